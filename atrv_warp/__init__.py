@@ -1,0 +1,34 @@
+"""atrv_warp: many ATRV-Jr skid-steer rovers at once, on Newton physics and Warp kernels.
+
+Public names are imported lazily so that ``python -m atrv_warp.<tool>`` loads only what
+the tool needs.
+"""
+
+from importlib import import_module
+
+_EXPORTS = {
+    "ArenaConfig": "config",
+    "ContactConfig": "config",
+    "InertialOverride": "config",
+    "RoverConfig": "config",
+    "SimConfig": "config",
+    "VARIANTS": "config",
+    "get_variant": "config",
+    "DRIVE_MODE_TORQUES": "sim",
+    "DriveMode": "sim",
+    "RoverSim": "sim",
+    "URDFError": "urdf",
+    "load_rover": "urdf",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(import_module(f".{_EXPORTS[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__

@@ -1,0 +1,423 @@
+"""N rovers in N independent worlds, stepped by Newton's Featherstone solver.
+
+One :meth:`RoverSim.step` advances every world by ``SimConfig.step_dt`` (0.05 s) in
+``substeps`` solver steps; per substep: contact wrenches (Hunt–Crossley, our kernel),
+wheel torques (motor kernel), one Featherstone step. The whole step is recorded once with
+``wp.ScopedCapture`` and replayed, on CPU as on CUDA. Per-world state is exposed as torch
+views of Warp arrays that the step updates in place (no copy per step).
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+
+import newton
+import numpy as np
+import torch
+import warp as wp
+
+from .config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant
+from .kernels.contact import FLAG_BODY_GROUND, FLAG_WALL, ArenaPlanes, ContactParams, RoverShapes, compute_contact_forces
+from .kernels.rover import RoverLayout, apply_wheel_torques, compute_rover_state, reset_worlds
+from .model import BuiltModel, build_model
+
+__all__ = ["DriveMode", "RoverSim", "DRIVE_MODE_TORQUES"]
+
+
+class DriveMode(str, Enum):
+    """The reference ROS tutorial's fixed-torque driving modes."""
+
+    COAST = "coast"
+    FORWARD = "forward"
+    BACKWARD = "backward"
+    ROTATE_RIGHT = "rotate_right"
+    ROTATE_LEFT = "rotate_left"
+
+
+DRIVE_MODE_TORQUES: dict[DriveMode, tuple[float, float]] = {
+    DriveMode.COAST: (0.0, 0.0),
+    DriveMode.FORWARD: (4.0, 4.0),
+    DriveMode.BACKWARD: (-4.0, -4.0),
+    DriveMode.ROTATE_RIGHT: (5.0, -5.0),
+    DriveMode.ROTATE_LEFT: (-5.0, 5.0),
+}
+"""(left, right) wheel torque [N·m] of each mode."""
+
+
+def _as_world_mask(mask, num_worlds: int) -> np.ndarray:
+    if mask is None:
+        return np.ones(num_worlds, dtype=bool)
+    m = np.asarray(mask.detach().cpu() if isinstance(mask, torch.Tensor) else mask)
+    if m.dtype != bool:
+        if m.ndim == 1 and m.size and np.issubdtype(m.dtype, np.integer):
+            idx = m
+            if idx.min() < 0 or idx.max() >= num_worlds:
+                raise IndexError(f"world indices must lie in [0, {num_worlds}), got {idx.tolist()}")
+            m = np.zeros(num_worlds, dtype=bool)
+            m[idx] = True
+            return m
+        raise TypeError(f"mask must be a bool array of shape ({num_worlds},) or integer world indices")
+    m = m.reshape(-1)
+    if m.shape != (num_worlds,):
+        raise ValueError(f"mask must have shape ({num_worlds},), got {tuple(m.shape)}")
+    return m
+
+
+class RoverSim:
+    """Batched ATRV-Jr simulator.
+
+    Args:
+        num_worlds: Number of independent worlds (one rover each), 1 … 4096 and beyond.
+        variant: Registered rover variant (``"realistic"`` or ``"reference"``); ignored if
+            ``rover`` is given.
+        rover: Rover configuration (URDF, link roles, motor limit).
+        contact: Contact law.
+        arena: Arena geometry.
+        sim: Integrator settings.
+        device: Warp device (``"cpu"`` default, ``"cuda:0"`` …).
+
+    State views (torch tensors on the sim device, updated in place by :meth:`step`; clone to keep):
+        ``root_pose`` (N, 7): chassis position [m] and quaternion (x, y, z, w), world frame.
+        ``lin_vel`` (N, 3): chassis-origin velocity [m/s], world frame.
+        ``ang_vel`` (N, 3): chassis angular velocity [rad/s], world frame.
+        ``rpy`` (N, 3): roll, pitch, yaw [rad].
+        ``wheel_speed`` (N, W): forward-positive wheel speeds [rad/s].
+        ``wheel_torque`` (N, W): torques applied in the last substep [N·m].
+        ``contact_flags`` (N,): bit 1 wall contact, bit 2 chassis–ground contact, since the last step began.
+        ``nonfinite`` (N,): 1 where the world's state is no longer finite (stays until reset).
+        ``commands`` (N, 2): [left, right] wheel torque commands [N·m], read by :meth:`step`.
+    """
+
+    def __init__(
+        self,
+        num_worlds: int = 1,
+        *,
+        variant: str = "realistic",
+        rover: RoverConfig | None = None,
+        contact: ContactConfig | None = None,
+        arena: ArenaConfig | None = None,
+        sim: SimConfig | None = None,
+        device: str | None = "cpu",
+        requires_grad: bool = False,
+    ):
+        self.rover_cfg = rover or get_variant(variant)
+        self.contact_cfg = contact or ContactConfig()
+        self.arena_cfg = arena or ArenaConfig()
+        self.sim_cfg = sim or SimConfig()
+        self.device = wp.get_device(device)
+        self.num_worlds = num_worlds
+        self.substeps = self.sim_cfg.substeps
+        self.built: BuiltModel = build_model(num_worlds, rover=self.rover_cfg, arena=self.arena_cfg,
+                                             sim=self.sim_cfg, device=self.device, requires_grad=requires_grad)
+        self.model = self.built.model
+        self.description = self.built.description
+        interval = self.sim_cfg.mass_matrix_interval or self.substeps
+        if self.substeps % interval:
+            raise ValueError(f"mass_matrix_interval={interval} must divide substeps={self.substeps}: a refresh "
+                             "must fall on every step boundary so a reset never meets a stale mass matrix")
+        self.solver = newton.solvers.SolverFeatherstone(
+            self.model, angular_damping=0.0, update_mass_matrix_interval=interval,
+            use_tile_gemm=self.sim_cfg.use_tile_gemm)
+        self.state_0 = self.model.state()
+        self.state_1 = self.model.state()
+        self.control = self.model.control()
+        self._make_layout()
+        self._make_contact()
+
+        n, w = num_worlds, len(self.description.wheels)
+        dev = self.device
+        self._commands = wp.zeros(n, dtype=wp.vec2, device=dev)
+        self._lin_vel = wp.zeros(n, dtype=wp.vec3, device=dev)
+        self._ang_vel = wp.zeros(n, dtype=wp.vec3, device=dev)
+        self._rpy = wp.zeros(n, dtype=wp.vec3, device=dev)
+        self._wheel_speed = wp.zeros((n, w), dtype=float, device=dev)
+        self._wheel_torque = wp.zeros((n, w), dtype=float, device=dev)
+        self._contact_flags = wp.zeros(n, dtype=wp.int32, device=dev)
+        self._nonfinite = wp.zeros(n, dtype=wp.int32, device=dev)
+        self._reset_mask = wp.zeros(n, dtype=bool, device=dev)
+        self._reset_poses = wp.zeros(n, dtype=wp.vec3, device=dev)
+
+        self.commands = wp.to_torch(self._commands).view(n, 2)
+        self.root_pose = wp.to_torch(self.state_0.body_q).view(n, self._layout.bodies_per_world, 7)[
+            :, self._layout.chassis_body]
+        self.lin_vel = wp.to_torch(self._lin_vel)
+        self.ang_vel = wp.to_torch(self._ang_vel)
+        self.rpy = wp.to_torch(self._rpy)
+        self.wheel_speed = wp.to_torch(self._wheel_speed)
+        self.wheel_torque = wp.to_torch(self._wheel_torque)
+        self.contact_flags = wp.to_torch(self._contact_flags)
+        self.nonfinite = wp.to_torch(self._nonfinite)
+
+        self.sim_time = 0.0
+        """Simulated time since construction [s] (the same in every world)."""
+        self._graph = None
+        self.reset()
+
+    # ------------------------------------------------------------------ build helpers
+    def _make_layout(self) -> None:
+        rb = self.built.rover_builder
+        q_start = list(rb.joint_q_start) + [rb.joint_coord_count]
+        qd_start = list(rb.joint_qd_start) + [rb.joint_dof_count]
+        root = rb.joint_label.index("root_joint")
+        layout = RoverLayout()
+        layout.bodies_per_world = rb.body_count
+        layout.coords_per_world = rb.joint_coord_count
+        layout.dofs_per_world = rb.joint_dof_count
+        layout.chassis_body = self.built.chassis_body
+        layout.chassis_coord = q_start[root]
+        layout.chassis_dof = qd_start[root]
+        wheels = self.description.wheels
+        layout.wheel_count = len(wheels)
+        dev = self.device
+        layout.wheel_coord = wp.array([q_start[j] for j in self.built.wheel_joints], dtype=int, device=dev)
+        layout.wheel_dof = wp.array([qd_start[j] for j in self.built.wheel_joints], dtype=int, device=dev)
+        layout.wheel_side = wp.array([w.side for w in wheels], dtype=int, device=dev)
+        layout.wheel_sign = wp.array([w.drive_sign for w in wheels], dtype=float, device=dev)
+        self._layout = layout
+
+    def _make_contact(self) -> None:
+        cfg, rb, dt = self.contact_cfg, self.built.rover_builder, self.sim_cfg.sim_dt
+        p = ContactParams()
+        p.stiffness = cfg.stiffness
+        p.damping = cfg.damping
+        p.exponent = cfg.exponent
+        p.linear_region = cfg.linear_region
+        p.linear_coeff = cfg.linear_region ** (cfg.exponent - 1.0)
+        p.friction = cfg.friction
+        self._contact_params = p
+
+        desc = self.description
+        n_wheels = len(desc.wheels)
+        mass = desc.total_mass
+        wheel_of_body = {b: w for b, w in zip(self.built.wheel_bodies, desc.wheels)}
+        body, kind, is_wheel, xform, size, slope_lon, slope_lat = [], [], [], [], [], [], []
+        for s in self.built.rover_shapes:
+            b = rb.shape_body[s]
+            gtype = rb.shape_type[s]
+            scale = rb.shape_scale[s]
+            body.append(b)
+            xform.append(rb.shape_transform[s])
+            if gtype == newton.GeoType.CYLINDER:
+                kind.append(0)
+                size.append(wp.vec3(scale[0], scale[1], 0.0))
+            elif gtype == newton.GeoType.BOX:
+                kind.append(1)
+                size.append(wp.vec3(*scale))
+            else:
+                raise ValueError(f"contact kernel handles cylinders and boxes, got {gtype!r}")
+            # Effective mass seen by friction at this shape's contact: a quarter of the rover
+            # sideways; along the rolling direction, that in series with the wheel's spin inertia.
+            m_share = mass / max(n_wheels, 1)
+            w = wheel_of_body.get(b)
+            if w is not None:
+                is_wheel.append(1)
+                i_axial = float(w.axis @ w.inertial.inertia @ w.axis)
+                r = self.rover_cfg.wheel_radius
+                m_lon = 1.0 / (1.0 / m_share + r * r / i_axial)
+            else:
+                is_wheel.append(0)
+                m_lon = m_share
+            slope_lon.append(cfg.friction_slope_fraction * m_lon / dt)
+            slope_lat.append(cfg.friction_slope_fraction * m_share / dt)
+        dev = self.device
+        sh = RoverShapes()
+        sh.count = len(body)
+        sh.body = wp.array(body, dtype=int, device=dev)
+        sh.kind = wp.array(kind, dtype=int, device=dev)
+        sh.is_wheel = wp.array(is_wheel, dtype=int, device=dev)
+        sh.xform = wp.array(xform, dtype=wp.transform, device=dev)
+        sh.size = wp.array(size, dtype=wp.vec3, device=dev)
+        sh.slope_lon = wp.array(slope_lon, dtype=float, device=dev)
+        sh.slope_lat = wp.array(slope_lat, dtype=float, device=dev)
+        self._shapes = sh
+
+        a = self.arena_cfg
+        h = a.half_size
+        planes = ArenaPlanes()
+        planes.normal = wp.array([(0, 0, 1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)], dtype=wp.vec3, device=dev)
+        planes.offset = wp.array([a.ground_top, -h, -h, -h, -h], dtype=float, device=dev)
+        self._planes = planes
+
+    # ------------------------------------------------------------------ derived figures
+    @property
+    def rest_height(self) -> float:
+        """Chassis-origin height [m] at static equilibrium on the ground, from the contact law."""
+        c = self.contact_cfg
+        load = self.description.total_mass * abs(self.sim_cfg.gravity) / len(self.description.wheels)
+        depth = (load / c.stiffness) ** (1.0 / c.exponent)
+        if depth < c.linear_region:
+            depth = load / (c.stiffness * c.linear_region ** (c.exponent - 1.0))
+        axle_z = float(np.mean([w.origin[2, 3] for w in self.description.wheels]))
+        return self.arena_cfg.ground_top + self.rover_cfg.wheel_radius - depth - axle_z
+
+    @property
+    def frame_names(self) -> tuple[str, ...]:
+        """Sensor frames fixed to the chassis, in URDF order."""
+        return tuple(f.name for f in self.description.frames)
+
+    def frame_pose(self, name: str) -> torch.Tensor:
+        """World pose (N, 4, 4) of a named sensor frame, from the chassis pose."""
+        frames = {f.name: f.transform for f in self.description.frames}
+        if name not in frames:
+            raise KeyError(f"unknown frame {name!r}; known: {sorted(frames)}")
+        pose = self.root_pose.detach().to(torch.float64).cpu()
+        x, y, z, w = pose[:, 3], pose[:, 4], pose[:, 5], pose[:, 6]
+        rot = torch.stack([
+            1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+            2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+            2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], dim=-1).view(-1, 3, 3)
+        chassis = torch.eye(4, dtype=torch.float64).repeat(self.num_worlds, 1, 1)
+        chassis[:, :3, :3] = rot
+        chassis[:, :3, 3] = pose[:, :3]
+        return chassis @ torch.as_tensor(frames[name])
+
+    # ------------------------------------------------------------------ stepping
+    def _substep(self, s_in: newton.State, s_out: newton.State, dt: float) -> None:
+        s_in.clear_forces()
+        wp.launch(compute_contact_forces, dim=self.num_worlds,
+                  inputs=[self._layout.bodies_per_world, self._shapes, self._planes, self._contact_params,
+                          s_in.body_q, s_in.body_qd, self.model.body_com],
+                  outputs=[s_in.body_f, self._contact_flags], device=self.device)
+        wp.launch(apply_wheel_torques, dim=self.num_worlds,
+                  inputs=[self._layout, self._commands, self.rover_cfg.wheel_speed_limit, s_in.joint_qd],
+                  outputs=[self.control.joint_f, self._wheel_torque], device=self.device)
+        self.solver.step(s_in, s_out, self.control, None, dt)
+
+    def _simulate(self) -> None:
+        self._contact_flags.zero_()
+        dt = self.sim_cfg.sim_dt
+        for _ in range(self.substeps):
+            self._substep(self.state_0, self.state_1, dt)
+            # Copy back rather than swap so the result always lives in state_0: the torch
+            # views and a recorded graph both point at fixed buffers.
+            self.state_0.assign(self.state_1)
+        self._update_views()
+
+    def _update_views(self) -> None:
+        s = self.state_0
+        wp.launch(compute_rover_state, dim=self.num_worlds,
+                  inputs=[self._layout, s.body_q, s.body_qd, self.model.body_com, s.joint_q, s.joint_qd],
+                  outputs=[self._lin_vel, self._ang_vel, self._rpy, self._wheel_speed, self._nonfinite],
+                  device=self.device)
+
+    def step(self, commands: torch.Tensor | np.ndarray | None = None) -> None:
+        """Advance every world by ``step_dt``.
+
+        Args:
+            commands: Optional (N, 2) [left, right] wheel torques [N·m]; if omitted, the
+                values in :attr:`commands` are used (write into it to avoid a copy).
+        """
+        if commands is not None:
+            self.set_commands(commands)
+        if self.sim_cfg.use_graph:
+            if self._graph is None:
+                with wp.ScopedCapture(device=self.device) as capture:
+                    self._simulate()
+                self._graph = capture.graph
+            wp.capture_launch(self._graph)
+        else:
+            self._simulate()
+        self.sim_time += self.sim_cfg.step_dt
+
+    def set_commands(self, commands) -> None:
+        """Copy (N, 2) or (2,) [left, right] wheel torques [N·m] into :attr:`commands`."""
+        c = torch.as_tensor(commands, dtype=torch.float32)
+        if c.shape == (2,):
+            c = c.expand(self.num_worlds, 2)
+        if c.shape != (self.num_worlds, 2):
+            raise ValueError(f"commands must have shape ({self.num_worlds}, 2) or (2,), got {tuple(c.shape)}")
+        if not torch.isfinite(c).all():
+            bad = (~torch.isfinite(c)).any(-1).nonzero().flatten().tolist()
+            raise ValueError(f"commands contain NaN/inf in world(s) {bad}")
+        self.commands.copy_(c)
+
+    def set_mode(self, mode: DriveMode | str, worlds=None) -> None:
+        """Apply a fixed-torque driving mode to all worlds, or to the masked/indexed ``worlds``."""
+        try:
+            mode = DriveMode(mode)
+        except ValueError:
+            raise ValueError(f"unknown driving mode {mode!r}; known: {[m.value for m in DriveMode]}") from None
+        mask = torch.as_tensor(_as_world_mask(worlds, self.num_worlds), device=self.commands.device)
+        self.commands[mask] = torch.tensor(DRIVE_MODE_TORQUES[mode], dtype=torch.float32,
+                                           device=self.commands.device)
+
+    def reset(self, mask=None, poses=None, *, height: float | None = None) -> None:
+        """Re-pose the selected worlds at rest, level, wheels still; others are untouched.
+
+        Args:
+            mask: (N,) bool mask or integer world indices; ``None`` = all worlds.
+            poses: (N, 3) or (M, 3) for the M selected worlds: x [m], y [m], yaw [rad];
+                ``None`` = origin, yaw 0.
+            height: Chassis-origin height [m]; default :attr:`rest_height`.
+        """
+        m = _as_world_mask(mask, self.num_worlds)
+        p = np.zeros((self.num_worlds, 3), dtype=np.float32)
+        if poses is not None:
+            given = np.asarray(poses.detach().cpu() if isinstance(poses, torch.Tensor) else poses, dtype=np.float32)
+            if given.shape == (self.num_worlds, 3):
+                p = given
+            elif given.shape == (int(m.sum()), 3):
+                p[m] = given
+            else:
+                raise ValueError(f"poses must have shape ({self.num_worlds}, 3) or ({int(m.sum())}, 3), "
+                                 f"got {given.shape}")
+            if not np.isfinite(p[m]).all():
+                raise ValueError("poses contain NaN/inf")
+        self._reset_mask.assign(m)
+        self._reset_poses.assign(p)
+        self._apply_reset(self.rest_height if height is None else float(height))
+
+    def reset_torch(self, mask: torch.Tensor, poses: torch.Tensor, height: float | None = None) -> None:
+        """Device-side reset: ``mask`` (N,) bool and ``poses`` (N, 3) torch tensors on the sim
+        device; no host round trip (the path the RL env uses every step)."""
+        wp.copy(self._reset_mask, wp.from_torch(mask.contiguous(), dtype=bool))
+        wp.copy(self._reset_poses, wp.from_torch(poses.contiguous(), dtype=wp.vec3))
+        self._apply_reset(self.rest_height if height is None else float(height))
+
+    def _apply_reset(self, height: float) -> None:
+        s = self.state_0
+        wp.launch(reset_worlds, dim=self.num_worlds,
+                  inputs=[self._layout, self._reset_mask, self._reset_poses, height],
+                  outputs=[s.joint_q, s.joint_qd, self._contact_flags, self._nonfinite], device=self.device)
+        newton.eval_fk(self.model, s.joint_q, s.joint_qd, s, mask=self._reset_mask)
+        self._update_views()
+
+    # ------------------------------------------------------------------ snapshots
+    def get_state(self) -> dict[str, torch.Tensor]:
+        """Copy of the full simulation state (restore with :meth:`set_state`)."""
+        s = self.state_0
+        return {"joint_q": wp.to_torch(s.joint_q).clone(), "joint_qd": wp.to_torch(s.joint_qd).clone(),
+                "commands": self.commands.clone(), "sim_time": torch.tensor(self.sim_time, dtype=torch.float64)}
+
+    def set_state(self, snapshot: dict[str, torch.Tensor]) -> None:
+        """Restore a snapshot taken by :meth:`get_state`."""
+        s = self.state_0
+        wp.to_torch(s.joint_q).copy_(snapshot["joint_q"])
+        wp.to_torch(s.joint_qd).copy_(snapshot["joint_qd"])
+        self.commands.copy_(snapshot["commands"])
+        self.sim_time = float(snapshot["sim_time"])
+        newton.eval_fk(self.model, s.joint_q, s.joint_qd, s)
+        self._contact_flags.zero_()
+        self._nonfinite.zero_()
+        self._update_views()
+
+    # ------------------------------------------------------------------ convenience
+    @property
+    def collision(self) -> torch.Tensor:
+        """(N,) bool: a wall or chassis–ground contact happened during the last step."""
+        return self.contact_flags != 0
+
+    @property
+    def wall_contact(self) -> torch.Tensor:
+        """(N,) bool: a wall contact happened during the last step."""
+        return (self.contact_flags & int(FLAG_WALL)) != 0
+
+    @property
+    def body_ground_contact(self) -> torch.Tensor:
+        """(N,) bool: the chassis touched the ground during the last step."""
+        return (self.contact_flags & int(FLAG_BODY_GROUND)) != 0
+
+    def __repr__(self) -> str:
+        return (f"RoverSim(num_worlds={self.num_worlds}, urdf={self.description.path!r}, "
+                f"step_dt={self.sim_cfg.step_dt}, substeps={self.substeps}, device={self.device})")
+

@@ -1,0 +1,262 @@
+"""Read a skid-steer rover URDF with yourdfpy, check it, and describe it for model building.
+
+The description is what the reference simulation keeps after editing its imported
+model: one chassis on a free joint, revolute wheels with their axes and drive signs,
+sensor frames fixed to the chassis (their masses, if any, lumped into the chassis), and
+the geometry needed to replace the URDF's collision meshes by wheel cylinders.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import InertialOverride, RoverConfig, default_urdf_path
+
+__all__ = ["URDFError", "Inertial", "Wheel", "Frame", "RoverDescription", "load_rover"]
+
+
+class URDFError(ValueError):
+    """A URDF file that cannot be read or does not describe a skid-steer rover."""
+
+
+@dataclass(frozen=True)
+class Inertial:
+    """Mass properties of one body in its link frame."""
+
+    mass: float
+    """[kg]"""
+    com: np.ndarray
+    """Centre of mass in the link frame [m], shape (3,)."""
+    inertia: np.ndarray
+    """Inertia tensor about the COM, in link-frame axes [kg·m²], shape (3, 3)."""
+
+
+@dataclass(frozen=True)
+class Wheel:
+    """One driven wheel."""
+
+    link: str
+    joint: str
+    side: int
+    """0 for left (first command), 1 for right (second command)."""
+    origin: np.ndarray
+    """Joint frame in the chassis link frame, 4x4 homogeneous transform."""
+    axis: np.ndarray
+    """Unit joint axis in the wheel link frame, shape (3,)."""
+    drive_sign: float
+    """+1 if a positive joint torque drives the rover forward (+x), else -1."""
+    outward: np.ndarray
+    """Unit axle direction in the wheel link frame that points away from the chassis centre."""
+    inertial: Inertial
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A link fixed to the chassis, kept as a named frame."""
+
+    name: str
+    transform: np.ndarray
+    """Pose in the chassis link frame, 4x4 homogeneous transform."""
+
+
+@dataclass(frozen=True)
+class RoverDescription:
+    """A checked rover: what :func:`atrv_warp.model.build_model` needs from the URDF."""
+
+    path: str
+    name: str
+    chassis: str
+    chassis_inertial: Inertial
+    """Chassis mass properties with the fixed frames' masses lumped in."""
+    chassis_box: tuple[np.ndarray, np.ndarray] | None
+    """(4x4 pose in the chassis frame, half extents [m]) of the chassis collision box, taken
+    from a URDF box collision (or box visual); ``None`` if the URDF gives neither."""
+    wheels: tuple[Wheel, ...]
+    frames: tuple[Frame, ...]
+    tree: tuple[tuple[str, str, str, str], ...]
+    """(body, parent, joint name, joint type) of every URDF link, root first."""
+
+    @property
+    def total_mass(self) -> float:
+        """Chassis plus wheels [kg]."""
+        return self.chassis_inertial.mass + sum(w.inertial.mass for w in self.wheels)
+
+
+def _inertial_of(link) -> Inertial:
+    if link.inertial is None or link.inertial.mass is None:
+        return Inertial(0.0, np.zeros(3), np.zeros((3, 3)))
+    origin = np.eye(4) if link.inertial.origin is None else np.asarray(link.inertial.origin, dtype=float)
+    rot = origin[:3, :3]
+    inertia = np.zeros((3, 3)) if link.inertial.inertia is None else np.asarray(link.inertial.inertia, dtype=float)
+    return Inertial(float(link.inertial.mass), origin[:3, 3].copy(), rot @ inertia @ rot.T)
+
+
+def _lump(parts: list[tuple[Inertial, np.ndarray]]) -> Inertial:
+    """Combine inertials given with the 4x4 pose of their link in a common frame."""
+    mass = sum(p.mass for p, _ in parts)
+    if mass <= 0.0:
+        return Inertial(0.0, np.zeros(3), np.zeros((3, 3)))
+    coms = [(tf[:3, :3] @ p.com + tf[:3, 3]) for p, tf in parts]
+    com = sum(p.mass * c for (p, _), c in zip(parts, coms)) / mass
+    inertia = np.zeros((3, 3))
+    for (p, tf), c in zip(parts, coms):
+        r = c - com
+        rot = tf[:3, :3]
+        # parallel-axis theorem
+        inertia += rot @ p.inertia @ rot.T + p.mass * (np.dot(r, r) * np.eye(3) - np.outer(r, r))
+    return Inertial(mass, com, inertia)
+
+
+def _apply_override(inertial: Inertial, ov: InertialOverride) -> Inertial:
+    if ov.mass <= 0.0:
+        raise URDFError(f"inertial override for {ov.link!r}: mass must be > 0, got {ov.mass}")
+    if ov.inertia_diag is not None:
+        inertia = np.diag(np.asarray(ov.inertia_diag, dtype=float))
+    elif inertial.mass > 0.0:
+        inertia = inertial.inertia * (ov.mass / inertial.mass)
+    else:
+        raise URDFError(f"inertial override for {ov.link!r} needs inertia_diag: the URDF link has no inertia")
+    return Inertial(ov.mass, inertial.com, inertia)
+
+
+def _check_inertial(path: str, name: str, inertial: Inertial) -> None:
+    if inertial.mass <= 0.0:
+        raise URDFError(f"{path}: link {name!r} needs a positive <inertial><mass>, got {inertial.mass}")
+    eig = np.linalg.eigvalsh(0.5 * (inertial.inertia + inertial.inertia.T))
+    if eig.min() <= 0.0 or eig[0] + eig[1] < eig[2] * (1.0 - 1e-6):
+        raise URDFError(
+            f"{path}: link {name!r} has an unphysical inertia tensor (principal moments {eig.round(6).tolist()} kg·m²)"
+        )
+
+
+def load_rover(rover: RoverConfig | None = None) -> RoverDescription:
+    """Load, check and describe the rover URDF named by ``rover.urdf``.
+
+    Raises:
+        URDFError: the file is missing or malformed, a required link is absent, a wheel is
+            not on a revolute/continuous joint to the chassis, or a sensor frame is not
+            fixed to it.
+    """
+    from lxml import etree
+    import yourdfpy
+
+    rover = rover or RoverConfig()
+    path = os.fspath(rover.urdf or default_urdf_path())
+    if not os.path.isfile(path):
+        raise URDFError(f"URDF file not found: {path}")
+    try:  # yourdfpy silently recovers from broken XML; refuse it instead
+        etree.parse(path, etree.XMLParser(recover=False))
+    except etree.XMLSyntaxError as err:
+        raise URDFError(f"{path}: malformed URDF (XML): {err}") from None
+    try:
+        urdf = yourdfpy.URDF.load(
+            path,
+            build_scene_graph=False,
+            build_collision_scene_graph=False,
+            load_meshes=False,
+            load_collision_meshes=False,
+        )
+    except Exception as err:  # yourdfpy raises assorted types for schema problems
+        raise URDFError(f"{path}: malformed URDF: {err}") from None
+    robot = urdf.robot
+    links = {link.name: link for link in robot.links}
+    joints_by_child = {j.child: j for j in robot.joints}
+    for j in robot.joints:
+        for end in (j.parent, j.child):
+            if end not in links:
+                raise URDFError(f"{path}: joint {j.name!r} refers to missing link {end!r}")
+
+    wheel_names = tuple(rover.left_wheels) + tuple(rover.right_wheels)
+    required = [(rover.chassis_link, "chassis")]
+    required += [(n, "wheel") for n in wheel_names]
+    required += [(n, "sensor frame") for n in rover.sensor_frames]
+    for name, role in required:
+        if name not in links:
+            raise URDFError(
+                f"{path}: required {role} link {name!r} not found; links present: {sorted(links)}"
+            )
+    if rover.chassis_link in joints_by_child:
+        raise URDFError(f"{path}: chassis link {rover.chassis_link!r} must be the root, but it is the child of "
+                        f"joint {joints_by_child[rover.chassis_link].name!r}")
+
+    overrides = {ov.link: ov for ov in rover.inertial_overrides}
+    unknown = sorted(set(overrides) - set(links))
+    if unknown:
+        raise URDFError(f"{path}: inertial overrides name unknown link(s) {unknown}")
+
+    def inertial(name: str) -> Inertial:
+        base = _inertial_of(links[name])
+        return _apply_override(base, overrides[name]) if name in overrides else base
+
+    # Links fixed to the chassis (directly or through other fixed joints) become frames.
+    def fixed_pose(name: str) -> np.ndarray | None:
+        pose = np.eye(4)
+        while name != rover.chassis_link:
+            j = joints_by_child.get(name)
+            if j is None or j.type != "fixed":
+                return None
+            origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float)
+            pose = origin @ pose
+            name = j.parent
+        return pose
+
+    frames: list[Frame] = []
+    for name in links:
+        if name == rover.chassis_link or name in wheel_names:
+            continue
+        pose = fixed_pose(name)
+        if pose is not None:
+            frames.append(Frame(name, pose))
+        elif name in rover.sensor_frames:
+            raise URDFError(f"{path}: sensor frame {name!r} must be fixed to {rover.chassis_link!r}")
+    parts = [(inertial(rover.chassis_link), np.eye(4))] + [(inertial(f.name), f.transform) for f in frames]
+    chassis_inertial = _lump(parts)
+    _check_inertial(path, rover.chassis_link, chassis_inertial)
+
+    wheels: list[Wheel] = []
+    for name in wheel_names:
+        j = joints_by_child.get(name)
+        if j is None or j.type not in ("revolute", "continuous") or j.parent != rover.chassis_link:
+            kind = "no joint" if j is None else f"a {j.type} joint to {j.parent!r}"
+            raise URDFError(f"{path}: wheel {name!r} must hang on a revolute/continuous joint from "
+                            f"{rover.chassis_link!r}, found {kind}")
+        origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float)
+        axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
+        axis = axis / np.linalg.norm(axis)
+        axis_chassis = origin[:3, :3] @ axis
+        if abs(axis_chassis[1]) < 0.9:
+            raise URDFError(f"{path}: wheel joint {j.name!r} axis {axis_chassis.round(3).tolist()} (chassis frame) "
+                            "is not lateral; a skid-steer wheel turns about the chassis y axis")
+        # Rolling forward (+x) is a positive rotation about chassis +y.
+        drive_sign = 1.0 if axis_chassis[1] > 0.0 else -1.0
+        lateral = 1.0 if origin[1, 3] >= 0.0 else -1.0
+        outward = axis * (1.0 if axis_chassis[1] * lateral > 0.0 else -1.0)
+        w_inertial = inertial(name)
+        _check_inertial(path, name, w_inertial)
+        wheels.append(Wheel(name, j.name, 0 if name in rover.left_wheels else 1, origin, axis,
+                            drive_sign, outward, w_inertial))
+
+    chassis_box = None
+    link = links[rover.chassis_link]
+    for geom_list in (link.collisions, link.visuals):
+        for g in geom_list or ():
+            if g.geometry is not None and g.geometry.box is not None:
+                pose = np.eye(4) if g.origin is None else np.asarray(g.origin, dtype=float)
+                chassis_box = (pose, 0.5 * np.asarray(g.geometry.box.size, dtype=float))
+                break
+        if chassis_box is not None:
+            break
+
+    tree = []
+    root_first = [rover.chassis_link] + [n for n in links if n != rover.chassis_link]
+    for name in root_first:
+        j = joints_by_child.get(name)
+        if j is None:
+            tree.append((name, "world", "root_joint", "free"))
+        else:
+            tree.append((name, j.parent, j.name, j.type))
+    return RoverDescription(path, robot.name, rover.chassis_link, chassis_inertial, chassis_box,
+                            tuple(wheels), tuple(frames), tuple(tree))
