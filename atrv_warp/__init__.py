@@ -21,7 +21,20 @@ _EXPORTS = {
     "load_rover": "urdf",
 }
 
-__all__ = sorted(_EXPORTS)
+__all__ = [
+    "DRIVE_MODE_TORQUES",
+    "VARIANTS",
+    "ArenaConfig",
+    "ContactConfig",
+    "DriveMode",
+    "InertialOverride",
+    "RoverConfig",
+    "RoverSim",
+    "SimConfig",
+    "URDFError",
+    "get_variant",
+    "load_rover",
+]
 
 
 def __getattr__(name: str):

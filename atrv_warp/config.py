@@ -12,12 +12,12 @@ from dataclasses import dataclass
 from importlib import resources
 
 __all__ = [
+    "VARIANTS",
     "ArenaConfig",
     "ContactConfig",
     "InertialOverride",
     "RoverConfig",
     "SimConfig",
-    "VARIANTS",
     "default_urdf_path",
     "get_variant",
     "replace_checked",
@@ -139,8 +139,8 @@ class SimConfig:
     """Featherstone mass-matrix refresh interval in substeps; ``None`` = once per step
     (``substeps``), aligned with step boundaries so a reset never meets a stale matrix."""
     use_tile_gemm: bool = True
-    """Use Warp's tile API for the mass-matrix factorisation: 2.4x faster at N=1024 on CPU
-    (51k vs 21k env-steps/s measured by benchmarks/sim_throughput.py)."""
+    """Use Warp's tile API for the mass-matrix factorisation: 2.2x faster at N=1024 on CPU
+    (54k vs 25k env-steps/s, benchmarks/sim_throughput.py)."""
     use_graph: bool = True
     """Record the whole step once (``wp.ScopedCapture``) and replay it."""
 

@@ -18,7 +18,7 @@ import warp as wp
 from .config import ArenaConfig, RoverConfig, SimConfig, get_variant, replace_checked
 from .urdf import RoverDescription, load_rover
 
-__all__ = ["BuiltModel", "build_model", "format_tree", "format_table", "main"]
+__all__ = ["BuiltModel", "build_model", "format_table", "format_tree", "main"]
 
 _JOINT_DOFS = {"free": 6, "floating": 6, "revolute": 1, "continuous": 1, "prismatic": 1, "fixed": 0, "planar": 2}
 

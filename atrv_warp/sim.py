@@ -17,11 +17,18 @@ import torch
 import warp as wp
 
 from .config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant
-from .kernels.contact import FLAG_BODY_GROUND, FLAG_WALL, ArenaPlanes, ContactParams, RoverShapes, compute_contact_forces
+from .kernels.contact import (
+    FLAG_BODY_GROUND,
+    FLAG_WALL,
+    ArenaPlanes,
+    ContactParams,
+    RoverShapes,
+    compute_contact_forces,
+)
 from .kernels.rover import RoverLayout, apply_wheel_torques, compute_rover_state, reset_worlds
 from .model import BuiltModel, build_model
 
-__all__ = ["DriveMode", "RoverSim", "DRIVE_MODE_TORQUES"]
+__all__ = ["DRIVE_MODE_TORQUES", "DriveMode", "RoverSim"]
 
 
 class DriveMode(str, Enum):

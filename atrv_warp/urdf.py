@@ -15,7 +15,7 @@ import numpy as np
 
 from .config import InertialOverride, RoverConfig, default_urdf_path
 
-__all__ = ["URDFError", "Inertial", "Wheel", "Frame", "RoverDescription", "load_rover"]
+__all__ = ["Frame", "Inertial", "RoverDescription", "URDFError", "Wheel", "load_rover"]
 
 
 class URDFError(ValueError):
@@ -140,8 +140,8 @@ def load_rover(rover: RoverConfig | None = None) -> RoverDescription:
             not on a revolute/continuous joint to the chassis, or a sensor frame is not
             fixed to it.
     """
-    from lxml import etree
     import yourdfpy
+    from lxml import etree
 
     rover = rover or RoverConfig()
     path = os.fspath(rover.urdf or default_urdf_path())
@@ -159,7 +159,7 @@ def load_rover(rover: RoverConfig | None = None) -> RoverDescription:
             load_meshes=False,
             load_collision_meshes=False,
         )
-    except Exception as err:  # yourdfpy raises assorted types for schema problems
+    except Exception as err:  # noqa: BLE001 - yourdfpy raises assorted types for schema problems
         raise URDFError(f"{path}: malformed URDF: {err}") from None
     robot = urdf.robot
     links = {link.name: link for link in robot.links}

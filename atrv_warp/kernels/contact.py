@@ -63,7 +63,7 @@ def hunt_crossley(depth: float, depth_rate: float, p: ContactParams) -> float:
     """Normal force [N] for penetration ``depth`` [m] growing at ``depth_rate`` [m/s]."""
     if depth <= 0.0:
         return 0.0
-    s = float(0.0)
+    s = 0.0
     if depth < p.linear_region:
         s = p.linear_coeff * depth
     else:

@@ -1,0 +1,94 @@
+"""Physics figures against the reference: rest height, straight-line drive, acceleration, turning.
+
+Run: ``python benchmarks/physics_report.py``; prints a table and writes
+``benchmarks/results/physics_report.json``. The README's physics figures come from here.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def main() -> int:
+    import warp as wp
+
+    wp.config.quiet = True
+    from atrv_warp import DriveMode, RoverSim
+
+    rows: list[tuple[str, float, str]] = []
+
+    # 1. reference variant: drop 2 cm, settle 1 s, +4 N·m on all wheels for 4.9 s
+    sim = RoverSim(1, variant="reference")
+    sim.reset(height=sim.rest_height + 0.02)
+    z = []
+    for _ in range(20):
+        sim.step()
+        z.append(sim.root_pose[0, 2].item())
+    x0 = sim.root_pose[0, 0].item()
+    sim.set_mode(DriveMode.FORWARD)
+    xs, ys, zs = [], [], []
+    for _ in range(98):
+        sim.step()
+        xs.append(sim.root_pose[0, 0].item() - x0)
+        ys.append(sim.root_pose[0, 1].item())
+        zs.append(sim.root_pose[0, 2].item())
+    rows += [
+        ("reference: z range while settling [m]", f"{min(z):.3f} .. {max(z):.3f}", "0.125 .. 0.150"),
+        ("reference: x after 1 s of driving [m]", f"{xs[19]:.3f}", "0.17"),
+        ("reference: x after 3 s [m]", f"{xs[59]:.3f}", "1.72"),
+        ("reference: x after 4.9 s [m]", f"{xs[97]:.3f}", "4.70"),
+        ("reference: lateral drift [mm]", f"{1e3 * np.abs(ys).max():.2f}", "< 6"),
+        ("reference: height while driving [m]", f"{np.mean(zs[40:]):.4f}", "0.137"),
+    ]
+
+    # 2. realistic variant at rest, +2 N·m (below slip), rotate_left
+    sim = RoverSim(3)
+    sim.reset(height=sim.rest_height + 0.02)
+    for _ in range(200):
+        sim.step()
+    rest = sim.root_pose[0, 2].item()
+    sim.set_commands([[2.0, 2.0], [-5.0, 5.0], [0.0, 0.0]])
+    for _ in range(10):
+        sim.step()
+    v0, yaw_prev = sim.lin_vel[0, 0].item(), sim.rpy[1, 2].item()
+    p1 = sim.root_pose[1, :2].clone()
+    turned = 0.0
+    for _ in range(30):
+        sim.step()
+        d = sim.rpy[1, 2].item() - yaw_prev
+        turned += (d + math.pi) % (2 * math.pi) - math.pi
+        yaw_prev = sim.rpy[1, 2].item()
+    accel = (sim.lin_vel[0, 0].item() - v0) / 1.5
+    desc = sim.description
+    r = sim.rover_cfg.wheel_radius
+    spin = sum(float(w.axis @ w.inertial.inertia @ w.axis) for w in desc.wheels)
+    analytic = 4 * 2.0 / r / (desc.total_mass + spin / r**2)
+    rows += [
+        ("realistic: rest height [m]", f"{rest:.4f}", f"{sim.rest_height:.4f} (static HC equilibrium)"),
+        ("realistic: accel at +2 N·m [m/s²]", f"{accel:.4f}", f"{analytic:.4f} = F/(M+ΣI/r²)"),
+        ("realistic: rotate_left yaw rate [rad/s]", f"{turned / 1.5:.3f}", "turns in place"),
+        ("realistic: rotate_left translation [m]", f"{(sim.root_pose[1, :2] - p1).norm().item():.4f}", "< 0.10"),
+    ]
+
+    width = max(len(r[0]) for r in rows)
+    print(f"{'quantity':{width}s}  {'atrv_warp':>16s}  reference / analytic")
+    for name, ours, ref in rows:
+        print(f"{name:{width}s}  {ours:>16s}  {ref}")
+    out = RESULTS / "physics_report.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"rows": [dict(zip(("quantity", "atrv_warp", "reference"), r)) for r in rows],
+                               "time": time.strftime("%Y-%m-%d %H:%M:%S")}, indent=2) + "\n")
+    print(f"\nwritten to {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
