@@ -1,0 +1,275 @@
+"""TorchRL environment: N ATRV-Jr rovers driving to targets, one batched ``EnvBase``.
+
+The task math (observations, rewards, terminations, reset sampling) runs in Warp kernels,
+one thread per world (``atrv_warp/kernels/task.py``); TensorDicts carry zero-copy views
+of the Warp buffers, cloned only where TorchRL would otherwise keep a reference to a buffer
+the next step overwrites.
+
+Keys produced:
+    ``observation`` (N, 10) float32: target x, y; rover x, y; vx, vy (world); roll; yaw rate;
+    sin and cos of the heading error. ``reward`` (N, 1); ``done`` / ``terminated`` /
+    ``truncated`` (N, 1) bool; ``end_reason`` (N, 1) int64 (see :data:`END_REASONS`);
+    ``distance`` (N, 1) distance to the target [m].
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Mapping
+
+import torch
+import warp as wp
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Bounded, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
+
+from .config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, TaskConfig, get_variant, replace_checked
+from .kernels.task import OBS_DIM, TaskBuffers, TaskParams, compute_step_outcome, observe_reset, sample_episodes
+from .sim import RoverSim
+
+__all__ = ["END_REASONS", "OBSERVATION_NAMES", "ATRVjrEnv", "EnvFactory"]
+
+END_REASONS = ("running", "success", "wall", "flip", "timeout", "nonfinite")
+"""Index = value of ``end_reason``."""
+
+OBSERVATION_NAMES = ("target_x", "target_y", "rover_x", "rover_y", "rover_vx", "rover_vy", "roll", "yaw_rate",
+                     "sin_heading_error", "cos_heading_error")
+
+# The reference's observation bounds.
+_TARGET_BOUND, _POSITION_BOUND, _VELOCITY_BOUND, _ROLL_BOUND, _YAW_RATE_BOUND = 12.0, 30.0, 6.0, 0.25, 6.0
+
+
+def _torch_device(device: wp.context.Device) -> torch.device:
+    return torch.device("cpu") if device.is_cpu else torch.device(f"cuda:{device.ordinal}")
+
+
+class ATRVjrEnv(EnvBase):
+    """N skid-steer rovers learning to drive to a target (the reference RL task).
+
+    Args:
+        num_envs: Number of worlds (the batch size).
+        device: ``"cpu"`` (default) or a CUDA device; the simulator runs there.
+        seed: Seed of the per-world reset streams; ``None`` leaves seed 0.
+        variant: Registered rover variant.
+        task: Task configuration, or keyword overrides of it via ``**task_overrides``.
+        rover, contact, arena, sim: Simulator configuration (see :class:`RoverSim`).
+        **task_overrides: Fields of :class:`TaskConfig` (e.g. ``max_steps=100``); an unknown
+            name raises ``ValueError``.
+    """
+
+    batch_locked = True
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        *,
+        device: str = "cpu",
+        seed: int | None = None,
+        variant: str = "realistic",
+        task: TaskConfig | None = None,
+        rover: RoverConfig | None = None,
+        contact: ContactConfig | None = None,
+        arena: ArenaConfig | None = None,
+        sim: SimConfig | None = None,
+        **task_overrides,
+    ):
+        self.task_cfg = replace_checked(task or TaskConfig(), **task_overrides)
+        self.sim = RoverSim(num_envs, rover=rover or get_variant(variant), contact=contact, arena=arena, sim=sim,
+                            device=device)
+        super().__init__(device=_torch_device(self.sim.device), batch_size=torch.Size([num_envs]))
+        self.num_envs = num_envs
+        self._wp_device = self.sim.device
+        self._make_task_buffers()
+        self._make_spec()
+        self.nonfinite_count = 0
+        """Worlds terminated and reset because their state stopped being finite."""
+        self._seed = 0
+        self._set_seed(seed)
+
+    # ------------------------------------------------------------------ set-up
+    def _make_task_buffers(self) -> None:
+        n, dev, c = self.num_envs, self._wp_device, self.task_cfg
+        p = TaskParams()
+        p.spawn_bound = c.spawn_bound
+        p.reach_radius = c.reach_radius
+        p.flip_roll = c.flip_roll
+        p.max_steps = c.max_steps
+        p.success_reward = c.success_reward
+        p.failure_reward = c.failure_reward
+        p.heading_weight = c.heading_weight
+        p.step_penalty = c.step_penalty
+        p.target_bound = _TARGET_BOUND
+        p.position_bound = _POSITION_BOUND
+        p.velocity_bound = _VELOCITY_BOUND
+        p.roll_bound = _ROLL_BOUND
+        p.yaw_rate_bound = _YAW_RATE_BOUND
+        self._params = p
+        t = TaskBuffers()
+        t.target = wp.zeros(n, dtype=wp.vec2, device=dev)
+        t.prev_distance = wp.zeros(n, dtype=float, device=dev)
+        t.prev_heading_error = wp.zeros(n, dtype=float, device=dev)
+        t.step_count = wp.zeros(n, dtype=wp.int32, device=dev)
+        t.episode = wp.zeros(n, dtype=wp.int32, device=dev)
+        self._task = t
+        self._obs = wp.zeros((n, OBS_DIM), dtype=float, device=dev)
+        self._reward = wp.zeros(n, dtype=float, device=dev)
+        self._terminated = wp.zeros(n, dtype=bool, device=dev)
+        self._truncated = wp.zeros(n, dtype=bool, device=dev)
+        self._end_reason = wp.zeros(n, dtype=wp.int32, device=dev)
+        self._distance = wp.zeros(n, dtype=float, device=dev)
+        self._mask = wp.zeros(n, dtype=bool, device=dev)
+        # torch views (no copies)
+        self.target = wp.to_torch(t.target)
+        self.step_count = wp.to_torch(t.step_count)
+        self._obs_t = wp.to_torch(self._obs)
+        self._reward_t = wp.to_torch(self._reward).unsqueeze(-1)
+        self._terminated_t = wp.to_torch(self._terminated).unsqueeze(-1)
+        self._truncated_t = wp.to_torch(self._truncated).unsqueeze(-1)
+        self._end_reason_t = wp.to_torch(self._end_reason).unsqueeze(-1)
+        self._distance_t = wp.to_torch(self._distance).unsqueeze(-1)
+        self._mask_t = wp.to_torch(self._mask)
+        self._episode_t = wp.to_torch(t.episode)
+        self._task_views = {
+            "target": self.target, "prev_distance": wp.to_torch(t.prev_distance),
+            "prev_heading_error": wp.to_torch(t.prev_heading_error), "step_count": self.step_count,
+            "episode": self._episode_t, "observation": self._obs_t,
+        }
+
+    def _make_spec(self) -> None:
+        n, dev = self.num_envs, self.device
+        low = torch.tensor([-_TARGET_BOUND] * 2 + [-_POSITION_BOUND] * 2 + [-_VELOCITY_BOUND] * 2
+                           + [-_ROLL_BOUND, -_YAW_RATE_BOUND, -1.0, -1.0])
+        bounds = (low.expand(n, OBS_DIM), (-low).expand(n, OBS_DIM))
+        self.observation_spec = Composite(
+            observation=Bounded(*bounds, shape=(n, OBS_DIM), dtype=torch.float32, device=dev),
+            end_reason=Categorical(len(END_REASONS), shape=(n, 1), dtype=torch.int64, device=dev),
+            distance=Unbounded(shape=(n, 1), dtype=torch.float32, device=dev),
+            shape=(n,), device=dev,
+        )
+        self.action_spec = Bounded(-1.0, 1.0, shape=(n, 2), dtype=torch.float32, device=dev)
+        self.reward_spec = Unbounded(shape=(n, 1), dtype=torch.float32, device=dev)
+        self.done_spec = Composite(
+            done=Categorical(2, shape=(n, 1), dtype=torch.bool, device=dev),
+            terminated=Categorical(2, shape=(n, 1), dtype=torch.bool, device=dev),
+            truncated=Categorical(2, shape=(n, 1), dtype=torch.bool, device=dev),
+            shape=(n,), device=dev,
+        )
+
+    # ------------------------------------------------------------------ EnvBase hooks
+    def _set_seed(self, seed: int | None) -> None:
+        """Seed every world's reset stream; episode k of world w draws from (seed, w, k)."""
+        self._seed = 0 if seed is None else int(seed) % (2**31)
+        self._episode_t.zero_()
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        mask = None
+        if tensordict is not None and "_reset" in tensordict:
+            mask = tensordict.get("_reset").reshape(self.num_envs)
+        if mask is None:
+            self._mask_t.fill_(True)
+        else:
+            self._mask_t.copy_(mask)
+        sim = self.sim
+        wp.launch(sample_episodes, dim=self.num_envs, inputs=[self._seed, self._params, self._mask],
+                  outputs=[self._task, sim._reset_poses], device=self._wp_device)
+        sim._reset_mask.assign(self._mask)
+        sim._apply_reset(sim.rest_height)
+        wp.launch(observe_reset, dim=self.num_envs,
+                  inputs=[self._params, self._mask, self._task, sim.state_0.body_q, sim._layout.bodies_per_world,
+                          sim._layout.chassis_body, sim._lin_vel, sim._ang_vel, sim._rpy],
+                  outputs=[self._obs, self._distance], device=self._wp_device)
+        self._end_reason_t.masked_fill_(self._mask_t.unsqueeze(-1), 0)
+        zeros = torch.zeros((self.num_envs, 1), dtype=torch.bool, device=self.device)
+        return TensorDict(
+            {"observation": self._obs_t.clone(), "end_reason": self._end_reason_t.long(),
+             "distance": self._distance_t.clone(), "done": zeros, "terminated": zeros.clone(),
+             "truncated": zeros.clone()},
+            batch_size=self.batch_size, device=self.device)
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        action = self._check_action(tensordict.get("action"))
+        torch.mul(action.clamp(-1.0, 1.0), self.task_cfg.action_scale, out=self.sim.commands)
+        sim = self.sim
+        sim.step()
+        wp.launch(compute_step_outcome, dim=self.num_envs,
+                  inputs=[self._params, self._task, sim.state_0.body_q, sim._layout.bodies_per_world,
+                          sim._layout.chassis_body, sim._lin_vel, sim._ang_vel, sim._rpy, sim._contact_flags,
+                          sim._nonfinite],
+                  outputs=[self._obs, self._reward, self._terminated, self._truncated, self._end_reason,
+                           self._distance], device=self._wp_device)
+        if bool(sim.nonfinite.any()):  # one flag read per step; blown-up worlds are rare
+            self.nonfinite_count += int(sim.nonfinite.sum())
+        return TensorDict(
+            {"observation": self._obs_t.clone(), "reward": self._reward_t.clone(),
+             "done": self._terminated_t | self._truncated_t, "terminated": self._terminated_t.clone(),
+             "truncated": self._truncated_t.clone(), "end_reason": self._end_reason_t.long(),
+             "distance": self._distance_t.clone()},
+            batch_size=self.batch_size, device=self.device)
+
+    def _check_action(self, action: torch.Tensor | None) -> torch.Tensor:
+        expected = (self.num_envs, 2)
+        if action is None:
+            raise KeyError("the input tensordict has no 'action' entry")
+        if tuple(action.shape) != expected:
+            raise ValueError(f"action must have shape {expected} (num_envs, [left, right]), got {tuple(action.shape)}")
+        if not action.is_floating_point():
+            raise TypeError(f"action must be a floating-point tensor of shape {expected}, got dtype {action.dtype}")
+        finite = torch.isfinite(action).all(-1)
+        if not bool(finite.all()):
+            bad = (~finite).nonzero().flatten().tolist()
+            raise ValueError(f"action contains NaN/inf in world(s) {bad[:20]}{' ...' if len(bad) > 20 else ''}; "
+                             "nothing was stepped")
+        return action.to(self.device, torch.float32)
+
+    # ------------------------------------------------------------------ save / restore
+    def state_dict(self, *args, **kwargs):
+        sd = super().state_dict(*args, **kwargs)
+        snapshot = self.sim.get_state()
+        for k, v in snapshot.items():
+            sd[f"sim.{k}"] = v
+        for k, v in self._task_views.items():
+            sd[f"task.{k}"] = v.clone()
+        sd["task.seed"] = torch.tensor(self._seed)
+        sd["task.nonfinite_count"] = torch.tensor(self.nonfinite_count)
+        return sd
+
+    def load_state_dict(self, state_dict: Mapping, strict: bool = True, assign: bool = False):
+        state_dict = dict(state_dict)
+        sim_state = {k[4:]: state_dict.pop(k) for k in list(state_dict) if k.startswith("sim.")}
+        task_state = {k[5:]: state_dict.pop(k) for k in list(state_dict) if k.startswith("task.")}
+        missing = sorted({"joint_q", "joint_qd", "commands", "sim_time"} - set(sim_state))
+        if missing:
+            raise KeyError(f"state dict lacks simulator entries {missing}")
+        self.sim.set_state(sim_state)
+        for k, v in self._task_views.items():
+            v.copy_(task_state[k])
+        self._seed = int(task_state["seed"])
+        self.nonfinite_count = int(task_state["nonfinite_count"])
+        return super().load_state_dict(state_dict, strict=strict, assign=assign)
+
+    def __repr__(self) -> str:
+        return f"ATRVjrEnv(num_envs={self.num_envs}, device={self.device}, variant_urdf={self.sim.description.path!r})"
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvFactory:
+    """Picklable env constructor for multi-process collectors (``spawn``-safe).
+
+    Pins the worker process to ``core`` (if given) and to one torch thread before building,
+    so two workers on a 2-core machine do not fight over cores.
+    """
+
+    num_envs: int = 64
+    seed: int | None = None
+    core: int | None = None
+    kwargs: tuple[tuple[str, object], ...] = ()
+
+    def __call__(self) -> ATRVjrEnv:
+        if self.core is not None and hasattr(os, "sched_setaffinity"):
+            cores = sorted(os.sched_getaffinity(0))
+            os.sched_setaffinity(0, {cores[self.core % len(cores)]})
+        torch.set_num_threads(1)
+        wp.config.quiet = True
+        return ATRVjrEnv(self.num_envs, seed=self.seed, **dict(self.kwargs))
+
