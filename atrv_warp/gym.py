@@ -12,6 +12,8 @@ truncation, so no ``TimeLimit`` wrapper is added.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import gymnasium
 import numpy as np
 import torch
@@ -34,7 +36,7 @@ def _spaces(env: ATRVjrEnv) -> tuple[spaces.Box, spaces.Box]:
 class ATRVjrGymEnv(gymnasium.Env):
     """Single-rover Gymnasium environment: the reference's interface."""
 
-    metadata = {"render_modes": []}
+    metadata: ClassVar[dict] = {"render_modes": []}
 
     def __init__(self, **env_kwargs):
         self._env = ATRVjrEnv(1, **env_kwargs)
@@ -63,7 +65,7 @@ class ATRVjrGymEnv(gymnasium.Env):
 class ATRVjrVectorEnv(VectorEnv):
     """N rovers as a Gymnasium ``VectorEnv`` (autoreset on the next step, Gymnasium's default)."""
 
-    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP}
+    metadata: ClassVar[dict] = {"autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 1, **env_kwargs):
         self._env = ATRVjrEnv(num_envs, **env_kwargs)
