@@ -188,11 +188,13 @@ def compute_step_outcome(
     if d < params.reach_radius:
         reason = END_SUCCESS
         rew = params.success_reward
-    elif contact_flags[world] != 0:
-        reason = END_WALL
-        rew = params.failure_reward
     elif wp.abs(r[0]) > params.flip_roll:
+        # before the contact check: a flipping chassis usually also touches the ground
         reason = END_FLIP
+        rew = params.failure_reward
+    elif contact_flags[world] != 0:
+        # wall, or the chassis on the ground: any contact beyond the wheels' ground contacts
+        reason = END_WALL
         rew = params.failure_reward
     else:
         rew = (task.prev_distance[world] - d) + params.heading_weight * (

@@ -1,0 +1,281 @@
+"""The TorchRL environment: spec conformance, task math, resets, seeding, errors, TorchRL tooling."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+import warp as wp
+from tensordict import TensorDict
+from torchrl.envs import InitTracker, ObservationNorm, RewardSum, StepCounter, TransformedEnv, VecNormV2
+from torchrl.envs.utils import check_env_specs, step_mdp
+
+from atrv_warp import ATRVjrEnv
+from atrv_warp.baseline import scripted_policy
+from atrv_warp.env import END_REASONS, OBSERVATION_NAMES
+
+REASON = {name: i for i, name in enumerate(END_REASONS)}
+
+
+def random_actions(n, steps, seed):
+    g = torch.Generator().manual_seed(seed)
+    return torch.rand(steps, n, 2, generator=g) * 2 - 1
+
+
+def run(env, actions):
+    """Step with given actions, resetting done worlds as TorchRL collectors do."""
+    td = env.reset()
+    out = []
+    for a in actions:
+        td["action"] = a
+        td, td_next = env.step_and_maybe_reset(td)
+        out.append(td["next"].clone())
+        td = td_next
+    return torch.stack(out)
+
+
+def test_specs_and_rollout():
+    env = ATRVjrEnv(4, seed=0)
+    check_env_specs(env)
+    assert env.observation_spec["observation"].shape == (4, 10)
+    assert env.action_spec.shape == (4, 2)
+    assert env.action_spec.space.low.min() == -1 and env.action_spec.space.high.max() == 1
+    assert env.reward_spec.shape == (4, 1)
+    assert set(env.done_keys) == {"done", "terminated", "truncated"}
+    high = env.observation_spec["observation"].space.high[0]
+    assert high.tolist() == pytest.approx([12, 12, 30, 30, 6, 6, 0.25, 6, 1, 1])
+    assert len(OBSERVATION_NAMES) == 10
+    td = env.rollout(50, policy=scripted_policy())
+    assert td["next", "observation"].dtype == torch.float32
+    assert torch.isfinite(td["next", "observation"]).all()
+
+
+def test_reset_samples_and_observation_order():
+    env = ATRVjrEnv(256, seed=5)
+    td = env.reset()
+    obs = td["observation"]
+    target, pos = obs[:, 0:2], obs[:, 2:4]
+    assert target.abs().max() <= 12 and pos.abs().max() <= 12
+    assert target.std(0).min() > 5  # uniform on [-12, 12]: std 6.9
+    torch.testing.assert_close(pos, env.sim.root_pose[:, :2])
+    torch.testing.assert_close(target, env.target)
+    assert obs[:, 4:8].abs().max() == 0  # at rest, level
+    yaw = env.sim.rpy[:, 2]
+    assert yaw.min() < -2.8 and yaw.max() > 2.8
+    # heading error: angle from rover heading to the target direction
+    err = torch.atan2(target[:, 1] - pos[:, 1], target[:, 0] - pos[:, 0]) - yaw
+    torch.testing.assert_close(obs[:, 8], torch.sin(err), atol=1e-5, rtol=0)
+    torch.testing.assert_close(obs[:, 9], torch.cos(err), atol=1e-5, rtol=0)
+    torch.testing.assert_close(td["distance"][:, 0], (target - pos).norm(dim=-1))
+
+
+def place(env, world, x, y, yaw, target, height=None):
+    mask = torch.zeros(env.num_envs, dtype=torch.bool)
+    mask[world] = True
+    env.sim.reset(mask=mask, poses=[[x, y, yaw]], height=height)
+    env.target[world] = torch.tensor(target)
+
+
+def test_reward_and_termination_on_built_states():
+    env = ATRVjrEnv(4, seed=0, max_steps=200)
+    env.reset()
+    place(env, 0, 0.0, 0.0, 0.0, [0.3, 0.0])  # already within 1 m: success
+    place(env, 1, 14.69, 0.0, 0.0, [0.0, 5.0])  # front wheels touching the +x wall
+    place(env, 2, 0.0, 0.0, 0.0, [8.0, 0.0], height=0.6)  # rolled by hand below, in the air
+    place(env, 3, -5.0, 0.0, 0.0, [5.0, 0.0])  # plain progress
+    # roll world 2 by 0.3 rad
+    q = wp.to_torch(env.sim.state_0.joint_q).view(4, -1)
+    q[2, 3:7] = torch.tensor([math.sin(0.15), 0.0, 0.0, math.cos(0.15)])
+    env.sim.set_state(env.sim.get_state())
+    # prime the progress terms from the hand-built states, as a reset would
+    env._task_views["prev_distance"].copy_((env.target - env.sim.root_pose[:, :2]).norm(dim=-1))
+    env._task_views["prev_heading_error"].zero_()
+    action = torch.tensor([[0.0, 0.0], [1.0, 1.0], [0.0, 0.0], [0.5, 0.5]])
+    nxt = env.step(TensorDict(action=action, batch_size=[4]))["next"]
+    reason = nxt["end_reason"][:, 0].tolist()
+    assert reason[:3] == [REASON["success"], REASON["wall"], REASON["flip"]]
+    assert nxt["reward"][:3, 0].tolist() == [4.0, -4.0, -4.0]
+    assert nxt["terminated"][:3].all() and not nxt["truncated"].any()
+    assert reason[3] == REASON["running"] and not nxt["done"][3]
+    # progress reward: (previous distance - distance) + 4 (previous |err| - |err|) - 0.03
+    obs = nxt["observation"][3]
+    d = (obs[0:2] - obs[2:4]).norm()
+    err = torch.atan2(obs[8], obs[9]).abs()
+    expected = (10.0 - d) + 4.0 * (0.0 - err) - 0.03
+    assert nxt["reward"][3, 0].item() == pytest.approx(expected.item(), abs=1e-5)
+    assert d.item() < 10.0  # it moved towards the target
+
+
+def test_timeout_truncates():
+    env = ATRVjrEnv(2, seed=1, max_steps=3)
+    td = env.reset()
+    for i in range(3):
+        td["action"] = torch.zeros(2, 2)
+        td = env.step(td)
+        nxt = td["next"]
+        td = step_mdp(td)
+    assert nxt["truncated"].all() and not nxt["terminated"].any() and nxt["done"].all()
+    assert (nxt["end_reason"] == REASON["timeout"]).all()
+
+
+def test_partial_reset_leaves_other_worlds_bit_identical():
+    env = ATRVjrEnv(4, seed=2)
+    td = env.reset()
+    for a in random_actions(4, 10, 0):
+        td["action"] = a
+        td = step_mdp(env.step(td))
+    before_q = wp.to_torch(env.sim.state_0.joint_q).clone().view(4, -1)
+    before_qd = wp.to_torch(env.sim.state_0.joint_qd).clone().view(4, -1)
+    before_obs = td["observation"].clone()
+    mask = torch.tensor([[False], [True], [False], [True]])
+    td.set("_reset", mask)
+    out = env.reset(td)
+    q = wp.to_torch(env.sim.state_0.joint_q).view(4, -1)
+    qd = wp.to_torch(env.sim.state_0.joint_qd).view(4, -1)
+    keep = torch.tensor([0, 2])
+    assert torch.equal(q[keep], before_q[keep]) and torch.equal(qd[keep], before_qd[keep])
+    assert torch.equal(out["observation"][keep], before_obs[keep])
+    assert not torch.equal(q[1], before_q[1]) and qd[[1, 3]].abs().max() == 0
+    assert env.step_count[[1, 3]].tolist() == [0, 0] and env.step_count[keep].tolist() == [10, 10]
+
+
+def test_seed_determinism_and_save_restore():
+    actions = random_actions(8, 60, 1)
+    a = run(ATRVjrEnv(8, seed=42), actions)
+    b = run(ATRVjrEnv(8, seed=42), actions)
+    c = run(ATRVjrEnv(8, seed=43), actions)
+    assert torch.equal(a["observation"], b["observation"]) and torch.equal(a["reward"], b["reward"])
+    assert not torch.equal(a["observation"], c["observation"])
+    # save mid-rollout, restore into a fresh env, continue: identical to continuing the original
+    env = ATRVjrEnv(8, seed=7)
+    td = env.reset()
+    for act in actions[:25]:
+        td["action"] = act
+        td = env.step_and_maybe_reset(td)[1]
+    saved, saved_td = env.state_dict(), td.clone()
+    for act in actions[25:35]:  # wander off before restoring
+        td["action"] = act
+        td = env.step_and_maybe_reset(td)[1]
+    env.load_state_dict(saved)
+    env2 = ATRVjrEnv(8, seed=0)
+    env2.load_state_dict(saved)
+    outs = []
+    for e in (env, env2):
+        t = saved_td.clone()
+        seq = []
+        for act in actions[25:]:
+            t["action"] = act
+            t, t_next = e.step_and_maybe_reset(t)
+            seq.append(t["next", "observation"].clone())
+            t = t_next
+        outs.append(torch.stack(seq))
+    assert torch.equal(outs[0], outs[1])
+
+
+def test_bad_actions_raise_clear_errors():
+    env = ATRVjrEnv(3, seed=0)
+    td = env.reset()
+    with pytest.raises(ValueError, match=r"action must have shape \(3, 2\).*got \(3,\)"):
+        env.step(td.set("action", torch.zeros(3)))
+    with pytest.raises(TypeError, match="floating-point"):
+        env.step(td.set("action", torch.zeros(3, 2, dtype=torch.int64)))
+    bad = torch.zeros(3, 2)
+    bad[2, 1] = float("nan")
+    pose = env.sim.root_pose.clone()
+    with pytest.raises(ValueError, match=r"NaN/inf in world\(s\) \[2\]"):
+        env.step(td.set("action", bad))
+    assert torch.equal(env.sim.root_pose, pose)  # nothing was stepped
+    # out-of-range values are clipped to [-1, 1]
+    big = run(ATRVjrEnv(1, seed=4), torch.full((5, 1, 2), 7.0))
+    one = run(ATRVjrEnv(1, seed=4), torch.full((5, 1, 2), 1.0))
+    assert torch.equal(big["observation"], one["observation"])
+
+
+def test_nonfinite_world_is_contained():
+    env = ATRVjrEnv(3, seed=3)
+    ref = ATRVjrEnv(3, seed=3)
+    td, tdr = env.reset(), ref.reset()
+    qd = wp.to_torch(env.sim.state_0.joint_qd).view(3, -1)
+    qd[1, 0] = float("nan")  # world 1 blows up
+    act = torch.full((3, 2), 0.5)
+    td["action"], tdr["action"] = act, act.clone()
+    td, td_next = env.step_and_maybe_reset(td)
+    tdr, _ = ref.step_and_maybe_reset(tdr)
+    nxt = td["next"]
+    assert torch.isfinite(nxt["observation"]).all() and torch.isfinite(nxt["reward"]).all()
+    assert nxt["end_reason"][1, 0].item() == REASON["nonfinite"] and nxt["terminated"][1]
+    assert nxt["reward"][1, 0].item() == 0.0
+    keep = torch.tensor([0, 2])
+    assert torch.equal(nxt["observation"][keep], tdr["next", "observation"][keep])
+    assert env.nonfinite_count == 1
+    # the collector-style reset brought world 1 back
+    assert torch.isfinite(wp.to_torch(env.sim.state_0.joint_qd)).all()
+    assert torch.isfinite(td_next["observation"]).all() and env.sim.nonfinite.sum() == 0
+
+
+def test_transforms():
+    env = TransformedEnv(ATRVjrEnv(4, seed=0))
+    env.append_transform(StepCounter())
+    env.append_transform(RewardSum())
+    env.append_transform(InitTracker())
+    env.append_transform(ObservationNorm(in_keys=["observation"], standard_normal=True))
+    env.transform[-1].init_stats(num_iter=20, reduce_dim=(0, 1), cat_dim=0)
+    env.append_transform(VecNormV2(in_keys=["reward"], decay=0.99))
+    check_env_specs(env)
+    td = env.rollout(30, break_when_any_done=False)
+    assert td["next", "step_count"].max() == 30
+    assert "episode_reward" in td["next"] and "is_init" in td
+    assert torch.isfinite(td["next", "observation"]).all()
+
+
+def test_scripted_baseline_reaches_targets():
+    from atrv_warp.evaluation import evaluate
+
+    r = evaluate(scripted_policy(), num_episodes=64, seed=11)
+    assert r.success_rate > 0.85
+    assert r.success_rate + r.wall_rate + r.flip_rate + r.timeout_rate == pytest.approx(1.0)
+
+
+def test_gymnasium_adapter():
+    import gymnasium
+    from gymnasium.utils.env_checker import check_env
+
+    env = gymnasium.make("atrv_warp.gym:ATRVjr-v0")
+    check_env(env.unwrapped)
+    obs, info = env.reset(seed=1)
+    assert obs.shape == (10,) and obs.dtype == np.float32 and info["end_reason"] == "running"
+    venv = gymnasium.make_vec("ATRVjr-v0", num_envs=3)
+    obs, _ = venv.reset(seed=1)
+    ends = 0
+    for _ in range(210):
+        obs, _rew, term, trunc, _info = venv.step(venv.action_space.sample())
+        ends += int((term | trunc).sum())
+    assert obs.shape == (3, 10) and ends >= 3  # every world truncates by step 200
+
+
+def test_collector_single_process():
+    from torchrl.collectors import Collector
+
+    collector = Collector(ATRVjrEnv(8, seed=0), scripted_policy(), frames_per_batch=80, total_frames=160)
+    batches = [b for b in collector]
+    collector.shutdown()
+    assert [b.numel() for b in batches] == [80, 80]
+    assert batches[0].batch_size == (8, 10)
+    # the collector resets finished worlds and keeps going; step counts never exceed 200
+    assert torch.isfinite(batches[-1]["next", "observation"]).all()
+
+
+def test_multisync_collector_two_workers():
+    from torchrl.collectors import MultiSyncCollector
+
+    from atrv_warp import EnvFactory
+
+    collector = MultiSyncCollector([EnvFactory(8, seed=1, core=0), EnvFactory(8, seed=2, core=1)],
+                                   scripted_policy(), frames_per_batch=320, total_frames=640)
+    batches = [b for b in collector]
+    collector.shutdown()
+    assert len(batches) == 2 and all(b.numel() == 320 for b in batches)
+    obs = batches[0]["observation"]
+    assert obs.shape[-1] == 10 and torch.isfinite(obs).all()
+    # the two workers were seeded differently: their first targets differ
+    assert not torch.equal(obs[0, :, 0, :2], obs[1, :, 0, :2])
