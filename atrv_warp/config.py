@@ -20,6 +20,7 @@ __all__ = [
     "SimConfig",
     "default_urdf_path",
     "get_variant",
+    "load_train_config",
     "replace_checked",
 ]
 
@@ -209,3 +210,139 @@ class TaskConfig:
     """Subtracted from every non-terminal reward."""
     action_scale: float = 20.0
     """Wheel torque per unit action [N·m]."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """SAC training of the drive-to-target task (``python -m atrv_warp.train``).
+
+    Defaults are chosen by measurement on a 2-core CPU (README, 'Training').
+    """
+
+    # -- run
+    name: str = "default"
+    """Run name; outputs go to ``<out_dir>/<name>``."""
+    out_dir: str = "runs"
+    """Parent folder of run folders."""
+    seed: int = 0
+    """Seeds torch, the training envs and the exploration noise (not the evaluation set)."""
+    max_minutes: float = 10.0
+    """Wall-clock budget for training, evaluations included [min]; 0 = no limit."""
+    total_frames: int = 3_000_000
+    """Environment steps (all worlds together) to collect at most."""
+    # -- collection
+    num_envs: int = 256
+    """Worlds stepped together by the collector."""
+    steps_per_batch: int = 8
+    """Steps per world in one collected batch (frames per batch = num_envs x steps_per_batch)."""
+    collector: str = "async"
+    """``async``: a separate worker process collects on its own core while the trainer updates;
+    ``sync``: collect and update in turn, in this process."""
+    init_random_frames: int = 20_000
+    """Frames collected with uniform random actions before learning starts (also the data the
+    observation statistics are computed from)."""
+    # -- SAC
+    buffer_size: int = 1_000_000
+    """Replay capacity [frames]."""
+    batch_size: int = 512
+    """Transitions per gradient step."""
+    utd_ratio: float = 0.03125
+    """Gradient steps per collected frame (1/32: one update per 32 frames)."""
+    width: int = 128
+    """Hidden units per layer, actor and critics."""
+    depth: int = 2
+    """Hidden layers, actor and critics."""
+    lr: float = 3e-4
+    """Adam learning rate, actor, critics and temperature."""
+    gamma: float = 0.99
+    """Discount."""
+    tau: float = 0.005
+    """Target-network soft-update rate."""
+    init_alpha: float = 1.0
+    """Initial entropy temperature (learned)."""
+    threads: int = 1
+    """torch threads of the trainer (measured: 2 threads gain < 20 % on these small nets)."""
+    # -- evaluation, logging, checkpoints
+    eval_every_frames: int = 200_000
+    """Deterministic evaluation interval [frames]."""
+    eval_episodes: int = 256
+    """Seeded episodes per periodic evaluation (fixed set, seed EVAL_SEED)."""
+    final_eval_episodes: int = 1000
+    """Episodes of the final evaluation of the best policy."""
+    logger: str = "csv"
+    """Scalars always go to CSV (the learning curve is drawn from it); ``tensorboard`` adds a
+    TensorBoard log, ``rerun`` a Rerun recording (``train.rrd``) that also holds two worlds of
+    every periodic evaluation."""
+    progress: bool = True
+    """Show a progress bar (frames, success rate, reward, ETA)."""
+
+    @property
+    def frames_per_batch(self) -> int:
+        return self.num_envs * self.steps_per_batch
+
+    def validate(self) -> TrainConfig:
+        """Raise ``ValueError`` naming the first bad value."""
+        positive = ("num_envs", "steps_per_batch", "buffer_size", "batch_size", "width", "depth",
+                    "eval_every_frames", "eval_episodes", "final_eval_episodes", "total_frames", "threads")
+        for name in positive:
+            if getattr(self, name) <= 0:
+                raise ValueError(f"train config: {name} must be > 0, got {getattr(self, name)}")
+        for name in ("lr", "tau", "init_alpha", "utd_ratio"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"train config: {name} must be > 0, got {getattr(self, name)}")
+        if not 0.0 < self.gamma <= 1.0:
+            raise ValueError(f"train config: gamma must be in (0, 1], got {self.gamma}")
+        if self.max_minutes < 0 or self.init_random_frames < 0:
+            raise ValueError("train config: max_minutes and init_random_frames must be >= 0")
+        if self.collector not in ("async", "sync"):
+            raise ValueError(f"train config: collector must be 'async' or 'sync', got {self.collector!r}")
+        if self.logger not in ("csv", "tensorboard", "rerun"):
+            raise ValueError(f"train config: logger must be 'csv', 'tensorboard' or 'rerun', got {self.logger!r}")
+        if self.batch_size > self.buffer_size:
+            raise ValueError("train config: batch_size must not exceed buffer_size")
+        return self
+
+
+def _coerce(field_type, name: str, value):
+    """Convert a TOML value or command-line string to a field's type, naming the field on failure."""
+    kind = {"int": int, "float": float, "str": str, "bool": bool}[field_type]
+    if isinstance(value, str) and kind is not str:
+        text = value.strip().lower()
+        if kind is bool:
+            if text in ("1", "true", "yes", "on"):
+                return True
+            if text in ("0", "false", "no", "off"):
+                return False
+            raise ValueError(f"train config: {name} expects true/false, got {value!r}")
+        try:
+            value = float(text.replace("_", "")) if kind is float else int(text.replace("_", ""))
+        except ValueError:
+            raise ValueError(f"train config: {name} expects {field_type}, got {value!r}") from None
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if kind is int and isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
+        raise ValueError(f"train config: {name} expects {field_type}, got {value!r}")
+    return value
+
+
+def load_train_config(path: str | None = None, overrides: dict | None = None) -> TrainConfig:
+    """Read a TOML config (flat ``key = value``), apply overrides, check every key and value."""
+    import tomllib
+
+    values: dict = {}
+    if path is not None:
+        with open(path, "rb") as fh:
+            try:
+                values.update(tomllib.load(fh))
+            except tomllib.TOMLDecodeError as err:
+                raise ValueError(f"{path}: not valid TOML: {err}") from None
+    values.update(overrides or {})
+    fields = {f.name: f for f in dataclasses.fields(TrainConfig)}
+    unknown = sorted(set(values) - set(fields))
+    if unknown:
+        where = f" in {path}" if path else ""
+        raise ValueError(f"unknown train config key(s) {unknown}{where}; known: {sorted(fields)}")
+    typed = {k: _coerce(fields[k].type, k, v) for k, v in values.items()}
+    return TrainConfig(**typed).validate()

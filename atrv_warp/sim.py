@@ -190,8 +190,8 @@ class RoverSim:
         p.exponent = cfg.exponent
         p.linear_region = cfg.linear_region
         p.linear_coeff = cfg.linear_region ** (cfg.exponent - 1.0)
-        p.friction = cfg.friction
         self._contact_params = p
+        self._friction = wp.array([cfg.friction], dtype=float, device=self.device)
 
         desc = self.description
         n_wheels = len(desc.wheels)
@@ -283,7 +283,7 @@ class RoverSim:
         s_in.clear_forces()
         wp.launch(compute_contact_forces, dim=self.num_worlds,
                   inputs=[self._layout.bodies_per_world, self._shapes, self._planes, self._contact_params,
-                          s_in.body_q, s_in.body_qd, self.model.body_com],
+                          self._friction, s_in.body_q, s_in.body_qd, self.model.body_com],
                   outputs=[s_in.body_f, self._contact_flags], device=self.device)
         wp.launch(apply_wheel_torques, dim=self.num_worlds,
                   inputs=[self._layout, self._commands, self.rover_cfg.wheel_speed_limit, s_in.joint_qd],

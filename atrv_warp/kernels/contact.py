@@ -33,7 +33,6 @@ class ContactParams:
     exponent: float  # n [-]
     linear_region: float  # [m]
     linear_coeff: float  # linear_region^(n-1), so the law is continuous at linear_region
-    friction: float  # mu [-]
 
 
 @wp.struct
@@ -101,6 +100,7 @@ def point_contact_force(
     slope_lon: float,
     slope_lat: float,
     params: ContactParams,
+    friction: float,
 ) -> wp.vec3:
     """Normal plus friction force [N] at contact point ``p`` of a body moving with (v_com, omega)."""
     v = v_com + wp.cross(omega, p - com)
@@ -118,7 +118,7 @@ def point_contact_force(
     else:
         ft = -slope_lat * vt
     # Coulomb cap: |ft| <= mu fn
-    fmax = params.friction * fn
+    fmax = friction * fn
     fl = wp.length(ft)
     if fl > fmax:
         ft = ft * (fmax / fl)
@@ -131,14 +131,19 @@ def compute_contact_forces(
     shapes: RoverShapes,
     planes: ArenaPlanes,
     params: ContactParams,
+    friction: wp.array(dtype=float),
     body_q: wp.array(dtype=wp.transform),
     body_qd: wp.array(dtype=wp.spatial_vector),
     body_com: wp.array(dtype=wp.vec3),
     body_f: wp.array(dtype=wp.spatial_vector),
     contact_flags: wp.array(dtype=wp.int32),
 ):
-    """One thread per world: add every shape–plane contact wrench to ``body_f``."""
+    """One thread per world: add every shape–plane contact wrench to ``body_f``.
+
+    ``friction`` is a one-element array (mu) so that gradients can flow to it.
+    """
     world = wp.tid()
+    mu = friction[0]
     base = world * bodies_per_world
     flags = contact_flags[world]
     for s in range(shapes.count):
@@ -161,7 +166,7 @@ def compute_contact_forces(
                 depth = off - wp.dot(n, p)
                 if depth > 0.0:
                     f = point_contact_force(p, depth, n, com, v_com, omega, axle,
-                                            shapes.slope_lon[s], shapes.slope_lat[s], params)
+                                            shapes.slope_lon[s], shapes.slope_lat[s], params, mu)
                     f_sum += f
                     t_sum += wp.cross(p - com, f)
                     if k > 0:
@@ -177,12 +182,13 @@ def compute_contact_forces(
                     depth = off - wp.dot(n, p)
                     if depth > 0.0:
                         f = point_contact_force(p, depth, n, com, v_com, omega, axle,
-                                                shapes.slope_lat[s], shapes.slope_lat[s], params)
+                                                shapes.slope_lat[s], shapes.slope_lat[s], params, mu)
                         f_sum += f
                         t_sum += wp.cross(p - com, f)
                         if k > 0:
                             flags = flags | FLAG_WALL
                         elif shapes.is_wheel[s] == 0:
                             flags = flags | FLAG_BODY_GROUND
-        body_f[b] = body_f[b] + wp.spatial_vector(f_sum, t_sum)
+        # atomic_add, not read-modify-write: it has an adjoint, so wp.Tape can differentiate it
+        wp.atomic_add(body_f, b, wp.spatial_vector(f_sum, t_sum))
     contact_flags[world] = flags

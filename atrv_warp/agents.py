@@ -1,0 +1,118 @@
+"""SAC networks and the self-contained policy that ships.
+
+Observation normalisation lives *inside* the networks (:class:`Normalize`, statistics as
+buffers): it is saved with the policy, frozen for evaluation, and a saved policy runs on raw
+``ATRVjrEnv`` observations with no transform to rebuild.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+import torch
+from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictSequential
+from torch import nn
+from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
+
+__all__ = ["Normalize", "load_policy", "make_actor", "make_qvalue", "pretrained_policy_path", "save_policy"]
+
+OBS_DIM, ACT_DIM = 10, 2
+
+
+class Normalize(nn.Module):
+    """``(x - loc) / scale`` with frozen statistics stored as buffers."""
+
+    def __init__(self, dim: int = OBS_DIM):
+        super().__init__()
+        self.register_buffer("loc", torch.zeros(dim))
+        self.register_buffer("scale", torch.ones(dim))
+
+    def set_stats(self, loc: torch.Tensor, scale: torch.Tensor) -> None:
+        self.loc.copy_(loc)
+        self.scale.copy_(scale.clamp(min=1e-3))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return (x - self.loc) / self.scale
+
+
+def make_actor(width: int = 128, depth: int = 2, normalize: Normalize | None = None) -> ProbabilisticActor:
+    """Tanh-Gaussian actor ``observation -> action`` in [-1, 1]²."""
+    net = nn.Sequential(
+        normalize if normalize is not None else Normalize(),
+        MLP(in_features=OBS_DIM, out_features=2 * ACT_DIM, num_cells=[width] * depth, activation_class=nn.ReLU),
+        NormalParamExtractor(),
+    )
+    module = TensorDictModule(net, in_keys=["observation"], out_keys=["loc", "scale"])
+    return ProbabilisticActor(module, in_keys=["loc", "scale"], out_keys=["action"], distribution_class=TanhNormal,
+                              distribution_kwargs={"low": -1.0, "high": 1.0}, return_log_prob=False)
+
+
+class _QNet(nn.Module):
+    def __init__(self, normalize: Normalize, width: int, depth: int):
+        super().__init__()
+        self.normalize = normalize
+        self.mlp = MLP(in_features=OBS_DIM + ACT_DIM, out_features=1, num_cells=[width] * depth,
+                       activation_class=nn.ReLU)
+
+    def forward(self, observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        return self.mlp(torch.cat([self.normalize(observation), action], dim=-1))
+
+
+def make_qvalue(width: int = 128, depth: int = 2, normalize: Normalize | None = None) -> ValueOperator:
+    """Q-network ``(observation, action) -> state_action_value``; shares ``normalize``'s statistics."""
+    return ValueOperator(_QNet(normalize if normalize is not None else Normalize(), width, depth),
+                         in_keys=["observation", "action"])
+
+
+def save_policy(actor: ProbabilisticActor, path: str | Path, *, width: int, depth: int, meta: dict | None = None):
+    """Write the actor's weights (normalisation included) atomically, loadable with weights_only."""
+    path = Path(path)
+    payload = {"format": "atrv_warp.policy/1", "width": width, "depth": depth,
+               "state_dict": {k: v.detach().cpu() for k, v in actor.state_dict().items()}, "meta": meta or {}}
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    torch.save(payload, tmp)
+    tmp.replace(path)
+
+
+def pretrained_policy_path() -> Path:
+    """The policy shipped inside the package (trained by ``python -m atrv_warp.train``)."""
+    return Path(str(resources.files("atrv_warp").joinpath("assets/pretrained_policy.pt")))
+
+
+def load_policy(path: str | Path | None = None, *, deterministic: bool = True) -> TensorDictSequential:
+    """Load a saved policy (default: the shipped one) as a TorchRL policy module.
+
+    The module reads raw ``observation`` from :class:`~atrv_warp.env.ATRVjrEnv` and writes
+    ``action``; with ``deterministic=True`` it returns the distribution's mode.
+    """
+    path = Path(path) if path is not None else pretrained_policy_path()
+    if not path.is_file():
+        raise FileNotFoundError(f"policy file not found: {path}")
+    payload = torch.load(path, map_location="cpu", weights_only=True)
+    if "policy" in payload:  # a training checkpoint: take its policy
+        payload = payload["policy"]
+    if payload.get("format") != "atrv_warp.policy/1":
+        raise ValueError(f"{path}: not an atrv_warp policy (format {payload.get('format')!r})")
+    actor = make_actor(payload["width"], payload["depth"])
+    actor.load_state_dict(payload["state_dict"])
+    actor.eval()
+    if not deterministic:
+        return actor
+    from torchrl.envs.utils import ExplorationType
+
+    return _Deterministic(actor, ExplorationType.DETERMINISTIC)
+
+
+class _Deterministic(TensorDictSequential):
+    """Runs the wrapped actor under a fixed exploration type."""
+
+    def __init__(self, actor, exploration_type):
+        super().__init__(actor)
+        self._exploration_type = exploration_type
+
+    def forward(self, tensordict, *args, **kwargs):
+        from torchrl.envs.utils import set_exploration_type
+
+        with set_exploration_type(self._exploration_type), torch.no_grad():
+            return super().forward(tensordict, *args, **kwargs)

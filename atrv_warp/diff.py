@@ -1,0 +1,214 @@
+"""Differentiable rollouts: gradients of a chassis trajectory with respect to wheel-torque
+actions, the initial state and the friction coefficient, through Newton's Featherstone solver
+and our contact kernel, recorded on a ``wp.Tape`` and exposed as a ``torch.autograd.Function``.
+
+Why the gradients are usable over a useful horizon: the wheel–ground contact is the analytic
+deepest point of a cylinder on a plane (``kernels/contact.py``), a smooth function of the pose,
+so the contact point moves with the wheel in the derivative as it does in the simulation.
+(Collision detection that returns contact points as constants biases the gradient when the
+wheels slip.) ``benchmarks/diff_gradients.py`` measures the agreement with finite differences
+against the horizon.
+
+Example::
+
+    from atrv_warp.diff import DiffRollout
+    roll = DiffRollout(num_worlds=1, steps=20)                  # 20 env steps = 1 s
+    actions = torch.zeros(20, 1, 2, requires_grad=True)        # [left, right] in [-1, 1] x 20 N·m
+    poses = roll(actions)                                       # (21, 1, 7) chassis x, y, z, qx, qy, qz, qw
+    poses[-1, 0, 0].backward()                                  # d x_final / d actions
+"""
+
+from __future__ import annotations
+
+import newton
+import torch
+import warp as wp
+
+from .config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, TaskConfig, get_variant
+from .kernels.contact import compute_contact_forces
+from .kernels.rover import apply_wheel_torques
+from .sim import RoverSim
+
+__all__ = ["DiffRollout", "NonFiniteGradientError"]
+
+
+_SCRATCH = ("M", "J", "P", "H", "L")
+
+
+class NonFiniteGradientError(FloatingPointError):
+    """The backward pass produced NaN or inf (the rollout was too long or too violent)."""
+
+
+@wp.kernel
+def scale_actions(actions: wp.array2d(dtype=float), scale: float, commands: wp.array(dtype=wp.vec2)):
+    world = wp.tid()
+    commands[world] = wp.vec2(scale * actions[world, 0], scale * actions[world, 1])
+
+
+@wp.kernel
+def gather_chassis_pose(body_q: wp.array(dtype=wp.transform), bodies_per_world: int, chassis: int,
+                        out: wp.array2d(dtype=float)):
+    world = wp.tid()
+    X = body_q[world * bodies_per_world + chassis]
+    p = wp.transform_get_translation(X)
+    q = wp.transform_get_rotation(X)
+    for i in range(3):
+        out[world, i] = p[i]
+    for i in range(4):
+        out[world, 3 + i] = q[i]
+
+
+class DiffRollout:
+    """A fixed-horizon, differentiable rollout of ``num_worlds`` rovers.
+
+    Args:
+        num_worlds: Rovers simulated together (gradients are per world).
+        steps: Horizon in env steps (``SimConfig.step_dt`` = 0.05 s each).
+        variant, rover, contact, arena, sim: As for :class:`~atrv_warp.sim.RoverSim`
+            (graph replay and tile GEMM are switched off: the tape records eager launches).
+        device: Warp device.
+
+    Calling the object runs the rollout; see :meth:`__call__`.
+    """
+
+    def __init__(self, num_worlds: int = 1, steps: int = 20, *, variant: str = "realistic",
+                 rover: RoverConfig | None = None, contact: ContactConfig | None = None,
+                 arena: ArenaConfig | None = None, sim: SimConfig | None = None, device: str = "cpu"):
+        if steps < 1:
+            raise ValueError(f"steps must be >= 1, got {steps}")
+        sim_cfg = sim or SimConfig()
+        sim_cfg = SimConfig(step_dt=sim_cfg.step_dt, sim_dt=sim_cfg.sim_dt, gravity=sim_cfg.gravity,
+                            mass_matrix_interval=1, use_tile_gemm=False, use_graph=False)
+        self.sim = RoverSim(num_worlds, rover=rover or get_variant(variant), contact=contact, arena=arena,
+                            sim=sim_cfg, device=device, requires_grad=True)
+        self.num_worlds, self.steps = num_worlds, steps
+        self.action_scale = TaskConfig().action_scale
+        model = self.sim.model
+        n_sub = steps * self.sim.substeps
+        self.states = [model.state(requires_grad=True) for _ in range(n_sub + 1)]
+        self.controls = [model.control(clone_variables=True) for _ in range(n_sub)]
+        for c in self.controls:
+            c.joint_f.requires_grad = True
+        dev = self.sim.device
+        self._actions = [wp.zeros((num_worlds, 2), dtype=float, device=dev, requires_grad=True) for _ in range(steps)]
+        self._commands = [wp.zeros(num_worlds, dtype=wp.vec2, device=dev, requires_grad=True) for _ in range(steps)]
+        self._poses = [wp.zeros((num_worlds, 7), dtype=float, device=dev, requires_grad=True)
+                       for _ in range(steps + 1)]
+        self._friction = wp.zeros(1, dtype=float, device=dev, requires_grad=True)
+        self._flags = wp.zeros(num_worlds, dtype=wp.int32, device=dev)
+        self._torque = wp.zeros((num_worlds, len(self.sim.description.wheels)), dtype=float, device=dev)
+        # Featherstone keeps its mass-matrix scratch (M, J, P, H, L) on the solver, shared by every
+        # step. Under a tape each step must own them, or the adjoints of all steps mix in one buffer
+        # (gradients explode with the horizon); so each substep gets its own set, swapped in below.
+        solver = self.sim.solver
+        self._scratch = [{name: wp.zeros_like(getattr(solver, name), requires_grad=True) for name in _SCRATCH}
+                         for _ in range(n_sub)]
+        self._tape: wp.Tape | None = None
+
+    # ------------------------------------------------------------------ recording
+    def _record(self) -> None:
+        sim, lay = self.sim, self.sim._layout
+        dt = sim.sim_cfg.sim_dt
+        n = self.num_worlds
+        s0 = self.states[0]
+        newton.eval_fk(sim.model, s0.joint_q, s0.joint_qd, s0)
+        wp.launch(gather_chassis_pose, dim=n, inputs=[s0.body_q, lay.bodies_per_world, lay.chassis_body],
+                  outputs=[self._poses[0]], device=sim.device)
+        k = 0
+        for t in range(self.steps):
+            wp.launch(scale_actions, dim=n, inputs=[self._actions[t], self.action_scale], outputs=[self._commands[t]],
+                      device=sim.device)
+            for _ in range(sim.substeps):
+                s_in, s_out, control = self.states[k], self.states[k + 1], self.controls[k]
+                wp.launch(compute_contact_forces, dim=n,
+                          inputs=[lay.bodies_per_world, sim._shapes, sim._planes, sim._contact_params, self._friction,
+                                  s_in.body_q, s_in.body_qd, sim.model.body_com],
+                          outputs=[s_in.body_f, self._flags], device=sim.device)
+                wp.launch(apply_wheel_torques, dim=n,
+                          inputs=[lay, self._commands[t], sim.rover_cfg.wheel_speed_limit, s_in.joint_qd],
+                          outputs=[control.joint_f, self._torque], device=sim.device)
+                for name, arr in self._scratch[k].items():
+                    setattr(sim.solver, name, arr)
+                sim.solver.step(s_in, s_out, control, None, dt)
+                k += 1
+            wp.launch(gather_chassis_pose, dim=n, inputs=[self.states[k].body_q, lay.bodies_per_world,
+                                                         lay.chassis_body], outputs=[self._poses[t + 1]],
+                      device=sim.device)
+
+    def forward(self, actions: torch.Tensor, joint_q: torch.Tensor, joint_qd: torch.Tensor,
+                friction: torch.Tensor) -> torch.Tensor:
+        for t in range(self.steps):
+            wp.to_torch(self._actions[t]).copy_(actions[t])
+        s0 = self.states[0]
+        wp.to_torch(s0.joint_q).copy_(joint_q.reshape(-1))
+        wp.to_torch(s0.joint_qd).copy_(joint_qd.reshape(-1))
+        wp.to_torch(self._friction).copy_(friction.reshape(1))
+        for s in self.states:
+            s.body_f.zero_()
+        self._tape = wp.Tape()
+        with self._tape:
+            self._record()
+        return torch.stack([wp.to_torch(p).clone() for p in self._poses])
+
+    def backward(self, grad_poses: torch.Tensor):
+        tape = self._tape
+        if tape is None:
+            raise RuntimeError("backward called before forward")
+        grads = {p: wp.from_torch(grad_poses[i].contiguous()) for i, p in enumerate(self._poses)}
+        tape.backward(grads=grads)
+        g_actions = torch.stack([wp.to_torch(a.grad).clone() for a in self._actions])
+        s0 = self.states[0]
+        g_q = wp.to_torch(s0.joint_q.grad).clone()
+        g_qd = wp.to_torch(s0.joint_qd.grad).clone()
+        g_mu = wp.to_torch(self._friction.grad).clone()
+        tape.zero()
+        self._tape = None
+        for name, g in (("actions", g_actions), ("initial joint_q", g_q), ("initial joint_qd", g_qd),
+                        ("friction", g_mu)):
+            if not torch.isfinite(g).all():
+                raise NonFiniteGradientError(
+                    f"gradient w.r.t. {name} is not finite after a {self.steps}-step rollout; shorten the "
+                    "horizon or soften the actions")
+        return g_actions, g_q, g_qd, g_mu
+
+    # ------------------------------------------------------------------ torch entry point
+    def initial_state(self, poses: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Generalised coordinates (joint_q, joint_qd) of rovers at rest at (x, y, yaw) ``poses`` (N, 3)."""
+        sim = self.sim
+        sim.reset(poses=poses)
+        return wp.to_torch(sim.state_0.joint_q).clone(), wp.to_torch(sim.state_0.joint_qd).clone()
+
+    def __call__(self, actions: torch.Tensor, initial_state: tuple[torch.Tensor, torch.Tensor] | None = None,
+                 friction: torch.Tensor | float | None = None) -> torch.Tensor:
+        """Roll out and return chassis poses (steps + 1, N, 7): x, y, z [m], quaternion (x, y, z, w).
+
+        Args:
+            actions: (steps, N, 2) in [-1, 1] (x 20 N·m), differentiable.
+            initial_state: (joint_q, joint_qd) from :meth:`initial_state` (default: every rover at
+                the origin, at rest); differentiable.
+            friction: Coulomb coefficient (default: the contact config's), differentiable.
+        """
+        expected = (self.steps, self.num_worlds, 2)
+        if tuple(actions.shape) != expected:
+            raise ValueError(f"actions must have shape {expected} (steps, worlds, [left, right]), "
+                             f"got {tuple(actions.shape)}")
+        if not torch.isfinite(actions).all():
+            raise ValueError("actions contain NaN/inf")
+        if initial_state is None:
+            initial_state = self.initial_state()
+        if friction is None:
+            friction = self.sim.contact_cfg.friction
+        friction = torch.as_tensor(friction, dtype=torch.float32).reshape(1)
+        return _RolloutFn.apply(self, actions.float(), initial_state[0].float(), initial_state[1].float(), friction)
+
+
+class _RolloutFn(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, roll: DiffRollout, actions, joint_q, joint_qd, friction):
+        ctx.roll = roll
+        return roll.forward(actions.detach(), joint_q.detach(), joint_qd.detach(), friction.detach())
+
+    @staticmethod
+    def backward(ctx, grad_poses):
+        g_a, g_q, g_qd, g_mu = ctx.roll.backward(grad_poses)
+        return None, g_a, g_q, g_qd, g_mu

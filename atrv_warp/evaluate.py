@@ -1,0 +1,87 @@
+"""Evaluate a saved policy on seeded episodes: ``python -m atrv_warp.evaluate [CHECKPOINT]``.
+
+CHECKPOINT is a ``best_policy.pt``, a training ``checkpoint.pt``, or omitted for the policy
+shipped with the package. Reports success rate, mean return, mean steps and the failure
+breakdown (wall, flip, timeout), optionally as JSON.
+
+Examples::
+
+    python -m atrv_warp.evaluate                          # the shipped policy, 1000 episodes
+    python -m atrv_warp.evaluate runs/default/best_policy.pt --episodes 200 --seed 7
+    python -m atrv_warp.evaluate --baseline               # the scripted driver, for comparison
+    python -m atrv_warp.evaluate --episodes 8 --rerun eval.rrd      # record 4 worlds; view: rerun eval.rrd
+    python -m atrv_warp.evaluate --episodes 4 --serve --real-time   # live web viewer on 127.0.0.1
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m atrv_warp.evaluate", description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    parser.add_argument("checkpoint", nargs="?", default=None, help="policy or checkpoint file (default: shipped)")
+    parser.add_argument("--episodes", type=int, default=1000, help="number of seeded episodes (one world each)")
+    parser.add_argument("--seed", type=int, default=None, help="evaluation-set seed (default: the standard set)")
+    parser.add_argument("--baseline", action="store_true", help="evaluate the scripted baseline instead")
+    parser.add_argument("--device", default="cpu", help="simulation device")
+    parser.add_argument("--json", metavar="FILE", help="also write the figures to FILE")
+    parser.add_argument("--rerun", metavar="FILE.rrd", help="record the episodes to a Rerun file")
+    parser.add_argument("--serve", action="store_true", help="serve a live Rerun web viewer on 127.0.0.1")
+    parser.add_argument("--real-time", action="store_true", help="slow the simulation to real time")
+    parser.add_argument("--worlds", type=int, nargs="+", default=None,
+                        help="worlds (episodes) to record (default: the first 4)")
+    args = parser.parse_args(argv)
+    if args.episodes < 1:
+        parser.error("--episodes must be >= 1")
+
+    import warp as wp
+
+    wp.config.quiet = True
+    from .evaluation import EVAL_SEED, evaluate, format_result
+
+    if args.baseline:
+        from .baseline import scripted_policy
+
+        policy, name = scripted_policy(), "scripted baseline"
+    else:
+        from .agents import load_policy, pretrained_policy_path
+
+        path = args.checkpoint or str(pretrained_policy_path())
+        try:
+            policy = load_policy(path)
+        except (FileNotFoundError, ValueError, KeyError) as err:
+            parser.error(f"cannot load policy: {err}")
+        name = path
+    seed = EVAL_SEED if args.seed is None else args.seed
+    recorder, env, on_step = None, None, None
+    if args.rerun or args.serve or args.real_time:
+        from .env import ATRVjrEnv
+        from .viz import RerunRecorder
+
+        env = ATRVjrEnv(args.episodes, device=args.device)
+        recorder = RerunRecorder(env.sim, path=args.rerun, serve=args.serve, worlds=args.worlds,
+                                 real_time=args.real_time)
+        on_step = recorder.env_hook()
+    try:
+        result = evaluate(policy, num_episodes=args.episodes, seed=seed, device=args.device, env=env,
+                          on_step=on_step)
+    finally:
+        if recorder is not None:
+            recorder.close()
+    print(format_result(name, result))
+    if args.rerun:
+        print(f"recording: {args.rerun}  (view with: rerun {args.rerun})")
+    if args.serve:
+        input("viewer running; press Enter to stop ...") if sys.stdin.isatty() else None
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump({"policy": name, "seed": seed, **result.as_dict()}, fh, indent=2)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

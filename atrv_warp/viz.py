@@ -1,0 +1,263 @@
+"""Rerun visualisation: the arena, the rovers drawn from the model's own shapes, targets,
+trajectories and per-world scalars, to an ``.rrd`` file or a live web viewer on localhost.
+
+Entities (``W`` = world index)::
+
+    arena/ground, arena/grid, arena/walls          static
+    world_W/rover/<link>                           Transform3D per step; shapes static below it
+    world_W/target                                 target disc
+    world_W/trajectory                             chassis path of the current episode
+    plots/world_W/{reward,distance,torque_left,torque_right}   Scalars
+    train/<name>                                   training scalars (:class:`RerunLogger`)
+
+Timelines: ``step`` (env steps since the recorder started), ``sim_time`` (seconds), and
+``frames`` (training frames, for training scalars and the evaluations recorded during training).
+
+Nothing here runs unless a recorder is created and called: the simulator's step path has no
+logging hook, so disabled logging costs nothing.
+
+View a file with ``rerun FILE.rrd``.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import time
+from collections.abc import Sequence
+
+import numpy as np
+import rerun as rr
+from torchrl.record.loggers import Logger
+
+__all__ = ["DEFAULT_WORLDS", "RerunLogger", "RerunRecorder", "serve_localhost"]
+
+DEFAULT_WORLDS = 4
+"""Worlds logged when none are named."""
+
+_CHASSIS_COLOR = (190, 30, 30)
+_WHEEL_COLOR = (25, 25, 25)
+_TARGET_COLOR = (40, 90, 230)
+_GROUND_COLOR = (150, 150, 140)
+_WALL_COLOR = (120, 120, 130)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def serve_localhost(rec: rr.RecordingStream, *, grpc_port: int | None = None, web_port: int | None = None) -> str:
+    """Start Rerun's web viewer and gRPC proxy bound to 127.0.0.1 only, connect ``rec`` to it,
+    and return the URL to open. (The SDK's own ``serve_grpc`` binds every interface.)"""
+    exe = shutil.which("rerun")
+    if exe is None:
+        raise RuntimeError("the 'rerun' command (installed with rerun-sdk) is not on PATH")
+    grpc_port = grpc_port or _free_port()
+    web_port = web_port or _free_port()
+    proc = subprocess.Popen(
+        [exe, "--serve-web", "--bind", "127.0.0.1", "--port", str(grpc_port), "--web-viewer-port", str(web_port)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + 20.0
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"rerun viewer server exited with code {proc.returncode}")
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", grpc_port)) == 0:
+                break
+        time.sleep(0.1)
+    else:
+        proc.terminate()
+        raise RuntimeError("rerun viewer server did not start within 20 s")
+    grpc_url = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
+    rec.connect_grpc(grpc_url)
+    rec._atrv_server = proc  # stopped with the recorder
+    return f"http://127.0.0.1:{web_port}/?url={grpc_url.replace('+', '%2B')}"
+
+
+class RerunRecorder:
+    """Logs selected worlds of a :class:`~atrv_warp.sim.RoverSim` (or an env's ``.sim``) to Rerun.
+
+    Args:
+        sim: The simulator to read state and shapes from.
+        path: Write an ``.rrd`` file here.
+        serve: Also serve a live web viewer on 127.0.0.1 (the URL is printed and kept in ``url``).
+        worlds: World indices to log (default: the first ``DEFAULT_WORLDS``).
+        real_time: Sleep so that logged ``sim_time`` advances no faster than wall time.
+        recording: Log into an existing ``RecordingStream`` instead of creating one.
+        application_id: Rerun application id of a new recording.
+    """
+
+    def __init__(self, sim, *, path: str | os.PathLike | None = None, serve: bool = False,
+                 worlds: Sequence[int] | None = None, real_time: bool = False,
+                 recording: rr.RecordingStream | None = None, application_id: str = "atrv_warp"):
+        self.sim = sim
+        n = sim.num_worlds
+        self.worlds = list(range(min(DEFAULT_WORLDS, n))) if worlds is None else [int(w) for w in worlds]
+        bad = [w for w in self.worlds if not 0 <= w < n]
+        if bad:
+            raise ValueError(f"worlds {bad} out of range for {n} worlds")
+        self.rec = recording or rr.RecordingStream(application_id)
+        self.path = None if path is None else os.fspath(path)
+        if self.path is not None:
+            self.rec.save(self.path)
+        self.url = serve_localhost(self.rec) if serve else None
+        if self.url:
+            print(f"Rerun web viewer (localhost only): {self.url}", flush=True)
+        self.real_time = real_time
+        self.step = 0
+        self._wall0 = None
+        self._sim0 = sim.sim_time
+        self._trails: dict[int, list[np.ndarray]] = {w: [] for w in self.worlds}
+        built = sim.built
+        self._bodies = [built.chassis_body, *built.wheel_bodies]
+        labels = built.rover_builder.body_label
+        self._body_names = [labels[b].split("/")[-1] for b in self._bodies]
+        self._log_static()
+
+    # ------------------------------------------------------------------ static scene
+    def _log_static(self) -> None:
+        rec, arena = self.rec, self.sim.arena_cfg
+        rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        h = arena.half_size
+        rec.log("arena/ground", rr.Boxes3D(centers=[(0, 0, arena.ground_center_z)],
+                                           half_sizes=[(h, h, 0.5 * arena.ground_thickness)],
+                                           colors=[_GROUND_COLOR], fill_mode="solid"), static=True)
+        ticks = np.arange(-h, h + 0.5, 1.0)
+        z = arena.ground_top + 0.002
+        lines = [[(x, -h, z), (x, h, z)] for x in ticks] + [[(-h, y, z), (h, y, z)] for y in ticks]
+        rec.log("arena/grid", rr.LineStrips3D(lines, colors=[(90, 90, 90)], radii=0.005), static=True)
+        t = 0.5 * arena.wall_thickness
+        zc = arena.ground_top + 0.5 * arena.wall_height
+        centers = [(h + t, 0, zc), (-h - t, 0, zc), (0, h + t, zc), (0, -h - t, zc)]
+        halves = [(t, h + 2 * t, 0.5 * arena.wall_height)] * 2 + [(h, t, 0.5 * arena.wall_height)] * 2
+        rec.log("arena/walls", rr.Boxes3D(centers=centers, half_sizes=halves, colors=[_WALL_COLOR],
+                                          fill_mode="solid"), static=True)
+        # Rover shapes from the model (a different URDF draws right): local frames of each body.
+        rb = self.sim.built.rover_builder
+        import newton
+
+        for w in self.worlds:
+            for body, name in zip(self._bodies, self._body_names):
+                for s in range(rb.shape_count):
+                    if rb.shape_body[s] != body:
+                        continue
+                    xf = rb.shape_transform[s]
+                    pos, quat = list(xf.p), list(xf.q)
+                    scale = rb.shape_scale[s]
+                    ent = f"world_{w}/rover/{name}/shape_{s}"
+                    if rb.shape_type[s] == newton.GeoType.BOX:
+                        rec.log(ent, rr.Boxes3D(centers=[pos], half_sizes=[tuple(scale)],
+                                                quaternions=[rr.Quaternion(xyzw=quat)], colors=[_CHASSIS_COLOR],
+                                                fill_mode="solid"), static=True)
+                    elif rb.shape_type[s] == newton.GeoType.CYLINDER:
+                        rec.log(ent, rr.Cylinders3D(lengths=[2 * scale[1]], radii=[scale[0]], centers=[pos],
+                                                    quaternions=[rr.Quaternion(xyzw=quat)], colors=[_WHEEL_COLOR],
+                                                    fill_mode="solid"), static=True)
+
+    # ------------------------------------------------------------------ per step
+    def log_step(self, *, targets=None, rewards=None, distances=None, reset_mask=None) -> None:
+        """Log the current state of the selected worlds at the next ``step``.
+
+        Args:
+            targets: (N, 2) target positions [m] (drawn as discs).
+            rewards, distances: (N,) or (N, 1) per-world scalars to plot.
+            reset_mask: (N,) bool, worlds whose episode restarts here (their trail is cleared).
+        """
+        rec, sim = self.rec, self.sim
+        rec.set_time("step", sequence=self.step)
+        rec.set_time("sim_time", duration=sim.sim_time)
+        bpw = sim._layout.bodies_per_world
+        # .numpy() of a CPU array is a view of live simulator memory; Rerun may read it after the next
+        # step, so take a copy (one per logged step).
+        body_q = sim.state_0.body_q.numpy().reshape(sim.num_worlds, bpw, 7).copy()
+        torques = sim.wheel_torque.detach().cpu().numpy()
+        sides = np.array([w.side for w in sim.description.wheels])
+        for w in self.worlds:
+            for body, name in zip(self._bodies, self._body_names):
+                q = body_q[w, body]
+                rec.log(f"world_{w}/rover/{name}", rr.Transform3D(translation=q[:3], quaternion=rr.Quaternion(xyzw=q[3:])))
+            if reset_mask is not None and bool(reset_mask[w]):
+                self._trails[w] = []
+            self._trails[w].append(body_q[w, sim._layout.chassis_body, :3].copy())
+            rec.log(f"world_{w}/trajectory", rr.LineStrips3D([np.array(self._trails[w])], colors=[(230, 160, 20)],
+                                                             radii=0.02))
+            if targets is not None:
+                tx, ty = (float(v) for v in targets[w][:2])
+                rec.log(f"world_{w}/target", rr.Cylinders3D(lengths=[0.02], radii=[self.sim.arena_cfg.target_radius],
+                                                            centers=[(tx, ty, sim.arena_cfg.ground_top + 0.01)],
+                                                            colors=[_TARGET_COLOR], fill_mode="solid"))
+            plots = f"plots/world_{w}"
+            if rewards is not None:
+                rec.log(f"{plots}/reward", rr.Scalars(float(np.asarray(rewards[w]).reshape(-1)[0])))
+            if distances is not None:
+                rec.log(f"{plots}/distance", rr.Scalars(float(np.asarray(distances[w]).reshape(-1)[0])))
+            rec.log(f"{plots}/torque_left", rr.Scalars(float(torques[w][sides == 0].mean())))
+            rec.log(f"{plots}/torque_right", rr.Scalars(float(torques[w][sides == 1].mean())))
+        self.step += 1
+        if self.real_time:
+            now = time.monotonic()
+            if self._wall0 is None:
+                self._wall0, self._sim0 = now, sim.sim_time
+            ahead = (sim.sim_time - self._sim0) - (now - self._wall0)
+            if ahead > 0:
+                time.sleep(ahead)
+
+    def env_hook(self):
+        """An ``on_step(env, tensordict)`` callback for :func:`atrv_warp.evaluation.evaluate`."""
+
+        def on_step(env, td):
+            base = getattr(env, "base_env", env)
+            nxt = td["next"]
+            self.log_step(targets=base.target.cpu().numpy(), rewards=nxt["reward"].cpu().numpy(),
+                          distances=nxt["distance"].cpu().numpy())
+
+        return on_step
+
+    def close(self) -> None:
+        """Flush and close the recording (and stop a served viewer)."""
+        self.rec.flush()
+        server = getattr(self.rec, "_atrv_server", None)
+        if self.path is not None:
+            self.rec.disconnect()
+        if server is not None:
+            server.terminate()
+
+
+class RerunLogger(Logger):
+    """A TorchRL ``Logger`` writing training scalars into a Rerun recording (``frames`` timeline),
+    so that they share one recording with the evaluation episodes a :class:`RerunRecorder` logs."""
+
+    def __init__(self, exp_name: str = "train", *, recording: rr.RecordingStream | None = None,
+                 path: str | os.PathLike | None = None):
+        self._recording, self._path = recording, path
+        super().__init__(exp_name=exp_name, log_dir=None if path is None else os.fspath(path))
+
+    def _create_experiment(self) -> rr.RecordingStream:
+        rec = self._recording or rr.RecordingStream("atrv_warp")
+        if self._recording is None and self._path is not None:
+            rec.save(os.fspath(self._path))
+        return rec
+
+    def log_scalar(self, name: str, value: float, step: int | None = None) -> None:
+        if step is not None:
+            self.experiment.set_time("frames", sequence=int(step))
+        self.experiment.log(f"{self.exp_name}/{name}", rr.Scalars(float(value)))
+
+    def log_video(self, name: str, video, step: int | None = None, **kwargs) -> None:
+        raise NotImplementedError("RerunLogger logs scalars; record rollouts with RerunRecorder")
+
+    def log_hparams(self, cfg) -> None:
+        items = cfg.items() if isinstance(cfg, dict) else vars(cfg).items()
+        text = "\n".join(f"- **{k}**: {v}" for k, v in items)
+        self.experiment.log(f"{self.exp_name}/hparams", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN),
+                            static=True)
+
+    def log_histogram(self, name: str, data, **kwargs) -> None:
+        raise NotImplementedError("RerunLogger does not log histograms")
+
+    def __repr__(self) -> str:
+        return f"RerunLogger(exp_name={self.exp_name!r}, path={self._path!r})"

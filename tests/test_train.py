@@ -1,0 +1,108 @@
+"""Training entry point: smoke run end to end, config errors, resume, evaluation CLI, shipped policy."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from atrv_warp.config import TrainConfig, load_train_config
+
+ROOT = Path(__file__).resolve().parent.parent
+SMOKE = ROOT / "configs" / "smoke.toml"
+
+
+def run_module(*args, check=True):
+    proc = subprocess.run([sys.executable, "-m", *args], check=False, capture_output=True, text=True, cwd=ROOT)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"{args} failed ({proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    return proc
+
+
+def test_config_files_and_errors(tmp_path):
+    default = load_train_config(str(ROOT / "configs" / "default.toml"))
+    assert default == TrainConfig()  # the file names the documented defaults
+    smoke = load_train_config(str(SMOKE), {"width": "16"})
+    assert smoke.width == 16 and smoke.collector == "sync"
+    with pytest.raises(ValueError, match=r"unknown train config key\(s\) \['lerning_rate'\]"):
+        load_train_config(None, {"lerning_rate": "1e-3"})
+    with pytest.raises(ValueError, match="batch_size expects int, got 'big'"):
+        load_train_config(None, {"batch_size": "big"})
+    with pytest.raises(ValueError, match="gamma must be in"):
+        load_train_config(None, {"gamma": "1.5"})
+    bad = tmp_path / "bad.toml"
+    bad.write_text("num_envs = 8\nnum_env = 4\n")
+    with pytest.raises(ValueError, match=r"unknown train config key\(s\) \['num_env'\] in .*bad.toml"):
+        load_train_config(str(bad))
+
+
+def test_cli_rejects_bad_config_before_work(tmp_path):
+    proc = run_module("atrv_warp.train", "--config", str(SMOKE), f"out_dir={tmp_path}", "num_envs=-3", check=False)
+    assert proc.returncode == 2 and "num_envs must be > 0" in proc.stderr
+    assert not any(tmp_path.iterdir())  # nothing was started or written
+
+
+@pytest.fixture(scope="module")
+def smoke_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs")
+    proc = run_module("atrv_warp.train", "--config", str(SMOKE), f"out_dir={out}")
+    return out / "smoke", proc.stdout
+
+
+def test_smoke_training_end_to_end(smoke_run):
+    run_dir, stdout = smoke_run
+    for name in ("config.toml", "checkpoint.pt", "best_policy.pt", "final_eval.json", "learning_curve.png"):
+        assert (run_dir / name).is_file(), name
+    assert (run_dir / "logs" / "scalars" / "eval_success_rate.csv").is_file()
+    result = json.loads((run_dir / "final_eval.json").read_text())
+    assert result["frames"] >= 6144 and result["updates"] > 0
+    assert 0.0 <= result["final_eval"]["success_rate"] <= 1.0
+    assert "best policy:" in stdout and str(run_dir) in stdout
+    ck = torch.load(run_dir / "checkpoint.pt", weights_only=True)  # no arbitrary pickle needed
+    assert ck["frames"] == result["frames"]
+
+
+def test_evaluate_cli_loads_checkpoint(smoke_run, tmp_path):
+    run_dir, _ = smoke_run
+    out = tmp_path / "eval.json"
+    proc = run_module("atrv_warp.evaluate", str(run_dir / "checkpoint.pt"), "--episodes", "16", "--json", str(out))
+    assert "success" in proc.stdout
+    figures = json.loads(out.read_text())
+    assert figures["episodes"] == 16
+    total = figures["success_rate"] + figures["wall_rate"] + figures["flip_rate"] + figures["timeout_rate"]
+    assert total == pytest.approx(1.0 - figures["nonfinite_rate"])
+    bad = run_module("atrv_warp.evaluate", str(tmp_path / "missing.pt"), check=False)
+    assert bad.returncode == 2 and "policy file not found" in bad.stderr
+
+
+def test_resume_continues_step_counter(smoke_run, tmp_path):
+    import shutil
+
+    run_dir, _ = smoke_run
+    copy = tmp_path / "smoke"
+    shutil.copytree(run_dir, copy)
+    before = torch.load(copy / "checkpoint.pt", weights_only=True)
+    run_module("atrv_warp.train", "--resume", str(copy), "total_frames=10240")
+    after = torch.load(copy / "checkpoint.pt", weights_only=True)
+    assert after["frames"] >= 10240 > before["frames"]
+    assert after["updates"] > before["updates"]
+    rows = (copy / "logs" / "scalars" / "train_reward.csv").read_text().splitlines()
+    steps = [int(r.split(",")[0]) for r in rows]
+    assert steps == sorted(steps) and steps[-1] >= 10240  # the log continues, it does not restart
+    again = run_module("atrv_warp.train", "--config", str(SMOKE), f"out_dir={tmp_path}", check=False)
+    assert again.returncode != 0 and "already holds a run" in again.stderr
+
+
+def test_shipped_policy_beats_scripted_baseline():
+    from atrv_warp.agents import load_policy, pretrained_policy_path
+    from atrv_warp.baseline import scripted_policy
+    from atrv_warp.evaluation import evaluate
+
+    assert pretrained_policy_path().stat().st_size < 1_000_000
+    shipped = evaluate(load_policy(), num_episodes=200, seed=99)
+    baseline = evaluate(scripted_policy(), num_episodes=200, seed=99)
+    assert shipped.success_rate >= baseline.success_rate
+    # it also earns more of the shaped reward (it turns more smoothly; the baseline is quicker)
+    assert shipped.mean_return > baseline.mean_return
