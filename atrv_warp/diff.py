@@ -135,8 +135,10 @@ class DiffRollout:
                                                          lay.chassis_body], outputs=[self._poses[t + 1]],
                       device=sim.device)
 
+    @torch.no_grad()
     def forward(self, actions: torch.Tensor, joint_q: torch.Tensor, joint_qd: torch.Tensor,
                 friction: torch.Tensor) -> torch.Tensor:
+        """Record the rollout on a fresh tape; returns poses (steps + 1, N, 7)."""
         for t in range(self.steps):
             wp.to_torch(self._actions[t]).copy_(actions[t])
         s0 = self.states[0]
@@ -151,6 +153,7 @@ class DiffRollout:
         return torch.stack([wp.to_torch(p).clone() for p in self._poses])
 
     def backward(self, grad_poses: torch.Tensor):
+        """Back-propagate ``grad_poses`` through the last recorded rollout."""
         tape = self._tape
         if tape is None:
             raise RuntimeError("backward called before forward")
@@ -176,7 +179,7 @@ class DiffRollout:
         """Generalised coordinates (joint_q, joint_qd) of rovers at rest at (x, y, yaw) ``poses`` (N, 3)."""
         sim = self.sim
         sim.reset(poses=poses)
-        return wp.to_torch(sim.state_0.joint_q).clone(), wp.to_torch(sim.state_0.joint_qd).clone()
+        return (wp.to_torch(sim.state_0.joint_q).detach().clone(), wp.to_torch(sim.state_0.joint_qd).detach().clone())
 
     def __call__(self, actions: torch.Tensor, initial_state: tuple[torch.Tensor, torch.Tensor] | None = None,
                  friction: torch.Tensor | float | None = None) -> torch.Tensor:
