@@ -36,7 +36,7 @@ import time
 
 from .sim import DriveMode
 
-__all__ = ["main", "MISSING_ROS_MESSAGE"]
+__all__ = ["MISSING_ROS_MESSAGE", "main"]
 
 MISSING_ROS_MESSAGE = (
     "ROS 2 Python packages are not installed (needed: rclpy, geometry_msgs, std_msgs, rosgraph_msgs).\n"
@@ -115,7 +115,7 @@ def _goal_observation(sim, target):
     roll, _, yaw = sim.rpy[0].tolist()
     err = math.atan2(target[1] - y, target[0] - x) - yaw
     err = math.atan2(math.sin(err), math.cos(err))
-    clip = lambda v, b: max(-b, min(b, v))  # noqa: E731
+    clip = lambda v, b: max(-b, min(b, v))
     vx, vy = sim.lin_vel[0, 0].item(), sim.lin_vel[0, 1].item()
     obs = [clip(target[0], 12.0), clip(target[1], 12.0), clip(x, 30.0), clip(y, 30.0), clip(vx, 6.0),
            clip(vy, 6.0), clip(roll, 0.25), clip(sim.ang_vel[0, 2].item(), 6.0), math.sin(err), math.cos(err)]
@@ -220,8 +220,9 @@ def run(args: list[str] | None = None) -> int:
         import torch
 
         if state["policy"] is None:
-            from .agents import load_policy
             from tensordict import TensorDict
+
+            from .agents import load_policy
 
             state["policy"] = (load_policy(params["policy"] or None), TensorDict)
         policy, td_cls = state["policy"]

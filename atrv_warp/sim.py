@@ -374,13 +374,6 @@ class RoverSim:
         self._reset_poses.assign(p)
         self._apply_reset(self.rest_height if height is None else float(height))
 
-    def reset_torch(self, mask: torch.Tensor, poses: torch.Tensor, height: float | None = None) -> None:
-        """Device-side reset: ``mask`` (N,) bool and ``poses`` (N, 3) torch tensors on the sim
-        device; no host round trip (the path the RL env uses every step)."""
-        wp.copy(self._reset_mask, wp.from_torch(mask.contiguous(), dtype=bool))
-        wp.copy(self._reset_poses, wp.from_torch(poses.contiguous(), dtype=wp.vec3))
-        self._apply_reset(self.rest_height if height is None else float(height))
-
     def _apply_reset(self, height: float) -> None:
         s = self.state_0
         wp.launch(reset_worlds, dim=self.num_worlds,

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import time
@@ -223,8 +224,13 @@ class RerunRecorder:
         server = getattr(self.rec, "_atrv_server", None)
         if self.path is not None:
             self.rec.disconnect()
-        if server is not None:
-            server.terminate()
+        if server is not None:  # its own session: signal the group (a launcher shim may sit on top)
+            os.killpg(server.pid, signal.SIGTERM)
+            try:
+                server.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                os.killpg(server.pid, signal.SIGKILL)
+                server.wait()
 
 
 class RerunLogger(Logger):

@@ -1,5 +1,6 @@
 """ROS 2 bridge: a real node in its own process, driven by a real rclpy client, on loopback only."""
 
+import itertools
 import math
 import os
 import random
@@ -10,9 +11,9 @@ import time
 import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="ROS 2 extra not installed: pip install -e '.[ros]'")
-from geometry_msgs.msg import PoseStamped  # noqa: E402
-from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
-from std_msgs.msg import String  # noqa: E402
+from geometry_msgs.msg import PoseStamped
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
 
 
 @pytest.fixture(scope="module")
@@ -93,7 +94,7 @@ def test_live_node_rate_stamps_and_commands(ros_env):
         rate = len(client.poses) / elapsed
         assert 8.0 <= rate <= 12.0, rate  # 10 Hz in real time
         stamps = [p.header.stamp.sec + 1e-9 * p.header.stamp.nanosec for p in client.poses]
-        steps = [b - a for a, b in zip(stamps, stamps[1:])]
+        steps = [b - a for a, b in itertools.pairwise(stamps)]
         assert all(abs(s - 0.1) < 1e-6 for s in steps), steps  # simulation time, 0.1 s apart
         assert client.poses[-1].header.frame_id == "center_link"
         x0 = client.poses[-1].pose.position.x

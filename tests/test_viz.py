@@ -102,3 +102,32 @@ def test_evaluate_cli_writes_rrd(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     data = read_rrd(path)
     assert "/world_2/rover/center_link" in data and "/world_1/rover/center_link" not in data
+
+
+def test_served_viewer_is_localhost_only_and_stops():
+    import socket
+    import urllib.parse
+
+    from atrv_warp import RoverSim
+
+    sim = RoverSim(1)
+    recorder = RerunRecorder(sim, serve=True)
+    try:
+        url = urllib.parse.urlparse(recorder.url)
+        assert url.hostname == "127.0.0.1"
+        grpc = urllib.parse.urlparse(urllib.parse.parse_qs(url.query)["url"][0].replace("rerun+", ""))
+        sim.step()
+        recorder.log_step()
+        for port in (url.port, grpc.port):
+            with socket.socket() as s:
+                assert s.connect_ex(("127.0.0.1", port)) == 0
+            # bound to loopback only: not reachable on another local address
+            with socket.socket() as s:
+                s.settimeout(1.0)
+                other = socket.gethostbyname(socket.gethostname())
+                if not other.startswith("127."):
+                    assert s.connect_ex((other, port)) != 0
+    finally:
+        recorder.close()
+    with socket.socket() as s:
+        assert s.connect_ex(("127.0.0.1", url.port)) != 0  # stopped with the recorder
