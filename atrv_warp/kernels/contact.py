@@ -129,6 +129,35 @@ def point_contact_force(
     return fn * normal + ft
 
 
+@wp.func
+def contact_wrench(
+    p: wp.vec3,
+    depth: float,
+    normal: wp.vec3,
+    com: wp.vec3,
+    v_com: wp.vec3,
+    omega: wp.vec3,
+    axle: wp.vec3,
+    slope_lon: float,
+    slope_lat: float,
+    params: ContactParams,
+    friction: float,
+) -> wp.spatial_vector:
+    """World-frame wrench about the COM [N, N·m] of one contact point."""
+    f = point_contact_force(p, depth, normal, com, v_com, omega, axle, slope_lon, slope_lat, params, friction)
+    return wp.spatial_vector(f, wp.cross(p - com, f))
+
+
+@wp.func
+def contact_flag(plane: int, is_wheel: int) -> wp.int32:
+    """FLAG_WALL for a wall (planes 1-4), FLAG_BODY_GROUND for a non-wheel on the ground (plane 0)."""
+    if plane > 0:
+        return FLAG_WALL
+    if is_wheel == 0:
+        return FLAG_BODY_GROUND
+    return wp.int32(0)
+
+
 @wp.kernel
 def compute_contact_forces(
     bodies_per_world: int,
@@ -160,8 +189,8 @@ def compute_contact_forces(
         omega = wp.spatial_bottom(qd)
         axle = wp.transform_vector(xf, wp.vec3(0.0, 0.0, 1.0))
         size = shapes.size[s]
-        f_sum = wp.vec3(0.0)
-        t_sum = wp.vec3(0.0)
+        wheel = shapes.is_wheel[s]
+        wrench = wp.spatial_vector()
         for k in range(planes.normal.shape[0]):
             n = planes.normal[k]
             off = planes.offset[k]
@@ -169,14 +198,9 @@ def compute_contact_forces(
                 p = cylinder_deepest_point(xf, size[0], size[1], n)
                 depth = off - wp.dot(n, p)
                 if depth > 0.0:
-                    f = point_contact_force(p, depth, n, com, v_com, omega, axle,
-                                            shapes.slope_lon[s], shapes.slope_lat[s], params, mu)
-                    f_sum += f
-                    t_sum += wp.cross(p - com, f)
-                    if k > 0:
-                        flags = flags | FLAG_WALL
-                    elif shapes.is_wheel[s] == 0:
-                        flags = flags | FLAG_BODY_GROUND
+                    wrench += contact_wrench(p, depth, n, com, v_com, omega, axle, shapes.slope_lon[s],
+                                             shapes.slope_lat[s], params, mu)
+                    flags = flags | contact_flag(k, wheel)
             else:
                 for corner in range(8):
                     sx = float(2 * (corner & 1) - 1)
@@ -184,15 +208,10 @@ def compute_contact_forces(
                     sz = float(2 * ((corner >> 2) & 1) - 1)
                     p = wp.transform_point(xf, wp.vec3(sx * size[0], sy * size[1], sz * size[2]))
                     depth = off - wp.dot(n, p)
-                    if depth > 0.0:
-                        f = point_contact_force(p, depth, n, com, v_com, omega, axle,
-                                                shapes.slope_lat[s], shapes.slope_lat[s], params, mu)
-                        f_sum += f
-                        t_sum += wp.cross(p - com, f)
-                        if k > 0:
-                            flags = flags | FLAG_WALL
-                        elif shapes.is_wheel[s] == 0:
-                            flags = flags | FLAG_BODY_GROUND
+                    if depth > 0.0:  # boxes: isotropic friction slope
+                        wrench += contact_wrench(p, depth, n, com, v_com, omega, axle, shapes.slope_lat[s],
+                                                 shapes.slope_lat[s], params, mu)
+                        flags = flags | contact_flag(k, wheel)
         # atomic_add, not read-modify-write: it has an adjoint, so wp.Tape can differentiate it
-        wp.atomic_add(body_f, b, wp.spatial_vector(f_sum, t_sum))
+        wp.atomic_add(body_f, b, wrench)
     contact_flags[world] = flags
