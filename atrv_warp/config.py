@@ -140,8 +140,8 @@ class SimConfig:
     """Featherstone mass-matrix refresh interval in substeps; ``None`` = once per step
     (``substeps``), aligned with step boundaries so a reset never meets a stale matrix."""
     use_tile_gemm: bool = True
-    """Use Warp's tile API for the mass-matrix factorisation: 2.2x faster at N=1024 on CPU
-    (54k vs 25k env-steps/s, benchmarks/sim_throughput.py)."""
+    """Use Warp's tile API for the mass-matrix factorisation: 2.1x faster at N=1024 on CPU
+    (50k vs 24k env-steps/s, benchmarks/sim_throughput.py)."""
     use_graph: bool = True
     """Record the whole step once (``wp.ScopedCapture``) and replay it."""
 
@@ -261,7 +261,8 @@ class TrainConfig:
     init_alpha: float = 1.0
     """Initial entropy temperature (learned)."""
     threads: int = 1
-    """torch threads of the trainer (measured: 2 threads gain < 20 % on these small nets)."""
+    """torch threads of the trainer (benchmarks/sac_update_cost.py: a second thread saves about 20 % per
+    update, and the async collector needs that core)."""
     # -- evaluation, logging, checkpoints
     eval_every_frames: int = 200_000
     """Deterministic evaluation interval [frames]."""

@@ -204,8 +204,10 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
                                         frames_per_batch=fpb, total_frames=max(remaining, fpb),
                                         init_random_frames=random_left)
     else:
+        # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
         collector = Collector(ATRVjrEnv(cfg.num_envs, seed=env_seed), actor, frames_per_batch=fpb,
-                              total_frames=max(remaining, fpb), init_random_frames=random_left)
+                              total_frames=max(remaining, fpb), init_random_frames=random_left,
+                              auto_register_policy_transforms=False)
     eval_env = ATRVjrEnv(cfg.eval_episodes, seed=EVAL_SEED)
     eval_recorder = None
     if cfg.logger == "rerun":  # periodic evaluations go into the same recording as the scalars
