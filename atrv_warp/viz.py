@@ -222,15 +222,22 @@ class RerunRecorder:
         """Flush and close the recording (and stop a served viewer)."""
         self.rec.flush()
         server = getattr(self.rec, "_atrv_server", None)
-        if self.path is not None:
+        if self.path is not None or server is not None:  # sinks this recorder opened
             self.rec.disconnect()
-        if server is not None:  # its own session: signal the group (a launcher shim may sit on top)
-            os.killpg(server.pid, signal.SIGTERM)
-            try:
-                server.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                os.killpg(server.pid, signal.SIGKILL)
-                server.wait()
+        if server is not None:
+            # Its own session: signal the whole group. A launcher (pyenv shim, rerun_cli) may exit
+            # before the viewer binary it started, so the group is killed after the wait regardless.
+            for sig, wait in ((signal.SIGTERM, 5.0), (signal.SIGKILL, None)):
+                try:
+                    os.killpg(server.pid, sig)
+                except ProcessLookupError:
+                    break
+                if wait is not None:
+                    try:
+                        server.wait(timeout=wait)
+                    except subprocess.TimeoutExpired:
+                        pass
+            server.wait()
 
 
 class RerunLogger(Logger):

@@ -129,5 +129,13 @@ def test_served_viewer_is_localhost_only_and_stops():
                     assert s.connect_ex((other, port)) != 0
     finally:
         recorder.close()
-    with socket.socket() as s:
-        assert s.connect_ex(("127.0.0.1", url.port)) != 0  # stopped with the recorder
+    import time
+
+    deadline = time.monotonic() + 5.0  # stopped with the recorder (sockets close as it exits)
+    while True:
+        with socket.socket() as s:
+            closed = s.connect_ex(("127.0.0.1", url.port)) != 0
+        if closed or time.monotonic() > deadline:
+            break
+        time.sleep(0.1)
+    assert closed
