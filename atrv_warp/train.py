@@ -129,6 +129,11 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     from .env import ATRVjrEnv, EnvFactory
     from .evaluation import EVAL_SEED, evaluate, format_result
 
+    if cfg.logger == "tensorboard":
+        import importlib.util
+
+        if importlib.util.find_spec("tensorboard") is None:
+            raise ModuleNotFoundError("logger=tensorboard needs the tensorboard package: pip install -e '.[tensorboard]'")
     run_dir = Path(cfg.out_dir) / cfg.name
     ckpt_path = run_dir / "checkpoint.pt"
     if resume and not ckpt_path.is_file():
@@ -179,7 +184,9 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
             buffer.loads(run_dir / "buffer")
         print(f"resumed {run_dir} at {frames:,} frames, {updates:,} updates, best success {100 * best:.1f}%")
     if frames >= cfg.total_frames:
-        print(f"nothing to do: {frames:,} frames already collected (total_frames={cfg.total_frames:,})")
+        print(f"nothing to do: {frames:,} frames already collected (total_frames={cfg.total_frames:,}); "
+              "raise total_frames= to train further")
+        return run_dir
 
     loggers = [CSVLogger(exp_name="logs", log_dir=str(run_dir))]  # always: the learning curve is drawn from it
     if cfg.logger == "tensorboard":
@@ -362,7 +369,10 @@ def main(argv: list[str] | None = None) -> int:
             cfg = load_train_config(path, overrides)
     except (ValueError, FileNotFoundError) as err:
         parser.error(str(err))
-    train(cfg, resume=bool(args.resume))
+    try:
+        train(cfg, resume=bool(args.resume))
+    except (FileExistsError, FileNotFoundError, ModuleNotFoundError) as err:
+        parser.error(str(err))
     return 0
 
 
