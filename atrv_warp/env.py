@@ -175,10 +175,7 @@ class ATRVjrEnv(EnvBase):
                   outputs=[self._task, sim._reset_poses], device=self._wp_device)
         sim._reset_mask.assign(self._mask)
         sim._apply_reset(sim.rest_height)
-        wp.launch(observe_reset, dim=self.num_envs,
-                  inputs=[self._params, self._mask, self._task, sim.state_0.body_q, sim._layout.bodies_per_world,
-                          sim._layout.chassis_body, sim._lin_vel, sim._ang_vel, sim._rpy],
-                  outputs=[self._obs, self._distance], device=self._wp_device)
+        self._launch_observe()
         self._end_reason_t.masked_fill_(self._mask_t.unsqueeze(-1), 0)
         zeros = torch.zeros((self.num_envs, 1), dtype=torch.bool, device=self.device)
         return TensorDict(
@@ -186,6 +183,23 @@ class ATRVjrEnv(EnvBase):
              "distance": self._distance_t.clone(), "done": zeros, "terminated": zeros.clone(),
              "truncated": zeros.clone()},
             batch_size=self.batch_size, device=self.device)
+
+    def observe(self, targets: torch.Tensor) -> torch.Tensor:
+        """Set every world's target (N, 2) [m] and return the observation (N, 10) of the current
+        state, from the same kernel as a reset (the progress terms are re-primed from here).
+
+        For driving the simulator outside TorchRL's step loop, e.g. the ROS bridge's goal mode."""
+        self.target.copy_(torch.as_tensor(targets, dtype=torch.float32, device=self.device).reshape(self.num_envs, 2))
+        self._mask_t.fill_(True)
+        self._launch_observe()
+        return self._obs_t.clone()
+
+    def _launch_observe(self) -> None:
+        sim = self.sim
+        wp.launch(observe_reset, dim=self.num_envs,
+                  inputs=[self._params, self._mask, self._task, sim.state_0.body_q, sim._layout.bodies_per_world,
+                          sim._layout.chassis_body, sim._lin_vel, sim._ang_vel, sim._rpy],
+                  outputs=[self._obs, self._distance], device=self._wp_device)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = self._check_action(tensordict.get("action"))

@@ -75,8 +75,8 @@ def main(argv: list[str] | None = None) -> int:
     print(format_result(name, result))
     if args.rerun:
         print(f"recording: {args.rerun}  (view with: rerun {args.rerun})")
-    if args.serve:
-        input("viewer running; press Enter to stop ...") if sys.stdin.isatty() else None
+    if args.serve and sys.stdin.isatty():
+        input("viewer running; press Enter to stop ...")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"policy": name, "seed": seed, **result.as_dict()}, fh, indent=2)

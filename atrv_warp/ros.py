@@ -107,21 +107,6 @@ def _pose_dict(msg) -> dict:
                      "orientation": {"x": q.x, "y": q.y, "z": q.z, "w": q.w}}}
 
 
-def _goal_observation(sim, target):
-    """The 10 observation values of atrv_warp.env for world 0, computed on the host (one rover)."""
-    import torch
-
-    x, y = sim.root_pose[0, 0].item(), sim.root_pose[0, 1].item()
-    roll, _, yaw = sim.rpy[0].tolist()
-    err = math.atan2(target[1] - y, target[0] - x) - yaw
-    err = math.atan2(math.sin(err), math.cos(err))
-    clip = lambda v, b: max(-b, min(b, v))
-    vx, vy = sim.lin_vel[0, 0].item(), sim.lin_vel[0, 1].item()
-    obs = [clip(target[0], 12.0), clip(target[1], 12.0), clip(x, 30.0), clip(y, 30.0), clip(vx, 6.0),
-           clip(vy, 6.0), clip(roll, 0.25), clip(sim.ang_vel[0, 2].item(), 6.0), math.sin(err), math.cos(err)]
-    return torch.tensor([obs], dtype=torch.float32), math.hypot(target[0] - x, target[1] - y)
-
-
 def run(args: list[str] | None = None) -> int:
     try:
         import rclpy
@@ -139,7 +124,7 @@ def run(args: list[str] | None = None) -> int:
     import warp as wp
 
     wp.config.quiet = True
-    from .sim import RoverSim
+    from .env import ATRVjrEnv
 
     rclpy.init(args=args)
     node = Node("atrv_sim")
@@ -160,7 +145,8 @@ def run(args: list[str] | None = None) -> int:
         rclpy.try_shutdown()
         return 2
 
-    sim = RoverSim(1, variant=params["variant"])
+    env = ATRVjrEnv(1, variant=params["variant"])  # goal mode reads the policy's own observation kernel
+    sim = env.sim
     sim.reset(poses=[[params["x"], params["y"], params["yaw"]]])
     sim.set_mode(params["mode"])
     dt = sim.sim_cfg.step_dt
@@ -226,9 +212,10 @@ def run(args: list[str] | None = None) -> int:
 
             state["policy"] = (load_policy(params["policy"] or None), TensorDict)
         policy, td_cls = state["policy"]
-        obs, dist = _goal_observation(sim, state["goal"])
+        obs = env.observe(torch.tensor([state["goal"]]))
+        dist = float(env._distance_t[0, 0])
         action = policy(td_cls(observation=obs, batch_size=[1]))["action"]
-        return torch.clamp(action[0], -1.0, 1.0) * 20.0, dist
+        return torch.clamp(action[0], -1.0, 1.0) * env.task_cfg.action_scale, dist
 
     deadline = params["duration"] if params["duration"] > 0 else math.inf
     if params["wait_for_subscribers"] > 0:

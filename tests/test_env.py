@@ -279,3 +279,13 @@ def test_multisync_collector_two_workers():
     assert obs.shape[-1] == 10 and torch.isfinite(obs).all()
     # the two workers were seeded differently: their first targets differ
     assert not torch.equal(obs[0, :, 0, :2], obs[1, :, 0, :2])
+
+
+def test_observe_matches_reset_observation():
+    """observe() (used by the ROS goal mode) runs the very kernel a reset does."""
+    env = ATRVjrEnv(3, seed=8)
+    td = env.reset()
+    again = env.observe(env.target.clone())
+    assert torch.equal(again, td["observation"])
+    moved = env.observe(torch.tensor([[5.0, 5.0]] * 3))
+    assert moved[:, :2].tolist() == [[5.0, 5.0]] * 3 and torch.equal(moved[:, 2:8], td["observation"][:, 2:8])
