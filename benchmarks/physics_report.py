@@ -17,6 +17,14 @@ import numpy as np
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
+def analytic_accel(sim, torque: float) -> float:
+    """F / (M + sum I_axle / r^2) [m/s^2] for ``torque`` [N·m] on every wheel, from the model's masses."""
+    desc = sim.description
+    r = sim.rover_cfg.wheel_radius
+    spin = sum(float(w.axis @ w.inertial.inertia @ w.axis) for w in desc.wheels)
+    return len(desc.wheels) * torque / r / (desc.total_mass + spin / r**2)
+
+
 def main() -> int:
     import warp as wp
 
@@ -34,12 +42,16 @@ def main() -> int:
         z.append(sim.root_pose[0, 2].item())
     x0 = sim.root_pose[0, 0].item()
     sim.set_mode(DriveMode.FORWARD)
-    xs, ys, zs = [], [], []
+    xs, ys, zs, vs = [], [], [], []
     for _ in range(98):
         sim.step()
         xs.append(sim.root_pose[0, 0].item() - x0)
         ys.append(sim.root_pose[0, 1].item())
         zs.append(sim.root_pose[0, 2].item())
+        vs.append(sim.lin_vel[0, 0].item())
+    ref_accel = (vs[97] - vs[19]) / (0.05 * 78)  # from 1 s to 4.9 s of driving
+    ref_analytic = analytic_accel(sim, 4.0)
+    ref_depth = sim.arena_cfg.ground_top + sim.rover_cfg.wheel_radius - sim.rest_height
     rows += [
         ("reference: z range while settling [m]", f"{min(z):.3f} .. {max(z):.3f}", "0.125 .. 0.150"),
         ("reference: x after 1 s of driving [m]", f"{xs[19]:.3f}", "0.17"),
@@ -47,6 +59,8 @@ def main() -> int:
         ("reference: x after 4.9 s [m]", f"{xs[97]:.3f}", "4.70"),
         ("reference: lateral drift [mm]", f"{1e3 * np.abs(ys).max():.2f}", "< 6"),
         ("reference: height while driving [m]", f"{np.mean(zs[40:]):.4f}", "0.137"),
+        ("reference: acceleration, 1 .. 4.9 s [m/s²]", f"{ref_accel:.3f}", f"{ref_analytic:.3f} = F/(M+ΣI/r²)"),
+        ("reference: static tyre depth of the law [mm]", f"{1e3 * ref_depth:.1f}", "(m g / 4 kp)^(1/n), 54 kg"),
     ]
 
     # 2. realistic variant at rest, +2 N·m (below slip), rotate_left
@@ -67,12 +81,11 @@ def main() -> int:
         turned += (d + math.pi) % (2 * math.pi) - math.pi
         yaw_prev = sim.rpy[1, 2].item()
     accel = (sim.lin_vel[0, 0].item() - v0) / 1.5
-    desc = sim.description
-    r = sim.rover_cfg.wheel_radius
-    spin = sum(float(w.axis @ w.inertial.inertia @ w.axis) for w in desc.wheels)
-    analytic = 4 * 2.0 / r / (desc.total_mass + spin / r**2)
+    analytic = analytic_accel(sim, 2.0)
+    depth = sim.arena_cfg.ground_top + sim.rover_cfg.wheel_radius - sim.rest_height
     rows += [
         ("realistic: rest height [m]", f"{rest:.4f}", f"{sim.rest_height:.4f} (static HC equilibrium)"),
+        ("realistic: static tyre depth of the law [mm]", f"{1e3 * depth:.1f}", "(m g / 4 kp)^(1/n), 58 kg"),
         ("realistic: accel at +2 N·m [m/s²]", f"{accel:.4f}", f"{analytic:.4f} = F/(M+ΣI/r²)"),
         ("realistic: rotate_left yaw rate [rad/s]", f"{turned / 1.5:.3f}", "turns in place"),
         ("realistic: rotate_left translation [m]", f"{(sim.root_pose[1, :2] - p1).norm().item():.4f}", "< 0.10"),
