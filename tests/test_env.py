@@ -256,12 +256,17 @@ def test_gymnasium_adapter():
 def test_collector_single_process():
     from torchrl.collectors import Collector
 
-    collector = Collector(ATRVjrEnv(8, seed=0), scripted_policy(), frames_per_batch=80, total_frames=160)
+    env = ATRVjrEnv(8, seed=0, max_steps=4)  # short episodes: the collector must reset within a batch
+    collector = Collector(env, scripted_policy(), frames_per_batch=80, total_frames=160)
     batches = [b for b in collector]
     collector.shutdown()
     assert [b.numel() for b in batches] == [80, 80]
     assert batches[0].batch_size == (8, 10)
-    # the collector resets finished worlds and keeps going; step counts never exceed 200
+    b = batches[0]
+    assert b["next", "truncated"][:, 3].all()  # every world times out at its 4th step ...
+    # ... and the collector starts a new episode there: new target, step counter back to zero
+    assert not torch.equal(b["observation"][:, 4, :2], b["observation"][:, 3, :2])
+    assert int(env.step_count.max()) <= 4
     assert torch.isfinite(batches[-1]["next", "observation"]).all()
 
 
