@@ -1,5 +1,5 @@
 """Differentiable rollouts: gradients of a chassis trajectory with respect to wheel-torque
-actions, the initial state and the friction coefficient, through Newton's Featherstone solver
+actions, the initial state, the friction coefficient and the chassis mass, through Newton's Featherstone solver
 and our contact kernel, recorded on a ``wp.Tape`` and exposed as a ``torch.autograd.Function``.
 
 What makes the gradients agree with finite differences (README, "Differentiable rollouts"):
@@ -12,9 +12,8 @@ What makes the gradients agree with finite differences (README, "Differentiable 
   (``kernels/contact.py``), a smooth function of the pose, so the contact point moves with the
   wheel in the derivative as it does in the simulation.
 
-``benchmarks/diff_gradients.py`` measures the agreement against the horizon: the action
-gradients within 0.4 % and the friction gradient within 1.6 % over 2 s, wherever the finite
-differences are smooth enough to be a reference (README for the table).
+``benchmarks/diff_gradients.py`` measures the agreement against the horizon over 0.05-5 s
+(README for the tables and the stated horizon).
 
 Example::
 
@@ -52,6 +51,17 @@ class NonFiniteGradientError(FloatingPointError):
 def scale_actions(actions: wp.array2d(dtype=float), scale: float, commands: wp.array(dtype=wp.vec2)):
     world = wp.tid()
     commands[world] = wp.vec2(scale * actions[world, 0], scale * actions[world, 1])
+
+
+@wp.kernel
+def set_chassis_mass(mass: wp.array(dtype=float), nominal_mass: float, nominal_inertia: wp.mat33,
+                     bodies_per_world: int, chassis: int, body_mass: wp.array(dtype=float),
+                     body_inertia: wp.array(dtype=wp.mat33)):
+    """Chassis mass of every world from ``mass[0]``; its inertia scales with it (same shape, density)."""
+    world = wp.tid()
+    b = world * bodies_per_world + chassis
+    body_mass[b] = mass[0]
+    body_inertia[b] = nominal_inertia * (mass[0] / nominal_mass)
 
 
 @wp.kernel
@@ -125,6 +135,10 @@ class DiffRollout:
         self._poses = [wp.zeros((num_worlds, 7), dtype=float, device=dev, requires_grad=True)
                        for _ in range(steps + 1)]
         self._friction = wp.zeros(1, dtype=float, device=dev, requires_grad=True)
+        self._chassis_mass = wp.zeros(1, dtype=float, device=dev, requires_grad=True)
+        chassis = self.sim._layout.chassis_body
+        self.nominal_chassis_mass = float(model.body_mass.numpy()[chassis])
+        self._nominal_chassis_inertia = wp.mat33(model.body_inertia.numpy()[chassis])
         self._flags = wp.zeros(num_worlds, dtype=wp.int32, device=dev)
         self._torque = wp.zeros((num_worlds, len(self.sim.description.wheels)), dtype=float, device=dev)
         # Featherstone keeps its mass-matrix scratch (M, J, P, H, L) on the solver, shared by every
@@ -151,6 +165,13 @@ class DiffRollout:
         sim, lay = self.sim, self.sim._layout
         dt = sim.sim_cfg.sim_dt
         n = self.num_worlds
+        # The chassis mass (a payload) is an input of the tape: set it, then let the solver re-derive
+        # its spatial inertias (Newton's public route for runtime mass changes), both recorded.
+        wp.launch(set_chassis_mass, dim=n, inputs=[self._chassis_mass, self.nominal_chassis_mass,
+                                                   self._nominal_chassis_inertia, lay.bodies_per_world,
+                                                   lay.chassis_body],
+                  outputs=[sim.model.body_mass, sim.model.body_inertia], device=sim.device)
+        sim.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
         s0 = self.states[0]
         newton.eval_fk(sim.model, s0.joint_q, s0.joint_qd, s0)
         wp.launch(gather_chassis_pose, dim=n, inputs=[s0.body_q, lay.bodies_per_world, lay.chassis_body],
@@ -180,7 +201,7 @@ class DiffRollout:
 
     @torch.no_grad()
     def forward(self, actions: torch.Tensor, joint_q: torch.Tensor, joint_qd: torch.Tensor,
-                friction: torch.Tensor, record: bool = True) -> tuple[torch.Tensor, int]:
+                friction: torch.Tensor, chassis_mass: torch.Tensor, record: bool = True) -> tuple[torch.Tensor, int]:
         """Run the rollout, on a fresh tape if ``record``; returns poses (steps + 1, N, 7) and the
         rollout's number (which :meth:`backward` checks against the tape it holds)."""
         for t in range(self.steps):
@@ -189,6 +210,7 @@ class DiffRollout:
         wp.to_torch(s0.joint_q).copy_(joint_q.reshape(-1))
         wp.to_torch(s0.joint_qd).copy_(joint_qd.reshape(-1))
         wp.to_torch(self._friction).copy_(friction.reshape(1))
+        wp.to_torch(self._chassis_mass).copy_(chassis_mass.reshape(1))
         for s in self.states:
             s.body_f.zero_()
         self._rollout_id += 1
@@ -215,15 +237,16 @@ class DiffRollout:
         g_q = wp.to_torch(s0.joint_q.grad).clone()
         g_qd = wp.to_torch(s0.joint_qd.grad).clone()
         g_mu = wp.to_torch(self._friction.grad).clone()
+        g_mass = wp.to_torch(self._chassis_mass.grad).clone()
         tape.zero()
         self._tape = None
         for name, g in (("actions", g_actions), ("initial joint_q", g_q), ("initial joint_qd", g_qd),
-                        ("friction", g_mu)):
+                        ("friction", g_mu), ("chassis mass", g_mass)):
             if not torch.isfinite(g).all():
                 raise NonFiniteGradientError(
                     f"gradient w.r.t. {name} is not finite after a {self.steps}-step rollout; shorten the "
                     "horizon or soften the actions")
-        return g_actions, g_q, g_qd, g_mu
+        return g_actions, g_q, g_qd, g_mu, g_mass
 
     # ------------------------------------------------------------------ torch entry point
     def initial_state(self, poses: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
@@ -233,7 +256,8 @@ class DiffRollout:
         return (wp.to_torch(sim.state_0.joint_q).detach().clone(), wp.to_torch(sim.state_0.joint_qd).detach().clone())
 
     def __call__(self, actions: torch.Tensor, initial_state: tuple[torch.Tensor, torch.Tensor] | None = None,
-                 friction: torch.Tensor | float | None = None) -> torch.Tensor:
+                 friction: torch.Tensor | float | None = None,
+                 chassis_mass: torch.Tensor | float | None = None) -> torch.Tensor:
         """Roll out and return chassis poses (steps + 1, N, 7): x, y, z [m], quaternion (x, y, z, w).
 
         Args:
@@ -241,6 +265,10 @@ class DiffRollout:
             initial_state: (joint_q, joint_qd) from :meth:`initial_state` (default: every rover at
                 the origin, at rest); differentiable.
             friction: Coulomb coefficient (default: the contact config's), differentiable.
+            chassis_mass: Chassis mass [kg] of every world, e.g. with a payload (default: the
+                URDF's, :attr:`nominal_chassis_mass`); its inertia scales with it. Differentiable.
+                The friction law's low-slip slope is sized for the nominal mass (half the
+                stable maximum), so stay above about half of it.
         """
         expected = (self.steps, self.num_worlds, 2)
         if tuple(actions.shape) != expected:
@@ -253,7 +281,12 @@ class DiffRollout:
         if friction is None:
             friction = self.sim.contact_cfg.friction
         friction = torch.as_tensor(friction, dtype=torch.float32).reshape(1)
-        inputs = (actions.float(), initial_state[0].float(), initial_state[1].float(), friction)
+        if chassis_mass is None:
+            chassis_mass = self.nominal_chassis_mass
+        chassis_mass = torch.as_tensor(chassis_mass, dtype=torch.float32).reshape(1)
+        if not (torch.isfinite(chassis_mass).all() and chassis_mass.item() > 0.0):
+            raise ValueError(f"chassis_mass must be a positive number of kg, got {chassis_mass.item()}")
+        inputs = (actions.float(), initial_state[0].float(), initial_state[1].float(), friction, chassis_mass)
         if not (torch.is_grad_enabled() and any(t.requires_grad for t in inputs)):
             return self.forward(*inputs, record=False)[0]  # nothing to differentiate: no tape
         return _RolloutFn.apply(self, *inputs)
@@ -261,15 +294,16 @@ class DiffRollout:
 
 class _RolloutFn(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, roll: DiffRollout, actions, joint_q, joint_qd, friction):
-        poses, ctx.rollout_id = roll.forward(actions.detach(), joint_q.detach(), joint_qd.detach(), friction.detach())
+    def forward(ctx, roll: DiffRollout, actions, joint_q, joint_qd, friction, chassis_mass):
+        poses, ctx.rollout_id = roll.forward(actions.detach(), joint_q.detach(), joint_qd.detach(), friction.detach(),
+                                             chassis_mass.detach())
         ctx.roll = roll
         return poses
 
     @staticmethod
     def backward(ctx, grad_poses):
-        g_a, g_q, g_qd, g_mu = ctx.roll.backward(grad_poses, ctx.rollout_id)
-        return None, g_a, g_q, g_qd, g_mu
+        g_a, g_q, g_qd, g_mu, g_mass = ctx.roll.backward(grad_poses, ctx.rollout_id)
+        return None, g_a, g_q, g_qd, g_mu, g_mass
 
 
 def progress_reward(poses: torch.Tensor, targets: torch.Tensor, task: TaskConfig | None = None) -> torch.Tensor:

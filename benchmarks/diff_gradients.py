@@ -7,7 +7,8 @@ Agreement: for each driving scenario and horizon T (env steps of 0.05 s), the ta
 ``L = x_T + y_T + 2 qz_T`` (final position and heading) with respect to all actions is compared
 with central finite differences along random unit directions of two kinds: common mode (both
 wheels together, random weights over time) and differential (left against right: what turns
-the rover); and dL/dmu. Reported: the worst relative error |g.d - fd| / max(|fd|, 1e-3) of each
+the rover); and dL/dmu and dL/d(chassis mass) (the latter per unit relative change, m dL/dm,
+against differences at 0.2 % and 0.66 % of the mass). Reported: the worst relative error |g.d - fd| / max(|fd|, 1e-3) of each
 kind, against central differences at eps = 3e-3 (actions) and 1e-3 (mu). The same difference
 is also taken at a step 3.3x larger; where the two disagree by more than 5 % the function is
 not smooth at that scale (stick-slip, contact switching), the finite difference is no reference,
@@ -39,10 +40,11 @@ def objective(poses):
     return poses[-1, 0, 0] + poses[-1, 0, 1] + 2.0 * poses[-1, 0, 5]
 
 
-def central(roll, state, a, mu, d_actions, d_mu, eps):
-    """Central difference of the objective along (d_actions, d_mu) with step eps."""
-    plus = objective(roll(a + eps * d_actions, state, mu + eps * d_mu))
-    minus = objective(roll(a - eps * d_actions, state, mu - eps * d_mu))
+def central(roll, state, a, mu, d_actions, d_mu, eps, d_mass=0.0):
+    """Central difference of the objective along (d_actions, d_mu, d_mass [kg]) with step eps."""
+    m = roll.nominal_chassis_mass
+    plus = objective(roll(a + eps * d_actions, state, mu + eps * d_mu, m + eps * d_mass))
+    minus = objective(roll(a - eps * d_actions, state, mu - eps * d_mu, m - eps * d_mass))
     return ((plus - minus) / (2 * eps)).item()
 
 
@@ -102,7 +104,8 @@ def main() -> int:
             mu = torch.tensor(0.3)
             aa = a.clone().requires_grad_(True)
             mm = mu.clone().requires_grad_(True)
-            poses = roll(aa, state, mm)
+            mass = torch.tensor(roll.nominal_chassis_mass, requires_grad=True)
+            poses = roll(aa, state, mm, mass)
             objective(poses).backward()
 
             # where the rover ends up (the arena's walls are 15 m from the start)
@@ -129,11 +132,20 @@ def main() -> int:
             row["friction_rel_err"] = abs(mm.grad.item() - fd_mu) / max(abs(fd_mu), 1e-3)
             row["friction_fd_rough"] = abs(fd_mu_coarse - fd_mu) > 0.05 * max(abs(fd_mu), 1e-3)
             row["friction_tape"], row["friction_fd"] = mm.grad.item(), fd_mu
+            # chassis mass: steps of 0.2 % and 0.66 % of it; derivative reported per unit relative change
+            m0 = roll.nominal_chassis_mass
+            fd_m = m0 * central(roll, state, a, mu, 0.0, 0.0, 0.002 * m0, d_mass=1.0)
+            fd_m_coarse = m0 * central(roll, state, a, mu, 0.0, 0.0, 0.0066 * m0, d_mass=1.0)
+            tape_m = m0 * mass.grad.item()
+            row["mass_rel_err"] = abs(tape_m - fd_m) / max(abs(fd_m), 1e-3)
+            row["mass_fd_rough"] = abs(fd_m_coarse - fd_m) > 0.05 * max(abs(fd_m), 1e-3)
+            row["mass_tape"], row["mass_fd"] = tape_m, fd_m
             agreement.append(row)
             print(f"T={T:3d} ({0.05 * T:4.2f} s) {name:8s} common {100 * row['common_rel_err']:7.2f}%"
                   f"{'†' if row['common_fd_rough'] else ' '} differential {100 * row['differential_rel_err']:7.2f}%"
                   f"{'†' if row['differential_fd_rough'] else ' '} friction {100 * row['friction_rel_err']:7.2f}%"
-                  f"{'†' if row['friction_fd_rough'] else ' '} (tape {mm.grad.item():+.4f}, fd {fd_mu:+.4f}); "
+                  f"{'†' if row['friction_fd_rough'] else ' '} (tape {mm.grad.item():+.4f}, fd {fd_mu:+.4f}) "
+                  f"chassis mass {100 * row['mass_rel_err']:7.2f}%{'†' if row['mass_fd_rough'] else ' '}; "
                   f"max x {row['path_max_x']:.2f} m",
                   flush=True)
 
@@ -179,13 +191,13 @@ def report(results) -> None:
     # scenario's at that horizon are marked negligible (shown as "~0").
     for T in horizons:
         rows = [r for r in agreement if r["horizon_steps"] == T]
-        for key in ("common", "differential", "friction"):
+        for key in ("common", "differential", "friction", "mass"):
             scale = statistics.median(max(magnitudes(r, key)) for r in rows)
             for r in rows:
                 r[key + "_negligible"] = max(magnitudes(r, key)) < 0.01 * scale
     print(f"\ngradient agreement ({'with' if results['wrench_fix'] else 'WITHOUT'} the wrench-adjoint fix)")
     for key, label in (("common", "both wheels together"), ("differential", "left vs right"),
-                       ("friction", "friction mu")):
+                       ("friction", "friction mu"), ("mass", "chassis mass")):
         print(f"\nworst relative error, {label} († = finite differences not smooth at this scale; "
               "~0 = derivative under 1 % of the median scenario's):")
         print("| scenario | " + " | ".join(f"{0.05 * T:.2f} s" for T in horizons) + " |")

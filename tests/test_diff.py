@@ -81,6 +81,22 @@ def test_turning_gradient_over_one_second(roll20, left, right):
         assert tape == pytest.approx(fd, rel=0.02, abs=1e-4)
 
 
+def test_chassis_mass_gradient_over_one_second(roll20):
+    """d(final pose) / d(chassis mass) in a curve over 1 s; the mass is an input of the tape."""
+    roll, state = roll20
+    a = torch.empty(20, 1, 2)
+    a[..., 0], a[..., 1] = 0.2, 0.4
+    m0 = roll.nominal_chassis_mass
+    objective = lambda poses: poses[-1, 0, 0] + poses[-1, 0, 1] + 2.0 * poses[-1, 0, 5]
+    mass = torch.tensor(m0, requires_grad=True)
+    objective(roll(a, state, None, mass)).backward()
+    fd = ((objective(roll(a, state, None, m0 + 0.1)) - objective(roll(a, state, None, m0 - 0.1))) / 0.2).item()
+    assert fd < 0  # heavier: slower, less far
+    assert mass.grad.item() == pytest.approx(fd, rel=0.02)
+    # the rollout's nominal mass is restored on the next call without an explicit mass
+    assert roll(a, state)[-1, 0, 0].item() == pytest.approx(roll(a, state, None, m0)[-1, 0, 0].item(), abs=0)
+
+
 def test_initial_heading_gradient_while_turning():
     """d(final pose) / d(initial heading), through the free joint's quaternion, over 0.5 s of spinning."""
     roll = DiffRollout(1, steps=10)
@@ -128,6 +144,8 @@ def test_errors_are_clear():
         roll(torch.zeros(3, 1, 2))
     with pytest.raises(ValueError, match="NaN/inf"):
         roll(torch.full((2, 1, 2), float("nan")))
+    with pytest.raises(ValueError, match="chassis_mass must be a positive"):
+        roll(torch.zeros(2, 1, 2), chassis_mass=-1.0)
     a = torch.zeros(2, 1, 2, requires_grad=True)
     poses = roll(a)
     with pytest.raises(NonFiniteGradientError, match="not finite"):
