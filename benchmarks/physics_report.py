@@ -17,40 +17,21 @@ import numpy as np
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
-def analytic_accel(sim, torque: float) -> float:
-    """F / (M + sum I_axle / r^2) [m/s^2] for ``torque`` [N·m] on every wheel, from the model's masses."""
-    desc = sim.description
-    r = sim.rover_cfg.wheel_radius
-    spin = sum(float(w.axis @ w.inertial.inertia @ w.axis) for w in desc.wheels)
-    return len(desc.wheels) * torque / r / (desc.total_mass + spin / r**2)
-
-
 def main() -> int:
     import warp as wp
 
     wp.config.quiet = True
-    from atrv_warp import DriveMode, RoverSim
+    from atrv_warp import RoverSim
+    from atrv_warp.checks import reference_drive, rolling_acceleration
 
     rows: list[tuple[str, float, str]] = []
 
     # 1. reference variant: drop 2 cm, settle 1 s, +4 N·m on all wheels for 4.9 s
-    sim = RoverSim(1, variant="reference")
-    sim.reset(height=sim.rest_height + 0.02)
-    z = []
-    for _ in range(20):
-        sim.step()
-        z.append(sim.root_pose[0, 2].item())
-    x0 = sim.root_pose[0, 0].item()
-    sim.set_mode(DriveMode.FORWARD)
-    xs, ys, zs, vs = [], [], [], []
-    for _ in range(98):
-        sim.step()
-        xs.append(sim.root_pose[0, 0].item() - x0)
-        ys.append(sim.root_pose[0, 1].item())
-        zs.append(sim.root_pose[0, 2].item())
-        vs.append(sim.lin_vel[0, 0].item())
+    run = reference_drive()
+    sim, z = run.sim, run.settle_z
+    xs, ys, zs, vs = run.track[:, 0], run.track[:, 1], run.track[:, 2], run.forward_speed
     ref_accel = (vs[97] - vs[19]) / (0.05 * 78)  # from 1 s to 4.9 s of driving
-    ref_analytic = analytic_accel(sim, 4.0)
+    ref_analytic = rolling_acceleration(sim, 4.0)
     ref_depth = sim.arena_cfg.ground_top + sim.rover_cfg.wheel_radius - sim.rest_height
     rows += [
         ("reference: z range while settling [m]", f"{min(z):.3f} .. {max(z):.3f}", "0.125 .. 0.150"),
@@ -81,7 +62,7 @@ def main() -> int:
         turned += (d + math.pi) % (2 * math.pi) - math.pi
         yaw_prev = sim.rpy[1, 2].item()
     accel = (sim.lin_vel[0, 0].item() - v0) / 1.5
-    analytic = analytic_accel(sim, 2.0)
+    analytic = rolling_acceleration(sim, 2.0)
     depth = sim.arena_cfg.ground_top + sim.rover_cfg.wheel_radius - sim.rest_height
     rows += [
         ("realistic: rest height [m]", f"{rest:.4f}", f"{sim.rest_height:.4f} (static HC equilibrium)"),

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from atrv_warp import DriveMode, RoverSim
+from atrv_warp import RoverSim, checks
 
 STEP = 0.05  # [s] per env step
 
@@ -17,20 +17,8 @@ def run(sim, seconds):
 @pytest.fixture(scope="module")
 def reference_drive():
     """Reference variant dropped 2 cm above rest, settled 1 s, then +4 N·m on all wheels."""
-    sim = RoverSim(1, variant="reference")
-    sim.reset(height=sim.rest_height + 0.02)
-    z = []
-    for _ in range(20):
-        sim.step()
-        z.append(sim.root_pose[0, 2].item())
-    x0, y0 = sim.root_pose[0, 0].item(), sim.root_pose[0, 1].item()
-    sim.set_mode(DriveMode.FORWARD)
-    track = []
-    for _ in range(98):
-        sim.step()
-        track.append(sim.root_pose[0, :3].tolist())
-    track = np.array(track) - [x0, y0, 0.0]
-    return sim, np.array(z), track
+    run = checks.reference_drive()
+    return run.sim, run.settle_z, run.track
 
 
 def test_settles_level_at_rest_height(reference_drive):
@@ -73,11 +61,7 @@ def test_realistic_acceleration_matches_analytic():
     v0, t0 = sim.lin_vel[0, 0].item(), sim.sim_time
     run(sim, 1.5)
     accel = (sim.lin_vel[0, 0].item() - v0) / (sim.sim_time - t0)
-    desc = sim.description
-    r = sim.rover_cfg.wheel_radius
-    spin = sum(float(w.axis @ w.inertial.inertia @ w.axis) for w in desc.wheels)
-    expected = len(desc.wheels) * tau / r / (desc.total_mass + spin / r**2)
-    assert accel == pytest.approx(expected, rel=0.05)
+    assert accel == pytest.approx(checks.rolling_acceleration(sim, tau), rel=0.05)
 
 
 def test_rotate_left_turns_in_place():
