@@ -210,6 +210,13 @@ def report(results) -> None:
         for r in results["cost"]:
             print(f"| {r['num_worlds']} | {r['forward_us_per_world_step']:.1f} | {r['backward_us_per_world_step']:.1f} | "
                   f"{r['backward_over_forward']:.2f} |")
+        sim_results = RESULTS / "sim_throughput.json"
+        taped = {r["num_worlds"]: r["forward_us_per_world_step"] for r in results["cost"]}
+        if sim_results.exists() and 1024 in taped:  # against the graph-replayed training simulator
+            plain = {r["num_worlds"]: 1e6 / r["env_steps_per_s"] for r in json.loads(sim_results.read_text())["rows"]}
+            if 1024 in plain:
+                print(f"\ntaped forward at N = 1024: {taped[1024] / plain[1024]:.1f}x the training simulator's "
+                      f"{plain[1024]:.1f} us per world-step (sim_throughput.json)")
 
 
 if __name__ == "__main__":
