@@ -6,6 +6,10 @@ the tool needs.
 
 from importlib import import_module
 
+from . import runtime as _runtime
+
+_runtime.configure()  # quiet Warp/TorchRL console before Newton's import initialises Warp (ATRV_WARP_VERBOSE=1: all)
+
 _EXPORTS = {
     "ArenaConfig": "config",
     "ContactConfig": "config",

@@ -15,9 +15,14 @@ from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictSequ
 from torch import nn
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 
-__all__ = ["Normalize", "load_policy", "make_actor", "make_qvalue", "pretrained_policy_path", "save_policy"]
+from .storage import FileFormatError, atomic_save, load_weights
+
+__all__ = ["POLICY_FORMAT", "Normalize", "load_policy", "make_actor", "make_qvalue", "policy_payload",
+           "pretrained_policy_path", "save_policy"]
 
 OBS_DIM, ACT_DIM = 10, 2
+POLICY_FORMAT = "atrv_warp.policy/1"
+"""Format tag of a saved policy (``save_policy``, and the ``policy`` entry of a training checkpoint)."""
 
 
 class Normalize(nn.Module):
@@ -67,12 +72,13 @@ def make_qvalue(width: int = 128, depth: int = 2, normalize: Normalize | None = 
 
 def save_policy(actor: ProbabilisticActor, path: str | Path, *, width: int, depth: int, meta: dict | None = None):
     """Write the actor's weights (normalisation included) atomically, loadable with weights_only."""
-    path = Path(path)
-    payload = {"format": "atrv_warp.policy/1", "width": width, "depth": depth,
-               "state_dict": {k: v.detach().cpu() for k, v in actor.state_dict().items()}, "meta": meta or {}}
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    torch.save(payload, tmp)
-    tmp.replace(path)
+    atomic_save(policy_payload(actor, width=width, depth=depth, meta=meta), path)
+
+
+def policy_payload(actor: ProbabilisticActor, *, width: int, depth: int, meta: dict | None = None) -> dict:
+    """The saved form of a policy (``POLICY_FORMAT``), as :func:`load_policy` reads it."""
+    return {"format": POLICY_FORMAT, "width": width, "depth": depth,
+            "state_dict": {k: v.detach().cpu() for k, v in actor.state_dict().items()}, "meta": meta or {}}
 
 
 def pretrained_policy_path() -> Path:
@@ -85,17 +91,26 @@ def load_policy(path: str | Path | None = None, *, deterministic: bool = True) -
 
     The module reads raw ``observation`` from :class:`~atrv_warp.env.ATRVjrEnv` and writes
     ``action``; with ``deterministic=True`` it returns the distribution's mode.
+
+    Raises ``FileNotFoundError``, or :class:`~atrv_warp.storage.FileFormatError` naming the file
+    and the problem for anything that is not a complete policy (nothing is unpickled).
     """
     path = Path(path) if path is not None else pretrained_policy_path()
-    if not path.is_file():
-        raise FileNotFoundError(f"policy file not found: {path}")
-    payload = torch.load(path, map_location="cpu", weights_only=True)
-    if "policy" in payload:  # a training checkpoint: take its policy
+    payload = load_weights(path, "policy file")
+    if isinstance(payload.get("policy"), dict):  # a training checkpoint: take its policy
         payload = payload["policy"]
-    if payload.get("format") != "atrv_warp.policy/1":
-        raise ValueError(f"{path}: not an atrv_warp policy (format {payload.get('format')!r})")
-    actor = make_actor(payload["width"], payload["depth"])
-    actor.load_state_dict(payload["state_dict"])
+    if payload.get("format") != POLICY_FORMAT:
+        raise FileFormatError(f"{path}: not an atrv_warp policy (format {payload.get('format')!r}, "
+                              f"expected {POLICY_FORMAT!r})")
+    try:
+        actor = make_actor(int(payload["width"]), int(payload["depth"]))
+        actor.load_state_dict(payload["state_dict"])
+    except (KeyError, TypeError, ValueError, RuntimeError) as err:
+        detail = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise FileFormatError(f"{path}: damaged atrv_warp policy ({detail[:200]})") from None
+    bad = [k for k, v in actor.state_dict().items() if v.is_floating_point() and not torch.isfinite(v).all()]
+    if bad:
+        raise FileFormatError(f"{path}: damaged atrv_warp policy (non-finite values in {bad[:3]})")
     actor.eval()
     if not deterministic:
         return actor

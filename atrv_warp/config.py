@@ -21,6 +21,7 @@ __all__ = [
     "default_urdf_path",
     "get_variant",
     "load_train_config",
+    "preset_names",
     "replace_checked",
 ]
 
@@ -328,22 +329,45 @@ def _coerce(field_type, name: str, value):
     return value
 
 
-def load_train_config(path: str | None = None, overrides: dict | None = None) -> TrainConfig:
-    """Read a TOML config (flat ``key = value``), apply overrides, check every key and value."""
+def preset_names() -> list[str]:
+    """Names of the training presets shipped inside the package (``atrv_warp/configs/*.toml``)."""
+    folder = resources.files("atrv_warp").joinpath("configs")
+    return sorted(f.name.removesuffix(".toml") for f in folder.iterdir() if f.name.endswith(".toml"))
+
+
+def _read_config_source(source: str) -> tuple[str, bytes]:
+    """``(label, TOML bytes)`` for a preset name (``smoke``) or a file path (``my.toml``)."""
+    import os
+
+    if os.path.isfile(source):
+        with open(source, "rb") as fh:
+            return source, fh.read()
+    if source in preset_names():  # packaged, so a non-editable install has the same defaults
+        return f"preset {source!r}", resources.files("atrv_warp").joinpath(f"configs/{source}.toml").read_bytes()
+    raise FileNotFoundError(f"config {source!r} is neither a file nor a preset; presets: {preset_names()}")
+
+
+def load_train_config(source: str | None = None, overrides: dict | None = None) -> TrainConfig:
+    """Read a TOML config (flat ``key = value``), apply overrides, check every key and value.
+
+    ``source`` is a preset name (:func:`preset_names`: ``default``, ``smoke``), a file path, or
+    ``None`` for the :class:`TrainConfig` defaults alone.
+    """
     import tomllib
 
     values: dict = {}
-    if path is not None:
-        with open(path, "rb") as fh:
-            try:
-                values.update(tomllib.load(fh))
-            except tomllib.TOMLDecodeError as err:
-                raise ValueError(f"{path}: not valid TOML: {err}") from None
+    label = None
+    if source is not None:
+        label, text = _read_config_source(str(source))
+        try:
+            values.update(tomllib.loads(text.decode()))
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+            raise ValueError(f"{label}: not valid TOML: {err}") from None
     values.update(overrides or {})
     fields = {f.name: f for f in dataclasses.fields(TrainConfig)}
     unknown = sorted(set(values) - set(fields))
     if unknown:
-        where = f" in {path}" if path else ""
+        where = f" in {label}" if label else ""
         raise ValueError(f"unknown train config key(s) {unknown}{where}; known: {sorted(fields)}")
     typed = {k: _coerce(fields[k].type, k, v) for k, v in values.items()}
     return TrainConfig(**typed).validate()

@@ -17,10 +17,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variant", default="realistic", help="rover variant: realistic | reference")
     parser.add_argument("--device", default="cpu", help="Warp device, e.g. cpu or cuda:0")
     args = parser.parse_args(argv)
-
-    import warp as wp
-
-    wp.config.quiet = True
     from .sim import DriveMode, RoverSim
 
     modes = list(DriveMode)

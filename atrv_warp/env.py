@@ -284,6 +284,5 @@ class EnvFactory:
             cores = sorted(os.sched_getaffinity(0))
             os.sched_setaffinity(0, {cores[self.core % len(cores)]})
         torch.set_num_threads(1)
-        wp.config.quiet = True
         return ATRVjrEnv(self.num_envs, seed=self.seed, **dict(self.kwargs))
 

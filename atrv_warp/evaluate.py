@@ -19,6 +19,8 @@ import argparse
 import json
 import sys
 
+from .runtime import add_verbose_argument, device_summary, error_line, set_verbose
+
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.evaluate", description=__doc__.splitlines()[0],
@@ -34,13 +36,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--real-time", action="store_true", help="slow the simulation to real time")
     parser.add_argument("--worlds", type=int, nargs="+", default=None,
                         help="worlds (episodes) to record (default: the first 4)")
+    add_verbose_argument(parser)
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error("--episodes must be >= 1")
-
-    import warp as wp
-
-    wp.config.quiet = True
+    if args.verbose:
+        set_verbose()
     from .evaluation import EVAL_SEED, evaluate, format_result
 
     if args.baseline:
@@ -49,13 +50,18 @@ def main(argv: list[str] | None = None) -> int:
         policy, name = scripted_policy(), "scripted baseline"
     else:
         from .agents import load_policy, pretrained_policy_path
+        from .storage import FileFormatError
 
         path = args.checkpoint or str(pretrained_policy_path())
         try:
             policy = load_policy(path)
-        except (FileNotFoundError, ValueError, KeyError) as err:
-            parser.error(f"cannot load policy: {err}")
+        except (FileNotFoundError, FileFormatError) as err:
+            return error_line(parser.prog, f"cannot load policy: {err}")
         name = path
+    try:
+        print(device_summary(args.device))
+    except (RuntimeError, ValueError) as err:
+        return error_line(parser.prog, f"--device {args.device!r}: {err}")
     seed = EVAL_SEED if args.seed is None else args.seed
     recorder, env, on_step = None, None, None
     if args.rerun or args.serve or args.real_time:

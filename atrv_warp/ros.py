@@ -120,10 +120,6 @@ def run(args: list[str] | None = None) -> int:
     except ImportError:
         print(MISSING_ROS_MESSAGE, file=sys.stderr)
         return 2
-
-    import warp as wp
-
-    wp.config.quiet = True
     from .env import ATRVjrEnv
 
     rclpy.init(args=args)
@@ -147,7 +143,13 @@ def run(args: list[str] | None = None) -> int:
 
     env = ATRVjrEnv(1, variant=params["variant"])  # goal mode reads the policy's own observation kernel
     sim = env.sim
-    sim.reset(poses=[[params["x"], params["y"], params["yaw"]]])
+    try:
+        sim.reset(poses=[[params["x"], params["y"], params["yaw"]]])
+    except ValueError as err:
+        log.error(f"parameters x, y, yaw: {err}")
+        node.destroy_node()
+        rclpy.try_shutdown()
+        return 2
     sim.set_mode(params["mode"])
     dt = sim.sim_cfg.step_dt
     every = max(1, round(1.0 / (params["publish_rate"] * dt)))

@@ -354,7 +354,8 @@ class RoverSim:
         Args:
             mask: (N,) bool mask or integer world indices; ``None`` = all worlds.
             poses: (N, 3) or (M, 3) for the M selected worlds: x [m], y [m], yaw [rad];
-                ``None`` = origin, yaw 0.
+                ``None`` = origin, yaw 0. A pose with |x| or |y| at or beyond the walls'
+                inner faces (``ArenaConfig.half_size``) is a ``ValueError``.
             height: Chassis-origin height [m]; default :attr:`rest_height`.
         """
         m = _as_world_mask(mask, self.num_worlds)
@@ -370,6 +371,13 @@ class RoverSim:
                                  f"got {given.shape}")
             if not np.isfinite(p[m]).all():
                 raise ValueError("poses contain NaN/inf")
+            half = self.arena_cfg.half_size
+            outside = np.flatnonzero(m & ((np.abs(p[:, 0]) >= half) | (np.abs(p[:, 1]) >= half)))
+            if outside.size:
+                w = int(outside[0])
+                raise ValueError(f"reset pose outside the arena in world(s) {outside[:8].tolist()}: (x, y) = "
+                                 f"({p[w, 0]:g}, {p[w, 1]:g}) m; |x| and |y| must be below {half:g} m, the walls' "
+                                 "inner faces")
         self._reset_mask.assign(m)
         self._reset_poses.assign(p)
         self._apply_reset(self.rest_height if height is None else float(height))

@@ -2,8 +2,9 @@
 
 Usage::
 
-    python -m atrv_warp.train                                  # configs/default.toml
-    python -m atrv_warp.train --config configs/smoke.toml      # tiny budget
+    python -m atrv_warp.train                                  # preset "default" (the TrainConfig defaults)
+    python -m atrv_warp.train --config smoke                   # preset "smoke": about a minute
+    python -m atrv_warp.train --config my_run.toml             # your own TOML file
     python -m atrv_warp.train num_envs=128 max_minutes=5       # override any field
     python -m atrv_warp.train --resume runs/default            # continue a killed run
 
@@ -25,11 +26,15 @@ from pathlib import Path
 
 import torch
 
-from .config import TrainConfig, load_train_config
+from .config import TrainConfig, load_train_config, preset_names
+from .runtime import add_verbose_argument, device_summary, error_line, set_verbose
+from .storage import FileFormatError, atomic_save, load_weights
 
-__all__ = ["main", "train"]
+__all__ = ["CHECKPOINT_KEYS", "load_checkpoint", "main", "train"]
 
-DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "default.toml"
+DEFAULT_PRESET = "default"
+CHECKPOINT_KEYS = ("frames", "updates", "best_success", "elapsed_s", "next_eval", "stats_ready", "rng", "policy")
+"""Entries every training checkpoint holds (``loss`` and ``opts`` too once learning has started)."""
 
 
 def _pin_to_core(index: int) -> None:
@@ -46,10 +51,63 @@ def _write_toml(cfg: TrainConfig, path: Path) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
-def _atomic_save(obj, path: Path) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    torch.save(obj, tmp)
-    tmp.replace(path)
+def load_checkpoint(path: Path) -> dict:
+    """Read a training checkpoint (``weights_only``); a damaged one is a ``FileFormatError`` naming it."""
+    ck = load_weights(path, "training checkpoint", CHECKPOINT_KEYS)
+    if ck["stats_ready"] and not ({"loss", "opts"} <= ck.keys()):
+        raise FileFormatError(f"{path}: not a complete training checkpoint: learner state missing")
+    if not isinstance(ck["rng"], torch.Tensor) or ck["rng"].dtype != torch.uint8:
+        raise FileFormatError(f"{path}: not a complete training checkpoint: bad random-generator state")
+    return ck
+
+
+def _pct(rate: float) -> str:
+    """``' 82.4%'``, or ``'  n/a'`` before there is anything to rate."""
+    return "  n/a" if math.isnan(rate) else f"{100 * rate:5.1f}%"
+
+
+class _Progress:
+    """Progress toward whichever budget ends the run first: ``total_frames`` or ``max_minutes``.
+
+    On a terminal: a bar whose percentage is the larger of the two fractions, with frames,
+    minutes, ETA and the latest figures. Elsewhere (a log file, CI): one line per evaluation.
+    """
+
+    def __init__(self, cfg: TrainConfig, frames: int, elapsed_s: float):
+        from tqdm import tqdm
+
+        self.total_frames, self.budget_s = cfg.total_frames, cfg.max_minutes * 60.0
+        self.frames0, self.elapsed0 = frames, elapsed_s
+        self.interactive = cfg.progress and sys.stderr.isatty()
+        self.bar = tqdm(total=1000, disable=not self.interactive, dynamic_ncols=True,
+                        bar_format="train {percentage:3.0f}%|{bar}| {desc}", mininterval=0.5)
+        self.enabled = cfg.progress
+
+    def fraction(self, frames: int, elapsed_s: float) -> float:
+        f = frames / self.total_frames
+        if self.budget_s > 0:
+            f = max(f, elapsed_s / self.budget_s)
+        return min(f, 1.0)
+
+    def eta_s(self, frames: int, elapsed_s: float) -> float:
+        rate = (frames - self.frames0) / max(elapsed_s - self.elapsed0, 1e-9)
+        eta = (self.total_frames - frames) / rate if rate > 0 else math.inf
+        return min(eta, self.budget_s - elapsed_s) if self.budget_s > 0 else eta
+
+    def update(self, frames: int, elapsed_s: float, figures: str) -> None:
+        eta = self.eta_s(frames, elapsed_s)
+        self.bar.set_description_str(f"{frames / 1e6:.2f}M frames | {elapsed_s / 60:.1f} min | "
+                                     f"ETA {eta / 60:.1f} min | {figures}", refresh=False)
+        self.bar.update(round(1000 * self.fraction(frames, elapsed_s)) - self.bar.n)  # redraws at most 2/s
+
+    def log(self, line: str) -> None:
+        if self.interactive:
+            self.bar.write(line)
+        elif self.enabled:
+            print(line, flush=True)
+
+    def close(self) -> None:
+        self.bar.close()
 
 
 class _Stats:
@@ -115,17 +173,13 @@ def _plot_curve(log_dir: Path, out: Path) -> bool:
 
 def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     """Run SAC training with ``cfg``; returns the run folder."""
-    import warp as wp
-
-    wp.config.quiet = True
     from tensordict import TensorDict
     from torchrl.collectors import Collector, MultiAsyncCollector
     from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
     from torchrl.objectives import SACLoss, SoftUpdate
     from torchrl.record.loggers import CSVLogger
-    from tqdm import tqdm
 
-    from .agents import Normalize, make_actor, make_qvalue, save_policy
+    from .agents import Normalize, make_actor, make_qvalue, policy_payload, save_policy
     from .env import ATRVjrEnv, EnvFactory
     from .evaluation import EVAL_SEED, evaluate, format_result
 
@@ -140,8 +194,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
         raise FileNotFoundError(f"--resume: no checkpoint at {ckpt_path}")
     if not resume and ckpt_path.exists():
         raise FileExistsError(f"{run_dir} already holds a run; use --resume to continue it or another name=")
-    run_dir.mkdir(parents=True, exist_ok=True)
-    _write_toml(cfg, run_dir / "config.toml")
+    ck = load_checkpoint(ckpt_path) if resume else None  # before anything is written: a bad file loses nothing
 
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.threads)
@@ -169,24 +222,34 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
 
     frames, updates, best, elapsed_before, next_eval = 0, 0, -1.0, 0.0, cfg.eval_every_frames
     stats_ready = False
-    if resume:
-        ck = torch.load(ckpt_path, map_location="cpu", weights_only=True)
+    if ck is not None:
         frames, updates, best = ck["frames"], ck["updates"], ck["best_success"]
         elapsed_before, next_eval, stats_ready = ck["elapsed_s"], ck["next_eval"], ck["stats_ready"]
-        actor.load_state_dict(ck["policy"]["state_dict"])
-        if stats_ready:
-            build_learner()
-            parts["loss"].load_state_dict(ck["loss"])
-            for k, opt in parts["opts"].items():
-                opt.load_state_dict(ck["opts"][k])
+        try:
+            actor.load_state_dict(ck["policy"]["state_dict"])
+            if stats_ready:
+                build_learner()
+                parts["loss"].load_state_dict(ck["loss"])
+                for k, opt in parts["opts"].items():
+                    opt.load_state_dict(ck["opts"][k])
+        except (KeyError, TypeError, ValueError, RuntimeError) as err:
+            detail = (str(err).strip().splitlines() or [type(err).__name__])[0][:200]
+            raise FileFormatError(f"{ckpt_path}: does not match this run's networks (width={cfg.width}, "
+                                  f"depth={cfg.depth}): {detail}") from None
         torch.set_rng_state(ck["rng"])
         if (run_dir / "buffer").is_dir():
-            buffer.loads(run_dir / "buffer")
+            try:
+                buffer.loads(run_dir / "buffer")
+            except Exception as err:  # noqa: BLE001 - any failure here means a damaged buffer folder
+                raise FileFormatError(f"{run_dir / 'buffer'}: damaged replay buffer ({type(err).__name__}: "
+                                      f"{(str(err).strip().splitlines() or [''])[0][:200]})") from None
         print(f"resumed {run_dir} at {frames:,} frames, {updates:,} updates, best success {100 * best:.1f}%")
     if frames >= cfg.total_frames:
         print(f"nothing to do: {frames:,} frames already collected (total_frames={cfg.total_frames:,}); "
               "raise total_frames= to train further")
         return run_dir
+    run_dir.mkdir(parents=True, exist_ok=True)
+    _write_toml(cfg, run_dir / "config.toml")
 
     loggers = [CSVLogger(exp_name="logs", log_dir=str(run_dir))]  # always: the learning curve is drawn from it
     if cfg.logger == "tensorboard":
@@ -206,14 +269,15 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     random_left = max(cfg.init_random_frames - frames, 0)
     fpb = cfg.frames_per_batch
     env_seed = cfg.seed + 7919 * (frames // fpb + 1)  # a resumed run draws new episodes
+    whole_batches = max(math.ceil(remaining / fpb), 1) * fpb  # the loop stops at total_frames itself
     if cfg.collector == "async":
         collector = MultiAsyncCollector([EnvFactory(cfg.num_envs, seed=env_seed, core=1)], actor,
-                                        frames_per_batch=fpb, total_frames=max(remaining, fpb),
+                                        frames_per_batch=fpb, total_frames=whole_batches,
                                         init_random_frames=random_left)
     else:
         # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
         collector = Collector(ATRVjrEnv(cfg.num_envs, seed=env_seed), actor, frames_per_batch=fpb,
-                              total_frames=max(remaining, fpb), init_random_frames=random_left,
+                              total_frames=whole_batches, init_random_frames=random_left,
                               auto_register_policy_transforms=False)
     eval_env = ATRVjrEnv(cfg.eval_episodes, seed=EVAL_SEED)
     eval_recorder = None
@@ -241,11 +305,10 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
         if stats_ready:
             learner = {"loss": parts["loss"].state_dict(),
                        "opts": {k: o.state_dict() for k, o in parts["opts"].items()}}
-        _atomic_save({**learner, "frames": frames, "updates": updates, "best_success": best, "elapsed_s": elapsed,
+        atomic_save({**learner, "frames": frames, "updates": updates, "best_success": best, "elapsed_s": elapsed,
                       "next_eval": next_eval, "stats_ready": stats_ready, "rng": torch.get_rng_state(),
-                      "policy": {"format": "atrv_warp.policy/1", "width": cfg.width, "depth": cfg.depth,
-                                 "state_dict": actor.state_dict(), "meta": {"frames": frames}},
-                      "config": dataclasses.asdict(cfg)}, ckpt_path)
+                     "policy": policy_payload(actor, width=cfg.width, depth=cfg.depth, meta={"frames": frames}),
+                     "config": dataclasses.asdict(cfg)}, ckpt_path)
         if stats_ready and len(buffer):
             buffer.dumps(run_dir / "buffer")
 
@@ -254,9 +317,10 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     stats = _Stats()
     update_credit = 0.0
     last_eval_success, last_train = float("nan"), (float("nan"), float("nan"))
-    bar = tqdm(total=cfg.total_frames, initial=frames, unit="frame", unit_scale=True, dynamic_ncols=True,
-               disable=not cfg.progress, desc="train")
-    print(f"run folder: {run_dir}  ({cfg.collector} collector, {cfg.num_envs} worlds, batch {fpb} frames)")
+    print(f"run folder: {run_dir}  ({cfg.collector} collector, {cfg.num_envs} worlds, batch {fpb} frames; "
+          f"budget {cfg.total_frames:,} frames or {cfg.max_minutes:g} min, whichever ends first)")
+    print(device_summary("cpu"))
+    progress = _Progress(cfg, frames, elapsed_before)
     stopped_by = "total_frames"
     try:
         for data in collector:
@@ -264,7 +328,6 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
             frames += n
             stats.update(data)
             buffer.extend(data.reshape(-1).cpu())
-            bar.update(n)
             if frames >= cfg.init_random_frames:
                 if not stats_ready:
                     obs = buffer[:]["observation"]
@@ -302,19 +365,18 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
                                     meta={"frames": frames, "eval_success": best})
                 next_eval = (frames // cfg.eval_every_frames + 1) * cfg.eval_every_frames
                 checkpoint()
-            left = budget_s - (elapsed_before + time.perf_counter() - t_start)
-            frame_rate = bar.format_dict["rate"] or 1.0
-            eta = min(left, (cfg.total_frames - frames) / frame_rate)
-            bar.set_postfix_str(f"eval {100 * last_eval_success:.0f}% | train {100 * last_train[0]:.0f}% | "
-                                f"reward {last_train[1]:+.3f} | updates {updates:,} | ETA {eta / 60:.1f} min",
-                                refresh=False)
+                progress.log(f"{frames:>11,} frames {elapsed / 60:5.1f} min  eval success {_pct(last_eval_success)}"
+                             f"  training episodes {_pct(last_train[0])}  reward {last_train[1]:+.3f}  "
+                             f"updates {updates:,}")
+            progress.update(frames, elapsed, f"eval {_pct(last_eval_success)} | train {_pct(last_train[0])} | "
+                                             f"updates {updates:,}")
             if elapsed >= budget_s:
                 stopped_by = f"max_minutes={cfg.max_minutes}"
                 break
             if frames >= cfg.total_frames:
                 break
     finally:
-        bar.close()
+        progress.close()
         collector.shutdown()
     elapsed = elapsed_before + time.perf_counter() - t_start
     print(f"training stopped by {stopped_by}: {frames:,} frames, {updates:,} updates, {elapsed / 60:.1f} min")
@@ -351,10 +413,15 @@ def _parse_overrides(items: list[str]) -> dict:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.train", description=__doc__.splitlines()[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
-    parser.add_argument("--config", default=None, help=f"TOML config (default: {DEFAULT_CONFIG.name} if present)")
+    parser.add_argument("--config", default=None, metavar="PRESET|FILE",
+                        help=f"a preset shipped with the package ({', '.join(preset_names())}; default "
+                             f"{DEFAULT_PRESET!r}) or a TOML file")
     parser.add_argument("--resume", metavar="RUN_DIR", default=None, help="continue the run in RUN_DIR")
+    add_verbose_argument(parser)
     parser.add_argument("overrides", nargs="*", help="key=value overrides of any TrainConfig field")
     args = parser.parse_args(argv)
+    if args.verbose:
+        set_verbose()
     try:
         overrides = _parse_overrides(args.overrides)
         if args.resume:
@@ -365,14 +432,13 @@ def main(argv: list[str] | None = None) -> int:
             overrides = {"out_dir": str(run_dir.parent), "name": run_dir.name, **overrides}
             cfg = load_train_config(str(cfg_file), overrides)
         else:
-            path = args.config or (str(DEFAULT_CONFIG) if DEFAULT_CONFIG.is_file() else None)
-            cfg = load_train_config(path, overrides)
+            cfg = load_train_config(args.config or DEFAULT_PRESET, overrides)
     except (ValueError, FileNotFoundError) as err:
-        parser.error(str(err))
+        return error_line(parser.prog, str(err))
     try:
         train(cfg, resume=bool(args.resume))
-    except (FileExistsError, FileNotFoundError, ModuleNotFoundError) as err:
-        parser.error(str(err))
+    except (FileExistsError, FileNotFoundError, ModuleNotFoundError, FileFormatError) as err:
+        return error_line(parser.prog, str(err))
     return 0
 
 

@@ -26,8 +26,10 @@ import shutil
 import signal
 import socket
 import subprocess
+import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 import rerun as rr
@@ -54,9 +56,11 @@ def _free_port() -> int:
 def serve_localhost(rec: rr.RecordingStream, *, grpc_port: int | None = None, web_port: int | None = None) -> str:
     """Start Rerun's web viewer and gRPC proxy bound to 127.0.0.1 only, connect ``rec`` to it,
     and return the URL to open. (The SDK's own ``serve_grpc`` binds every interface.)"""
-    exe = shutil.which("rerun")
+    # the venv's own script first: a venv's python run without activating the venv has no bin/ on PATH
+    exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
     if exe is None:
-        raise RuntimeError("the 'rerun' command (installed with rerun-sdk) is not on PATH")
+        raise RuntimeError(f"the 'rerun' command (installed with rerun-sdk) is neither beside {sys.executable} "
+                           "nor on PATH")
     grpc_port = grpc_port or _free_port()
     web_port = web_port or _free_port()
     proc = subprocess.Popen(

@@ -81,9 +81,6 @@ def main() -> int:
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     import torch
-    import warp as wp
-
-    wp.config.quiet = True
     torch.set_num_threads(1)
     from atrv_warp import diff
     from atrv_warp.diff import DiffRollout

@@ -56,9 +56,6 @@ def main() -> int:
 
     cores = sorted(os.sched_getaffinity(0))
     import torch
-    import warp as wp
-
-    wp.config.quiet = True
     torch.set_num_threads(1)
     from torchrl.collectors import Collector, MultiSyncCollector
 

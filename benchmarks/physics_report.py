@@ -18,9 +18,6 @@ RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def main() -> int:
-    import warp as wp
-
-    wp.config.quiet = True
     from atrv_warp import RoverSim
     from atrv_warp.checks import reference_drive, rolling_acceleration
 

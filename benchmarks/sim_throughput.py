@@ -37,7 +37,6 @@ def main() -> int:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     import warp as wp
 
-    wp.config.quiet = True
     tmp_cache = None
     if not args.warm_cache:
         tmp_cache = tempfile.TemporaryDirectory(prefix="warp-cache-")

@@ -170,6 +170,19 @@ def test_bad_commands_are_named():
         sim.set_mode("fly")
 
 
+def test_reset_outside_the_arena_is_refused():
+    sim = RoverSim(3)
+    sim.reset(poses=[[14.5, 0.0, 0.0], [0.0, -14.5, 1.0], [0.0, 0.0, 0.0]])  # inside, near the walls
+    before = sim.get_state()
+    with pytest.raises(ValueError, match=r"outside the arena in world\(s\) \[1\]: \(x, y\) = \(0, 15\.5\) m; "
+                                         r"\|x\| and \|y\| must be below 15 m"):
+        sim.reset(poses=[[0.0, 0.0, 0.0], [0.0, 15.5, 0.0], [1.0, 1.0, 0.0]])
+    with pytest.raises(ValueError, match=r"outside the arena in world\(s\) \[0\]"):
+        sim.reset(mask=[0], poses=[[-20.0, 0.0, 0.0]])
+    after = sim.get_state()
+    assert all(torch.equal(before[k], after[k]) for k in before)  # a refused reset changes nothing
+
+
 def test_masked_reset_leaves_others_untouched():
     sim = RoverSim(3)
     sim.set_commands([[5.0, 5.0], [5.0, -5.0], [-3.0, 4.0]])

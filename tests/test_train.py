@@ -8,10 +8,10 @@ from pathlib import Path
 import pytest
 import torch
 
-from atrv_warp.config import TrainConfig, load_train_config
+from atrv_warp.config import TrainConfig, load_train_config, preset_names
 
 ROOT = Path(__file__).resolve().parent.parent
-SMOKE = ROOT / "configs" / "smoke.toml"
+SMOKE = "smoke"  # a preset shipped inside the package
 
 
 def run_module(*args, check=True):
@@ -22,10 +22,16 @@ def run_module(*args, check=True):
 
 
 def test_config_files_and_errors(tmp_path):
-    default = load_train_config(str(ROOT / "configs" / "default.toml"))
-    assert default == TrainConfig()  # the file names the documented defaults
-    smoke = load_train_config(str(SMOKE), {"width": "16"})
+    assert {"default", "smoke"} <= set(preset_names())
+    default = load_train_config("default")
+    assert default == TrainConfig()  # the preset names the documented defaults
+    smoke = load_train_config(SMOKE, {"width": "16"})
     assert smoke.width == 16 and smoke.collector == "sync"
+    mine = tmp_path / "mine.toml"
+    mine.write_text('name = "mine"\nwidth = 64\n')
+    assert load_train_config(str(mine)).width == 64
+    with pytest.raises(FileNotFoundError, match=r"config 'smok' is neither a file nor a preset; presets: \["):
+        load_train_config("smok")
     with pytest.raises(ValueError, match=r"unknown train config key\(s\) \['lerning_rate'\]"):
         load_train_config(None, {"lerning_rate": "1e-3"})
     with pytest.raises(ValueError, match="batch_size expects int, got 'big'"):
@@ -39,16 +45,17 @@ def test_config_files_and_errors(tmp_path):
 
 
 def test_cli_rejects_bad_config_before_work(tmp_path):
-    proc = run_module("atrv_warp.train", "--config", str(SMOKE), f"out_dir={tmp_path}", "num_envs=-3", check=False)
+    proc = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", "num_envs=-3", check=False)
     assert proc.returncode == 2 and "num_envs must be > 0" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1  # one line naming the problem, no usage dump
     assert not any(tmp_path.iterdir())  # nothing was started or written
 
 
 @pytest.fixture(scope="module")
 def smoke_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("runs")
-    proc = run_module("atrv_warp.train", "--config", str(SMOKE), f"out_dir={out}")
-    return out / "smoke", proc.stdout
+    proc = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={out}", "progress=true")
+    return out / "smoke", proc.stdout + proc.stderr
 
 
 def test_smoke_training_end_to_end(smoke_run):
@@ -60,6 +67,11 @@ def test_smoke_training_end_to_end(smoke_run):
     assert result["frames"] >= 6144 and result["updates"] > 0
     assert 0.0 <= result["final_eval"]["success_rate"] <= 1.0
     assert "best policy:" in stdout and str(run_dir) in stdout
+    # a quiet console: the device once, one line per evaluation, no library chatter
+    assert stdout.count("simulation on cpu") == 1
+    assert "Module " not in stdout and "CUDA warning" not in stdout and "INFO" not in stdout
+    assert "Warning" not in stdout, stdout
+    assert sum("eval success" in line for line in stdout.splitlines()) == 3  # every 2048 of 6144 frames
     ck = torch.load(run_dir / "checkpoint.pt", weights_only=True)  # no arbitrary pickle needed
     assert ck["frames"] == result["frames"]
 
@@ -91,7 +103,7 @@ def test_resume_continues_step_counter(smoke_run, tmp_path):
     rows = (copy / "logs" / "scalars" / "train_reward.csv").read_text().splitlines()
     steps = [int(r.split(",")[0]) for r in rows]
     assert steps == sorted(steps) and steps[-1] >= 10240  # the log continues, it does not restart
-    again = run_module("atrv_warp.train", "--config", str(SMOKE), f"out_dir={tmp_path}", check=False)
+    again = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", check=False)
     assert again.returncode != 0 and "already holds a run" in again.stderr
 
 
@@ -111,8 +123,86 @@ def test_shipped_policy_beats_scripted_baseline():
 def test_sync_training_is_reproducible(smoke_run, tmp_path):
     """Same seed, same result: the in-process (sync) collector gives bit-identical weights."""
     run_dir, _ = smoke_run
-    run_module("atrv_warp.train", "--config", str(SMOKE), f"out_dir={tmp_path}")
+    run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}")
     a = torch.load(run_dir / "checkpoint.pt", weights_only=True)["policy"]["state_dict"]
     b = torch.load(tmp_path / "smoke" / "checkpoint.pt", weights_only=True)["policy"]["state_dict"]
     assert a.keys() == b.keys()
     assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+class _TouchOnLoad:
+    """Unpickling this creates ``path``: proof that a loader executed pickled code."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def __reduce__(self):
+        return (Path.touch, (Path(self.path),))
+
+
+def _damaged_files(tmp_path: Path, good: Path) -> tuple[dict[str, Path], Path]:
+    import pickle
+    import random
+
+    marker = tmp_path / "unpickled.marker"
+    files = {"random": tmp_path / "random.pt", "pickle": tmp_path / "objects.pkl",
+             "torch_pickle": tmp_path / "objects.pt", "truncated": tmp_path / "truncated.pt"}
+    files["random"].write_bytes(random.Random(0).randbytes(4096))
+    files["pickle"].write_bytes(pickle.dumps({"policy": _TouchOnLoad(marker)}))
+    torch.save({"policy": _TouchOnLoad(marker)}, files["torch_pickle"])
+    data = good.read_bytes()
+    files["truncated"].write_bytes(data[: len(data) // 2])
+    return files, marker
+
+
+def test_evaluate_names_a_bad_file_in_one_line_and_unpickles_nothing(smoke_run, tmp_path):
+    run_dir, _ = smoke_run
+    files, marker = _damaged_files(tmp_path, run_dir / "checkpoint.pt")
+    expected = {"random": "not a complete file written by torch.save",
+                "pickle": "not a complete file written by torch.save",
+                "torch_pickle": "holds Python objects other than tensors",
+                "truncated": "not a complete file written by torch.save"}
+    for kind in ("random", "torch_pickle", "truncated"):  # one of each kind of refusal through the CLI
+        proc = run_module("atrv_warp.evaluate", str(files[kind]), "--episodes", "2", check=False)
+        lines = proc.stderr.strip().splitlines()
+        assert proc.returncode == 2 and len(lines) == 1, (kind, proc.stderr)
+        assert str(files[kind]) in lines[0] and expected[kind] in lines[0], lines[0]
+        assert "Traceback" not in proc.stderr
+    from atrv_warp.agents import load_policy
+    from atrv_warp.storage import FileFormatError
+
+    for kind, path in files.items():
+        with pytest.raises(FileFormatError, match=expected[kind]):
+            load_policy(path)
+    assert not marker.exists()  # nothing was unpickled
+    tensor = tmp_path / "tensor.pt"
+    torch.save(torch.zeros(3), tensor)
+    with pytest.raises(FileFormatError, match="holds a Tensor, not a dict"):
+        load_policy(tensor)
+    ck = torch.load(run_dir / "checkpoint.pt", weights_only=True)
+    ck["policy"]["state_dict"] = {k: v.fill_(float("nan")) if v.is_floating_point() else v
+                                  for k, v in ck["policy"]["state_dict"].items()}
+    torch.save(ck, tmp_path / "nan.pt")
+    with pytest.raises(FileFormatError, match="non-finite values"):
+        load_policy(tmp_path / "nan.pt")
+    ck["policy"]["width"] = 7
+    torch.save(ck, tmp_path / "shape.pt")
+    with pytest.raises(FileFormatError, match="damaged atrv_warp policy"):
+        load_policy(tmp_path / "shape.pt")
+
+
+def test_resume_refuses_a_damaged_checkpoint_and_keeps_the_run(smoke_run, tmp_path):
+    import shutil
+
+    run_dir, _ = smoke_run
+    copy = tmp_path / "smoke"
+    shutil.copytree(run_dir, copy)
+    data = (copy / "checkpoint.pt").read_bytes()
+    (copy / "checkpoint.pt").write_bytes(data[: len(data) - 100])
+    before = {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()}
+    proc = run_module("atrv_warp.train", "--resume", str(copy), "total_frames=10240", check=False)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert str(copy / "checkpoint.pt") in lines[0] and "training checkpoint" in lines[0]
+    after = {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()}
+    assert after == before  # nothing rewritten, nothing added

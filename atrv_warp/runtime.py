@@ -1,0 +1,114 @@
+"""Console behaviour shared by every entry point: quiet by default, detail on request.
+
+By default the package keeps the console to what a user needs:
+
+- Warp's per-module ``Module … load on device 'cpu'`` lines and its init banner are hidden
+  (``warp.config.log_level = LOG_WARNING``);
+- the CUDA-driver warning that Warp's native library prints on a machine without a GPU is
+  held back (the entry points say once which device simulates instead, :func:`device_summary`);
+- TorchRL's INFO messages are hidden (``RL_LOGGING_LEVEL=WARNING`` unless you set it).
+
+``ATRV_WARP_VERBOSE=1`` in the environment, or ``--verbose`` on a command (which calls
+:func:`set_verbose`), brings all of it back, in worker processes too. Importing ``atrv_warp``
+runs :func:`configure` once, before any module imports Newton (whose import initialises Warp).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+
+__all__ = ["VERBOSE_ENV", "add_verbose_argument", "configure", "device_summary", "error_line", "is_verbose",
+           "set_verbose"]
+
+VERBOSE_ENV = "ATRV_WARP_VERBOSE"
+"""Environment variable: ``1`` (or ``true``/``yes``/``on``) shows library detail."""
+
+_held_back = ""  # what Warp's native init wrote to stderr while we were quiet
+
+
+def is_verbose() -> bool:
+    """Whether library detail is shown (``ATRV_WARP_VERBOSE``)."""
+    return os.environ.get(VERBOSE_ENV, "").strip().lower() in ("1", "true", "yes", "on")
+
+
+def _init_warp_quietly() -> str:
+    """``wp.init()`` with file descriptor 2 redirected; returns what the native code printed."""
+    import warp as wp
+
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile(mode="w+b") as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        sink.seek(0)
+        return sink.read().decode(errors="replace")
+
+
+def configure() -> None:
+    """Apply the console policy to Warp and TorchRL; idempotent, cheap after the first call."""
+    global _held_back
+    import warp as wp
+
+    verbose = is_verbose()
+    os.environ.setdefault("RL_LOGGING_LEVEL", "INFO" if verbose else "WARNING")
+    wp.config.log_level = wp.LOG_INFO if verbose else wp.LOG_WARNING
+    if verbose:
+        wp.init()
+        return
+    text = _init_warp_quietly()
+    # keep anything but the driver notice: a real error from the native library must still show
+    kept = [line for line in text.splitlines() if line and "Could not find or load the NVIDIA CUDA driver" not in line]
+    _held_back += text
+    if kept:
+        print("\n".join(kept), file=sys.stderr)
+
+
+def set_verbose(verbose: bool = True) -> None:
+    """Switch library detail on or off for this process and the workers it starts."""
+    import logging
+
+    import warp as wp
+
+    global _held_back
+    os.environ[VERBOSE_ENV] = "1" if verbose else "0"
+    os.environ["RL_LOGGING_LEVEL"] = "INFO" if verbose else "WARNING"
+    wp.config.log_level = wp.LOG_INFO if verbose else wp.LOG_WARNING
+    level = logging.INFO if verbose else logging.WARNING
+    for name in ("torchrl", "tensordict"):
+        logger = logging.getLogger(name)
+        logger.setLevel(level)
+        for handler in logger.handlers:
+            handler.setLevel(level)
+    if verbose and _held_back:
+        print(_held_back.rstrip(), file=sys.stderr)
+        _held_back = ""
+
+
+def device_summary(device: str | None = None) -> str:
+    """One line naming the device that simulates, e.g. ``simulation on cpu (no CUDA device found)``."""
+    import warp as wp
+
+    dev = wp.get_device(device)
+    cuda = wp.get_cuda_device_count()
+    if dev.is_cuda:
+        return f"simulation on {dev.alias} ({dev.name}), Warp {wp.config.version}"
+    extra = "no CUDA device found" if cuda == 0 else f"{cuda} CUDA device(s) available: pass device=cuda:0"
+    return f"simulation on cpu ({extra}), Warp {wp.config.version}"
+
+
+def add_verbose_argument(parser) -> None:
+    """``--verbose`` on an ``argparse`` command line (call :func:`set_verbose` when it is given)."""
+    parser.add_argument("--verbose", action="store_true",
+                        help=f"show library detail: Warp module loads, TorchRL INFO (same as {VERBOSE_ENV}=1)")
+
+
+def error_line(prog: str, message: str) -> int:
+    """Print ``prog: error: message`` as one line on stderr; returns the exit status 2."""
+    print(f"{prog}: error: {' '.join(str(message).split())}", file=sys.stderr)
+    return 2
