@@ -16,11 +16,12 @@ from torch import nn
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 
 from .storage import FileFormatError, atomic_save, load_weights
+from .task_spec import ACTION_DIM, OBS_DIM
 
 __all__ = ["POLICY_FORMAT", "Normalize", "load_policy", "make_actor", "make_qvalue", "policy_payload",
            "pretrained_policy_path", "save_policy"]
 
-OBS_DIM, ACT_DIM = 10, 2
+ACT_DIM = ACTION_DIM
 POLICY_FORMAT = "atrv_warp.policy/1"
 """Format tag of a saved policy (``save_policy``, and the ``policy`` entry of a training checkpoint)."""
 

@@ -15,6 +15,8 @@ import torch
 from tensordict.nn import TensorDictModule
 from torch import nn
 
+from .task_spec import OBS_INDEX
+
 __all__ = ["ScriptedDriver", "scripted_policy"]
 
 
@@ -32,7 +34,8 @@ class ScriptedDriver(nn.Module):
         self.turn_gain, self.drive, self.align = turn_gain, drive, align
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
-        err = torch.atan2(observation[..., 8], observation[..., 9])
+        err = torch.atan2(observation[..., OBS_INDEX["sin_heading_error"]],
+                          observation[..., OBS_INDEX["cos_heading_error"]])
         turn = (self.turn_gain * err).clamp(-1.0, 1.0)
         fwd = self.drive * (1.0 - err.abs() / self.align).clamp(min=0.0)
         return torch.stack([fwd - turn, fwd + turn], dim=-1).clamp(-1.0, 1.0)

@@ -6,7 +6,7 @@ What makes the gradients agree with finite differences (README, "Differentiable 
 
 - a backward-pass fix for Newton 1.8's Featherstone adjoint, whose in-place conversion of
   external wrenches corrupts every derivative that multiplies them: the steering gradient
-  (:func:`_restore_external_wrench`);
+  (:func:`restore_external_wrench`);
 - mass-matrix scratch of its own for every substep (Featherstone shares it across steps);
 - the wheel–ground contact as the analytic deepest point of a cylinder on a plane
   (``kernels/contact.py``), a smooth function of the pose, so the contact point moves with the
@@ -33,11 +33,9 @@ import torch
 import warp as wp
 
 from .config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, TaskConfig, get_variant
-from .kernels.contact import compute_contact_forces
-from .kernels.rover import apply_wheel_torques
 from .sim import RoverSim
 
-__all__ = ["DiffRollout", "NonFiniteGradientError", "progress_reward"]
+__all__ = ["DiffRollout", "NonFiniteGradientError", "progress_reward", "restore_external_wrench"]
 
 
 _SCRATCH = ("M", "J", "P", "H", "L")
@@ -77,7 +75,7 @@ def gather_chassis_pose(body_q: wp.array(dtype=wp.transform), bodies_per_world: 
         out[world, 3 + i] = q[i]
 
 
-def _restore_external_wrench(state_out: newton.State, state_in: newton.State):
+def restore_external_wrench(state_out: newton.State, state_in: newton.State):
     """Backward-pass fix for Newton 1.8's Featherstone adjoint with external wrenches.
 
     ``eval_rigid_tau`` converts the external wrenches in place (``body_f_ext[child] = f(body_f_ext[child])``,
@@ -107,13 +105,16 @@ class DiffRollout:
         variant, rover, contact, arena, sim: As for :class:`~atrv_warp.sim.RoverSim`
             (graph replay and tile GEMM are switched off: the tape records eager launches).
         device: Warp device.
+        wrench_fix: Apply :func:`restore_external_wrench` (keep ``True``; ``False`` reproduces
+            Newton 1.8's wrong steering gradient, for comparison).
 
     Calling the object runs the rollout; see :meth:`__call__`.
     """
 
     def __init__(self, num_worlds: int = 1, steps: int = 20, *, variant: str = "realistic",
                  rover: RoverConfig | None = None, contact: ContactConfig | None = None,
-                 arena: ArenaConfig | None = None, sim: SimConfig | None = None, device: str = "cpu"):
+                 arena: ArenaConfig | None = None, sim: SimConfig | None = None, device: str = "cpu",
+                 wrench_fix: bool = True):
         if steps < 1:
             raise ValueError(f"steps must be >= 1, got {steps}")
         sim_cfg = sim or SimConfig()
@@ -122,6 +123,9 @@ class DiffRollout:
         self.sim = RoverSim(num_worlds, rover=rover or get_variant(variant), contact=contact, arena=arena,
                             sim=sim_cfg, device=device, requires_grad=True)
         self.num_worlds, self.steps = num_worlds, steps
+        self.wrench_fix = wrench_fix
+        """Record :func:`restore_external_wrench` after each solver step (``False`` only to measure
+        what the workaround fixes, as ``benchmarks/diff_gradients.py --without-wrench-fix`` does)."""
         self.action_scale = TaskConfig().action_scale
         model = self.sim.model
         n_sub = steps * self.sim.substeps
@@ -136,7 +140,7 @@ class DiffRollout:
                        for _ in range(steps + 1)]
         self._friction = wp.zeros(1, dtype=float, device=dev, requires_grad=True)
         self._chassis_mass = wp.zeros(1, dtype=float, device=dev, requires_grad=True)
-        chassis = self.sim._layout.chassis_body
+        chassis = self.sim.layout.chassis_body
         self.nominal_chassis_mass = float(model.body_mass.numpy()[chassis])
         self._nominal_chassis_inertia = wp.mat33(model.body_inertia.numpy()[chassis])
         self._flags = wp.zeros(num_worlds, dtype=wp.int32, device=dev)
@@ -162,8 +166,7 @@ class DiffRollout:
 
     # ------------------------------------------------------------------ recording
     def _record(self) -> None:
-        sim, lay = self.sim, self.sim._layout
-        dt = sim.sim_cfg.sim_dt
+        sim, lay = self.sim, self.sim.layout
         n = self.num_worlds
         # The chassis mass (a payload) is an input of the tape: set it, then let the solver re-derive
         # its spatial inertias (Newton's public route for runtime mass changes), both recorded.
@@ -181,19 +184,13 @@ class DiffRollout:
             wp.launch(scale_actions, dim=n, inputs=[self._actions[t], self.action_scale], outputs=[self._commands[t]],
                       device=sim.device)
             for _ in range(sim.substeps):
-                s_in, s_out, control = self.states[k], self.states[k + 1], self.controls[k]
-                wp.launch(compute_contact_forces, dim=n,
-                          inputs=[lay.bodies_per_world, sim._shapes, sim._planes, sim._contact_params, self._friction,
-                                  s_in.body_q, s_in.body_qd, sim.model.body_com],
-                          outputs=[s_in.body_f, self._flags], device=sim.device)
-                wp.launch(apply_wheel_torques, dim=n,
-                          inputs=[lay, self._commands[t], sim.rover_cfg.wheel_speed_limit, s_in.joint_qd],
-                          outputs=[control.joint_f, self._torque], device=sim.device)
+                s_in, s_out = self.states[k], self.states[k + 1]
                 for name, arr in self._scratch[k].items():
                     setattr(sim.solver, name, arr)
-                sim.solver.step(self._solver_in[k], s_out, control, None, dt)
-                if self._tape is not None:
-                    self._tape.record_func(backward=_restore_external_wrench(s_out, s_in), arrays=[])
+                sim.substep(s_in, s_out, self.controls[k], self._commands[t], friction=self._friction,
+                            flags=self._flags, torque=self._torque, solver_in=self._solver_in[k])
+                if self._tape is not None and self.wrench_fix:
+                    self._tape.record_func(backward=restore_external_wrench(s_out, s_in), arrays=[])
                 k += 1
             wp.launch(gather_chassis_pose, dim=n, inputs=[self.states[k].body_q, lay.bodies_per_world,
                                                          lay.chassis_body], outputs=[self._poses[t + 1]],
@@ -310,8 +307,9 @@ def progress_reward(poses: torch.Tensor, targets: torch.Tensor, task: TaskConfig
     """The task's dense reward of every step of a rollout, differentiable: (steps, N).
 
     ``(previous distance - distance) + heading_weight * (previous |heading error| - |heading error|)
-    - step_penalty``, as the environment's ``compute_step_outcome`` kernel computes it for a
-    non-terminal step (tested against the environment). The terminal rewards (+4 within 1 m,
+    - step_penalty``: the non-terminal terms of :data:`atrv_warp.task_spec.REWARD_TERMS`
+    (progress, heading, step_penalty), as the environment's ``compute_step_outcome`` kernel
+    computes them (tested against the environment). The terminal rewards (+4 within 1 m,
     -4 on a wall or flip) are discrete events without a gradient and are left out.
 
     Args:

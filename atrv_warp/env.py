@@ -5,11 +5,12 @@ one thread per world (``atrv_warp/kernels/task.py``); TensorDicts carry zero-cop
 of the Warp buffers, cloned only where TorchRL would otherwise keep a reference to a buffer
 the next step overwrites.
 
-Keys produced:
+Keys produced (the contract is declared in :mod:`atrv_warp.task_spec`):
     ``observation`` (N, 10) float32: target x, y; rover x, y; vx, vy (world); roll; yaw rate;
-    sin and cos of the heading error. ``reward`` (N, 1); ``done`` / ``terminated`` /
-    ``truncated`` (N, 1) bool; ``end_reason`` (N, 1) int64 (see :data:`END_REASONS`);
-    ``distance`` (N, 1) distance to the target [m].
+    sin and cos of the heading error (``OBSERVATION``). ``reward`` (N, 1);
+    ``("reward_terms", name)`` (N, 1) for each of ``REWARD_TERMS``, which sum to the reward;
+    ``done`` / ``terminated`` / ``truncated`` (N, 1) bool; ``end_reason`` (N, 1) int64
+    (``EndReason``, named by :data:`END_REASONS`); ``distance`` (N, 1) distance to the target [m].
 """
 
 from __future__ import annotations
@@ -25,19 +26,19 @@ from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from .config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, TaskConfig, get_variant, replace_checked
-from .kernels.task import OBS_DIM, TaskBuffers, TaskParams, compute_step_outcome, observe_reset, sample_episodes
+from .kernels.task import TaskBuffers, TaskParams, compute_step_outcome, observe_reset, sample_episodes
 from .sim import RoverSim
+from .task_spec import (
+    ACTION_DIM,
+    END_REASONS,
+    OBS_DIM,
+    OBSERVATION_NAMES,
+    REWARD_TERMS,
+    action_to_torque,
+    observation_bounds,
+)
 
-__all__ = ["END_REASONS", "OBSERVATION_NAMES", "ATRVjrEnv", "EnvFactory"]
-
-END_REASONS = ("running", "success", "wall", "flip", "timeout", "nonfinite")
-"""Index = value of ``end_reason``."""
-
-OBSERVATION_NAMES = ("target_x", "target_y", "rover_x", "rover_y", "rover_vx", "rover_vy", "roll", "yaw_rate",
-                     "sin_heading_error", "cos_heading_error")
-
-# The reference's observation bounds.
-_TARGET_BOUND, _POSITION_BOUND, _VELOCITY_BOUND, _ROLL_BOUND, _YAW_RATE_BOUND = 12.0, 30.0, 6.0, 0.25, 6.0
+__all__ = ["END_REASONS", "OBSERVATION_NAMES", "REWARD_TERMS", "ATRVjrEnv", "EnvFactory"]
 
 
 def _torch_device(device: wp.context.Device) -> torch.device:
@@ -99,11 +100,6 @@ class ATRVjrEnv(EnvBase):
         p.failure_reward = c.failure_reward
         p.heading_weight = c.heading_weight
         p.step_penalty = c.step_penalty
-        p.target_bound = _TARGET_BOUND
-        p.position_bound = _POSITION_BOUND
-        p.velocity_bound = _VELOCITY_BOUND
-        p.roll_bound = _ROLL_BOUND
-        p.yaw_rate_bound = _YAW_RATE_BOUND
         self._params = p
         t = TaskBuffers()
         t.target = wp.zeros(n, dtype=wp.vec2, device=dev)
@@ -114,16 +110,21 @@ class ATRVjrEnv(EnvBase):
         self._task = t
         self._obs = wp.zeros((n, OBS_DIM), dtype=float, device=dev)
         self._reward = wp.zeros(n, dtype=float, device=dev)
+        self._reward_terms = wp.zeros((n, len(REWARD_TERMS)), dtype=float, device=dev)
         self._terminated = wp.zeros(n, dtype=bool, device=dev)
         self._truncated = wp.zeros(n, dtype=bool, device=dev)
         self._end_reason = wp.zeros(n, dtype=wp.int32, device=dev)
         self._distance = wp.zeros(n, dtype=float, device=dev)
         self._mask = wp.zeros(n, dtype=bool, device=dev)
+        self._reset_poses = wp.zeros(n, dtype=wp.vec3, device=dev)  # the sampler's starts (x, y, yaw)
         # torch views (no copies)
         self.target = wp.to_torch(t.target)
         self.step_count = wp.to_torch(t.step_count)
+        self.target_distance = wp.to_torch(self._distance)
+        """(N,) chassis-to-target distance [m] after the last reset, step or :meth:`observe` (a view)."""
         self._obs_t = wp.to_torch(self._obs)
         self._reward_t = wp.to_torch(self._reward).unsqueeze(-1)
+        self._reward_terms_t = wp.to_torch(self._reward_terms)
         self._terminated_t = wp.to_torch(self._terminated).unsqueeze(-1)
         self._truncated_t = wp.to_torch(self._truncated).unsqueeze(-1)
         self._end_reason_t = wp.to_torch(self._end_reason).unsqueeze(-1)
@@ -138,16 +139,18 @@ class ATRVjrEnv(EnvBase):
 
     def _make_spec(self) -> None:
         n, dev = self.num_envs, self.device
-        low = torch.tensor([-_TARGET_BOUND] * 2 + [-_POSITION_BOUND] * 2 + [-_VELOCITY_BOUND] * 2
-                           + [-_ROLL_BOUND, -_YAW_RATE_BOUND, -1.0, -1.0])
-        bounds = (low.expand(n, OBS_DIM), (-low).expand(n, OBS_DIM))
+        low, high = observation_bounds()
+        bounds = (low.expand(n, OBS_DIM), high.expand(n, OBS_DIM))
+        terms = Composite({name: Unbounded(shape=(n, 1), dtype=torch.float32, device=dev) for name in REWARD_TERMS},
+                          shape=(n,), device=dev)
         self.observation_spec = Composite(
             observation=Bounded(*bounds, shape=(n, OBS_DIM), dtype=torch.float32, device=dev),
             end_reason=Categorical(len(END_REASONS), shape=(n, 1), dtype=torch.int64, device=dev),
             distance=Unbounded(shape=(n, 1), dtype=torch.float32, device=dev),
+            reward_terms=terms,
             shape=(n,), device=dev,
         )
-        self.action_spec = Bounded(-1.0, 1.0, shape=(n, 2), dtype=torch.float32, device=dev)
+        self.action_spec = Bounded(-1.0, 1.0, shape=(n, ACTION_DIM), dtype=torch.float32, device=dev)
         self.reward_spec = Unbounded(shape=(n, 1), dtype=torch.float32, device=dev)
         self.done_spec = Composite(
             done=Categorical(2, shape=(n, 1), dtype=torch.bool, device=dev),
@@ -172,17 +175,21 @@ class ATRVjrEnv(EnvBase):
             self._mask_t.copy_(mask)
         sim = self.sim
         wp.launch(sample_episodes, dim=self.num_envs, inputs=[self._seed, self._params, self._mask],
-                  outputs=[self._task, sim._reset_poses], device=self._wp_device)
-        sim._reset_mask.assign(self._mask)
-        sim._apply_reset(sim.rest_height)
+                  outputs=[self._task, self._reset_poses], device=self._wp_device)
+        sim.reset_worlds(self._mask, self._reset_poses)
         self._launch_observe()
         self._end_reason_t.masked_fill_(self._mask_t.unsqueeze(-1), 0)
         zeros = torch.zeros((self.num_envs, 1), dtype=torch.bool, device=self.device)
         return TensorDict(
             {"observation": self._obs_t.clone(), "end_reason": self._end_reason_t.long(),
              "distance": self._distance_t.clone(), "done": zeros, "terminated": zeros.clone(),
-             "truncated": zeros.clone()},
+             "truncated": zeros.clone(), "reward_terms": self._terms_td(torch.zeros_like(self._reward_terms_t))},
             batch_size=self.batch_size, device=self.device)
+
+    def _terms_td(self, terms: torch.Tensor) -> TensorDict:
+        """``("reward_terms", name)`` entries as (N, 1) views of one (N, K) tensor."""
+        return TensorDict({name: terms[:, i:i + 1] for i, name in enumerate(REWARD_TERMS)},
+                          batch_size=self.batch_size, device=self.device)
 
     def observe(self, targets: torch.Tensor) -> torch.Tensor:
         """Set every world's target (N, 2) [m] and return the observation (N, 10) of the current
@@ -195,30 +202,29 @@ class ATRVjrEnv(EnvBase):
         return self._obs_t.clone()
 
     def _launch_observe(self) -> None:
-        sim = self.sim
+        b = self.sim.buffers
         wp.launch(observe_reset, dim=self.num_envs,
-                  inputs=[self._params, self._mask, self._task, sim.state_0.body_q, sim._layout.bodies_per_world,
-                          sim._layout.chassis_body, sim._lin_vel, sim._ang_vel, sim._rpy],
+                  inputs=[self._params, self._mask, self._task, b.body_q, b.layout.bodies_per_world,
+                          b.layout.chassis_body, b.lin_vel, b.ang_vel, b.rpy],
                   outputs=[self._obs, self._distance], device=self._wp_device)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = self._check_action(tensordict.get("action"))
-        torch.mul(action.clamp(-1.0, 1.0), self.task_cfg.action_scale, out=self.sim.commands)
-        sim = self.sim
+        action_to_torque(action, self.task_cfg.action_scale, out=self.sim.commands)
+        sim, b = self.sim, self.sim.buffers
         sim.step()
         wp.launch(compute_step_outcome, dim=self.num_envs,
-                  inputs=[self._params, self._task, sim.state_0.body_q, sim._layout.bodies_per_world,
-                          sim._layout.chassis_body, sim._lin_vel, sim._ang_vel, sim._rpy, sim._contact_flags,
-                          sim._nonfinite],
-                  outputs=[self._obs, self._reward, self._terminated, self._truncated, self._end_reason,
-                           self._distance], device=self._wp_device)
+                  inputs=[self._params, self._task, b.body_q, b.layout.bodies_per_world,
+                          b.layout.chassis_body, b.lin_vel, b.ang_vel, b.rpy, b.contact_flags, b.nonfinite],
+                  outputs=[self._obs, self._reward, self._reward_terms, self._terminated, self._truncated,
+                           self._end_reason, self._distance], device=self._wp_device)
         if bool(sim.nonfinite.any()):  # one flag read per step; blown-up worlds are rare
             self.nonfinite_count += int(sim.nonfinite.sum())
         return TensorDict(
             {"observation": self._obs_t.clone(), "reward": self._reward_t.clone(),
              "done": self._terminated_t | self._truncated_t, "terminated": self._terminated_t.clone(),
              "truncated": self._truncated_t.clone(), "end_reason": self._end_reason_t.long(),
-             "distance": self._distance_t.clone()},
+             "distance": self._distance_t.clone(), "reward_terms": self._terms_td(self._reward_terms_t.clone())},
             batch_size=self.batch_size, device=self.device)
 
     def _check_action(self, action: torch.Tensor | None) -> torch.Tensor:

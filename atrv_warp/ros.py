@@ -207,6 +207,8 @@ def run(args: list[str] | None = None) -> int:
     def goal_action():
         import torch
 
+        from .task_spec import action_to_torque
+
         if state["policy"] is None:
             from tensordict import TensorDict
 
@@ -215,9 +217,9 @@ def run(args: list[str] | None = None) -> int:
             state["policy"] = (load_policy(params["policy"] or None), TensorDict)
         policy, td_cls = state["policy"]
         obs = env.observe(torch.tensor([state["goal"]]))
-        dist = float(env._distance_t[0, 0])
+        dist = float(env.target_distance[0])
         action = policy(td_cls(observation=obs, batch_size=[1]))["action"]
-        return torch.clamp(action[0], -1.0, 1.0) * env.task_cfg.action_scale, dist
+        return action_to_torque(action[0], env.task_cfg.action_scale), dist
 
     deadline = params["duration"] if params["duration"] > 0 else math.inf
     if params["wait_for_subscribers"] > 0:

@@ -9,6 +9,7 @@ views of Warp arrays that the step updates in place (no copy per step).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from enum import Enum
 
 import newton
@@ -17,18 +18,12 @@ import torch
 import warp as wp
 
 from .config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant
-from .kernels.contact import (
-    FLAG_BODY_GROUND,
-    FLAG_WALL,
-    ArenaPlanes,
-    ContactParams,
-    RoverShapes,
-    compute_contact_forces,
-)
+from .contact import ContactModel
+from .kernels.contact import FLAG_BODY_GROUND, FLAG_WALL
 from .kernels.rover import RoverLayout, apply_wheel_torques, compute_rover_state, reset_worlds
 from .model import BuiltModel, build_model
 
-__all__ = ["DRIVE_MODE_TORQUES", "DriveMode", "RoverSim"]
+__all__ = ["DRIVE_MODE_TORQUES", "DriveMode", "RoverSim", "SimBuffers"]
 
 
 class DriveMode(str, Enum):
@@ -70,6 +65,46 @@ def _as_world_mask(mask, num_worlds: int) -> np.ndarray:
     return m
 
 
+@dataclass(frozen=True)
+class SimBuffers:
+    """Read-only view of the Warp arrays a :class:`RoverSim` steps in place, for clients' kernels
+    (the task, sensors, recorders). The arrays live as long as the simulator and are never
+    reallocated. Write only ``commands``; everything else is the simulator's output.
+
+    Per-world arrays have N = ``num_worlds`` rows; Newton's flat arrays hold
+    ``layout.bodies_per_world`` bodies per world, world after world.
+    """
+
+    layout: RoverLayout
+    """Where each world's rover lives in Newton's flat arrays (the kernels' struct)."""
+    body_q: wp.array
+    """(N·B,) ``wp.transform`` body poses, world frame (``state_0``)."""
+    body_qd: wp.array
+    """(N·B,) ``wp.spatial_vector`` body velocities (Newton's convention)."""
+    joint_q: wp.array
+    """Generalised coordinates, ``layout.coords_per_world`` per world."""
+    joint_qd: wp.array
+    """Generalised velocities, ``layout.dofs_per_world`` per world."""
+    body_com: wp.array
+    """(N·B,) ``wp.vec3`` centres of mass in body frames."""
+    commands: wp.array
+    """(N,) ``wp.vec2`` [left, right] wheel torque commands [N·m], read by the next step."""
+    lin_vel: wp.array
+    """(N,) ``wp.vec3`` chassis-origin velocity [m/s], world frame."""
+    ang_vel: wp.array
+    """(N,) ``wp.vec3`` chassis angular velocity [rad/s], world frame."""
+    rpy: wp.array
+    """(N,) ``wp.vec3`` roll, pitch, yaw [rad]."""
+    wheel_speed: wp.array
+    """(N, W) forward-positive wheel speeds [rad/s]."""
+    wheel_torque: wp.array
+    """(N, W) torques applied in the last substep [N·m]."""
+    contact_flags: wp.array
+    """(N,) ``int32``: bit 1 wall contact, bit 2 chassis–ground contact, since the last step began."""
+    nonfinite: wp.array
+    """(N,) ``int32``: 1 where the world's state is no longer finite (stays until reset)."""
+
+
 class RoverSim:
     """Batched ATRV-Jr simulator.
 
@@ -93,6 +128,13 @@ class RoverSim:
         ``contact_flags`` (N,): bit 1 wall contact, bit 2 chassis–ground contact, since the last step began.
         ``nonfinite`` (N,): 1 where the world's state is no longer finite (stays until reset).
         ``commands`` (N, 2): [left, right] wheel torque commands [N·m], read by :meth:`step`.
+
+    The contract for code that builds on the simulator (tasks, sensors, integrations):
+        :attr:`buffers` the Warp arrays behind those views (:class:`SimBuffers`), for kernels;
+        :attr:`layout` where each world's rover sits in Newton's arrays;
+        :meth:`reset_worlds` a masked reset from device arrays (no host round trip);
+        :attr:`contact` the contact model, and :meth:`substep` one solver substep, which
+        :class:`~atrv_warp.diff.DiffRollout` steps through too.
     """
 
     def __init__(
@@ -129,7 +171,9 @@ class RoverSim:
         self.state_1 = self.model.state()
         self.control = self.model.control()
         self._make_layout()
-        self._make_contact()
+        self.contact = ContactModel(self.built, rover=self.rover_cfg, contact=self.contact_cfg, arena=self.arena_cfg,
+                                    sim_dt=self.sim_cfg.sim_dt, device=self.device)
+        """The contact model every substep launches (:class:`~atrv_warp.contact.ContactModel`)."""
 
         n, w = num_worlds, len(self.description.wheels)
         dev = self.device
@@ -154,6 +198,13 @@ class RoverSim:
         self.wheel_torque = wp.to_torch(self._wheel_torque)
         self.contact_flags = wp.to_torch(self._contact_flags)
         self.nonfinite = wp.to_torch(self._nonfinite)
+
+        s0 = self.state_0
+        self._buffers = SimBuffers(
+            layout=self._layout, body_q=s0.body_q, body_qd=s0.body_qd, joint_q=s0.joint_q, joint_qd=s0.joint_qd,
+            body_com=self.model.body_com, commands=self._commands, lin_vel=self._lin_vel, ang_vel=self._ang_vel,
+            rpy=self._rpy, wheel_speed=self._wheel_speed, wheel_torque=self._wheel_torque,
+            contact_flags=self._contact_flags, nonfinite=self._nonfinite)
 
         self.sim_time = 0.0
         """Simulated time since construction [s] (the same in every world)."""
@@ -182,68 +233,16 @@ class RoverSim:
         layout.wheel_sign = wp.array([w.drive_sign for w in wheels], dtype=float, device=dev)
         self._layout = layout
 
-    def _make_contact(self) -> None:
-        cfg, rb, dt = self.contact_cfg, self.built.rover_builder, self.sim_cfg.sim_dt
-        p = ContactParams()
-        p.stiffness = cfg.stiffness
-        p.damping = cfg.damping
-        p.exponent = cfg.exponent
-        p.linear_region = cfg.linear_region
-        p.linear_coeff = cfg.linear_region ** (cfg.exponent - 1.0)
-        self._contact_params = p
-        self._friction = wp.array([cfg.friction], dtype=float, device=self.device)
+    # ------------------------------------------------------------------ the contract
+    @property
+    def layout(self) -> RoverLayout:
+        """Where each world's rover lives in Newton's flat arrays (read-only)."""
+        return self._layout
 
-        desc = self.description
-        n_wheels = len(desc.wheels)
-        mass = desc.total_mass
-        wheel_of_body = {b: w for b, w in zip(self.built.wheel_bodies, desc.wheels)}
-        body, kind, is_wheel, xform, size, slope_lon, slope_lat = [], [], [], [], [], [], []
-        for s in self.built.rover_shapes:
-            b = rb.shape_body[s]
-            gtype = rb.shape_type[s]
-            scale = rb.shape_scale[s]
-            body.append(b)
-            xform.append(rb.shape_transform[s])
-            if gtype == newton.GeoType.CYLINDER:
-                kind.append(0)
-                size.append(wp.vec3(scale[0], scale[1], 0.0))
-            elif gtype == newton.GeoType.BOX:
-                kind.append(1)
-                size.append(wp.vec3(*scale))
-            else:
-                raise ValueError(f"contact kernel handles cylinders and boxes, got {gtype!r}")
-            # Effective mass seen by friction at this shape's contact: a quarter of the rover
-            # sideways; along the rolling direction, that in series with the wheel's spin inertia.
-            m_share = mass / max(n_wheels, 1)
-            w = wheel_of_body.get(b)
-            if w is not None:
-                is_wheel.append(1)
-                i_axial = float(w.axis @ w.inertial.inertia @ w.axis)
-                r = self.rover_cfg.wheel_radius
-                m_lon = 1.0 / (1.0 / m_share + r * r / i_axial)
-            else:
-                is_wheel.append(0)
-                m_lon = m_share
-            slope_lon.append(cfg.friction_slope_fraction * m_lon / dt)
-            slope_lat.append(cfg.friction_slope_fraction * m_share / dt)
-        dev = self.device
-        sh = RoverShapes()
-        sh.count = len(body)
-        sh.body = wp.array(body, dtype=int, device=dev)
-        sh.kind = wp.array(kind, dtype=int, device=dev)
-        sh.is_wheel = wp.array(is_wheel, dtype=int, device=dev)
-        sh.xform = wp.array(xform, dtype=wp.transform, device=dev)
-        sh.size = wp.array(size, dtype=wp.vec3, device=dev)
-        sh.slope_lon = wp.array(slope_lon, dtype=float, device=dev)
-        sh.slope_lat = wp.array(slope_lat, dtype=float, device=dev)
-        self._shapes = sh
-
-        a = self.arena_cfg
-        h = a.half_size
-        planes = ArenaPlanes()
-        planes.normal = wp.array([(0, 0, 1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)], dtype=wp.vec3, device=dev)
-        planes.offset = wp.array([a.ground_top, -h, -h, -h, -h], dtype=float, device=dev)
-        self._planes = planes
+    @property
+    def buffers(self) -> SimBuffers:
+        """The Warp arrays behind the state views, for kernels (:class:`SimBuffers`, read-only)."""
+        return self._buffers
 
     # ------------------------------------------------------------------ derived figures
     @property
@@ -279,22 +278,27 @@ class RoverSim:
         return chassis @ torch.as_tensor(frames[name])
 
     # ------------------------------------------------------------------ stepping
-    def _substep(self, s_in: newton.State, s_out: newton.State, dt: float) -> None:
+    def substep(self, s_in: newton.State, s_out: newton.State, control: newton.Control, commands: wp.array, *,
+                friction: wp.array | None = None, flags: wp.array | None = None, torque: wp.array | None = None,
+                solver_in: newton.State | None = None) -> None:
+        """One solver substep of ``sim_dt``: contact wrenches, wheel torques, one Featherstone step.
+
+        The simulator's own step calls it on its two states; :class:`~atrv_warp.diff.DiffRollout`
+        calls it on a tape with one state per substep, its own ``commands`` (N,) ``wp.vec2``,
+        ``friction`` (1,), ``flags`` (N,) and ``torque`` (N, W) outputs, and ``solver_in``: a view
+        of ``s_in`` with its own ``body_q`` for the solver to write.
+        """
         s_in.clear_forces()
-        wp.launch(compute_contact_forces, dim=self.num_worlds,
-                  inputs=[self._layout.bodies_per_world, self._shapes, self._planes, self._contact_params,
-                          self._friction, s_in.body_q, s_in.body_qd, self.model.body_com],
-                  outputs=[s_in.body_f, self._contact_flags], device=self.device)
+        self.contact.apply(s_in, self.model.body_com, self._contact_flags if flags is None else flags, friction)
         wp.launch(apply_wheel_torques, dim=self.num_worlds,
-                  inputs=[self._layout, self._commands, self.rover_cfg.wheel_speed_limit, s_in.joint_qd],
-                  outputs=[self.control.joint_f, self._wheel_torque], device=self.device)
-        self.solver.step(s_in, s_out, self.control, None, dt)
+                  inputs=[self._layout, commands, self.rover_cfg.wheel_speed_limit, s_in.joint_qd],
+                  outputs=[control.joint_f, self._wheel_torque if torque is None else torque], device=self.device)
+        self.solver.step(s_in if solver_in is None else solver_in, s_out, control, None, self.sim_cfg.sim_dt)
 
     def _simulate(self) -> None:
         self._contact_flags.zero_()
-        dt = self.sim_cfg.sim_dt
         for _ in range(self.substeps):
-            self._substep(self.state_0, self.state_1, dt)
+            self.substep(self.state_0, self.state_1, self.control, self._commands)
             # Copy back rather than swap so the result always lives in state_0: the torch
             # views and a recorded graph both point at fixed buffers.
             self.state_0.assign(self.state_1)
@@ -380,14 +384,21 @@ class RoverSim:
                                  "inner faces")
         self._reset_mask.assign(m)
         self._reset_poses.assign(p)
-        self._apply_reset(self.rest_height if height is None else float(height))
+        self.reset_worlds(self._reset_mask, self._reset_poses, height)
 
-    def _apply_reset(self, height: float) -> None:
+    def reset_worlds(self, mask: wp.array, poses: wp.array, height: float | None = None) -> None:
+        """Device-side masked reset: worlds where ``mask`` (N,) bool is set are re-posed at rest at
+        ``poses`` (N,) ``wp.vec3`` (x [m], y [m], yaw [rad]); the others are untouched.
+
+        For poses that a kernel produced on the device (a task's episode sampler): nothing is
+        copied to the host and nothing is checked, so they must lie inside the arena. User input
+        goes through :meth:`reset`, which checks it.
+        """
         s = self.state_0
         wp.launch(reset_worlds, dim=self.num_worlds,
-                  inputs=[self._layout, self._reset_mask, self._reset_poses, height],
+                  inputs=[self._layout, mask, poses, self.rest_height if height is None else float(height)],
                   outputs=[s.joint_q, s.joint_qd, self._contact_flags, self._nonfinite], device=self.device)
-        newton.eval_fk(self.model, s.joint_q, s.joint_qd, s, mask=self._reset_mask)
+        newton.eval_fk(self.model, s.joint_q, s.joint_qd, s, mask=mask)
         self._update_views()
 
     # ------------------------------------------------------------------ snapshots

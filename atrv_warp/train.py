@@ -29,6 +29,7 @@ import torch
 from .config import TrainConfig, load_train_config, preset_names
 from .runtime import add_verbose_argument, device_summary, error_line, set_verbose
 from .storage import FileFormatError, atomic_save, load_weights
+from .task_spec import REWARD_TERMS, EndReason
 
 __all__ = ["CHECKPOINT_KEYS", "load_checkpoint", "main", "train"]
 
@@ -111,30 +112,55 @@ class _Progress:
 
 
 class _Stats:
-    """Running training statistics from collected batches (episodes that ended in them)."""
+    """Running training statistics from collected batches (episodes that ended in them), and the
+    mean of every reward term over the collected steps."""
 
     def __init__(self):
         self.ended = 0
         self.success = 0
         self.reward_sum = 0.0
         self.reward_n = 0
+        self.term_sums = torch.zeros(len(REWARD_TERMS), dtype=torch.float64)
 
     def update(self, data) -> None:
-        from .env import END_REASONS
-
         done = data["next", "done"].reshape(-1)
         reasons = data["next", "end_reason"].reshape(-1)[done]
         self.ended += int(done.sum())
-        self.success += int((reasons == END_REASONS.index("success")).sum())
+        self.success += int((reasons == EndReason.SUCCESS).sum())
         r = data["next", "reward"]
         self.reward_sum += float(r.sum())
         self.reward_n += r.numel()
+        terms = data["next", "reward_terms"]
+        self.term_sums += torch.stack([terms[name].sum() for name in REWARD_TERMS]).double()
 
-    def pop(self) -> tuple[float, float]:
+    def pop(self) -> tuple[float, float, dict[str, float]]:
+        """(success rate, mean reward, mean of each reward term), then start over."""
         rate = self.success / self.ended if self.ended else float("nan")
-        reward = self.reward_sum / self.reward_n if self.reward_n else float("nan")
+        n = self.reward_n
+        reward = self.reward_sum / n if n else float("nan")
+        terms = {name: float(v) / n if n else float("nan") for name, v in zip(REWARD_TERMS, self.term_sums)}
         self.__init__()
-        return rate, reward
+        return rate, reward, terms
+
+
+class _LossMeans:
+    """Means of SAC's losses and entropy over the updates since the last :meth:`pop`."""
+
+    KEYS = ("loss_actor", "loss_qvalue", "loss_alpha", "entropy")
+
+    def __init__(self):
+        self.sums = {k: 0.0 for k in self.KEYS}
+        self.n = 0
+
+    def add(self, out) -> None:
+        for k in self.KEYS:
+            self.sums[k] += float(out[k].detach())
+        self.n += 1
+
+    def pop(self) -> dict[str, float]:
+        means = {k: v / self.n for k, v in self.sums.items()} if self.n else {}
+        self.__init__()
+        return means
 
 
 def _plot_curve(log_dir: Path, out: Path) -> bool:
@@ -315,8 +341,9 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     budget_s = cfg.max_minutes * 60.0 if cfg.max_minutes > 0 else math.inf
     t_start = time.perf_counter()
     stats = _Stats()
+    losses = _LossMeans()
     update_credit = 0.0
-    last_eval_success, last_train = float("nan"), (float("nan"), float("nan"))
+    last_eval_success, last_train = float("nan"), (float("nan"), float("nan"), {})
     print(f"run folder: {run_dir}  ({cfg.collector} collector, {cfg.num_envs} worlds, batch {fpb} frames; "
           f"budget {cfg.total_frames:,} frames or {cfg.max_minutes:g} min, whichever ends first)")
     print(device_summary("cpu"))
@@ -346,6 +373,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
                         opt.step()
                     parts["target_update"].step()
                     updates += 1
+                    losses.add(out)
                 if cfg.collector == "async":  # the worker holds a copy; the sync collector shares `actor`
                     collector.update_policy_weights_(TensorDict.from_module(actor))
             elapsed = elapsed_before + time.perf_counter() - t_start
@@ -353,7 +381,11 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
                 last_train = stats.pop()
                 log_scalar("train_success_rate", last_train[0])
                 log_scalar("train_reward", last_train[1])
+                for name, value in last_train[2].items():
+                    log_scalar(f"train_reward_{name}", value)
                 log_scalar("updates", updates)
+                for name, value in losses.pop().items():
+                    log_scalar(name, value)
                 log_scalar("wall_time_s", elapsed)
                 if stats_ready:
                     log_scalar("alpha", float(parts["loss"].log_alpha.detach().exp()))
@@ -392,7 +424,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     (run_dir / "final_eval.json").write_text(json.dumps(result, indent=2) + "\n")
     if eval_recorder is not None:
         eval_recorder.close()
-        print(f"rerun recording: {loggers[-1]._path}")
+        print(f"rerun recording: {loggers[-1].path}")
     if _plot_curve(run_dir / "logs", run_dir / "learning_curve.png"):
         print(f"learning curve: {run_dir / 'learning_curve.png'}")
     print(f"checkpoint: {ckpt_path}\nbest policy: {best_path if best_path.is_file() else '(none yet)'}\n"

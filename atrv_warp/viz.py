@@ -53,9 +53,11 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def serve_localhost(rec: rr.RecordingStream, *, grpc_port: int | None = None, web_port: int | None = None) -> str:
+def serve_localhost(rec: rr.RecordingStream, *, grpc_port: int | None = None,
+                    web_port: int | None = None) -> tuple[str, subprocess.Popen]:
     """Start Rerun's web viewer and gRPC proxy bound to 127.0.0.1 only, connect ``rec`` to it,
-    and return the URL to open. (The SDK's own ``serve_grpc`` binds every interface.)"""
+    and return the URL to open and the server process, which runs in its own session (stop its
+    process group). The SDK's own ``serve_grpc`` binds every interface."""
     # the venv's own script first: a venv's python run without activating the venv has no bin/ on PATH
     exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
     if exe is None:
@@ -79,8 +81,7 @@ def serve_localhost(rec: rr.RecordingStream, *, grpc_port: int | None = None, we
         raise RuntimeError("rerun viewer server did not start within 20 s")
     grpc_url = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
     rec.connect_grpc(grpc_url)
-    rec._atrv_server = proc  # stopped with the recorder
-    return f"http://127.0.0.1:{web_port}/?url={grpc_url.replace('+', '%2B')}"
+    return f"http://127.0.0.1:{web_port}/?url={grpc_url.replace('+', '%2B')}", proc
 
 
 class RerunRecorder:
@@ -109,7 +110,7 @@ class RerunRecorder:
         self.path = None if path is None else os.fspath(path)
         if self.path is not None:
             self.rec.save(self.path)
-        self.url = serve_localhost(self.rec) if serve else None
+        self.url, self._server = serve_localhost(self.rec) if serve else (None, None)
         if self.url:
             print(f"Rerun web viewer (localhost only): {self.url}", flush=True)
         self.real_time = real_time
@@ -175,7 +176,7 @@ class RerunRecorder:
         rec, sim = self.rec, self.sim
         rec.set_time("step", sequence=self.step)
         rec.set_time("sim_time", duration=sim.sim_time)
-        bpw = sim._layout.bodies_per_world
+        bpw = sim.layout.bodies_per_world
         # .numpy() of a CPU array is a view of live simulator memory; Rerun may read it after the next
         # step, so take a copy (one per logged step).
         body_q = sim.state_0.body_q.numpy().reshape(sim.num_worlds, bpw, 7).copy()
@@ -187,7 +188,7 @@ class RerunRecorder:
                 rec.log(f"world_{w}/rover/{name}", rr.Transform3D(translation=q[:3], quaternion=rr.Quaternion(xyzw=q[3:])))
             if reset_mask is not None and bool(reset_mask[w]):
                 self._trails[w] = []
-            self._trails[w].append(body_q[w, sim._layout.chassis_body, :3].copy())
+            self._trails[w].append(body_q[w, sim.layout.chassis_body, :3].copy())
             rec.log(f"world_{w}/trajectory", rr.LineStrips3D([np.array(self._trails[w])], colors=[(230, 160, 20)],
                                                              radii=0.02))
             if targets is not None:
@@ -225,7 +226,7 @@ class RerunRecorder:
     def close(self) -> None:
         """Flush and close the recording (and stop a served viewer)."""
         self.rec.flush()
-        server = getattr(self.rec, "_atrv_server", None)
+        server = self._server
         if self.path is not None or server is not None:  # sinks this recorder opened
             self.rec.disconnect()
         if server is not None:
@@ -252,6 +253,11 @@ class RerunLogger(Logger):
                  path: str | os.PathLike | None = None):
         self._recording, self._path = recording, path
         super().__init__(exp_name=exp_name, log_dir=None if path is None else os.fspath(path))
+
+    @property
+    def path(self) -> str | os.PathLike | None:
+        """The ``.rrd`` file the scalars are saved to (``None`` when writing to a given recording)."""
+        return self._path
 
     def _create_experiment(self) -> rr.RecordingStream:
         rec = self._recording or rr.RecordingStream("atrv_warp")

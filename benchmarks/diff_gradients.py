@@ -82,18 +82,16 @@ def main() -> int:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     import torch
     torch.set_num_threads(1)
-    from atrv_warp import diff
     from atrv_warp.diff import DiffRollout
 
-    if args.without_wrench_fix:
-        diff._restore_external_wrench = lambda state_out, state_in: (lambda: None)
+    fix = not args.without_wrench_fix
     default_name = "diff_gradients_without_fix.json" if args.without_wrench_fix else "diff_gradients.json"
     args.out = args.out or str(RESULTS / default_name)
 
     agreement = []
     gen = torch.Generator().manual_seed(0)
     for T in args.horizons:
-        roll = DiffRollout(1, steps=T)
+        roll = DiffRollout(1, steps=T, wrench_fix=fix)
         state = roll.initial_state()
         for name, (left, right) in SCENARIOS.items():
             a = torch.empty(T, 1, 2)
@@ -149,7 +147,7 @@ def main() -> int:
     cost = []
     for n in args.sizes:
         T = 20
-        roll = DiffRollout(n, steps=T)
+        roll = DiffRollout(n, steps=T, wrench_fix=fix)
         state = roll.initial_state()
         a = (torch.rand(T, n, 2, generator=gen) * 2 - 1).requires_grad_(True)
         roll(a, state)  # warm-up

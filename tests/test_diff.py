@@ -58,7 +58,7 @@ def test_turning_gradient_over_one_second(roll20, left, right):
     """Steering (left against right) over 1 s while curving and while skidding in place.
 
     This is the derivative that Newton's in-place wrench conversion corrupted (see
-    ``diff._restore_external_wrench``: without it the error is tens of percent here);
+    ``diff.restore_external_wrench``: without it the error is tens of percent here);
     ``benchmarks/diff_gradients.py`` measures under 0.5 % over 2 s."""
     roll, state = roll20
     a = torch.empty(20, 1, 2)
@@ -199,13 +199,13 @@ def test_featherstone_wrench_adjoint_one_substep(with_fix):
 
     Newton 1.8's eval_rigid_tau converts external wrenches in place, so Warp's adjoint replay
     reads converted values and the orientation derivative comes out wrong; recording
-    diff._restore_external_wrench after the step fixes it. The canary checks that the bug is
+    diff.restore_external_wrench after the step fixes it. The canary checks that the bug is
     still there without the fix: if it fails after a Newton upgrade, upstream fixed it and the
     workaround can go."""
     import newton
     import warp as wp
 
-    from atrv_warp.diff import _restore_external_wrench
+    from atrv_warp.diff import restore_external_wrench
 
     roll = DiffRollout(1, steps=10)
     a = torch.tensor([[-0.3, 0.3]]).expand(10, 1, 2).contiguous()
@@ -230,7 +230,7 @@ def test_featherstone_wrench_adjoint_one_substep(with_fix):
             with tape:
                 solver.step(s_in, s_out, control, None, 0.01)
                 if with_fix:
-                    tape.record_func(backward=_restore_external_wrench(s_out, s_in), arrays=[])
+                    tape.record_func(backward=restore_external_wrench(s_out, s_in), arrays=[])
         return (as_t(s_out.joint_qd).double() * weights).sum().item()
 
     def turned(angle):

@@ -87,9 +87,8 @@ def test_reward_and_termination_on_built_states():
     q = wp.to_torch(env.sim.state_0.joint_q).view(4, -1)
     q[2, 3:7] = torch.tensor([math.sin(0.15), 0.0, 0.0, math.cos(0.15)])
     env.sim.set_state(env.sim.get_state())
-    # prime the progress terms from the hand-built states, as a reset would
-    env._task_views["prev_distance"].copy_((env.target - env.sim.root_pose[:, :2]).norm(dim=-1))
-    env._task_views["prev_heading_error"].zero_()
+    # prime the progress terms from the hand-built states, as a reset would (world 3 faces its target)
+    env.observe(env.target.clone())
     action = torch.tensor([[0.0, 0.0], [1.0, 1.0], [0.0, 0.0], [0.5, 0.5]])
     nxt = env.step(TensorDict(action=action, batch_size=[4]))["next"]
     reason = nxt["end_reason"][:, 0].tolist()
@@ -294,3 +293,26 @@ def test_observe_matches_reset_observation():
     assert torch.equal(again, td["observation"])
     moved = env.observe(torch.tensor([[5.0, 5.0]] * 3))
     assert moved[:, :2].tolist() == [[5.0, 5.0]] * 3 and torch.equal(moved[:, 2:8], td["observation"][:, 2:8])
+
+
+def test_reward_terms_sum_to_the_reward_and_follow_the_spec():
+    from atrv_warp.baseline import scripted_policy
+    from atrv_warp.task_spec import END_REASONS, OBS_DIM, REWARD_TERMS, EndReason, observation_bounds
+
+    env = ATRVjrEnv(32, seed=5)
+    assert env.observation_spec["observation"].shape[-1] == OBS_DIM
+    assert torch.equal(env.observation_spec["observation"].space.high[0], observation_bounds()[1])
+    assert END_REASONS[EndReason.NONFINITE] == "nonfinite"
+    td = env.rollout(200, scripted_policy(), break_when_any_done=False)
+    nxt = td["next"]
+    terms = torch.cat([nxt["reward_terms", name] for name in REWARD_TERMS], -1)
+    assert torch.equal(terms.sum(-1, keepdim=True), nxt["reward"])  # summed in the kernel, in this order
+    reason = nxt["end_reason"]
+    success, failure = reason == EndReason.SUCCESS, (reason == EndReason.WALL) | (reason == EndReason.FLIP)
+    assert success.any()
+    assert (nxt["reward_terms", "success"][success] == 4.0).all()
+    assert (nxt["reward_terms", "success"][~success] == 0.0).all()
+    assert (nxt["reward_terms", "failure"][failure] == -4.0).all()
+    running = ~(success | failure)
+    assert (nxt["reward_terms", "step_penalty"][running] == -0.03).all()
+    assert (nxt["reward_terms", "progress"][~running] == 0.0).all()

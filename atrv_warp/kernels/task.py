@@ -2,22 +2,51 @@
 
 One thread per world. Figures are the reference task's (``TaskConfig``): targets and starts
 uniform in ±12 m, reach within 1 m (+4), wall/flip (-4), otherwise progress reward, 200-step
-truncation.
+truncation. The observation layout, its bounds, the end reasons and the reward terms come from
+:mod:`atrv_warp.task_spec`; each reward term is its own ``@wp.func`` and is written out per step.
 """
 
 from __future__ import annotations
 
 import warp as wp
 
-# Why an episode ended (``end_reason``).
-END_NONE = wp.constant(0)
-END_SUCCESS = wp.constant(1)
-END_WALL = wp.constant(2)
-END_FLIP = wp.constant(3)
-END_TIMEOUT = wp.constant(4)
-END_NONFINITE = wp.constant(5)
+from ..task_spec import OBS_DIM, OBS_INDEX, OBSERVATION, REWARD_TERMS, EndReason
 
-OBS_DIM = 10
+# Why an episode ended (``end_reason``), from task_spec.EndReason.
+END_NONE = wp.constant(int(EndReason.RUNNING))
+END_SUCCESS = wp.constant(int(EndReason.SUCCESS))
+END_WALL = wp.constant(int(EndReason.WALL))
+END_FLIP = wp.constant(int(EndReason.FLIP))
+END_TIMEOUT = wp.constant(int(EndReason.TIMEOUT))
+END_NONFINITE = wp.constant(int(EndReason.NONFINITE))
+
+# Observation indices and clip bounds, from task_spec.OBSERVATION.
+OBS_TARGET_X = wp.constant(OBS_INDEX["target_x"])
+OBS_TARGET_Y = wp.constant(OBS_INDEX["target_y"])
+OBS_ROVER_X = wp.constant(OBS_INDEX["rover_x"])
+OBS_ROVER_Y = wp.constant(OBS_INDEX["rover_y"])
+OBS_ROVER_VX = wp.constant(OBS_INDEX["rover_vx"])
+OBS_ROVER_VY = wp.constant(OBS_INDEX["rover_vy"])
+OBS_ROLL = wp.constant(OBS_INDEX["roll"])
+OBS_YAW_RATE = wp.constant(OBS_INDEX["yaw_rate"])
+OBS_SIN_HEADING = wp.constant(OBS_INDEX["sin_heading_error"])
+OBS_COS_HEADING = wp.constant(OBS_INDEX["cos_heading_error"])
+_BOUND = {f.name: f.bound for f in OBSERVATION}
+TARGET_BOUND = wp.constant(_BOUND["target_x"])
+POSITION_BOUND = wp.constant(_BOUND["rover_x"])
+VELOCITY_BOUND = wp.constant(_BOUND["rover_vx"])
+ROLL_BOUND = wp.constant(_BOUND["roll"])
+YAW_RATE_BOUND = wp.constant(_BOUND["yaw_rate"])
+assert _BOUND["target_x"] == _BOUND["target_y"] and _BOUND["rover_x"] == _BOUND["rover_y"]
+assert _BOUND["rover_vx"] == _BOUND["rover_vy"]
+
+# Reward-term columns of ``reward_terms``, from task_spec.REWARD_TERMS.
+TERM_PROGRESS = wp.constant(REWARD_TERMS.index("progress"))
+TERM_HEADING = wp.constant(REWARD_TERMS.index("heading"))
+TERM_STEP_PENALTY = wp.constant(REWARD_TERMS.index("step_penalty"))
+TERM_SUCCESS = wp.constant(REWARD_TERMS.index("success"))
+TERM_FAILURE = wp.constant(REWARD_TERMS.index("failure"))
+NUM_TERMS = wp.constant(len(REWARD_TERMS))
 
 
 @wp.struct
@@ -30,11 +59,6 @@ class TaskParams:
     failure_reward: float  # (negative) on wall or flip
     heading_weight: float  # weight of heading progress
     step_penalty: float  # subtracted every step
-    target_bound: float  # observation clip for target x, y [m]
-    position_bound: float  # ... rover x, y [m]
-    velocity_bound: float  # ... vx, vy [m/s]
-    roll_bound: float  # ... roll [rad]
-    yaw_rate_bound: float  # ... yaw rate [rad/s]
 
 
 @wp.struct
@@ -100,16 +124,16 @@ def write_observation(
     head_err: float,
 ):
     p = wp.transform_get_translation(pose)
-    obs[world, 0] = wp.clamp(target[0], -params.target_bound, params.target_bound)
-    obs[world, 1] = wp.clamp(target[1], -params.target_bound, params.target_bound)
-    obs[world, 2] = wp.clamp(p[0], -params.position_bound, params.position_bound)
-    obs[world, 3] = wp.clamp(p[1], -params.position_bound, params.position_bound)
-    obs[world, 4] = wp.clamp(lin_vel[0], -params.velocity_bound, params.velocity_bound)
-    obs[world, 5] = wp.clamp(lin_vel[1], -params.velocity_bound, params.velocity_bound)
-    obs[world, 6] = wp.clamp(roll, -params.roll_bound, params.roll_bound)
-    obs[world, 7] = wp.clamp(yaw_rate, -params.yaw_rate_bound, params.yaw_rate_bound)
-    obs[world, 8] = wp.sin(head_err)
-    obs[world, 9] = wp.cos(head_err)
+    obs[world, OBS_TARGET_X] = wp.clamp(target[0], -TARGET_BOUND, TARGET_BOUND)
+    obs[world, OBS_TARGET_Y] = wp.clamp(target[1], -TARGET_BOUND, TARGET_BOUND)
+    obs[world, OBS_ROVER_X] = wp.clamp(p[0], -POSITION_BOUND, POSITION_BOUND)
+    obs[world, OBS_ROVER_Y] = wp.clamp(p[1], -POSITION_BOUND, POSITION_BOUND)
+    obs[world, OBS_ROVER_VX] = wp.clamp(lin_vel[0], -VELOCITY_BOUND, VELOCITY_BOUND)
+    obs[world, OBS_ROVER_VY] = wp.clamp(lin_vel[1], -VELOCITY_BOUND, VELOCITY_BOUND)
+    obs[world, OBS_ROLL] = wp.clamp(roll, -ROLL_BOUND, ROLL_BOUND)
+    obs[world, OBS_YAW_RATE] = wp.clamp(yaw_rate, -YAW_RATE_BOUND, YAW_RATE_BOUND)
+    obs[world, OBS_SIN_HEADING] = wp.sin(head_err)
+    obs[world, OBS_COS_HEADING] = wp.cos(head_err)
 
 
 @wp.kernel
@@ -141,6 +165,30 @@ def observe_reset(
     write_observation(obs, world, params, target, pose, lin_vel[world], r[0], ang_vel[world][2], err)
 
 
+@wp.func
+def progress_term(prev_distance: float, distance: float) -> float:
+    """Distance gained toward the target this step [m]."""
+    return prev_distance - distance
+
+
+@wp.func
+def heading_term(weight: float, prev_abs_error: float, abs_error: float) -> float:
+    """``weight`` x the reduction of |heading error| this step."""
+    return weight * (prev_abs_error - abs_error)
+
+
+@wp.func
+def step_penalty_term(step_penalty: float) -> float:
+    """The cost of a non-terminal step."""
+    return -step_penalty
+
+
+@wp.func
+def clear_terms(terms: wp.array2d(dtype=float), world: int):
+    for i in range(NUM_TERMS):
+        terms[world, i] = 0.0
+
+
 @wp.kernel
 def compute_step_outcome(
     params: TaskParams,
@@ -155,12 +203,14 @@ def compute_step_outcome(
     nonfinite: wp.array(dtype=wp.int32),
     obs: wp.array2d(dtype=float),
     reward: wp.array(dtype=float),
+    reward_terms: wp.array2d(dtype=float),
     terminated: wp.array(dtype=bool),
     truncated: wp.array(dtype=bool),
     end_reason: wp.array(dtype=wp.int32),
     distance: wp.array(dtype=float),
 ):
-    """Observation, reward and termination of every world after one step."""
+    """Observation, reward (and its terms, which sum to it) and termination of every world after
+    one step. The checks come in a fixed order: success, flip, contact, else a running step."""
     world = wp.tid()
     steps = task.step_count[world] + 1
     task.step_count[world] = steps
@@ -169,9 +219,10 @@ def compute_step_outcome(
         # Contain a blown-up world: a finite, neutral observation and reward, then a reset.
         for i in range(OBS_DIM):
             obs[world, i] = 0.0
-        obs[world, 0] = target[0]
-        obs[world, 1] = target[1]
-        obs[world, 9] = 1.0
+        obs[world, OBS_TARGET_X] = target[0]
+        obs[world, OBS_TARGET_Y] = target[1]
+        obs[world, OBS_COS_HEADING] = 1.0
+        clear_terms(reward_terms, world)
         reward[world] = 0.0
         terminated[world] = True
         truncated[world] = False
@@ -184,21 +235,26 @@ def compute_step_outcome(
     d = planar_distance(pose, target)
     write_observation(obs, world, params, target, pose, lin_vel[world], r[0], ang_vel[world][2], err)
     reason = END_NONE
-    rew = 0.0
+    clear_terms(reward_terms, world)
     if d < params.reach_radius:
         reason = END_SUCCESS
-        rew = params.success_reward
+        reward_terms[world, TERM_SUCCESS] = params.success_reward
     elif wp.abs(r[0]) > params.flip_roll:
         # before the contact check: a flipping chassis usually also touches the ground
         reason = END_FLIP
-        rew = params.failure_reward
+        reward_terms[world, TERM_FAILURE] = params.failure_reward
     elif contact_flags[world] != 0:
         # wall, or the chassis on the ground: any contact beyond the wheels' ground contacts
         reason = END_WALL
-        rew = params.failure_reward
+        reward_terms[world, TERM_FAILURE] = params.failure_reward
     else:
-        rew = (task.prev_distance[world] - d) + params.heading_weight * (
-            task.prev_heading_error[world] - wp.abs(err)) - params.step_penalty
+        reward_terms[world, TERM_PROGRESS] = progress_term(task.prev_distance[world], d)
+        reward_terms[world, TERM_HEADING] = heading_term(params.heading_weight, task.prev_heading_error[world],
+                                                         wp.abs(err))
+        reward_terms[world, TERM_STEP_PENALTY] = step_penalty_term(params.step_penalty)
+    rew = wp.float32(0.0)
+    for i in range(NUM_TERMS):  # in REWARD_TERMS order: progress + heading - penalty as before
+        rew += reward_terms[world, i]
     task.prev_distance[world] = d
     task.prev_heading_error[world] = wp.abs(err)
     term = reason != END_NONE

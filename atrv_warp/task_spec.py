@@ -1,0 +1,104 @@
+"""The drive-to-target task's contract, declared once.
+
+Everything that reads or writes the task's tensors derives from here: the environment's
+specs, the Warp kernels (observation indices, bounds, end reasons, reward terms), the scripted
+baseline, the Gymnasium spaces, the ROS goal mode and :func:`atrv_warp.diff.progress_reward`.
+
+- :data:`OBSERVATION`: the observation's fields in order, each with its clip bound.
+- :class:`EndReason`: why an episode ended (the ``end_reason`` entry).
+- :data:`REWARD_TERMS`: the reward's terms; their sum is ``reward``, and each is reported per
+  step as ``("reward_terms", name)``.
+- :func:`action_to_torque`: action in [-1, 1]² to wheel torques.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+import torch
+
+__all__ = [
+    "ACTION_DIM",
+    "END_REASONS",
+    "OBSERVATION",
+    "OBSERVATION_NAMES",
+    "OBS_DIM",
+    "OBS_INDEX",
+    "REWARD_TERMS",
+    "EndReason",
+    "ObservationField",
+    "action_to_torque",
+    "observation_bounds",
+]
+
+
+@dataclass(frozen=True)
+class ObservationField:
+    """One entry of the observation vector."""
+
+    name: str
+    bound: float
+    """The value is clipped to [-bound, bound] (unit of the quantity)."""
+    description: str
+
+
+OBSERVATION: tuple[ObservationField, ...] = (
+    ObservationField("target_x", 12.0, "target x, world frame [m]"),
+    ObservationField("target_y", 12.0, "target y, world frame [m]"),
+    ObservationField("rover_x", 30.0, "chassis x, world frame [m]"),
+    ObservationField("rover_y", 30.0, "chassis y, world frame [m]"),
+    ObservationField("rover_vx", 6.0, "chassis-origin velocity x, world frame [m/s]"),
+    ObservationField("rover_vy", 6.0, "chassis-origin velocity y, world frame [m/s]"),
+    ObservationField("roll", 0.25, "chassis roll [rad]"),
+    ObservationField("yaw_rate", 6.0, "chassis yaw rate [rad/s]"),
+    ObservationField("sin_heading_error", 1.0, "sine of the angle from the heading to the target direction"),
+    ObservationField("cos_heading_error", 1.0, "its cosine"),
+)
+"""The observation, in order (the reference task's fields and bounds)."""
+
+OBSERVATION_NAMES: tuple[str, ...] = tuple(f.name for f in OBSERVATION)
+OBS_INDEX: dict[str, int] = {f.name: i for i, f in enumerate(OBSERVATION)}
+OBS_DIM = len(OBSERVATION)
+ACTION_DIM = 2
+"""[left, right] in [-1, 1], times ``TaskConfig.action_scale`` N·m per wheel."""
+
+
+class EndReason(IntEnum):
+    """Why an episode ended (``end_reason``; ``RUNNING`` while it has not)."""
+
+    RUNNING = 0
+    SUCCESS = 1
+    WALL = 2
+    """A wall contact, or the chassis touching the ground."""
+    FLIP = 3
+    """|roll| beyond ``TaskConfig.flip_roll``."""
+    TIMEOUT = 4
+    """Truncated at ``TaskConfig.max_steps``."""
+    NONFINITE = 5
+    """The world's state stopped being finite; it is reset on its own."""
+
+
+END_REASONS: tuple[str, ...] = tuple(r.name.lower() for r in EndReason)
+"""``END_REASONS[end_reason]`` names an end reason."""
+
+REWARD_TERMS: tuple[str, ...] = ("progress", "heading", "step_penalty", "success", "failure")
+"""Terms of the reward, in the order of the ``reward_terms`` kernel output; they sum to ``reward``.
+
+- ``progress``: previous distance to the target minus the distance now [m] (non-terminal steps);
+- ``heading``: ``heading_weight`` x (previous |heading error| - |heading error|) (non-terminal);
+- ``step_penalty``: ``-step_penalty`` on every non-terminal step;
+- ``success``: ``success_reward`` on reaching the target;
+- ``failure``: ``failure_reward`` on a wall or chassis contact or a flip.
+"""
+
+
+def observation_bounds(dtype: torch.dtype = torch.float32) -> tuple[torch.Tensor, torch.Tensor]:
+    """(low, high) of the observation, (OBS_DIM,) each."""
+    high = torch.tensor([f.bound for f in OBSERVATION], dtype=dtype)
+    return -high, high
+
+
+def action_to_torque(action: torch.Tensor, action_scale: float, out: torch.Tensor | None = None) -> torch.Tensor:
+    """Wheel torques [N·m] for actions: clipped to [-1, 1], times ``action_scale``."""
+    return torch.mul(action.clamp(-1.0, 1.0), action_scale, out=out)
