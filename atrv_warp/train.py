@@ -22,16 +22,22 @@ import math
 import os
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
+from tensordict import TensorDict
 
+from .agents import Normalize, load_policy, make_actor, make_qvalue, policy_payload, save_policy
 from .config import TrainConfig, load_train_config, preset_names
+from .env import ATRVjrEnv, EnvFactory
+from .evaluation import EVAL_SEED, evaluate, format_result
 from .runtime import add_verbose_argument, device_summary, error_line, set_verbose
 from .storage import FileFormatError, atomic_save, load_weights
 from .task_spec import REWARD_TERMS, EndReason
 
-__all__ = ["CHECKPOINT_KEYS", "load_checkpoint", "main", "train"]
+__all__ = ["CHECKPOINT_KEYS", "Checkpoint", "Evaluator", "Learner", "RunState", "load_checkpoint", "main",
+           "make_buffer", "make_collector", "make_loggers", "train"]
 
 DEFAULT_PRESET = "default"
 CHECKPOINT_KEYS = ("frames", "updates", "best_success", "elapsed_s", "next_eval", "stats_ready", "rng", "policy")
@@ -197,87 +203,134 @@ def _plot_curve(log_dir: Path, out: Path) -> bool:
     return True
 
 
-def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
-    """Run SAC training with ``cfg``; returns the run folder."""
-    from tensordict import TensorDict
-    from torchrl.collectors import Collector, MultiAsyncCollector
-    from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
-    from torchrl.objectives import SACLoss, SoftUpdate
-    from torchrl.record.loggers import CSVLogger
+@dataclass
+class RunState:
+    """Where a run stands; saved in every checkpoint and restored by ``--resume``."""
 
-    from .agents import Normalize, make_actor, make_qvalue, policy_payload, save_policy
-    from .env import ATRVjrEnv, EnvFactory
-    from .evaluation import EVAL_SEED, evaluate, format_result
+    frames: int = 0
+    updates: int = 0
+    best_success: float = -1.0
+    elapsed_s: float = 0.0
+    next_eval: int = 0
+    stats_ready: bool = False
+    """Observation statistics are frozen and the learner exists (after ``init_random_frames``)."""
 
-    if cfg.logger == "tensorboard":
-        import importlib.util
 
-        if importlib.util.find_spec("tensorboard") is None:
-            raise ModuleNotFoundError("logger=tensorboard needs the tensorboard package: pip install -e '.[tensorboard]'")
-    run_dir = Path(cfg.out_dir) / cfg.name
-    ckpt_path = run_dir / "checkpoint.pt"
-    if resume and not ckpt_path.is_file():
-        raise FileNotFoundError(f"--resume: no checkpoint at {ckpt_path}")
-    if not resume and ckpt_path.exists():
-        raise FileExistsError(f"{run_dir} already holds a run; use --resume to continue it or another name=")
-    ck = load_checkpoint(ckpt_path) if resume else None  # before anything is written: a bad file loses nothing
+class Learner:
+    """SAC's critics, loss, target-network update and optimisers.
 
-    torch.manual_seed(cfg.seed)
-    torch.set_num_threads(cfg.threads)
-    if cfg.collector == "async":
-        _pin_to_core(0)
+    Built once the observation statistics are final, so the critics' (copied) normalisation
+    matches the actor's.
+    """
 
-    normalize = Normalize()
-    actor = make_actor(cfg.width, cfg.depth, normalize=normalize)
-    buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(cfg.buffer_size), batch_size=cfg.batch_size)
-    parts: dict = {}
+    def __init__(self, cfg: TrainConfig, actor, normalize: Normalize):
+        from torchrl.objectives import SACLoss, SoftUpdate
 
-    def build_learner() -> None:
-        """Critics, loss, optimisers: built once the observation statistics are final, so the
-        critics' (copied) normalisation matches the actor's."""
         qvalue = make_qvalue(cfg.width, cfg.depth, normalize=normalize)
-        loss = SACLoss(actor, qvalue, num_qvalue_nets=2, alpha_init=cfg.init_alpha, target_entropy=-2.0)
-        loss.make_value_estimator(gamma=cfg.gamma)
-        parts["loss"] = loss
-        parts["target_update"] = SoftUpdate(loss, tau=cfg.tau)
-        parts["opts"] = {
-            "actor": torch.optim.Adam(loss.actor_network_params.flatten_keys().values(), lr=cfg.lr),
-            "critic": torch.optim.Adam(loss.qvalue_network_params.flatten_keys().values(), lr=cfg.lr),
-            "alpha": torch.optim.Adam([loss.log_alpha], lr=cfg.lr),
+        self.loss = SACLoss(actor, qvalue, num_qvalue_nets=2, alpha_init=cfg.init_alpha, target_entropy=-2.0)
+        self.loss.make_value_estimator(gamma=cfg.gamma)
+        self.target_update = SoftUpdate(self.loss, tau=cfg.tau)
+        self.opts = {
+            "actor": torch.optim.Adam(self.loss.actor_network_params.flatten_keys().values(), lr=cfg.lr),
+            "critic": torch.optim.Adam(self.loss.qvalue_network_params.flatten_keys().values(), lr=cfg.lr),
+            "alpha": torch.optim.Adam([self.loss.log_alpha], lr=cfg.lr),
         }
 
-    frames, updates, best, elapsed_before, next_eval = 0, 0, -1.0, 0.0, cfg.eval_every_frames
-    stats_ready = False
-    if ck is not None:
-        frames, updates, best = ck["frames"], ck["updates"], ck["best_success"]
-        elapsed_before, next_eval, stats_ready = ck["elapsed_s"], ck["next_eval"], ck["stats_ready"]
+    def update(self, batch):
+        """One gradient step on every network and the temperature; returns the loss TensorDict."""
+        out = self.loss(batch)
+        for opt in self.opts.values():
+            opt.zero_grad(set_to_none=True)
+        (out["loss_actor"] + out["loss_qvalue"] + out["loss_alpha"]).backward()
+        for opt in self.opts.values():
+            opt.step()
+        self.target_update.step()
+        return out
+
+    @property
+    def alpha(self) -> float:
+        return float(self.loss.log_alpha.detach().exp())
+
+    def state_dict(self) -> dict:
+        return {"loss": self.loss.state_dict(), "opts": {k: o.state_dict() for k, o in self.opts.items()}}
+
+    def load_state_dict(self, sd: dict) -> None:
+        self.loss.load_state_dict(sd["loss"])
+        for k, opt in self.opts.items():
+            opt.load_state_dict(sd["opts"][k])
+
+
+class Checkpoint:
+    """``checkpoint.pt`` (atomic) and the replay buffer beside it; :meth:`save` and :meth:`restore`
+    mirror each other."""
+
+    def __init__(self, run_dir: Path):
+        self.path, self.buffer_dir = run_dir / "checkpoint.pt", run_dir / "buffer"
+
+    def save(self, cfg: TrainConfig, state: RunState, actor, learner: Learner | None, buffer) -> None:
+        payload = {**dataclasses.asdict(state), "rng": torch.get_rng_state(), "config": dataclasses.asdict(cfg),
+                   "policy": policy_payload(actor, width=cfg.width, depth=cfg.depth, meta={"frames": state.frames})}
+        if learner is not None:
+            payload.update(learner.state_dict())
+        atomic_save(payload, self.path)
+        if learner is not None and len(buffer):
+            buffer.dumps(self.buffer_dir)
+
+    def restore(self, ck: dict, cfg: TrainConfig, actor, normalize: Normalize, buffer) -> tuple[RunState, Learner | None]:
+        """Load a checkpoint read by :func:`load_checkpoint` into fresh networks and buffer."""
+        state = RunState(**{f.name: ck[f.name] for f in dataclasses.fields(RunState)})
+        learner = None
         try:
             actor.load_state_dict(ck["policy"]["state_dict"])
-            if stats_ready:
-                build_learner()
-                parts["loss"].load_state_dict(ck["loss"])
-                for k, opt in parts["opts"].items():
-                    opt.load_state_dict(ck["opts"][k])
+            if state.stats_ready:
+                learner = Learner(cfg, actor, normalize)
+                learner.load_state_dict(ck)
         except (KeyError, TypeError, ValueError, RuntimeError) as err:
-            detail = (str(err).strip().splitlines() or [type(err).__name__])[0][:200]
-            raise FileFormatError(f"{ckpt_path}: does not match this run's networks (width={cfg.width}, "
-                                  f"depth={cfg.depth}): {detail}") from None
+            raise FileFormatError(f"{self.path}: does not match this run's networks (width={cfg.width}, "
+                                  f"depth={cfg.depth}): {_first_line(err)}") from None
         torch.set_rng_state(ck["rng"])
-        if (run_dir / "buffer").is_dir():
+        if self.buffer_dir.is_dir():
             try:
-                buffer.loads(run_dir / "buffer")
+                buffer.loads(self.buffer_dir)
             except Exception as err:  # noqa: BLE001 - any failure here means a damaged buffer folder
-                raise FileFormatError(f"{run_dir / 'buffer'}: damaged replay buffer ({type(err).__name__}: "
-                                      f"{(str(err).strip().splitlines() or [''])[0][:200]})") from None
-        print(f"resumed {run_dir} at {frames:,} frames, {updates:,} updates, best success {100 * best:.1f}%")
-    if frames >= cfg.total_frames:
-        print(f"nothing to do: {frames:,} frames already collected (total_frames={cfg.total_frames:,}); "
-              "raise total_frames= to train further")
-        return run_dir
-    run_dir.mkdir(parents=True, exist_ok=True)
-    _write_toml(cfg, run_dir / "config.toml")
+                raise FileFormatError(f"{self.buffer_dir}: damaged replay buffer ({type(err).__name__}: "
+                                      f"{_first_line(err)})") from None
+        return state, learner
 
-    loggers = [CSVLogger(exp_name="logs", log_dir=str(run_dir))]  # always: the learning curve is drawn from it
+
+def _first_line(err: Exception) -> str:
+    return (str(err).strip().splitlines() or [type(err).__name__])[0][:200]
+
+
+def make_buffer(cfg: TrainConfig):
+    from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+
+    return TensorDictReplayBuffer(storage=LazyTensorStorage(cfg.buffer_size), batch_size=cfg.batch_size)
+
+
+def make_collector(cfg: TrainConfig, actor, frames_done: int):
+    """``async``: one worker process on the second core; ``sync``: collect in this process."""
+    from torchrl.collectors import Collector, MultiAsyncCollector
+
+    fpb = cfg.frames_per_batch
+    remaining = max(cfg.total_frames - frames_done, 0)
+    random_left = max(cfg.init_random_frames - frames_done, 0)
+    env_seed = cfg.seed + 7919 * (frames_done // fpb + 1)  # a resumed run draws new episodes
+    whole_batches = max(math.ceil(remaining / fpb), 1) * fpb  # the loop stops at total_frames itself
+    if cfg.collector == "async":
+        return MultiAsyncCollector([EnvFactory(cfg.num_envs, seed=env_seed, core=1)], actor, frames_per_batch=fpb,
+                                   total_frames=whole_batches, init_random_frames=random_left)
+    # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
+    return Collector(ATRVjrEnv(cfg.num_envs, seed=env_seed), actor, frames_per_batch=fpb,
+                     total_frames=whole_batches, init_random_frames=random_left,
+                     auto_register_policy_transforms=False)
+
+
+def make_loggers(cfg: TrainConfig, run_dir: Path, resume: bool) -> list:
+    """CSV always (the learning curve is drawn from it), plus TensorBoard or Rerun."""
+    from torchrl.record.loggers import CSVLogger
+
+    loggers = [CSVLogger(exp_name="logs", log_dir=str(run_dir))]
     if cfg.logger == "tensorboard":
         from torchrl.record.loggers import TensorboardLogger
 
@@ -286,150 +339,198 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
         from .viz import RerunLogger
 
         loggers.append(RerunLogger("train", path=run_dir / ("train_resumed.rrd" if resume else "train.rrd")))
+    return loggers
 
-    def log_scalar(name: str, value: float) -> None:
-        for lg in loggers:
-            lg.log_scalar(name, value, step=frames)
 
-    remaining = max(cfg.total_frames - frames, 0)
-    random_left = max(cfg.init_random_frames - frames, 0)
-    fpb = cfg.frames_per_batch
-    env_seed = cfg.seed + 7919 * (frames // fpb + 1)  # a resumed run draws new episodes
-    whole_batches = max(math.ceil(remaining / fpb), 1) * fpb  # the loop stops at total_frames itself
-    if cfg.collector == "async":
-        collector = MultiAsyncCollector([EnvFactory(cfg.num_envs, seed=env_seed, core=1)], actor,
-                                        frames_per_batch=fpb, total_frames=whole_batches,
-                                        init_random_frames=random_left)
-    else:
-        # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
-        collector = Collector(ATRVjrEnv(cfg.num_envs, seed=env_seed), actor, frames_per_batch=fpb,
-                              total_frames=whole_batches, init_random_frames=random_left,
-                              auto_register_policy_transforms=False)
-    eval_env = ATRVjrEnv(cfg.eval_episodes, seed=EVAL_SEED)
-    eval_recorder = None
-    if cfg.logger == "rerun":  # periodic evaluations go into the same recording as the scalars
-        from .viz import RerunRecorder
+class Evaluator:
+    """The periodic deterministic evaluation on the fixed seeded set (and its Rerun recording)."""
 
-        eval_recorder = RerunRecorder(eval_env.sim, recording=loggers[-1].experiment, worlds=range(2))
+    def __init__(self, cfg: TrainConfig, actor, loggers: list):
+        self.cfg, self.actor = cfg, actor
+        self.env = ATRVjrEnv(cfg.eval_episodes, seed=EVAL_SEED)
+        self.recorder = None
+        if cfg.logger == "rerun":  # periodic evaluations go into the same recording as the scalars
+            from .viz import RerunRecorder
 
-    def run_eval() -> float:
-        actor.eval()
+            self.recorder = RerunRecorder(self.env.sim, recording=loggers[-1].experiment, worlds=range(2))
+
+    def __call__(self, frames: int):
+        self.actor.eval()
         on_step = None
-        if eval_recorder is not None:
-            eval_recorder.rec.set_time("frames", sequence=frames)
-            on_step = eval_recorder.env_hook()
-        r = evaluate(actor, num_episodes=cfg.eval_episodes, seed=EVAL_SEED, env=eval_env, on_step=on_step)
-        actor.train()
-        for k, v in r.as_dict().items():
-            if k != "episodes":
-                log_scalar(f"eval_{k}", v)
-        return r.success_rate
+        if self.recorder is not None:
+            self.recorder.rec.set_time("frames", sequence=frames)
+            on_step = self.recorder.env_hook()
+        result = evaluate(self.actor, num_episodes=self.cfg.eval_episodes, seed=EVAL_SEED, env=self.env,
+                          on_step=on_step)
+        self.actor.train()
+        return result
 
-    def checkpoint() -> None:
-        elapsed = elapsed_before + time.perf_counter() - t_start
-        learner = {}
-        if stats_ready:
-            learner = {"loss": parts["loss"].state_dict(),
-                       "opts": {k: o.state_dict() for k, o in parts["opts"].items()}}
-        atomic_save({**learner, "frames": frames, "updates": updates, "best_success": best, "elapsed_s": elapsed,
-                      "next_eval": next_eval, "stats_ready": stats_ready, "rng": torch.get_rng_state(),
-                     "policy": policy_payload(actor, width=cfg.width, depth=cfg.depth, meta={"frames": frames}),
-                     "config": dataclasses.asdict(cfg)}, ckpt_path)
-        if stats_ready and len(buffer):
-            buffer.dumps(run_dir / "buffer")
+    def close(self) -> None:
+        if self.recorder is not None:
+            self.recorder.close()
 
-    budget_s = cfg.max_minutes * 60.0 if cfg.max_minutes > 0 else math.inf
-    t_start = time.perf_counter()
-    stats = _Stats()
-    losses = _LossMeans()
-    update_credit = 0.0
-    last_eval_success, last_train = float("nan"), (float("nan"), float("nan"), {})
-    print(f"run folder: {run_dir}  ({cfg.collector} collector, {cfg.num_envs} worlds, batch {fpb} frames; "
-          f"budget {cfg.total_frames:,} frames or {cfg.max_minutes:g} min, whichever ends first)")
+
+def _prepare_run(cfg: TrainConfig, resume: bool) -> tuple[Path, dict | None]:
+    """Check the run folder, and read the checkpoint to resume from before anything is written."""
+    if cfg.logger == "tensorboard":
+        import importlib.util
+
+        if importlib.util.find_spec("tensorboard") is None:
+            raise ModuleNotFoundError("logger=tensorboard needs the tensorboard package: pip install -e '.[tensorboard]'")
+    run_dir = Path(cfg.out_dir) / cfg.name
+    ckpt_path = Checkpoint(run_dir).path
+    if resume and not ckpt_path.is_file():
+        raise FileNotFoundError(f"--resume: no checkpoint at {ckpt_path}")
+    if not resume and ckpt_path.exists():
+        raise FileExistsError(f"{run_dir} already holds a run; use --resume to continue it or another name=")
+    return run_dir, (load_checkpoint(ckpt_path) if resume else None)  # a bad file loses nothing
+
+
+def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
+    """Run SAC training with ``cfg``; returns the run folder."""
+    run_dir, ck = _prepare_run(cfg, resume)
+    torch.manual_seed(cfg.seed)
+    torch.set_num_threads(cfg.threads)
+    if cfg.collector == "async":
+        _pin_to_core(0)
+    normalize = Normalize()
+    actor = make_actor(cfg.width, cfg.depth, normalize=normalize)
+    buffer = make_buffer(cfg)
+    checkpoint = Checkpoint(run_dir)
+    state, learner = RunState(next_eval=cfg.eval_every_frames), None
+    if ck is not None:
+        state, learner = checkpoint.restore(ck, cfg, actor, normalize, buffer)
+        print(f"resumed {run_dir} at {state.frames:,} frames, {state.updates:,} updates, "
+              f"best success {100 * state.best_success:.1f}%")
+    if state.frames >= cfg.total_frames:
+        print(f"nothing to do: {state.frames:,} frames already collected (total_frames={cfg.total_frames:,}); "
+              "raise total_frames= to train further")
+        return run_dir
+    run_dir.mkdir(parents=True, exist_ok=True)
+    _write_toml(cfg, run_dir / "config.toml")
+    loggers = make_loggers(cfg, run_dir, resume)
+    collector = make_collector(cfg, actor, state.frames)
+    evaluator = Evaluator(cfg, actor, loggers)
+    print(f"run folder: {run_dir}  ({cfg.collector} collector, {cfg.num_envs} worlds, batch {cfg.frames_per_batch} "
+          f"frames; budget {cfg.total_frames:,} frames or {cfg.max_minutes:g} min, whichever ends first)")
     print(device_summary("cpu"))
-    progress = _Progress(cfg, frames, elapsed_before)
-    stopped_by = "total_frames"
+    loop = _TrainLoop(cfg, state, actor, normalize, buffer, learner, loggers, evaluator, checkpoint, run_dir)
     try:
+        stopped_by = loop.run(collector)
+    finally:
+        loop.progress.close()
+        collector.shutdown()
+    state.elapsed_s = loop.elapsed()
+    print(f"training stopped by {stopped_by}: {state.frames:,} frames, {state.updates:,} updates, "
+          f"{state.elapsed_s / 60:.1f} min")
+    _finish(cfg, state, run_dir, evaluator, loggers)
+    return run_dir
+
+
+class _TrainLoop:
+    """Collect, learn, evaluate and checkpoint until a budget ends the run."""
+
+    def __init__(self, cfg, state, actor, normalize, buffer, learner, loggers, evaluator, checkpoint, run_dir):
+        self.cfg, self.state, self.actor, self.normalize, self.buffer = cfg, state, actor, normalize, buffer
+        self.learner, self.loggers, self.evaluator, self.checkpoint = learner, loggers, evaluator, checkpoint
+        self.run_dir = run_dir
+        self.stats, self.losses = _Stats(), _LossMeans()
+        self.progress = _Progress(cfg, state.frames, state.elapsed_s)
+        self.last_eval, self.last_train = float("nan"), (float("nan"), float("nan"), {})
+        self.budget_s = cfg.max_minutes * 60.0 if cfg.max_minutes > 0 else math.inf
+        self.clock0 = (state.elapsed_s, time.perf_counter())
+
+    def elapsed(self) -> float:
+        """Training time of the whole run [s], earlier sessions of a resumed run included."""
+        return self.clock0[0] + time.perf_counter() - self.clock0[1]
+
+    def log(self, name: str, value: float) -> None:
+        for lg in self.loggers:
+            lg.log_scalar(name, value, step=self.state.frames)
+
+    def run(self, collector) -> str:
+        cfg, st = self.cfg, self.state
+        credit = 0.0
         for data in collector:
             n = data.numel()
-            frames += n
-            stats.update(data)
-            buffer.extend(data.reshape(-1).cpu())
-            if frames >= cfg.init_random_frames:
-                if not stats_ready:
-                    obs = buffer[:]["observation"]
-                    normalize.set_stats(obs.mean(0), obs.std(0))
-                    stats_ready = True
-                    build_learner()
-                loss, opts = parts["loss"], parts["opts"].values()
-                update_credit += n * cfg.utd_ratio
-                while update_credit >= 1.0:
-                    update_credit -= 1.0
-                    out = loss(buffer.sample())
-                    for opt in opts:
-                        opt.zero_grad(set_to_none=True)
-                    (out["loss_actor"] + out["loss_qvalue"] + out["loss_alpha"]).backward()
-                    for opt in opts:
-                        opt.step()
-                    parts["target_update"].step()
-                    updates += 1
-                    losses.add(out)
+            st.frames += n
+            self.stats.update(data)
+            self.buffer.extend(data.reshape(-1).cpu())
+            if st.frames >= cfg.init_random_frames:
+                credit = self.learn(credit + n * cfg.utd_ratio)
                 if cfg.collector == "async":  # the worker holds a copy; the sync collector shares `actor`
-                    collector.update_policy_weights_(TensorDict.from_module(actor))
-            elapsed = elapsed_before + time.perf_counter() - t_start
-            if frames >= next_eval or frames >= cfg.total_frames or elapsed >= budget_s:
-                last_train = stats.pop()
-                log_scalar("train_success_rate", last_train[0])
-                log_scalar("train_reward", last_train[1])
-                for name, value in last_train[2].items():
-                    log_scalar(f"train_reward_{name}", value)
-                log_scalar("updates", updates)
-                for name, value in losses.pop().items():
-                    log_scalar(name, value)
-                log_scalar("wall_time_s", elapsed)
-                if stats_ready:
-                    log_scalar("alpha", float(parts["loss"].log_alpha.detach().exp()))
-                if stats_ready:
-                    last_eval_success = run_eval()
-                    if last_eval_success > best:
-                        best = last_eval_success
-                        save_policy(actor, run_dir / "best_policy.pt", width=cfg.width, depth=cfg.depth,
-                                    meta={"frames": frames, "eval_success": best})
-                next_eval = (frames // cfg.eval_every_frames + 1) * cfg.eval_every_frames
-                checkpoint()
-                progress.log(f"{frames:>11,} frames {elapsed / 60:5.1f} min  eval success {_pct(last_eval_success)}"
-                             f"  training episodes {_pct(last_train[0])}  reward {last_train[1]:+.3f}  "
-                             f"updates {updates:,}")
-            progress.update(frames, elapsed, f"eval {_pct(last_eval_success)} | train {_pct(last_train[0])} | "
-                                             f"updates {updates:,}")
-            if elapsed >= budget_s:
-                stopped_by = f"max_minutes={cfg.max_minutes}"
+                    collector.update_policy_weights_(TensorDict.from_module(self.actor))
+            st.elapsed_s = self.elapsed()
+            if st.frames >= st.next_eval or st.frames >= cfg.total_frames or st.elapsed_s >= self.budget_s:
+                self.evaluate_and_save()
+            self.progress.update(st.frames, st.elapsed_s, f"eval {_pct(self.last_eval)} | train "
+                                                           f"{_pct(self.last_train[0])} | updates {st.updates:,}")
+            if st.elapsed_s >= self.budget_s:
+                return f"max_minutes={cfg.max_minutes}"
+            if st.frames >= cfg.total_frames:
                 break
-            if frames >= cfg.total_frames:
-                break
-    finally:
-        progress.close()
-        collector.shutdown()
-    elapsed = elapsed_before + time.perf_counter() - t_start
-    print(f"training stopped by {stopped_by}: {frames:,} frames, {updates:,} updates, {elapsed / 60:.1f} min")
+        return "total_frames"
 
-    result = {"frames": frames, "updates": updates, "train_minutes": elapsed / 60, "best_periodic_success": best}
+    def learn(self, credit: float) -> float:
+        """Freeze the observation statistics on first use, then spend whole update credits."""
+        if not self.state.stats_ready:
+            obs = self.buffer[:]["observation"]
+            self.normalize.set_stats(obs.mean(0), obs.std(0))
+            self.state.stats_ready = True
+            self.learner = Learner(self.cfg, self.actor, self.normalize)
+        while credit >= 1.0:
+            credit -= 1.0
+            self.losses.add(self.learner.update(self.buffer.sample()))
+            self.state.updates += 1
+        return credit
+
+    def evaluate_and_save(self) -> None:
+        cfg, st = self.cfg, self.state
+        self.last_train = self.stats.pop()
+        self.log("train_success_rate", self.last_train[0])
+        self.log("train_reward", self.last_train[1])
+        for name, value in self.last_train[2].items():
+            self.log(f"train_reward_{name}", value)
+        self.log("updates", st.updates)
+        for name, value in self.losses.pop().items():
+            self.log(name, value)
+        self.log("wall_time_s", st.elapsed_s)
+        if self.learner is not None:
+            self.log("alpha", self.learner.alpha)
+            result = self.evaluator(st.frames)
+            for k, v in result.as_dict().items():
+                if k != "episodes":
+                    self.log(f"eval_{k}", v)
+            self.last_eval = result.success_rate
+            if self.last_eval > st.best_success:
+                st.best_success = self.last_eval
+                save_policy(self.actor, self.run_dir / "best_policy.pt", width=cfg.width, depth=cfg.depth,
+                            meta={"frames": st.frames, "eval_success": st.best_success})
+        st.next_eval = (st.frames // cfg.eval_every_frames + 1) * cfg.eval_every_frames
+        st.elapsed_s = self.elapsed()  # the evaluation's time counts too
+        self.checkpoint.save(cfg, st, self.actor, self.learner, self.buffer)
+        self.progress.log(f"{st.frames:>11,} frames {st.elapsed_s / 60:5.1f} min  eval success "
+                          f"{_pct(self.last_eval)}  training episodes {_pct(self.last_train[0])}  reward "
+                          f"{self.last_train[1]:+.3f}  updates {st.updates:,}")
+
+
+def _finish(cfg: TrainConfig, state: RunState, run_dir: Path, evaluator: Evaluator, loggers: list) -> None:
+    """Final evaluation of the best policy on the full set, results file, learning curve, summary."""
+    result = {"frames": state.frames, "updates": state.updates, "train_minutes": state.elapsed_s / 60,
+              "best_periodic_success": state.best_success}
     best_path = run_dir / "best_policy.pt"
     if best_path.is_file():
-        from .agents import load_policy
-
         final = evaluate(load_policy(best_path), num_episodes=cfg.final_eval_episodes, seed=EVAL_SEED)
         print(format_result("best policy, final evaluation", final))
         result["final_eval"] = final.as_dict()
     (run_dir / "final_eval.json").write_text(json.dumps(result, indent=2) + "\n")
-    if eval_recorder is not None:
-        eval_recorder.close()
+    if evaluator.recorder is not None:
+        evaluator.close()
         print(f"rerun recording: {loggers[-1].path}")
     if _plot_curve(run_dir / "logs", run_dir / "learning_curve.png"):
         print(f"learning curve: {run_dir / 'learning_curve.png'}")
-    print(f"checkpoint: {ckpt_path}\nbest policy: {best_path if best_path.is_file() else '(none yet)'}\n"
+    print(f"checkpoint: {Checkpoint(run_dir).path}\nbest policy: {best_path if best_path.is_file() else '(none yet)'}\n"
           f"logs: {run_dir / 'logs'}\nevaluate: python -m atrv_warp.evaluate {best_path}")
-    return run_dir
 
 
 def _parse_overrides(items: list[str]) -> dict:

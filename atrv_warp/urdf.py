@@ -132,19 +132,11 @@ def _check_inertial(path: str, name: str, inertial: Inertial) -> None:
         )
 
 
-def load_rover(rover: RoverConfig | None = None) -> RoverDescription:
-    """Load, check and describe the rover URDF named by ``rover.urdf``.
-
-    Raises:
-        URDFError: the file is missing or malformed, a required link is absent, a wheel is
-            not on a revolute/continuous joint to the chassis, or a sensor frame is not
-            fixed to it.
-    """
+def _parse(path: str):
+    """The URDF's robot, or a URDFError naming the file and what is wrong with it."""
     import yourdfpy
     from lxml import etree
 
-    rover = rover or RoverConfig()
-    path = os.fspath(rover.urdf or default_urdf_path())
     if not os.path.isfile(path):
         raise URDFError(f"URDF file not found: {path}")
     try:  # yourdfpy silently recovers from broken XML; refuse it instead
@@ -161,17 +153,17 @@ def load_rover(rover: RoverConfig | None = None) -> RoverDescription:
         )
     except Exception as err:  # noqa: BLE001 - yourdfpy raises assorted types for schema problems
         raise URDFError(f"{path}: malformed URDF: {err}") from None
-    robot = urdf.robot
-    links = {link.name: link for link in robot.links}
-    joints_by_child = {j.child: j for j in robot.joints}
-    for j in robot.joints:
+    return urdf.robot
+
+
+def _check_links(path: str, rover: RoverConfig, links: dict, joints_by_child: dict, joints) -> None:
+    """Every joint's ends exist, every role's link exists, the chassis is the root."""
+    for j in joints:
         for end in (j.parent, j.child):
             if end not in links:
                 raise URDFError(f"{path}: joint {j.name!r} refers to missing link {end!r}")
-
-    wheel_names = tuple(rover.left_wheels) + tuple(rover.right_wheels)
     required = [(rover.chassis_link, "chassis")]
-    required += [(n, "wheel") for n in wheel_names]
+    required += [(n, "wheel") for n in tuple(rover.left_wheels) + tuple(rover.right_wheels)]
     required += [(n, "sensor frame") for n in rover.sensor_frames]
     for name, role in required:
         if name not in links:
@@ -181,82 +173,99 @@ def load_rover(rover: RoverConfig | None = None) -> RoverDescription:
     if rover.chassis_link in joints_by_child:
         raise URDFError(f"{path}: chassis link {rover.chassis_link!r} must be the root, but it is the child of "
                         f"joint {joints_by_child[rover.chassis_link].name!r}")
-
-    overrides = {ov.link: ov for ov in rover.inertial_overrides}
-    unknown = sorted(set(overrides) - set(links))
+    unknown = sorted({ov.link for ov in rover.inertial_overrides} - set(links))
     if unknown:
         raise URDFError(f"{path}: inertial overrides name unknown link(s) {unknown}")
+
+
+def _fixed_pose(name: str, chassis: str, joints_by_child: dict) -> np.ndarray | None:
+    """Pose in the chassis frame of a link fixed to it (directly or through fixed joints), else None."""
+    pose = np.eye(4)
+    while name != chassis:
+        j = joints_by_child.get(name)
+        if j is None or j.type != "fixed":
+            return None
+        origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float)
+        pose = origin @ pose
+        name = j.parent
+    return pose
+
+
+def _frames(path: str, rover: RoverConfig, links: dict, joints_by_child: dict) -> list[Frame]:
+    """Links fixed to the chassis (not the chassis or a wheel) become named frames."""
+    wheel_names = tuple(rover.left_wheels) + tuple(rover.right_wheels)
+    frames: list[Frame] = []
+    for name in links:
+        if name == rover.chassis_link or name in wheel_names:
+            continue
+        pose = _fixed_pose(name, rover.chassis_link, joints_by_child)
+        if pose is not None:
+            frames.append(Frame(name, pose))
+        elif name in rover.sensor_frames:
+            raise URDFError(f"{path}: sensor frame {name!r} must be fixed to {rover.chassis_link!r}")
+    return frames
+
+
+def _wheel(path: str, rover: RoverConfig, name: str, j, inertial: Inertial) -> Wheel:
+    """A wheel on a revolute joint from the chassis, about a lateral axis."""
+    if j is None or j.type not in ("revolute", "continuous") or j.parent != rover.chassis_link:
+        kind = "no joint" if j is None else f"a {j.type} joint to {j.parent!r}"
+        raise URDFError(f"{path}: wheel {name!r} must hang on a revolute/continuous joint from "
+                        f"{rover.chassis_link!r}, found {kind}")
+    origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float)
+    axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
+    axis = axis / np.linalg.norm(axis)
+    axis_chassis = origin[:3, :3] @ axis
+    if abs(axis_chassis[1]) < 0.9:
+        raise URDFError(f"{path}: wheel joint {j.name!r} axis {axis_chassis.round(3).tolist()} (chassis frame) "
+                        "is not lateral; a skid-steer wheel turns about the chassis y axis")
+    # Rolling forward (+x) is a positive rotation about chassis +y.
+    drive_sign = 1.0 if axis_chassis[1] > 0.0 else -1.0
+    lateral = 1.0 if origin[1, 3] >= 0.0 else -1.0
+    outward = axis * (1.0 if axis_chassis[1] * lateral > 0.0 else -1.0)
+    _check_inertial(path, name, inertial)
+    return Wheel(name, j.name, 0 if name in rover.left_wheels else 1, origin, axis, drive_sign, outward, inertial)
+
+
+def _chassis_box(link) -> tuple[np.ndarray, np.ndarray] | None:
+    """(pose, half extents) of the chassis link's first box, collision geometry before visual."""
+    for geom_list in (link.collisions, link.visuals):
+        for g in geom_list or ():
+            if g.geometry is not None and g.geometry.box is not None:
+                pose = np.eye(4) if g.origin is None else np.asarray(g.origin, dtype=float)
+                return pose, 0.5 * np.asarray(g.geometry.box.size, dtype=float)
+    return None
+
+
+def load_rover(rover: RoverConfig | None = None) -> RoverDescription:
+    """Load, check and describe the rover URDF named by ``rover.urdf``.
+
+    Raises:
+        URDFError: the file is missing or malformed, a required link is absent, a wheel is
+            not on a revolute/continuous joint to the chassis, or a sensor frame is not
+            fixed to it.
+    """
+    rover = rover or RoverConfig()
+    path = os.fspath(rover.urdf or default_urdf_path())
+    robot = _parse(path)
+    links = {link.name: link for link in robot.links}
+    joints_by_child = {j.child: j for j in robot.joints}
+    _check_links(path, rover, links, joints_by_child, robot.joints)
+    overrides = {ov.link: ov for ov in rover.inertial_overrides}
 
     def inertial(name: str) -> Inertial:
         base = _inertial_of(links[name])
         return _apply_override(base, overrides[name]) if name in overrides else base
 
-    # Links fixed to the chassis (directly or through other fixed joints) become frames.
-    def fixed_pose(name: str) -> np.ndarray | None:
-        pose = np.eye(4)
-        while name != rover.chassis_link:
-            j = joints_by_child.get(name)
-            if j is None or j.type != "fixed":
-                return None
-            origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float)
-            pose = origin @ pose
-            name = j.parent
-        return pose
-
-    frames: list[Frame] = []
-    for name in links:
-        if name == rover.chassis_link or name in wheel_names:
-            continue
-        pose = fixed_pose(name)
-        if pose is not None:
-            frames.append(Frame(name, pose))
-        elif name in rover.sensor_frames:
-            raise URDFError(f"{path}: sensor frame {name!r} must be fixed to {rover.chassis_link!r}")
+    frames = _frames(path, rover, links, joints_by_child)
     parts = [(inertial(rover.chassis_link), np.eye(4))] + [(inertial(f.name), f.transform) for f in frames]
     chassis_inertial = _lump(parts)
     _check_inertial(path, rover.chassis_link, chassis_inertial)
-
-    wheels: list[Wheel] = []
-    for name in wheel_names:
-        j = joints_by_child.get(name)
-        if j is None or j.type not in ("revolute", "continuous") or j.parent != rover.chassis_link:
-            kind = "no joint" if j is None else f"a {j.type} joint to {j.parent!r}"
-            raise URDFError(f"{path}: wheel {name!r} must hang on a revolute/continuous joint from "
-                            f"{rover.chassis_link!r}, found {kind}")
-        origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float)
-        axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
-        axis = axis / np.linalg.norm(axis)
-        axis_chassis = origin[:3, :3] @ axis
-        if abs(axis_chassis[1]) < 0.9:
-            raise URDFError(f"{path}: wheel joint {j.name!r} axis {axis_chassis.round(3).tolist()} (chassis frame) "
-                            "is not lateral; a skid-steer wheel turns about the chassis y axis")
-        # Rolling forward (+x) is a positive rotation about chassis +y.
-        drive_sign = 1.0 if axis_chassis[1] > 0.0 else -1.0
-        lateral = 1.0 if origin[1, 3] >= 0.0 else -1.0
-        outward = axis * (1.0 if axis_chassis[1] * lateral > 0.0 else -1.0)
-        w_inertial = inertial(name)
-        _check_inertial(path, name, w_inertial)
-        wheels.append(Wheel(name, j.name, 0 if name in rover.left_wheels else 1, origin, axis,
-                            drive_sign, outward, w_inertial))
-
-    chassis_box = None
-    link = links[rover.chassis_link]
-    for geom_list in (link.collisions, link.visuals):
-        for g in geom_list or ():
-            if g.geometry is not None and g.geometry.box is not None:
-                pose = np.eye(4) if g.origin is None else np.asarray(g.origin, dtype=float)
-                chassis_box = (pose, 0.5 * np.asarray(g.geometry.box.size, dtype=float))
-                break
-        if chassis_box is not None:
-            break
-
+    wheels = [_wheel(path, rover, name, joints_by_child.get(name), inertial(name))
+              for name in tuple(rover.left_wheels) + tuple(rover.right_wheels)]
     tree = []
-    root_first = [rover.chassis_link] + [n for n in links if n != rover.chassis_link]
-    for name in root_first:
+    for name in [rover.chassis_link] + [n for n in links if n != rover.chassis_link]:
         j = joints_by_child.get(name)
-        if j is None:
-            tree.append((name, "world", "root_joint", "free"))
-        else:
-            tree.append((name, j.parent, j.name, j.type))
-    return RoverDescription(path, robot.name, rover.chassis_link, chassis_inertial, chassis_box,
-                            tuple(wheels), tuple(frames), tuple(tree))
+        tree.append((name, "world", "root_joint", "free") if j is None else (name, j.parent, j.name, j.type))
+    return RoverDescription(path, robot.name, rover.chassis_link, chassis_inertial,
+                            _chassis_box(links[rover.chassis_link]), tuple(wheels), tuple(frames), tuple(tree))

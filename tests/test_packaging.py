@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 # Files that may import what an optional extra brings (they check for it and say how to install it).
 EXTRA_USERS = {
-    "ros": ("atrv_warp/ros.py", "tests/test_ros.py"),
+    "ros": ("atrv_warp/ros.py", "atrv_warp/ros_node.py", "tests/test_ros.py"),
     "test": ("tests/",),
 }
 SCANNED = ("atrv_warp", "tests", "benchmarks", "examples")

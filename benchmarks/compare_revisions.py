@@ -1,0 +1,120 @@
+"""Speed of this tree against an earlier revision, measured in one run, interleaved.
+
+    python benchmarks/compare_revisions.py --old 98b8398            # sim and env throughput
+    python benchmarks/compare_revisions.py --old HEAD~3 --sizes 64 1024 --rounds 5
+
+Absolute figures on a shared machine drift by tens of percent between runs, so this script
+checks out ``--old`` into a temporary git worktree and measures both trees alternately
+(old, new, old, new, …), each measurement in a fresh process pinned to one core with one torch
+thread, after a warm-up (kernels compiled and cached beforehand). Per size it reports the median
+env-steps/s of ``RoverSim.step`` (random torques) and of ``ATRVjrEnv.rollout`` (random actions)
+for both trees and their ratio. Prints the table and writes
+``benchmarks/results/compare_revisions.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+
+_PROBE = r"""
+import json, os, sys, time
+if hasattr(os, "sched_setaffinity"):
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+import torch
+torch.set_num_threads(1)
+from atrv_warp import ATRVjrEnv, RoverSim
+kind, n, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+gen = torch.Generator().manual_seed(0)
+if kind == "sim":
+    sim = RoverSim(n)
+    sim.reset(poses=(torch.rand(n, 3, generator=gen) * 2 - 1) * torch.tensor([12.0, 12.0, 3.14]))
+    cmds = [(torch.rand(n, 2, generator=gen) * 2 - 1) * 20 for _ in range(8)]
+    def run():
+        for c in cmds:
+            sim.step(c)
+    frames = 8 * n
+else:
+    env = ATRVjrEnv(n, seed=0)
+    env.reset()
+    def run():
+        env.rollout(20, auto_reset=False, tensordict=env.reset(), break_when_any_done=False)
+    frames = 20 * n
+run()
+run()
+calls, t0 = 0, time.perf_counter()
+while True:
+    run()
+    calls += 1
+    elapsed = time.perf_counter() - t0
+    if elapsed >= seconds:
+        break
+print(json.dumps({"rate": calls * frames / elapsed, "module": __import__("atrv_warp").__file__}))
+"""
+
+
+def _measure(tree: Path, kind: str, n: int, seconds: float) -> float:
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    proc = subprocess.run([sys.executable, "-c", _PROBE, kind, str(n), str(seconds)], capture_output=True,
+                          text=True, env=env, check=False, cwd=tree)
+    if proc.returncode != 0:
+        raise SystemExit(f"measurement in {tree} failed:\n{proc.stderr[-3000:]}")
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    if not out["module"].startswith(str(tree)):
+        raise SystemExit(f"measured {out['module']}, not the tree {tree}")
+    return out["rate"]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--old", required=True, help="git revision to compare against")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[64, 1024])
+    parser.add_argument("--kinds", nargs="+", default=["sim", "env"], choices=["sim", "env"])
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--seconds", type=float, default=3.0, help="timed wall time per measurement [s]")
+    parser.add_argument("--out", default=str(RESULTS / "compare_revisions.json"))
+    args = parser.parse_args()
+
+    old_rev = subprocess.run(["git", "rev-parse", "--short", args.old], cwd=ROOT, capture_output=True, text=True,
+                             check=True).stdout.strip()
+    new_rev = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=ROOT, capture_output=True, text=True,
+                             check=True).stdout.strip()
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="atrv-old-") as tmp:
+        old_tree = Path(tmp) / "tree"
+        subprocess.run(["git", "worktree", "add", "--detach", "-q", str(old_tree), old_rev], cwd=ROOT, check=True)
+        try:
+            for kind in args.kinds:
+                for n in args.sizes:
+                    for tree in (old_tree, ROOT):  # warm-up: compile both trees' kernels before timing
+                        _measure(tree, kind, n, 0.2)
+                    old, new = [], []
+                    for _ in range(args.rounds):
+                        old.append(_measure(old_tree, kind, n, args.seconds))
+                        new.append(_measure(ROOT, kind, n, args.seconds))
+                    row = {"kind": kind, "num_worlds": n, "old_median": statistics.median(old),
+                           "new_median": statistics.median(new), "old": old, "new": new}
+                    row["ratio"] = row["new_median"] / row["old_median"]
+                    rows.append(row)
+                    print(f"{kind:>3} N={n:>5}: old {row['old_median']:>9,.0f}  new {row['new_median']:>9,.0f} "
+                          f"env-steps/s  new/old {row['ratio']:.3f}", flush=True)
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(old_tree)], cwd=ROOT, check=False)
+    result = {"old": old_rev, "new": new_rev, "rounds": args.rounds, "seconds": args.seconds, "rows": rows}
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
