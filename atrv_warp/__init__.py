@@ -1,5 +1,10 @@
 """atrv_warp: many ATRV-Jr skid-steer rovers at once, on Newton physics and Warp kernels.
 
+Layout: :mod:`atrv_warp.sim` (the simulator), :mod:`atrv_warp.task` (the drive-to-target task
+and its TorchRL environment), :mod:`atrv_warp.rl` (SAC training), :mod:`atrv_warp.integrations`
+(Rerun, ROS 2, Gymnasium); the command-line tools are thin modules at the top
+(``python -m atrv_warp.train``, ``evaluate``, ``baseline``, ``demo``, ``model``, ``ros``).
+
 Public names are imported lazily so that ``python -m atrv_warp.<tool>`` loads only what
 the tool needs.
 """
@@ -11,22 +16,27 @@ from . import runtime as _runtime
 _runtime.configure()  # quiet Warp/TorchRL console before Newton's import initialises Warp (ATRV_WARP_VERBOSE=1: all)
 
 _EXPORTS = {
-    "ArenaConfig": "config",
-    "ContactConfig": "config",
-    "InertialOverride": "config",
-    "RoverConfig": "config",
-    "SimConfig": "config",
-    "VARIANTS": "config",
-    "get_variant": "config",
-    "TaskConfig": "config",
-    "ATRVjrEnv": "env",
-    "EnvFactory": "env",
-    "END_REASONS": "env",
-    "DRIVE_MODE_TORQUES": "sim",
-    "DriveMode": "sim",
-    "RoverSim": "sim",
-    "URDFError": "urdf",
-    "load_rover": "urdf",
+    "ArenaConfig": "sim.config",
+    "ContactConfig": "sim.config",
+    "InertialOverride": "sim.config",
+    "RoverConfig": "sim.config",
+    "SimConfig": "sim.config",
+    "VARIANTS": "sim.config",
+    "get_variant": "sim.config",
+    "TaskConfig": "task.config",
+    "TrainConfig": "rl.config",
+    "ATRVjrEnv": "task.env",
+    "EnvFactory": "task.env",
+    "END_REASONS": "task.spec",
+    "EndReason": "task.spec",
+    "DRIVE_MODE_TORQUES": "sim.simulator",
+    "DriveMode": "sim.simulator",
+    "RoverSim": "sim.simulator",
+    "SimBuffers": "sim.simulator",
+    "DiffRollout": "sim.diff",
+    "URDFError": "sim.urdf",
+    "load_rover": "sim.urdf",
+    "load_policy": "rl.agents",
 }
 
 __all__ = [
@@ -36,22 +46,27 @@ __all__ = [
     "ATRVjrEnv",
     "ArenaConfig",
     "ContactConfig",
+    "DiffRollout",
     "DriveMode",
+    "EndReason",
     "EnvFactory",
     "InertialOverride",
     "RoverConfig",
     "RoverSim",
+    "SimBuffers",
     "SimConfig",
     "TaskConfig",
+    "TrainConfig",
     "URDFError",
     "get_variant",
+    "load_policy",
     "load_rover",
 ]
 
 
 def __getattr__(name: str):
     if name in _EXPORTS:
-        return getattr(import_module(f".{_EXPORTS[name]}", __name__), name)
+        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

@@ -1,9 +1,6 @@
-"""Scripted baseline driver: turn toward the target, drive when roughly aligned.
+"""The scripted baseline on the standard evaluation set: ``python -m atrv_warp.baseline``.
 
-It reads only the observation (sin and cos of the heading error), so it is a TorchRL policy
-like any learned one: ``scripted_policy()`` returns a ``TensorDictModule`` writing ``action``.
-Its success rate on the fixed evaluation set tells what is reachable in 200 steps on our
-physics (see ``python -m atrv_warp.baseline``).
+The driver itself is :class:`atrv_warp.task.baseline.ScriptedDriver`.
 """
 
 from __future__ import annotations
@@ -11,43 +8,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-import torch
-from tensordict.nn import TensorDictModule
-from torch import nn
-
-from .task_spec import OBS_INDEX
-
-__all__ = ["ScriptedDriver", "scripted_policy"]
-
-
-class ScriptedDriver(nn.Module):
-    """Proportional heading control with a forward drive that fades out when misaligned.
-
-    Args:
-        turn_gain: Differential action per radian of heading error.
-        drive: Forward action when aligned (1 = 20 N·m per wheel).
-        align: Heading error [rad] beyond which the rover turns in place.
-    """
-
-    def __init__(self, turn_gain: float = 1.5, drive: float = 0.6, align: float = 0.6):
-        super().__init__()
-        self.turn_gain, self.drive, self.align = turn_gain, drive, align
-
-    def forward(self, observation: torch.Tensor) -> torch.Tensor:
-        err = torch.atan2(observation[..., OBS_INDEX["sin_heading_error"]],
-                          observation[..., OBS_INDEX["cos_heading_error"]])
-        turn = (self.turn_gain * err).clamp(-1.0, 1.0)
-        fwd = self.drive * (1.0 - err.abs() / self.align).clamp(min=0.0)
-        return torch.stack([fwd - turn, fwd + turn], dim=-1).clamp(-1.0, 1.0)
-
-
-def scripted_policy(**kwargs) -> TensorDictModule:
-    """The baseline as a TorchRL policy module (``observation`` -> ``action``)."""
-    return TensorDictModule(ScriptedDriver(**kwargs), in_keys=["observation"], out_keys=["action"])
+__all__ = ["main"]
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .evaluation import evaluate, format_result
+    from atrv_warp.task.baseline import scripted_policy
+    from atrv_warp.task.evaluation import evaluate, format_result
 
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.baseline", description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=1000)

@@ -17,7 +17,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variant", default="realistic", help="rover variant: realistic | reference")
     parser.add_argument("--device", default="cpu", help="Warp device, e.g. cpu or cuda:0")
     args = parser.parse_args(argv)
-    from .sim import DriveMode, RoverSim
+    from atrv_warp.sim.simulator import DriveMode, RoverSim
 
     modes = list(DriveMode)
     print(f"building {len(modes)} worlds (first run compiles Warp kernels, ~1 min on CPU) ...", flush=True)

@@ -19,7 +19,7 @@ import argparse
 import json
 import sys
 
-from .runtime import add_verbose_argument, device_summary, error_line, set_verbose
+from atrv_warp.runtime import add_verbose_argument, device_summary, error_line, set_verbose
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -42,15 +42,15 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--episodes must be >= 1")
     if args.verbose:
         set_verbose()
-    from .evaluation import EVAL_SEED, evaluate, format_result
+    from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result
 
     if args.baseline:
-        from .baseline import scripted_policy
+        from atrv_warp.task.baseline import scripted_policy
 
         policy, name = scripted_policy(), "scripted baseline"
     else:
-        from .agents import load_policy, pretrained_policy_path
-        from .storage import FileFormatError
+        from atrv_warp.rl.agents import load_policy, pretrained_policy_path
+        from atrv_warp.storage import FileFormatError
 
         path = args.checkpoint or str(pretrained_policy_path())
         try:
@@ -65,8 +65,8 @@ def main(argv: list[str] | None = None) -> int:
     seed = EVAL_SEED if args.seed is None else args.seed
     recorder, env, on_step = None, None, None
     if args.rerun or args.serve or args.real_time:
-        from .env import ATRVjrEnv
-        from .viz import RerunRecorder
+        from atrv_warp.integrations.rerun import RerunRecorder
+        from atrv_warp.task.env import ATRVjrEnv
 
         env = ATRVjrEnv(args.episodes, device=args.device)
         recorder = RerunRecorder(env.sim, path=args.rerun, serve=args.serve, worlds=args.worlds,

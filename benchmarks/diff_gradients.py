@@ -70,7 +70,7 @@ def main() -> int:
     parser.add_argument("--directions", type=int, default=3, help="random directions per kind")
     parser.add_argument("--repeats", type=int, default=3, help="timed forward/backward passes per size (median)")
     parser.add_argument("--without-wrench-fix", action="store_true",
-                        help="diagnostic: leave out atrv_warp.diff's fix for Newton's in-place wrench "
+                        help="diagnostic: leave out atrv_warp.sim.diff's fix for Newton's in-place wrench "
                              "conversion, to measure what it changes (default output: diff_gradients_without_fix.json)")
     parser.add_argument("--out", default=None)
     parser.add_argument("--report", metavar="JSON", help="print the tables of an existing results file and exit")
@@ -82,7 +82,7 @@ def main() -> int:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     import torch
     torch.set_num_threads(1)
-    from atrv_warp.diff import DiffRollout
+    from atrv_warp.sim.diff import DiffRollout
 
     fix = not args.without_wrench_fix
     default_name = "diff_gradients_without_fix.json" if args.without_wrench_fix else "diff_gradients.json"

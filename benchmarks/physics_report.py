@@ -19,7 +19,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 
 def main() -> int:
     from atrv_warp import RoverSim
-    from atrv_warp.checks import reference_drive, rolling_acceleration
+    from atrv_warp.sim.checks import reference_drive, rolling_acceleration
 
     rows: list[tuple[str, float, str]] = []
 

@@ -23,7 +23,7 @@ def main() -> int:
     from tensordict import TensorDict
     from torchrl.objectives import SACLoss, SoftUpdate
 
-    from atrv_warp.agents import make_actor, make_qvalue
+    from atrv_warp.rl.agents import make_actor, make_qvalue
 
     rows = []
     for threads in (1, 2):

@@ -38,14 +38,17 @@ def main() -> int:
     args = parser.parse_args()
 
     sys.path.insert(0, str(ROOT))
-    from atrv_warp.config import load_train_config
-    from atrv_warp.train import _parse_overrides, train
+    from atrv_warp.rl.config import load_train_config
+    from atrv_warp.rl.trainer import train
 
+    bad = [item for item in args.overrides if "=" not in item]
+    if bad:
+        parser.error(f"overrides must look like key=value, got {bad}")
     overrides = {"name": "bench_train_to_success", "out_dir": str(ROOT / "runs"), "max_minutes": args.minutes,
                  "eval_every_frames": 100_000, "eval_episodes": 1000, "final_eval_episodes": 1000,
-                 **_parse_overrides(args.overrides)}
-    cfg = load_train_config(str(ROOT / "configs" / "default.toml"), overrides)
-    run_dir = Path(cfg.out_dir) / cfg.name
+                 **dict(item.split("=", 1) for item in args.overrides)}
+    cfg = load_train_config("default", overrides)
+    run_dir = Path(cfg.run.out_dir) / cfg.run.name
     if run_dir.exists():
         shutil.rmtree(run_dir)
     t0 = time.perf_counter()

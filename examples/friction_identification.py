@@ -14,7 +14,7 @@ import sys
 
 import torch
 
-from atrv_warp.diff import DiffRollout
+from atrv_warp.sim.diff import DiffRollout
 
 
 def identify(true_mu: float = 0.3, guess: float = 0.5, steps: int = 20, iterations: int = 30, verbose: bool = True):

@@ -5,7 +5,7 @@ Run: ``python examples/trajectory_optimisation.py [--target 1.5 1.5] [--heading 
 Finds 3 s of [left, right] wheel torques that bring a rover from rest at the origin (facing +x)
 to a target pose: by default 1.5 m ahead and 1.5 m to the left, arriving facing +y, a quarter
 turn that needs the skid-steer's left-against-right gradient. Adam on the gradient of the
-final-pose loss through the differentiable rollout (:class:`atrv_warp.diff.DiffRollout`), with a
+final-pose loss through the differentiable rollout (:class:`atrv_warp.sim.diff.DiffRollout`), with a
 cosine learning-rate decay. Prints the loss per iteration and the final miss.
 """
 
@@ -17,7 +17,7 @@ import sys
 
 import torch
 
-from atrv_warp.diff import DiffRollout
+from atrv_warp.sim.diff import DiffRollout
 
 
 def final_pose(poses: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from atrv_warp.diff import DiffRollout, NonFiniteGradientError, progress_reward
+from atrv_warp.sim.diff import DiffRollout, NonFiniteGradientError, progress_reward
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -205,7 +205,7 @@ def test_featherstone_wrench_adjoint_one_substep(with_fix):
     import newton
     import warp as wp
 
-    from atrv_warp.diff import restore_external_wrench
+    from atrv_warp.sim.diff import restore_external_wrench
 
     roll = DiffRollout(1, steps=10)
     a = torch.tensor([[-0.3, 0.3]]).expand(10, 1, 2).contiguous()

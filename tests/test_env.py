@@ -11,8 +11,8 @@ from torchrl.envs import InitTracker, ObservationNorm, RewardSum, StepCounter, T
 from torchrl.envs.utils import check_env_specs, step_mdp
 
 from atrv_warp import ATRVjrEnv
-from atrv_warp.baseline import scripted_policy
-from atrv_warp.env import END_REASONS, OBSERVATION_NAMES
+from atrv_warp.task.baseline import scripted_policy
+from atrv_warp.task.env import END_REASONS, OBSERVATION_NAMES
 
 REASON = {name: i for i, name in enumerate(END_REASONS)}
 
@@ -228,7 +228,7 @@ def test_transforms():
 
 
 def test_scripted_baseline_reaches_targets():
-    from atrv_warp.evaluation import evaluate
+    from atrv_warp.task.evaluation import evaluate
 
     r = evaluate(scripted_policy(), num_episodes=64, seed=11)
     assert r.success_rate > 0.85
@@ -239,7 +239,7 @@ def test_gymnasium_adapter():
     import gymnasium
     from gymnasium.utils.env_checker import check_env
 
-    env = gymnasium.make("atrv_warp.gym:ATRVjr-v0")
+    env = gymnasium.make("atrv_warp.integrations.gymnasium:ATRVjr-v0")
     check_env(env.unwrapped)
     obs, info = env.reset(seed=1)
     assert obs.shape == (10,) and obs.dtype == np.float32 and info["end_reason"] == "running"
@@ -296,8 +296,8 @@ def test_observe_matches_reset_observation():
 
 
 def test_reward_terms_sum_to_the_reward_and_follow_the_spec():
-    from atrv_warp.baseline import scripted_policy
-    from atrv_warp.task_spec import END_REASONS, OBS_DIM, REWARD_TERMS, EndReason, observation_bounds
+    from atrv_warp.task.baseline import scripted_policy
+    from atrv_warp.task.spec import END_REASONS, OBS_DIM, REWARD_TERMS, EndReason, observation_bounds
 
     env = ATRVjrEnv(32, seed=5)
     assert env.observation_spec["observation"].shape[-1] == OBS_DIM

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from atrv_warp.config import RoverConfig, default_urdf_path, get_variant, replace_checked
-from atrv_warp.model import build_model, format_table, format_tree
-from atrv_warp.urdf import URDFError, load_rover
+from atrv_warp.sim.config import RoverConfig, default_urdf_path, get_variant, replace_checked
+from atrv_warp.sim.model import build_model, format_table, format_tree
+from atrv_warp.sim.urdf import URDFError, load_rover
 
 SPEC_LINKS = ["center_link", "left_front_wheel_link", "left_rear_wheel_link", "right_front_wheel_link",
               "right_rear_wheel_link", "cbimu_frame", "mpuimu_frame", "arm_base_frame", "lrf_frame", "novatel"]

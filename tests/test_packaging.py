@@ -11,6 +11,7 @@ from __future__ import annotations
 import ast
 import importlib.metadata as md
 import re
+import shutil
 import subprocess
 import sys
 import tomllib
@@ -21,7 +22,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 # Files that may import what an optional extra brings (they check for it and say how to install it).
 EXTRA_USERS = {
-    "ros": ("atrv_warp/ros.py", "atrv_warp/ros_node.py", "tests/test_ros.py"),
+    "ros": ("atrv_warp/integrations/ros/", "tests/test_ros.py"),
     "test": ("tests/",),
 }
 SCANNED = ("atrv_warp", "tests", "benchmarks", "examples")
@@ -90,20 +91,24 @@ def test_the_check_catches_a_removed_dependency():
     pruned = re.sub(r'^\s*"matplotlib[^"]*",.*\n', "", text, flags=re.MULTILINE)
     assert pruned != text
     problems = undeclared_imports(pruned, _project_files())
-    assert any(p.startswith("atrv_warp/train.py: imports 'matplotlib'") for p in problems), problems
+    assert any(p.startswith("atrv_warp/rl/trainer.py: imports 'matplotlib'") for p in problems), problems
     # and an extra's module used from a core module is caught too
-    leaky = undeclared_imports(text, {"atrv_warp/sim.py": "import rclpy\n"})
-    assert len(leaky) == 1 and leaky[0].startswith("atrv_warp/sim.py: imports 'rclpy' from [")
+    leaky = undeclared_imports(text, {"atrv_warp/sim/simulator.py": "import rclpy\n"})
+    assert len(leaky) == 1 and leaky[0].startswith("atrv_warp/sim/simulator.py: imports 'rclpy' from [")
     assert leaky[0].endswith("not declared for this file")
 
 
 def test_wheel_carries_configs_urdf_and_policy(tmp_path):
     """A plain (non-editable) install gets the same defaults: the presets are package data."""
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), str(ROOT)],
+    # from a copy of the source: a build/ folder left in the checkout would let stale modules into the wheel
+    src = tmp_path / "src"
+    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(".git", "build", "runs", "*.egg-info", "__pycache__",
+                                                             ".venv", "results"))
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), str(src)],
                    check=True, capture_output=True)
     (wheel,) = tmp_path.glob("atrv_warp-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
-    for needed in ("atrv_warp/configs/default.toml", "atrv_warp/configs/smoke.toml", "atrv_warp/assets/atrvjr.urdf",
+    for needed in ("atrv_warp/rl/configs/default.toml", "atrv_warp/rl/configs/smoke.toml", "atrv_warp/assets/atrvjr.urdf",
                    "atrv_warp/assets/pretrained_policy.pt"):
         assert needed in names, needed
     entry_points = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("entry_points.txt"))).decode()

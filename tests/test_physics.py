@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 import torch
 
-from atrv_warp import RoverSim, checks
+from atrv_warp import RoverSim
+from atrv_warp.sim import checks
 
 STEP = 0.05  # [s] per env step
 

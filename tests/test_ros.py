@@ -176,6 +176,6 @@ def test_goal_mode_drives_to_goal(ros_env):
 
 
 def test_missing_extra_message():
-    from atrv_warp.ros import MISSING_ROS_MESSAGE
+    from atrv_warp.integrations.ros import MISSING_ROS_MESSAGE
 
     assert "pip install -e '.[ros]'" in MISSING_ROS_MESSAGE

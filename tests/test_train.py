@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from atrv_warp.config import TrainConfig, load_train_config, preset_names
+from atrv_warp.rl.config import TrainConfig, load_train_config, preset_names
 
 ROOT = Path(__file__).resolve().parent.parent
 SMOKE = "smoke"  # a preset shipped inside the package
@@ -26,10 +26,11 @@ def test_config_files_and_errors(tmp_path):
     default = load_train_config("default")
     assert default == TrainConfig()  # the preset names the documented defaults
     smoke = load_train_config(SMOKE, {"width": "16"})
-    assert smoke.width == 16 and smoke.collector == "sync"
+    assert smoke.network.width == 16 and smoke.collector.kind == "sync"
+    assert load_train_config(SMOKE, {"optim.lr": "1e-3", "collector": "async"}).optim.lr == 1e-3
     mine = tmp_path / "mine.toml"
-    mine.write_text('name = "mine"\nwidth = 64\n')
-    assert load_train_config(str(mine)).width == 64
+    mine.write_text('name = "mine"\nwidth = 64\n[optim]\nlr = 1e-3\n')  # flat keys (older runs) and tables
+    assert load_train_config(str(mine)).network.width == 64 and load_train_config(str(mine)).optim.lr == 1e-3
     with pytest.raises(FileNotFoundError, match=r"config 'smok' is neither a file nor a preset; presets: \["):
         load_train_config("smok")
     with pytest.raises(ValueError, match=r"unknown train config key\(s\) \['lerning_rate'\]"):
@@ -48,13 +49,17 @@ def test_cli_rejects_bad_config_before_work(tmp_path):
     proc = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", "num_envs=-3", check=False)
     assert proc.returncode == 2 and "num_envs must be > 0" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1  # one line naming the problem, no usage dump
+    typo = run_module("atrv_warp.train", f"out_dir={tmp_path}", "lerning_rate=1e-3", check=False)
+    assert typo.returncode == 2 and "unknown train config key(s) ['lerning_rate']" in typo.stderr
+    bad = run_module("atrv_warp.train", f"out_dir={tmp_path}", "--optim.batch-size", "big", check=False)
+    assert bad.returncode == 2 and "--optim.batch-size" in bad.stderr and "big" in bad.stderr
     assert not any(tmp_path.iterdir())  # nothing was started or written
 
 
 @pytest.fixture(scope="module")
 def smoke_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("runs")
-    proc = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={out}", "progress=true")
+    proc = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={out}", "--logging.progress", "True")
     return out / "smoke", proc.stdout + proc.stderr
 
 
@@ -108,9 +113,9 @@ def test_resume_continues_step_counter(smoke_run, tmp_path):
 
 
 def test_shipped_policy_beats_scripted_baseline():
-    from atrv_warp.agents import load_policy, pretrained_policy_path
-    from atrv_warp.baseline import scripted_policy
-    from atrv_warp.evaluation import evaluate
+    from atrv_warp.rl.agents import load_policy, pretrained_policy_path
+    from atrv_warp.task.baseline import scripted_policy
+    from atrv_warp.task.evaluation import evaluate
 
     assert pretrained_policy_path().stat().st_size < 1_000_000
     shipped = evaluate(load_policy(), num_episodes=200, seed=99)
@@ -168,7 +173,7 @@ def test_evaluate_names_a_bad_file_in_one_line_and_unpickles_nothing(smoke_run, 
         assert proc.returncode == 2 and len(lines) == 1, (kind, proc.stderr)
         assert str(files[kind]) in lines[0] and expected[kind] in lines[0], lines[0]
         assert "Traceback" not in proc.stderr
-    from atrv_warp.agents import load_policy
+    from atrv_warp.rl.agents import load_policy
     from atrv_warp.storage import FileFormatError
 
     for kind, path in files.items():

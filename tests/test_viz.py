@@ -10,9 +10,9 @@ import torch
 from rerun.chunk import RrdReader
 
 from atrv_warp import ATRVjrEnv
-from atrv_warp.baseline import scripted_policy
-from atrv_warp.evaluation import evaluate
-from atrv_warp.viz import RerunLogger, RerunRecorder
+from atrv_warp.integrations.rerun import RerunLogger, RerunRecorder
+from atrv_warp.task.baseline import scripted_policy
+from atrv_warp.task.evaluation import evaluate
 
 
 def read_rrd(path):

@@ -39,12 +39,12 @@ def evaluate(policy, *, num_episodes: int = 1000, seed: int = EVAL_SEED, env=Non
             ``TensorDictModule`` or TorchRL actor; run under ``ExplorationType.DETERMINISTIC``.
         num_episodes: Number of episodes (= worlds).
         seed: Seed of the evaluation set; the same seed gives the same starts and targets.
-        env: An :class:`~atrv_warp.env.ATRVjrEnv` (possibly wrapped in transforms) with
+        env: An :class:`~atrv_warp.task.env.ATRVjrEnv` (possibly wrapped in transforms) with
             ``num_episodes`` worlds to reuse; built if omitted.
         on_step: Optional callback ``on_step(env, tensordict)`` after every step (recording).
-        **env_kwargs: Passed to :class:`~atrv_warp.env.ATRVjrEnv` when it is built here.
+        **env_kwargs: Passed to :class:`~atrv_warp.task.env.ATRVjrEnv` when it is built here.
     """
-    from .env import END_REASONS, ATRVjrEnv
+    from atrv_warp.task.env import END_REASONS, ATRVjrEnv
 
     if env is None:
         env = ATRVjrEnv(num_episodes, **env_kwargs)

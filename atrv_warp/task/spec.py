@@ -2,7 +2,7 @@
 
 Everything that reads or writes the task's tensors derives from here: the environment's
 specs, the Warp kernels (observation indices, bounds, end reasons, reward terms), the scripted
-baseline, the Gymnasium spaces, the ROS goal mode and :func:`atrv_warp.diff.progress_reward`.
+baseline, the Gymnasium spaces, the ROS goal mode and :func:`atrv_warp.sim.diff.progress_reward`.
 
 - :data:`OBSERVATION`: the observation's fields in order, each with its clip bound.
 - :class:`EndReason`: why an episode ended (the ``end_reason`` entry).

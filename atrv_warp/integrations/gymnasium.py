@@ -1,12 +1,12 @@
 """Gymnasium adapters, for users of the reference's Gymnasium + Stable-Baselines3 stack.
 
 Registered ids (importing this module registers them; ``gymnasium.make`` accepts the
-``"atrv_warp.gym:ATRVjr-v0"`` form, which imports it for you):
+``"atrv_warp.integrations.gymnasium:ATRVjr-v0"`` form, which imports it for you):
 
 - ``ATRVjr-v0``: one rover, a ``gymnasium.Env`` (what SB3's ``DummyVecEnv`` wraps);
   ``gymnasium.make_vec("ATRVjr-v0", num_envs=N)`` gives the batched ``ATRVjrVectorEnv``.
 
-Both run on :class:`atrv_warp.env.ATRVjrEnv`; the episode limit (200 steps) is the task's own
+Both run on :class:`atrv_warp.task.env.ATRVjrEnv`; the episode limit (200 steps) is the task's own
 truncation, so no ``TimeLimit`` wrapper is added.
 """
 
@@ -21,7 +21,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from tensordict import TensorDict
 
-from .env import END_REASONS, ATRVjrEnv
+from atrv_warp.task.env import END_REASONS, ATRVjrEnv
 
 __all__ = ["ATRVjrGymEnv", "ATRVjrVectorEnv"]
 

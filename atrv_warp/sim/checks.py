@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sim import DriveMode, RoverSim
+from atrv_warp.sim.simulator import DriveMode, RoverSim
 
 
 def rolling_acceleration(sim: RoverSim, torque: float) -> float:

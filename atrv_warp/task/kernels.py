@@ -3,14 +3,14 @@
 One thread per world. Figures are the reference task's (``TaskConfig``): targets and starts
 uniform in ±12 m, reach within 1 m (+4), wall/flip (-4), otherwise progress reward, 200-step
 truncation. The observation layout, its bounds, the end reasons and the reward terms come from
-:mod:`atrv_warp.task_spec`; each reward term is its own ``@wp.func`` and is written out per step.
+:mod:`atrv_warp.task.spec`; each reward term is its own ``@wp.func`` and is written out per step.
 """
 
 from __future__ import annotations
 
 import warp as wp
 
-from ..task_spec import OBS_DIM, OBS_INDEX, OBSERVATION, REWARD_TERMS, EndReason
+from atrv_warp.task.spec import OBS_DIM, OBS_INDEX, OBSERVATION, REWARD_TERMS, EndReason
 
 # Why an episode ended (``end_reason``), from task_spec.EndReason.
 END_NONE = wp.constant(int(EndReason.RUNNING))

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import InertialOverride, RoverConfig, default_urdf_path
+from atrv_warp.sim.config import InertialOverride, RoverConfig, default_urdf_path
 
 __all__ = ["Frame", "Inertial", "RoverDescription", "URDFError", "Wheel", "load_rover"]
 

@@ -26,7 +26,7 @@ FLAG_BODY_GROUND = wp.constant(2)
 
 @wp.struct
 class ContactParams:
-    """Hunt–Crossley law and friction (see :class:`atrv_warp.config.ContactConfig`)."""
+    """Hunt–Crossley law and friction (see :class:`atrv_warp.sim.config.ContactConfig`)."""
 
     stiffness: float  # kp [N/m^n]
     damping: float  # kc [N·s/m^(n+1)]

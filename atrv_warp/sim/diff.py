@@ -17,7 +17,7 @@ What makes the gradients agree with finite differences (README, "Differentiable 
 
 Example::
 
-    from atrv_warp.diff import DiffRollout
+    from atrv_warp.sim.diff import DiffRollout
     roll = DiffRollout(num_worlds=1, steps=20)                  # 20 env steps = 1 s
     actions = torch.zeros(20, 1, 2, requires_grad=True)        # [left, right] in [-1, 1] x 20 N·m
     poses = roll(actions)                                       # (21, 1, 7) chassis x, y, z, qx, qy, qz, qw
@@ -32,8 +32,9 @@ import newton
 import torch
 import warp as wp
 
-from .config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, TaskConfig, get_variant
-from .sim import RoverSim
+from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant
+from atrv_warp.sim.simulator import RoverSim
+from atrv_warp.task.config import TaskConfig
 
 __all__ = ["DiffRollout", "NonFiniteGradientError", "progress_reward", "restore_external_wrench"]
 
@@ -307,7 +308,7 @@ def progress_reward(poses: torch.Tensor, targets: torch.Tensor, task: TaskConfig
     """The task's dense reward of every step of a rollout, differentiable: (steps, N).
 
     ``(previous distance - distance) + heading_weight * (previous |heading error| - |heading error|)
-    - step_penalty``: the non-terminal terms of :data:`atrv_warp.task_spec.REWARD_TERMS`
+    - step_penalty``: the non-terminal terms of :data:`atrv_warp.task.spec.REWARD_TERMS`
     (progress, heading, step_penalty), as the environment's ``compute_step_outcome`` kernel
     computes them (tested against the environment). The terminal rewards (+4 within 1 m,
     -4 on a wall or flip) are discrete events without a gradient and are left out.
@@ -315,7 +316,7 @@ def progress_reward(poses: torch.Tensor, targets: torch.Tensor, task: TaskConfig
     Args:
         poses: (steps + 1, N, 7) chassis poses from :class:`DiffRollout`.
         targets: (N, 2) target x, y [m].
-        task: Reward weights (default :class:`~atrv_warp.config.TaskConfig`).
+        task: Reward weights (default :class:`~atrv_warp.task.config.TaskConfig`).
     """
     task = task or TaskConfig()
     qx, qy, qz, qw = poses[..., 3:7].unbind(-1)

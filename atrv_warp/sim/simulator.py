@@ -17,11 +17,11 @@ import numpy as np
 import torch
 import warp as wp
 
-from .config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant
-from .contact import ContactModel
-from .kernels.contact import FLAG_BODY_GROUND, FLAG_WALL
-from .kernels.rover import RoverLayout, apply_wheel_torques, compute_rover_state, reset_worlds
-from .model import BuiltModel, build_model
+from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant
+from atrv_warp.sim.contact import ContactModel
+from atrv_warp.sim.kernels.contact import FLAG_BODY_GROUND, FLAG_WALL
+from atrv_warp.sim.kernels.rover import RoverLayout, apply_wheel_torques, compute_rover_state, reset_worlds
+from atrv_warp.sim.model import BuiltModel, build_model
 
 __all__ = ["DRIVE_MODE_TORQUES", "DriveMode", "RoverSim", "SimBuffers"]
 
@@ -134,7 +134,7 @@ class RoverSim:
         :attr:`layout` where each world's rover sits in Newton's arrays;
         :meth:`reset_worlds` a masked reset from device arrays (no host round trip);
         :attr:`contact` the contact model, and :meth:`substep` one solver substep, which
-        :class:`~atrv_warp.diff.DiffRollout` steps through too.
+        :class:`~atrv_warp.sim.diff.DiffRollout` steps through too.
     """
 
     def __init__(
@@ -173,7 +173,7 @@ class RoverSim:
         self._make_layout()
         self.contact = ContactModel(self.built, rover=self.rover_cfg, contact=self.contact_cfg, arena=self.arena_cfg,
                                     sim_dt=self.sim_cfg.sim_dt, device=self.device)
-        """The contact model every substep launches (:class:`~atrv_warp.contact.ContactModel`)."""
+        """The contact model every substep launches (:class:`~atrv_warp.sim.contact.ContactModel`)."""
 
         n, w = num_worlds, len(self.description.wheels)
         dev = self.device
@@ -283,7 +283,7 @@ class RoverSim:
                 solver_in: newton.State | None = None) -> None:
         """One solver substep of ``sim_dt``: contact wrenches, wheel torques, one Featherstone step.
 
-        The simulator's own step calls it on its two states; :class:`~atrv_warp.diff.DiffRollout`
+        The simulator's own step calls it on its two states; :class:`~atrv_warp.sim.diff.DiffRollout`
         calls it on a tape with one state per substep, its own ``commands`` (N,) ``wp.vec2``,
         ``friction`` (1,), ``flags`` (N,) and ``torque`` (N, W) outputs, and ``solver_in``: a view
         of ``s_in`` with its own ``body_q`` for the solver to write.

@@ -15,8 +15,8 @@ from tensordict.nn import NormalParamExtractor, TensorDictModule, TensorDictSequ
 from torch import nn
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 
-from .storage import FileFormatError, atomic_save, load_weights
-from .task_spec import ACTION_DIM, OBS_DIM
+from atrv_warp.storage import FileFormatError, atomic_save, load_weights
+from atrv_warp.task.spec import ACTION_DIM, OBS_DIM
 
 __all__ = ["POLICY_FORMAT", "Normalize", "load_policy", "make_actor", "make_qvalue", "policy_payload",
            "pretrained_policy_path", "save_policy"]
@@ -90,7 +90,7 @@ def pretrained_policy_path() -> Path:
 def load_policy(path: str | Path | None = None, *, deterministic: bool = True) -> TensorDictSequential:
     """Load a saved policy (default: the shipped one) as a TorchRL policy module.
 
-    The module reads raw ``observation`` from :class:`~atrv_warp.env.ATRVjrEnv` and writes
+    The module reads raw ``observation`` from :class:`~atrv_warp.task.env.ATRVjrEnv` and writes
     ``action``; with ``deterministic=True`` it returns the distribution's mode.
 
     Raises ``FileNotFoundError``, or :class:`~atrv_warp.storage.FileFormatError` naming the file

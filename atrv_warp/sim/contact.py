@@ -1,8 +1,8 @@
 """The contact model a simulator launches: the rover's shapes, the arena's planes and the law.
 
 :class:`ContactModel` turns the configs and the built Newton model into the structs the
-Hunt–Crossley kernel (:mod:`atrv_warp.kernels.contact`) reads, once per simulator, and launches
-it. :class:`~atrv_warp.sim.RoverSim` and :class:`~atrv_warp.diff.DiffRollout` both step through
+Hunt–Crossley kernel (:mod:`atrv_warp.sim.kernels.contact`) reads, once per simulator, and launches
+it. :class:`~atrv_warp.sim.RoverSim` and :class:`~atrv_warp.sim.diff.DiffRollout` both step through
 it, so there is one contact model to change.
 """
 
@@ -11,9 +11,9 @@ from __future__ import annotations
 import newton
 import warp as wp
 
-from .config import ArenaConfig, ContactConfig, RoverConfig
-from .kernels.contact import ArenaPlanes, ContactParams, RoverShapes, compute_contact_forces
-from .model import BuiltModel
+from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig
+from atrv_warp.sim.kernels.contact import ArenaPlanes, ContactParams, RoverShapes, compute_contact_forces
+from atrv_warp.sim.model import BuiltModel
 
 __all__ = ["ContactModel"]
 
@@ -30,10 +30,9 @@ def _law(cfg: ContactConfig) -> ContactParams:
 
 def _planes(arena: ArenaConfig, device) -> ArenaPlanes:
     """Ground and the four walls as half-spaces ``n·x >= offset`` (inner faces)."""
-    h = arena.half_size
     planes = ArenaPlanes()
-    planes.normal = wp.array([(0, 0, 1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)], dtype=wp.vec3, device=device)
-    planes.offset = wp.array([arena.ground_top, -h, -h, -h, -h], dtype=float, device=device)
+    planes.normal = wp.array([n for n, _ in arena.planes()], dtype=wp.vec3, device=device)
+    planes.offset = wp.array([o for _, o in arena.planes()], dtype=float, device=device)
     return planes
 
 
@@ -84,9 +83,9 @@ class ContactModel:
     """Hunt–Crossley contact of every world's rover against the arena, ready to launch.
 
     Attributes (read-only; the kernel's inputs):
-        params: the law (:class:`~atrv_warp.kernels.contact.ContactParams`).
-        shapes: the template rover's shapes (:class:`~atrv_warp.kernels.contact.RoverShapes`).
-        planes: ground and walls (:class:`~atrv_warp.kernels.contact.ArenaPlanes`).
+        params: the law (:class:`~atrv_warp.sim.kernels.contact.ContactParams`).
+        shapes: the template rover's shapes (:class:`~atrv_warp.sim.kernels.contact.RoverShapes`).
+        planes: ground and walls (:class:`~atrv_warp.sim.kernels.contact.ArenaPlanes`).
         friction: (1,) Coulomb coefficient, the default for :meth:`apply`.
     """
 

@@ -19,10 +19,10 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
-from .env import ATRVjrEnv
-from .ros import COMMANDS, GOAL, BagWriter, pose_dict
-from .sim import DriveMode
-from .task_spec import action_to_torque
+from atrv_warp.integrations.ros import COMMANDS, GOAL, BagWriter, pose_dict
+from atrv_warp.sim.simulator import DriveMode
+from atrv_warp.task.env import ATRVjrEnv
+from atrv_warp.task.spec import action_to_torque
 
 __all__ = ["PARAMETERS", "NodeConfigError", "RoverSimNode"]
 
@@ -143,7 +143,7 @@ class RoverSimNode(Node):
         if self.policy is None:
             from tensordict import TensorDict
 
-            from .agents import load_policy
+            from atrv_warp.rl.agents import load_policy
 
             self.policy = (load_policy(self.params["policy"] or None), TensorDict)
         policy, td_cls = self.policy

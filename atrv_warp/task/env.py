@@ -1,11 +1,11 @@
 """TorchRL environment: N ATRV-Jr rovers driving to targets, one batched ``EnvBase``.
 
 The task math (observations, rewards, terminations, reset sampling) runs in Warp kernels,
-one thread per world (``atrv_warp/kernels/task.py``); TensorDicts carry zero-copy views
+one thread per world (``atrv_warp/task/kernels.py``); TensorDicts carry zero-copy views
 of the Warp buffers, cloned only where TorchRL would otherwise keep a reference to a buffer
 the next step overwrites.
 
-Keys produced (the contract is declared in :mod:`atrv_warp.task_spec`):
+Keys produced (the contract is declared in :mod:`atrv_warp.task.spec`):
     ``observation`` (N, 10) float32: target x, y; rover x, y; vx, vy (world); roll; yaw rate;
     sin and cos of the heading error (``OBSERVATION``). ``reward`` (N, 1);
     ``("reward_terms", name)`` (N, 1) for each of ``REWARD_TERMS``, which sum to the reward;
@@ -25,10 +25,11 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from .config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, TaskConfig, get_variant, replace_checked
-from .kernels.task import TaskBuffers, TaskParams, compute_step_outcome, observe_reset, sample_episodes
-from .sim import RoverSim
-from .task_spec import (
+from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant, replace_checked
+from atrv_warp.sim.simulator import RoverSim
+from atrv_warp.task.config import TaskConfig
+from atrv_warp.task.kernels import TaskBuffers, TaskParams, compute_step_outcome, observe_reset, sample_episodes
+from atrv_warp.task.spec import (
     ACTION_DIM,
     END_REASONS,
     OBS_DIM,

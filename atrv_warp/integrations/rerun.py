@@ -129,18 +129,15 @@ class RerunRecorder:
         rec, arena = self.rec, self.sim.arena_cfg
         rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         h = arena.half_size
-        rec.log("arena/ground", rr.Boxes3D(centers=[(0, 0, arena.ground_center_z)],
-                                           half_sizes=[(h, h, 0.5 * arena.ground_thickness)],
+        (_, ground_centre, ground_half), *walls = arena.boxes()
+        rec.log("arena/ground", rr.Boxes3D(centers=[ground_centre], half_sizes=[ground_half],
                                            colors=[_GROUND_COLOR], fill_mode="solid"), static=True)
         ticks = np.arange(-h, h + 0.5, 1.0)
         z = arena.ground_top + 0.002
         lines = [[(x, -h, z), (x, h, z)] for x in ticks] + [[(-h, y, z), (h, y, z)] for y in ticks]
         rec.log("arena/grid", rr.LineStrips3D(lines, colors=[(90, 90, 90)], radii=0.005), static=True)
-        t = 0.5 * arena.wall_thickness
-        zc = arena.ground_top + 0.5 * arena.wall_height
-        centers = [(h + t, 0, zc), (-h - t, 0, zc), (0, h + t, zc), (0, -h - t, zc)]
-        halves = [(t, h + 2 * t, 0.5 * arena.wall_height)] * 2 + [(h, t, 0.5 * arena.wall_height)] * 2
-        rec.log("arena/walls", rr.Boxes3D(centers=centers, half_sizes=halves, colors=[_WALL_COLOR],
+        rec.log("arena/walls", rr.Boxes3D(centers=[c for _, c, _ in walls], half_sizes=[e for _, _, e in walls],
+                                          colors=[_WALL_COLOR],
                                           fill_mode="solid"), static=True)
         # Rover shapes from the model (a different URDF draws right): local frames of each body.
         rb = self.sim.built.rover_builder
@@ -213,7 +210,7 @@ class RerunRecorder:
                 time.sleep(ahead)
 
     def env_hook(self):
-        """An ``on_step(env, tensordict)`` callback for :func:`atrv_warp.evaluation.evaluate`."""
+        """An ``on_step(env, tensordict)`` callback for :func:`atrv_warp.task.evaluation.evaluate`."""
 
         def on_step(env, td):
             base = getattr(env, "base_env", env)

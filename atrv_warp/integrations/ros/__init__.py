@@ -1,0 +1,107 @@
+"""ROS 2 bridge: the node behind ``python -m atrv_warp.ros`` (topics and parameters there).
+
+rclpy is optional: this package imports without it, :func:`run` says how to install it, and
+:mod:`.node` (the rclpy node) is imported only when it is there.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from atrv_warp.sim.simulator import DriveMode
+
+__all__ = ["COMMANDS", "GOAL", "MISSING_ROS_MESSAGE", "BagWriter", "pose_dict", "run"]
+
+MISSING_ROS_MESSAGE = (
+    "ROS 2 Python packages are not installed (needed: rclpy, geometry_msgs, std_msgs, rosgraph_msgs).\n"
+    "Install the extra:  pip install -e '.[ros]'   (ros-rclpy[fastrtps], ros-geometry-msgs, ros-std-msgs, "
+    "mcap-ros2-support from PyPI), or source a ROS 2 installation."
+)
+
+GOAL = "goal"
+COMMANDS = tuple(m.value for m in DriveMode) + (GOAL,)
+
+_STRING_DEF = "string data\n"
+_POSE_STAMPED_DEF = """std_msgs/Header header
+geometry_msgs/Pose pose
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+================================================================================
+MSG: geometry_msgs/Pose
+geometry_msgs/Point position
+geometry_msgs/Quaternion orientation
+================================================================================
+MSG: geometry_msgs/Point
+float64 x
+float64 y
+float64 z
+================================================================================
+MSG: geometry_msgs/Quaternion
+float64 x 0
+float64 y 0
+float64 z 0
+float64 w 1
+"""
+
+
+class BagWriter:
+    """ROS 2 bag in MCAP format (``ros2 bag info/play`` read it), written with mcap-ros2-support."""
+
+    def __init__(self, path: str):
+        from mcap_ros2.writer import Writer
+
+        self._fh = open(path, "wb")  # noqa: SIM115 - closed in close()
+        self._writer = Writer(self._fh)
+        self._schemas = {
+            "geometry_msgs/msg/PoseStamped": self._writer.register_msgdef("geometry_msgs/msg/PoseStamped",
+                                                                          _POSE_STAMPED_DEF),
+            "std_msgs/msg/String": self._writer.register_msgdef("std_msgs/msg/String", _STRING_DEF),
+        }
+
+    def write(self, topic: str, type_name: str, message: dict, stamp_ns: int) -> None:
+        self._writer.write_message(topic=topic, schema=self._schemas[type_name], message=message,
+                                   log_time=stamp_ns, publish_time=stamp_ns)
+
+    def close(self) -> None:
+        self._writer.finish()
+        self._fh.close()
+
+
+def pose_dict(msg) -> dict:
+    """A PoseStamped as the nested dict :class:`BagWriter` writes."""
+    p, q = msg.pose.position, msg.pose.orientation
+    return {"header": {"stamp": {"sec": msg.header.stamp.sec, "nanosec": msg.header.stamp.nanosec},
+                       "frame_id": msg.header.frame_id},
+            "pose": {"position": {"x": p.x, "y": p.y, "z": p.z},
+                     "orientation": {"x": q.x, "y": q.y, "z": q.z, "w": q.w}}}
+
+
+def run(args: list[str] | None = None) -> int:
+    """Run the node until ``duration`` of sim time, Ctrl-C or shutdown; 2 on a bad parameter."""
+    try:
+        import rclpy
+        from rclpy.executors import ExternalShutdownException
+
+        from atrv_warp.integrations.ros.node import NodeConfigError, RoverSimNode
+    except ImportError:
+        print(MISSING_ROS_MESSAGE, file=sys.stderr)
+        return 2
+    rclpy.init(args=args)
+    node = RoverSimNode()
+    try:
+        node.setup()
+        node.spin_simulation()
+    except NodeConfigError:
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.close()
+        rclpy.try_shutdown()
+    return 0

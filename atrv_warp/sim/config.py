@@ -1,0 +1,208 @@
+"""Configuration of the simulator: the rover (and its registered variants), the contact law,
+the arena and the integrator.
+
+Every physical quantity carries its SI unit. Configs are frozen dataclasses: derive a
+variant with :func:`dataclasses.replace`, never mutate a shared default.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from importlib import resources
+
+__all__ = [
+    "VARIANTS",
+    "ArenaConfig",
+    "ContactConfig",
+    "InertialOverride",
+    "RoverConfig",
+    "SimConfig",
+    "default_urdf_path",
+    "get_variant",
+    "replace_checked",
+]
+
+
+def default_urdf_path() -> str:
+    """Path of the ATRV-Jr URDF shipped inside the package."""
+    return str(resources.files("atrv_warp").joinpath("assets/atrvjr.urdf"))
+
+
+@dataclass(frozen=True)
+class InertialOverride:
+    """Replaces the mass properties a URDF gives one link (used by the ``reference`` variant)."""
+
+    link: str
+    """Name of the link whose inertial is replaced."""
+    mass: float
+    """Mass [kg]."""
+    inertia_diag: tuple[float, float, float] | None = None
+    """Principal moments about the link's inertial frame [kg·m²]; ``None`` keeps the
+    URDF's inertia tensor scaled by the mass ratio."""
+
+
+@dataclass(frozen=True)
+class RoverConfig:
+    """Which URDF to load, which links play which role, and how the wheels are driven."""
+
+    urdf: str | None = None
+    """Path of the URDF; ``None`` uses the packaged ``atrvjr.urdf``."""
+    chassis_link: str = "center_link"
+    """Link joined to the world by the free 6-DOF joint."""
+    left_wheels: tuple[str, ...] = ("left_front_wheel_link", "left_rear_wheel_link")
+    """Wheel links driven by the first (left) command."""
+    right_wheels: tuple[str, ...] = ("right_front_wheel_link", "right_rear_wheel_link")
+    """Wheel links driven by the second (right) command."""
+    sensor_frames: tuple[str, ...] = ("cbimu_frame", "mpuimu_frame", "arm_base_frame", "lrf_frame", "novatel")
+    """Links fixed to the chassis that must exist; kept as named frames."""
+    wheel_radius: float = 0.125
+    """Radius of the wheel collision cylinder [m]."""
+    wheel_length: float = 0.075
+    """Length (width) of the wheel collision cylinder [m]."""
+    wheel_offset: float = 0.03
+    """Offset of the cylinder centre from the wheel joint along the axle, outward [m]."""
+    wheel_speed_limit: float = 50.0
+    """Motor no-load speed [rad/s] (50 rad/s = 6.25 m/s at the rim). Drive torque tapers linearly
+    from full at 80 % of this speed to zero at it, like a DC motor's back-EMF; an
+    unbounded torque source otherwise spins a slipping wheel to 1000+ rad/s."""
+    inertial_overrides: tuple[InertialOverride, ...] = ()
+    """Mass-property replacements applied after loading the URDF."""
+
+
+@dataclass(frozen=True)
+class ContactConfig:
+    """Hunt–Crossley penalty contact with regularised Coulomb friction.
+
+    Normal force per contact point, penetration ``d`` [m] and its rate ``d_dot`` [m/s]:
+    ``f_n = kp d^n + kc d^n d_dot`` (clamped at 0, no adhesion). Below ``linear_region``
+    the ``d^n`` factor is replaced by its secant ``linear_region^(n-1) d`` so the stiffness
+    stays finite at first touch. Defaults are the reference simulation's figures.
+    """
+
+    stiffness: float = 1.0e5
+    """kp [N/m^n]."""
+    damping: float = 2.0e4
+    """kc [N·s/m^(n+1)]."""
+    exponent: float = 1.5
+    """n, Hertz-like exponent [-]."""
+    linear_region: float = 1.0e-3
+    """Penetration below which the law is linear [m]."""
+    friction: float = 0.3
+    """Coulomb coefficient mu [-]."""
+    friction_slope_fraction: float = 0.5
+    """Low-slip viscous slope of the friction law as a fraction of the largest slope an
+    explicit step of ``sim_dt`` stays stable with (``m_eff / sim_dt`` per contact direction).
+    Friction is ``mu f_n`` once slip exceeds ``mu f_n dt / (fraction m_eff)``; below it,
+    proportional to slip. 0.5 halves the slip velocity twice per substep without overshoot."""
+
+
+@dataclass(frozen=True)
+class ArenaConfig:
+    """Ground box and four walls of the reference arena."""
+
+    size: float = 30.0
+    """Side of the square ground [m]."""
+    ground_thickness: float = 0.25
+    """[m]"""
+    ground_center_z: float = -0.1
+    """Height of the ground box centre [m]; the top is at centre + thickness/2 = 0.025 m."""
+    wall_thickness: float = 0.25
+    """[m]"""
+    wall_height: float = 2.5
+    """[m]"""
+    target_radius: float = 0.25
+    """Radius of the target disc (graphics only) [m]."""
+
+    @property
+    def ground_top(self) -> float:
+        """Height of the driving surface [m]."""
+        return self.ground_center_z + 0.5 * self.ground_thickness
+
+    @property
+    def half_size(self) -> float:
+        """Distance from the centre to each wall's inner face [m]."""
+        return 0.5 * self.size
+
+    def boxes(self) -> tuple[tuple[str, tuple[float, float, float], tuple[float, float, float]], ...]:
+        """(label, centre [m], half extents [m]) of the ground and the four walls: what the model
+        builds and the viewer draws."""
+        h, t = self.half_size, 0.5 * self.wall_thickness
+        zc, hz = self.ground_top + 0.5 * self.wall_height, 0.5 * self.wall_height
+        return (
+            ("ground", (0.0, 0.0, self.ground_center_z), (h, h, 0.5 * self.ground_thickness)),
+            ("wall_+x", (h + t, 0.0, zc), (t, h + 2 * t, hz)),
+            ("wall_-x", (-h - t, 0.0, zc), (t, h + 2 * t, hz)),
+            ("wall_+y", (0.0, h + t, zc), (h, t, hz)),
+            ("wall_-y", (0.0, -h - t, zc), (h, t, hz)),
+        )
+
+    def planes(self) -> tuple[tuple[tuple[float, float, float], float], ...]:
+        """(normal, offset) of each box's inner face as a half-space ``n·x >= offset``, same order
+        as :meth:`boxes`: what the contact kernel tests."""
+        h = self.half_size
+        return (((0.0, 0.0, 1.0), self.ground_top), ((1.0, 0.0, 0.0), -h), ((-1.0, 0.0, 0.0), -h),
+                ((0.0, 1.0, 0.0), -h), ((0.0, -1.0, 0.0), -h))
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Integrator settings. Chosen by measurement (see README, 'Choices')."""
+
+    step_dt: float = 0.05
+    """Simulated time of one environment step [s]."""
+    sim_dt: float = 0.01
+    """Solver substep [s]; the reference integrated RK4 at 0.01 s."""
+    gravity: float = -9.81
+    """[m/s²] along z."""
+    mass_matrix_interval: int | None = None
+    """Featherstone mass-matrix refresh interval in substeps; ``None`` = once per step
+    (``substeps``), aligned with step boundaries so a reset never meets a stale matrix."""
+    use_tile_gemm: bool = True
+    """Use Warp's tile API for the mass-matrix factorisation: 2.1x faster at N=1024 on CPU
+    (50k vs 24k env-steps/s, benchmarks/sim_throughput.py)."""
+    use_graph: bool = True
+    """Record the whole step once (``wp.ScopedCapture``) and replay it."""
+
+    @property
+    def substeps(self) -> int:
+        """Solver substeps per environment step."""
+        n = round(self.step_dt / self.sim_dt)
+        if n < 1 or not math.isclose(n * self.sim_dt, self.step_dt, rel_tol=1e-9):
+            raise ValueError(f"step_dt={self.step_dt} is not a whole multiple of sim_dt={self.sim_dt}")
+        return n
+
+
+_REFERENCE_INERTIALS = (
+    InertialOverride("center_link", 50.0),
+    *(
+        InertialOverride(w, 1.0, (1.0, 1.0, 1.0))
+        for w in ("left_front_wheel_link", "left_rear_wheel_link", "right_front_wheel_link", "right_rear_wheel_link")
+    ),
+)
+
+VARIANTS: dict[str, RoverConfig] = {
+    "realistic": RoverConfig(),
+    "reference": RoverConfig(inertial_overrides=_REFERENCE_INERTIALS),
+}
+"""Registered rover variants. ``realistic``: masses and inertias from geometry (58 kg).
+``reference``: the reference simulation's chassis 50 kg, wheels 1 kg with a placeholder
+1 kg·m² inertia, which is why it accelerated at only ~0.4 m/s²."""
+
+
+def get_variant(name: str) -> RoverConfig:
+    """Return the registered :class:`RoverConfig` called ``name``."""
+    try:
+        return VARIANTS[name]
+    except KeyError:
+        raise ValueError(f"unknown rover variant {name!r}; known: {sorted(VARIANTS)}") from None
+
+
+def replace_checked(cfg, **changes):
+    """:func:`dataclasses.replace` that names an unknown field instead of a TypeError."""
+    names = {f.name for f in dataclasses.fields(cfg)}
+    unknown = sorted(set(changes) - names)
+    if unknown:
+        raise ValueError(f"unknown {type(cfg).__name__} key(s) {unknown}; known: {sorted(names)}")
+    return dataclasses.replace(cfg, **changes)
