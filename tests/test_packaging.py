@@ -24,8 +24,9 @@ ROOT = Path(__file__).resolve().parent.parent
 EXTRA_USERS = {
     "ros": ("atrv_warp/integrations/ros/", "tests/test_ros.py"),
     "test": ("tests/",),
+    "browser": ("atrv_warp/integrations/browser.py", "docs/make_pictures.py"),
 }
-SCANNED = ("atrv_warp", "tests", "benchmarks", "examples")
+SCANNED = ("atrv_warp", "tests", "benchmarks", "examples", "docs")
 
 
 def _name(requirement: str) -> str:

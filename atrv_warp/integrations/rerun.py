@@ -30,12 +30,13 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Self
 
 import numpy as np
 import rerun as rr
 from torchrl.record.loggers import Logger
 
-__all__ = ["DEFAULT_WORLDS", "RerunLogger", "RerunRecorder", "serve_localhost"]
+__all__ = ["DEFAULT_WORLDS", "RerunLogger", "RerunRecorder", "ServedViewer"]
 
 DEFAULT_WORLDS = 4
 """Worlds logged when none are named."""
@@ -53,35 +54,108 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def serve_localhost(rec: rr.RecordingStream, *, grpc_port: int | None = None,
-                    web_port: int | None = None) -> tuple[str, subprocess.Popen]:
-    """Start Rerun's web viewer and gRPC proxy bound to 127.0.0.1 only, connect ``rec`` to it,
-    and return the URL to open and the server process, which runs in its own session (stop its
-    process group). The SDK's own ``serve_grpc`` binds every interface."""
-    # the venv's own script first: a venv's python run without activating the venv has no bin/ on PATH
-    exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
-    if exe is None:
-        raise RuntimeError(f"the 'rerun' command (installed with rerun-sdk) is neither beside {sys.executable} "
-                           "nor on PATH")
-    grpc_port = grpc_port or _free_port()
-    web_port = web_port or _free_port()
-    proc = subprocess.Popen(
-        [exe, "--serve-web", "--bind", "127.0.0.1", "--port", str(grpc_port), "--web-viewer-port", str(web_port)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    deadline = time.monotonic() + 20.0
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise RuntimeError(f"rerun viewer server exited with code {proc.returncode}")
-        with socket.socket() as s:
-            if s.connect_ex(("127.0.0.1", grpc_port)) == 0:
+def _port_open(port: int) -> bool:
+    with socket.socket() as s:
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+class ServedViewer:
+    """Rerun's web viewer and gRPC proxy, bound to 127.0.0.1 only, as a context manager.
+
+    ``start()`` launches ``rerun --serve-web`` in its own process session and waits until the
+    gRPC proxy accepts connections and the web page answers; ``stop()`` signals the whole process
+    group (a launcher may exit before the viewer binary it started) and waits until both ports
+    are free. The SDK's own ``serve_grpc`` binds every interface, so it is not used.
+
+    Example::
+
+        with ServedViewer() as viewer:
+            viewer.connect(rec)            # a rr.RecordingStream
+            print(viewer.url)              # open in a browser
+    """
+
+    def __init__(self, *, grpc_port: int | None = None, web_port: int | None = None, timeout_s: float = 20.0):
+        self.grpc_port = grpc_port or _free_port()
+        self.web_port = web_port or _free_port()
+        self.timeout_s = timeout_s
+        self.process: subprocess.Popen | None = None
+
+    @property
+    def grpc_url(self) -> str:
+        """The proxy a recording streams to, and the viewer reads from."""
+        return f"rerun+http://127.0.0.1:{self.grpc_port}/proxy"
+
+    @property
+    def url(self) -> str:
+        """The web page to open: the viewer, pointed at the proxy."""
+        return f"http://127.0.0.1:{self.web_port}/?url={self.grpc_url.replace('+', '%2B')}"
+
+    def start(self) -> Self:
+        # the venv's own script first: a venv's python run without activating the venv has no bin/ on PATH
+        exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
+        if exe is None:
+            raise RuntimeError(f"the 'rerun' command (installed with rerun-sdk) is neither beside {sys.executable} "
+                               "nor on PATH")
+        for port in (self.grpc_port, self.web_port):
+            if _port_open(port):
+                raise RuntimeError(f"port {port} on 127.0.0.1 is already in use")
+        self.process = subprocess.Popen(
+            [exe, "--serve-web", "--bind", "127.0.0.1", "--port", str(self.grpc_port),
+             "--web-viewer-port", str(self.web_port)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        deadline = time.monotonic() + self.timeout_s
+        while not self.healthy():
+            if self.process.poll() is not None:
+                code = self.process.returncode
+                self.stop()
+                raise RuntimeError(f"rerun viewer server exited with code {code}")
+            if time.monotonic() > deadline:
+                self.stop()
+                raise RuntimeError(f"rerun viewer server did not answer within {self.timeout_s:g} s")
+            time.sleep(0.1)
+        return self
+
+    def healthy(self) -> bool:
+        """The proxy accepts connections and the web page answers HTTP 200."""
+        import urllib.request
+
+        if not (_port_open(self.grpc_port) and _port_open(self.web_port)):
+            return False
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{self.web_port}/", timeout=2.0) as resp:
+                return resp.status == 200
+        except OSError:
+            return False
+
+    def connect(self, rec: rr.RecordingStream) -> None:
+        """Stream ``rec`` to the proxy (the viewer shows it live)."""
+        rec.connect_grpc(self.grpc_url)
+
+    def stop(self) -> None:
+        """Stop the server's whole process group and wait until its ports are free (idempotent)."""
+        proc, self.process = self.process, None
+        if proc is None:
+            return
+        for sig, wait in ((signal.SIGTERM, 5.0), (signal.SIGKILL, None)):
+            try:
+                os.killpg(proc.pid, sig)
+            except ProcessLookupError:
                 break
-        time.sleep(0.1)
-    else:
-        proc.terminate()
-        raise RuntimeError("rerun viewer server did not start within 20 s")
-    grpc_url = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
-    rec.connect_grpc(grpc_url)
-    return f"http://127.0.0.1:{web_port}/?url={grpc_url.replace('+', '%2B')}", proc
+            if wait is not None:
+                try:
+                    proc.wait(timeout=wait)
+                except subprocess.TimeoutExpired:
+                    pass
+        proc.wait()
+        deadline = time.monotonic() + 10.0
+        while (_port_open(self.grpc_port) or _port_open(self.web_port)) and time.monotonic() < deadline:
+            time.sleep(0.1)
+
+    def __enter__(self) -> Self:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
 
 
 class RerunRecorder:
@@ -110,7 +184,11 @@ class RerunRecorder:
         self.path = None if path is None else os.fspath(path)
         if self.path is not None:
             self.rec.save(self.path)
-        self.url, self._server = serve_localhost(self.rec) if serve else (None, None)
+        self.viewer = ServedViewer().start() if serve else None
+        """The served web viewer, if ``serve``; stopped by :meth:`close`."""
+        if self.viewer is not None:
+            self.viewer.connect(self.rec)
+        self.url = self.viewer.url if self.viewer is not None else None
         if self.url:
             print(f"Rerun web viewer (localhost only): {self.url}", flush=True)
         self.real_time = real_time
@@ -223,23 +301,10 @@ class RerunRecorder:
     def close(self) -> None:
         """Flush and close the recording (and stop a served viewer)."""
         self.rec.flush()
-        server = self._server
-        if self.path is not None or server is not None:  # sinks this recorder opened
+        if self.path is not None or self.viewer is not None:  # sinks this recorder opened
             self.rec.disconnect()
-        if server is not None:
-            # Its own session: signal the whole group. A launcher (pyenv shim, rerun_cli) may exit
-            # before the viewer binary it started, so the group is killed after the wait regardless.
-            for sig, wait in ((signal.SIGTERM, 5.0), (signal.SIGKILL, None)):
-                try:
-                    os.killpg(server.pid, sig)
-                except ProcessLookupError:
-                    break
-                if wait is not None:
-                    try:
-                        server.wait(timeout=wait)
-                    except subprocess.TimeoutExpired:
-                        pass
-            server.wait()
+        if self.viewer is not None:
+            self.viewer.stop()
 
 
 class RerunLogger(Logger):

@@ -1,0 +1,172 @@
+"""Pictures for the README, straight from the simulator: ``python docs/make_pictures.py``.
+
+Runs the shipped policy on the first episodes of the standard evaluation set (seed 2024) and
+draws, with matplotlib, from the chassis poses the simulator produced:
+
+- ``docs/trajectories.png``: top-down view of the arena with every episode's path, coloured by
+  world, its start and its target (the 1 m success disc);
+- ``docs/episode.gif``: one episode animated, the rover's footprint (from the URDF's chassis
+  box) turning toward its target and driving there;
+- with ``--viewer``: ``docs/viewer.png``, the Rerun web viewer showing a recorded evaluation,
+  served on localhost and photographed in headless Chromium (needs Debian's ``chromium`` and
+  the ``browser`` extra).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+DOCS = Path(__file__).resolve().parent
+
+
+def rollout(num_episodes: int, seed: int) -> dict:
+    """First episode of each world: chassis x, y, yaw per step until it ended, targets, end reasons."""
+    from tensordict import TensorDict
+
+    from atrv_warp import ATRVjrEnv, load_policy
+    from atrv_warp.task.spec import END_REASONS
+
+    env = ATRVjrEnv(num_episodes, seed=seed)
+    policy = load_policy()
+    td = env.reset()
+    target = env.target.clone().numpy()
+    poses = [torch.cat([env.sim.root_pose[:, :2], env.sim.rpy[:, 2:3]], -1).clone()]
+    ended = torch.zeros(num_episodes, dtype=torch.bool)
+    reason = torch.zeros(num_episodes, dtype=torch.long)
+    length = torch.full((num_episodes,), env.task_cfg.max_steps)
+    for t in range(env.task_cfg.max_steps):
+        td = env.step(policy(TensorDict(observation=td["observation"], batch_size=[num_episodes])))["next"]
+        poses.append(torch.cat([env.sim.root_pose[:, :2], env.sim.rpy[:, 2:3]], -1).clone())
+        newly = td["done"][:, 0] & ~ended
+        reason[newly] = td["end_reason"][newly, 0]
+        length[newly] = t + 1
+        ended |= newly
+        if bool(ended.all()):
+            break
+    chassis = env.sim.description.chassis_box
+    return {"poses": torch.stack(poses).numpy(), "target": target, "length": length.numpy(),
+            "reason": [END_REASONS[int(r)] for r in reason], "half_size": env.sim.arena_cfg.half_size,
+            "reach": env.task_cfg.reach_radius, "footprint": 2 * chassis[1][:2] if chassis is not None else (0.6, 0.4),
+            "dt": env.sim.sim_cfg.step_dt}
+
+
+def _arena(ax, h: float) -> None:
+    from matplotlib.patches import Rectangle
+
+    ax.add_patch(Rectangle((-h, -h), 2 * h, 2 * h, fill=False, lw=3, color="0.35"))  # the walls' inner faces
+    ax.set_xlim(-h - 1, h + 1)
+    ax.set_ylim(-h - 1, h + 1)
+    ax.set_aspect("equal")
+    ax.grid(alpha=0.25)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+
+
+def draw_trajectories(run: dict, out: Path) -> None:
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle
+
+    fig, ax = plt.subplots(figsize=(6.4, 6.4), dpi=110)
+    _arena(ax, run["half_size"])
+    colors = plt.get_cmap("tab10")
+    for w in range(len(run["length"])):
+        c = colors(w % 10)
+        xy = run["poses"][: run["length"][w] + 1, w, :2]
+        ax.plot(xy[:, 0], xy[:, 1], color=c, lw=2)
+        ax.plot(*xy[0], "o", color=c, ms=6)
+        ax.add_patch(Circle(tuple(run["target"][w]), run["reach"], color=c, alpha=0.25))
+        ax.plot(*run["target"][w], "x", color=c, ms=8, mew=2)
+    ok = sum(r == "success" for r in run["reason"])
+    ax.set_title(f"shipped policy, {len(run['length'])} evaluation episodes: {ok} reached their target\n"
+                 "(o start, x target, disc = 1 m success radius)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out)
+    plt.close(fig)
+
+
+def draw_episode(run: dict, world: int, out: Path, every: int = 2) -> None:
+    import matplotlib.pyplot as plt
+    from matplotlib import animation
+    from matplotlib.patches import Circle, Polygon
+
+    n = int(run["length"][world]) + 1
+    traj = run["poses"][:n, world]
+    lx, ly = run["footprint"][0] / 2, run["footprint"][1] / 2
+    corners = np.array([[lx, ly], [lx, -ly], [-lx, -ly], [-lx, ly]])
+    fig, ax = plt.subplots(figsize=(4.2, 4.2), dpi=80)
+    target = run["target"][world]
+    lo = np.minimum(traj[:, :2].min(0), target) - 2.0
+    hi = np.maximum(traj[:, :2].max(0), target) + 2.0
+    span = (hi - lo).max()
+    ax.set_xlim(lo[0], lo[0] + span)
+    ax.set_ylim(lo[1], lo[1] + span)
+    ax.set_aspect("equal")
+    ax.grid(alpha=0.25)
+    ax.add_patch(Circle(tuple(target), run["reach"], color="tab:blue", alpha=0.25))
+    ax.plot(*target, "x", color="tab:blue", ms=9, mew=2)
+    (trail,) = ax.plot([], [], color="tab:orange", lw=2)
+    body = ax.add_patch(Polygon(corners, closed=True, color="tab:red"))
+    title = ax.set_title("")
+
+    def frame(i: int):
+        x, y, yaw = traj[i]
+        rot = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
+        body.set_xy(corners @ rot.T + (x, y))
+        trail.set_data(traj[: i + 1, 0], traj[: i + 1, 1])
+        title.set_text(f"t = {i * run['dt']:.2f} s")
+        return body, trail, title
+
+    frames = list(range(0, n, every)) + [n - 1]
+    anim = animation.FuncAnimation(fig, frame, frames=frames, blit=False)
+    anim.save(out, writer=animation.PillowWriter(fps=round(1 / (run["dt"] * every))))
+    plt.close(fig)
+
+
+def viewer_screenshot(out: Path, episodes: int = 4) -> None:
+    """Record the shipped policy's evaluation into a served viewer and photograph the page."""
+    from atrv_warp import ATRVjrEnv, load_policy
+    from atrv_warp.integrations.browser import capture_viewer
+    from atrv_warp.integrations.rerun import RerunRecorder
+    from atrv_warp.task.evaluation import evaluate
+
+    env = ATRVjrEnv(episodes)
+    recorder = RerunRecorder(env.sim, serve=True, worlds=range(episodes))
+    try:
+        evaluate(load_policy(), num_episodes=episodes, env=env, on_step=recorder.env_hook())
+        recorder.rec.flush()
+        report = capture_viewer(recorder.viewer, out, size=(1400, 860), settle_s=8.0)
+    finally:
+        recorder.close()
+    if not report.grpc_responses or report.errors:
+        raise RuntimeError(f"the viewer did not load the recording: {report.errors or report.console[-5:]}")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=8)
+    parser.add_argument("--seed", type=int, default=2024, help="the standard evaluation set's seed")
+    parser.add_argument("--world", type=int, default=0, help="the episode to animate")
+    parser.add_argument("--out-dir", default=str(DOCS))
+    parser.add_argument("--viewer", action="store_true", help="also photograph the Rerun web viewer (Chromium)")
+    args = parser.parse_args()
+    import matplotlib
+
+    matplotlib.use("Agg")
+    run = rollout(args.episodes, args.seed)
+    out = Path(args.out_dir)
+    draw_trajectories(run, out / "trajectories.png")
+    draw_episode(run, args.world, out / "episode.gif")
+    print(f"{', '.join(run['reason'])}\nwrote {out / 'trajectories.png'} and {out / 'episode.gif'}")
+    if args.viewer:
+        viewer_screenshot(out / "viewer.png")
+        print(f"wrote {out / 'viewer.png'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
