@@ -2,7 +2,6 @@
 :func:`make_loggers`, :class:`Learner`, :class:`Evaluator`, :class:`Checkpoint`, and
 :func:`train`, which reads top to bottom. The command line is ``python -m atrv_warp.train``."""
 
-
 from __future__ import annotations
 
 import dataclasses
