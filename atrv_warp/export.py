@@ -1,0 +1,46 @@
+"""Export a trained policy to a file that runs with torch alone: ``python -m atrv_warp.export [POLICY] OUT``.
+
+POLICY is a ``best_policy.pt``, a training ``checkpoint.pt``, or omitted for the policy shipped
+with the package; OUT ends in ``.pt2`` (a ``torch.export`` archive). See
+:mod:`atrv_warp.rl.export` for what the file holds, and ``examples/run_exported_policy.py`` for a
+standalone inference loop.
+
+Examples::
+
+    python -m atrv_warp.export policy.pt2                               # the shipped policy
+    python -m atrv_warp.export runs/default/best_policy.pt my_rover.pt2
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from atrv_warp.runtime import error_line
+from atrv_warp.storage import FileFormatError
+
+__all__ = ["main"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m atrv_warp.export", description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    parser.add_argument("paths", nargs="+", metavar="[POLICY] OUT", help="policy file (default: shipped), output .pt2")
+    args = parser.parse_args(argv)
+    if len(args.paths) > 2:
+        parser.error("expected [POLICY] OUT")
+    policy, out = (None, args.paths[0]) if len(args.paths) == 1 else args.paths
+    from atrv_warp.rl.export import export_policy, load_exported
+
+    try:
+        path = export_policy(policy, out)
+    except (FileNotFoundError, FileFormatError, ValueError) as err:
+        return error_line(parser.prog, str(err))
+    _, spec = load_exported(path)
+    print(f"wrote {path}: observation ({len(spec['observation'])},) -> action (2,) in [-1, 1] "
+          f"x {spec['action']['scale']:g} N·m; runs with torch alone (torch.export.load)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,86 @@
+"""A trained policy that leaves the simulator: a file that runs with torch alone.
+
+:func:`export_policy` writes the deterministic policy (observation normalisation included) as a
+``torch.export`` program (``.pt2``): raw observation (B, 10) in, action (B, 2) in [-1, 1] out,
+the action TorchRL's deterministic exploration gives (tanh of the Gaussian's mean). The file
+also carries ``atrv_warp.json``: the observation fields with their bounds, the action's meaning
+and the policy's metadata, so a robot stack can build the observation without this package.
+
+Load it anywhere torch runs, with no Warp, Newton or TorchRL::
+
+    import json, torch
+    extra = {"atrv_warp.json": ""}
+    program = torch.export.load("policy.pt2", extra_files=extra)
+    spec = json.loads(extra["atrv_warp.json"])
+    action = program.module()(observation)          # (B, 10) float32 -> (B, 2)
+    torques = action * spec["action"]["scale"]      # [left, right] wheel torque [N·m]
+
+The command line is ``python -m atrv_warp.export [POLICY] OUT``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+from torch import nn
+
+from atrv_warp.rl.agents import load_policy, pretrained_policy_path
+from atrv_warp.task.config import TaskConfig
+from atrv_warp.task.spec import ACTION_DIM, OBS_DIM, OBSERVATION
+
+__all__ = ["EXPORT_FORMAT", "PolicyNet", "export_policy", "load_exported"]
+
+EXPORT_FORMAT = "atrv_warp.exported_policy/1"
+
+
+class PolicyNet(nn.Module):
+    """Raw observation (B, OBS_DIM) -> deterministic action (B, ACTION_DIM) in [-1, 1]."""
+
+    def __init__(self, net: nn.Sequential):
+        super().__init__()
+        self.normalize, self.mlp = net[0], net[1]  # Normalize, MLP; net[2] splits (loc, scale)
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        loc = self.mlp(self.normalize(observation))[..., :ACTION_DIM]
+        return torch.tanh(loc)
+
+
+def _spec(source: Path, meta: dict) -> dict:
+    task = TaskConfig()
+    return {"format": EXPORT_FORMAT, "source": str(source), "policy_meta": meta,
+            "observation": [{"name": f.name, "bound": f.bound, "description": f.description} for f in OBSERVATION],
+            "action": {"names": ["left", "right"], "low": -1.0, "high": 1.0, "scale": task.action_scale,
+                       "unit_after_scale": "N·m wheel torque, per side"},
+            "step_dt": 0.05}
+
+
+def export_policy(policy: str | Path | None, out: str | Path) -> Path:
+    """Write the policy file ``policy`` (default: the shipped one) to ``out`` (``.pt2``)."""
+    from atrv_warp.storage import load_weights
+
+    if Path(out).suffix != ".pt2":
+        raise ValueError(f"{out}: the exported file must end in .pt2 (a torch.export archive)")
+    source = Path(policy) if policy is not None else pretrained_policy_path()
+    actor = load_policy(source, deterministic=False)  # checks the file, names any problem
+    payload = load_weights(source, "policy file")
+    meta = payload.get("policy", payload).get("meta", {})
+    net = PolicyNet(actor.module[0].module).eval()
+    example = torch.zeros(2, OBS_DIM)
+    batch = torch.export.Dim("batch")
+    with torch.no_grad():
+        program = torch.export.export(net, (example,), dynamic_shapes=({0: batch},))
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.stem}.tmp.pt2")  # atomic: written beside, then renamed
+    torch.export.save(program, tmp, extra_files={"atrv_warp.json": json.dumps(_spec(source, meta), default=str)})
+    tmp.replace(out)
+    return out
+
+
+def load_exported(path: str | Path) -> tuple[nn.Module, dict]:
+    """The exported program's module and its ``atrv_warp.json`` description."""
+    extra = {"atrv_warp.json": ""}
+    program = torch.export.load(str(path), extra_files=extra)
+    return program.module(), json.loads(extra["atrv_warp.json"])
