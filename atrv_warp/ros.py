@@ -1,38 +1,44 @@
-"""ROS 2 bridge: a real rclpy node that simulates one ATRV-Jr, publishes ``/pose`` and obeys ``/command``.
+"""ROS 2 base driver for simulated ATRV-Jr rovers: ``python -m atrv_warp.ros [--ros-args -p name:=value …]``.
 
 Run::
 
-    python -m atrv_warp.ros                                   # real time, pose at 10 Hz
-    python -m atrv_warp.ros --ros-args -p real_time_factor:=0.0 -p duration:=5.0 -p mode:=forward
+    python -m atrv_warp.ros                                   # one rover, real time
+    python -m atrv_warp.ros --ros-args -p num_rovers:=2       # /rover_0/…, /rover_1/…
+    ros2 topic pub -r 10 /cmd_vel geometry_msgs/msg/Twist "{linear: {x: 0.5}, angular: {z: 0.2}}"
     ros2 topic pub --once /command std_msgs/msg/String "{data: rotate_left}"
 
-Topics:
-    ``/pose`` (geometry_msgs/msg/PoseStamped, out): chassis pose; stamp = simulation time,
-    frame_id = the chassis body name (parameter ``frame_id`` overrides it).
-    ``/command`` (std_msgs/msg/String, in): coast | forward | backward | rotate_left |
-    rotate_right (applied at the next step) | goal (drive to the last ``/goal``); anything else is
-    logged and ignored.
-    ``/goal`` (geometry_msgs/msg/PoseStamped, in): a target; switches to ``goal`` mode, in which a
-    trained policy (the shipped one by default) drives the rover there.
-    ``/goal_status`` (std_msgs/msg/String, out): ``distance=<m>`` at the pose rate, then ``reached``.
-    ``/clock`` (rosgraph_msgs/msg/Clock, out): simulation time, for nodes with ``use_sim_time``.
+Topics (per rover; under ``/rover_<k>`` when ``num_rovers`` > 1):
+    ``cmd_vel`` (geometry_msgs/Twist, in): linear.x [m/s] and angular.z [rad/s], through skid-steer
+    kinematics (effective track = ``effective_track_factor`` x wheel track) to wheel-speed
+    targets, held by a PI controller within the motor limit. A watchdog stops the rover when no
+    command arrives for ``cmd_vel_timeout`` s of sim time. Non-finite values are logged, ignored.
+    ``command`` (std_msgs/String, in): coast | forward | backward | rotate_left | rotate_right
+    (the reference's fixed-torque modes) | goal; the newest command source wins.
+    ``goal`` (geometry_msgs/PoseStamped, in): drive there with the trained policy (shipped one
+    by default); ``goal_status`` (std_msgs/String, out): ``distance=<m>``, then ``reached``.
+    ``odom`` (nav_msgs/Odometry, out): wheel odometry (frame ``odom``, child ``base_link``), skid
+    error included, with pose and twist covariances; the odom frame starts at the start pose.
+    ``ground_truth/odom`` (nav_msgs/Odometry, out): the simulator's pose (frame ``world``) and
+    body-frame twist.
+    ``joint_states`` (sensor_msgs/JointState, out): wheel joint positions [rad] and velocities.
+    ``imu`` (sensor_msgs/Imu, out, frame ``cbimu_frame``): orientation, angular velocity and
+    specific force (+9.81 m/s² up at rest) from the simulated motion, with Gaussian noise.
+    ``pose`` (geometry_msgs/PoseStamped, out): the reference's chassis pose topic.
+Shared: ``/clock`` (rosgraph_msgs/Clock, every step: use ``use_sim_time``) and
+``/robot_description`` (std_msgs/String, the URDF, transient local).
+State topics come at ``publish_rate`` Hz of sim time; stamps are sim time. No ``/tf``: tf2_msgs
+is not on the package index here.
 
-Parameters (``--ros-args -p name:=value``): ``real_time_factor`` (1.0; 0 = as fast as
-possible), ``publish_rate`` [Hz] (10.0), ``duration`` [s of sim time] (0 = until Ctrl-C),
-``mode`` (initial driving mode, coast), ``variant`` (realistic), ``x``, ``y``, ``yaw`` (start),
-``frame_id``, ``policy`` (policy file for goal mode; empty = shipped), ``bag`` (write an MCAP
-ROS 2 bag of /pose, /command, /goal, /goal_status; empty = off), ``wait_for_subscribers`` (wait
-until this many /pose subscribers are matched before starting; 0).
-
-The simulator does not depend on ROS: this module is a thin layer over
-:meth:`atrv_warp.sim.RoverSim.set_mode`.
+Parameters: see :data:`atrv_warp.integrations.ros.node.PARAMETERS` (each declared with its
+description: ``ros2 param describe /atrv_sim <name>``). An unknown parameter, or a bad value,
+is refused at start-up with a message naming it.
 """
 
 from __future__ import annotations
 
 import sys
 
-from .integrations.ros import run
+from atrv_warp.integrations.ros import parameter_help, run
 
 __all__ = ["main"]
 
@@ -41,6 +47,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv if argv is None else argv
     if any(a in ("-h", "--help") for a in argv[1:]) and "--ros-args" not in argv:
         print(__doc__)
+        print(f"Parameters (--ros-args -p name:=value):\n{parameter_help()}")
         return 0
     return run(argv)
 

@@ -11,7 +11,7 @@ import time
 import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="ROS 2 extra not installed: pip install -e '.[ros]'")
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, Twist
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
@@ -179,3 +179,138 @@ def test_missing_extra_message():
     from atrv_warp.integrations.ros import MISSING_ROS_MESSAGE
 
     assert "pip install -e '.[ros]'" in MISSING_ROS_MESSAGE
+
+
+class DriverClient:
+    """Subscribes to every base-driver topic of the rovers under ``prefixes``; publishes /cmd_vel."""
+
+    def __init__(self, name, prefixes):
+        from nav_msgs.msg import Odometry
+        from sensor_msgs.msg import Imu, JointState
+
+        self.node = rclpy.create_node(name)
+        self.msgs = {}
+        for prefix in prefixes:
+            for topic, kind in (("odom", Odometry), ("ground_truth/odom", Odometry), ("joint_states", JointState),
+                                ("imu", Imu)):
+                key = f"{prefix}/{topic}"
+                self.msgs[key] = []
+                self.node.create_subscription(kind, key, self.msgs[key].append, 100)
+        self.poses = []  # the node waits for a /pose subscriber of its first rover before starting
+        self.node.create_subscription(PoseStamped, f"{prefixes[0]}/pose", self.poses.append, 10)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
+        self.description = []
+        self.node.create_subscription(String, "/robot_description", lambda m: self.description.append(m.data),
+                                      latched)
+        self.cmd = {p: self.node.create_publisher(Twist, f"{p}/cmd_vel", 10) for p in prefixes}
+
+    def drive(self, seconds, commands):
+        """Publish ``commands`` {prefix: (v, w)} at 10 Hz for ``seconds`` of wall time, spinning."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            for prefix, (v, w) in commands.items():
+                msg = Twist()
+                msg.linear.x, msg.angular.z = v, w
+                self.cmd[prefix].publish(msg)
+            t = time.monotonic() + 0.1
+            while time.monotonic() < t:
+                rclpy.spin_once(self.node, timeout_sec=0.02)
+
+    def last(self, key):
+        return self.msgs[key][-1]
+
+    def wait(self, cond, timeout):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and not cond():
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+        return cond()
+
+
+def _planar(odom):
+    p = odom.pose.pose.position
+    return p.x, p.y
+
+
+def _yaw(odom):
+    q = odom.pose.pose.orientation
+    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+
+
+def _wrap(angle):
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def _stamp(msg):
+    return msg.header.stamp.sec, msg.header.stamp.nanosec
+
+
+def _paired(client, a, b):
+    """The newest messages of topics ``a`` and ``b`` with the same stamp (one simulator step)."""
+    stamps = {_stamp(m): m for m in client.msgs[b]}
+    return next((m, stamps[_stamp(m)]) for m in reversed(client.msgs[a]) if _stamp(m) in stamps)
+
+
+def test_base_driver_two_rovers_cmd_vel_odometry_imu_watchdog(ros_env):
+    proc = start_node(ros_env, "num_rovers:=2", "wait_for_subscribers:=1", "duration:=40.0")
+    client = DriverClient("atrv_driver_client", ["/rover_0", "/rover_1"])
+    try:
+        assert client.wait(lambda: all(client.msgs[k] for k in client.msgs), 90), "no state topics"
+        # rover 0 drives straight at 0.5 m/s, rover 1 turns in place at 0.3 rad/s: independently
+        client.drive(1.5, {"/rover_0": (0.5, 0.0), "/rover_1": (0.0, 0.3)})  # past the spin-up slip
+        truth, odom = _paired(client, "/rover_0/ground_truth/odom", "/rover_0/odom")
+        start0, odom0 = _planar(truth), _planar(odom)
+        truth, odom = _paired(client, "/rover_1/ground_truth/odom", "/rover_1/odom")
+        start1, yaw_truth1, yaw_odom1 = _planar(truth), _yaw(truth), _yaw(odom)
+        client.drive(3.0, {"/rover_0": (0.5, 0.0), "/rover_1": (0.0, 0.3)})
+        truth0, truth1 = client.last("/rover_0/ground_truth/odom"), client.last("/rover_1/ground_truth/odom")
+        assert truth0.twist.twist.linear.x == pytest.approx(0.5, rel=0.10)
+        assert abs(truth0.twist.twist.angular.z) < 0.02
+        assert truth1.twist.twist.angular.z == pytest.approx(0.3, rel=0.15)
+        assert math.dist(_planar(truth1), start1) < 0.1  # turned in place
+        # wheel odometry against the truth, cruising: a straight run agrees within 5 % of the distance,
+        # and the turn's heading change within 5 % (the effective track is calibrated for skid)
+        truth, odom = _paired(client, "/rover_0/ground_truth/odom", "/rover_0/odom")
+        driven, odo_driven = math.dist(_planar(truth), start0), math.dist(_planar(odom), odom0)
+        assert driven > 1.0
+        assert odo_driven == pytest.approx(driven, rel=0.05), (odo_driven, driven)
+        truth, odom = _paired(client, "/rover_1/ground_truth/odom", "/rover_1/odom")
+        turned, odo_turned = _wrap(_yaw(truth) - yaw_truth1), _wrap(_yaw(odom) - yaw_odom1)
+        assert turned > 0.5 and odo_turned == pytest.approx(turned, rel=0.05), (odo_turned, turned)
+        # message types, frames, joints, IMU at rest-ish on flat ground: specific force ~ +g up
+        odom = client.last("/rover_0/odom")
+        assert (odom.header.frame_id, odom.child_frame_id) == ("odom", "base_link")
+        assert len(odom.pose.covariance) == 36 and odom.pose.covariance[0] > 0
+        joints = client.last("/rover_1/joint_states")
+        assert len(joints.name) == 4 and len(joints.position) == 4 and len(joints.velocity) == 4
+        imu = client.last("/rover_0/imu")
+        assert imu.header.frame_id == "cbimu_frame"
+        assert imu.linear_acceleration.z == pytest.approx(9.81, abs=0.5)
+        assert "<robot" in client.description[0]
+        n = len(client.msgs["/rover_0/odom"])
+        client.drive(2.0, {})
+        rate = (len(client.msgs["/rover_0/odom"]) - n) / 2.0
+        assert 7.0 <= rate <= 13.0, rate  # 10 Hz of sim time, in real time
+        # watchdog: no /cmd_vel for 0.5 s stops the rover; a NaN command is ignored
+        bad = Twist()
+        bad.linear.x = float("nan")
+        client.cmd["/rover_1"].publish(bad)
+        client.drive(2.0, {})
+        assert abs(client.last("/rover_0/ground_truth/odom").twist.twist.linear.x) < 0.05
+        assert abs(client.last("/rover_1/ground_truth/odom").twist.twist.angular.z) < 0.02
+        assert proc.poll() is None
+    finally:
+        client.node.destroy_node()
+        out = stop(proc)
+    assert "/rover_0/cmd_vel silent for 0.5 s: stopping" in out
+    assert "ignored non-finite /rover_1/cmd_vel" in out
+    assert proc.returncode == 0, out[-2000:]
+
+
+def test_bad_parameters_are_refused_at_start(ros_env):
+    for params, message in ((["bogus_param:=1"], "unknown parameter(s) ['bogus_param']"),
+                            (["num_rovers:=0"], "num_rovers must be in 1")):
+        proc = start_node(ros_env, *params)
+        out, _ = proc.communicate(timeout=120)
+        assert proc.returncode == 2, out[-2000:]
+        assert message in out, out[-2000:]

@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import sys
 
+from atrv_warp.integrations.ros.base import BaseParams
 from atrv_warp.sim.simulator import DriveMode
 
-__all__ = ["COMMANDS", "GOAL", "MISSING_ROS_MESSAGE", "BagWriter", "pose_dict", "run"]
+__all__ = ["COMMANDS", "GOAL", "MAX_ROVERS", "MISSING_ROS_MESSAGE", "PARAMETERS", "VELOCITY", "BagWriter",
+           "parameter_help", "pose_dict", "run"]
 
 MISSING_ROS_MESSAGE = (
     "ROS 2 Python packages are not installed (needed: rclpy, geometry_msgs, std_msgs, rosgraph_msgs).\n"
@@ -20,6 +22,35 @@ MISSING_ROS_MESSAGE = (
 
 GOAL = "goal"
 COMMANDS = tuple(m.value for m in DriveMode) + (GOAL,)
+
+VELOCITY = "velocity"
+"""The mode /cmd_vel switches to."""
+MAX_ROVERS = 64
+
+PARAMETERS = (
+    ("real_time_factor", 1.0, "simulated seconds per wall second; 0 = as fast as possible"),
+    ("publish_rate", 10.0, "rate of /pose, /odom, /ground_truth/odom, /joint_states and /imu [Hz of sim time]"),
+    ("duration", 0.0, "stop after this much sim time [s]; 0 = until Ctrl-C"),
+    ("mode", "coast", "initial driving mode: coast | forward | backward | rotate_left | rotate_right"),
+    ("variant", "realistic", "rover variant: realistic | reference"),
+    ("x", 0.0, "start x of rover 0 [m]"), ("y", 0.0, "start y of rover 0 [m]"), ("yaw", 0.0, "start yaw [rad]"),
+    ("spacing", 2.0, "rover k starts at y + k * spacing [m]"),
+    ("num_rovers", 1, f"rovers simulated (1 … {MAX_ROVERS}); more than one puts each under /rover_<k>"),
+    ("frame_id", "", "frame_id of /pose (default: the URDF's chassis link)"),
+    ("odom_frame", "odom", "frame of /odom (REP 105)"), ("base_frame", "base_link", "child frame of /odom"),
+    ("policy", "", "policy file for goal mode (default: the shipped one)"),
+    ("bag", "", "write an MCAP ROS 2 bag of /pose, /command, /goal and /goal_status here"),
+    ("wait_for_subscribers", 0, "wait for this many /pose subscribers before starting"),
+    ("reach_radius", 1.0, "goal mode: reached within this distance [m]"),
+    ("effective_track_factor", BaseParams.effective_track_factor, "skid: effective track / wheel track"),
+    ("wheel_kp", BaseParams.kp, "wheel-speed PI proportional gain [N·m per rad/s]"),
+    ("wheel_ki", BaseParams.ki, "wheel-speed PI integral gain [N·m per rad]"),
+    ("cmd_vel_timeout", BaseParams.timeout, "watchdog: stop when no /cmd_vel arrives for this long [s]"),
+    ("imu_accel_noise", 0.05, "IMU accelerometer noise, standard deviation [m/s²]"),
+    ("imu_gyro_noise", 0.005, "IMU gyroscope noise, standard deviation [rad/s]"),
+    ("seed", 0, "seed of the IMU noise"),
+)
+"""(name, default, description) of every parameter the node declares."""
 
 _STRING_DEF = "string data\n"
 _POSE_STAMPED_DEF = """std_msgs/Header header
@@ -48,6 +79,11 @@ float64 y 0
 float64 z 0
 float64 w 1
 """
+
+
+def parameter_help() -> str:
+    """The node's parameters as ``name (default): description`` lines."""
+    return "\n".join(f"    {name} ({default!r}): {text}" for name, default, text in PARAMETERS)
 
 
 class BagWriter:
@@ -93,7 +129,7 @@ def run(args: list[str] | None = None) -> int:
         print(MISSING_ROS_MESSAGE, file=sys.stderr)
         return 2
     rclpy.init(args=args)
-    node = RoverSimNode()
+    node = RoverSimNode(args)
     try:
         node.setup()
         node.spin_simulation()

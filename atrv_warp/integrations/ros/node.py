@@ -1,36 +1,40 @@
 """The rclpy node behind ``python -m atrv_warp.ros`` (imported only where rclpy is installed).
 
-:class:`RoverSimNode` owns one simulated rover, its publishers, subscriptions and optional bag;
-:meth:`RoverSimNode.spin_simulation` steps it in (scaled) real time and serves callbacks between
-steps. Topics and parameters are listed in :mod:`atrv_warp.ros`.
+:class:`RoverSimNode` simulates ``num_rovers`` rovers in one simulator, each with its own topics
+(under ``/rover_<k>`` when there is more than one), and steps them in (scaled) real time,
+serving callbacks between steps. Topics and parameters are listed in :mod:`atrv_warp.ros`.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 
 import rclpy
 import torch
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import String
 
-from atrv_warp.integrations.ros import COMMANDS, GOAL, BagWriter, pose_dict
-from atrv_warp.sim.simulator import DriveMode
+from atrv_warp.integrations.ros import COMMANDS, GOAL, MAX_ROVERS, PARAMETERS, VELOCITY, BagWriter, pose_dict
+from atrv_warp.integrations.ros.base import BaseParams, VelocityController, WheelOdometry, imu_reading, yaw_quaternion
+from atrv_warp.sim.simulator import DRIVE_MODE_TORQUES, DriveMode
 from atrv_warp.task.env import ATRVjrEnv
 from atrv_warp.task.spec import action_to_torque
 
-__all__ = ["PARAMETERS", "NodeConfigError", "RoverSimNode"]
+__all__ = ["NodeConfigError", "RoverIO", "RoverSimNode", "unknown_parameters"]
 
-PARAMETERS = (
-    ("real_time_factor", 1.0), ("publish_rate", 10.0), ("duration", 0.0), ("mode", "coast"),
-    ("variant", "realistic"), ("x", 0.0), ("y", 0.0), ("yaw", 0.0), ("frame_id", ""), ("policy", ""),
-    ("bag", ""), ("wait_for_subscribers", 0), ("reach_radius", 1.0))
-"""(name, default) of every ROS parameter the node declares."""
+# Diagonal covariances of the wheel odometry (x, y, z, roll, pitch, yaw); z and the tilts are not
+# observed by wheel odometry, so they are marked as unknown with a large variance.
+_ODOM_POSE_VAR = (0.01, 0.01, 1e6, 1e6, 1e6, 0.05)
+_ODOM_TWIST_VAR = (0.01, 0.01, 1e6, 1e6, 1e6, 0.05)
 
 
 class NodeConfigError(ValueError):
@@ -41,41 +45,216 @@ def _stamp(ns: int) -> Time:
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
-class RoverSimNode(Node):
-    """One simulated ATRV-Jr as a ROS 2 node: ``/pose``, ``/clock``, ``/goal_status`` out;
-    ``/command`` and ``/goal`` in.
+def unknown_parameters(args: list[str] | None) -> list[str]:
+    """Names given as ``-p name:=value`` after ``--ros-args`` that the node does not declare."""
+    args = list(args or [])
+    known = {name for name, _, _ in PARAMETERS} | {"use_sim_time"}
+    names = [args[i + 1].split(":=")[0] for i, a in enumerate(args[:-1]) if a in ("-p", "--param")]
+    return sorted(set(names) - known)
 
-    Construction declares the parameters; :meth:`setup` checks them (a bad one is logged and
-    raises :class:`NodeConfigError`), then builds the simulator, publishers and subscriptions.
+
+class RoverIO:
+    """One rover's topics, driving mode, velocity controller and odometry."""
+
+    def __init__(self, node: RoverSimNode, index: int, prefix: str, qos: QoSProfile, base: BaseParams):
+        self.node, self.index, self.prefix = node, index, prefix
+        self.mode = self.pending = node.params["mode"]
+        self.goal: tuple[float, float] | None = None
+        self.distance: float | None = None
+        """Distance to the goal at the last goal-mode step [m]."""
+        self.controller = VelocityController(base)
+        self.odometry = WheelOdometry(base)
+        self.prev_vel = torch.zeros(3)
+        self.pose_pub = node.create_publisher(PoseStamped, f"{prefix}/pose", qos)
+        self.status_pub = node.create_publisher(String, f"{prefix}/goal_status", 10)
+        self.odom_pub = node.create_publisher(Odometry, f"{prefix}/odom", 10)
+        self.truth_pub = node.create_publisher(Odometry, f"{prefix}/ground_truth/odom", 10)
+        self.joint_pub = node.create_publisher(JointState, f"{prefix}/joint_states", 10)
+        self.imu_pub = node.create_publisher(Imu, f"{prefix}/imu", 10)
+        node.create_subscription(String, f"{prefix}/command", self.on_command, qos)
+        node.create_subscription(PoseStamped, f"{prefix}/goal", self.on_goal, qos)
+        node.create_subscription(Twist, f"{prefix}/cmd_vel", self.on_cmd_vel, qos)
+
+    # ------------------------------------------------------------------ subscriptions
+    def on_command(self, msg: String) -> None:
+        text = msg.data.strip()
+        self.node.record(f"{self.prefix}/command", "std_msgs/msg/String", {"data": msg.data})
+        if text not in COMMANDS:
+            self.node.log.warning(f"ignored unknown command {msg.data!r} on {self.prefix}/command; "
+                                  f"known: {list(COMMANDS)}")
+            return
+        if text == GOAL and self.goal is None:
+            self.node.log.warning("ignored 'goal': no goal received on /goal yet")
+            return
+        self.pending = text
+
+    def on_goal(self, msg: PoseStamped) -> None:
+        g = (msg.pose.position.x, msg.pose.position.y)
+        if not all(math.isfinite(v) for v in g):
+            self.node.log.warning(f"ignored non-finite goal {g}")
+            return
+        self.node.record(f"{self.prefix}/goal", "geometry_msgs/msg/PoseStamped", pose_dict(msg))
+        self.goal = g
+        self.pending = GOAL
+        self.node.log.info(f"goal ({g[0]:.2f}, {g[1]:.2f}) received: driving there")
+
+    def on_cmd_vel(self, msg: Twist) -> None:
+        v, w = msg.linear.x, msg.angular.z
+        if not (math.isfinite(v) and math.isfinite(w)):
+            self.node.log.warning(f"ignored non-finite {self.prefix}/cmd_vel (linear.x={v}, angular.z={w})")
+            return
+        self.controller.command(v, w, self.node.sim.sim_time)
+        self.pending = VELOCITY
+
+    # ------------------------------------------------------------------ driving
+    def torques(self, side_speeds: torch.Tensor, goal_action) -> torch.Tensor:
+        """(left, right) torques [N·m] of this step for the current mode."""
+        node = self.node
+        if self.pending != self.mode:
+            self.mode = self.pending
+            node.log.info(f"{self.prefix or 'rover'}: mode -> {self.mode}")
+            self.controller.reset()
+        if self.mode == VELOCITY:
+            was_stopped = self.controller.stopped_by_watchdog
+            out = self.controller.torques(side_speeds, node.sim.sim_time, node.sim.sim_cfg.step_dt)
+            if self.controller.stopped_by_watchdog and not was_stopped:
+                node.log.warning(f"{self.prefix}/cmd_vel silent for {self.controller.params.timeout:g} s: stopping")
+            return out
+        if self.mode == GOAL:
+            torques, dist = goal_action(self.index)
+            self.distance = dist
+            if dist < node.params["reach_radius"]:
+                self.publish_status("reached")
+                node.log.info("goal reached")
+                self.mode = self.pending = DriveMode.COAST.value
+                return torch.zeros(2)
+            return torques
+        return torch.tensor(DRIVE_MODE_TORQUES[DriveMode(self.mode)])
+
+    # ------------------------------------------------------------------ publishing
+    def publish_status(self, text: str) -> None:
+        self.status_pub.publish(String(data=text))
+        self.node.record(f"{self.prefix}/goal_status", "std_msgs/msg/String", {"data": text})
+
+    def publish_state(self, ns: int, frame_pose: torch.Tensor, accel: torch.Tensor) -> None:
+        node, sim, k = self.node, self.node.sim, self.index
+        p = sim.root_pose[k].tolist()
+        msg = PoseStamped()
+        msg.header.stamp = _stamp(ns)
+        msg.header.frame_id = node.frame_id
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = p[0], p[1], p[2]
+        o = msg.pose.orientation
+        o.x, o.y, o.z, o.w = p[3], p[4], p[5], p[6]
+        self.pose_pub.publish(msg)
+        node.record(f"{self.prefix}/pose", "geometry_msgs/msg/PoseStamped", pose_dict(msg), ns)
+        self.publish_odometry(ns, p)
+        self.publish_joints(ns)
+        self.publish_imu(ns, frame_pose, accel)
+        if self.mode == GOAL and self.distance is not None:
+            self.publish_status(f"distance={self.distance:.3f}")
+
+    def publish_odometry(self, ns: int, pose: list[float]) -> None:
+        node, sim, k = self.node, self.node.sim, self.index
+        odo = self.odometry
+        msg = Odometry()
+        msg.header.stamp, msg.header.frame_id, msg.child_frame_id = _stamp(ns), node.odom_frame, node.base_frame
+        msg.pose.pose.position.x, msg.pose.pose.position.y = odo.x, odo.y
+        o = msg.pose.pose.orientation
+        o.x, o.y, o.z, o.w = yaw_quaternion(odo.yaw)
+        msg.pose.covariance = [v if i == j else 0.0 for i in range(6) for j, v in enumerate(_ODOM_POSE_VAR)]
+        msg.twist.twist.linear.x, msg.twist.twist.angular.z = odo.linear, odo.angular
+        msg.twist.covariance = [v if i == j else 0.0 for i in range(6) for j, v in enumerate(_ODOM_TWIST_VAR)]
+        self.odom_pub.publish(msg)
+        truth = Odometry()
+        truth.header.stamp, truth.header.frame_id, truth.child_frame_id = _stamp(ns), "world", node.base_frame
+        t = truth.pose.pose
+        t.position.x, t.position.y, t.position.z = pose[0], pose[1], pose[2]
+        t.orientation.x, t.orientation.y, t.orientation.z, t.orientation.w = pose[3], pose[4], pose[5], pose[6]
+        rot = node.chassis_rotation(k)
+        v_body = rot.T @ sim.lin_vel[k].to(torch.float64)
+        w_body = rot.T @ sim.ang_vel[k].to(torch.float64)
+        tw = truth.twist.twist
+        tw.linear.x, tw.linear.y, tw.linear.z = v_body.tolist()
+        tw.angular.x, tw.angular.y, tw.angular.z = w_body.tolist()
+        self.truth_pub.publish(truth)
+
+    def publish_joints(self, ns: int) -> None:
+        node, k = self.node, self.index
+        msg = JointState()
+        msg.header.stamp = _stamp(ns)
+        msg.name = node.joint_names
+        msg.position = node.wheel_positions(k)
+        msg.velocity = node.wheel_velocities(k)
+        self.joint_pub.publish(msg)
+
+    def publish_imu(self, ns: int, frame_pose: torch.Tensor, accel: torch.Tensor) -> None:
+        node, k = self.node, self.index
+        r = imu_reading(frame_pose, node.sim.ang_vel[k], accel, node.sim.sim_cfg.gravity,
+                        (node.params["imu_accel_noise"], node.params["imu_gyro_noise"]), node.noise)
+        msg = Imu()
+        msg.header.stamp, msg.header.frame_id = _stamp(ns), node.imu_frame
+        q = msg.orientation
+        q.x, q.y, q.z, q.w = r["orientation"]
+        msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = r["angular_velocity"]
+        a = msg.linear_acceleration
+        a.x, a.y, a.z = r["linear_acceleration"]
+        gyro, acc = node.params["imu_gyro_noise"] ** 2, node.params["imu_accel_noise"] ** 2
+        msg.angular_velocity_covariance = [gyro, 0.0, 0.0, 0.0, gyro, 0.0, 0.0, 0.0, gyro]
+        msg.linear_acceleration_covariance = [acc, 0.0, 0.0, 0.0, acc, 0.0, 0.0, 0.0, acc]
+        msg.orientation_covariance = [1e-6, 0.0, 0.0, 0.0, 1e-6, 0.0, 0.0, 0.0, 1e-6]
+        self.imu_pub.publish(msg)
+
+
+class RoverSimNode(Node):
+    """Simulated ATRV-Jr rovers as a ROS 2 base driver.
+
+    Construction declares the parameters (with descriptions); :meth:`setup` checks them (a bad
+    or unknown one is logged and raises :class:`NodeConfigError`), then builds the simulator
+    and every rover's topics.
     """
 
-    def __init__(self):
+    def __init__(self, args: list[str] | None = None):
         super().__init__("atrv_sim")
-        self.params = {name: self.declare_parameter(name, default).value for name, default in PARAMETERS}
+        self.params = {name: self.declare_parameter(name, default, ParameterDescriptor(description=text)).value
+                       for name, default, text in PARAMETERS}
         self.log = self.get_logger()
+        self.args = args
         self.bag: BagWriter | None = None
         self.sim = None
+        self.rovers: list[RoverIO] = []
 
     def setup(self) -> None:
         self._check_parameters()
-        self.env = ATRVjrEnv(1, variant=self.params["variant"])  # goal mode reads the policy's observation kernel
+        p = self.params
+        k = p["num_rovers"]
+        self.env = ATRVjrEnv(k, variant=p["variant"])  # goal mode reads the policy's observation kernel
         self.sim = self.env.sim
+        starts = [[p["x"], p["y"] + i * p["spacing"], p["yaw"]] for i in range(k)]
         try:
-            self.sim.reset(poses=[[self.params["x"], self.params["y"], self.params["yaw"]]])
+            self.sim.reset(poses=starts)
         except ValueError as err:
-            self._fail(f"parameters x, y, yaw: {err}")
-        self.sim.set_mode(self.params["mode"])
-        self.every = max(1, round(1.0 / (self.params["publish_rate"] * self.sim.sim_cfg.step_dt)))
-        self.frame_id = self.params["frame_id"] or self.sim.description.chassis
+            self._fail(f"parameters x, y, yaw, spacing: {err}")
+        desc = self.sim.description
+        self.every = max(1, round(1.0 / (p["publish_rate"] * self.sim.sim_cfg.step_dt)))
+        self.frame_id = p["frame_id"] or desc.chassis
+        self.odom_frame, self.base_frame, self.imu_frame = p["odom_frame"], p["base_frame"], "cbimu_frame"
+        self.joint_names = [w.joint for w in desc.wheels]
+        self.side = torch.tensor([w.side for w in desc.wheels])
+        self.noise = torch.Generator().manual_seed(int(p["seed"]))
+        track = abs(float(desc.wheels[0].origin[1, 3]) - float(desc.wheels[-1].origin[1, 3])) \
+            + 2 * self.sim.rover_cfg.wheel_offset
+        base = BaseParams(wheel_radius=self.sim.rover_cfg.wheel_radius, track_width=track,
+                          effective_track_factor=p["effective_track_factor"], kp=p["wheel_kp"], ki=p["wheel_ki"],
+                          torque_limit=self.env.task_cfg.action_scale, timeout=p["cmd_vel_timeout"])
         qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
-        self.pose_pub = self.create_publisher(PoseStamped, "/pose", qos)
-        self.status_pub = self.create_publisher(String, "/goal_status", 10)
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
-        self.create_subscription(String, "/command", self.on_command, qos)
-        self.create_subscription(PoseStamped, "/goal", self.on_goal, qos)
-        self.bag = BagWriter(self.params["bag"]) if self.params["bag"] else None
-        self.mode = self.pending = self.params["mode"]
-        self.goal: tuple[float, float] | None = None
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.create_publisher(String, "/robot_description", latched).publish(String(data=Path(desc.path).read_text()))
+        self.rovers = [RoverIO(self, i, f"/rover_{i}" if k > 1 else "", qos, base) for i in range(k)]
+        for rover, (x, y, yaw) in zip(self.rovers, starts):  # the odom frame starts at the start pose
+            rover.odometry.x, rover.odometry.y, rover.odometry.yaw = x, y, yaw
+        self.bag = BagWriter(p["bag"]) if p["bag"] else None
         self.policy = None
 
     def _fail(self, message: str):
@@ -84,12 +263,19 @@ class RoverSimNode(Node):
 
     def _check_parameters(self) -> None:
         p = self.params
+        unknown = unknown_parameters(self.args)
+        if unknown:
+            self._fail(f"unknown parameter(s) {unknown}; known: {sorted(n for n, _, _ in PARAMETERS)}")
         if p["mode"] not in COMMANDS or p["mode"] == GOAL:
             self._fail(f"parameter mode={p['mode']!r} is not a driving mode; use one of {list(COMMANDS[:-1])}")
         if p["real_time_factor"] < 0 or p["publish_rate"] <= 0:
             self._fail("real_time_factor must be >= 0 and publish_rate > 0")
+        if not 1 <= p["num_rovers"] <= MAX_ROVERS:
+            self._fail(f"num_rovers must be in 1 … {MAX_ROVERS}, got {p['num_rovers']}")
+        if p["cmd_vel_timeout"] <= 0 or p["effective_track_factor"] <= 0 or p["wheel_kp"] < 0 or p["wheel_ki"] < 0:
+            self._fail("cmd_vel_timeout and effective_track_factor must be > 0, wheel_kp and wheel_ki >= 0")
 
-    # ------------------------------------------------------------------ time and bag
+    # ------------------------------------------------------------------ simulator reads
     def stamp_ns(self) -> int:
         """Simulation time [ns]: the stamp of everything the node publishes."""
         return round(self.sim.sim_time * 1e9)
@@ -98,48 +284,36 @@ class RoverSimNode(Node):
         if self.bag is not None:
             self.bag.write(topic, type_name, message, self.stamp_ns() if stamp_ns is None else stamp_ns)
 
-    # ------------------------------------------------------------------ subscriptions
-    def on_command(self, msg: String) -> None:
-        text = msg.data.strip()
-        self.record("/command", "std_msgs/msg/String", {"data": msg.data})
-        if text not in COMMANDS:
-            self.log.warning(f"ignored unknown command {msg.data!r}; known: {list(COMMANDS)}")
-            return
-        if text == GOAL and self.goal is None:
-            self.log.warning("ignored 'goal': no goal received on /goal yet")
-            return
-        self.pending = text
+    def side_speeds(self) -> torch.Tensor:
+        """(K, 2) mean left and right forward wheel speeds [rad/s]."""
+        ws = self.sim.wheel_speed
+        return torch.stack([ws[:, self.side == 0].mean(-1), ws[:, self.side == 1].mean(-1)], -1)
 
-    def on_goal(self, msg: PoseStamped) -> None:
-        g = (msg.pose.position.x, msg.pose.position.y)
-        if not all(math.isfinite(v) for v in g):
-            self.log.warning(f"ignored non-finite goal {g}")
-            return
-        self.record("/goal", "geometry_msgs/msg/PoseStamped", pose_dict(msg))
-        self.goal = g
-        self.pending = GOAL
-        self.log.info(f"goal ({g[0]:.2f}, {g[1]:.2f}) received: driving there")
+    def _wheel_view(self, array, index) -> list[float]:
+        return array.view(self.sim.num_worlds, -1)[:, index].tolist()
 
-    # ------------------------------------------------------------------ publishing
-    def publish_pose(self) -> None:
-        p = self.sim.root_pose[0].tolist()
-        ns = self.stamp_ns()
-        msg = PoseStamped()
-        msg.header.stamp = _stamp(ns)
-        msg.header.frame_id = self.frame_id
-        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = p[0], p[1], p[2]
-        o = msg.pose.orientation
-        o.x, o.y, o.z, o.w = p[3], p[4], p[5], p[6]
-        self.pose_pub.publish(msg)
-        self.record("/pose", "geometry_msgs/msg/PoseStamped", pose_dict(msg), ns)
+    def wheel_positions(self, k: int) -> list[float]:
+        import warp as wp
 
-    def publish_status(self, text: str) -> None:
-        self.status_pub.publish(String(data=text))
-        self.record("/goal_status", "std_msgs/msg/String", {"data": text})
+        b = self.sim.buffers
+        return self._wheel_view(wp.to_torch(b.joint_q), wp.to_torch(b.layout.wheel_coord).long())[k]
+
+    def wheel_velocities(self, k: int) -> list[float]:
+        import warp as wp
+
+        b = self.sim.buffers
+        return self._wheel_view(wp.to_torch(b.joint_qd), wp.to_torch(b.layout.wheel_dof).long())[k]
+
+    def chassis_rotation(self, k: int) -> torch.Tensor:
+        """Rover ``k``'s chassis rotation matrix (world from body), float64."""
+        x, y, z, w = self.sim.root_pose[k, 3:7].to(torch.float64).tolist()
+        return torch.tensor([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                             [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]], dtype=torch.float64)
 
     # ------------------------------------------------------------------ driving
-    def goal_action(self) -> tuple[torch.Tensor, float]:
-        """Wheel torques the policy chooses toward the goal, and the distance to it [m]."""
+    def goal_action(self, k: int) -> tuple[torch.Tensor, float]:
+        """Rover ``k``'s wheel torques from the policy toward its goal, and the distance to it [m]."""
         if self.policy is None:
             from tensordict import TensorDict
 
@@ -147,51 +321,52 @@ class RoverSimNode(Node):
 
             self.policy = (load_policy(self.params["policy"] or None), TensorDict)
         policy, td_cls = self.policy
-        obs = self.env.observe(torch.tensor([self.goal]))
-        dist = float(self.env.target_distance[0])
-        action = policy(td_cls(observation=obs, batch_size=[1]))["action"]
-        return action_to_torque(action[0], self.env.task_cfg.action_scale), dist
+        targets = self.sim.root_pose[:, :2].clone()  # rovers not in goal mode: their own position
+        for rover in self.rovers:
+            if rover.goal is not None:
+                targets[rover.index] = torch.tensor(rover.goal)
+        obs = self.env.observe(targets)
+        action = policy(td_cls(observation=obs, batch_size=[self.sim.num_worlds]))["action"]
+        return action_to_torque(action[k], self.env.task_cfg.action_scale), float(self.env.target_distance[k])
 
-    def step_once(self) -> float | None:
-        """Apply a pending mode, drive (goal mode: the policy), step; returns the goal distance."""
-        if self.pending != self.mode:
-            self.mode = self.pending
-            self.log.info(f"mode -> {self.mode}")
-            if self.mode != GOAL:
-                self.sim.set_mode(self.mode)
-        dist = None
-        if self.mode == GOAL:
-            torques, dist = self.goal_action()
-            if dist < self.params["reach_radius"]:
-                self.publish_status("reached")
-                self.log.info("goal reached")
-                self.mode = self.pending = DriveMode.COAST.value
-                self.sim.set_mode(DriveMode.COAST)
-            else:
-                self.sim.set_commands(torques)
+    def step_once(self) -> None:
+        """Every rover's torques for its mode, one simulator step, odometry, /clock."""
+        speeds = self.side_speeds()
+        torques = torch.stack([rover.torques(speeds[rover.index], self.goal_action) for rover in self.rovers])
+        for rover in self.rovers:
+            rover.prev_vel = self.sim.lin_vel[rover.index].clone()
+        self.sim.set_commands(torques)
         self.sim.step()
+        speeds = self.side_speeds()
+        for rover in self.rovers:
+            rover.odometry.update(speeds[rover.index], self.sim.sim_cfg.step_dt)
         self.clock_pub.publish(Clock(clock=_stamp(self.stamp_ns())))
-        return dist
+
+    def publish_state(self) -> None:
+        ns = self.stamp_ns()
+        frames = self.sim.frame_pose(self.imu_frame)
+        dt = self.sim.sim_cfg.step_dt
+        for rover in self.rovers:
+            accel = (self.sim.lin_vel[rover.index] - rover.prev_vel) / dt
+            rover.publish_state(ns, frames[rover.index], accel)
 
     def spin_simulation(self) -> None:
         """Step until ``duration`` of sim time (or shutdown), serving callbacks between steps."""
         p, sim = self.params, self.sim
         deadline = p["duration"] if p["duration"] > 0 else math.inf
-        while p["wait_for_subscribers"] > 0 and rclpy.ok() \
-                and self.pose_pub.get_subscription_count() < p["wait_for_subscribers"]:
+        first = self.rovers[0].pose_pub
+        while p["wait_for_subscribers"] > 0 and rclpy.ok() and first.get_subscription_count() < p["wait_for_subscribers"]:
             rclpy.spin_once(self, timeout_sec=0.05)
-        self.log.info(f"simulating {sim} at real-time factor {p['real_time_factor']}, publishing /pose every "
-                      f"{self.every * sim.sim_cfg.step_dt:.3f} s of sim time, mode {self.mode}")
+        self.log.info(f"simulating {sim} ({len(self.rovers)} rover(s)) at real-time factor {p['real_time_factor']}, "
+                      f"publishing every {self.every * sim.sim_cfg.step_dt:.3f} s of sim time, mode {p['mode']}")
         step, wall0 = 0, time.monotonic()
-        self.publish_pose()
+        self.publish_state()
         while rclpy.ok() and sim.sim_time < deadline - 1e-9:
             rclpy.spin_once(self, timeout_sec=0.0)
-            dist = self.step_once()
+            self.step_once()
             step += 1
             if step % self.every == 0:
-                self.publish_pose()
-                if dist is not None and self.mode == GOAL:
-                    self.publish_status(f"distance={dist:.3f}")
+                self.publish_state()
             if p["real_time_factor"] > 0:
                 ahead = sim.sim_time / p["real_time_factor"] - (time.monotonic() - wall0)
                 if ahead > 0:

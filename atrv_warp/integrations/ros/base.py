@@ -1,0 +1,128 @@
+"""What a real mobile-base driver does, without ROS types: skid-steer kinematics, a wheel-speed PI
+controller, a command watchdog, wheel odometry and an IMU reading. :mod:`.node` publishes these.
+
+All of it is per rover and plain torch/math, so it is tested without a ROS graph too.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import torch
+
+__all__ = ["BaseParams", "VelocityController", "WheelOdometry", "imu_reading", "yaw_quaternion"]
+
+
+@dataclass(frozen=True)
+class BaseParams:
+    """Skid-steer base figures (ROS parameters of the node)."""
+
+    wheel_radius: float
+    """[m]"""
+    track_width: float
+    """Distance between the left and right wheel centres [m] (from the URDF)."""
+    effective_track_factor: float = 8.28
+    """Skid-steer wheels slide sideways when turning, so the rover turns slower than a
+    differential drive with the same track: ``yaw rate = r (w_right - w_left) / (factor x track)``.
+    8.28 is measured on our physics (``benchmarks/skid_calibration.py``; constant over speeds)."""
+    kp: float = 0.6
+    """PI proportional gain [N·m per rad/s]. The controller runs once per 0.05 s step, and a
+    slipping wheel's own inertia (0.02 kg·m²) bounds it: above ~0.8 it oscillates."""
+    ki: float = 3.0
+    """PI integral gain [N·m per rad]."""
+    torque_limit: float = 20.0
+    """Motor limit [N·m] (the task's action scale)."""
+    timeout: float = 0.5
+    """Watchdog: with no /cmd_vel for this long [s of sim time], the targets drop to zero."""
+
+    @property
+    def effective_track(self) -> float:
+        return self.effective_track_factor * self.track_width
+
+
+@dataclass
+class VelocityController:
+    """Twist (linear.x [m/s], angular.z [rad/s]) -> per-side wheel-speed targets -> PI torques."""
+
+    params: BaseParams
+    target: tuple[float, float] = (0.0, 0.0)
+    """Commanded (linear.x, angular.z)."""
+    last_command: float = -math.inf
+    """Sim time of the newest command [s]."""
+    integral: torch.Tensor = field(default_factory=lambda: torch.zeros(2))
+    stopped_by_watchdog: bool = False
+
+    def command(self, linear: float, angular: float, now: float) -> None:
+        self.target, self.last_command, self.stopped_by_watchdog = (linear, angular), now, False
+
+    def wheel_targets(self, now: float) -> torch.Tensor:
+        """(left, right) wheel-speed targets [rad/s]; zero once the watchdog has fired."""
+        if now - self.last_command > self.params.timeout:
+            self.stopped_by_watchdog = True
+            return torch.zeros(2)
+        v, w = self.target
+        half = 0.5 * w * self.params.effective_track
+        return torch.tensor([v - half, v + half]) / self.params.wheel_radius
+
+    def torques(self, side_speeds: torch.Tensor, now: float, dt: float) -> torch.Tensor:
+        """(left, right) torques [N·m] toward the targets, within the motor limit (anti-windup:
+        the integral stops growing while the output saturates)."""
+        p = self.params
+        error = self.wheel_targets(now) - side_speeds
+        candidate = self.integral + error * dt
+        out = p.kp * error + p.ki * candidate
+        saturated = out.abs() > p.torque_limit
+        self.integral = torch.where(saturated, self.integral, candidate)
+        return (p.kp * error + p.ki * self.integral).clamp(-p.torque_limit, p.torque_limit)
+
+    def reset(self) -> None:
+        self.integral.zero_()
+
+
+@dataclass
+class WheelOdometry:
+    """Pose integrated from the wheel speeds alone, as a real base reports it (skid error included)."""
+
+    params: BaseParams
+    x: float = 0.0
+    y: float = 0.0
+    yaw: float = 0.0
+    linear: float = 0.0
+    angular: float = 0.0
+
+    def update(self, side_speeds: torch.Tensor, dt: float) -> None:
+        """Advance by ``dt`` [s] with the mean (left, right) wheel speeds [rad/s] (midpoint rule)."""
+        r = self.params.wheel_radius
+        left, right = float(side_speeds[0]), float(side_speeds[1])
+        self.linear = r * (left + right) / 2
+        self.angular = r * (right - left) / self.params.effective_track
+        mid = self.yaw + 0.5 * self.angular * dt
+        self.x += self.linear * math.cos(mid) * dt
+        self.y += self.linear * math.sin(mid) * dt
+        self.yaw = math.atan2(math.sin(self.yaw + self.angular * dt), math.cos(self.yaw + self.angular * dt))
+
+
+def yaw_quaternion(yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation by ``yaw`` about z."""
+    return 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)
+
+
+def imu_reading(frame_pose: torch.Tensor, ang_vel: torch.Tensor, accel: torch.Tensor, gravity: float,
+                noise: tuple[float, float], gen: torch.Generator) -> dict:
+    """Orientation, angular velocity and specific force of an IMU at ``frame_pose`` (4x4, world).
+
+    ``ang_vel`` and ``accel`` [m/s²] are world-frame chassis quantities; the IMU measures
+    ``accel - g`` (so +9.81 m/s² up at rest) and the angular velocity, both in its own frame,
+    plus Gaussian noise of standard deviation ``noise`` = (accel [m/s²], gyro [rad/s]).
+    """
+    rot = frame_pose[:3, :3].to(torch.float64)
+    specific = accel.to(torch.float64) - torch.tensor([0.0, 0.0, gravity], dtype=torch.float64)
+    a = rot.T @ specific + noise[0] * torch.randn(3, generator=gen, dtype=torch.float64)
+    w = rot.T @ ang_vel.to(torch.float64) + noise[1] * torch.randn(3, generator=gen, dtype=torch.float64)
+    m, t = rot, rot.trace()
+    qw = math.sqrt(max(0.0, 1.0 + float(t))) / 2
+    qx = math.copysign(math.sqrt(max(0.0, 1 + float(m[0, 0] - m[1, 1] - m[2, 2]))) / 2, float(m[2, 1] - m[1, 2]))
+    qy = math.copysign(math.sqrt(max(0.0, 1 - float(m[0, 0] - m[1, 1] + m[2, 2]))) / 2, float(m[0, 2] - m[2, 0]))
+    qz = math.copysign(math.sqrt(max(0.0, 1 - float(m[0, 0] + m[1, 1] - m[2, 2]))) / 2, float(m[1, 0] - m[0, 1]))
+    return {"orientation": (qx, qy, qz, qw), "angular_velocity": w.tolist(), "linear_acceleration": a.tolist()}
