@@ -1,4 +1,4 @@
-"""Export a trained policy to a file that runs with torch alone: ``python -m atrv_warp.export [POLICY] OUT``.
+"""Export a trained policy to a file that runs with torch alone: ``python -m atrv_warp.export [--onnx] [POLICY] OUT``.
 
 POLICY is a ``best_policy.pt``, a training ``checkpoint.pt``, or omitted for the policy shipped
 with the package; OUT ends in ``.pt2`` (a ``torch.export`` archive). See
@@ -9,6 +9,7 @@ Examples::
 
     python -m atrv_warp.export policy.pt2                               # the shipped policy
     python -m atrv_warp.export runs/default/best_policy.pt my_rover.pt2
+    python -m atrv_warp.export --onnx policy.pt2                        # also policy.onnx (extra: onnx)
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.export", description=__doc__.splitlines()[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     parser.add_argument("paths", nargs="+", metavar="[POLICY] OUT", help="policy file (default: shipped), output .pt2")
+    parser.add_argument("--onnx", action="store_true", help="also write OUT.onnx, checked with onnxruntime")
     args = parser.parse_args(argv)
     if len(args.paths) > 2:
         parser.error("expected [POLICY] OUT")
@@ -33,12 +35,16 @@ def main(argv: list[str] | None = None) -> int:
     from atrv_warp.rl.export import export_policy, load_exported
 
     try:
-        path = export_policy(policy, out)
-    except (FileNotFoundError, FileFormatError, ValueError) as err:
+        path = export_policy(policy, out, onnx=args.onnx)
+    except (FileNotFoundError, FileFormatError, ValueError, RuntimeError) as err:
         return error_line(parser.prog, str(err))
+    except ModuleNotFoundError as err:
+        return error_line(parser.prog, f"--onnx needs the onnx extra ({err.name} is missing): pip install -e '.[onnx]'")
     _, spec = load_exported(path)
     print(f"wrote {path}: observation ({len(spec['observation'])},) -> action (2,) in [-1, 1] "
           f"x {spec['action']['scale']:g} N·m; runs with torch alone (torch.export.load)")
+    if args.onnx:
+        print(f"wrote {path.with_suffix('.onnx')}: checked with onnxruntime against the torch policy (< 1e-5)")
     return 0
 
 

@@ -66,3 +66,22 @@ def test_export_cli_and_bad_input(tmp_path):
     with pytest.raises(ValueError, match=r"must end in \.pt2"):
         export_policy(None, tmp_path / "x.onnx")
     assert not (tmp_path / "x.pt2").exists()
+
+
+def test_onnx_export_checked_with_onnxruntime(tmp_path):
+    ort = pytest.importorskip("onnxruntime", reason="pip install -e '.[onnx]'")
+    import json
+
+    import numpy as np
+    import onnx
+
+    path = export_policy(None, tmp_path / "policy.pt2", onnx=True)
+    model = tmp_path / "policy.onnx"
+    assert model.is_file()
+    props = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
+    assert json.loads(props["atrv_warp.json"])["action"]["scale"] == 20.0
+    obs = torch.rand(1000, len(OBSERVATION), generator=torch.Generator().manual_seed(1)) * 4 - 2
+    got = ort.InferenceSession(str(model), providers=["CPUExecutionProvider"]).run(None, {"observation": obs.numpy()})[0]
+    expected = load_policy()(TensorDict(observation=obs, batch_size=[1000]))["action"].numpy()
+    assert np.abs(got - expected).max() < 1e-5
+    assert path.is_file()

@@ -25,6 +25,7 @@ EXTRA_USERS = {
     "ros": ("atrv_warp/integrations/ros/", "tests/test_ros.py"),
     "test": ("tests/",),
     "browser": ("atrv_warp/integrations/browser.py", "docs/make_pictures.py"),
+    "onnx": ("atrv_warp/rl/export.py",),
 }
 SCANNED = ("atrv_warp", "tests", "benchmarks", "examples", "docs")
 
