@@ -1,14 +1,13 @@
 """The rclpy node behind ``python -m atrv_warp.ros`` (imported only where rclpy is installed).
 
 :class:`RoverSimNode` simulates ``num_rovers`` rovers in one simulator, each with its own topics
-(under ``/rover_<k>`` when there is more than one), and steps them in (scaled) real time,
-serving callbacks between steps. Topics and parameters are listed in :mod:`atrv_warp.ros`.
+(under ``/rover_<k>`` when there is more than one), and steps them on an rclpy timer in (scaled)
+real time; the executor serves the subscriptions between steps. Topics and parameters are listed in :mod:`atrv_warp.ros`.
 """
 
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import rclpy
@@ -19,6 +18,7 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import String
@@ -351,26 +351,32 @@ class RoverSimNode(Node):
             rover.publish_state(ns, frames[rover.index], accel)
 
     def spin_simulation(self) -> None:
-        """Step until ``duration`` of sim time (or shutdown), serving callbacks between steps."""
+        """Step on a timer (period ``step_dt / real_time_factor``; 0 = as fast as possible) until
+        ``duration`` of sim time or shutdown; the executor serves the subscriptions between steps."""
         p, sim = self.params, self.sim
-        deadline = p["duration"] if p["duration"] > 0 else math.inf
         first = self.rovers[0].pose_pub
         while p["wait_for_subscribers"] > 0 and rclpy.ok() and first.get_subscription_count() < p["wait_for_subscribers"]:
             rclpy.spin_once(self, timeout_sec=0.05)
         self.log.info(f"simulating {sim} ({len(self.rovers)} rover(s)) at real-time factor {p['real_time_factor']}, "
                       f"publishing every {self.every * sim.sim_cfg.step_dt:.3f} s of sim time, mode {p['mode']}")
-        step, wall0 = 0, time.monotonic()
+        self.deadline = p["duration"] if p["duration"] > 0 else math.inf
+        self.steps = 0
+        self.finished = Future()
         self.publish_state()
-        while rclpy.ok() and sim.sim_time < deadline - 1e-9:
-            rclpy.spin_once(self, timeout_sec=0.0)
+        period = sim.sim_cfg.step_dt / p["real_time_factor"] if p["real_time_factor"] > 0 else 0.0
+        self.step_timer = self.create_timer(period, self.on_step_timer)
+        rclpy.spin_until_future_complete(self, self.finished)
+
+    def on_step_timer(self) -> None:
+        """One simulator step; state topics every ``publish_rate``; finish at the deadline."""
+        if self.sim.sim_time < self.deadline - 1e-9:
             self.step_once()
-            step += 1
-            if step % self.every == 0:
+            self.steps += 1
+            if self.steps % self.every == 0:
                 self.publish_state()
-            if p["real_time_factor"] > 0:
-                ahead = sim.sim_time / p["real_time_factor"] - (time.monotonic() - wall0)
-                if ahead > 0:
-                    rclpy.spin_once(self, timeout_sec=ahead)
+        if self.sim.sim_time >= self.deadline - 1e-9 and not self.finished.done():
+            self.step_timer.cancel()
+            self.finished.set_result(True)
 
     def close(self) -> None:
         """Close the bag and destroy the node."""
