@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
@@ -215,15 +216,24 @@ class Learner:
             "alpha": torch.optim.Adam([self.loss.log_alpha], lr=cfg.optim.lr),
         }
 
-    def update(self, batch):
-        """One gradient step on every network and the temperature; returns the loss TensorDict."""
-        out = self.loss(batch)
-        for opt in self.opts.values():
-            opt.zero_grad(set_to_none=True)
-        (out["loss_actor"] + out["loss_qvalue"] + out["loss_alpha"]).backward()
-        for opt in self.opts.values():
-            opt.step()
-        self.target_update.step()
+    def update(self, batch, phase=None):
+        """One gradient step on every network and the temperature; returns the loss TensorDict.
+
+        ``phase``: optional ``phase(name)`` context-manager factory that times each part (loss,
+        backward, optimiser, target), as ``benchmarks/train_profile.py`` does.
+        """
+        phase = phase or (lambda name: contextlib.nullcontext())
+        with phase("loss"):
+            out = self.loss(batch)
+        with phase("backward"):
+            for opt in self.opts.values():
+                opt.zero_grad(set_to_none=True)
+            (out["loss_actor"] + out["loss_qvalue"] + out["loss_alpha"]).backward()
+        with phase("optimiser"):
+            for opt in self.opts.values():
+                opt.step()
+        with phase("target"):
+            self.target_update.step()
         return out
 
     @property
@@ -399,6 +409,9 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     finally:
         loop.progress.close()
         collector.shutdown()
+        # TorchRL's shutdown resets torch's thread count (to the machine's cores); on the core this
+        # process is pinned to, two threads make every op of the final evaluation ~40x slower
+        torch.set_num_threads(cfg.run.threads)
     state.elapsed_s = loop.elapsed()
     print(f"training stopped by {stopped_by}: {state.frames:,} frames, {state.updates:,} updates, "
           f"{state.elapsed_s / 60:.1f} min")
