@@ -28,7 +28,15 @@ from torchrl.envs import EnvBase
 from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant, replace_checked
 from atrv_warp.sim.simulator import RoverSim
 from atrv_warp.task.config import TaskConfig
-from atrv_warp.task.kernels import TaskBuffers, TaskParams, compute_step_outcome, observe_reset, sample_episodes
+from atrv_warp.task.kernels import (
+    RoverState,
+    StepOutputs,
+    TaskBuffers,
+    TaskParams,
+    compute_step_outcome,
+    observe_reset,
+    sample_episodes,
+)
 from atrv_warp.task.spec import (
     ACTION_DIM,
     END_REASONS,
@@ -118,6 +126,13 @@ class ATRVjrEnv(EnvBase):
         self._distance = wp.zeros(n, dtype=float, device=dev)
         self._mask = wp.zeros(n, dtype=bool, device=dev)
         self._reset_poses = wp.zeros(n, dtype=wp.vec3, device=dev)  # the sampler's starts (x, y, yaw)
+        b, rover, out = self.sim.buffers, RoverState(), StepOutputs()  # the kernels' inputs and outputs, once
+        rover.body_q, rover.lin_vel, rover.ang_vel, rover.rpy = b.body_q, b.lin_vel, b.ang_vel, b.rpy
+        rover.bodies_per_world, rover.chassis_body = b.layout.bodies_per_world, b.layout.chassis_body
+        rover.contact_flags, rover.nonfinite = b.contact_flags, b.nonfinite
+        out.obs, out.reward, out.reward_terms, out.distance = self._obs, self._reward, self._reward_terms, self._distance
+        out.terminated, out.truncated, out.end_reason = self._terminated, self._truncated, self._end_reason
+        self._rover, self._out = rover, out
         # torch views (no copies)
         self.target = wp.to_torch(t.target)
         self.step_count = wp.to_torch(t.step_count)
@@ -203,22 +218,16 @@ class ATRVjrEnv(EnvBase):
         return self._obs_t.clone()
 
     def _launch_observe(self) -> None:
-        b = self.sim.buffers
-        wp.launch(observe_reset, dim=self.num_envs,
-                  inputs=[self._params, self._mask, self._task, b.body_q, b.layout.bodies_per_world,
-                          b.layout.chassis_body, b.lin_vel, b.ang_vel, b.rpy],
-                  outputs=[self._obs, self._distance], device=self._wp_device)
+        wp.launch(observe_reset, dim=self.num_envs, inputs=[self._params, self._mask, self._task, self._rover],
+                  outputs=[self._out], device=self._wp_device)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = self._check_action(tensordict.get("action"))
         action_to_torque(action, self.task_cfg.action_scale, out=self.sim.commands)
-        sim, b = self.sim, self.sim.buffers
+        sim = self.sim
         sim.step()
-        wp.launch(compute_step_outcome, dim=self.num_envs,
-                  inputs=[self._params, self._task, b.body_q, b.layout.bodies_per_world,
-                          b.layout.chassis_body, b.lin_vel, b.ang_vel, b.rpy, b.contact_flags, b.nonfinite],
-                  outputs=[self._obs, self._reward, self._reward_terms, self._terminated, self._truncated,
-                           self._end_reason, self._distance], device=self._wp_device)
+        wp.launch(compute_step_outcome, dim=self.num_envs, inputs=[self._params, self._task, self._rover],
+                  outputs=[self._out], device=self._wp_device)
         if bool(sim.nonfinite.any()):  # one flag read per step; blown-up worlds are rare
             self.nonfinite_count += int(sim.nonfinite.sum())
         return TensorDict(

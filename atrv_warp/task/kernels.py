@@ -62,6 +62,34 @@ class TaskParams:
 
 
 @wp.struct
+class RoverState:
+    """The simulator state the task reads, one struct so that a launch cannot reorder it
+    (built once from :attr:`atrv_warp.sim.RoverSim.buffers`)."""
+
+    body_q: wp.array(dtype=wp.transform)
+    bodies_per_world: int
+    chassis_body: int
+    lin_vel: wp.array(dtype=wp.vec3)
+    ang_vel: wp.array(dtype=wp.vec3)
+    rpy: wp.array(dtype=wp.vec3)
+    contact_flags: wp.array(dtype=wp.int32)
+    nonfinite: wp.array(dtype=wp.int32)
+
+
+@wp.struct
+class StepOutputs:
+    """What one step writes per world (all length N; ``obs`` and ``reward_terms`` have columns)."""
+
+    obs: wp.array2d(dtype=float)
+    reward: wp.array(dtype=float)
+    reward_terms: wp.array2d(dtype=float)
+    terminated: wp.array(dtype=bool)
+    truncated: wp.array(dtype=bool)
+    end_reason: wp.array(dtype=wp.int32)
+    distance: wp.array(dtype=float)
+
+
+@wp.struct
 class TaskBuffers:
     """Per-world task state (all length N)."""
 
@@ -141,28 +169,22 @@ def observe_reset(
     params: TaskParams,
     mask: wp.array(dtype=bool),
     task: TaskBuffers,
-    body_q: wp.array(dtype=wp.transform),
-    bodies_per_world: int,
-    chassis_body: int,
-    lin_vel: wp.array(dtype=wp.vec3),
-    ang_vel: wp.array(dtype=wp.vec3),
-    rpy: wp.array(dtype=wp.vec3),
-    obs: wp.array2d(dtype=float),
-    distance: wp.array(dtype=float),
+    rover: RoverState,
+    out: StepOutputs,
 ):
-    """Observation of freshly reset worlds; primes the progress terms."""
+    """Observation (``out.obs``, ``out.distance``) of freshly reset worlds; primes the progress terms."""
     world = wp.tid()
     if not mask[world]:
         return
-    pose = body_q[world * bodies_per_world + chassis_body]
-    r = rpy[world]
+    pose = rover.body_q[world * rover.bodies_per_world + rover.chassis_body]
+    r = rover.rpy[world]
     target = task.target[world]
     err = heading_error(pose, target, r[2])
     d = planar_distance(pose, target)
     task.prev_distance[world] = d
     task.prev_heading_error[world] = wp.abs(err)
-    distance[world] = d
-    write_observation(obs, world, params, target, pose, lin_vel[world], r[0], ang_vel[world][2], err)
+    out.distance[world] = d
+    write_observation(out.obs, world, params, target, pose, rover.lin_vel[world], r[0], rover.ang_vel[world][2], err)
 
 
 @wp.func
@@ -193,21 +215,8 @@ def clear_terms(terms: wp.array2d(dtype=float), world: int):
 def compute_step_outcome(
     params: TaskParams,
     task: TaskBuffers,
-    body_q: wp.array(dtype=wp.transform),
-    bodies_per_world: int,
-    chassis_body: int,
-    lin_vel: wp.array(dtype=wp.vec3),
-    ang_vel: wp.array(dtype=wp.vec3),
-    rpy: wp.array(dtype=wp.vec3),
-    contact_flags: wp.array(dtype=wp.int32),
-    nonfinite: wp.array(dtype=wp.int32),
-    obs: wp.array2d(dtype=float),
-    reward: wp.array(dtype=float),
-    reward_terms: wp.array2d(dtype=float),
-    terminated: wp.array(dtype=bool),
-    truncated: wp.array(dtype=bool),
-    end_reason: wp.array(dtype=wp.int32),
-    distance: wp.array(dtype=float),
+    rover: RoverState,
+    out: StepOutputs,
 ):
     """Observation, reward (and its terms, which sum to it) and termination of every world after
     one step. The checks come in a fixed order: success, flip, contact, else a running step."""
@@ -215,54 +224,54 @@ def compute_step_outcome(
     steps = task.step_count[world] + 1
     task.step_count[world] = steps
     target = task.target[world]
-    if nonfinite[world] != 0:
+    if rover.nonfinite[world] != 0:
         # Contain a blown-up world: a finite, neutral observation and reward, then a reset.
         for i in range(OBS_DIM):
-            obs[world, i] = 0.0
-        obs[world, OBS_TARGET_X] = target[0]
-        obs[world, OBS_TARGET_Y] = target[1]
-        obs[world, OBS_COS_HEADING] = 1.0
-        clear_terms(reward_terms, world)
-        reward[world] = 0.0
-        terminated[world] = True
-        truncated[world] = False
-        end_reason[world] = END_NONFINITE
-        distance[world] = task.prev_distance[world]
+            out.obs[world, i] = 0.0
+        out.obs[world, OBS_TARGET_X] = target[0]
+        out.obs[world, OBS_TARGET_Y] = target[1]
+        out.obs[world, OBS_COS_HEADING] = 1.0
+        clear_terms(out.reward_terms, world)
+        out.reward[world] = 0.0
+        out.terminated[world] = True
+        out.truncated[world] = False
+        out.end_reason[world] = END_NONFINITE
+        out.distance[world] = task.prev_distance[world]
         return
-    pose = body_q[world * bodies_per_world + chassis_body]
-    r = rpy[world]
+    pose = rover.body_q[world * rover.bodies_per_world + rover.chassis_body]
+    r = rover.rpy[world]
     err = heading_error(pose, target, r[2])
     d = planar_distance(pose, target)
-    write_observation(obs, world, params, target, pose, lin_vel[world], r[0], ang_vel[world][2], err)
+    write_observation(out.obs, world, params, target, pose, rover.lin_vel[world], r[0], rover.ang_vel[world][2], err)
     reason = END_NONE
-    clear_terms(reward_terms, world)
+    clear_terms(out.reward_terms, world)
     if d < params.reach_radius:
         reason = END_SUCCESS
-        reward_terms[world, TERM_SUCCESS] = params.success_reward
+        out.reward_terms[world, TERM_SUCCESS] = params.success_reward
     elif wp.abs(r[0]) > params.flip_roll:
         # before the contact check: a flipping chassis usually also touches the ground
         reason = END_FLIP
-        reward_terms[world, TERM_FAILURE] = params.failure_reward
-    elif contact_flags[world] != 0:
+        out.reward_terms[world, TERM_FAILURE] = params.failure_reward
+    elif rover.contact_flags[world] != 0:
         # wall, or the chassis on the ground: any contact beyond the wheels' ground contacts
         reason = END_WALL
-        reward_terms[world, TERM_FAILURE] = params.failure_reward
+        out.reward_terms[world, TERM_FAILURE] = params.failure_reward
     else:
-        reward_terms[world, TERM_PROGRESS] = progress_term(task.prev_distance[world], d)
-        reward_terms[world, TERM_HEADING] = heading_term(params.heading_weight, task.prev_heading_error[world],
+        out.reward_terms[world, TERM_PROGRESS] = progress_term(task.prev_distance[world], d)
+        out.reward_terms[world, TERM_HEADING] = heading_term(params.heading_weight, task.prev_heading_error[world],
                                                          wp.abs(err))
-        reward_terms[world, TERM_STEP_PENALTY] = step_penalty_term(params.step_penalty)
+        out.reward_terms[world, TERM_STEP_PENALTY] = step_penalty_term(params.step_penalty)
     rew = wp.float32(0.0)
     for i in range(NUM_TERMS):  # in REWARD_TERMS order: progress + heading - penalty as before
-        rew += reward_terms[world, i]
+        rew += out.reward_terms[world, i]
     task.prev_distance[world] = d
     task.prev_heading_error[world] = wp.abs(err)
     term = reason != END_NONE
     trunc = (not term) and steps >= params.max_steps
     if trunc:
         reason = END_TIMEOUT
-    reward[world] = rew
-    terminated[world] = term
-    truncated[world] = trunc
-    end_reason[world] = reason
-    distance[world] = d
+    out.reward[world] = rew
+    out.terminated[world] = term
+    out.truncated[world] = trunc
+    out.end_reason[world] = reason
+    out.distance[world] = d
