@@ -3,7 +3,10 @@
 - :mod:`.config`: rover (and variants), contact law, arena, integrator settings.
 - :mod:`.urdf` / :mod:`.model`: the checked URDF description and the Newton model of N worlds.
 - :mod:`.simulator`: :class:`RoverSim`, its public contract (:class:`SimBuffers`) and driving modes.
-- :mod:`.contact`: :class:`ContactModel`; :mod:`.kernels`: contact and rover Warp kernels.
+- :mod:`.contact`: :class:`ContactModel`, each world's :class:`Terrain` and :class:`Obstacles`;
+  :mod:`.kernels`: contact, terrain, obstacle, scan and rover Warp kernels.
+- :mod:`.terrain`: seeded heightfields (:class:`TerrainConfig`, presets, :class:`HeightGrid`).
+- :mod:`.scanner`: :class:`LaserScanner`, the 2-D laser range finder.
 - :mod:`.diff`: :class:`DiffRollout`, gradients through the simulator.
 - :mod:`.checks`: the reference drive protocol shared by the physics report and tests.
 """
@@ -13,26 +16,37 @@ from atrv_warp.sim.config import (
     ArenaConfig,
     ContactConfig,
     InertialOverride,
+    ObstacleConfig,
     RoverConfig,
     SimConfig,
     get_variant,
 )
-from atrv_warp.sim.contact import ContactModel
+from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
+from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
 from atrv_warp.sim.simulator import DRIVE_MODE_TORQUES, DriveMode, RoverSim, SimBuffers
+from atrv_warp.sim.terrain import TERRAIN_PRESETS, HeightGrid, TerrainConfig
 from atrv_warp.sim.urdf import URDFError, load_rover
 
 __all__ = [
     "DRIVE_MODE_TORQUES",
+    "TERRAIN_PRESETS",
     "VARIANTS",
     "ArenaConfig",
     "ContactConfig",
     "ContactModel",
     "DriveMode",
+    "HeightGrid",
     "InertialOverride",
+    "LaserScanner",
+    "ObstacleConfig",
+    "Obstacles",
     "RoverConfig",
     "RoverSim",
+    "ScannerConfig",
     "SimBuffers",
     "SimConfig",
+    "Terrain",
+    "TerrainConfig",
     "URDFError",
     "get_variant",
     "load_rover",

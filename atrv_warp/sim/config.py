@@ -17,6 +17,7 @@ __all__ = [
     "ArenaConfig",
     "ContactConfig",
     "InertialOverride",
+    "ObstacleConfig",
     "RoverConfig",
     "SimConfig",
     "default_urdf_path",
@@ -96,6 +97,12 @@ class ContactConfig:
     explicit step of ``sim_dt`` stays stable with (``m_eff / sim_dt`` per contact direction).
     Friction is ``mu f_n`` once slip exceeds ``mu f_n dt / (fraction m_eff)``; below it,
     proportional to slip. 0.5 halves the slip velocity twice per substep without overshoot."""
+    stiction: float = 0.0
+    """Elastic stick phase of the wheels' ground friction: a bristle of stiffness
+    ``stiction x slope / sim_dt`` per direction (0.5 puts it at a quarter of the explicit stability
+    limit ``m_eff / sim_dt²``), held at ``mu f_n`` while sliding. 0 (the reference) is the viscous
+    law alone, under which a rover on any slope creeps (about 3 cm/s on 10 deg); 0.5 holds it within
+    a millimetre below atan(mu)."""
 
 
 @dataclass(frozen=True)
@@ -144,6 +151,20 @@ class ArenaConfig:
         h = self.half_size
         return (((0.0, 0.0, 1.0), self.ground_top), ((1.0, 0.0, 0.0), -h), ((-1.0, 0.0, 0.0), -h),
                 ((0.0, 1.0, 0.0), -h), ((0.0, -1.0, 0.0), -h))
+
+
+@dataclass(frozen=True)
+class ObstacleConfig:
+    """Room for static obstacles (upright boxes and cylinders) in every world.
+
+    Layouts are written per world through :attr:`atrv_warp.sim.RoverSim.obstacles` (a task's sampler
+    does it on reset); the slots beyond a layout stay empty.
+    """
+
+    slots: int = 8
+    """Obstacles per world at most."""
+    height: float = 1.0
+    """Height of every obstacle above the flat ground's top [m] (taller than the rover, 0.6 m)."""
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,5 @@
-"""The contact model a simulator launches: the rover's shapes, the arena's planes and the law.
+"""The contact model a simulator launches: the rover's shapes, the scene (arena planes, terrain,
+obstacles) and the law.
 
 :class:`ContactModel` turns the configs and the built Newton model into the structs the
 Hunt–Crossley kernel (:mod:`atrv_warp.sim.kernels.contact`) reads, once per simulator, and launches
@@ -9,23 +10,140 @@ it, so there is one contact model to change.
 from __future__ import annotations
 
 import newton
+import numpy as np
+import torch
 import warp as wp
 
-from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig
-from atrv_warp.sim.kernels.contact import ArenaPlanes, ContactParams, RoverShapes, compute_contact_forces
+from atrv_warp.sim.config import ArenaConfig, ContactConfig, ObstacleConfig, RoverConfig
+from atrv_warp.sim.kernels.contact import (
+    ArenaPlanes,
+    ContactParams,
+    RoverShapes,
+    Scene,
+    clear_bristles,
+    compute_contact_forces,
+)
+from atrv_warp.sim.kernels.obstacles import OBSTACLE_BOX, OBSTACLE_CYLINDER, OBSTACLE_NONE, ObstacleSet
+from atrv_warp.sim.kernels.terrain import TerrainGrid
 from atrv_warp.sim.model import BuiltModel
+from atrv_warp.sim.terrain import HeightGrid
 
-__all__ = ["ContactModel"]
+__all__ = ["OBSTACLE_KINDS", "ContactModel", "Obstacles", "Terrain"]
+
+OBSTACLE_KINDS = {"none": int(OBSTACLE_NONE), "box": int(OBSTACLE_BOX), "cylinder": int(OBSTACLE_CYLINDER)}
+"""Codes of :attr:`Obstacles.kind`."""
 
 
-def _law(cfg: ContactConfig) -> ContactParams:
+def _law(cfg: ContactConfig, sim_dt: float) -> ContactParams:
+    if cfg.stiction < 0:
+        raise ValueError(f"ContactConfig.stiction must be >= 0, got {cfg.stiction}")
     p = ContactParams()
     p.stiffness = cfg.stiffness
     p.damping = cfg.damping
     p.exponent = cfg.exponent
     p.linear_region = cfg.linear_region
     p.linear_coeff = cfg.linear_region ** (cfg.exponent - 1.0)
+    p.stiction = cfg.stiction
+    p.dt = sim_dt
     return p
+
+
+class Terrain:
+    """Each world's ground: the height grids and which tile each world drives on.
+
+    Attributes:
+        grid: the :class:`~atrv_warp.sim.terrain.HeightGrid` (``None`` on the flat arena).
+        tile: (N,) int32 torch view of each world's tile; write it before a reset to move a world
+            to another tile (values in [0, tiles)).
+        kernel: the :class:`~atrv_warp.sim.kernels.terrain.TerrainGrid` kernels read.
+    """
+
+    def __init__(self, grid: HeightGrid | None, num_worlds: int, arena: ArenaConfig, device):
+        self.grid = grid
+        k = TerrainGrid()
+        k.enabled = int(grid is not None)
+        heights = grid.heights if grid is not None else np.zeros((1, 2, 2), dtype=np.float32)
+        k.heights = wp.array(heights, dtype=float, device=device)
+        tiles = heights.shape[0]
+        k.tile = wp.array(np.arange(num_worlds) % tiles, dtype=wp.int32, device=device)
+        k.low = wp.array(heights.reshape(tiles, -1).min(1) + arena.ground_top, dtype=float, device=device)
+        k.high = wp.array(heights.reshape(tiles, -1).max(1) + arena.ground_top, dtype=float, device=device)
+        k.origin = -grid.half_size if grid is not None else -arena.half_size
+        k.inv_resolution = 1.0 / grid.resolution if grid is not None else 1.0
+        k.base = arena.ground_top
+        self.kernel = k
+        self.base = arena.ground_top
+        self.tile = wp.to_torch(k.tile)
+
+    @property
+    def enabled(self) -> bool:
+        return self.grid is not None
+
+    def height(self, x, y, worlds=None) -> np.ndarray:
+        """Absolute ground height [m] under (x, y) [m] in each world (or the given ``worlds``)."""
+        tiles = self.tile.cpu().numpy() if worlds is None else self.tile.cpu().numpy()[np.asarray(worlds)]
+        if self.grid is None:
+            return np.full(np.broadcast(np.asarray(x), tiles).shape, self.base)
+        return self.base + self.grid.height(tiles, x, y)
+
+
+class Obstacles:
+    """Every world's static obstacles (``ObstacleConfig.slots`` per world).
+
+    Attributes (torch views the contact and scan kernels read; write them before a reset or
+    through :meth:`set`):
+        kind: (N, slots) int32, :data:`OBSTACLE_KINDS` (0 = empty slot).
+        pose: (N, slots, 3) centre x [m], y [m], yaw [rad].
+        size: (N, slots, 2) box half extents x, y [m]; cylinder (radius [m], 0).
+        kernel: the :class:`~atrv_warp.sim.kernels.obstacles.ObstacleSet` kernels read.
+    """
+
+    def __init__(self, cfg: ObstacleConfig | None, num_worlds: int, arena: ArenaConfig, device):
+        self.cfg = cfg
+        slots = cfg.slots if cfg is not None else 0
+        if slots < 0 or (cfg is not None and cfg.height <= 0):
+            raise ValueError(f"ObstacleConfig needs slots >= 0 and height > 0, got {cfg}")
+        k = ObstacleSet()
+        k.count = slots
+        shape = (num_worlds, max(slots, 1))
+        k.kind = wp.zeros(shape, dtype=wp.int32, device=device)
+        k.pose = wp.zeros(shape, dtype=wp.vec3, device=device)
+        k.size = wp.zeros(shape, dtype=wp.vec2, device=device)
+        k.top = arena.ground_top + (cfg.height if cfg is not None else 0.0)
+        self.kernel = k
+        self.slots = slots
+        self.kind = wp.to_torch(k.kind)
+        self.pose = wp.to_torch(k.pose)
+        self.size = wp.to_torch(k.size)
+        self._half = arena.half_size
+
+    def set(self, world: int, layout) -> None:
+        """Replace one world's obstacles by ``layout``: a sequence of ``("box", x, y, yaw, hx, hy)``
+        and ``("cylinder", x, y, radius)`` [m, rad]. Checked: kinds, sizes > 0, inside the arena."""
+        if len(layout) > self.slots:
+            raise ValueError(f"{len(layout)} obstacles do not fit the {self.slots} slots (ObstacleConfig.slots)")
+        kind = torch.zeros(self.slots, dtype=torch.int32)
+        pose, size = torch.zeros(self.slots, 3), torch.zeros(self.slots, 2)
+        for i, item in enumerate(layout):
+            name, *values = item
+            if name == "box" and len(values) == 5:
+                pose[i] = torch.tensor(values[:3])
+                size[i] = torch.tensor(values[3:])
+            elif name == "cylinder" and len(values) == 3:
+                pose[i, :2] = torch.tensor(values[:2])
+                size[i, 0] = values[2]
+            else:
+                raise ValueError(f"obstacle {i}: {item!r} is neither ('box', x, y, yaw, hx, hy) nor "
+                                 "('cylinder', x, y, radius)")
+            if not (size[i, 0] > 0 and (name == "cylinder" or size[i, 1] > 0)) or not torch.isfinite(pose[i]).all():
+                raise ValueError(f"obstacle {i}: {item!r} needs positive sizes and a finite pose")
+            if pose[i, :2].abs().max() >= self._half:
+                raise ValueError(f"obstacle {i}: centre ({float(pose[i, 0]):g}, {float(pose[i, 1]):g}) m is outside "
+                                 f"the arena (|x|, |y| < {self._half:g} m)")
+            kind[i] = OBSTACLE_KINDS[name]
+        self.kind[world] = kind.to(self.kind.device)
+        self.pose[world] = pose.to(self.pose.device)
+        self.size[world] = size.to(self.size.device)
 
 
 def _planes(arena: ArenaConfig, device) -> ArenaPlanes:
@@ -86,18 +204,27 @@ class ContactModel:
         params: the law (:class:`~atrv_warp.sim.kernels.contact.ContactParams`).
         shapes: the template rover's shapes (:class:`~atrv_warp.sim.kernels.contact.RoverShapes`).
         planes: ground and walls (:class:`~atrv_warp.sim.kernels.contact.ArenaPlanes`).
+        terrain: each world's ground (:class:`Terrain`); obstacles: each world's (:class:`Obstacles`).
+        scene: planes, terrain and obstacles as the kernel's struct.
         friction: (1,) Coulomb coefficient, the default for :meth:`apply`.
     """
 
     def __init__(self, built: BuiltModel, *, rover: RoverConfig, contact: ContactConfig, arena: ArenaConfig,
-                 sim_dt: float, device):
+                 sim_dt: float, device, terrain: HeightGrid | None = None, obstacles: ObstacleConfig | None = None):
         self.num_worlds = built.num_worlds
         self.bodies_per_world = built.rover_builder.body_count
         self.device = device
-        self.params = _law(contact)
+        self.params = _law(contact, sim_dt)
         self.shapes = _shapes(built, rover, contact, sim_dt, device)
         self.planes = _planes(arena, device)
+        self.terrain = Terrain(terrain, self.num_worlds, arena, device)
+        self.obstacles = Obstacles(obstacles, self.num_worlds, arena, device)
+        scene = Scene()
+        scene.planes, scene.terrain, scene.obstacles = self.planes, self.terrain.kernel, self.obstacles.kernel
+        self.scene = scene
         self.friction = wp.array([contact.friction], dtype=float, device=device)
+        self.bristles = wp.zeros(self.num_worlds * self.shapes.count, dtype=wp.vec3, device=device)
+        """(N x shapes) each wheel's stick deflection [m], kept between substeps (``ContactConfig.stiction``)."""
 
     def apply(self, state: newton.State, body_com: wp.array, flags: wp.array, friction: wp.array | None = None) -> None:
         """Add every contact wrench to ``state.body_f`` and OR the contact bits into ``flags``.
@@ -105,6 +232,11 @@ class ContactModel:
         ``friction`` (1,) overrides the configured coefficient, e.g. a differentiable one.
         """
         wp.launch(compute_contact_forces, dim=self.num_worlds,
-                  inputs=[self.bodies_per_world, self.shapes, self.planes, self.params,
+                  inputs=[self.bodies_per_world, self.shapes, self.scene, self.params,
                           self.friction if friction is None else friction, state.body_q, state.body_qd, body_com],
-                  outputs=[state.body_f, flags], device=self.device)
+                  outputs=[state.body_f, flags, self.bristles], device=self.device)
+
+    def reset(self, mask: wp.array) -> None:
+        """Clear the masked worlds' stick deflections (a reset rover starts unloaded)."""
+        wp.launch(clear_bristles, dim=self.num_worlds, inputs=[mask, self.shapes.count], outputs=[self.bristles],
+                  device=self.device)

@@ -17,11 +17,13 @@ import numpy as np
 import torch
 import warp as wp
 
-from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant
-from atrv_warp.sim.contact import ContactModel
-from atrv_warp.sim.kernels.contact import FLAG_BODY_GROUND, FLAG_WALL
+from atrv_warp.sim.config import ArenaConfig, ContactConfig, ObstacleConfig, RoverConfig, SimConfig, get_variant
+from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
+from atrv_warp.sim.kernels.contact import FLAG_BODY_GROUND, FLAG_OBSTACLE, FLAG_WALL
 from atrv_warp.sim.kernels.rover import RoverLayout, apply_wheel_torques, compute_rover_state, reset_worlds
+from atrv_warp.sim.kernels.terrain import place_on_terrain
 from atrv_warp.sim.model import BuiltModel, build_model
+from atrv_warp.sim.terrain import HeightGrid, TerrainConfig, get_terrain
 
 __all__ = ["DRIVE_MODE_TORQUES", "DriveMode", "RoverSim", "SimBuffers"]
 
@@ -100,7 +102,8 @@ class SimBuffers:
     wheel_torque: wp.array
     """(N, W) torques applied in the last substep [N·m]."""
     contact_flags: wp.array
-    """(N,) ``int32``: bit 1 wall contact, bit 2 chassis–ground contact, since the last step began."""
+    """(N,) ``int32``: bit 1 wall contact, bit 2 chassis–ground contact, bit 4 obstacle contact, since
+    the last step began."""
     nonfinite: wp.array
     """(N,) ``int32``: 1 where the world's state is no longer finite (stays until reset)."""
 
@@ -116,6 +119,10 @@ class RoverSim:
         contact: Contact law.
         arena: Arena geometry.
         sim: Integrator settings.
+        terrain: The ground: ``None`` or ``"flat"`` (the reference arena), a preset name of
+            :data:`~atrv_warp.sim.terrain.TERRAIN_PRESETS`, a :class:`~atrv_warp.sim.terrain.TerrainConfig`
+            or a :class:`~atrv_warp.sim.terrain.HeightGrid`.
+        obstacles: Room for static obstacles per world (:class:`ObstacleConfig`); ``None``: none.
         device: Warp device (``"cpu"`` default, ``"cuda:0"`` …).
 
     State views (torch tensors on the sim device, updated in place by :meth:`step`; clone to keep):
@@ -134,7 +141,9 @@ class RoverSim:
         :attr:`layout` where each world's rover sits in Newton's arrays;
         :meth:`reset_worlds` a masked reset from device arrays (no host round trip);
         :attr:`contact` the contact model, and :meth:`substep` one solver substep, which
-        :class:`~atrv_warp.sim.diff.DiffRollout` steps through too.
+        :class:`~atrv_warp.sim.diff.DiffRollout` steps through too;
+        :attr:`terrain` and :attr:`obstacles` each world's ground and obstacles (write a world's tile or
+        layout, then reset it).
     """
 
     def __init__(
@@ -146,6 +155,8 @@ class RoverSim:
         contact: ContactConfig | None = None,
         arena: ArenaConfig | None = None,
         sim: SimConfig | None = None,
+        terrain: TerrainConfig | HeightGrid | str | None = None,
+        obstacles: ObstacleConfig | None = None,
         device: str | None = "cpu",
         requires_grad: bool = False,
     ):
@@ -171,8 +182,13 @@ class RoverSim:
         self.state_1 = self.model.state()
         self.control = self.model.control()
         self._make_layout()
+        if isinstance(terrain, str):
+            terrain = get_terrain(terrain)
+        if isinstance(terrain, TerrainConfig):
+            terrain = terrain.generate(self.arena_cfg.half_size)
         self.contact = ContactModel(self.built, rover=self.rover_cfg, contact=self.contact_cfg, arena=self.arena_cfg,
-                                    sim_dt=self.sim_cfg.sim_dt, device=self.device)
+                                    sim_dt=self.sim_cfg.sim_dt, device=self.device, terrain=terrain,
+                                    obstacles=obstacles)
         """The contact model every substep launches (:class:`~atrv_warp.sim.contact.ContactModel`)."""
 
         n, w = num_worlds, len(self.description.wheels)
@@ -238,6 +254,16 @@ class RoverSim:
     def layout(self) -> RoverLayout:
         """Where each world's rover lives in Newton's flat arrays (read-only)."""
         return self._layout
+
+    @property
+    def terrain(self) -> Terrain:
+        """Each world's ground (:class:`~atrv_warp.sim.contact.Terrain`; disabled on the flat arena)."""
+        return self.contact.terrain
+
+    @property
+    def obstacles(self) -> Obstacles:
+        """Each world's obstacles (:class:`~atrv_warp.sim.contact.Obstacles`; no slots without an ObstacleConfig)."""
+        return self.contact.obstacles
 
     @property
     def buffers(self) -> SimBuffers:
@@ -395,9 +421,15 @@ class RoverSim:
         goes through :meth:`reset`, which checks it.
         """
         s = self.state_0
-        wp.launch(reset_worlds, dim=self.num_worlds,
-                  inputs=[self._layout, mask, poses, self.rest_height if height is None else float(height)],
+        h = self.rest_height if height is None else float(height)
+        wp.launch(reset_worlds, dim=self.num_worlds, inputs=[self._layout, mask, poses, h],
                   outputs=[s.joint_q, s.joint_qd, self._contact_flags, self._nonfinite], device=self.device)
+        if self.terrain.enabled:
+            wp.launch(place_on_terrain, dim=self.num_worlds,
+                      inputs=[self._layout.chassis_coord, self._layout.coords_per_world, self.terrain.kernel, mask,
+                              poses, h, self._footprint], outputs=[s.joint_q], device=self.device)
+        if self.contact_cfg.stiction > 0:
+            self.contact.reset(mask)
         newton.eval_fk(self.model, s.joint_q, s.joint_qd, s, mask=mask)
         self._update_views()
 
@@ -415,6 +447,7 @@ class RoverSim:
         wp.to_torch(s.joint_qd).copy_(snapshot["joint_qd"])
         self.commands.copy_(snapshot["commands"])
         self.sim_time = float(snapshot["sim_time"])
+        self.contact.bristles.zero_()
         newton.eval_fk(self.model, s.joint_q, s.joint_qd, s)
         self._contact_flags.zero_()
         self._nonfinite.zero_()
@@ -423,13 +456,24 @@ class RoverSim:
     # ------------------------------------------------------------------ convenience
     @property
     def collision(self) -> torch.Tensor:
-        """(N,) bool: a wall or chassis–ground contact happened during the last step."""
+        """(N,) bool: a wall, obstacle or chassis–ground contact happened during the last step."""
         return self.contact_flags != 0
 
     @property
     def wall_contact(self) -> torch.Tensor:
         """(N,) bool: a wall contact happened during the last step."""
         return (self.contact_flags & int(FLAG_WALL)) != 0
+
+    @property
+    def obstacle_contact(self) -> torch.Tensor:
+        """(N,) bool: an obstacle contact happened during the last step."""
+        return (self.contact_flags & int(FLAG_OBSTACLE)) != 0
+
+    @property
+    def _footprint(self) -> float:
+        """Half the wheelbase or track, whichever is smaller [m]: the span a reset levels the chassis over."""
+        xy = np.array([w.origin[:2, 3] for w in self.description.wheels])
+        return float(max(min(np.abs(xy[:, 0]).max(), np.abs(xy[:, 1]).max()), 0.1))
 
     @property
     def body_ground_contact(self) -> torch.Tensor:

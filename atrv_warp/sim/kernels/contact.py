@@ -1,10 +1,18 @@
-"""Hunt–Crossley penalty contact between the rover's shapes and the arena's planes.
+"""Hunt–Crossley penalty contact between the rover's shapes and the scene: the arena's planes,
+the terrain and the obstacles.
 
 Newton 1.8's built-in contact force is linear in penetration (``ke d``); the reference law
-is ``kp d^n + kc d^n d_dot``. The arena is a flat ground and four axis-aligned walls, so
+is ``kp d^n + kc d^n d_dot``. The reference arena is a flat ground and four axis-aligned walls, so
 every pair is a convex shape against a half-space and the deepest point has a closed form:
 for a cylinder, the rim point furthest along ``-normal``; for a box, each corner. That
 closed form is exact, cheap (one thread per world, no broad phase) and differentiable.
+
+On terrain (``kernels/terrain.py``) the ground is the tangent plane under the shape: for a wheel,
+the plane under its centre gives a first deepest rim point, and the plane under that point the
+final one; box corners use the plane under each corner. Obstacles (``kernels/obstacles.py``) are
+worked out in the ground plane. With ``ContactParams.stiction > 0`` a wheel's ground friction
+also has an elastic stick phase (a bristle per wheel, its deflection kept between substeps), so a
+rover parked on a slope below atan(mu) stays put instead of creeping at the viscous rate.
 
 Forces are written into ``State.body_f`` (world-frame wrench at the body COM, linear first),
 which Newton's solvers add to the articulated dynamics.
@@ -14,6 +22,17 @@ from __future__ import annotations
 
 import warp as wp
 
+from atrv_warp.sim.kernels.obstacles import (
+    OBSTACLE_BOX,
+    OBSTACLE_CYLINDER,
+    ObstacleSet,
+    bounding_radius,
+    footprint_vs_box,
+    footprint_vs_disc,
+    rotate2,
+)
+from atrv_warp.sim.kernels.terrain import TerrainGrid, terrain_normal, terrain_plane_offset, terrain_sample
+
 SHAPE_CYLINDER = wp.constant(0)
 SHAPE_BOX = wp.constant(1)
 
@@ -22,6 +41,8 @@ FLAG_WALL = wp.constant(1)
 """Any rover shape touches a wall."""
 FLAG_BODY_GROUND = wp.constant(2)
 """A non-wheel shape (the chassis) touches the ground."""
+FLAG_OBSTACLE = wp.constant(4)
+"""Any rover shape touches an obstacle."""
 
 
 @wp.struct
@@ -33,6 +54,8 @@ class ContactParams:
     exponent: float  # n [-]
     linear_region: float  # [m]
     linear_coeff: float  # linear_region^(n-1), so the law is continuous at linear_region
+    stiction: float  # bristle stiffness x sim_dt / friction slope [-]; 0 = regularised Coulomb only
+    dt: float  # sim_dt [s]
 
 
 @wp.struct
@@ -55,6 +78,15 @@ class ArenaPlanes:
 
     normal: wp.array(dtype=wp.vec3)
     offset: wp.array(dtype=float)
+
+
+@wp.struct
+class Scene:
+    """Everything a rover can touch besides itself."""
+
+    planes: ArenaPlanes
+    terrain: TerrainGrid  # replaces plane 0 when enabled
+    obstacles: ObstacleSet
 
 
 @wp.func
@@ -158,11 +190,191 @@ def contact_flag(plane: int, is_wheel: int) -> wp.int32:
     return wp.int32(0)
 
 
+@wp.func
+def bristle_contact_force(
+    p: wp.vec3,
+    depth: float,
+    normal: wp.vec3,
+    com: wp.vec3,
+    v_com: wp.vec3,
+    omega: wp.vec3,
+    axle: wp.vec3,
+    slope_lon: float,
+    slope_lat: float,
+    params: ContactParams,
+    friction: float,
+    deflection: wp.vec3,
+):
+    """Like :func:`point_contact_force`, with an elastic stick phase: the tangential force is
+    ``-k deflection - c slip`` (``k = stiction c / dt`` per direction), the deflection integrates the
+    slip and is held at the Coulomb limit while sliding. Returns (force, new deflection)."""
+    v = v_com + wp.cross(omega, p - com)
+    vn = wp.dot(v, normal)
+    fn = hunt_crossley(depth, -vn, params)
+    vt = v - vn * normal
+    lat = axle - wp.dot(axle, normal) * normal
+    ll = wp.length(lat)
+    if ll < 1.0e-6:
+        return point_contact_force(p, depth, normal, com, v_com, omega, axle, slope_lon, slope_lat, params,
+                                   friction), wp.vec3(0.0)
+    lat = lat / ll
+    lon = wp.cross(normal, lat)
+    d = deflection - wp.dot(deflection, normal) * normal + vt * params.dt
+    k_lon = params.stiction * slope_lon / params.dt
+    k_lat = params.stiction * slope_lat / params.dt
+    spring = -(k_lon * wp.dot(d, lon)) * lon - (k_lat * wp.dot(d, lat)) * lat
+    fmax = friction * fn
+    sl = wp.length(spring)
+    if sl > fmax:  # sliding: the bristle stays at the Coulomb limit
+        d = d * (fmax / sl)
+        spring = spring * (fmax / sl)
+    ft = spring - (slope_lon * wp.dot(vt, lon)) * lon - (slope_lat * wp.dot(vt, lat)) * lat
+    fl = wp.length(ft)
+    if fl > fmax:
+        ft = ft * (fmax / fl)
+    return fn * normal + ft, d
+
+
+@wp.func
+def cylinder_ground_contact(
+    scene: Scene,
+    tile: int,
+    xf: wp.transform,
+    size: wp.vec3,
+    com: wp.vec3,
+    v_com: wp.vec3,
+    omega: wp.vec3,
+    axle: wp.vec3,
+    slope_lon: float,
+    slope_lat: float,
+    params: ContactParams,
+    friction: float,
+    deflection: wp.vec3,
+):
+    """A cylinder on the ground (the terrain's tangent plane, or plane 0), with stiction if enabled:
+    (wrench about the COM, new bristle deflection, 1 if touching)."""
+    n = scene.planes.normal[0]
+    off = scene.planes.offset[0]
+    if scene.terrain.enabled != 0:
+        c = wp.transform_get_translation(xf)
+        h = terrain_sample(scene.terrain, tile, c[0], c[1])
+        n = terrain_normal(h)
+        off = terrain_plane_offset(n, c[0], c[1], h)
+        p0 = cylinder_deepest_point(xf, size[0], size[1], n)
+        h = terrain_sample(scene.terrain, tile, p0[0], p0[1])
+        n = terrain_normal(h)
+        off = terrain_plane_offset(n, p0[0], p0[1], h)
+    p = cylinder_deepest_point(xf, size[0], size[1], n)
+    depth = off - wp.dot(n, p)
+    if depth <= 0.0:
+        return wp.spatial_vector(), wp.vec3(0.0), 0
+    f = wp.vec3(0.0)
+    d = wp.vec3(0.0)
+    if params.stiction > 0.0:
+        f, d = bristle_contact_force(p, depth, n, com, v_com, omega, axle, slope_lon, slope_lat, params, friction,
+                                     deflection)
+    else:
+        f = point_contact_force(p, depth, n, com, v_com, omega, axle, slope_lon, slope_lat, params, friction)
+    return wp.spatial_vector(f, wp.cross(p - com, f)), d, 1
+
+
+@wp.func
+def box_terrain_contact(
+    scene: Scene,
+    tile: int,
+    xf: wp.transform,
+    size: wp.vec3,
+    com: wp.vec3,
+    v_com: wp.vec3,
+    omega: wp.vec3,
+    axle: wp.vec3,
+    slope: float,
+    params: ContactParams,
+    friction: float,
+):
+    """A box's corners on the terrain, each against the tangent plane under it: (wrench, 1 if touching)."""
+    wrench = wp.spatial_vector()
+    touching = int(0)
+    for corner in range(8):
+        sx = float(2 * (corner & 1) - 1)
+        sy = float(2 * ((corner >> 1) & 1) - 1)
+        sz = float(2 * ((corner >> 2) & 1) - 1)
+        p = wp.transform_point(xf, wp.vec3(sx * size[0], sy * size[1], sz * size[2]))
+        h = terrain_sample(scene.terrain, tile, p[0], p[1])
+        n = terrain_normal(h)
+        depth = terrain_plane_offset(n, p[0], p[1], h) - wp.dot(n, p)
+        if depth > 0.0:
+            wrench += contact_wrench(p, depth, n, com, v_com, omega, axle, slope, slope, params, friction)
+            touching = 1
+    return wrench, touching
+
+
+@wp.func
+def obstacle_contact(
+    obstacles: ObstacleSet,
+    world: int,
+    kind: int,
+    xf: wp.transform,
+    size: wp.vec3,
+    com: wp.vec3,
+    v_com: wp.vec3,
+    omega: wp.vec3,
+    axle: wp.vec3,
+    slope: float,
+    params: ContactParams,
+    friction: float,
+):
+    """A rover shape's footprint against every obstacle of the world: (wrench, 1 if touching)."""
+    c3 = wp.transform_get_translation(xf)
+    c = wp.vec2(c3[0], c3[1])
+    a1 = wp.vec2(0.0)
+    h1 = float(0.0)
+    h2 = float(0.0)
+    if kind == SHAPE_CYLINDER:  # footprint: the axle's length by the diameter
+        a1 = wp.vec2(axle[0], axle[1])
+        h1 = size[1]
+        h2 = size[0]
+    else:  # footprint: the box's x and y extents
+        ex = wp.transform_vector(xf, wp.vec3(1.0, 0.0, 0.0))
+        a1 = wp.vec2(ex[0], ex[1])
+        h1 = size[0]
+        h2 = size[1]
+    al = wp.length(a1)
+    wrench = wp.spatial_vector()
+    touching = int(0)
+    if al < 1.0e-6:
+        return wrench, touching
+    a1 = a1 / al
+    reach = wp.sqrt(h1 * h1 + h2 * h2)
+    for o in range(obstacles.count):
+        okind = obstacles.kind[world, o]
+        if okind == 0:
+            continue
+        pose = obstacles.pose[world, o]
+        osize = obstacles.size[world, o]
+        q = wp.vec2(pose[0], pose[1])
+        if wp.length(q - c) > reach + bounding_radius(okind, osize) or c3[2] > obstacles.top:
+            continue
+        depth = float(0.0)
+        n2 = wp.vec2(0.0)
+        p2 = c
+        if okind == OBSTACLE_CYLINDER:
+            depth, n2, p2 = footprint_vs_disc(c, a1, h1, h2, q, osize[0])
+        elif okind == OBSTACLE_BOX:
+            depth, n2, p2 = footprint_vs_box(c, a1, h1, h2, q, rotate2(wp.vec2(1.0, 0.0), pose[2]), osize[0],
+                                             osize[1])
+        if depth > 0.0:
+            wrench += contact_wrench(wp.vec3(p2[0], p2[1], c3[2]), depth, wp.vec3(n2[0], n2[1], 0.0), com, v_com,
+                                     omega, axle, slope, slope, params, friction)
+            touching = 1
+    return wrench, touching
+
+
 @wp.kernel
 def compute_contact_forces(
     bodies_per_world: int,
     shapes: RoverShapes,
-    planes: ArenaPlanes,
+    scene: Scene,
     params: ContactParams,
     friction: wp.array(dtype=float),
     body_q: wp.array(dtype=wp.transform),
@@ -170,8 +382,10 @@ def compute_contact_forces(
     body_com: wp.array(dtype=wp.vec3),
     body_f: wp.array(dtype=wp.spatial_vector),
     contact_flags: wp.array(dtype=wp.int32),
+    bristles: wp.array(dtype=wp.vec3),
 ):
-    """One thread per world: add every shape–plane contact wrench to ``body_f``.
+    """One thread per world: add every shape's contact wrenches (planes or terrain, obstacles) to
+    ``body_f``; ``bristles`` (N x shapes) keeps each wheel's stick deflection between substeps.
 
     ``friction`` is a one-element array (mu) so that gradients can flow to it.
     """
@@ -179,6 +393,10 @@ def compute_contact_forces(
     mu = friction[0]
     base = world * bodies_per_world
     flags = contact_flags[world]
+    planes = scene.planes
+    tile = int(0)
+    if scene.terrain.enabled != 0:
+        tile = scene.terrain.tile[world]
     for s in range(shapes.count):
         b = base + shapes.body[s]
         X = body_q[b]
@@ -194,6 +412,23 @@ def compute_contact_forces(
         for k in range(planes.normal.shape[0]):
             n = planes.normal[k]
             off = planes.offset[k]
+            if k == 0 and shapes.kind[s] == SHAPE_CYLINDER and (scene.terrain.enabled != 0 or params.stiction > 0.0):
+                w, d, touching = cylinder_ground_contact(scene, tile, xf, size, com, v_com, omega, axle,
+                                                         shapes.slope_lon[s], shapes.slope_lat[s], params, mu,
+                                                         bristles[world * shapes.count + s])
+                if params.stiction > 0.0:
+                    bristles[world * shapes.count + s] = d
+                wrench += w
+                if touching != 0:
+                    flags = flags | contact_flag(k, wheel)
+                continue
+            if k == 0 and shapes.kind[s] == SHAPE_BOX and scene.terrain.enabled != 0:
+                w, touching = box_terrain_contact(scene, tile, xf, size, com, v_com, omega, axle,
+                                                  shapes.slope_lat[s], params, mu)
+                wrench += w
+                if touching != 0:
+                    flags = flags | contact_flag(k, wheel)
+                continue
             if shapes.kind[s] == SHAPE_CYLINDER:
                 p = cylinder_deepest_point(xf, size[0], size[1], n)
                 depth = off - wp.dot(n, p)
@@ -212,6 +447,22 @@ def compute_contact_forces(
                         wrench += contact_wrench(p, depth, n, com, v_com, omega, axle, shapes.slope_lat[s],
                                                  shapes.slope_lat[s], params, mu)
                         flags = flags | contact_flag(k, wheel)
+        if scene.obstacles.count > 0:
+            w, touching = obstacle_contact(scene.obstacles, world, shapes.kind[s], xf, size, com, v_com, omega, axle,
+                                           shapes.slope_lat[s], params, mu)
+            wrench += w
+            if touching != 0:
+                flags = flags | FLAG_OBSTACLE
         # atomic_add, not read-modify-write: it has an adjoint, so wp.Tape can differentiate it
         wp.atomic_add(body_f, b, wrench)
     contact_flags[world] = flags
+
+
+@wp.kernel
+def clear_bristles(mask: wp.array(dtype=bool), shape_count: int, bristles: wp.array(dtype=wp.vec3)):
+    """Zero the stick deflections of masked worlds (on reset)."""
+    world = wp.tid()
+    if not mask[world]:
+        return
+    for s in range(shape_count):
+        bristles[world * shape_count + s] = wp.vec3(0.0)

@@ -1,0 +1,72 @@
+"""The 2-D laser scanner: one ray per (world, beam) against the arena walls, the ground or terrain,
+and the world's obstacles, with seeded Gaussian range noise and dropout."""
+
+from __future__ import annotations
+
+import warp as wp
+
+from atrv_warp.sim.kernels.contact import Scene
+from atrv_warp.sim.kernels.obstacles import ray_obstacle
+from atrv_warp.sim.kernels.terrain import ray_terrain
+
+
+@wp.struct
+class ScanParams:
+    """The scanner (see :class:`atrv_warp.sim.scanner.ScannerConfig`)."""
+
+    mount: wp.transform  # scanner frame in the chassis frame; beams lie in its x-y plane
+    angles: wp.array(dtype=float)  # (B,) beam angles about the frame's z, 0 = forward [rad]
+    min_range: float  # [m]
+    max_range: float  # [m]; also what a beam without a return reads
+    noise_std: float  # Gaussian range noise [m]
+    dropout: float  # probability that a beam reads max_range [-]
+    march_step: float  # ray-marching step over terrain [m]
+    bodies_per_world: int
+    chassis_body: int
+
+
+@wp.func
+def ray_plane(normal: wp.vec3, offset: float, origin: wp.vec3, direction: wp.vec3, t_max: float) -> float:
+    """Distance [m] along a unit ray from free space (``n·x >= offset``) to the plane, or ``t_max``."""
+    dn = wp.dot(normal, direction)
+    if dn >= -1.0e-9:
+        return t_max
+    return wp.clamp((offset - wp.dot(normal, origin)) / dn, 0.0, t_max)
+
+
+@wp.kernel
+def cast_scan(
+    params: ScanParams,
+    scene: Scene,
+    body_q: wp.array(dtype=wp.transform),
+    seed: int,
+    counter: int,
+    ranges: wp.array2d(dtype=float),
+):
+    """Range [m] of every beam of every world (dim = (N, B))."""
+    world, beam = wp.tid()
+    X = body_q[world * params.bodies_per_world + params.chassis_body] * params.mount
+    origin = wp.transform_get_translation(X)
+    a = params.angles[beam]
+    direction = wp.transform_vector(X, wp.vec3(wp.cos(a), wp.sin(a), 0.0))
+    t = params.max_range
+    for k in range(scene.planes.normal.shape[0]):
+        if k > 0 or scene.terrain.enabled == 0:
+            t = wp.min(t, ray_plane(scene.planes.normal[k], scene.planes.offset[k], origin, direction, t))
+    if scene.terrain.enabled != 0:
+        t = wp.min(t, ray_terrain(scene.terrain, scene.terrain.tile[world], origin, direction, t, params.march_step))
+    obstacles = scene.obstacles
+    for o in range(obstacles.count):
+        kind = obstacles.kind[world, o]
+        if kind != 0:
+            t = wp.min(t, ray_obstacle(kind, obstacles.pose[world, o], obstacles.size[world, o], obstacles.top, origin,
+                                       direction, t))
+    if params.noise_std > 0.0 or params.dropout > 0.0:
+        state = wp.rand_init(wp.int32(wp.rand_init(seed, counter)), world * ranges.shape[1] + beam)
+        if wp.randf(state) < params.dropout:
+            t = params.max_range
+        elif t < params.max_range:
+            t = t + params.noise_std * wp.randn(state)
+    if not wp.isfinite(t):  # a blown-up world (the simulator flags it): no return
+        t = params.max_range
+    ranges[world, beam] = wp.clamp(t, params.min_range, params.max_range)

@@ -1,0 +1,117 @@
+"""A 2-D laser range finder on every rover, after the ATRV-Jr's SICK LMS-class scanner.
+
+One Warp ray cast per (world, beam) from the URDF's ``lrf_frame`` against the arena walls, the
+ground or terrain, and the world's obstacles (``kernels/scan.py``). The ranges are a zero-copy
+``(N, beams)`` torch view, refreshed by :meth:`LaserScanner.scan`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import warp as wp
+
+from atrv_warp.sim.kernels.scan import ScanParams, cast_scan
+from atrv_warp.sim.simulator import RoverSim
+
+__all__ = ["LaserScanner", "ScannerConfig"]
+
+
+@dataclass(frozen=True)
+class ScannerConfig:
+    """The scanner's geometry and noise. Defaults after a SICK LMS 2xx: 180 deg, 0.1 … 20 m."""
+
+    beams: int = 64
+    """Beams across the field of view (64 for learning; 181 gives the LMS's 1 deg for ROS)."""
+    fov: float = math.pi
+    """Field of view [rad], centred on the frame's +x."""
+    min_range: float = 0.1
+    """[m]"""
+    max_range: float = 20.0
+    """[m]; a beam without a return (or dropped) reads this."""
+    noise_std: float = 0.0
+    """Gaussian range noise [m] (a SICK LMS: about 0.01)."""
+    dropout: float = 0.0
+    """Probability that a beam returns nothing [-]."""
+    frame: str = "lrf_frame"
+    """URDF frame the beams start from; they lie in its x-y plane."""
+    march_step: float = 0.5
+    """Ray-marching step over terrain [m]; crossings are refined to 1/256 of it."""
+
+    def __post_init__(self):
+        if self.beams < 1 or not 0 < self.fov <= 2 * math.pi:
+            raise ValueError(f"scanner needs beams >= 1 and 0 < fov <= 2 pi, got {self.beams}, {self.fov}")
+        if not 0 <= self.min_range < self.max_range or self.noise_std < 0 or not 0 <= self.dropout <= 1:
+            raise ValueError(f"bad scanner ranges or noise: {self}")
+        if self.march_step <= 0:
+            raise ValueError(f"march_step must be > 0, got {self.march_step}")
+
+    @property
+    def angles(self) -> np.ndarray:
+        """(beams,) beam angles [rad], right to left (counter-clockwise), as ROS LaserScan orders them."""
+        if self.beams == 1:
+            return np.zeros(1)
+        return np.linspace(-0.5 * self.fov, 0.5 * self.fov, self.beams)
+
+
+class LaserScanner:
+    """A scanner on every world's rover.
+
+    Args:
+        sim: The simulator whose rovers carry it.
+        config: Geometry and noise.
+        seed: Seed of the noise and dropout draws; scan k of a seed is the same in every run.
+
+    Attributes:
+        ranges: (N, beams) float32 torch view [m], written by :meth:`scan`.
+        angles: (beams,) float32 beam angles [rad].
+    """
+
+    def __init__(self, sim: RoverSim, config: ScannerConfig | None = None, *, seed: int = 0):
+        self.sim, self.cfg = sim, config or ScannerConfig()
+        frames = {f.name: f.transform for f in sim.description.frames}
+        if self.cfg.frame not in frames:
+            raise ValueError(f"scanner frame {self.cfg.frame!r} is not a frame of the rover; known: {sorted(frames)}")
+        m = np.asarray(frames[self.cfg.frame], dtype=np.float64)
+        rot = wp.mat33(*m[:3, :3].flatten().tolist())
+        dev = sim.device
+        p = ScanParams()
+        p.mount = wp.transform(wp.vec3(*m[:3, 3].tolist()), wp.quat_from_matrix(rot))
+        p.angles = wp.array(self.cfg.angles, dtype=float, device=dev)
+        p.min_range, p.max_range = self.cfg.min_range, self.cfg.max_range
+        p.noise_std, p.dropout, p.march_step = self.cfg.noise_std, self.cfg.dropout, self.cfg.march_step
+        p.bodies_per_world, p.chassis_body = sim.layout.bodies_per_world, sim.layout.chassis_body
+        self._params = p
+        self._ranges = wp.zeros((sim.num_worlds, self.cfg.beams), dtype=float, device=dev)
+        self.ranges = wp.to_torch(self._ranges)
+        self.buffer = self._ranges
+        """The Warp array behind :attr:`ranges`, for kernels (read-only)."""
+        self.angles = wp.to_torch(p.angles)
+        self.seed = int(seed) % 2**31
+        self.count = 0
+        """Scans taken since seeding (the noise stream's position)."""
+
+    def reseed(self, seed: int) -> None:
+        """Restart the noise stream."""
+        self.seed, self.count = int(seed) % 2**31, 0
+
+    def scan(self) -> torch.Tensor:
+        """Cast every beam of every world from the current state; returns :attr:`ranges` (a view)."""
+        wp.launch(cast_scan, dim=(self.sim.num_worlds, self.cfg.beams),
+                  inputs=[self._params, self.sim.contact.scene, self.sim.buffers.body_q, self.seed, self.count],
+                  outputs=[self._ranges], device=self.sim.device)
+        self.count += 1
+        return self.ranges
+
+    def points(self, worlds=None) -> np.ndarray:
+        """World-frame hit points (len(worlds), beams, 3) [m] of the last scan (beams without a return
+        end at ``max_range``), for drawing."""
+        worlds = np.arange(self.sim.num_worlds) if worlds is None else np.asarray(worlds)
+        frame = self.sim.frame_pose(self.cfg.frame).numpy()[worlds]
+        r = self.ranges.detach().cpu().numpy()[worlds].astype(np.float64)
+        a = self.cfg.angles
+        local = np.stack([r * np.cos(a), r * np.sin(a), np.zeros_like(r), np.ones_like(r)], axis=-1)
+        return np.einsum("wij,wbj->wbi", frame, local)[..., :3]
