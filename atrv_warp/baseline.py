@@ -1,4 +1,4 @@
-"""The scripted baseline on the standard evaluation set: ``python -m atrv_warp.baseline``.
+"""The scripted baseline on the standard evaluation set: ``python -m atrv_warp.baseline [--task nav]``.
 
 The driver itself is :class:`atrv_warp.task.baseline.ScriptedDriver`.
 """
@@ -18,9 +18,14 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.baseline", description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=1000)
     parser.add_argument("--seed", type=int, default=2024)
+    parser.add_argument("--task", default="reach", help="task: reach | nav")
     args = parser.parse_args(argv)
-    result = evaluate(scripted_policy(), num_episodes=args.episodes, seed=args.seed)
-    print(format_result("scripted baseline", result))
+    from atrv_warp.task.config import TASK_VARIANTS
+
+    if args.task not in TASK_VARIANTS:
+        parser.error(f"unknown --task {args.task!r}; known: {sorted(TASK_VARIANTS)}")
+    result = evaluate(scripted_policy(), num_episodes=args.episodes, seed=args.seed, task=args.task)
+    print(format_result(f"scripted baseline ({args.task})", result))
     return 0
 
 

@@ -9,6 +9,8 @@ Examples::
     python -m atrv_warp.evaluate                          # the shipped policy, 1000 episodes
     python -m atrv_warp.evaluate runs/default/best_policy.pt --episodes 200 --seed 7
     python -m atrv_warp.evaluate --baseline               # the scripted driver, for comparison
+    python -m atrv_warp.evaluate --task nav               # the shipped navigation policy
+    python -m atrv_warp.evaluate --task nav --baseline --episodes 8 --rerun nav.rrd
     python -m atrv_warp.evaluate --episodes 8 --rerun eval.rrd      # record 4 worlds; view: rerun eval.rrd
     python -m atrv_warp.evaluate --episodes 4 --serve --real-time   # live web viewer on 127.0.0.1
 """
@@ -29,6 +31,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=1000, help="number of seeded episodes (one world each)")
     parser.add_argument("--seed", type=int, default=None, help="evaluation-set seed (default: the standard set)")
     parser.add_argument("--baseline", action="store_true", help="evaluate the scripted baseline instead")
+    parser.add_argument("--task", default=None,
+                        help="task: reach | nav (default: the policy's own; reach for the baseline)")
     parser.add_argument("--device", default="cpu", help="simulation device")
     parser.add_argument("--json", metavar="FILE", help="also write the figures to FILE")
     parser.add_argument("--rerun", metavar="FILE.rrd", help="record the episodes to a Rerun file")
@@ -42,22 +46,30 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--episodes must be >= 1")
     if args.verbose:
         set_verbose()
+    from atrv_warp.task.config import TASK_VARIANTS
     from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result
 
+    if args.task is not None and args.task not in TASK_VARIANTS:
+        return error_line(parser.prog, f"unknown --task {args.task!r}; known: {sorted(TASK_VARIANTS)}")
+    task = args.task or "reach"
     if args.baseline:
         from atrv_warp.task.baseline import scripted_policy
 
-        policy, name = scripted_policy(), "scripted baseline"
+        policy, name = scripted_policy(), f"scripted baseline ({task})"
     else:
-        from atrv_warp.rl.agents import load_policy, pretrained_policy_path
+        from atrv_warp.rl.agents import load_policy, policy_task, pretrained_nav_policy_path, pretrained_policy_path
         from atrv_warp.storage import FileFormatError
 
-        path = args.checkpoint or str(pretrained_policy_path())
+        shipped = pretrained_nav_policy_path() if args.task == "nav" else pretrained_policy_path()
+        path = args.checkpoint or str(shipped)
         try:
             policy = load_policy(path)
+            trained_on = policy_task(path)
         except (FileNotFoundError, FileFormatError) as err:
             return error_line(parser.prog, f"cannot load policy: {err}")
-        name = path
+        if args.task is not None and args.task != trained_on:
+            return error_line(parser.prog, f"{path} was trained on task {trained_on!r}, not {args.task!r}")
+        task, name = trained_on, path
     try:
         print(device_summary(args.device))
     except (RuntimeError, ValueError) as err:
@@ -68,13 +80,13 @@ def main(argv: list[str] | None = None) -> int:
         from atrv_warp.integrations.rerun import RerunRecorder
         from atrv_warp.task.env import ATRVjrEnv
 
-        env = ATRVjrEnv(args.episodes, device=args.device)
+        env = ATRVjrEnv(args.episodes, device=args.device, task=task)
         recorder = RerunRecorder(env.sim, path=args.rerun, serve=args.serve, worlds=args.worlds,
                                  real_time=args.real_time)
         on_step = recorder.env_hook()
     try:
         result = evaluate(policy, num_episodes=args.episodes, seed=seed, device=args.device, env=env,
-                          on_step=on_step)
+                          on_step=on_step, task=task)
     finally:
         if recorder is not None:
             recorder.close()
@@ -85,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
         input("viewer running; press Enter to stop ...")
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({"policy": name, "seed": seed, **result.as_dict()}, fh, indent=2)
+            json.dump({"policy": name, "task": task, "seed": seed, **result.as_dict()}, fh, indent=2)
     return 0
 
 

@@ -5,6 +5,8 @@ Registered ids (importing this module registers them; ``gymnasium.make`` accepts
 
 - ``ATRVjr-v0``: one rover, a ``gymnasium.Env`` (what SB3's ``DummyVecEnv`` wraps);
   ``gymnasium.make_vec("ATRVjr-v0", num_envs=N)`` gives the batched ``ATRVjrVectorEnv``.
+- ``ATRVjrNav-v0``: the same on the navigation task (terrain, obstacles, the scan in the
+  observation and the full scan in ``info["scan"]``).
 
 Both run on :class:`atrv_warp.task.env.ATRVjrEnv`; the episode limit (200 steps) is the task's own
 truncation, so no ``TimeLimit`` wrapper is added.
@@ -59,7 +61,10 @@ class ATRVjrGymEnv(gymnasium.Env):
 
     @staticmethod
     def _info(td) -> dict:
-        return {"end_reason": END_REASONS[int(td["end_reason"][0, 0])], "distance": float(td["distance"][0, 0])}
+        info = {"end_reason": END_REASONS[int(td["end_reason"][0, 0])], "distance": float(td["distance"][0, 0])}
+        if "scan" in td:
+            info["scan"] = td["scan"][0].numpy().copy()
+        return info
 
 
 class ATRVjrVectorEnv(VectorEnv):
@@ -98,8 +103,13 @@ class ATRVjrVectorEnv(VectorEnv):
             trunc[mask] = False
         self._needs_reset = term | trunc
         info = {"end_reason": nxt["end_reason"][:, 0].numpy().copy(), "distance": nxt["distance"][:, 0].numpy().copy()}
+        if "scan" in nxt:
+            info["scan"] = nxt["scan"].numpy().copy()
         return obs.numpy(), reward.numpy(), term.numpy(), trunc.numpy(), info
 
 
 if "ATRVjr-v0" not in gymnasium.registry:
     gymnasium.register(id="ATRVjr-v0", entry_point=ATRVjrGymEnv, vector_entry_point=ATRVjrVectorEnv)
+if "ATRVjrNav-v0" not in gymnasium.registry:
+    gymnasium.register(id="ATRVjrNav-v0", entry_point=ATRVjrGymEnv, vector_entry_point=ATRVjrVectorEnv,
+                       kwargs={"task": "nav"})

@@ -3,8 +3,11 @@ trajectories and per-world scalars, to an ``.rrd`` file or a live web viewer on 
 
 Entities (``W`` = world index)::
 
-    arena/ground, arena/grid, arena/walls          static
+    arena/ground, arena/grid, arena/walls          static (no ground box or grid on terrain)
     world_W/rover/<link>                           Transform3D per step; shapes static below it
+    world_W/terrain                                the world's terrain tile (mesh), when it changes
+    world_W/obstacles/{boxes,cylinders}            the world's obstacles, when they change
+    world_W/scan/{hits,rays}                       the laser scan's returns and beams, per step
     world_W/target                                 target disc
     world_W/trajectory                             chassis path of the current episode
     plots/world_W/{reward,distance,torque_left,torque_right}   Scalars
@@ -46,6 +49,26 @@ _WHEEL_COLOR = (25, 25, 25)
 _TARGET_COLOR = (40, 90, 230)
 _GROUND_COLOR = (150, 150, 140)
 _WALL_COLOR = (120, 120, 130)
+_OBSTACLE_COLOR = (200, 140, 40)
+_SCAN_COLOR = (230, 30, 200)
+_TERRAIN_MAX_SIDE = 121
+"""Terrain meshes are drawn from at most this many samples per side."""
+
+
+def _terrain_mesh(heights: np.ndarray, half: float, base: float) -> rr.Mesh3D:
+    """A tile's height grid as a triangle mesh coloured by height."""
+    step = max(1, int(np.ceil((heights.shape[0] - 1) / (_TERRAIN_MAX_SIDE - 1))))
+    h = heights[::step, ::step]
+    n = h.shape[0]
+    axis = np.linspace(-half, half, heights.shape[0])[::step]
+    x, y = np.meshgrid(axis, axis, indexing="ij")
+    vertices = np.stack([x, y, base + h], axis=-1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
+    a = (i * n + j).reshape(-1)
+    tris = np.concatenate([np.stack([a, a + n, a + n + 1], 1), np.stack([a, a + n + 1, a + 1], 1)])
+    t = (h - h.min()) / max(float(np.ptp(h)), 1e-6)
+    colors = np.stack([110 + 70 * t, 140 + 50 * t, 90 + 40 * t], axis=-1).reshape(-1, 3).astype(np.uint8)
+    return rr.Mesh3D(vertex_positions=vertices, triangle_indices=tris, vertex_colors=colors)
 
 
 def _free_port() -> int:
@@ -196,6 +219,8 @@ class RerunRecorder:
         self._wall0 = None
         self._sim0 = sim.sim_time
         self._trails: dict[int, list[np.ndarray]] = {w: [] for w in self.worlds}
+        self._drawn_tile: dict[int, int] = {}
+        self._drawn_obstacles: dict[int, np.ndarray] = {}
         built = sim.built
         self._bodies = [built.chassis_body, *built.wheel_bodies]
         labels = built.rover_builder.body_label
@@ -208,12 +233,13 @@ class RerunRecorder:
         rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         h = arena.half_size
         (_, ground_centre, ground_half), *walls = arena.boxes()
-        rec.log("arena/ground", rr.Boxes3D(centers=[ground_centre], half_sizes=[ground_half],
-                                           colors=[_GROUND_COLOR], fill_mode="solid"), static=True)
-        ticks = np.arange(-h, h + 0.5, 1.0)
-        z = arena.ground_top + 0.002
-        lines = [[(x, -h, z), (x, h, z)] for x in ticks] + [[(-h, y, z), (h, y, z)] for y in ticks]
-        rec.log("arena/grid", rr.LineStrips3D(lines, colors=[(90, 90, 90)], radii=0.005), static=True)
+        if not self.sim.terrain.enabled:  # on terrain, each world's tile is drawn instead
+            rec.log("arena/ground", rr.Boxes3D(centers=[ground_centre], half_sizes=[ground_half],
+                                               colors=[_GROUND_COLOR], fill_mode="solid"), static=True)
+            ticks = np.arange(-h, h + 0.5, 1.0)
+            z = arena.ground_top + 0.002
+            lines = [[(x, -h, z), (x, h, z)] for x in ticks] + [[(-h, y, z), (h, y, z)] for y in ticks]
+            rec.log("arena/grid", rr.LineStrips3D(lines, colors=[(90, 90, 90)], radii=0.005), static=True)
         rec.log("arena/walls", rr.Boxes3D(centers=[c for _, c, _ in walls], half_sizes=[e for _, _, e in walls],
                                           colors=[_WALL_COLOR],
                                           fill_mode="solid"), static=True)
@@ -240,24 +266,66 @@ class RerunRecorder:
                                                     fill_mode="solid"), static=True)
 
     # ------------------------------------------------------------------ per step
-    def log_step(self, *, targets=None, rewards=None, distances=None, reset_mask=None) -> None:
+    def _log_scene(self, w: int) -> None:
+        """The world's terrain tile and obstacles, logged again only when they change (a new episode)."""
+        rec, sim = self.rec, self.sim
+        terrain = sim.terrain
+        if terrain.enabled:
+            tile = int(terrain.tile[w])
+            if self._drawn_tile.get(w) != tile:
+                self._drawn_tile[w] = tile
+                rec.log(f"world_{w}/terrain", _terrain_mesh(terrain.grid.heights[tile], terrain.grid.half_size,
+                                                            terrain.base))
+        obstacles = sim.obstacles
+        if not obstacles.slots:
+            return
+        kind, pose, size = (t[w].detach().cpu().numpy().copy() for t in (obstacles.kind, obstacles.pose, obstacles.size))
+        layout = np.concatenate([kind[:, None], pose, size], axis=1)
+        if w in self._drawn_obstacles and np.array_equal(self._drawn_obstacles[w], layout):
+            return
+        self._drawn_obstacles[w] = layout
+        base, top = terrain.base - 0.5, obstacles.kernel.top
+        zc, hz = 0.5 * (base + top), 0.5 * (top - base)
+        boxes, cyls = kind == 1, kind == 2
+        yaw = pose[boxes, 2]
+        rec.log(f"world_{w}/obstacles/boxes", rr.Boxes3D(
+            centers=[(x, y, zc) for x, y in pose[boxes, :2]], half_sizes=[(a, b, hz) for a, b in size[boxes]],
+            quaternions=[rr.Quaternion(xyzw=[0.0, 0.0, np.sin(0.5 * t), np.cos(0.5 * t)]) for t in yaw],
+            colors=[_OBSTACLE_COLOR], fill_mode="solid"))
+        rec.log(f"world_{w}/obstacles/cylinders", rr.Cylinders3D(
+            lengths=[2 * hz] * int(cyls.sum()), radii=size[cyls, 0], centers=[(x, y, zc) for x, y in pose[cyls, :2]],
+            colors=[_OBSTACLE_COLOR], fill_mode="solid"))
+
+    def _log_scan(self, w: int, scanner, points: np.ndarray) -> None:
+        origin = self.sim.frame_pose(scanner.cfg.frame)[w, :3, 3].numpy()
+        hit = scanner.ranges[w].detach().cpu().numpy() < scanner.cfg.max_range
+        self.rec.log(f"world_{w}/scan/hits", rr.Points3D(points[hit], colors=[_SCAN_COLOR], radii=0.04))
+        self.rec.log(f"world_{w}/scan/rays", rr.LineStrips3D([[origin, p] for p in points],
+                                                             colors=[(*_SCAN_COLOR, 60)], radii=0.004))
+
+    def log_step(self, *, targets=None, rewards=None, distances=None, reset_mask=None, scanner=None) -> None:
         """Log the current state of the selected worlds at the next ``step``.
 
         Args:
             targets: (N, 2) target positions [m] (drawn as discs).
             rewards, distances: (N,) or (N, 1) per-world scalars to plot.
             reset_mask: (N,) bool, worlds whose episode restarts here (their trail is cleared).
+            scanner: A :class:`~atrv_warp.sim.scanner.LaserScanner` whose last scan is drawn.
         """
         rec, sim = self.rec, self.sim
         rec.set_time("step", sequence=self.step)
         rec.set_time("sim_time", duration=sim.sim_time)
+        scan_points = scanner.points(self.worlds) if scanner is not None else None
         bpw = sim.layout.bodies_per_world
         # .numpy() of a CPU array is a view of live simulator memory; Rerun may read it after the next
         # step, so take a copy (one per logged step).
         body_q = sim.state_0.body_q.numpy().reshape(sim.num_worlds, bpw, 7).copy()
         torques = sim.wheel_torque.detach().cpu().numpy()
         sides = np.array([w.side for w in sim.description.wheels])
-        for w in self.worlds:
+        for i, w in enumerate(self.worlds):
+            self._log_scene(w)
+            if scan_points is not None:
+                self._log_scan(w, scanner, scan_points[i])
             for body, name in zip(self._bodies, self._body_names):
                 q = body_q[w, body]
                 rec.log(f"world_{w}/rover/{name}", rr.Transform3D(translation=q[:3], quaternion=rr.Quaternion(xyzw=q[3:])))
@@ -294,7 +362,7 @@ class RerunRecorder:
             base = getattr(env, "base_env", env)
             nxt = td["next"]
             self.log_step(targets=base.target.cpu().numpy(), rewards=nxt["reward"].cpu().numpy(),
-                          distances=nxt["distance"].cpu().numpy())
+                          distances=nxt["distance"].cpu().numpy(), scanner=getattr(base, "scanner", None))
 
         return on_step
 

@@ -18,8 +18,8 @@ from torchrl.modules import MLP, ProbabilisticActor, TanhNormal, ValueOperator
 from atrv_warp.storage import FileFormatError, atomic_save, load_weights
 from atrv_warp.task.spec import ACTION_DIM, OBS_DIM
 
-__all__ = ["POLICY_FORMAT", "Normalize", "load_policy", "make_actor", "make_qvalue", "policy_payload",
-           "pretrained_policy_path", "save_policy"]
+__all__ = ["POLICY_FORMAT", "Normalize", "load_policy", "make_actor", "make_qvalue", "policy_payload", "policy_task",
+           "pretrained_nav_policy_path", "pretrained_policy_path", "save_policy"]
 
 ACT_DIM = ACTION_DIM
 POLICY_FORMAT = "atrv_warp.policy/1"
@@ -42,11 +42,12 @@ class Normalize(nn.Module):
         return (x - self.loc) / self.scale
 
 
-def make_actor(width: int = 128, depth: int = 2, normalize: Normalize | None = None) -> ProbabilisticActor:
-    """Tanh-Gaussian actor ``observation -> action`` in [-1, 1]²."""
+def make_actor(width: int = 128, depth: int = 2, normalize: Normalize | None = None, *,
+               obs_dim: int = OBS_DIM) -> ProbabilisticActor:
+    """Tanh-Gaussian actor ``observation`` (``obs_dim``: the task's) ``-> action`` in [-1, 1]²."""
     net = nn.Sequential(
-        normalize if normalize is not None else Normalize(),
-        MLP(in_features=OBS_DIM, out_features=2 * ACT_DIM, num_cells=[width] * depth, activation_class=nn.ReLU),
+        normalize if normalize is not None else Normalize(obs_dim),
+        MLP(in_features=obs_dim, out_features=2 * ACT_DIM, num_cells=[width] * depth, activation_class=nn.ReLU),
         NormalParamExtractor(),
     )
     module = TensorDictModule(net, in_keys=["observation"], out_keys=["loc", "scale"])
@@ -58,7 +59,7 @@ class _QNet(nn.Module):
     def __init__(self, normalize: Normalize, width: int, depth: int):
         super().__init__()
         self.normalize = normalize
-        self.mlp = MLP(in_features=OBS_DIM + ACT_DIM, out_features=1, num_cells=[width] * depth,
+        self.mlp = MLP(in_features=normalize.loc.numel() + ACT_DIM, out_features=1, num_cells=[width] * depth,
                        activation_class=nn.ReLU)
 
     def forward(self, observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
@@ -72,14 +73,29 @@ def make_qvalue(width: int = 128, depth: int = 2, normalize: Normalize | None = 
 
 
 def save_policy(actor: ProbabilisticActor, path: str | Path, *, width: int, depth: int, meta: dict | None = None):
-    """Write the actor's weights (normalisation included) atomically, loadable with weights_only."""
+    """Write the actor's weights (normalisation included) atomically, loadable with weights_only.
+    ``meta["task"]`` names the task the policy observes (``reach`` if absent)."""
     atomic_save(policy_payload(actor, width=width, depth=depth, meta=meta), path)
 
 
 def policy_payload(actor: ProbabilisticActor, *, width: int, depth: int, meta: dict | None = None) -> dict:
     """The saved form of a policy (``POLICY_FORMAT``), as :func:`load_policy` reads it."""
-    return {"format": POLICY_FORMAT, "width": width, "depth": depth,
-            "state_dict": {k: v.detach().cpu() for k, v in actor.state_dict().items()}, "meta": meta or {}}
+    sd = {k: v.detach().cpu() for k, v in actor.state_dict().items()}
+    obs_dim = next(v.numel() for k, v in sd.items() if k.endswith("loc") and v.ndim == 1)
+    return {"format": POLICY_FORMAT, "width": width, "depth": depth, "obs_dim": obs_dim, "state_dict": sd,
+            "meta": meta or {}}
+
+
+def policy_task(path: str | Path) -> str:
+    """The task a saved policy was trained on (``meta["task"]``; ``reach`` for older files)."""
+    payload = load_weights(Path(path), "policy file")
+    payload = payload["policy"] if isinstance(payload.get("policy"), dict) else payload
+    return str(payload.get("meta", {}).get("task", "reach"))
+
+
+def pretrained_nav_policy_path() -> Path:
+    """The navigation policy shipped inside the package (trained by ``python -m atrv_warp.train --config nav``)."""
+    return Path(str(resources.files("atrv_warp").joinpath("assets/nav_policy.pt")))
 
 
 def pretrained_policy_path() -> Path:
@@ -104,7 +120,7 @@ def load_policy(path: str | Path | None = None, *, deterministic: bool = True) -
         raise FileFormatError(f"{path}: not an atrv_warp policy (format {payload.get('format')!r}, "
                               f"expected {POLICY_FORMAT!r})")
     try:
-        actor = make_actor(int(payload["width"]), int(payload["depth"]))
+        actor = make_actor(int(payload["width"]), int(payload["depth"]), obs_dim=int(payload.get("obs_dim", OBS_DIM)))
         actor.load_state_dict(payload["state_dict"])
     except (KeyError, TypeError, ValueError, RuntimeError) as err:
         detail = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__

@@ -54,6 +54,8 @@ class RunConfig:
 class EnvConfig:
     """The training environments."""
 
+    task: str = "reach"
+    """Registered task (:data:`atrv_warp.task.config.TASK_VARIANTS`): ``reach`` (the reference) or ``nav``."""
     num_envs: int = 256
     """Worlds stepped together by the collector."""
     steps_per_batch: int = 8
@@ -155,6 +157,9 @@ class TrainConfig:
             raise ValueError("train config: max_minutes and init_random_frames must be >= 0")
         if self.optim.batch_size > self.optim.buffer_size:
             raise ValueError("train config: batch_size must not exceed buffer_size")
+        from atrv_warp.task.config import get_task
+
+        get_task(self.env.task)  # names the known tasks if this one is not
         return self
 
 

@@ -21,9 +21,10 @@ from atrv_warp.rl.agents import Normalize, load_policy, make_actor, make_qvalue,
 from atrv_warp.rl.config import TrainConfig, to_toml
 from atrv_warp.runtime import device_summary
 from atrv_warp.storage import FileFormatError, atomic_save, load_weights
+from atrv_warp.task.config import get_task
 from atrv_warp.task.env import ATRVjrEnv, EnvFactory
 from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result
-from atrv_warp.task.spec import REWARD_TERMS, EndReason
+from atrv_warp.task.spec import REWARD_TERMS, EndReason, observation_fields
 
 __all__ = ["CHECKPOINT_KEYS", "Checkpoint", "Evaluator", "Learner", "RunState", "load_checkpoint", "make_buffer",
            "make_collector", "make_loggers", "train"]
@@ -258,7 +259,8 @@ class Checkpoint:
 
     def save(self, cfg: TrainConfig, state: RunState, actor, learner: Learner | None, buffer) -> None:
         payload = {**dataclasses.asdict(state), "rng": torch.get_rng_state(), "config": dataclasses.asdict(cfg),
-                   "policy": policy_payload(actor, width=cfg.network.width, depth=cfg.network.depth, meta={"frames": state.frames})}
+                   "policy": policy_payload(actor, width=cfg.network.width, depth=cfg.network.depth,
+                                          meta={"frames": state.frames, "task": cfg.env.task})}
         if learner is not None:
             payload.update(learner.state_dict())
         atomic_save(payload, self.path)
@@ -307,10 +309,11 @@ def make_collector(cfg: TrainConfig, actor, frames_done: int):
     env_seed = cfg.run.seed + 7919 * (frames_done // fpb + 1)  # a resumed run draws new episodes
     whole_batches = max(math.ceil(remaining / fpb), 1) * fpb  # the loop stops at total_frames itself
     if cfg.collector.kind == "async":
-        return MultiAsyncCollector([EnvFactory(cfg.env.num_envs, seed=env_seed, core=1)], actor, frames_per_batch=fpb,
-                                   total_frames=whole_batches, init_random_frames=random_left)
+        factory = EnvFactory(cfg.env.num_envs, seed=env_seed, core=1, env_kwargs=(("task", cfg.env.task),))
+        return MultiAsyncCollector([factory], actor, frames_per_batch=fpb, total_frames=whole_batches,
+                                   init_random_frames=random_left)
     # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
-    return Collector(ATRVjrEnv(cfg.env.num_envs, seed=env_seed), actor, frames_per_batch=fpb,
+    return Collector(ATRVjrEnv(cfg.env.num_envs, seed=env_seed, task=cfg.env.task), actor, frames_per_batch=fpb,
                      total_frames=whole_batches, init_random_frames=random_left,
                      auto_register_policy_transforms=False)
 
@@ -336,7 +339,7 @@ class Evaluator:
 
     def __init__(self, cfg: TrainConfig, actor, loggers: list):
         self.cfg, self.actor = cfg, actor
-        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=EVAL_SEED)
+        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=EVAL_SEED, task=cfg.env.task)
         self.recorder = None
         if cfg.logging.logger == "rerun":  # periodic evaluations go into the same recording as the scalars
             from atrv_warp.integrations.rerun import RerunRecorder
@@ -382,8 +385,9 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     torch.set_num_threads(cfg.run.threads)
     if cfg.collector.kind == "async":
         _pin_to_core(0)
-    normalize = Normalize()
-    actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize)
+    obs_dim = len(observation_fields(get_task(cfg.env.task)))
+    normalize = Normalize(obs_dim)
+    actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize, obs_dim=obs_dim)
     buffer = make_buffer(cfg)
     checkpoint = Checkpoint(run_dir)
     state, learner = RunState(next_eval=cfg.logging.eval_every_frames), None
@@ -447,7 +451,8 @@ class _TrainLoop:
             n = data.numel()
             st.frames += n
             self.stats.update(data)
-            self.buffer.extend(data.reshape(-1).cpu())
+            # the full-resolution scan is for viewers; the policy observes its sectors
+            self.buffer.extend(data.exclude("scan", ("next", "scan")).reshape(-1).cpu())
             if st.frames >= cfg.collector.init_random_frames:
                 credit = self.learn(credit + n * cfg.optim.utd_ratio)
                 if cfg.collector.kind == "async":  # the worker holds a copy; the sync collector shares `actor`
@@ -497,7 +502,7 @@ class _TrainLoop:
             if self.last_eval > st.best_success:
                 st.best_success = self.last_eval
                 save_policy(self.actor, self.run_dir / "best_policy.pt", width=cfg.network.width, depth=cfg.network.depth,
-                            meta={"frames": st.frames, "eval_success": st.best_success})
+                            meta={"frames": st.frames, "eval_success": st.best_success, "task": cfg.env.task})
         st.next_eval = (st.frames // cfg.logging.eval_every_frames + 1) * cfg.logging.eval_every_frames
         st.elapsed_s = self.elapsed()  # the evaluation's time counts too
         self.checkpoint.save(cfg, st, self.actor, self.learner, self.buffer)
@@ -512,7 +517,8 @@ def _finish(cfg: TrainConfig, state: RunState, run_dir: Path, evaluator: Evaluat
               "best_periodic_success": state.best_success}
     best_path = run_dir / "best_policy.pt"
     if best_path.is_file():
-        final = evaluate(load_policy(best_path), num_episodes=cfg.logging.final_eval_episodes, seed=EVAL_SEED)
+        final = evaluate(load_policy(best_path), num_episodes=cfg.logging.final_eval_episodes, seed=EVAL_SEED,
+                         task=cfg.env.task)
         print(format_result("best policy, final evaluation", final))
         result["final_eval"] = final.as_dict()
     (run_dir / "final_eval.json").write_text(json.dumps(result, indent=2) + "\n")

@@ -1,15 +1,17 @@
-"""Configuration of the drive-to-target task (its contract is :mod:`atrv_warp.task.spec`)."""
+"""Configuration of the tasks (their contract is :mod:`atrv_warp.task.spec`) and the registered
+variants, ``reach`` (the reference drive-to-target task) and ``nav`` (over terrain, around
+obstacles, seen through the laser scanner)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["TaskConfig"]
+__all__ = ["TASK_VARIANTS", "TaskConfig", "get_task"]
 
 
 @dataclass(frozen=True)
 class TaskConfig:
-    """The reference drive-to-target task."""
+    """A drive-to-target task. The defaults are the reference task, on the flat arena."""
 
     spawn_bound: float = 12.0
     """Targets and starts are uniform in [-bound, bound]² [m] (arena half size - 3)."""
@@ -21,10 +23,73 @@ class TaskConfig:
     """Truncation after this many steps (200 × 0.05 s = 10 s)."""
     success_reward: float = 4.0
     failure_reward: float = -4.0
-    """Reward on a wall contact or a flip (the episode ends)."""
+    """Reward on a wall, chassis or obstacle contact, or a flip (the episode ends)."""
     heading_weight: float = 4.0
     """Weight of the heading-progress term (previous |error| - |error|) [1/rad]."""
     step_penalty: float = 0.03
     """Subtracted from every non-terminal reward."""
     action_scale: float = 20.0
     """Wheel torque per unit action [N·m]."""
+
+    # ---- the scene: terrain, obstacles, scanner (the reference has none of them)
+    terrain: str = "flat"
+    """Terrain preset (:data:`atrv_warp.sim.terrain.TERRAIN_PRESETS`); each episode draws one of its tiles."""
+    target_distance: tuple[float, float] | None = None
+    """Start-to-target distance range [m]; ``None``: start and target drawn independently (the reference)."""
+    obstacles: int = 0
+    """Obstacles per episode (upright boxes and cylinders)."""
+    obstacles_on_path: int = 0
+    """How many of them stand across the straight line from start to target (at 35–65 % of it,
+    within ``path_offset`` of it), so that driving straight at the target runs into them."""
+    path_offset: float = 0.4
+    """Largest sideways offset of an on-path obstacle's centre from the straight line [m]."""
+    obstacle_size: tuple[float, float] = (0.3, 0.6)
+    """Range of cylinder radii and box half sides [m]."""
+    clearance: float = 1.0
+    """No obstacle's bounding circle comes closer than this to the start or the target [m]."""
+    scan_beams: int = 0
+    """Scanner beams (0: no scanner). The full scan is the step's ``scan`` entry [m]."""
+    scan_sectors: int = 0
+    """Observed scan: the minimum range over each of this many equal sectors, as
+    min(range, scan_clip) / scan_clip in [0, 1]; ``scan_beams`` must be a multiple of it."""
+    scan_clip: float = 5.0
+    """Ranges beyond this [m] are observed as 1."""
+    stiction: float = 0.0
+    """``ContactConfig.stiction`` of the task's simulator (0: the reference friction law)."""
+
+    def __post_init__(self):
+        if self.scan_sectors and (self.scan_beams % self.scan_sectors or self.scan_sectors < 0):
+            raise ValueError(f"scan_beams={self.scan_beams} must be a multiple of scan_sectors={self.scan_sectors}")
+        if self.obstacles_on_path > self.obstacles or self.obstacles < 0:
+            raise ValueError(f"need 0 <= obstacles_on_path <= obstacles, got {self.obstacles_on_path}, "
+                             f"{self.obstacles}")
+        lo, hi = self.obstacle_size
+        if not 0 < lo <= hi:
+            raise ValueError(f"obstacle_size must be 0 < low <= high, got {self.obstacle_size}")
+        if self.target_distance is not None and not 0 < self.target_distance[0] <= self.target_distance[1]:
+            raise ValueError(f"target_distance must be 0 < low <= high, got {self.target_distance}")
+
+
+TASK_VARIANTS: dict[str, TaskConfig] = {
+    "reach": TaskConfig(),
+    "nav": TaskConfig(
+        terrain="rolling", target_distance=(5.0, 10.0), obstacles=6, obstacles_on_path=1, max_steps=300,
+        flip_roll=0.5, scan_beams=64, scan_sectors=16, stiction=0.5),
+}
+"""Registered tasks. ``reach``: the reference task (flat, no obstacles, no scanner). ``nav``: rolling
+terrain, six obstacles (one across the straight line to the target), targets 5–10 m away, 15 s
+episodes, a 64-beam scan observed as 16 sectors, wheels that stick on slopes."""
+
+
+def get_task(task: str | TaskConfig | None) -> TaskConfig:
+    """The registered task called ``task`` (``None``: ``reach``), or ``task`` itself."""
+    if task is None:
+        return TASK_VARIANTS["reach"]
+    if isinstance(task, TaskConfig):
+        return task
+    try:
+        return TASK_VARIANTS[task]
+    except KeyError:
+        raise ValueError(f"unknown task {task!r}; known: {sorted(TASK_VARIANTS)}") from None
+
+

@@ -7,7 +7,8 @@ the next step overwrites.
 
 Keys produced (the contract is declared in :mod:`atrv_warp.task.spec`):
     ``observation`` (N, 10) float32: target x, y; rover x, y; vx, vy (world); roll; yaw rate;
-    sin and cos of the heading error (``OBSERVATION``). ``reward`` (N, 1);
+    sin and cos of the heading error (``OBSERVATION``), then a task's scan sectors
+    (``observation_fields``). ``scan`` (N, beams) [m] with a scanner. ``reward`` (N, 1);
     ``("reward_terms", name)`` (N, 1) for each of ``REWARD_TERMS``, which sum to the reward;
     ``done`` / ``terminated`` / ``truncated`` (N, 1) bool; ``end_reason`` (N, 1) int64
     (``EndReason``, named by :data:`END_REASONS`); ``distance`` (N, 1) distance to the target [m].
@@ -25,17 +26,29 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant, replace_checked
+from atrv_warp.sim.config import (
+    ArenaConfig,
+    ContactConfig,
+    ObstacleConfig,
+    RoverConfig,
+    SimConfig,
+    get_variant,
+    replace_checked,
+)
+from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
 from atrv_warp.sim.simulator import RoverSim
-from atrv_warp.task.config import TaskConfig
+from atrv_warp.task.config import TaskConfig, get_task
 from atrv_warp.task.kernels import (
     RoverState,
+    SceneParams,
     StepOutputs,
     TaskBuffers,
     TaskParams,
     compute_step_outcome,
     observe_reset,
     sample_episodes,
+    sample_nav_episodes,
+    write_scan_observation,
 )
 from atrv_warp.task.spec import (
     ACTION_DIM,
@@ -45,6 +58,7 @@ from atrv_warp.task.spec import (
     REWARD_TERMS,
     action_to_torque,
     observation_bounds,
+    observation_fields,
 )
 
 __all__ = ["END_REASONS", "OBSERVATION_NAMES", "REWARD_TERMS", "ATRVjrEnv", "EnvFactory"]
@@ -60,9 +74,10 @@ class ATRVjrEnv(EnvBase):
     Args:
         num_envs: Number of worlds (the batch size).
         device: ``"cpu"`` (default) or a CUDA device; the simulator runs there.
-        seed: Seed of the per-world reset streams; ``None`` leaves seed 0.
+        seed: Seed of the per-world reset streams (and the scanner's noise); ``None`` leaves seed 0.
         variant: Registered rover variant.
-        task: Task configuration, or keyword overrides of it via ``**task_overrides``.
+        task: Registered task name (``"reach"``, the default, or ``"nav"``) or a :class:`TaskConfig`;
+            keyword overrides of it via ``**task_overrides``.
         rover, contact, arena, sim: Simulator configuration (see :class:`RoverSim`).
         **task_overrides: Fields of :class:`TaskConfig` (e.g. ``max_steps=100``); an unknown
             name raises ``ValueError``.
@@ -77,18 +92,25 @@ class ATRVjrEnv(EnvBase):
         device: str = "cpu",
         seed: int | None = None,
         variant: str = "realistic",
-        task: TaskConfig | None = None,
+        task: TaskConfig | str | None = None,
         rover: RoverConfig | None = None,
         contact: ContactConfig | None = None,
         arena: ArenaConfig | None = None,
         sim: SimConfig | None = None,
         **task_overrides,
     ):
-        self.task_cfg = replace_checked(task or TaskConfig(), **task_overrides)
+        self.task_cfg = c = replace_checked(get_task(task), **task_overrides)
+        if c.stiction:
+            contact = dataclasses.replace(contact or ContactConfig(), stiction=c.stiction)
         self.sim = RoverSim(num_envs, rover=rover or get_variant(variant), contact=contact, arena=arena, sim=sim,
+                            terrain=c.terrain, obstacles=ObstacleConfig(slots=c.obstacles) if c.obstacles else None,
                             device=device)
+        self.scanner = LaserScanner(self.sim, ScannerConfig(beams=c.scan_beams)) if c.scan_beams else None
+        """The rovers' laser scanner (:class:`~atrv_warp.sim.scanner.LaserScanner`), if the task has one."""
         super().__init__(device=_torch_device(self.sim.device), batch_size=torch.Size([num_envs]))
         self.num_envs = num_envs
+        self.obs_dim = len(observation_fields(c))
+        self._nav = c.target_distance is not None or c.obstacles > 0 or self.sim.terrain.enabled
         self._wp_device = self.sim.device
         self._make_task_buffers()
         self._make_spec()
@@ -110,6 +132,13 @@ class ATRVjrEnv(EnvBase):
         p.heading_weight = c.heading_weight
         p.step_penalty = c.step_penalty
         self._params = p
+        sp = SceneParams()
+        sp.distance_min, sp.distance_max = c.target_distance or (c.reach_radius, 2.0 * c.spawn_bound)
+        sp.obstacles, sp.on_path, sp.path_offset = c.obstacles, c.obstacles_on_path, c.path_offset
+        sp.size_min, sp.size_max = c.obstacle_size
+        sp.clearance = c.clearance
+        sp.tiles = self.sim.terrain.grid.tiles if self.sim.terrain.enabled else 1
+        self._scene_params = sp
         t = TaskBuffers()
         t.target = wp.zeros(n, dtype=wp.vec2, device=dev)
         t.prev_distance = wp.zeros(n, dtype=float, device=dev)
@@ -117,7 +146,7 @@ class ATRVjrEnv(EnvBase):
         t.step_count = wp.zeros(n, dtype=wp.int32, device=dev)
         t.episode = wp.zeros(n, dtype=wp.int32, device=dev)
         self._task = t
-        self._obs = wp.zeros((n, OBS_DIM), dtype=float, device=dev)
+        self._obs = wp.zeros((n, self.obs_dim), dtype=float, device=dev)
         self._reward = wp.zeros(n, dtype=float, device=dev)
         self._reward_terms = wp.zeros((n, len(REWARD_TERMS)), dtype=float, device=dev)
         self._terminated = wp.zeros(n, dtype=bool, device=dev)
@@ -152,20 +181,28 @@ class ATRVjrEnv(EnvBase):
             "prev_heading_error": wp.to_torch(t.prev_heading_error), "step_count": self.step_count,
             "episode": self._episode_t, "observation": self._obs_t,
         }
+        if self._nav:  # the episode's layout is part of the task's state
+            obstacles = self.sim.obstacles
+            self._task_views.update({"tile": self.sim.terrain.tile, "obstacle_kind": obstacles.kind,
+                                     "obstacle_pose": obstacles.pose, "obstacle_size": obstacles.size})
 
     def _make_spec(self) -> None:
-        n, dev = self.num_envs, self.device
-        low, high = observation_bounds()
-        bounds = (low.expand(n, OBS_DIM), high.expand(n, OBS_DIM))
+        n, dev, dim = self.num_envs, self.device, self.obs_dim
+        low, high = observation_bounds(task=self.task_cfg)
+        bounds = (low.expand(n, dim), high.expand(n, dim))
         terms = Composite({name: Unbounded(shape=(n, 1), dtype=torch.float32, device=dev) for name in REWARD_TERMS},
                           shape=(n,), device=dev)
         self.observation_spec = Composite(
-            observation=Bounded(*bounds, shape=(n, OBS_DIM), dtype=torch.float32, device=dev),
+            observation=Bounded(*bounds, shape=(n, dim), dtype=torch.float32, device=dev),
             end_reason=Categorical(len(END_REASONS), shape=(n, 1), dtype=torch.int64, device=dev),
             distance=Unbounded(shape=(n, 1), dtype=torch.float32, device=dev),
             reward_terms=terms,
             shape=(n,), device=dev,
         )
+        if self.scanner is not None:
+            sc = self.scanner.cfg
+            self.observation_spec["scan"] = Bounded(sc.min_range, sc.max_range, shape=(n, sc.beams),
+                                                    dtype=torch.float32, device=dev)
         self.action_spec = Bounded(-1.0, 1.0, shape=(n, ACTION_DIM), dtype=torch.float32, device=dev)
         self.reward_spec = Unbounded(shape=(n, 1), dtype=torch.float32, device=dev)
         self.done_spec = Composite(
@@ -180,6 +217,8 @@ class ATRVjrEnv(EnvBase):
         """Seed every world's reset stream; episode k of world w draws from (seed, w, k)."""
         self._seed = 0 if seed is None else int(seed) % (2**31)
         self._episode_t.zero_()
+        if self.scanner is not None:
+            self.scanner.reseed(self._seed)
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         mask = None
@@ -190,17 +229,24 @@ class ATRVjrEnv(EnvBase):
         else:
             self._mask_t.copy_(mask)
         sim = self.sim
-        wp.launch(sample_episodes, dim=self.num_envs, inputs=[self._seed, self._params, self._mask],
-                  outputs=[self._task, self._reset_poses], device=self._wp_device)
+        if self._nav:
+            wp.launch(sample_nav_episodes, dim=self.num_envs,
+                      inputs=[self._seed, self._params, self._scene_params, self._mask],
+                      outputs=[self._task, self._reset_poses, sim.obstacles.kernel, sim.terrain.kernel],
+                      device=self._wp_device)
+        else:
+            wp.launch(sample_episodes, dim=self.num_envs, inputs=[self._seed, self._params, self._mask],
+                      outputs=[self._task, self._reset_poses], device=self._wp_device)
         sim.reset_worlds(self._mask, self._reset_poses)
         self._launch_observe()
         self._end_reason_t.masked_fill_(self._mask_t.unsqueeze(-1), 0)
         zeros = torch.zeros((self.num_envs, 1), dtype=torch.bool, device=self.device)
-        return TensorDict(
-            {"observation": self._obs_t.clone(), "end_reason": self._end_reason_t.long(),
-             "distance": self._distance_t.clone(), "done": zeros, "terminated": zeros.clone(),
-             "truncated": zeros.clone(), "reward_terms": self._terms_td(torch.zeros_like(self._reward_terms_t))},
-            batch_size=self.batch_size, device=self.device)
+        out = {"observation": self._obs_t.clone(), "end_reason": self._end_reason_t.long(),
+               "distance": self._distance_t.clone(), "done": zeros, "terminated": zeros.clone(),
+               "truncated": zeros.clone(), "reward_terms": self._terms_td(torch.zeros_like(self._reward_terms_t))}
+        if self.scanner is not None:
+            out["scan"] = self.scanner.ranges.clone()
+        return TensorDict(out, batch_size=self.batch_size, device=self.device)
 
     def _terms_td(self, terms: torch.Tensor) -> TensorDict:
         """``("reward_terms", name)`` entries as (N, 1) views of one (N, K) tensor."""
@@ -218,24 +264,37 @@ class ATRVjrEnv(EnvBase):
         return self._obs_t.clone()
 
     def _launch_observe(self) -> None:
+        if self.scanner is not None:
+            self.scanner.scan()
         wp.launch(observe_reset, dim=self.num_envs, inputs=[self._params, self._mask, self._task, self._rover],
                   outputs=[self._out], device=self._wp_device)
+        self._launch_scan_observation()
+
+    def _launch_scan_observation(self) -> None:
+        if self.task_cfg.scan_sectors:
+            wp.launch(write_scan_observation, dim=(self.num_envs, self.task_cfg.scan_sectors),
+                      inputs=[self.scanner.buffer, self.sim.buffers.nonfinite, OBS_DIM, self.task_cfg.scan_clip],
+                      outputs=[self._obs], device=self._wp_device)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = self._check_action(tensordict.get("action"))
         action_to_torque(action, self.task_cfg.action_scale, out=self.sim.commands)
         sim = self.sim
         sim.step()
+        if self.scanner is not None:
+            self.scanner.scan()
         wp.launch(compute_step_outcome, dim=self.num_envs, inputs=[self._params, self._task, self._rover],
                   outputs=[self._out], device=self._wp_device)
+        self._launch_scan_observation()
         if bool(sim.nonfinite.any()):  # one flag read per step; blown-up worlds are rare
             self.nonfinite_count += int(sim.nonfinite.sum())
-        return TensorDict(
-            {"observation": self._obs_t.clone(), "reward": self._reward_t.clone(),
-             "done": self._terminated_t | self._truncated_t, "terminated": self._terminated_t.clone(),
-             "truncated": self._truncated_t.clone(), "end_reason": self._end_reason_t.long(),
-             "distance": self._distance_t.clone(), "reward_terms": self._terms_td(self._reward_terms_t.clone())},
-            batch_size=self.batch_size, device=self.device)
+        out = {"observation": self._obs_t.clone(), "reward": self._reward_t.clone(),
+               "done": self._terminated_t | self._truncated_t, "terminated": self._terminated_t.clone(),
+               "truncated": self._truncated_t.clone(), "end_reason": self._end_reason_t.long(),
+               "distance": self._distance_t.clone(), "reward_terms": self._terms_td(self._reward_terms_t.clone())}
+        if self.scanner is not None:
+            out["scan"] = self.scanner.ranges.clone()
+        return TensorDict(out, batch_size=self.batch_size, device=self.device)
 
     def _check_action(self, action: torch.Tensor | None) -> torch.Tensor:
         expected = (self.num_envs, 2)
@@ -262,6 +321,8 @@ class ATRVjrEnv(EnvBase):
             sd[f"task.{k}"] = v.clone()
         sd["task.seed"] = torch.tensor(self._seed)
         sd["task.nonfinite_count"] = torch.tensor(self.nonfinite_count)
+        if self.scanner is not None:
+            sd["task.scan_count"] = torch.tensor(self.scanner.count)
         return sd
 
     def load_state_dict(self, state_dict: Mapping, strict: bool = True, assign: bool = False):
@@ -276,10 +337,15 @@ class ATRVjrEnv(EnvBase):
             v.copy_(task_state[k])
         self._seed = int(task_state["seed"])
         self.nonfinite_count = int(task_state["nonfinite_count"])
+        if self.scanner is not None:
+            self.scanner.reseed(self._seed)
+            self.scanner.count = int(task_state["scan_count"])
         return super().load_state_dict(state_dict, strict=strict, assign=assign)
 
     def __repr__(self) -> str:
-        return f"ATRVjrEnv(num_envs={self.num_envs}, device={self.device}, variant_urdf={self.sim.description.path!r})"
+        return (f"ATRVjrEnv(num_envs={self.num_envs}, device={self.device}, terrain={self.task_cfg.terrain!r}, "
+                f"obstacles={self.task_cfg.obstacles}, scan_beams={self.task_cfg.scan_beams}, "
+                f"urdf={self.sim.description.path!r})")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -293,12 +359,14 @@ class EnvFactory:
     num_envs: int = 64
     seed: int | None = None
     core: int | None = None
-    kwargs: tuple[tuple[str, object], ...] = ()
+    env_kwargs: tuple[tuple[str, object], ...] = ()
+    """Keyword arguments of :class:`ATRVjrEnv` as (name, value) pairs (a field called ``kwargs`` would be
+    taken by TorchRL's collectors for their own)."""
 
     def __call__(self) -> ATRVjrEnv:
         if self.core is not None and hasattr(os, "sched_setaffinity"):
             cores = sorted(os.sched_getaffinity(0))
             os.sched_setaffinity(0, {cores[self.core % len(cores)]})
         torch.set_num_threads(1)
-        return ATRVjrEnv(self.num_envs, seed=self.seed, **dict(self.kwargs))
+        return ATRVjrEnv(self.num_envs, seed=self.seed, **dict(self.env_kwargs))
 

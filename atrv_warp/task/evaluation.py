@@ -24,6 +24,7 @@ class EvalResult:
     flip_rate: float
     timeout_rate: float
     nonfinite_rate: float
+    obstacle_rate: float = 0.0
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -73,10 +74,11 @@ def evaluate(policy, *, num_episodes: int = 1000, seed: int = EVAL_SEED, env=Non
     counts = torch.bincount(reason, minlength=len(END_REASONS)).float() / num_episodes
     rate = dict(zip(END_REASONS, counts.tolist()))
     return EvalResult(num_episodes, rate["success"], returns.mean().item(), steps.mean().item(), rate["wall"],
-                      rate["flip"], rate["timeout"], rate["nonfinite"])
+                      rate["flip"], rate["timeout"], rate["nonfinite"], rate["obstacle"])
 
 
 def format_result(name: str, r: EvalResult) -> str:
     return (f"{name}: success {100 * r.success_rate:.1f}% over {r.episodes} episodes | return {r.mean_return:.2f} | "
             f"steps {r.mean_steps:.1f} | wall {100 * r.wall_rate:.1f}% flip {100 * r.flip_rate:.1f}% "
-            f"timeout {100 * r.timeout_rate:.1f}% nonfinite {100 * r.nonfinite_rate:.1f}%")
+            f"timeout {100 * r.timeout_rate:.1f}% nonfinite {100 * r.nonfinite_rate:.1f}%"
+            + (f" obstacle {100 * r.obstacle_rate:.1f}%" if r.obstacle_rate else ""))

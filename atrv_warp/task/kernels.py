@@ -10,6 +10,9 @@ from __future__ import annotations
 
 import warp as wp
 
+from atrv_warp.sim.kernels.contact import FLAG_OBSTACLE
+from atrv_warp.sim.kernels.obstacles import OBSTACLE_BOX, OBSTACLE_CYLINDER, ObstacleSet, bounding_radius
+from atrv_warp.sim.kernels.terrain import TerrainGrid
 from atrv_warp.task.spec import OBS_DIM, OBS_INDEX, OBSERVATION, REWARD_TERMS, EndReason
 
 # Why an episode ended (``end_reason``), from task_spec.EndReason.
@@ -19,6 +22,7 @@ END_WALL = wp.constant(int(EndReason.WALL))
 END_FLIP = wp.constant(int(EndReason.FLIP))
 END_TIMEOUT = wp.constant(int(EndReason.TIMEOUT))
 END_NONFINITE = wp.constant(int(EndReason.NONFINITE))
+END_OBSTACLE = wp.constant(int(EndReason.OBSTACLE))
 
 # Observation indices and clip bounds, from task_spec.OBSERVATION.
 OBS_TARGET_X = wp.constant(OBS_INDEX["target_x"])
@@ -219,7 +223,8 @@ def compute_step_outcome(
     out: StepOutputs,
 ):
     """Observation, reward (and its terms, which sum to it) and termination of every world after
-    one step. The checks come in a fixed order: success, flip, contact, else a running step."""
+    one step. The checks come in a fixed order: success, flip, obstacle, other contact, else a
+    running step."""
     world = wp.tid()
     steps = task.step_count[world] + 1
     task.step_count[world] = steps
@@ -252,6 +257,9 @@ def compute_step_outcome(
         # before the contact check: a flipping chassis usually also touches the ground
         reason = END_FLIP
         out.reward_terms[world, TERM_FAILURE] = params.failure_reward
+    elif (rover.contact_flags[world] & FLAG_OBSTACLE) != 0:
+        reason = END_OBSTACLE
+        out.reward_terms[world, TERM_FAILURE] = params.failure_reward
     elif rover.contact_flags[world] != 0:
         # wall, or the chassis on the ground: any contact beyond the wheels' ground contacts
         reason = END_WALL
@@ -275,3 +283,103 @@ def compute_step_outcome(
     out.truncated[world] = trunc
     out.end_reason[world] = reason
     out.distance[world] = d
+
+
+@wp.struct
+class SceneParams:
+    """How the navigation sampler lays out an episode (see :class:`atrv_warp.task.config.TaskConfig`)."""
+
+    distance_min: float  # start-to-target distance range [m]
+    distance_max: float
+    obstacles: int  # obstacles per episode (<= the simulator's slots)
+    on_path: int  # of which across the start-target line
+    path_offset: float  # [m]
+    size_min: float  # cylinder radius / box half side range [m]
+    size_max: float
+    clearance: float  # from start and target [m]
+    tiles: int  # terrain tiles to draw from (1 on the flat arena)
+
+
+@wp.func
+def obstacle_clear(q: wp.vec2, r: float, start: wp.vec2, target: wp.vec2, clearance: float) -> bool:
+    return wp.length(q - start) > r + clearance and wp.length(q - target) > r + clearance
+
+
+@wp.kernel
+def sample_nav_episodes(
+    seed: int,
+    params: TaskParams,
+    scene: SceneParams,
+    mask: wp.array(dtype=bool),
+    task: TaskBuffers,
+    poses: wp.array(dtype=wp.vec3),
+    obstacles: ObstacleSet,
+    terrain: TerrainGrid,
+):
+    """Draw a masked world's episode: start and yaw, a target at a set distance, a terrain tile and
+    an obstacle layout that keeps clear of both ends, from a per-(world, episode) stream."""
+    world = wp.tid()
+    if not mask[world]:
+        return
+    h = wp.rand_init(seed, world)
+    state = wp.rand_init(wp.int32(h), task.episode[world])
+    b = params.spawn_bound
+    start = wp.vec2(wp.randf(state, -b, b), wp.randf(state, -b, b))
+    poses[world] = wp.vec3(start[0], start[1], wp.randf(state, -wp.pi, wp.pi))
+    target = start
+    for _ in range(32):  # a direction whose target lies inside the bound (the last try is clamped)
+        a = wp.randf(state, -wp.pi, wp.pi)
+        d = wp.randf(state, scene.distance_min, scene.distance_max)
+        target = start + d * wp.vec2(wp.cos(a), wp.sin(a))
+        if wp.abs(target[0]) <= b and wp.abs(target[1]) <= b:
+            break
+    target = wp.vec2(wp.clamp(target[0], -b, b), wp.clamp(target[1], -b, b))
+    task.target[world] = target
+    terrain.tile[world] = wp.int32(wp.min(int(wp.randf(state) * float(scene.tiles)), scene.tiles - 1))
+    line = target - start
+    length = wp.max(wp.length(line), 1.0e-6)
+    along = line / length
+    across = wp.vec2(-along[1], along[0])
+    half = b + 2.0
+    for o in range(obstacles.count):
+        obstacles.kind[world, o] = 0
+        if o >= scene.obstacles:
+            continue
+        for _ in range(8):  # retry a layout that would crowd the start or the target
+            kind = OBSTACLE_CYLINDER
+            if wp.randf(state) < 0.5:
+                kind = OBSTACLE_BOX
+            size = wp.vec2(wp.randf(state, scene.size_min, scene.size_max), 0.0)
+            if kind == OBSTACLE_BOX:
+                size = wp.vec2(size[0], wp.randf(state, scene.size_min, scene.size_max))
+            q = wp.vec2(wp.randf(state, -half, half), wp.randf(state, -half, half))
+            if o < scene.on_path:
+                q = start + wp.randf(state, 0.35, 0.65) * line + wp.randf(state, -1.0, 1.0) * scene.path_offset * across
+            yaw = wp.randf(state, -wp.pi, wp.pi)
+            if obstacle_clear(q, bounding_radius(kind, size), start, target, scene.clearance):
+                obstacles.kind[world, o] = kind
+                obstacles.pose[world, o] = wp.vec3(q[0], q[1], yaw)
+                obstacles.size[world, o] = size
+                break
+    task.episode[world] = task.episode[world] + 1
+    task.step_count[world] = 0
+
+
+@wp.kernel
+def write_scan_observation(
+    ranges: wp.array2d(dtype=float),
+    nonfinite: wp.array(dtype=wp.int32),
+    first_column: int,
+    clip: float,
+    obs: wp.array2d(dtype=float),
+):
+    """Observed scan (dim = (N, sectors)): each sector's nearest return, min(r, clip) / clip; a
+    non-finite world observes an empty scan (1)."""
+    world, sector = wp.tid()
+    sectors = obs.shape[1] - first_column
+    per = ranges.shape[1] // sectors
+    r = clip
+    if nonfinite[world] == 0:
+        for i in range(per):
+            r = wp.min(r, ranges[world, sector * per + i])
+    obs[world, first_column + sector] = r / clip

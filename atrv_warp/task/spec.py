@@ -4,7 +4,8 @@ Everything that reads or writes the task's tensors derives from here: the enviro
 specs, the Warp kernels (observation indices, bounds, end reasons, reward terms), the scripted
 baseline, the Gymnasium spaces, the ROS goal mode and :func:`atrv_warp.sim.diff.progress_reward`.
 
-- :data:`OBSERVATION`: the observation's fields in order, each with its clip bound.
+- :data:`OBSERVATION`: the observation's fields in order, each with its clip bound;
+  :func:`observation_fields` adds a task's scan sectors after them.
 - :class:`EndReason`: why an episode ended (the ``end_reason`` entry).
 - :data:`REWARD_TERMS`: the reward's terms; their sum is ``reward``, and each is reported per
   step as ``("reward_terms", name)``.
@@ -30,6 +31,7 @@ __all__ = [
     "ObservationField",
     "action_to_torque",
     "observation_bounds",
+    "observation_fields",
 ]
 
 
@@ -57,6 +59,17 @@ OBSERVATION: tuple[ObservationField, ...] = (
 )
 """The observation, in order (the reference task's fields and bounds)."""
 
+
+
+def observation_fields(task=None) -> tuple[ObservationField, ...]:
+    """The observation of ``task`` (a :class:`~atrv_warp.task.config.TaskConfig`): :data:`OBSERVATION`,
+    then ``scan_0 … scan_{S-1}`` for its ``scan_sectors`` (right to left), in [0, 1]."""
+    sectors = getattr(task, "scan_sectors", 0)
+    return OBSERVATION + tuple(
+        ObservationField(f"scan_{i}", 1.0, f"nearest return in scan sector {i} of {sectors} (right to left), "
+                         "min(range, scan_clip) / scan_clip") for i in range(sectors))
+
+
 OBSERVATION_NAMES: tuple[str, ...] = tuple(f.name for f in OBSERVATION)
 OBS_INDEX: dict[str, int] = {f.name: i for i, f in enumerate(OBSERVATION)}
 OBS_DIM = len(OBSERVATION)
@@ -77,6 +90,8 @@ class EndReason(IntEnum):
     """Truncated at ``TaskConfig.max_steps``."""
     NONFINITE = 5
     """The world's state stopped being finite; it is reset on its own."""
+    OBSTACLE = 6
+    """A rover shape touched an obstacle."""
 
 
 END_REASONS: tuple[str, ...] = tuple(r.name.lower() for r in EndReason)
@@ -89,14 +104,16 @@ REWARD_TERMS: tuple[str, ...] = ("progress", "heading", "step_penalty", "success
 - ``heading``: ``heading_weight`` x (previous |heading error| - |heading error|) (non-terminal);
 - ``step_penalty``: ``-step_penalty`` on every non-terminal step;
 - ``success``: ``success_reward`` on reaching the target;
-- ``failure``: ``failure_reward`` on a wall or chassis contact or a flip.
+- ``failure``: ``failure_reward`` on a wall, chassis or obstacle contact, or a flip.
 """
 
 
-def observation_bounds(dtype: torch.dtype = torch.float32) -> tuple[torch.Tensor, torch.Tensor]:
-    """(low, high) of the observation, (OBS_DIM,) each."""
-    high = torch.tensor([f.bound for f in OBSERVATION], dtype=dtype)
-    return -high, high
+def observation_bounds(dtype: torch.dtype = torch.float32, task=None) -> tuple[torch.Tensor, torch.Tensor]:
+    """(low, high) of the observation of ``task`` (default: the reference's, (OBS_DIM,) each)."""
+    fields = observation_fields(task)
+    high = torch.tensor([f.bound for f in fields], dtype=dtype)
+    low = torch.tensor([0.0 if f.name.startswith("scan_") else -f.bound for f in fields], dtype=dtype)
+    return low, high
 
 
 def action_to_torque(action: torch.Tensor, action_scale: float, out: torch.Tensor | None = None) -> torch.Tensor:
