@@ -4,6 +4,7 @@ Run::
 
     python -m atrv_warp.ros                                   # one rover, real time
     python -m atrv_warp.ros --ros-args -p num_rovers:=2       # /rover_0/…, /rover_1/…
+    python -m atrv_warp.ros --ros-args -p task:=nav           # terrain and obstacles, seen on /scan
     ros2 topic pub -r 10 /cmd_vel geometry_msgs/msg/Twist "{linear: {x: 0.5}, angular: {z: 0.2}}"
     ros2 topic pub --once /command std_msgs/msg/String "{data: rotate_left}"
 
@@ -23,6 +24,9 @@ Topics (per rover; under ``/rover_<k>`` when ``num_rovers`` > 1):
     ``joint_states`` (sensor_msgs/JointState, out): wheel joint positions [rad] and velocities.
     ``imu`` (sensor_msgs/Imu, out, frame ``cbimu_frame``): orientation, angular velocity and
     specific force (+9.81 m/s² up at rest) from the simulated motion, with Gaussian noise.
+    ``scan`` (sensor_msgs/LaserScan, out, frame ``lrf_frame``): the laser scanner, ``scan_beams``
+    beams over 180 deg (-90 to +90 deg, counter-clockwise), 0.1 … 20 m, ``scan_noise`` Gaussian
+    noise; a beam without a return reads +inf (REP 117).
     ``pose`` (geometry_msgs/PoseStamped, out): the reference's chassis pose topic.
 Shared: ``/clock`` (rosgraph_msgs/Clock, every step: use ``use_sim_time``) and
 ``/robot_description`` (std_msgs/String, the URDF, transient local).

@@ -186,13 +186,13 @@ class DriverClient:
 
     def __init__(self, name, prefixes):
         from nav_msgs.msg import Odometry
-        from sensor_msgs.msg import Imu, JointState
+        from sensor_msgs.msg import Imu, JointState, LaserScan
 
         self.node = rclpy.create_node(name)
         self.msgs = {}
         for prefix in prefixes:
             for topic, kind in (("odom", Odometry), ("ground_truth/odom", Odometry), ("joint_states", JointState),
-                                ("imu", Imu)):
+                                ("imu", Imu), ("scan", LaserScan)):
                 key = f"{prefix}/{topic}"
                 self.msgs[key] = []
                 self.node.create_subscription(kind, key, self.msgs[key].append, 100)
@@ -287,6 +287,15 @@ def test_base_driver_two_rovers_cmd_vel_odometry_imu_watchdog(ros_env):
         assert imu.header.frame_id == "cbimu_frame"
         assert imu.linear_acceleration.z == pytest.approx(9.81, abs=0.5)
         assert "<robot" in client.description[0]
+        # /scan: 181 beams over 180 deg from lrf_frame (0.3 m ahead of the chassis origin); the forward
+        # beam meets the +x wall (inner face at x = 15 m) and the leftmost the +y wall, same stamp as the truth
+        scan, truth = _paired(client, "/rover_0/scan", "/rover_0/ground_truth/odom")
+        assert scan.header.frame_id == "lrf_frame" and len(scan.ranges) == 181
+        assert scan.angle_min == pytest.approx(-math.pi / 2) and scan.angle_max == pytest.approx(math.pi / 2)
+        assert (scan.range_min, scan.range_max) == pytest.approx((0.1, 20.0))
+        x, y = _planar(truth)
+        assert scan.ranges[90] == pytest.approx(15.0 - (x + 0.3), abs=0.05)
+        assert scan.ranges[180] == pytest.approx(15.0 - y, abs=0.05)
         n = len(client.msgs["/rover_0/odom"])
         client.drive(2.0, {})
         rate = (len(client.msgs["/rover_0/odom"]) - n) / 2.0
@@ -309,7 +318,8 @@ def test_base_driver_two_rovers_cmd_vel_odometry_imu_watchdog(ros_env):
 
 def test_bad_parameters_are_refused_at_start(ros_env):
     for params, message in ((["bogus_param:=1"], "unknown parameter(s) ['bogus_param']"),
-                            (["num_rovers:=0"], "num_rovers must be in 1")):
+                            (["num_rovers:=0"], "num_rovers must be in 1"),
+                            (["task:=maze"], "task='maze' is not a task")):
         proc = start_node(ros_env, *params)
         out, _ = proc.communicate(timeout=120)
         assert proc.returncode == 2, out[-2000:]

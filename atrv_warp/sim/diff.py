@@ -118,6 +118,9 @@ class DiffRollout:
                  wrench_fix: bool = True):
         if steps < 1:
             raise ValueError(f"steps must be >= 1, got {steps}")
+        if contact is not None and contact.stiction:
+            raise ValueError("DiffRollout needs ContactConfig.stiction = 0: the stick phase keeps each wheel's "
+                             "deflection in one buffer across substeps, which a tape cannot differentiate")
         sim_cfg = sim or SimConfig()
         sim_cfg = SimConfig(step_dt=sim_cfg.step_dt, sim_dt=sim_cfg.sim_dt, gravity=sim_cfg.gravity,
                             mass_matrix_interval=1, use_tile_gemm=False, use_graph=False)

@@ -29,10 +29,13 @@ MAX_ROVERS = 64
 
 PARAMETERS = (
     ("real_time_factor", 1.0, "simulated seconds per wall second; 0 = as fast as possible"),
-    ("publish_rate", 10.0, "rate of /pose, /odom, /ground_truth/odom, /joint_states and /imu [Hz of sim time]"),
+    ("publish_rate", 10.0, "rate of /pose, /odom, /ground_truth/odom, /joint_states, /imu and /scan [Hz of sim time]"),
     ("duration", 0.0, "stop after this much sim time [s]; 0 = until Ctrl-C"),
     ("mode", "coast", "initial driving mode: coast | forward | backward | rotate_left | rotate_right"),
     ("variant", "realistic", "rover variant: realistic | reference"),
+    ("task", "reach", "world: reach (the flat arena) | nav (terrain and obstacles, drawn once at start)"),
+    ("scan_beams", 181, "/scan beams over 180 deg (181: 1 deg, as a SICK LMS); 0 = no /scan"),
+    ("scan_noise", 0.01, "/scan range noise, standard deviation [m]"),
     ("x", 0.0, "start x of rover 0 [m]"), ("y", 0.0, "start y of rover 0 [m]"), ("yaw", 0.0, "start yaw [rad]"),
     ("spacing", 2.0, "rover k starts at y + k * spacing [m]"),
     ("num_rovers", 1, f"rovers simulated (1 … {MAX_ROVERS}); more than one puts each under /rover_<k>"),

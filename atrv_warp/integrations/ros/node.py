@@ -20,7 +20,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import Imu, JointState
+from sensor_msgs.msg import Imu, JointState, LaserScan
 from std_msgs.msg import String
 
 from atrv_warp.integrations.ros import COMMANDS, GOAL, MAX_ROVERS, PARAMETERS, VELOCITY, BagWriter, pose_dict
@@ -71,6 +71,7 @@ class RoverIO:
         self.truth_pub = node.create_publisher(Odometry, f"{prefix}/ground_truth/odom", 10)
         self.joint_pub = node.create_publisher(JointState, f"{prefix}/joint_states", 10)
         self.imu_pub = node.create_publisher(Imu, f"{prefix}/imu", 10)
+        self.scan_pub = node.create_publisher(LaserScan, f"{prefix}/scan", 10) if node.scanner is not None else None
         node.create_subscription(String, f"{prefix}/command", self.on_command, qos)
         node.create_subscription(PoseStamped, f"{prefix}/goal", self.on_goal, qos)
         node.create_subscription(Twist, f"{prefix}/cmd_vel", self.on_cmd_vel, qos)
@@ -150,6 +151,8 @@ class RoverIO:
         self.publish_odometry(ns, p)
         self.publish_joints(ns)
         self.publish_imu(ns, frame_pose, accel)
+        if self.scan_pub is not None:
+            self.publish_scan(ns)
         if self.mode == GOAL and self.distance is not None:
             self.publish_status(f"distance={self.distance:.3f}")
 
@@ -187,6 +190,21 @@ class RoverIO:
         msg.velocity = node.wheel_velocities(k)
         self.joint_pub.publish(msg)
 
+    def publish_scan(self, ns: int) -> None:
+        """The last scan as ``sensor_msgs/LaserScan`` in the scanner's frame; no return is +inf (REP 117)."""
+        scanner = self.node.scanner
+        cfg = scanner.cfg
+        msg = LaserScan()
+        msg.header.stamp, msg.header.frame_id = _stamp(ns), cfg.frame
+        msg.angle_min, msg.angle_max = float(cfg.angles[0]), float(cfg.angles[-1])
+        msg.angle_increment = float(cfg.angles[1] - cfg.angles[0]) if cfg.beams > 1 else 0.0
+        msg.time_increment = 0.0  # every beam of a scan is cast at the same simulated instant
+        msg.scan_time = self.node.every * self.node.sim.sim_cfg.step_dt
+        msg.range_min, msg.range_max = cfg.min_range, cfg.max_range
+        ranges = scanner.ranges[self.index].tolist()
+        msg.ranges = [r if r < cfg.max_range else math.inf for r in ranges]
+        self.scan_pub.publish(msg)
+
     def publish_imu(self, ns: int, frame_pose: torch.Tensor, accel: torch.Tensor) -> None:
         node, k = self.node, self.index
         r = imu_reading(frame_pose, node.sim.ang_vel[k], accel, node.sim.sim_cfg.gravity,
@@ -221,19 +239,32 @@ class RoverSimNode(Node):
         self.args = args
         self.bag: BagWriter | None = None
         self.sim = None
+        self.scanner = None
         self.rovers: list[RoverIO] = []
 
     def setup(self) -> None:
         self._check_parameters()
         p = self.params
         k = p["num_rovers"]
-        self.env = ATRVjrEnv(k, variant=p["variant"])  # goal mode reads the policy's observation kernel
+        # goal mode reads the policy's observation kernel
+        self.env = ATRVjrEnv(k, variant=p["variant"], task=p["task"], seed=int(p["seed"]))
         self.sim = self.env.sim
         starts = [[p["x"], p["y"] + i * p["spacing"], p["yaw"]] for i in range(k)]
+        if p["task"] != "reach":  # terrain tiles and obstacle layouts come with the task's first episodes
+            self.env.reset()
+            starts = self.sim.root_pose[:, :2].tolist()
+            starts = [[x, y, float(yaw)] for (x, y), yaw in zip(starts, self.sim.rpy[:, 2].tolist())]
+            self.log.info("task nav: rovers start at their first episodes' starts "
+                          + ", ".join(f"({x:.1f}, {y:.1f})" for x, y, _ in starts))
         try:
             self.sim.reset(poses=starts)
         except ValueError as err:
             self._fail(f"parameters x, y, yaw, spacing: {err}")
+        if p["scan_beams"] > 0:
+            from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
+
+            self.scanner = LaserScanner(self.sim, ScannerConfig(beams=p["scan_beams"], noise_std=p["scan_noise"]),
+                                        seed=int(p["seed"]))
         desc = self.sim.description
         self.every = max(1, round(1.0 / (p["publish_rate"] * self.sim.sim_cfg.step_dt)))
         self.frame_id = p["frame_id"] or desc.chassis
@@ -274,6 +305,12 @@ class RoverSimNode(Node):
             self._fail(f"num_rovers must be in 1 … {MAX_ROVERS}, got {p['num_rovers']}")
         if p["cmd_vel_timeout"] <= 0 or p["effective_track_factor"] <= 0 or p["wheel_kp"] < 0 or p["wheel_ki"] < 0:
             self._fail("cmd_vel_timeout and effective_track_factor must be > 0, wheel_kp and wheel_ki >= 0")
+        from atrv_warp.task.config import TASK_VARIANTS
+
+        if p["task"] not in TASK_VARIANTS:
+            self._fail(f"task={p['task']!r} is not a task; use one of {sorted(TASK_VARIANTS)}")
+        if p["scan_beams"] < 0 or p["scan_noise"] < 0:
+            self._fail("scan_beams and scan_noise must be >= 0")
 
     # ------------------------------------------------------------------ simulator reads
     def stamp_ns(self) -> int:
@@ -317,9 +354,10 @@ class RoverSimNode(Node):
         if self.policy is None:
             from tensordict import TensorDict
 
-            from atrv_warp.rl.agents import load_policy
+            from atrv_warp.rl.agents import load_policy, pretrained_nav_policy_path
 
-            self.policy = (load_policy(self.params["policy"] or None), TensorDict)
+            shipped = pretrained_nav_policy_path() if self.params["task"] == "nav" else None
+            self.policy = (load_policy(self.params["policy"] or shipped), TensorDict)
         policy, td_cls = self.policy
         targets = self.sim.root_pose[:, :2].clone()  # rovers not in goal mode: their own position
         for rover in self.rovers:
@@ -344,6 +382,8 @@ class RoverSimNode(Node):
 
     def publish_state(self) -> None:
         ns = self.stamp_ns()
+        if self.scanner is not None:
+            self.scanner.scan()
         frames = self.sim.frame_pose(self.imu_frame)
         dt = self.sim.sim_cfg.step_dt
         for rover in self.rovers:
