@@ -1,13 +1,14 @@
 """Wall time and environment steps until SAC's evaluation success first reaches 90 %.
 
-Run: ``python benchmarks/train_to_success.py [--minutes 10] [--threshold 0.9] [key=value ...]``
+Run: ``python benchmarks/train_to_success.py [--config default|nav] [--minutes 10] [--threshold 0.9] [key=value ...]``
 
-Trains with the default config (``configs/default.toml``; overrides as in
-``python -m atrv_warp.train``), evaluating every 100k frames on the 1,000-episode seeded
-evaluation set, and reports when the success rate first reached the threshold (wall time
-since the start of training, evaluations included) and the final rate of the best policy.
-Figures are printed and written to ``benchmarks/results/train_to_success.json``; the run
-folder is kept under ``runs/bench_train_to_success``.
+Trains with a preset (``configs/default.toml`` by default, ``--config nav`` for the navigation
+task; overrides as in ``python -m atrv_warp.train``), evaluating every 100k frames on the
+1,000-episode seeded evaluation set, and reports when the success rate first reached the
+threshold (wall time since the start of training, evaluations included) and the final rate of
+the best policy. Figures are printed and written to ``benchmarks/results/train_to_success.json``
+(``train_to_success_<config>.json`` for another preset); the run folder is kept under
+``runs/bench_train_to_success[_<config>]``.
 """
 
 from __future__ import annotations
@@ -33,7 +34,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=10.0, help="training budget [min]")
     parser.add_argument("--threshold", type=float, default=0.9)
-    parser.add_argument("--out", default=str(RESULTS / "train_to_success.json"))
+    parser.add_argument("--config", default="default", help="training preset (default, nav, ...)")
+    parser.add_argument("--out", default=None, help="results file (default: results/train_to_success[_CONFIG].json)")
     parser.add_argument("overrides", nargs="*", help="key=value TrainConfig overrides")
     args = parser.parse_args()
 
@@ -44,10 +46,12 @@ def main() -> int:
     bad = [item for item in args.overrides if "=" not in item]
     if bad:
         parser.error(f"overrides must look like key=value, got {bad}")
-    overrides = {"name": "bench_train_to_success", "out_dir": str(ROOT / "runs"), "max_minutes": args.minutes,
+    suffix = "" if args.config == "default" else f"_{args.config}"
+    args.out = args.out or str(RESULTS / f"train_to_success{suffix}.json")
+    overrides = {"name": f"bench_train_to_success{suffix}", "out_dir": str(ROOT / "runs"), "max_minutes": args.minutes,
                  "eval_every_frames": 100_000, "eval_episodes": 1000, "final_eval_episodes": 1000,
                  **dict(item.split("=", 1) for item in args.overrides)}
-    cfg = load_train_config("default", overrides)
+    cfg = load_train_config(args.config, overrides)
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
     if run_dir.exists():
         shutil.rmtree(run_dir)
@@ -63,6 +67,7 @@ def main() -> int:
     result = {
         "benchmark": "train_to_success",
         "threshold": args.threshold,
+        "preset": args.config,
         "config": {k: v for k, v in overrides.items() if k not in ("out_dir",)},
         "reached": reached is not None,
         "frames_to_threshold": reached[0] if reached else None,

@@ -7,6 +7,9 @@ draws, with matplotlib, from the chassis poses the simulator produced:
   world, its start and its target (the 1 m success disc);
 - ``docs/episode.gif``: one episode animated, the rover's footprint (from the URDF's chassis
   box) turning toward its target and driving there;
+- ``docs/nav.png``: four episodes of the navigation task (``--task nav``'s first worlds) over
+  their terrain (shaded by height) and obstacles, driven by the scripted driver (dashed) and by
+  the shipped navigation policy (solid);
 - with ``--viewer``: ``docs/viewer.png``, the Rerun web viewer showing a recorded evaluation,
   served on localhost and photographed in headless Chromium (needs Debian's ``chromium`` and
   the ``browser`` extra).
@@ -127,6 +130,79 @@ def draw_episode(run: dict, world: int, out: Path, every: int = 2) -> None:
     plt.close(fig)
 
 
+def nav_paths(policy, episodes: int, seed: int) -> dict:
+    """Chassis paths of the first episode of each world on the navigation task, and the scene."""
+    from tensordict import TensorDict
+
+    from atrv_warp import ATRVjrEnv
+    from atrv_warp.task.spec import END_REASONS
+
+    env = ATRVjrEnv(episodes, task="nav", seed=seed)
+    td = env.reset()
+    scene = {"target": env.target.clone().numpy(), "tile": env.sim.terrain.tile.clone().numpy(),
+             "kind": env.sim.obstacles.kind.clone().numpy(), "pose": env.sim.obstacles.pose.clone().numpy(),
+             "size": env.sim.obstacles.size.clone().numpy()}
+    paths = [env.sim.root_pose[:, :2].clone()]
+    reason = torch.zeros(episodes, dtype=torch.long)
+    for _ in range(env.task_cfg.max_steps):
+        td = env.step(policy(TensorDict(observation=td["observation"], batch_size=[episodes])))["next"]
+        live = reason == 0
+        paths.append(torch.where(live[:, None], env.sim.root_pose[:, :2], paths[-1]))
+        reason = torch.where(live & td["done"][:, 0], td["end_reason"][:, 0], reason)
+        if bool((reason != 0).all()):
+            break
+    grid = env.sim.terrain.grid
+    return {**scene, "paths": torch.stack(paths).numpy(), "reason": [END_REASONS[int(r)] for r in reason],
+            "heights": grid.heights, "half": grid.half_size, "reach": env.task_cfg.reach_radius}
+
+
+def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
+    """Scripted driver against the shipped navigation policy on the same four episodes."""
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle, Polygon
+
+    from atrv_warp import load_policy
+    from atrv_warp.rl.agents import pretrained_nav_policy_path
+    from atrv_warp.task.baseline import scripted_policy
+
+    runs = {"scripted driver": nav_paths(scripted_policy(), episodes, seed),
+            "nav policy (SAC)": nav_paths(load_policy(pretrained_nav_policy_path()), episodes, seed)}
+    fig, axes = plt.subplots(1, episodes, figsize=(4.0 * episodes, 4.3), dpi=90)
+    base = runs["nav policy (SAC)"]
+    for w, ax in enumerate(np.atleast_1d(axes)):
+        start, target = base["paths"][0, w], base["target"][w]
+        lo = np.minimum(start, target) - 3.0
+        span = float((np.maximum(start, target) + 3.0 - lo).max())
+        h = base["half"]
+        ax.imshow(base["heights"][base["tile"][w]].T, origin="lower", extent=(-h, h, -h, h), cmap="gist_earth",
+                  alpha=0.6)
+        for k in range(base["kind"].shape[1]):
+            kind, (x, y, yaw), (a, b) = base["kind"][w, k], base["pose"][w, k], base["size"][w, k]
+            if kind == 2:
+                ax.add_patch(Circle((x, y), a, color="0.2"))
+            elif kind == 1:
+                c = np.array([[a, b], [a, -b], [-a, -b], [-a, b]])
+                rot = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
+                ax.add_patch(Polygon(c @ rot.T + (x, y), closed=True, color="0.2"))
+        ax.add_patch(Circle(tuple(target), base["reach"], color="tab:blue", alpha=0.35))
+        for (name, run), style in zip(runs.items(), ("--", "-")):
+            xy = run["paths"][:, w]
+            ax.plot(xy[:, 0], xy[:, 1], style, lw=2, color="tab:red" if style == "--" else "tab:orange",
+                    label=f"{name}: {run['reason'][w]}")
+        ax.plot(*start, "o", color="k")
+        ax.set_xlim(lo[0], lo[0] + span)
+        ax.set_ylim(lo[1], lo[1] + span)
+        ax.set_aspect("equal")
+        ax.legend(loc="lower left", fontsize=7)
+        ax.set_title(f"episode {w}", fontsize=9)
+    fig.suptitle("navigation task: terrain (shaded by height), obstacles (dark), start (o), target (disc)",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out)
+    plt.close(fig)
+    return [f"{name}: {', '.join(run['reason'])}" for name, run in runs.items()]
+
+
 def viewer_screenshot(out: Path, episodes: int = 4) -> None:
     """Record the shipped policy's evaluation into a served viewer and photograph the page."""
     from atrv_warp import ATRVjrEnv, load_policy
@@ -153,12 +229,16 @@ def main() -> int:
     parser.add_argument("--world", type=int, default=0, help="the episode to animate")
     parser.add_argument("--out-dir", default=str(DOCS))
     parser.add_argument("--viewer", action="store_true", help="also photograph the Rerun web viewer (Chromium)")
+    parser.add_argument("--nav", action="store_true", help="only draw docs/nav.png (the navigation task)")
     args = parser.parse_args()
     import matplotlib
 
     matplotlib.use("Agg")
-    run = rollout(args.episodes, args.seed)
     out = Path(args.out_dir)
+    if args.nav:
+        print("\n".join(draw_nav(out / "nav.png", args.seed)) + f"\nwrote {out / 'nav.png'}")
+        return 0
+    run = rollout(args.episodes, args.seed)
     draw_trajectories(run, out / "trajectories.png")
     draw_episode(run, args.world, out / "episode.gif")
     print(f"{', '.join(run['reason'])}\nwrote {out / 'trajectories.png'} and {out / 'episode.gif'}")

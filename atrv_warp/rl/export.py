@@ -30,8 +30,8 @@ import torch
 from torch import nn
 
 from atrv_warp.rl.agents import load_policy, pretrained_policy_path
-from atrv_warp.task.config import TaskConfig
-from atrv_warp.task.spec import ACTION_DIM, OBS_DIM, OBSERVATION
+from atrv_warp.task.config import get_task
+from atrv_warp.task.spec import ACTION_DIM, observation_fields
 
 __all__ = ["EXPORT_FORMAT", "PolicyNet", "export_onnx", "export_policy", "load_exported"]
 
@@ -39,11 +39,12 @@ EXPORT_FORMAT = "atrv_warp.exported_policy/1"
 
 
 class PolicyNet(nn.Module):
-    """Raw observation (B, OBS_DIM) -> deterministic action (B, ACTION_DIM) in [-1, 1]."""
+    """Raw observation (B, obs_dim) -> deterministic action (B, ACTION_DIM) in [-1, 1]."""
 
     def __init__(self, net: nn.Sequential):
         super().__init__()
         self.normalize, self.mlp = net[0], net[1]  # Normalize, MLP; net[2] splits (loc, scale)
+        self.obs_dim = self.normalize.loc.numel()
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
         loc = self.mlp(self.normalize(observation))[..., :ACTION_DIM]
@@ -51,9 +52,10 @@ class PolicyNet(nn.Module):
 
 
 def _spec(source: Path, meta: dict) -> dict:
-    task = TaskConfig()
-    return {"format": EXPORT_FORMAT, "source": str(source), "policy_meta": meta,
-            "observation": [{"name": f.name, "bound": f.bound, "description": f.description} for f in OBSERVATION],
+    task = get_task(meta.get("task", "reach"))
+    return {"format": EXPORT_FORMAT, "source": str(source), "policy_meta": meta, "task": meta.get("task", "reach"),
+            "observation": [{"name": f.name, "bound": f.bound, "description": f.description}
+                            for f in observation_fields(task)],
             "action": {"names": ["left", "right"], "low": -1.0, "high": 1.0, "scale": task.action_scale,
                        "unit_after_scale": "N·m wheel torque, per side"},
             "step_dt": 0.05}
@@ -75,7 +77,7 @@ def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = Fa
     payload = load_weights(source, "policy file")
     meta = payload.get("policy", payload).get("meta", {})
     net = PolicyNet(actor.module[0].module).eval()
-    example = torch.zeros(2, OBS_DIM)
+    example = torch.zeros(2, net.obs_dim)
     batch = torch.export.Dim("batch")
     with torch.no_grad():
         program = torch.export.export(net, (example,), dynamic_shapes=({0: batch},))
@@ -86,11 +88,11 @@ def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = Fa
     torch.export.save(program, tmp, extra_files={"atrv_warp.json": spec})
     tmp.replace(out)
     if onnx:
-        export_onnx(net, out.with_suffix(".onnx"), spec)
+        export_onnx(net, out.with_suffix(".onnx"), spec, get_task(meta.get("task", "reach")))
     return out
 
 
-def export_onnx(net: PolicyNet, out: Path, spec: str, checks: int = 1000) -> Path:
+def export_onnx(net: PolicyNet, out: Path, spec: str, task=None, checks: int = 1000) -> Path:
     """``net`` as ONNX (dynamic batch), ``spec`` in its metadata, checked with onnxruntime on
     ``checks`` random observations (largest difference from torch under 1e-5, else ``RuntimeError``)."""
     import contextlib
@@ -109,7 +111,7 @@ def export_onnx(net: PolicyNet, out: Path, spec: str, checks: int = 1000) -> Pat
     try:
         with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):  # the exporter's progress lines
             warnings.simplefilter("ignore")
-            torch.onnx.export(net, (torch.zeros(2, OBS_DIM),), str(tmp), dynamo=True, verbose=False,
+            torch.onnx.export(net, (torch.zeros(2, net.obs_dim),), str(tmp), dynamo=True, verbose=False,
                               input_names=["observation"], output_names=["action"],
                               dynamic_shapes=({0: torch.export.Dim("batch")},))
     finally:
@@ -117,8 +119,8 @@ def export_onnx(net: PolicyNet, out: Path, spec: str, checks: int = 1000) -> Pat
     model = onnx.load(str(tmp))
     onnx.helper.set_model_props(model, {"atrv_warp.json": spec})
     onnx.save(model, str(tmp))
-    bound = np.array([f.bound for f in OBSERVATION], dtype=np.float32)
-    obs = np.random.default_rng(0).uniform(-1.1, 1.1, (checks, OBS_DIM)).astype(np.float32) * bound
+    bound = np.array([f.bound for f in observation_fields(task)], dtype=np.float32)
+    obs = np.random.default_rng(0).uniform(-1.1, 1.1, (checks, net.obs_dim)).astype(np.float32) * bound
     session = onnxruntime.InferenceSession(str(tmp), providers=["CPUExecutionProvider"])
     got = session.run(None, {"observation": obs})[0]
     with torch.no_grad():

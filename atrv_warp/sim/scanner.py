@@ -38,8 +38,10 @@ class ScannerConfig:
     """Probability that a beam returns nothing [-]."""
     frame: str = "lrf_frame"
     """URDF frame the beams start from; they lie in its x-y plane."""
-    march_step: float = 0.5
-    """Ray-marching step over terrain [m]; crossings are refined to 1/256 of it."""
+    march_step: float = 1.0
+    """Ray-marching step over terrain [m]; crossings are refined to 1/256 of it. A ray that dips into
+    the ground and out again within one step is missed: keep it below the terrain's shortest
+    feature (the presets' roughness wavelength is 1 m at 2-3 cm height, their hills 3-12 m)."""
 
     def __post_init__(self):
         if self.beams < 1 or not 0 < self.fov <= 2 * math.pi:
@@ -90,6 +92,7 @@ class LaserScanner:
         self.buffer = self._ranges
         """The Warp array behind :attr:`ranges`, for kernels (read-only)."""
         self.angles = wp.to_torch(p.angles)
+        self._all = wp.full(sim.num_worlds, True, dtype=bool, device=dev)
         self.seed = int(seed) % 2**31
         self.count = 0
         """Scans taken since seeding (the noise stream's position)."""
@@ -98,10 +101,12 @@ class LaserScanner:
         """Restart the noise stream."""
         self.seed, self.count = int(seed) % 2**31, 0
 
-    def scan(self) -> torch.Tensor:
-        """Cast every beam of every world from the current state; returns :attr:`ranges` (a view)."""
+    def scan(self, mask: wp.array | None = None) -> torch.Tensor:
+        """Cast every beam of every world (or of the worlds where ``mask`` (N,) bool is set, e.g. the
+        ones a reset just moved) from the current state; returns :attr:`ranges` (a view)."""
         wp.launch(cast_scan, dim=(self.sim.num_worlds, self.cfg.beams),
-                  inputs=[self._params, self.sim.contact.scene, self.sim.buffers.body_q, self.seed, self.count],
+                  inputs=[self._params, self.sim.contact.scene, self.sim.buffers.body_q, self.seed, self.count,
+                          self._all if mask is None else mask],
                   outputs=[self._ranges], device=self.sim.device)
         self.count += 1
         return self.ranges

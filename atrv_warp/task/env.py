@@ -264,8 +264,8 @@ class ATRVjrEnv(EnvBase):
         return self._obs_t.clone()
 
     def _launch_observe(self) -> None:
-        if self.scanner is not None:
-            self.scanner.scan()
+        if self.scanner is not None:  # only the reset worlds moved
+            self.scanner.scan(self._mask)
         wp.launch(observe_reset, dim=self.num_envs, inputs=[self._params, self._mask, self._task, self._rover],
                   outputs=[self._out], device=self._wp_device)
         self._launch_scan_observation()

@@ -300,6 +300,8 @@ def box_terrain_contact(
         sy = float(2 * ((corner >> 1) & 1) - 1)
         sz = float(2 * ((corner >> 2) & 1) - 1)
         p = wp.transform_point(xf, wp.vec3(sx * size[0], sy * size[1], sz * size[2]))
+        if p[2] > scene.terrain.high[tile]:  # above the tile's highest point: no contact, skip the lookup
+            continue
         h = terrain_sample(scene.terrain, tile, p[0], p[1])
         n = terrain_normal(h)
         depth = terrain_plane_offset(n, p[0], p[1], h) - wp.dot(n, p)

@@ -109,6 +109,14 @@ def ray_obstacle(kind: int, pose: wp.vec3, size: wp.vec2, top: float, origin: wp
     d2 = wp.vec2(direction[0], direction[1])
     rel = wp.vec2(origin[0] - pose[0], origin[1] - pose[1])
     t = t_max
+    # cheap rejection by the bounding circle: behind the ray, beyond t_max, or passed wide of
+    reach = bounding_radius(kind, size)
+    a0 = wp.dot(d2, d2)
+    b0 = wp.dot(rel, d2)
+    if a0 < 1.0e-12 or b0 > 0.0 and wp.dot(rel, rel) > reach * reach:
+        return t_max
+    if wp.dot(rel, rel) - b0 * b0 / a0 > reach * reach or (wp.length(rel) - reach) * wp.sqrt(a0) > t_max:
+        return t_max
     if kind == OBSTACLE_CYLINDER:
         a = wp.dot(d2, d2)
         b = wp.dot(rel, d2)

@@ -41,10 +41,13 @@ def cast_scan(
     body_q: wp.array(dtype=wp.transform),
     seed: int,
     counter: int,
+    mask: wp.array(dtype=bool),
     ranges: wp.array2d(dtype=float),
 ):
-    """Range [m] of every beam of every world (dim = (N, B))."""
+    """Range [m] of every beam of every masked world (dim = (N, B)); other worlds keep their ranges."""
     world, beam = wp.tid()
+    if not mask[world]:
+        return
     X = body_q[world * params.bodies_per_world + params.chassis_body] * params.mount
     origin = wp.transform_get_translation(X)
     a = params.angles[beam]
@@ -53,14 +56,14 @@ def cast_scan(
     for k in range(scene.planes.normal.shape[0]):
         if k > 0 or scene.terrain.enabled == 0:
             t = wp.min(t, ray_plane(scene.planes.normal[k], scene.planes.offset[k], origin, direction, t))
-    if scene.terrain.enabled != 0:
-        t = wp.min(t, ray_terrain(scene.terrain, scene.terrain.tile[world], origin, direction, t, params.march_step))
     obstacles = scene.obstacles
     for o in range(obstacles.count):
         kind = obstacles.kind[world, o]
         if kind != 0:
             t = wp.min(t, ray_obstacle(kind, obstacles.pose[world, o], obstacles.size[world, o], obstacles.top, origin,
                                        direction, t))
+    if scene.terrain.enabled != 0:  # last: the nearest other hit bounds the march
+        t = wp.min(t, ray_terrain(scene.terrain, scene.terrain.tile[world], origin, direction, t, params.march_step))
     if params.noise_std > 0.0 or params.dropout > 0.0:
         state = wp.rand_init(wp.int32(wp.rand_init(seed, counter)), world * ranges.shape[1] + beam)
         if wp.randf(state) < params.dropout:

@@ -1,0 +1,105 @@
+"""Throughput of the navigation task against the flat reference task, measured in one run.
+
+Run: ``python benchmarks/nav_throughput.py [--sizes 64 1024] [--seconds 3] [--rounds 3]``
+
+For each N, in this process pinned to one core with one torch thread: env-steps/s of
+``ATRVjrEnv`` stepping random actions (with resets) for the ``reach`` task (flat, no obstacles,
+no scanner) and the ``nav`` task (terrain, six obstacles, 64-beam scan), measured alternately,
+best of ``--rounds`` each; then where nav's extra time goes: the simulator step on the flat arena
+and on terrain with obstacles, and one scan. Kernel compilation (the first build and step of each
+task) is timed separately and excluded. Target (issue 13): nav >= 50 % of reach at N = 1024.
+Figures are printed and written to ``benchmarks/results/nav_throughput.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def _rate(fn, per_call: int, seconds: float) -> float:
+    fn()
+    calls, t0 = 0, time.perf_counter()
+    while True:
+        fn()
+        calls += 1
+        elapsed = time.perf_counter() - t0
+        if elapsed >= seconds:
+            return calls * per_call / elapsed
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[64, 1024])
+    parser.add_argument("--seconds", type=float, default=3.0)
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--out", default=str(RESULTS / "nav_throughput.json"))
+    args = parser.parse_args()
+
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    import torch
+
+    torch.set_num_threads(1)
+    from atrv_warp.task.env import ATRVjrEnv
+
+    compile_s = {}
+    for task in ("reach", "nav"):  # first build + step compiles (or loads) every kernel the task uses
+        t0 = time.perf_counter()
+        env = ATRVjrEnv(2, task=task)
+        env.rollout(2)
+        compile_s[task] = time.perf_counter() - t0
+    print(f"first build and step (kernel compilation or cache load): {compile_s}")
+
+    rows = []
+    for n in args.sizes:
+        envs = {task: ATRVjrEnv(n, task=task, seed=0) for task in ("reach", "nav")}
+        gen = torch.Generator().manual_seed(0)
+        tds = {task: env.reset() for task, env in envs.items()}
+
+        def stepper(task):
+            env = envs[task]
+
+            def step():
+                td = tds[task]
+                td["action"] = torch.rand(n, 2, generator=gen) * 2 - 1
+                _, tds[task] = env.step_and_maybe_reset(td)
+            return step
+
+        best = {"reach": 0.0, "nav": 0.0}
+        for _ in range(args.rounds):  # interleaved: both tasks see the same machine load
+            for task in best:
+                best[task] = max(best[task], _rate(stepper(task), n, args.seconds))
+        sims = {task: env.sim for task, env in envs.items()}
+        sim_rate = {task: _rate(sim.step, n, args.seconds) for task, sim in sims.items()}
+        scanner = envs["nav"].scanner
+        scan_rate = _rate(scanner.scan, n, args.seconds)
+        row = {"num_envs": n, "reach_env_steps_per_s": best["reach"], "nav_env_steps_per_s": best["nav"],
+               "nav_over_reach": best["nav"] / best["reach"],
+               "sim_step_flat_per_s": sim_rate["reach"], "sim_step_terrain_obstacles_per_s": sim_rate["nav"],
+               "scan_64_beams_per_s": scan_rate,
+               "us_per_world_step": {"env_reach": 1e6 / best["reach"], "env_nav": 1e6 / best["nav"],
+                                     "sim_flat": 1e6 / sim_rate["reach"], "sim_nav": 1e6 / sim_rate["nav"],
+                                     "scan": 1e6 / scan_rate}}
+        rows.append(row)
+        us = row["us_per_world_step"]
+        print(f"N={n:5d}: reach {best['reach']:8.0f}  nav {best['nav']:8.0f} env-steps/s  -> nav/reach "
+              f"{row['nav_over_reach']:.2f} | per world-step [us]: sim flat {us['sim_flat']:.1f}, sim terrain+obstacles "
+              f"{us['sim_nav']:.1f}, scan {us['scan']:.1f}", flush=True)
+    result = {"benchmark": "nav_throughput", "target": "nav >= 0.5 x reach at N = 1024", "compile_s": compile_s,
+              "rows": rows, "time": time.strftime("%Y-%m-%d %H:%M:%S"), "python": sys.version.split()[0]}
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"written to {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
