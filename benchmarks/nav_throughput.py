@@ -34,6 +34,17 @@ def _rate(fn, per_call: int, seconds: float) -> float:
             return calls * per_call / elapsed
 
 
+def _stepper(env, tds: dict, task: str, gen):
+    """One random-action step (with resets) of ``env``, keeping its tensordict in ``tds[task]``."""
+    import torch
+
+    def step():
+        td = tds[task]
+        td["action"] = torch.rand(env.num_envs, 2, generator=gen) * 2 - 1
+        _, tds[task] = env.step_and_maybe_reset(td)
+    return step
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[64, 1024])
@@ -63,19 +74,10 @@ def main() -> int:
         gen = torch.Generator().manual_seed(0)
         tds = {task: env.reset() for task, env in envs.items()}
 
-        def stepper(task):
-            env = envs[task]
-
-            def step():
-                td = tds[task]
-                td["action"] = torch.rand(n, 2, generator=gen) * 2 - 1
-                _, tds[task] = env.step_and_maybe_reset(td)
-            return step
-
         best = {"reach": 0.0, "nav": 0.0}
         for _ in range(args.rounds):  # interleaved: both tasks see the same machine load
-            for task in best:
-                best[task] = max(best[task], _rate(stepper(task), n, args.seconds))
+            for task, rate in best.items():
+                best[task] = max(rate, _rate(_stepper(envs[task], tds, task, gen), n, args.seconds))
         sims = {task: env.sim for task, env in envs.items()}
         sim_rate = {task: _rate(sim.step, n, args.seconds) for task, sim in sims.items()}
         scanner = envs["nav"].scanner
