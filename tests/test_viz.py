@@ -151,3 +151,26 @@ def test_served_viewer_context_manager_refuses_a_busy_port():
     for port in ports:
         with socket.socket() as s:
             assert s.connect_ex(("127.0.0.1", port)) != 0
+
+
+def test_nav_recording_draws_terrain_obstacles_and_scan(tmp_path):
+    path = tmp_path / "nav.rrd"
+    env = ATRVjrEnv(3, task="nav", seed=5)
+    recorder = RerunRecorder(env.sim, path=path, worlds=[0, 2])
+    tiles = []
+    evaluate(scripted_policy(), num_episodes=3, seed=5, env=env,
+             on_step=lambda e, td: (recorder.env_hook()(e, td), tiles.append(e.sim.terrain.tile.clone())))
+    recorder.close()
+    data = read_rrd(path)
+    assert "/arena/ground" not in data and "/arena/walls" in data  # terrain replaces the flat ground
+    grid = env.sim.terrain.grid
+    for w in (0, 2):
+        mesh = data[f"/world_{w}/terrain"]
+        vertices = np.array(column(mesh, "Mesh3D:vertex_positions")[0]).reshape(-1, 3)
+        tile = int(tiles[0][w])
+        # the mesh's first vertex is the tile's corner sample (-15, -15) at ground_top + height
+        assert vertices[0, :2] == pytest.approx([-grid.half_size, -grid.half_size])
+        assert vertices[0, 2] == pytest.approx(env.sim.terrain.base + grid.heights[tile, 0, 0], abs=1e-5)
+        assert f"/world_{w}/obstacles/boxes" in data and f"/world_{w}/obstacles/cylinders" in data
+        assert sum(b.num_rows for b in data[f"/world_{w}/scan/rays"]) == recorder.step
+        assert f"/world_{w}/scan/hits" in data
