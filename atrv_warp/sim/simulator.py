@@ -323,10 +323,12 @@ class RoverSim:
 
     def _simulate(self) -> None:
         self._contact_flags.zero_()
-        for _ in range(self.substeps):
-            self.substep(self.state_0, self.state_1, self.control, self._commands)
-            # Copy back rather than swap so the result always lives in state_0: the torch
-            # views and a recorded graph both point at fixed buffers.
+        # Ping-pong between the two states, then one copy back if the substep count is odd, so
+        # the result lives in state_0: the torch views and a recorded graph point at fixed buffers.
+        states = (self.state_0, self.state_1)
+        for i in range(self.substeps):
+            self.substep(states[i % 2], states[(i + 1) % 2], self.control, self._commands)
+        if self.substeps % 2:
             self.state_0.assign(self.state_1)
         self._update_views()
 

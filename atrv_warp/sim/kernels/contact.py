@@ -411,9 +411,13 @@ def compute_contact_forces(
         size = shapes.size[s]
         wheel = shapes.is_wheel[s]
         wrench = wp.spatial_vector()
+        centre = wp.transform_get_translation(xf)
+        reach = wp.length(size)  # bounding sphere: cylinder sqrt(r² + (l/2)²), box half diagonal
         for k in range(planes.normal.shape[0]):
             n = planes.normal[k]
             off = planes.offset[k]
+            if k > 0 and wp.dot(n, centre) - off > reach:
+                continue  # a wall farther than the bounding sphere: no point can touch it (exact skip)
             if k == 0 and shapes.kind[s] == SHAPE_CYLINDER and (scene.terrain.enabled != 0 or params.stiction > 0.0):
                 w, d, touching = cylinder_ground_contact(scene, tile, xf, size, com, v_com, omega, axle,
                                                          shapes.slope_lon[s], shapes.slope_lat[s], params, mu,
