@@ -5,9 +5,11 @@ Run: ``flock /tmp/atrv_bench.lock python benchmarks/ray_collection.py [--worlds 
 
 Frames/s of the training path's :class:`RayCollector` (:func:`make_ray_collector`: asynchronous, the
 learner's weights sent to a collector after each of its batches) with 1 and 2 collectors, against
-TorchRL's :class:`MultiSyncCollector` with 1 and 2 worker processes (pinned to their own cores, weights
-updated before each batch), the same worlds per worker and steps per batch, the same policy (the
-default actor), no learning. All four are built first and measured in turn, ``--rounds`` times
+TorchRL's :class:`MultiSyncCollector` with 1 and 2 worker processes (weights updated after each batch,
+as the trainer does for its local worker), the same worlds per worker and steps per batch, the same
+policy (the default actor), no learning. Like for like: the local workers are not pinned to cores
+(Ray's actors are not), and Ray's workers run at niceness 0 like the local ones (Ray's default is 15,
+which on a machine shared with other work hands them less CPU; ``--ray-niceness`` sets it). All four are built first and measured in turn, ``--rounds`` times
 (interleaved, so the machine's drift hits each alike); the best round of each is kept.
 
 Before each window the collector is drained: a Ray collector's actors have a batch in flight when
@@ -48,6 +50,7 @@ def main() -> int:
     parser.add_argument("--steps", type=int, default=8, help="steps per world in one batch (training default 8)")
     parser.add_argument("--batches", type=int, default=20, help="timed batches per worker per window")
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--ray-niceness", type=int, default=0, help="niceness of Ray's worker processes (Ray: 15)")
     parser.add_argument("--out", default=str(RESULTS / "ray_collection.json"))
     args = parser.parse_args()
 
@@ -65,6 +68,7 @@ def main() -> int:
     cores = sorted(os.sched_getaffinity(0))
     actor = make_actor()  # the default network (width 128, depth 2); its weights are what gets sent
     fpb = args.worlds * args.steps
+    os.environ["RAY_worker_niceness"] = str(args.ray_niceness)  # read by the raylet ray.init starts
     # 3 logical CPUs: the 1- and the 2-collector RayCollector both live through the run (one collects at a time)
     ray.init(num_cpus=3, object_store_memory=OBJECT_STORE_BYTES, include_dashboard=False, logging_level="warning")
 
@@ -79,7 +83,7 @@ def main() -> int:
 
     contenders = {}
     for k in (1, 2):
-        local = MultiSyncCollector([EnvFactory(args.worlds, seed=100 + i, core=i) for i in range(k)], actor,
+        local = MultiSyncCollector([EnvFactory(args.worlds, seed=100 + i) for i in range(k)], actor,
                                    frames_per_batch=fpb * k, total_frames=-1)
         # (collector, yields per window of `--batches` per worker, batches in flight to skip, after each, drain)
         contenders[f"MultiSyncCollector x{k}"] = (local, args.batches, 0, local_after, lambda c: None)
@@ -107,7 +111,7 @@ def main() -> int:
     best = {name: max(v) for name, v in rounds.items()}
     ratios = {k: best[f"RayCollector x{k}"] / best[f"MultiSyncCollector x{k}"] for k in (1, 2)}
     result = {"benchmark": "ray_collection", "cores": len(cores), "worlds_per_worker": args.worlds,
-              "steps_per_batch": args.steps, "frames_per_worker_batch": fpb, "timed_batches_per_worker": args.batches,
+              "steps_per_batch": args.steps, "ray_worker_niceness": args.ray_niceness, "local_workers_pinned": False, "frames_per_worker_batch": fpb, "timed_batches_per_worker": args.batches,
               "rounds": rounds, "best_fps": best, "ray_over_local": {str(k): v for k, v in ratios.items()},
               "target": "Ray >= 0.8 x local multi-process (overhead within 20 %)",
               "met": all(v >= 0.8 for v in ratios.values()),

@@ -473,7 +473,8 @@ class _TrainLoop:
             n = data.numel()
             st.frames += n
             self.stats.update(data)
-            self.count_by_collector(data)
+            if cfg.collector.kind == "ray":
+                self.count_by_collector(data)
             self.buffer.extend(data.reshape(-1).cpu())
             if st.frames >= cfg.collector.init_random_frames:
                 credit = self.learn(credit + n * cfg.optim.utd_ratio)
@@ -493,6 +494,7 @@ class _TrainLoop:
         return "total_frames"
 
     def count_by_collector(self, data) -> None:
+        """Add each Ray collector's frames in ``data`` (stamped with its index) to :attr:`frames_by_collector`."""
         from atrv_warp.rl.ray_collection import WORKER_KEY
 
         if WORKER_KEY in data.keys(include_nested=True):
