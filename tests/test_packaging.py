@@ -26,6 +26,7 @@ EXTRA_USERS = {
     "test": ("tests/",),
     "browser": ("atrv_warp/integrations/browser.py", "docs/make_pictures.py"),
     "onnx": ("atrv_warp/rl/export.py",),
+    "ray": ("atrv_warp/rl/ray_collection.py", "tests/test_ray.py", "benchmarks/ray_collection.py"),
 }
 SCANNED = ("atrv_warp", "tests", "benchmarks", "examples", "docs")
 

@@ -66,12 +66,25 @@ class EnvConfig:
 class CollectorConfig:
     """How frames are collected."""
 
-    kind: Literal["async", "sync"] = "async"
+    kind: Literal["async", "sync", "ray"] = "async"
     """``async``: a separate worker process collects on its own core while the trainer updates;
-    ``sync``: collect and update in turn, in this process (bit-reproducible)."""
+    ``sync``: collect and update in turn, in this process (bit-reproducible); ``ray``:
+    ``num_collectors`` Ray actors collect, on this machine or a Ray cluster (needs the ``ray``
+    extra; README, 'Scale out on Ray')."""
     init_random_frames: int = 20_000
     """Frames collected with uniform random actions before learning starts (also the data the
     observation statistics are computed from)."""
+    num_collectors: int = 2
+    """``ray`` only: collector actors, one CPU each; each delivers its own batches, first ready
+    first served, and gets the learner's weights after each."""
+    envs_per_collector: int = 0
+    """``ray`` only: worlds stepped together by each collector; 0 = ``num_envs``."""
+    ray_address: str = ""
+    """``ray`` only: empty = start a local Ray sized to this machine (stopped at the end of the run);
+    ``auto`` = join the cluster this node is part of (``ray start``); or the head's ``HOST:PORT``."""
+    ray_resource: str = ""
+    """``ray`` only: a custom Ray resource each collector needs one unit of, to place collectors on
+    the nodes started with ``ray start --resources='{"NAME": N}'``; empty = any node with a free CPU."""
 
 
 @dataclass(frozen=True)
@@ -137,12 +150,21 @@ class TrainConfig:
     logging: LoggingConfig = field(default_factory=LoggingConfig)
 
     @property
+    def worlds_per_collector(self) -> int:
+        """Worlds one collector steps: ``envs_per_collector`` (or ``num_envs``) for ``ray``, else ``num_envs``."""
+        if self.collector.kind == "ray" and self.collector.envs_per_collector:
+            return self.collector.envs_per_collector
+        return self.env.num_envs
+
+    @property
     def frames_per_batch(self) -> int:
-        return self.env.num_envs * self.env.steps_per_batch
+        """Frames in one batch the trainer receives (``ray``: one collector's batch)."""
+        return self.worlds_per_collector * self.env.steps_per_batch
 
     def validate(self) -> TrainConfig:
         """Raise ``ValueError`` naming the first bad value."""
         positive = {"run": ("total_frames", "threads"), "env": ("num_envs", "steps_per_batch"),
+                    "collector": ("num_collectors",),
                     "optim": ("buffer_size", "batch_size", "lr", "tau", "init_alpha", "utd_ratio"),
                     "network": ("width", "depth"),
                     "logging": ("eval_every_frames", "eval_episodes", "final_eval_episodes")}
@@ -153,8 +175,8 @@ class TrainConfig:
                     raise ValueError(f"train config: {name} must be > 0, got {value}")
         if not 0.0 < self.optim.gamma <= 1.0:
             raise ValueError(f"train config: gamma must be in (0, 1], got {self.optim.gamma}")
-        if self.run.max_minutes < 0 or self.collector.init_random_frames < 0:
-            raise ValueError("train config: max_minutes and init_random_frames must be >= 0")
+        if self.run.max_minutes < 0 or self.collector.init_random_frames < 0 or self.collector.envs_per_collector < 0:
+            raise ValueError("train config: max_minutes, init_random_frames and envs_per_collector must be >= 0")
         if self.optim.batch_size > self.optim.buffer_size:
             raise ValueError("train config: batch_size must not exceed buffer_size")
         from atrv_warp.task.config import get_task

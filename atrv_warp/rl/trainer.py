@@ -289,6 +289,14 @@ class Checkpoint:
         return state, learner
 
 
+def _describe_collection(cfg: TrainConfig) -> str:
+    """``'async collector, 256 worlds'``, or ``'2 ray collectors x 64 worlds (local Ray)'``."""
+    if cfg.collector.kind != "ray":
+        return f"{cfg.collector.kind} collector, {cfg.env.num_envs} worlds"
+    where = f"Ray at {cfg.collector.ray_address}" if cfg.collector.ray_address else "local Ray"
+    return f"{cfg.collector.num_collectors} ray collectors x {cfg.worlds_per_collector} worlds ({where})"
+
+
 def _first_line(err: Exception) -> str:
     return (str(err).strip().splitlines() or [type(err).__name__])[0][:200]
 
@@ -300,7 +308,8 @@ def make_buffer(cfg: TrainConfig):
 
 
 def make_collector(cfg: TrainConfig, actor, frames_done: int):
-    """``async``: one worker process on the second core; ``sync``: collect in this process."""
+    """``async``: one worker process on the second core; ``sync``: collect in this process; ``ray``:
+    ``num_collectors`` Ray actors (:func:`atrv_warp.rl.ray_collection.make_ray_collector`)."""
     from torchrl.collectors import Collector, MultiAsyncCollector
 
     fpb = cfg.frames_per_batch
@@ -308,6 +317,11 @@ def make_collector(cfg: TrainConfig, actor, frames_done: int):
     random_left = max(cfg.collector.init_random_frames - frames_done, 0)
     env_seed = cfg.run.seed + 7919 * (frames_done // fpb + 1)  # a resumed run draws new episodes
     whole_batches = max(math.ceil(remaining / fpb), 1) * fpb  # the loop stops at total_frames itself
+    if cfg.collector.kind == "ray":
+        from atrv_warp.rl.ray_collection import make_ray_collector
+
+        return make_ray_collector(cfg, actor, total_frames=whole_batches, init_random_frames=random_left,
+                                  env_seed=env_seed)
     if cfg.collector.kind == "async":
         factory = EnvFactory(cfg.env.num_envs, seed=env_seed, core=1, env_kwargs=(("task", cfg.env.task),))
         return MultiAsyncCollector([factory], actor, frames_per_batch=fpb, total_frames=whole_batches,
@@ -369,6 +383,10 @@ def _prepare_run(cfg: TrainConfig, resume: bool) -> tuple[Path, dict | None]:
 
         if importlib.util.find_spec("tensorboard") is None:
             raise ModuleNotFoundError("logger=tensorboard needs the tensorboard package: pip install -e '.[tensorboard]'")
+    if cfg.collector.kind == "ray":
+        from atrv_warp.rl.ray_collection import require_ray
+
+        require_ray()
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
     ckpt_path = Checkpoint(run_dir).path
     if resume and not ckpt_path.is_file():
@@ -404,11 +422,15 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     loggers = make_loggers(cfg, run_dir, resume)
     collector = make_collector(cfg, actor, state.frames)
     evaluator = Evaluator(cfg, actor, loggers)
-    print(f"run folder: {run_dir}  ({cfg.collector.kind} collector, {cfg.env.num_envs} worlds, batch {cfg.frames_per_batch} "
-          f"frames; budget {cfg.run.total_frames:,} frames or {cfg.run.max_minutes:g} min, whichever ends first)")
+    print(f"run folder: {run_dir}  ({_describe_collection(cfg)}, batch {cfg.frames_per_batch} frames; budget "
+          f"{cfg.run.total_frames:,} frames or {cfg.run.max_minutes:g} min, whichever ends first)")
     print(device_summary("cpu"))
     loop = _TrainLoop(cfg, state, actor, normalize, buffer, learner, loggers, evaluator, checkpoint, run_dir)
     try:
+        if cfg.collector.kind == "ray":
+            from atrv_warp.rl.ray_collection import describe_placements
+
+            print(f"ray collectors on: {describe_placements(collector)}")
         stopped_by = loop.run(collector)
     finally:
         loop.progress.close()
@@ -419,6 +441,8 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     state.elapsed_s = loop.elapsed()
     print(f"training stopped by {stopped_by}: {state.frames:,} frames, {state.updates:,} updates, "
           f"{state.elapsed_s / 60:.1f} min")
+    if loop.frames_by_collector:
+        print(f"frames per collector: {', '.join(f'{n:,}' for n in loop.frames_by_collector)}")
     _finish(cfg, state, run_dir, evaluator, loggers)
     return run_dir
 
@@ -431,6 +455,8 @@ class _TrainLoop:
         self.learner, self.loggers, self.evaluator, self.checkpoint = learner, loggers, evaluator, checkpoint
         self.run_dir = run_dir
         self.stats, self.losses = _Stats(), _LossMeans()
+        self.frames_by_collector: list[int] = []
+        """Frames from each Ray collector (their batches carry the collector's index); empty otherwise."""
         self.progress = _Progress(cfg, state.frames, state.elapsed_s)
         self.last_eval, self.last_train = float("nan"), (float("nan"), float("nan"), {})
         self.budget_s = cfg.run.max_minutes * 60.0 if cfg.run.max_minutes > 0 else math.inf
@@ -451,12 +477,16 @@ class _TrainLoop:
             n = data.numel()
             st.frames += n
             self.stats.update(data)
+            if cfg.collector.kind == "ray":
+                self.count_by_collector(data)
             # the full-resolution scan is for viewers; the policy observes its sectors
             self.buffer.extend(data.exclude("scan", ("next", "scan")).reshape(-1).cpu())
             if st.frames >= cfg.collector.init_random_frames:
                 credit = self.learn(credit + n * cfg.optim.utd_ratio)
                 if cfg.collector.kind == "async":  # the worker holds a copy; the sync collector shares `actor`
                     collector.update_policy_weights_(TensorDict.from_module(self.actor))
+                # ray: the RayCollector sends the weights to the collector that delivered `data` once
+                # this body is done (update_after_each_batch)
             st.elapsed_s = self.elapsed()
             if st.frames >= st.next_eval or st.frames >= cfg.run.total_frames or st.elapsed_s >= self.budget_s:
                 self.evaluate_and_save()
@@ -467,6 +497,15 @@ class _TrainLoop:
             if st.frames >= cfg.run.total_frames:
                 break
         return "total_frames"
+
+    def count_by_collector(self, data) -> None:
+        """Add each Ray collector's frames in ``data`` (stamped with its index) to :attr:`frames_by_collector`."""
+        from atrv_warp.rl.ray_collection import WORKER_KEY
+
+        if WORKER_KEY in data.keys(include_nested=True):
+            counts = torch.bincount(data[WORKER_KEY].reshape(-1).long(), minlength=self.cfg.collector.num_collectors)
+            self.frames_by_collector = [a + int(b) for a, b in
+                                        zip(self.frames_by_collector or [0] * len(counts), counts, strict=True)]
 
     def learn(self, credit: float) -> float:
         """Freeze the observation statistics on first use, then spend whole update credits."""

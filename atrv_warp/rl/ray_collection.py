@@ -1,0 +1,158 @@
+"""Collection on Ray (``collector=ray``): TorchRL's :class:`~torchrl.collectors.distributed.RayCollector`
+over ``num_collectors`` actors, each stepping ``envs_per_collector`` worlds, on this machine or a cluster.
+
+``python -m atrv_warp.train --config smoke collector=ray`` trains with two collectors on a local Ray;
+``ray_address=auto`` joins the cluster this node belongs to (README, 'Scale out on Ray'). Needs the
+``ray`` extra: ``pip install -e ".[ray]"``.
+
+What runs where: the learner (SAC updates, replay buffer, evaluations) stays in the process that
+runs ``atrv_warp.train``; each collector is a Ray actor holding one :class:`ATRVjrEnv` and a copy of
+the policy. The collectors deliver their batches first ready, first served; after each batch the
+:class:`RayCollector` sends the learner's current weights to the collector that delivered it,
+through TorchRL's :class:`~torchrl.weight_update.RayWeightSyncScheme` (a Gloo process group;
+its TCP store listens on a random port of the learner's host).
+
+Ray itself: an already initialised Ray is reused and left running; otherwise the
+:class:`RayCollector` starts (``ray_address`` empty) or joins (``auto``, ``HOST:PORT``) one and
+its ``shutdown()`` stops or leaves it again, so a run leaves no Ray process behind.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import logging
+import os
+import warnings
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.collectors import Collector
+
+from atrv_warp.rl.config import TrainConfig
+from atrv_warp.task.env import EnvFactory
+
+__all__ = ["INSTALL_HINT", "OBJECT_STORE_BYTES", "WORKER_KEY", "RayWorker", "StampWorker", "describe_placements",
+           "make_ray_collector", "placements", "ray_init_config", "require_ray", "worker_weights"]
+
+INSTALL_HINT = 'collector=ray needs Ray, the optional extra [ray]: pip install -e ".[ray]"'
+"""What ``collector=ray`` says, before any work, where Ray is not installed."""
+OBJECT_STORE_BYTES = 256 * 1024**2
+"""Object store of a local Ray [B]: it only holds the batches in flight (512 worlds x 8 steps is a
+few MB), and Ray's default (30 % of the memory) is far more than a shared 2-core machine should lend."""
+WORKER_KEY = ("collector", "worker")
+"""Key of the index of the collector that produced each frame."""
+_SEED_STRIDE = 1_000_003
+"""Collector ``i`` seeds its worlds with ``seed + i * _SEED_STRIDE``: distinct episodes per collector."""
+
+
+def require_ray() -> None:
+    """Raise ``ModuleNotFoundError`` with :data:`INSTALL_HINT` where Ray is not installed."""
+    if importlib.util.find_spec("ray") is None:
+        raise ModuleNotFoundError(INSTALL_HINT)
+
+
+def ray_init_config(address: str) -> dict:
+    """``ray.init`` keywords for ``ray_address``: empty = a new local Ray with one CPU per core of this
+    machine and no dashboard; ``auto`` or ``HOST:PORT`` = join that cluster. Used only where Ray is not
+    already initialised in this process."""
+    quiet = {"logging_level": logging.WARNING, "log_to_driver": True}  # workers' errors still reach the console
+    if address:
+        return {"address": address, **quiet}
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return {"address": "local", "num_cpus": cores, "object_store_memory": OBJECT_STORE_BYTES,
+            "include_dashboard": False, **quiet}
+
+
+class StampWorker:
+    """Post-processing run in collector ``index``: writes its index under :data:`WORKER_KEY`, so the
+    learner can count each collector's frames."""
+
+    def __init__(self, index: int):
+        self.index = index
+
+    def __call__(self, data: TensorDictBase) -> TensorDictBase:
+        data.set(WORKER_KEY, torch.full(data.shape, self.index, dtype=torch.int16))
+        return data
+
+
+class RayWorker(Collector):
+    """One Ray collector: TorchRL's single-process :class:`Collector`, named briefly (Ray prefixes
+    every line an actor prints with the actor's repr, and Collector's spans dozens of lines), with
+    two queries the trainer and the tests make through :meth:`RayCollector.map_fn`."""
+
+    def __repr__(self) -> str:
+        return f"RayWorker({self.worker_idx})"
+
+    def placement(self) -> dict:
+        """Where this collector runs: Ray node id and IP address, host name and process id."""
+        import socket
+
+        import ray
+
+        context = ray.get_runtime_context()
+        return {"node_id": context.get_node_id(), "node_ip": ray.util.get_node_ip_address(),
+                "host": socket.gethostname(), "pid": os.getpid()}
+
+    def policy_weights(self) -> TensorDictBase:
+        """A copy of the weights (parameters and buffers) of this collector's policy."""
+        return TensorDict.from_module(self.policy).data.clone()
+
+
+def make_ray_collector(cfg: TrainConfig, actor, *, total_frames: int, init_random_frames: int, env_seed: int):
+    """A :class:`RayCollector` of ``cfg.collector.num_collectors`` :class:`RayWorker` actors.
+
+    Each actor needs one CPU (and one unit of ``ray_resource`` if set), builds its env with
+    :class:`EnvFactory` (no core pinning: Ray places the actor; one torch thread), and gets ``actor``'s
+    weights before it collects; afterwards, the collector that delivered a batch gets the learner's
+    weights once the loop body that used the batch is done (``update_after_each_batch``).
+
+    Args:
+        cfg: The training configuration (``collector`` group: count, worlds, address, resource).
+        actor: The learner's policy; its weights are sent, it is not shared.
+        total_frames: Frames after which the iterator stops.
+        init_random_frames: Frames collected with random actions first, split evenly between collectors.
+        env_seed: Seed of collector 0's worlds; collector ``i`` adds ``i * 1_000_003``.
+
+    Returns:
+        The collector; its ``shutdown()`` stops the actors, and Ray if it started it.
+    """
+    require_ray()
+    from torchrl.collectors.distributed import RayCollector
+
+    c = cfg.collector
+    remote = {"num_cpus": 1}
+    if c.ray_resource:
+        remote["resources"] = {c.ray_resource: 1}
+    envs = [EnvFactory(cfg.worlds_per_collector, seed=env_seed + i * _SEED_STRIDE,
+                       env_kwargs=(("task", cfg.env.task),)) for i in range(c.num_collectors)]
+    # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
+    kwargs = [{"postproc": StampWorker(i), "auto_register_policy_transforms": False} for i in range(c.num_collectors)]
+    with warnings.catch_warnings():
+        # TorchRL warns that asynchronous collectors may still act randomly while others use the policy;
+        # SAC learns off-policy from the buffer, and learning starts only once init_random_frames are in
+        warnings.filterwarnings("ignore", message="async distributed data collection with init_random_frames")
+        collector = RayCollector(envs, actor, collector_class=RayWorker, collector_kwargs=kwargs,
+                                 remote_configs=remote, ray_init_config=ray_init_config(c.ray_address),
+                                 frames_per_batch=cfg.frames_per_batch, total_frames=total_frames,
+                                 init_random_frames=init_random_frames, update_after_each_batch=True)
+    try:
+        collector.update_policy_weights_(actor)  # opens the weight-sync group; every worker gets the weights
+    except BaseException:
+        collector.shutdown()
+        raise
+    return collector
+
+
+def placements(collector) -> list[dict]:
+    """:meth:`RayWorker.placement` of every collector of ``collector``, in order."""
+    return collector.map_fn("placement")
+
+
+def describe_placements(collector) -> str:
+    """One line: each collector's node IP, host and node id (first 8 hex digits)."""
+    return ", ".join(f"{p['node_ip']} ({p['host']}, node {p['node_id'][:8]})" for p in placements(collector))
+
+
+def worker_weights(collector) -> list[TensorDictBase]:
+    """:meth:`RayWorker.policy_weights` of every collector of ``collector``, in order."""
+    return collector.map_fn("policy_weights")
