@@ -324,8 +324,18 @@ def make_collector(cfg: TrainConfig, actor, frames_done: int):
                                   env_seed=env_seed)
     if cfg.collector.kind == "async":
         factory = EnvFactory(cfg.env.num_envs, seed=env_seed, core=1, env_kwargs=(("task", cfg.env.task),))
-        return MultiAsyncCollector([factory], actor, frames_per_batch=fpb, total_frames=whole_batches,
-                                   init_random_frames=random_left)
+        failure = None
+        try:
+            return MultiAsyncCollector([factory], actor, frames_per_batch=fpb, total_frames=whole_batches,
+                                       init_random_frames=random_left)
+        except Exception as err:  # noqa: BLE001 - re-raised below, once the half-built collector is gone
+            failure = f"{type(err).__name__}: {err}"
+        # The half-built collector dies with the exception's frames, here: torchrl 0.14's weight-sync
+        # scheme shuts down in __del__, which deadlocks if it is left for interpreter exit.
+        import gc
+
+        gc.collect()
+        raise RuntimeError(f"the collector's worker process failed to start: {failure}")
     # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
     return Collector(ATRVjrEnv(cfg.env.num_envs, seed=env_seed, task=cfg.env.task), actor, frames_per_batch=fpb,
                      total_frames=whole_batches, init_random_frames=random_left,
