@@ -276,8 +276,11 @@ def _read_config_source(source: str) -> tuple[str, bytes]:
     if os.path.isfile(source):
         with open(source, "rb") as fh:
             return source, fh.read()
-    if source in preset_names():  # packaged, so a non-editable install has the same defaults
-        return f"preset {source!r}", resources.files("atrv_warp.rl").joinpath(f"configs/{source}.toml").read_bytes()
+    name = source
+    if source.endswith(".toml") and os.path.basename(os.path.dirname(source)) == "configs":
+        name = os.path.basename(source).removesuffix(".toml")  # `configs/smoke.toml`: the packaged preset
+    if name in preset_names():  # packaged, so a non-editable install has the same defaults
+        return f"preset {name!r}", resources.files("atrv_warp.rl").joinpath(f"configs/{name}.toml").read_bytes()
     raise FileNotFoundError(f"config {source!r} is neither a file nor a preset; presets: {preset_names()}")
 
 
@@ -285,8 +288,9 @@ def load_train_config(source: str | None = None, overrides: dict | None = None) 
     """Read a TOML config, apply ``overrides`` (``{"lr": "1e-3"}`` or ``{"optim.lr": ...}``), check
     every key and value.
 
-    ``source`` is a preset name (:func:`preset_names`: ``default``, ``smoke``), a file path, or
-    ``None`` for the :class:`TrainConfig` defaults alone.
+    ``source`` is a preset name (:func:`preset_names`: ``default``, ``nav``, ``smoke``), a file path
+    (``configs/<preset>.toml`` that is not a file names the packaged preset), or ``None`` for the
+    :class:`TrainConfig` defaults alone.
     """
     values: dict = {}
     label = None
