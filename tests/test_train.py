@@ -125,6 +125,20 @@ def test_shipped_policy_beats_scripted_baseline():
     assert shipped.mean_return > baseline.mean_return
 
 
+def test_shipped_nav_policy_beats_scripted_driver_on_nav():
+    """Learning matters on the nav task: the scripted turn-then-drive driver runs into the obstacle
+    across its path; the shipped nav policy drives around it."""
+    from atrv_warp.rl.agents import load_policy, policy_task, pretrained_nav_policy_path
+    from atrv_warp.task.baseline import scripted_policy
+    from atrv_warp.task.evaluation import evaluate
+
+    path = pretrained_nav_policy_path()
+    assert path.stat().st_size < 1_000_000 and policy_task(path) == "nav"
+    shipped = evaluate(load_policy(path), num_episodes=128, seed=99, task="nav")
+    baseline = evaluate(scripted_policy(), num_episodes=128, seed=99, task="nav")
+    assert shipped.success_rate >= 0.85 and baseline.success_rate < 0.3, (shipped, baseline)
+
+
 def test_sync_training_is_reproducible(smoke_run, tmp_path):
     """Same seed, same result: the in-process (sync) collector gives bit-identical weights."""
     run_dir, _ = smoke_run
