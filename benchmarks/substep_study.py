@@ -1,0 +1,128 @@
+"""Fewer, longer substeps: what they buy in speed and cost in accuracy and stability.
+
+Run: ``python benchmarks/substep_study.py [--substeps 5 4 3] [--nan-steps 1000] [--worlds 1024]``
+
+For each substep count (solver step ``sim_dt = 0.05 s / substeps``), in one run and on one core:
+env-steps/s of ``RoverSim.step`` at ``--worlds`` worlds (random torques; the counts measured in
+turn, best of 3 rounds); the reference drive's distances after 1, 3 and 4.9 s (the physics
+report's protocol: the reference variant settled 1 s, then +4 N·m on every wheel); the realistic
+rover's acceleration at +2 N·m against F/(M + ΣI/r²), and its rest height; and non-finite worlds
+after ``--nan-steps`` steps of ``--worlds`` worlds under random torques in ±20 N·m (fresh each
+step). Figures are printed and written to ``benchmarks/results/substep_study.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def _reference_drive(sim_cfg) -> dict:
+    from atrv_warp.sim import DriveMode, RoverSim
+
+    sim = RoverSim(1, variant="reference", sim=sim_cfg)
+    sim.reset(height=sim.rest_height + 0.02)
+    for _ in range(20):
+        sim.step()
+    x0 = sim.root_pose[0, 0].item()
+    sim.set_mode(DriveMode.FORWARD)
+    x = {}
+    for k in range(1, 99):
+        sim.step()
+        if k in (20, 60, 98):
+            x[f"x_after_{k * 0.05:.1f}_s"] = sim.root_pose[0, 0].item() - x0
+    return x
+
+
+def _acceleration(sim_cfg) -> dict:
+    from atrv_warp.sim import RoverSim
+    from atrv_warp.sim.checks import rolling_acceleration
+
+    sim = RoverSim(1, sim=sim_cfg)
+    sim.reset()
+    for _ in range(20):
+        sim.step()
+    rest = sim.root_pose[0, 2].item()
+    sim.set_commands([2.0, 2.0])
+    for _ in range(20):
+        sim.step()
+    v1 = sim.lin_vel[0, 0].item()
+    for _ in range(40):
+        sim.step()
+    v3 = sim.lin_vel[0, 0].item()
+    return {"rest_height_m": rest, "accel_2Nm": (v3 - v1) / 2.0, "accel_analytic": rolling_acceleration(sim, 2.0)}
+
+
+def _nonfinite(sim_cfg, worlds: int, steps: int) -> int:
+    import torch
+
+    from atrv_warp.sim import RoverSim
+
+    sim = RoverSim(worlds, sim=sim_cfg)
+    gen = torch.Generator().manual_seed(0)
+    sim.reset(poses=(torch.rand(worlds, 3, generator=gen) * 2 - 1) * torch.tensor([12.0, 12.0, 3.14]))
+    bad = torch.zeros(worlds, dtype=torch.bool)
+    for _ in range(steps):
+        sim.commands.copy_(torch.rand(worlds, 2, generator=gen) * 40 - 20)
+        sim.step()
+        bad |= sim.nonfinite.bool()
+    return int(bad.sum())
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--substeps", type=int, nargs="+", default=[5, 4, 3])
+    parser.add_argument("--worlds", type=int, default=1024)
+    parser.add_argument("--nan-steps", type=int, default=1000)
+    parser.add_argument("--seconds", type=float, default=2.0)
+    parser.add_argument("--out", default=str(RESULTS / "substep_study.json"))
+    args = parser.parse_args()
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    import torch
+
+    torch.set_num_threads(1)
+    from atrv_warp.sim import RoverSim, SimConfig
+
+    configs = {n: SimConfig(sim_dt=0.05 / n) for n in args.substeps}
+    sims = {n: RoverSim(args.worlds, sim=cfg) for n, cfg in configs.items()}
+    gen = torch.Generator().manual_seed(1)
+    for sim in sims.values():
+        sim.reset(poses=(torch.rand(args.worlds, 3, generator=gen) * 2 - 1) * torch.tensor([12.0, 12.0, 3.14]))
+        sim.commands.copy_(torch.rand(args.worlds, 2, generator=gen) * 16 - 8)
+        sim.step()  # graph capture
+    best = dict.fromkeys(configs, 0.0)
+    for _ in range(3):  # interleaved rounds
+        for n, sim in sims.items():
+            calls, t0 = 0, time.perf_counter()
+            while time.perf_counter() - t0 < args.seconds:
+                sim.step()
+                calls += 1
+            best[n] = max(best[n], calls * args.worlds / (time.perf_counter() - t0))
+    rows = []
+    for n, cfg in configs.items():
+        row = {"substeps": n, "sim_dt": cfg.sim_dt, "env_steps_per_s": best[n], "speedup_vs_5": best[n] / best.get(5, best[n]),
+               **_reference_drive(cfg), **_acceleration(cfg),
+               "nonfinite_worlds": _nonfinite(cfg, args.worlds, args.nan_steps), "world_steps": args.worlds * args.nan_steps}
+        rows.append(row)
+        print(f"substeps {n}: {row['env_steps_per_s']:8.0f} env-steps/s ({row['speedup_vs_5']:.2f}x) | reference drive x "
+              f"{row['x_after_1.0_s']:.3f} / {row['x_after_3.0_s']:.3f} / {row['x_after_4.9_s']:.3f} m | accel "
+              f"{row['accel_2Nm']:.4f} (analytic {row['accel_analytic']:.4f}) | rest {row['rest_height_m']:.4f} m | "
+              f"non-finite {row['nonfinite_worlds']} of {args.worlds} worlds in {row['world_steps']:,} world-steps",
+              flush=True)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"benchmark": "substep_study", "worlds": args.worlds, "rows": rows,
+                               "time": time.strftime("%Y-%m-%d %H:%M:%S")}, indent=2) + "\n")
+    print(f"written to {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
