@@ -95,6 +95,13 @@ class MujocoTwin:
         state, _ = self.rollout.rollout(self.model, self.data, state0, control, state=out)
         return state
 
+    def resets(self, state0: np.ndarray, states: np.ndarray) -> list[tuple[int, int]]:
+        """(world, step) of each rollout MuJoCo reset after a diverging step (Nan, Inf or huge qacc):
+        mj_step then restarts that world at qpos0, time 0, so its clock no longer runs on from ``state0``."""
+        expected = state0[:, :1] + self.model.opt.timestep * np.arange(1, states.shape[1] + 1)
+        off = np.abs(states[:, :, 0] - expected) > 1e-6
+        return [(int(w), int(np.argmax(off[w]))) for w in np.flatnonzero(off.any(1))]
+
     def unpack(self, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """qpos (.., nq), qvel (.., nv) of FULLPHYSICS states (time first)."""
         nq, nv = self.model.nq, self.model.nv
@@ -222,6 +229,7 @@ def main() -> int:
         out = np.empty((n, steps * twin.substeps, twin.nstate))
 
         ours_rates, mj_rates = [], []
+        mj_reset: dict[int, list[float]] = {}  # world -> chassis x, y, z [m] before MuJoCo reset it
         for _ in range(args.rounds):
             t0 = time.perf_counter()
             for t in range(steps):
@@ -233,6 +241,8 @@ def main() -> int:
             t0 = time.perf_counter()
             twin.run(mj_state0, control, out)
             mj_rates.append(n * steps / (time.perf_counter() - t0))
+            for w, k in twin.resets(mj_state0, out):
+                mj_reset.setdefault(w, twin.unpack(out[w, k - 1] if k else mj_state0[w])[0][:3].tolist())
             mj_state0 = np.ascontiguousarray(out[:, -1])
 
         ours_finite = bool(torch.isfinite(sim.root_pose).all() and not sim.nonfinite.any())
@@ -248,13 +258,16 @@ def main() -> int:
             # after the timed runs: how hard the rovers were driven (our motor tapers to 0 at 50 rad/s)
             "ours_mean_abs_wheel_speed_rad_s": sim.wheel_speed.abs().mean().item(),
             "mujoco_mean_abs_wheel_speed_rad_s": float(np.abs(qvel[:, twin.wheel_qvel]).mean()),
+            # worlds MuJoCo found diverging and restarted at its origin (timed runs; their state before)
+            "mujoco_reset_worlds": len(mj_reset), "mujoco_reset_chassis_xyz_m": mj_reset,
             "ours_mean_chassis_z_m": sim.root_pose[:, 2].mean().item(),
             "mujoco_mean_chassis_z_m": float(qpos[:, 2].mean()),
         }
         row["ratio_ours_over_mujoco"] = row["ours_env_steps_per_s"] / row["mujoco_env_steps_per_s"]
         rows.append(row)
         print(f"N={n:5d} ({steps} env steps, build {build_s:.1f} s): ours {row['ours_env_steps_per_s']:10,.0f}  "
-              f"MuJoCo {row['mujoco_env_steps_per_s']:10,.0f} env-steps/s  ratio {row['ratio_ours_over_mujoco']:.2f}",
+              f"MuJoCo {row['mujoco_env_steps_per_s']:10,.0f} env-steps/s  ratio {row['ratio_ours_over_mujoco']:.2f}  "
+              f"(MuJoCo reset {len(mj_reset)} diverging world(s))",
               flush=True)
         del sim
 
