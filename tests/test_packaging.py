@@ -27,6 +27,7 @@ EXTRA_USERS = {
     "browser": ("atrv_warp/integrations/browser.py", "docs/make_pictures.py"),
     "onnx": ("atrv_warp/rl/export.py",),
     "ray": ("atrv_warp/rl/ray_collection.py", "tests/test_ray.py", "benchmarks/ray_collection.py"),
+    "bench": ("benchmarks/sim_vs_mujoco.py", "benchmarks/mujoco_twin/"),
 }
 SCANNED = ("atrv_warp", "tests", "benchmarks", "examples", "docs")
 
