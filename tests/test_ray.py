@@ -188,8 +188,15 @@ def test_ctrl_c_and_errors_leave_no_ray_behind(tmp_path, no_ray_before):
     """SIGINT to a run mid-training; an exception inside the training loop (Ray gone while the process
     still lives); after both, no Ray process and no orphaned shared memory."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen(train_cmd(f"out_dir={tmp_path}", "total_frames=1000000", "envs_per_collector=16"),
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT, env=env)
+    # A shell's background job (`./.ci/run &`) starts with SIGINT ignored; a child inherits an ignored
+    # signal through exec, and a Python started that way never raises KeyboardInterrupt. Spawn the run
+    # with SIGINT handled here, so that it gets Ctrl-C as from a terminal.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        proc = subprocess.Popen(train_cmd(f"out_dir={tmp_path}", "total_frames=1000000", "envs_per_collector=16"),
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT, env=env)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     try:
         for line in proc.stdout:
             if line.startswith("ray collectors on:"):
