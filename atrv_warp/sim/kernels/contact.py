@@ -125,6 +125,21 @@ def cylinder_deepest_point(xf: wp.transform, radius: float, half_length: float, 
 
 
 @wp.func
+def contact_kinematics(p: wp.vec3, depth: float, normal: wp.vec3, com: wp.vec3, v_com: wp.vec3, omega: wp.vec3,
+                       axle: wp.vec3, params: ContactParams):
+    """At contact point ``p`` of a body moving with (v_com, omega): (normal force [N], tangential slip
+    velocity [m/s], the axle projected on the contact plane (the lateral direction, not normalised),
+    its length)."""
+    v = v_com + wp.cross(omega, p - com)
+    vn = wp.dot(v, normal)
+    fn = hunt_crossley(depth, -vn, params)
+    vt = v - vn * normal
+    # Directions: lateral = axle projected on the contact plane; longitudinal = normal x lateral.
+    lat = axle - wp.dot(axle, normal) * normal
+    return fn, vt, lat, wp.length(lat)
+
+
+@wp.func
 def point_contact_force(
     p: wp.vec3,
     depth: float,
@@ -139,13 +154,7 @@ def point_contact_force(
     friction: float,
 ) -> wp.vec3:
     """Normal plus friction force [N] at contact point ``p`` of a body moving with (v_com, omega)."""
-    v = v_com + wp.cross(omega, p - com)
-    vn = wp.dot(v, normal)
-    fn = hunt_crossley(depth, -vn, params)
-    vt = v - vn * normal
-    # Directions: lateral = axle projected on the contact plane; longitudinal = normal x lateral.
-    lat = axle - wp.dot(axle, normal) * normal
-    ll = wp.length(lat)
+    fn, vt, lat, ll = contact_kinematics(p, depth, normal, com, v_com, omega, axle, params)
     ft = wp.vec3(0.0)
     if ll > 1.0e-6:
         lat = lat / ll
@@ -208,12 +217,7 @@ def bristle_contact_force(
     """Like :func:`point_contact_force`, with an elastic stick phase: the tangential force is
     ``-k deflection - c slip`` (``k = stiction c / dt`` per direction), the deflection integrates the
     slip and is held at the Coulomb limit while sliding. Returns (force, new deflection)."""
-    v = v_com + wp.cross(omega, p - com)
-    vn = wp.dot(v, normal)
-    fn = hunt_crossley(depth, -vn, params)
-    vt = v - vn * normal
-    lat = axle - wp.dot(axle, normal) * normal
-    ll = wp.length(lat)
+    fn, vt, lat, ll = contact_kinematics(p, depth, normal, com, v_com, omega, axle, params)
     if ll < 1.0e-6:
         return point_contact_force(p, depth, normal, com, v_com, omega, axle, slope_lon, slope_lat, params,
                                    friction), wp.vec3(0.0)
