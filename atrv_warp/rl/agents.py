@@ -56,19 +56,28 @@ def make_actor(width: int = 128, depth: int = 2, normalize: Normalize | None = N
 
 
 class _QNet(nn.Module):
-    def __init__(self, normalize: Normalize, width: int, depth: int):
+    def __init__(self, normalize: Normalize, width: int, depth: int, batch_renorm: bool = False):
         super().__init__()
         self.normalize = normalize
+        norm = {}
+        if batch_renorm:
+            from torchrl.modules.models.batchrenorm import BatchRenorm1d
+
+            norm = {"norm_class": BatchRenorm1d, "norm_kwargs": {"num_features": width, "momentum": 0.01}}
         self.mlp = MLP(in_features=normalize.loc.numel() + ACT_DIM, out_features=1, num_cells=[width] * depth,
-                       activation_class=nn.ReLU)
+                       activation_class=nn.ReLU, **norm)
 
     def forward(self, observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         return self.mlp(torch.cat([self.normalize(observation), action], dim=-1))
 
 
-def make_qvalue(width: int = 128, depth: int = 2, normalize: Normalize | None = None) -> ValueOperator:
-    """Q-network ``(observation, action) -> state_action_value``; shares ``normalize``'s statistics."""
-    return ValueOperator(_QNet(normalize if normalize is not None else Normalize(), width, depth),
+def make_qvalue(width: int = 128, depth: int = 2, normalize: Normalize | None = None, *,
+                batch_renorm: bool = False) -> ValueOperator:
+    """Q-network ``(observation, action) -> state_action_value``; shares ``normalize``'s statistics.
+
+    ``batch_renorm``: batch renormalisation after every hidden layer, as CrossQ's critics need.
+    """
+    return ValueOperator(_QNet(normalize if normalize is not None else Normalize(), width, depth, batch_renorm),
                          in_keys=["observation", "action"])
 
 

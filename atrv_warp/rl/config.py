@@ -89,7 +89,12 @@ class CollectorConfig:
 
 @dataclass(frozen=True)
 class OptimConfig:
-    """SAC's updates: replay, batch, learning rates and targets."""
+    """SAC's updates: the loss, replay, batch, learning rates and targets."""
+
+    loss: Literal["sac", "crossq", "redq"] = "sac"
+    """TorchRL loss of the SAC family: ``sac`` (two critics with target networks); ``crossq``
+    (CrossQ: batch-renormalised critics and no target networks, ``tau`` unused); ``redq`` (REDQ: ten
+    critics with targets, the minimum of two drawn at random per update)."""
 
     buffer_size: int = 1_000_000
     """Replay capacity [frames]."""

@@ -27,7 +27,7 @@ from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result
 from atrv_warp.task.spec import REWARD_TERMS, EndReason, observation_fields
 
 __all__ = ["CHECKPOINT_KEYS", "Checkpoint", "Evaluator", "Learner", "RunState", "load_checkpoint", "make_buffer",
-           "make_collector", "make_loggers", "train"]
+           "make_collector", "make_loggers", "make_loss", "train"]
 
 CHECKPOINT_KEYS = ("frames", "updates", "best_success", "elapsed_s", "next_eval", "stats_ready", "rng", "policy")
 """Entries every training checkpoint holds (``loss`` and ``opts`` too once learning has started)."""
@@ -197,6 +197,26 @@ class RunState:
     """Observation statistics are frozen and the learner exists (after ``init_random_frames``)."""
 
 
+def make_loss(cfg: TrainConfig, actor, normalize: Normalize):
+    """The TorchRL loss ``cfg.optim.loss`` names, with new critics that share ``normalize``."""
+    from torchrl.objectives import CrossQLoss, REDQLoss, SACLoss
+
+    width, depth, common = cfg.network.width, cfg.network.depth, {"alpha_init": cfg.optim.init_alpha,
+                                                                   "target_entropy": -2.0}
+    if cfg.optim.loss == "crossq":
+        qvalue = make_qvalue(width, depth, normalize=normalize, batch_renorm=True)
+        loss = CrossQLoss(actor, qvalue, num_qvalue_nets=2, **common)
+    elif cfg.optim.loss == "redq":
+        qvalue = make_qvalue(width, depth, normalize=normalize)
+        loss = REDQLoss(actor, qvalue, num_qvalue_nets=10, sub_sample_len=2, min_alpha=1e-4, max_alpha=10.0,
+                        **common)
+    else:
+        loss = SACLoss(actor, make_qvalue(width, depth, normalize=normalize), num_qvalue_nets=2, **common)
+    loss.make_value_estimator(gamma=cfg.optim.gamma)
+    _ = loss.target_entropy  # REDQ registers this buffer lazily: a resumed run's state dict must find it
+    return loss
+
+
 class Learner:
     """SAC's critics, loss, target-network update and optimisers.
 
@@ -205,12 +225,12 @@ class Learner:
     """
 
     def __init__(self, cfg: TrainConfig, actor, normalize: Normalize):
-        from torchrl.objectives import SACLoss, SoftUpdate
+        self.loss = make_loss(cfg, actor, normalize)
+        self.target_update = None
+        if cfg.optim.loss != "crossq":  # CrossQ has no target networks
+            from torchrl.objectives import SoftUpdate
 
-        qvalue = make_qvalue(cfg.network.width, cfg.network.depth, normalize=normalize)
-        self.loss = SACLoss(actor, qvalue, num_qvalue_nets=2, alpha_init=cfg.optim.init_alpha, target_entropy=-2.0)
-        self.loss.make_value_estimator(gamma=cfg.optim.gamma)
-        self.target_update = SoftUpdate(self.loss, tau=cfg.optim.tau)
+            self.target_update = SoftUpdate(self.loss, tau=cfg.optim.tau)
         self.opts = {
             "actor": torch.optim.Adam(self.loss.actor_network_params.flatten_keys().values(), lr=cfg.optim.lr),
             "critic": torch.optim.Adam(self.loss.qvalue_network_params.flatten_keys().values(), lr=cfg.optim.lr),
@@ -233,8 +253,9 @@ class Learner:
         with phase("optimiser"):
             for opt in self.opts.values():
                 opt.step()
-        with phase("target"):
-            self.target_update.step()
+        if self.target_update is not None:
+            with phase("target"):
+                self.target_update.step()
         return out
 
     @property
