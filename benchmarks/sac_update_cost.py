@@ -2,10 +2,10 @@
 
 Run: ``python benchmarks/sac_update_cost.py [--skip-compile]``
 
-The training defaults (width 128, batch 512, 1 trainer thread, collection in a second process)
-were chosen from these figures: the update is dominated by per-call overhead, not FLOPs, so a
-wider net or a larger batch costs little extra, and a second thread buys little while it would
-take the core the collector needs.
+The training defaults (width 128, batch 256, 1 trainer thread, collection in a second process)
+were chosen with these figures: a step has a fixed cost of about 5 ms of per-call overhead, so
+halving the batch from 512 saves only about a quarter, and a second thread buys little while it
+would take the core the collector needs.
 
 Then the candidates for a cheaper update (issue #16), at the default preset's width and batch on
 one thread, each built by the trainer's own :class:`~atrv_warp.rl.trainer.Learner`: the three

@@ -1,7 +1,7 @@
 """Wall time and environment steps until SAC's evaluation success first reaches 90 %, per seed.
 
 Run: ``python benchmarks/train_to_success.py [--config default|nav] [--seeds 0 1 2] [--minutes 10]
-[--threshold 0.9] [key=value ...]``
+[--threshold 0.9] [--figure docs/learning_curve.png] [key=value ...]``
 
 Trains with a preset (``configs/default.toml`` by default, ``--config nav`` for the navigation
 task; overrides as in ``python -m atrv_warp.train``) once per seed, one after the other,
@@ -11,7 +11,8 @@ included), the final rate of the best policy, and updates/s and frames/s; then t
 Kernel compilation is paid once, before the first seed, and reported separately. Figures are
 printed and written to ``benchmarks/results/train_to_success.json``
 (``train_to_success_<config>.json`` for another preset); the run folders are kept under
-``runs/bench_train_to_success[_<config>]_seed<k>``.
+``runs/bench_<results file's stem>_seed<k>``. ``--figure`` draws every seed's evaluation
+success against wall time into one PNG.
 """
 
 from __future__ import annotations
@@ -44,15 +45,20 @@ def _one_seed(config: str, overrides: dict, threshold: float) -> dict:
         shutil.rmtree(run_dir)
     t0 = time.perf_counter()
     train(cfg)
-    total_s = time.perf_counter() - t0
+    return _summarize(run_dir, cfg.run.seed, threshold, time.perf_counter() - t0)
+
+
+def _summarize(run_dir: Path, seed: int, threshold: float, total_s: float | None) -> dict:
+    """One seed's figures from its run folder's logs and ``final_eval.json``."""
     scalars = run_dir / "logs" / "scalars"
     success = _series(scalars / "eval_success_rate.csv")
     wall = dict(_series(scalars / "wall_time_s.csv"))
-    reached = next(((f, r) for f, r in success if r >= threshold), None)
+    # rates are logged as float32: 900 of 1,000 episodes reads 0.89999998, which is 90 %
+    reached = next(((f, r) for f, r in success if r >= threshold - 1e-6), None)
     final = json.loads((run_dir / "final_eval.json").read_text())
     train_s = final["train_minutes"] * 60
     return {
-        "seed": cfg.run.seed,
+        "seed": seed,
         "run_dir": str(run_dir.relative_to(ROOT)) if run_dir.is_relative_to(ROOT) else str(run_dir),
         "reached": reached is not None,
         "frames_to_threshold": reached[0] if reached else None,
@@ -68,6 +74,42 @@ def _one_seed(config: str, overrides: dict, threshold: float) -> dict:
     }
 
 
+def _train_seed(args, name: str, extra: dict, seed: int) -> dict:
+    overrides = {"name": name, "out_dir": str(ROOT / "runs"),
+                 "max_minutes": args.minutes, "seed": seed, "eval_every_frames": 100_000, "eval_episodes": 1000,
+                 "final_eval_episodes": 1000, **extra}
+    r = _one_seed(args.config, overrides, args.threshold)
+    reached = f"{r['wall_s_to_threshold']:.0f} s" if r["reached"] else "not reached"
+    print(f"seed {seed}: {100 * args.threshold:.0f}% after {reached}; best policy final "
+          f"{100 * r['final_eval_best_policy']['success_rate']:.1f}%; {r['updates_per_s']:.1f} updates/s, "
+          f"{r['frames_per_s']:.0f} frames/s", flush=True)
+    return r
+
+
+def _figure(runs: list[dict], threshold: float, title: str, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4), dpi=100)
+    for r in runs:
+        rows = [row for row in r["eval_curve"] if row["wall_s"] is not None]
+        ax.plot([row["wall_s"] for row in rows], [100 * row["success_rate"] for row in rows], "o-", ms=3,
+                label=f"seed {r['seed']}")
+    ax.axhline(100 * threshold, color="grey", ls="--", lw=1)
+    ax.set_xlabel("wall time since the start of training [s] (2 CPU cores, evaluations included)")
+    ax.set_ylabel("evaluation success, 1,000 episodes [%]")
+    ax.set_ylim(0, 101)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    ax.set_title(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=10.0, help="training budget per seed [min]")
@@ -75,6 +117,10 @@ def main() -> int:
     parser.add_argument("--config", default="default", help="training preset (default, nav, ...)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="training seeds, run one after another")
     parser.add_argument("--out", default=None, help="results file (default: results/train_to_success[_CONFIG].json)")
+    parser.add_argument("--summarize", action="store_true",
+                        help="train nothing: rebuild the results (and figure) from the run folders an earlier "
+                             "invocation kept, e.g. for another --threshold")
+    parser.add_argument("--figure", default=None, help="PNG of every seed's evaluation success against wall time")
     parser.add_argument("overrides", nargs="*", help="key=value TrainConfig overrides")
     args = parser.parse_args()
 
@@ -89,23 +135,23 @@ def main() -> int:
     from atrv_warp.rl.config import load_train_config
     from atrv_warp.task.env import ATRVjrEnv
 
-    task = load_train_config(args.config, extra).env.task
-    t0 = time.perf_counter()
-    ATRVjrEnv(2, task=task).rollout(2)  # compiles (or loads) every kernel the run uses
-    compile_s = time.perf_counter() - t0
-    print(f"kernel compilation / cache load before the first seed: {compile_s:.1f} s", flush=True)
-
-    runs = []
-    for seed in args.seeds:
-        overrides = {"name": f"bench_train_to_success{suffix}_seed{seed}", "out_dir": str(ROOT / "runs"),
-                     "max_minutes": args.minutes, "seed": seed, "eval_every_frames": 100_000, "eval_episodes": 1000,
-                     "final_eval_episodes": 1000, **extra}
-        runs.append(_one_seed(args.config, overrides, args.threshold))
-        r = runs[-1]
-        reached = f"{r['wall_s_to_threshold']:.0f} s" if r["reached"] else "not reached"
-        print(f"seed {seed}: {100 * args.threshold:.0f}% after {reached}; best policy final "
-              f"{100 * r['final_eval_best_policy']['success_rate']:.1f}%; {r['updates_per_s']:.1f} updates/s, "
-              f"{r['frames_per_s']:.0f} frames/s", flush=True)
+    if args.summarize:
+        runs = []
+        for seed in args.seeds:
+            run_dir = ROOT / "runs" / f"bench_{out.stem}_seed{seed}"
+            if not (run_dir / "final_eval.json").is_file():
+                parser.error(f"--summarize: no finished run at {run_dir}")
+            runs.append(_summarize(run_dir, seed, args.threshold, None))
+        earlier = json.loads(out.read_text()) if out.is_file() else {}
+        # measured or set by the invocation that trained
+        compile_s, minutes, extra = earlier.get("compile_s"), earlier.get("minutes_per_seed"), earlier.get("overrides")
+    else:
+        task = load_train_config(args.config, extra).env.task
+        t0 = time.perf_counter()
+        ATRVjrEnv(2, task=task).rollout(2)  # compiles (or loads) every kernel the run uses
+        compile_s, minutes = time.perf_counter() - t0, args.minutes
+        print(f"kernel compilation / cache load before the first seed: {compile_s:.1f} s", flush=True)
+        runs = [_train_seed(args, f"bench_{out.stem}_seed{seed}", extra, seed) for seed in args.seeds]
 
     times = [r["wall_s_to_threshold"] for r in runs if r["reached"]]
     median = {
@@ -115,10 +161,18 @@ def main() -> int:
         "frames_per_s": statistics.median(r["frames_per_s"] for r in runs),
     }
     result = {"benchmark": "train_to_success", "preset": args.config, "threshold": args.threshold,
-              "minutes_per_seed": args.minutes, "overrides": extra, "compile_s": compile_s, "seeds": runs,
+              "minutes_per_seed": minutes, "overrides": extra, "compile_s": compile_s,
+              "summarized_from_kept_runs": args.summarize, "seeds": runs,
               "median": median, "time": time.strftime("%Y-%m-%d %H:%M:%S")}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"\n| seed | {100 * args.threshold:.0f} % after [s] | frames then | final success of the best policy | updates/s | frames/s |"
+          "\n|---:|---:|---:|---:|---:|---:|")
+    for r in runs:
+        when = (f"{r['wall_s_to_threshold']:.0f} | {r['frames_to_threshold']:,}" if r["reached"]
+                else "not reached | -")
+        print(f"| {r['seed']} | {when} | {100 * r['final_eval_best_policy']['success_rate']:.1f} % | "
+              f"{r['updates_per_s']:.1f} | {r['frames_per_s']:.0f} |")
     print("\n| seed | frames | wall [s] | eval success (1,000 episodes) |\n|---:|---:|---:|---:|")
     for r in runs:
         for row in r["eval_curve"]:
@@ -127,8 +181,12 @@ def main() -> int:
     med_text = f"{med:.0f} s" if med is not None else "not reached by every seed"
     print(f"\nmedian over {len(runs)} seed(s): {100 * args.threshold:.0f}% after {med_text}; final "
           f"{100 * median['final_success_rate']:.1f}%; {median['updates_per_s']:.1f} updates/s, "
-          f"{median['frames_per_s']:.0f} frames/s (kernel compilation {compile_s:.1f} s, excluded)")
+          f"{median['frames_per_s']:.0f} frames/s (kernel compilation "
+          f"{'n/a' if compile_s is None else f'{compile_s:.1f} s'}, excluded)")
     print(f"written to {out}")
+    if args.figure:
+        _figure(runs, args.threshold, f"SAC, {args.config} preset: evaluation success per seed", Path(args.figure))
+        print(f"figure: {args.figure}")
     return 0 if len(times) == len(runs) else 1
 
 

@@ -79,6 +79,13 @@ def test_smoke_training_end_to_end(smoke_run):
     assert sum("eval success" in line for line in stdout.splitlines()) == 3  # every 2048 of 6144 frames
     ck = torch.load(run_dir / "checkpoint.pt", weights_only=True)  # no arbitrary pickle needed
     assert ck["frames"] == result["frames"]
+    # the best policy is the best evaluation's: highest success, then highest mean return
+    scalars = run_dir / "logs" / "scalars"
+    rows = {name: [tuple(map(float, line.split(","))) for line in (scalars / f"{name}.csv").read_text().split()]
+            for name in ("eval_success_rate", "eval_mean_return")}
+    evals = [(rate, ret, -frames) for (frames, rate), (_, ret) in zip(*rows.values(), strict=True)]
+    meta = torch.load(run_dir / "best_policy.pt", weights_only=True)["meta"]
+    assert meta["frames"] == -max(evals)[2]
 
 
 def test_evaluate_cli_loads_checkpoint(smoke_run, tmp_path):

@@ -98,12 +98,14 @@ class OptimConfig:
 
     buffer_size: int = 1_000_000
     """Replay capacity [frames]."""
-    batch_size: int = 512
-    """Transitions per gradient step."""
+    batch_size: int = 256
+    """Transitions per gradient step (256: a step costs ~25 % less than at 512 and learns as well,
+    README 'Training')."""
     utd_ratio: float = 0.03125
     """Gradient steps per collected frame (1/32: one update per 32 frames)."""
-    lr: float = 3e-4
-    """Adam learning rate, actor, critics and temperature."""
+    lr: float = 1e-3
+    """Adam learning rate, actor, critics and temperature (on the reach task 1e-3 first passes 90 %
+    after about 2,500 gradient steps, 3e-4 after about 12,000: README 'Training')."""
     gamma: float = 0.99
     """Discount."""
     tau: float = 0.005
@@ -126,7 +128,7 @@ class NetworkConfig:
 class LoggingConfig:
     """Evaluations, scalars and the console."""
 
-    eval_every_frames: int = 200_000
+    eval_every_frames: int = 100_000
     """Deterministic evaluation interval [frames]."""
     eval_episodes: int = 256
     """Seeded episodes per periodic evaluation (fixed set, seed EVAL_SEED)."""

@@ -191,6 +191,8 @@ class RunState:
     frames: int = 0
     updates: int = 0
     best_success: float = -1.0
+    best_return: float = -math.inf
+    """Mean return of the best policy's evaluation: the tie-break between equal success rates."""
     elapsed_s: float = 0.0
     next_eval: int = 0
     stats_ready: bool = False
@@ -290,7 +292,8 @@ class Checkpoint:
 
     def restore(self, ck: dict, cfg: TrainConfig, actor, normalize: Normalize, buffer) -> tuple[RunState, Learner | None]:
         """Load a checkpoint read by :func:`load_checkpoint` into fresh networks and buffer."""
-        state = RunState(**{f.name: ck[f.name] for f in dataclasses.fields(RunState)})
+        # keys added after a checkpoint was written take their defaults
+        state = RunState(**{f.name: ck[f.name] for f in dataclasses.fields(RunState) if f.name in ck})
         learner = None
         try:
             actor.load_state_dict(ck["policy"]["state_dict"])
@@ -569,8 +572,9 @@ class _TrainLoop:
                 if k != "episodes":
                     self.log(f"eval_{k}", v)
             self.last_eval = result.success_rate
-            if self.last_eval > st.best_success:
-                st.best_success = self.last_eval
+            # equal success (100 % is common once learnt): the higher mean return, a quicker drive, wins
+            if (self.last_eval, result.mean_return) > (st.best_success, st.best_return):
+                st.best_success, st.best_return = self.last_eval, result.mean_return
                 save_policy(self.actor, self.run_dir / "best_policy.pt", width=cfg.network.width, depth=cfg.network.depth,
                             meta={"frames": st.frames, "eval_success": st.best_success, "task": cfg.env.task})
         st.next_eval = (st.frames // cfg.logging.eval_every_frames + 1) * cfg.logging.eval_every_frames
