@@ -5,8 +5,9 @@ Builds the default run's parts from the trainer's own factories (``make_collecto
 preset), fills the replay buffer with the random-action frames, then times the training loop for
 ``--seconds``: waiting for the collector, buffer extend, sampling, loss, backward, optimiser
 steps, target update, weight sync to the worker. Then the same update in isolation (the worker
-idle) for comparison, and after ``collector.shutdown()``, which resets torch's thread count. Kernel compilation happens during the warm-up and is not
-counted. Prints the breakdown and writes ``benchmarks/results/train_profile.json``.
+idle) for comparison; one periodic evaluation, with its share of a run; and an update after
+``collector.shutdown()``, which resets torch's thread count. Kernel compilation happens during
+the warm-up and is not counted. Prints the breakdown and writes ``benchmarks/results/train_profile.json``.
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ def main() -> int:
 
     from atrv_warp.rl.agents import Normalize, make_actor
     from atrv_warp.rl.config import load_train_config
-    from atrv_warp.rl.trainer import Learner, _pin_to_core, make_buffer, make_collector
+    from atrv_warp.rl.trainer import Evaluator, Learner, _pin_to_core, make_buffer, make_collector
 
     cfg = load_train_config("default")
     torch.manual_seed(0)
@@ -91,6 +92,11 @@ def main() -> int:
         with iso("sample"):
             batch = buffer.sample()
         learner.update(batch, phase=iso)
+    evaluator = Evaluator(cfg, actor, [])  # the periodic evaluation, on this core as in train()
+    evaluator(frames)  # warm: its environment's first steps
+    t_eval = time.perf_counter()
+    evaluator(frames)
+    eval_s = time.perf_counter() - t_eval
     threads_before = torch.get_num_threads()
     collector.shutdown()
     threads_after = torch.get_num_threads()  # TorchRL's shutdown resets it; train() sets it back
@@ -122,11 +128,16 @@ def main() -> int:
     print(f"{'(loop overhead)':<16}{100 * other / loop_s:>7.1f}%")
     print(f"\none update: {1e3 * in_loop:.2f} ms in the loop, {1e3 * isolated:.2f} ms in isolation "
           f"(ratio {in_loop / isolated:.2f})")
+    between_evals_s = cfg.logging.eval_every_frames / ((frames - cfg.collector.init_random_frames) / loop_s)
+    eval_share = eval_s / (eval_s + between_evals_s)
+    print(f"one periodic evaluation ({cfg.logging.eval_episodes} episodes): {eval_s:.2f} s every "
+          f"{cfg.logging.eval_every_frames:,} frames ({between_evals_s:.0f} s of this loop): {100 * eval_share:.1f} % "
+          "of a run")
     result = {"seconds": loop_s, "frames": frames, "updates": updates, "phases": rows,
               "update_ms_in_loop": 1e3 * in_loop, "update_ms_isolated": 1e3 * isolated,
               "isolated_phases_ms": {p: 1e3 * iso.total[p] / args.isolated_updates for p in update_phases},
               "threads_after_collector_shutdown": threads_after, "update_ms_after_shutdown": after_shutdown,
-              "update_ms_threads_restored": restored,
+              "update_ms_threads_restored": restored, "evaluation_s": eval_s, "evaluation_share": eval_share,
               "config": "default preset", "time": time.strftime("%Y-%m-%d %H:%M:%S")}
     RESULTS.mkdir(exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
