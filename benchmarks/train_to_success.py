@@ -145,6 +145,9 @@ def main() -> int:
         earlier = json.loads(out.read_text()) if out.is_file() else {}
         # measured or set by the invocation that trained
         compile_s, minutes, extra = earlier.get("compile_s"), earlier.get("minutes_per_seed"), earlier.get("overrides")
+        totals = {r["seed"]: r.get("total_wall_s_including_final_eval") for r in earlier.get("seeds", [])}
+        for r in runs:
+            r["total_wall_s_including_final_eval"] = totals.get(r["seed"])
     else:
         task = load_train_config(args.config, extra).env.task
         t0 = time.perf_counter()

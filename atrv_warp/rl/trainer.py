@@ -203,13 +203,14 @@ def make_loss(cfg: TrainConfig, actor, normalize: Normalize):
     """The TorchRL loss ``cfg.optim.loss`` names, with new critics that share ``normalize``."""
     from torchrl.objectives import CrossQLoss, REDQLoss, SACLoss
 
-    width, depth, common = cfg.network.width, cfg.network.depth, {"alpha_init": cfg.optim.init_alpha,
-                                                                   "target_entropy": -2.0}
+    width, depth = cfg.network.width, cfg.network.depth
+    common = {"alpha_init": cfg.optim.init_alpha, "target_entropy": -2.0}
     if cfg.optim.loss == "crossq":
         qvalue = make_qvalue(width, depth, normalize=normalize, batch_renorm=True)
         loss = CrossQLoss(actor, qvalue, num_qvalue_nets=2, **common)
     elif cfg.optim.loss == "redq":
         qvalue = make_qvalue(width, depth, normalize=normalize)
+        # REDQLoss needs temperature bounds; its default floor (0.1) would outweigh this task's rewards
         loss = REDQLoss(actor, qvalue, num_qvalue_nets=10, sub_sample_len=2, min_alpha=1e-4, max_alpha=10.0,
                         **common)
     else:
