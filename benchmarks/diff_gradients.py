@@ -25,11 +25,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
 import sys
 import time
 from pathlib import Path
+
+from _common import pin_to_one_core, write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SCENARIOS = {"straight": (0.1, 0.1), "slip": (1.0, 1.0), "curve": (0.2, 0.4), "spin": (-0.3, 0.3)}
@@ -78,8 +79,7 @@ def main() -> int:
     if args.report:
         report(json.loads(Path(args.report).read_text()))
         return 0
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    pin_to_one_core()
     import torch
     torch.set_num_threads(1)
     from atrv_warp.sim.diff import DiffRollout
@@ -170,9 +170,7 @@ def main() -> int:
     results = {"benchmark": "diff_gradients", "wrench_fix": not args.without_wrench_fix, "agreement": agreement,
                "cost": cost, "time": time.strftime("%Y-%m-%d %H:%M:%S")}
     report(results)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(results, indent=2) + "\n")
+    out = write_results(args.out, results)
     print(f"\nwritten to {out}")
     return 0
 

@@ -14,11 +14,12 @@ Figures are printed and written to ``benchmarks/results/env_throughput.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
 from pathlib import Path
+
+from _common import write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -116,9 +117,7 @@ def main() -> int:
               "scaling": {k: {"1_worker_fps": v[1], "2_workers_fps": v[2], "speedup": v[2] / v[1]}
                           for k, v in scaling.items()},
               "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    out = write_results(args.out, result)
     print("\n| N | raw sim frames/s | env.rollout | overhead | Collector | overhead |\n|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         print(f"| {r['num_envs']} | {r['raw_sim_fps']:,.0f} | {r['rollout_fps']:,.0f} | "

@@ -16,7 +16,6 @@ Prints the figures and writes ``benchmarks/results/fresh_install.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import subprocess
@@ -24,6 +23,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from _common import write_results
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
@@ -93,8 +94,7 @@ def main() -> int:
     print(f"\ninstall: {t_install:.0f} s ({result['pip_download_cache']} pip cache), venv {site_size / 2**30:.2f} GiB")
     print(f"kernel compile on first run: {result['cold_compile_s']:.0f} s "
           f"(smoke run {runs[0]:.0f} s cold vs {runs[1]:.0f} s warm; cache {result['kernel_cache_mib']:.0f} MiB)")
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    write_results(args.out, result)
     print(f"wrote {args.out}")
     return 0
 

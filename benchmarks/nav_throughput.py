@@ -14,11 +14,11 @@ Figures are printed and written to ``benchmarks/results/nav_throughput.json``.
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
 import time
 from pathlib import Path
+
+from _common import pin_to_one_core, write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -53,8 +53,7 @@ def main() -> int:
     parser.add_argument("--out", default=str(RESULTS / "nav_throughput.json"))
     args = parser.parse_args()
 
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    pin_to_one_core()
     import torch
 
     torch.set_num_threads(1)
@@ -96,9 +95,7 @@ def main() -> int:
               f"{us['sim_nav']:.1f}, scan {us['scan']:.1f}", flush=True)
     result = {"benchmark": "nav_throughput", "target": "nav >= 0.5 x reach at N = 1024", "compile_s": compile_s,
               "rows": rows, "time": time.strftime("%Y-%m-%d %H:%M:%S"), "python": sys.version.split()[0]}
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    out = write_results(args.out, result)
     print(f"written to {out}")
     return 0
 

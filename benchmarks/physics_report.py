@@ -6,13 +6,13 @@ Run: ``python benchmarks/physics_report.py``; prints a table and writes
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from _common import write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -73,10 +73,9 @@ def main() -> int:
     print(f"{'quantity':{width}s}  {'atrv_warp':>16s}  reference / analytic")
     for name, ours, ref in rows:
         print(f"{name:{width}s}  {ours:>16s}  {ref}")
-    out = RESULTS / "physics_report.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"rows": [dict(zip(("quantity", "atrv_warp", "reference"), r)) for r in rows],
-                               "time": time.strftime("%Y-%m-%d %H:%M:%S")}, indent=2) + "\n")
+    out = write_results(RESULTS / "physics_report.json",
+                        {"rows": [dict(zip(("quantity", "atrv_warp", "reference"), r)) for r in rows],
+                         "time": time.strftime("%Y-%m-%d %H:%M:%S")})
     print(f"\nwritten to {out}")
     return 0
 

@@ -23,11 +23,12 @@ Figures are printed and written to ``benchmarks/results/ray_collection.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
 from pathlib import Path
+
+from _common import write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -116,9 +117,7 @@ def main() -> int:
               "target": "Ray >= 0.8 x local multi-process (overhead within 20 %)",
               "met": all(v >= 0.8 for v in ratios.values()),
               "load_avg_1min_at_end": os.getloadavg()[0], "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    out = write_results(args.out, result)
     print(f"\n| workers x {args.worlds} worlds, {args.steps} steps/batch | MultiSyncCollector frames/s | "
           "RayCollector frames/s | Ray / local |\n|---:|---:|---:|---:|")
     for k in (1, 2):

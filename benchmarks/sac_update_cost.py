@@ -16,10 +16,11 @@ compile time reported apart). Written to ``benchmarks/results/sac_update_cost.js
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
+
+from _common import write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -150,10 +151,9 @@ def main() -> int:
             print(f"threads={threads} width={width:3d} batch={batch:4d}: {ms:6.2f} ms per update", flush=True)
     print("\ncandidates for a cheaper update (default width, one thread):")
     cands = variants(args.skip_compile)
-    out = RESULTS / "sac_update_cost.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"benchmark": "sac_update_cost", "rows": rows, "variants": cands,
-                               "time": time.strftime("%Y-%m-%d %H:%M:%S")}, indent=2) + "\n")
+    out = write_results(RESULTS / "sac_update_cost.json", {"benchmark": "sac_update_cost", "rows": rows,
+                                                           "variants": cands,
+                                                           "time": time.strftime("%Y-%m-%d %H:%M:%S")})
     print("\n| threads | width | batch | ms/update |\n|---:|---:|---:|---:|")
     for r in rows:
         print(f"| {r['threads']} | {r['width']} | {r['batch']} | {r['ms_per_update']:.1f} |")

@@ -12,13 +12,13 @@ Figures are printed and written to ``benchmarks/results/sim_throughput.json``.
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import platform
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from _common import pin_to_one_core, write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -33,8 +33,8 @@ def main() -> int:
     parser.add_argument("--out", default=str(RESULTS / "sim_throughput.json"))
     args = parser.parse_args()
 
-    if args.device == "cpu" and hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    if args.device == "cpu":
+        pin_to_one_core()
     import warp as wp
 
     tmp_cache = None
@@ -135,9 +135,7 @@ def main() -> int:
         "choices": choices,
         "time": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    out = write_results(args.out, result)
     print("\n| worlds | env-steps/s | ms/step |\n|---:|---:|---:|")
     for r in rows:
         print(f"| {r['num_worlds']} | {r['env_steps_per_s']:,.0f} | {r['ms_per_step']:.3f} |")

@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import json
-import os
 import platform
 import statistics
 import sys
@@ -33,6 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import pin_to_one_core, write_results
 
 HERE = Path(__file__).resolve().parent
 TWIN_DIR = HERE / "mujoco_twin"
@@ -165,8 +164,7 @@ def main() -> int:
     parser.add_argument("--out", default=str(RESULTS / "sim_vs_mujoco.json"))
     args = parser.parse_args()
 
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    pin_to_one_core()
     try:
         import mujoco
     except ImportError:
@@ -286,9 +284,7 @@ def main() -> int:
         "rows": rows,
         "time": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
-    out_path = Path(args.out)
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    out_path.write_text(json.dumps(result, indent=2) + "\n")
+    out_path = write_results(args.out, result)
     print("\n| worlds | ours env-steps/s | MuJoCo env-steps/s | ours / MuJoCo |\n|---:|---:|---:|---:|")
     for r in rows:
         print(f"| {r['num_worlds']} | {r['ours_env_steps_per_s']:,.0f} | {r['mujoco_env_steps_per_s']:,.0f} | "

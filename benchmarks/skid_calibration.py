@@ -15,11 +15,12 @@ simulator's truth. Prints a table and writes ``benchmarks/results/skid_calibrati
 
 from __future__ import annotations
 
-import json
 import math
 import statistics
 import sys
 from pathlib import Path
+
+from _common import write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
 COMMANDS = [(0.0, 0.25), (0.0, 0.5), (0.0, 1.0), (0.3, 0.3), (0.5, 0.5), (0.5, -0.25), (1.0, 0.2)]
@@ -92,8 +93,7 @@ def main() -> int:
     print(f"wheel track {track:.3f} m; effective track factor (median) {factor:.2f}")
     odometry = [odometry_error(v, w, factor) for v, w in ((0.5, 0.0), (0.0, 0.3))]
     out = {"track_width": track, "effective_track_factor": factor, "rows": rows, "odometry": odometry}
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "skid_calibration.json").write_text(json.dumps(out, indent=2) + "\n")
+    write_results(RESULTS / "skid_calibration.json", out)
     print(f"wrote {RESULTS / 'skid_calibration.json'}")
     return 0
 

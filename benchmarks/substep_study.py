@@ -14,11 +14,11 @@ step). Figures are printed and written to ``benchmarks/results/substep_study.jso
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
 import time
 from pathlib import Path
+
+from _common import pin_to_one_core, write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -83,8 +83,7 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=2.0)
     parser.add_argument("--out", default=str(RESULTS / "substep_study.json"))
     args = parser.parse_args()
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    pin_to_one_core()
     import torch
 
     torch.set_num_threads(1)
@@ -116,10 +115,8 @@ def main() -> int:
               f"{row['accel_2Nm']:.4f} (analytic {row['accel_analytic']:.4f}) | rest {row['rest_height_m']:.4f} m | "
               f"non-finite {row['nonfinite_worlds']} of {args.worlds} worlds in {row['world_steps']:,} world-steps",
               flush=True)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"benchmark": "substep_study", "worlds": args.worlds, "rows": rows,
-                               "time": time.strftime("%Y-%m-%d %H:%M:%S")}, indent=2) + "\n")
+    out = write_results(args.out, {"benchmark": "substep_study", "worlds": args.worlds, "rows": rows,
+                                   "time": time.strftime("%Y-%m-%d %H:%M:%S")})
     print(f"written to {out}")
     return 0
 

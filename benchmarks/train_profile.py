@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import sys
 import time
 from collections import defaultdict
 from pathlib import Path
+
+from _common import write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -139,8 +140,7 @@ def main() -> int:
               "threads_after_collector_shutdown": threads_after, "update_ms_after_shutdown": after_shutdown,
               "update_ms_threads_restored": restored, "evaluation_s": eval_s, "evaluation_share": eval_share,
               "config": "default preset", "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    RESULTS.mkdir(exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    write_results(args.out, result)
     print(f"wrote {args.out}")
     return 0
 

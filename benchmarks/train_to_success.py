@@ -25,6 +25,8 @@ import sys
 import time
 from pathlib import Path
 
+from _common import write_results
+
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -167,8 +169,7 @@ def main() -> int:
               "minutes_per_seed": minutes, "overrides": extra, "compile_s": compile_s,
               "summarized_from_kept_runs": args.summarize, "seeds": runs,
               "median": median, "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    write_results(out, result)
     print(f"\n| seed | {100 * args.threshold:.0f} % after [s] | frames then | final success of the best policy | updates/s | frames/s |"
           "\n|---:|---:|---:|---:|---:|---:|")
     for r in runs:

@@ -33,7 +33,7 @@ SCANNED = ("atrv_warp", "tests", "benchmarks", "examples", "docs")
 
 
 def _name(requirement: str) -> str:
-    return re.sub(r"[-_.]+", "-", re.match(r"\s*([A-Za-z0-9][A-Za-z0-9._-]*)", requirement).group(1)).lower()
+    return re.sub(r"[-_.]+", "-", re.match(r"\s*([A-Za-z0-9_][A-Za-z0-9._-]*)", requirement).group(1)).lower()
 
 
 def declared(pyproject_text: str) -> tuple[set[str], dict[str, set[str]]]:
@@ -66,9 +66,12 @@ def undeclared_imports(pyproject_text: str, files: dict[str, str]) -> list[str]:
             if any(rel == u or (u.endswith("/") and rel.startswith(u)) for u in users):
                 allowed |= extras.get(extra, set())
                 optional |= extras.get(extra, set())
+        folder = rel.rpartition("/")[0]
         for module in sorted(imported_modules(source)):
             if module in sys.stdlib_module_names or module in ("atrv_warp", "__future__"):
                 continue
+            if f"{folder}/{module}.py" in files:
+                continue  # a script's sibling module (benchmarks/_common.py): its folder is on sys.path
             dists = {_name(d) for d in providers.get(module, ())}
             if not dists and _name(module) in optional:
                 continue  # an extra this file may use, not installed here (e.g. [bench]'s mujoco in CI)
@@ -107,6 +110,11 @@ def test_the_check_catches_a_removed_dependency():
     bench = undeclared_imports(text, {"atrv_warp/sim/simulator.py": "import mujoco\n",
                                       "benchmarks/sim_vs_mujoco.py": "import mujoco\n"})
     assert len(bench) == 1 and bench[0].startswith("atrv_warp/sim/simulator.py: imports 'mujoco'"), bench
+    # a script may import a module beside it, and only beside it
+    sibling = undeclared_imports(text, {"benchmarks/a.py": "from _common import write_results\n",
+                                        "benchmarks/_common.py": "import json\n",
+                                        "examples/b.py": "import _common\n"})
+    assert sibling == ["examples/b.py: imports '_common', which no installed distribution provides"], sibling
 
 
 def test_wheel_carries_configs_urdf_and_policy(tmp_path):
