@@ -16,6 +16,7 @@ import warp as wp
 
 from atrv_warp.sim.config import ArenaConfig, ContactConfig, ObstacleConfig, RoverConfig
 from atrv_warp.sim.kernels.contact import (
+    ARENA_PLANES,
     ArenaPlanes,
     ContactParams,
     RoverShapes,
@@ -148,9 +149,13 @@ class Obstacles:
 
 def _planes(arena: ArenaConfig, device) -> ArenaPlanes:
     """Ground and the four walls as half-spaces ``n·x >= offset`` (inner faces)."""
+    half_spaces = arena.planes()
+    if len(half_spaces) != ARENA_PLANES:
+        raise ValueError(f"the contact kernel tests {ARENA_PLANES} arena planes (ground, four walls), the arena "
+                         f"has {len(half_spaces)}")
     planes = ArenaPlanes()
-    planes.normal = wp.array([n for n, _ in arena.planes()], dtype=wp.vec3, device=device)
-    planes.offset = wp.array([o for _, o in arena.planes()], dtype=float, device=device)
+    planes.normal = wp.array([n for n, _ in half_spaces], dtype=wp.vec3, device=device)
+    planes.offset = wp.array([o for _, o in half_spaces], dtype=float, device=device)
     return planes
 
 
