@@ -1,30 +1,23 @@
-"""The flat reference task's rollouts are pinned bit for bit.
+"""The flat reference task is bit-identical to the release before terrain, obstacles and the scanner.
 
-``tests/data/flat_reference_rollout.npz`` was written by the release of 2026-11-21 (commit 2d88b0e),
-which integrated at the reference's 0.01 s: 16 worlds, seed 123, 120 steps of seeded random actions
-with resets. ``SimConfig(sim_dt=REFERENCE_SIM_DT)`` must still reproduce it exactly. The default's three
-substeps are pinned the same way by ``flat_reference_rollout_3substeps.npz`` (written by
-``python tests/write_golden.py``). Any change to the reference path (kernels, contact,
-sampling) shows up here as a mismatch, not as a tolerance.
+``tests/data/flat_reference_rollout.npz`` was written by the release of 2026-11-21 (commit 2d88b0e):
+16 worlds, seed 123, 120 steps of seeded random actions with resets. Any change to the reference
+path (kernels, contact, sampling) shows up here as a mismatch, not as a tolerance.
 """
 
 from pathlib import Path
 
 import numpy as np
-import pytest
+import torch
 
-from atrv_warp.sim.config import REFERENCE_SIM_DT, SimConfig
+from atrv_warp.task.env import ATRVjrEnv
 
-DATA = Path(__file__).parent / "data"
+GOLDEN = Path(__file__).parent / "data" / "flat_reference_rollout.npz"
 
 
-def reference_rollout(sim: SimConfig) -> dict[str, np.ndarray]:
-    """The golden protocol: 16 worlds, seed 123, 120 seeded random-action steps with resets."""
-    import torch
-
-    from atrv_warp.task.env import ATRVjrEnv
-
-    env = ATRVjrEnv(16, seed=123, sim=sim)
+def test_flat_reference_rollout_is_bit_identical():
+    golden = np.load(GOLDEN)
+    env = ATRVjrEnv(16, seed=123)
     td = env.reset()
     g = torch.Generator().manual_seed(0)
     obs, rew, reason = [], [], []
@@ -36,14 +29,6 @@ def reference_rollout(sim: SimConfig) -> dict[str, np.ndarray]:
         reason.append(td["next", "end_reason"].numpy().copy())
         td = env.step_mdp(td)
         td = env.reset(td) if td["done"].any() else td
-    return {"observation": np.stack(obs), "reward": np.stack(rew), "end_reason": np.stack(reason)}
-
-
-@pytest.mark.parametrize(("sim", "golden"), [(SimConfig(sim_dt=REFERENCE_SIM_DT), "flat_reference_rollout.npz"),
-                                             (SimConfig(), "flat_reference_rollout_3substeps.npz")],
-                         ids=["0.01s-as-2d88b0e", "default"])
-def test_flat_reference_rollout_is_bit_identical(sim, golden):
-    expected = np.load(DATA / golden)
-    got = reference_rollout(sim)
-    for key in ("observation", "reward", "end_reason"):
-        np.testing.assert_array_equal(got[key], expected[key], err_msg=key)
+    np.testing.assert_array_equal(np.stack(obs), golden["observation"])
+    np.testing.assert_array_equal(np.stack(rew), golden["reward"])
+    np.testing.assert_array_equal(np.stack(reason), golden["end_reason"])

@@ -167,23 +167,14 @@ class ObstacleConfig:
     """Height of every obstacle above the flat ground's top [m] (taller than the rover, 0.6 m)."""
 
 
-REFERENCE_SIM_DT = 0.01
-"""The reference's integration step [s] (RK4 at 0.01 s). ``SimConfig(sim_dt=REFERENCE_SIM_DT)`` integrates
-five substeps per step, as every release before issue 17 did, and reproduces them bit for bit; it is
-:class:`~atrv_warp.sim.diff.DiffRollout`'s default, where the finer step makes the objective smoother."""
-
-
 @dataclass(frozen=True)
 class SimConfig:
     """Integrator settings. Chosen by measurement (see README, 'Choices')."""
 
     step_dt: float = 0.05
     """Simulated time of one environment step [s]."""
-    sim_dt: float = 0.05 / 3
-    """Solver substep [s]: three per step. Against 0.01 s (the reference's RK4 step, five substeps) the
-    physics report's figures move by at most 2 % (x after 1 s of driving: 0.196 vs 0.200 m), no world
-    blew up in 10^7 random-torque world-steps, and a step costs 1.4x less (README, 'Simulator
-    speed'). :data:`REFERENCE_SIM_DT` gives the old five substeps back."""
+    sim_dt: float = 0.01
+    """Solver substep [s]; the reference integrated RK4 at 0.01 s."""
     gravity: float = -9.81
     """[m/s²] along z."""
     mass_matrix_interval: int | None = None
