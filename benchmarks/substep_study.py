@@ -1,14 +1,18 @@
 """Fewer, longer substeps: what they buy in speed and cost in accuracy and stability.
 
-Run: ``python benchmarks/substep_study.py [--substeps 5 4 3] [--nan-steps 1000] [--worlds 1024]``
+Run: ``python benchmarks/substep_study.py [--substeps 5 4 3] [--nan-steps 1000] [--held-steps 2000]
+[--worlds 1024]``
 
 For each substep count (solver step ``sim_dt = 0.05 s / substeps``), in one run and on one core:
 env-steps/s of ``RoverSim.step`` at ``--worlds`` worlds (random torques; the counts measured in
 turn, best of 3 rounds); the reference drive's distances after 1, 3 and 4.9 s (the physics
 report's protocol: the reference variant settled 1 s, then +4 N·m on every wheel); the realistic
-rover's acceleration at +2 N·m against F/(M + ΣI/r²), and its rest height; and non-finite worlds
-after ``--nan-steps`` steps of ``--worlds`` worlds under random torques in ±20 N·m (fresh each
-step). Figures are printed and written to ``benchmarks/results/substep_study.json``.
+rover's acceleration at +2 N·m against F/(M + ΣI/r²), and its rest height; and stability, two
+ways: non-finite worlds after ``--nan-steps`` steps of ``--worlds`` worlds under random torques in
+±20 N·m drawn fresh each step (the rovers jiggle about their start), and after ``--held-steps``
+steps with each world's random torques held (they reach top speed and hit walls at it; worlds
+that ever exceed 1.2x the motor's top speed are counted too). Figures are printed and written to
+``benchmarks/results/substep_study.json``.
 """
 
 from __future__ import annotations
@@ -75,11 +79,36 @@ def _nonfinite(sim_cfg, worlds: int, steps: int) -> int:
     return int(bad.sum())
 
 
+def _held(sim_cfg, worlds: int, steps: int) -> dict:
+    """Held commands, as a driving policy holds them: each world keeps one random torque pair in
+    ±20 N·m from a random pose for ``steps`` steps, so most rovers reach top speed and many a wall
+    at it. Counts the worlds that go non-finite, and those that ever move faster than 1.2x the
+    motor's top speed (energy that only the contact can have put in)."""
+    import torch
+
+    from atrv_warp.sim import RoverSim
+
+    sim = RoverSim(worlds, sim=sim_cfg)
+    gen = torch.Generator().manual_seed(2)
+    sim.reset(poses=(torch.rand(worlds, 3, generator=gen) * 2 - 1) * torch.tensor([12.0, 12.0, 3.14]))
+    sim.commands.copy_(torch.rand(worlds, 2, generator=gen) * 40 - 20)
+    top = sim.rover_cfg.wheel_speed_limit * sim.rover_cfg.wheel_radius
+    bad = torch.zeros(worlds, dtype=torch.bool)
+    fast = torch.zeros(worlds, dtype=torch.bool)
+    for _ in range(steps):
+        sim.step()
+        bad |= sim.nonfinite.bool()
+        fast |= ~bad & (sim.lin_vel.norm(dim=-1) > 1.2 * top)
+    return {"held_nonfinite_worlds": int(bad.sum()), "held_overspeed_worlds": int(fast.sum()),
+            "held_world_steps": worlds * steps}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--substeps", type=int, nargs="+", default=[5, 4, 3])
     parser.add_argument("--worlds", type=int, default=1024)
-    parser.add_argument("--nan-steps", type=int, default=1000)
+    parser.add_argument("--nan-steps", type=int, default=1000, help="steps of fresh random torques per world")
+    parser.add_argument("--held-steps", type=int, default=2000, help="steps of held random torques per world")
     parser.add_argument("--seconds", type=float, default=2.0)
     parser.add_argument("--out", default=str(RESULTS / "substep_study.json"))
     args = parser.parse_args()
@@ -108,13 +137,15 @@ def main() -> int:
     for n, cfg in configs.items():
         row = {"substeps": n, "sim_dt": cfg.sim_dt, "env_steps_per_s": best[n], "speedup_vs_5": best[n] / best.get(5, best[n]),
                **_reference_drive(cfg), **_acceleration(cfg),
-               "nonfinite_worlds": _nonfinite(cfg, args.worlds, args.nan_steps), "world_steps": args.worlds * args.nan_steps}
+               "nonfinite_worlds": _nonfinite(cfg, args.worlds, args.nan_steps), "world_steps": args.worlds * args.nan_steps,
+               **_held(cfg, args.worlds, args.held_steps)}
         rows.append(row)
         print(f"substeps {n}: {row['env_steps_per_s']:8.0f} env-steps/s ({row['speedup_vs_5']:.2f}x) | reference drive x "
               f"{row['x_after_1.0_s']:.3f} / {row['x_after_3.0_s']:.3f} / {row['x_after_4.9_s']:.3f} m | accel "
               f"{row['accel_2Nm']:.4f} (analytic {row['accel_analytic']:.4f}) | rest {row['rest_height_m']:.4f} m | "
-              f"non-finite {row['nonfinite_worlds']} of {args.worlds} worlds in {row['world_steps']:,} world-steps",
-              flush=True)
+              f"non-finite {row['nonfinite_worlds']} of {args.worlds} worlds in {row['world_steps']:,} world-steps | "
+              f"held torques: non-finite {row['held_nonfinite_worlds']}, over 1.2x top speed "
+              f"{row['held_overspeed_worlds']} of {args.worlds} in {row['held_world_steps']:,} world-steps", flush=True)
     out = write_results(args.out, {"benchmark": "substep_study", "worlds": args.worlds, "rows": rows,
                                    "time": time.strftime("%Y-%m-%d %H:%M:%S")})
     print(f"written to {out}")
