@@ -18,7 +18,6 @@ Examples::
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 from atrv_warp.runtime import add_verbose_argument, device_summary, error_line, set_verbose
@@ -47,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.verbose:
         set_verbose()
     from atrv_warp.task.config import TASK_VARIANTS
-    from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result
+    from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result, write_result
 
     if args.task is not None and args.task not in TASK_VARIANTS:
         return error_line(parser.prog, f"unknown --task {args.task!r}; known: {sorted(TASK_VARIANTS)}")
@@ -96,8 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.serve and sys.stdin.isatty():
         input("viewer running; press Enter to stop ...")
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump({"policy": name, "task": task, "seed": seed, **result.as_dict()}, fh, indent=2)
+        write_result(args.json, name, task, seed, result)
     return 0
 
 

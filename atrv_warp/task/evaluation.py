@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import torch
 from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
-__all__ = ["EVAL_SEED", "EvalResult", "evaluate", "format_result"]
+__all__ = ["EVAL_SEED", "EvalResult", "evaluate", "format_result", "write_result"]
 
 EVAL_SEED = 2024
 """Seed of the standard evaluation set (training never uses it)."""
@@ -82,3 +84,9 @@ def format_result(name: str, r: EvalResult) -> str:
             f"steps {r.mean_steps:.1f} | wall {100 * r.wall_rate:.1f}% flip {100 * r.flip_rate:.1f}% "
             f"timeout {100 * r.timeout_rate:.1f}% nonfinite {100 * r.nonfinite_rate:.1f}%"
             + (f" obstacle {100 * r.obstacle_rate:.1f}%" if r.obstacle_rate else ""))
+
+
+def write_result(path: str | Path, name: str, task: str, seed: int, r: EvalResult) -> None:
+    """Write an evaluation's figures as JSON (``--json`` of ``python -m atrv_warp.evaluate`` and ``.baseline``)."""
+    with open(path, "w") as fh:
+        json.dump({"policy": name, "task": task, "seed": seed, **r.as_dict()}, fh, indent=2)
