@@ -1,17 +1,20 @@
 """Fewer, longer substeps: what they buy in speed and cost in accuracy and stability.
 
-Run: ``python benchmarks/substep_study.py [--substeps 5 4 3] [--nan-steps 1000] [--held-steps 2000]
-[--worlds 1024]``
+Run: ``python benchmarks/substep_study.py [--substeps 5 4 3] [--plain-law 3] [--nan-steps 1000]
+[--held-steps 2000] [--worlds 1024]``
 
 For each substep count (solver step ``sim_dt = 0.05 s / substeps``), in one run and on one core:
 env-steps/s of ``RoverSim.step`` at ``--worlds`` worlds (random torques; the counts measured in
 turn, best of 3 rounds); the reference drive's distances after 1, 3 and 4.9 s (the physics
 report's protocol: the reference variant settled 1 s, then +4 N·m on every wheel); the realistic
-rover's acceleration at +2 N·m against F/(M + ΣI/r²), and its rest height; and stability, two
+rover's acceleration at +2 N·m against F/(M + ΣI/r²), and its rest height; and stability, three
 ways: non-finite worlds after ``--nan-steps`` steps of ``--worlds`` worlds under random torques in
 ±20 N·m drawn fresh each step (the rovers jiggle about their start), and after ``--held-steps``
 steps with each world's random torques held (they reach top speed and hit walls at it; worlds
-that ever exceed 1.2x the motor's top speed are counted too). Figures are printed and written to
+that ever exceed 1.2x the motor's top speed are counted too); and the wall-impact sweep of
+:func:`atrv_warp.sim.checks.wall_impacts` (256 rovers driven into the walls at top speed from every
+heading; the fastest any leaves a wall). ``--plain-law`` substep counts run a second time with the
+plain Hunt–Crossley law (no ``ContactConfig.damping_limit``). Figures are printed and written to
 ``benchmarks/results/substep_study.json``.
 """
 
@@ -27,10 +30,10 @@ from _common import pin_to_one_core, write_results
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
-def _reference_drive(sim_cfg) -> dict:
+def _reference_drive(sim_cfg, contact) -> dict:
     from atrv_warp.sim import DriveMode, RoverSim
 
-    sim = RoverSim(1, variant="reference", sim=sim_cfg)
+    sim = RoverSim(1, variant="reference", sim=sim_cfg, contact=contact)
     sim.reset(height=sim.rest_height + 0.02)
     for _ in range(20):
         sim.step()
@@ -44,11 +47,11 @@ def _reference_drive(sim_cfg) -> dict:
     return x
 
 
-def _acceleration(sim_cfg) -> dict:
+def _acceleration(sim_cfg, contact) -> dict:
     from atrv_warp.sim import RoverSim
     from atrv_warp.sim.checks import rolling_acceleration
 
-    sim = RoverSim(1, sim=sim_cfg)
+    sim = RoverSim(1, sim=sim_cfg, contact=contact)
     sim.reset()
     for _ in range(20):
         sim.step()
@@ -63,12 +66,12 @@ def _acceleration(sim_cfg) -> dict:
     return {"rest_height_m": rest, "accel_2Nm": (v3 - v1) / 2.0, "accel_analytic": rolling_acceleration(sim, 2.0)}
 
 
-def _nonfinite(sim_cfg, worlds: int, steps: int) -> int:
+def _nonfinite(sim_cfg, contact, worlds: int, steps: int) -> int:
     import torch
 
     from atrv_warp.sim import RoverSim
 
-    sim = RoverSim(worlds, sim=sim_cfg)
+    sim = RoverSim(worlds, sim=sim_cfg, contact=contact)
     gen = torch.Generator().manual_seed(0)
     sim.reset(poses=(torch.rand(worlds, 3, generator=gen) * 2 - 1) * torch.tensor([12.0, 12.0, 3.14]))
     bad = torch.zeros(worlds, dtype=torch.bool)
@@ -79,7 +82,7 @@ def _nonfinite(sim_cfg, worlds: int, steps: int) -> int:
     return int(bad.sum())
 
 
-def _held(sim_cfg, worlds: int, steps: int) -> dict:
+def _held(sim_cfg, contact, worlds: int, steps: int) -> dict:
     """Held commands, as a driving policy holds them: each world keeps one random torque pair in
     ±20 N·m from a random pose for ``steps`` steps, so most rovers reach top speed and many a wall
     at it. Counts the worlds that go non-finite, and those that ever move faster than 1.2x the
@@ -88,7 +91,7 @@ def _held(sim_cfg, worlds: int, steps: int) -> dict:
 
     from atrv_warp.sim import RoverSim
 
-    sim = RoverSim(worlds, sim=sim_cfg)
+    sim = RoverSim(worlds, sim=sim_cfg, contact=contact)
     gen = torch.Generator().manual_seed(2)
     sim.reset(poses=(torch.rand(worlds, 3, generator=gen) * 2 - 1) * torch.tensor([12.0, 12.0, 3.14]))
     sim.commands.copy_(torch.rand(worlds, 2, generator=gen) * 40 - 20)
@@ -103,9 +106,19 @@ def _held(sim_cfg, worlds: int, steps: int) -> dict:
             "held_world_steps": worlds * steps}
 
 
+def _impacts(sim_cfg, contact) -> dict:
+    from atrv_warp.sim.checks import wall_impacts
+
+    got = wall_impacts(sim=sim_cfg, contact=contact)
+    return {"impact_max_speed": got.max_speed, "impact_top_speed": got.top_speed,
+            "impact_overspeed_worlds": got.overspeed_worlds, "impact_nonfinite_worlds": got.nonfinite_worlds}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--substeps", type=int, nargs="+", default=[5, 4, 3])
+    parser.add_argument("--plain-law", type=int, nargs="*", default=[3], help="substep counts also run with the plain "
+                        "Hunt-Crossley law (ContactConfig(damping_limit=None)), for comparison")
     parser.add_argument("--worlds", type=int, default=1024)
     parser.add_argument("--nan-steps", type=int, default=1000, help="steps of fresh random torques per world")
     parser.add_argument("--held-steps", type=int, default=2000, help="steps of held random torques per world")
@@ -116,10 +129,12 @@ def main() -> int:
     import torch
 
     torch.set_num_threads(1)
-    from atrv_warp.sim import RoverSim, SimConfig
+    from atrv_warp.sim import ContactConfig, RoverSim, SimConfig
 
-    configs = {n: SimConfig(sim_dt=0.05 / n) for n in args.substeps}
-    sims = {n: RoverSim(args.worlds, sim=cfg) for n, cfg in configs.items()}
+    default, plain = ContactConfig(), ContactConfig(damping_limit=None)
+    configs = {(n, "default"): (SimConfig(sim_dt=0.05 / n), default) for n in args.substeps}
+    configs.update({(n, "plain"): (SimConfig(sim_dt=0.05 / n), plain) for n in args.plain_law})
+    sims = {key: RoverSim(args.worlds, sim=cfg, contact=contact) for key, (cfg, contact) in configs.items()}
     gen = torch.Generator().manual_seed(1)
     for sim in sims.values():
         sim.reset(poses=(torch.rand(args.worlds, 3, generator=gen) * 2 - 1) * torch.tensor([12.0, 12.0, 3.14]))
@@ -127,25 +142,31 @@ def main() -> int:
         sim.step()  # graph capture
     best = dict.fromkeys(configs, 0.0)
     for _ in range(3):  # interleaved rounds
-        for n, sim in sims.items():
+        for key, sim in sims.items():
             calls, t0 = 0, time.perf_counter()
             while time.perf_counter() - t0 < args.seconds:
                 sim.step()
                 calls += 1
-            best[n] = max(best[n], calls * args.worlds / (time.perf_counter() - t0))
+            best[key] = max(best[key], calls * args.worlds / (time.perf_counter() - t0))
+    base = best.get((5, "default"))
     rows = []
-    for n, cfg in configs.items():
-        row = {"substeps": n, "sim_dt": cfg.sim_dt, "env_steps_per_s": best[n], "speedup_vs_5": best[n] / best.get(5, best[n]),
-               **_reference_drive(cfg), **_acceleration(cfg),
-               "nonfinite_worlds": _nonfinite(cfg, args.worlds, args.nan_steps), "world_steps": args.worlds * args.nan_steps,
-               **_held(cfg, args.worlds, args.held_steps)}
+    for (n, law), (cfg, contact) in configs.items():
+        row = {"substeps": n, "sim_dt": cfg.sim_dt, "contact_law": law, "damping_limit": contact.damping_limit,
+               "env_steps_per_s": best[n, law], "speedup_vs_5": best[n, law] / base if base else None,
+               **_reference_drive(cfg, contact), **_acceleration(cfg, contact),
+               "nonfinite_worlds": _nonfinite(cfg, contact, args.worlds, args.nan_steps),
+               "world_steps": args.worlds * args.nan_steps,
+               **_held(cfg, contact, args.worlds, args.held_steps), **_impacts(cfg, contact)}
         rows.append(row)
-        print(f"substeps {n}: {row['env_steps_per_s']:8.0f} env-steps/s ({row['speedup_vs_5']:.2f}x) | reference drive x "
+        speedup = f" ({row['speedup_vs_5']:.2f}x)" if base else ""
+        print(f"substeps {n}, {law} law: {row['env_steps_per_s']:8.0f} env-steps/s{speedup} | reference drive x "
               f"{row['x_after_1.0_s']:.3f} / {row['x_after_3.0_s']:.3f} / {row['x_after_4.9_s']:.3f} m | accel "
               f"{row['accel_2Nm']:.4f} (analytic {row['accel_analytic']:.4f}) | rest {row['rest_height_m']:.4f} m | "
               f"non-finite {row['nonfinite_worlds']} of {args.worlds} worlds in {row['world_steps']:,} world-steps | "
               f"held torques: non-finite {row['held_nonfinite_worlds']}, over 1.2x top speed "
-              f"{row['held_overspeed_worlds']} of {args.worlds} in {row['held_world_steps']:,} world-steps", flush=True)
+              f"{row['held_overspeed_worlds']} of {args.worlds} in {row['held_world_steps']:,} world-steps | "
+              f"wall impacts: fastest {row['impact_max_speed']:.2f} m/s (top {row['impact_top_speed']:.2f}), "
+              f"over 1.2x {row['impact_overspeed_worlds']}, non-finite {row['impact_nonfinite_worlds']}", flush=True)
     out = write_results(args.out, {"benchmark": "substep_study", "worlds": args.worlds, "rows": rows,
                                    "time": time.strftime("%Y-%m-%d %H:%M:%S")})
     print(f"written to {out}")

@@ -211,3 +211,12 @@ def test_sensor_frames_follow_chassis():
     # lrf sits 0.30 m ahead of the chassis origin; yaw 90 deg turns "ahead" into +y
     assert lrf[:3, 3].tolist() == pytest.approx([1.0, 2.3, sim.rest_height + 0.19], abs=1e-5)
     assert "novatel" in sim.frame_names
+
+
+def test_wall_impacts_at_top_speed_put_no_energy_in():
+    """Three substeps with the plain Hunt–Crossley law threw rovers off walls at up to 1.4x top speed
+    (and one blew up); ``ContactConfig.damping_limit`` keeps every impact under 1.2x."""
+    got = checks.wall_impacts()
+    assert got.nonfinite_worlds == 0
+    assert got.overspeed_worlds == 0, f"{got.overspeed_worlds} worlds left a wall faster than 1.2x top speed"
+    assert got.max_speed < 1.2 * got.top_speed

@@ -12,6 +12,7 @@
 """
 
 from atrv_warp.sim.config import (
+    REFERENCE_SIM_DT,
     VARIANTS,
     ArenaConfig,
     ContactConfig,
@@ -29,6 +30,7 @@ from atrv_warp.sim.urdf import URDFError, load_rover
 
 __all__ = [
     "DRIVE_MODE_TORQUES",
+    "REFERENCE_SIM_DT",
     "TERRAIN_PRESETS",
     "VARIANTS",
     "ArenaConfig",

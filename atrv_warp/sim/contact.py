@@ -9,6 +9,8 @@ it, so there is one contact model to change.
 
 from __future__ import annotations
 
+import math
+
 import newton
 import numpy as np
 import torch
@@ -35,9 +37,12 @@ OBSTACLE_KINDS = {"none": int(OBSTACLE_NONE), "box": int(OBSTACLE_BOX), "cylinde
 """Codes of :attr:`Obstacles.kind`."""
 
 
-def _law(cfg: ContactConfig, sim_dt: float) -> ContactParams:
+def _law(cfg: ContactConfig, sim_dt: float, m_share: float) -> ContactParams:
+    """The kernel's law; ``m_share`` [kg] is the rover's mass per wheel (the damping ceiling's ``m_eff``)."""
     if cfg.stiction < 0:
         raise ValueError(f"ContactConfig.stiction must be >= 0, got {cfg.stiction}")
+    if cfg.damping_limit is not None and not cfg.damping_limit > 0:
+        raise ValueError(f"ContactConfig.damping_limit must be > 0 or None (no ceiling), got {cfg.damping_limit}")
     p = ContactParams()
     p.stiffness = cfg.stiffness
     p.damping = cfg.damping
@@ -46,6 +51,7 @@ def _law(cfg: ContactConfig, sim_dt: float) -> ContactParams:
     p.linear_coeff = cfg.linear_region ** (cfg.exponent - 1.0)
     p.stiction = cfg.stiction
     p.dt = sim_dt
+    p.damping_cap = math.inf if cfg.damping_limit is None else cfg.damping_limit * m_share / sim_dt
     return p
 
 
@@ -219,7 +225,8 @@ class ContactModel:
         self.num_worlds = built.num_worlds
         self.bodies_per_world = built.rover_builder.body_count
         self.device = device
-        self.params = _law(contact, sim_dt)
+        desc = built.description
+        self.params = _law(contact, sim_dt, desc.total_mass / max(len(desc.wheels), 1))
         self.shapes = _shapes(built, rover, contact, sim_dt, device)
         self.planes = _planes(arena, device)
         self.terrain = Terrain(terrain, self.num_worlds, arena, device)

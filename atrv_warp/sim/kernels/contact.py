@@ -59,6 +59,7 @@ class ContactParams:
     linear_coeff: float  # linear_region^(n-1), so the law is continuous at linear_region
     stiction: float  # bristle stiffness x sim_dt / friction slope [-]; 0 = regularised Coulomb only
     dt: float  # sim_dt [s]
+    damping_cap: float  # ceiling on kc d^n [N·s/m] (ContactConfig.damping_limit)
 
 
 @wp.struct
@@ -102,7 +103,7 @@ def hunt_crossley(depth: float, depth_rate: float, p: ContactParams) -> float:
         s = p.linear_coeff * depth
     else:
         s = wp.pow(depth, p.exponent)
-    return wp.max(p.stiffness * s + p.damping * s * depth_rate, 0.0)
+    return wp.max(p.stiffness * s + wp.min(p.damping * s, p.damping_cap) * depth_rate, 0.0)
 
 
 CYLINDER_EDGE_TILT = wp.constant(0.02)
