@@ -6,7 +6,8 @@ For each N, in this process pinned to one core with one torch thread: env-steps/
 ``ATRVjrEnv`` stepping random actions (with resets) for the ``reach`` task (flat, no obstacles,
 no scanner) and the ``nav`` task (terrain, six obstacles, 64-beam scan), measured alternately,
 best of ``--rounds`` each; then where nav's extra time goes: the simulator step on the flat arena
-and on terrain with obstacles, and one scan. Kernel compilation (the first build and step of each
+and on terrain with obstacles, and one scan (and the scan's two kernel layouts, for all worlds and
+for 5 % of them as after a reset). Kernel compilation (the first build and step of each
 task) is timed separately and excluded. Target (issue 13): nav >= 50 % of reach at N = 1024.
 Figures are printed and written to ``benchmarks/results/nav_throughput.json``.
 """
@@ -55,6 +56,7 @@ def main() -> int:
 
     pin_to_one_core()
     import torch
+    import warp as wp
 
     torch.set_num_threads(1)
     from atrv_warp.task.env import ATRVjrEnv
@@ -81,10 +83,20 @@ def main() -> int:
         sim_rate = {task: _rate(sim.step, n, args.seconds) for task, sim in sims.items()}
         scanner = envs["nav"].scanner
         scan_rate = _rate(scanner.scan, n, args.seconds)
+        # The scan's two kernel layouts (a thread per beam, the GPU's; a thread per world, the CPU's
+        # default), for every world and for a reset's rescan of 5 % of them, alternately.
+        few = wp.array(torch.rand(n, generator=gen).numpy() < 0.05, dtype=bool)
+        layouts = {}
+        for _ in range(args.rounds):
+            for layout in ("beam", "world"):
+                for name, mask in (("all", None), ("reset_5pct", few)):
+                    ms = 1e3 * n / _rate(lambda m=mask, lay=layout, sc=scanner: sc.scan(m, layout=lay), n, args.seconds / 4)
+                    key = f"{layout}_{name}_ms"
+                    layouts[key] = min(layouts.get(key, ms), ms)
         row = {"num_envs": n, "reach_env_steps_per_s": best["reach"], "nav_env_steps_per_s": best["nav"],
                "nav_over_reach": best["nav"] / best["reach"],
                "sim_step_flat_per_s": sim_rate["reach"], "sim_step_terrain_obstacles_per_s": sim_rate["nav"],
-               "scan_64_beams_per_s": scan_rate,
+               "scan_64_beams_per_s": scan_rate, "scan_layouts": layouts,
                "us_per_world_step": {"env_reach": 1e6 / best["reach"], "env_nav": 1e6 / best["nav"],
                                      "sim_flat": 1e6 / sim_rate["reach"], "sim_nav": 1e6 / sim_rate["nav"],
                                      "scan": 1e6 / scan_rate}}
@@ -93,6 +105,9 @@ def main() -> int:
         print(f"N={n:5d}: reach {best['reach']:8.0f}  nav {best['nav']:8.0f} env-steps/s  -> nav/reach "
               f"{row['nav_over_reach']:.2f} | per world-step [us]: sim flat {us['sim_flat']:.1f}, sim terrain+obstacles "
               f"{us['sim_nav']:.1f}, scan {us['scan']:.1f}", flush=True)
+        print(f"         scan per call [ms], thread per beam / per world: all worlds {layouts['beam_all_ms']:.2f} / "
+              f"{layouts['world_all_ms']:.2f}; 5 % of them (a reset) {layouts['beam_reset_5pct_ms']:.2f} / "
+              f"{layouts['world_reset_5pct_ms']:.2f}", flush=True)
     result = {"benchmark": "nav_throughput", "target": "nav >= 0.5 x reach at N = 1024", "compile_s": compile_s,
               "rows": rows, "time": time.strftime("%Y-%m-%d %H:%M:%S"), "python": sys.version.split()[0]}
     out = write_results(args.out, result)

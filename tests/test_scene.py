@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 import torch
+import warp as wp
 
 from atrv_warp.sim import ContactConfig, ObstacleConfig, RoverSim
 from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
@@ -81,6 +82,24 @@ def test_scan_noise_and_dropout_are_seeded():
     clean = LaserScanner(sim, ScannerConfig(beams=32), seed=3).scan()
     noise = (torch.stack(first) - clean)[~dropped]
     assert 0.03 < float(noise.std()) < 0.07
+
+
+def test_scan_layouts_give_the_same_ranges_bit_for_bit():
+    """A thread per beam (the GPU's layout) and a thread per world (the CPU's) on the nav scene, with
+    noise and dropout, for all worlds and for a reset's mask; the wrong layout name is refused."""
+    env = ATRVjrEnv(16, task="nav", seed=5)
+    env.rollout(3, break_when_any_done=False)
+    cfg = ScannerConfig(noise_std=0.05, dropout=0.1)
+    by_beam, by_world = LaserScanner(env.sim, cfg, seed=7), LaserScanner(env.sim, cfg, seed=7)
+    a, b = by_beam.scan(layout="beam").clone(), by_world.scan(layout="world").clone()
+    assert torch.equal(a, b)
+    assert (a < cfg.max_range).any() and (a == cfg.max_range).any()  # hits, and dropped beams
+    mask = wp.array(np.arange(16) % 3 == 0, dtype=bool)
+    env.sim.step()
+    assert torch.equal(by_beam.scan(mask, layout="beam"), by_world.scan(mask, layout="world"))
+    assert torch.equal(by_world.ranges[1], b[1])  # unmasked worlds keep their ranges
+    with pytest.raises(ValueError, match="layout"):
+        by_world.scan(layout="rows")
 
 
 def _slope(degrees: float) -> TerrainConfig:

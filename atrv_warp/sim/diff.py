@@ -32,7 +32,7 @@ import newton
 import torch
 import warp as wp
 
-from atrv_warp.sim.config import REFERENCE_SIM_DT, ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant
+from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant
 from atrv_warp.sim.simulator import RoverSim
 from atrv_warp.task.config import TaskConfig
 
@@ -104,10 +104,7 @@ class DiffRollout:
         num_worlds: Rovers simulated together (gradients are per world).
         steps: Horizon in env steps (``SimConfig.step_dt`` = 0.05 s each).
         variant, rover, contact, arena, sim: As for :class:`~atrv_warp.sim.RoverSim`
-            (graph replay and tile GEMM are switched off: the tape records eager launches). ``sim``
-            defaults to the reference's 0.01 s substeps (:data:`~atrv_warp.sim.config.REFERENCE_SIM_DT`),
-            not the simulator's 1/60 s: the rollout is smoother at the finite-difference scale
-            (README, 'Differentiable rollouts'); pass ``SimConfig()`` to match the simulator's step.
+            (graph replay and tile GEMM are switched off: the tape records eager launches).
         device: Warp device.
         wrench_fix: Apply :func:`restore_external_wrench` (keep ``True``; ``False`` reproduces
             Newton 1.8's wrong steering gradient, for comparison).
@@ -124,7 +121,7 @@ class DiffRollout:
         if contact is not None and contact.stiction:
             raise ValueError("DiffRollout needs ContactConfig.stiction = 0: the stick phase keeps each wheel's "
                              "deflection in one buffer across substeps, which a tape cannot differentiate")
-        sim_cfg = sim or SimConfig(sim_dt=REFERENCE_SIM_DT)
+        sim_cfg = sim or SimConfig()
         sim_cfg = SimConfig(step_dt=sim_cfg.step_dt, sim_dt=sim_cfg.sim_dt, gravity=sim_cfg.gravity,
                             mass_matrix_interval=1, use_tile_gemm=False, use_graph=False)
         self.sim = RoverSim(num_worlds, rover=rover or get_variant(variant), contact=contact, arena=arena,

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from atrv_warp.sim.kernels.contact import Scene
+from atrv_warp.sim.kernels.contact import ARENA_PLANES, Scene
 from atrv_warp.sim.kernels.obstacles import ray_obstacle
 from atrv_warp.sim.kernels.terrain import ray_terrain
 
@@ -34,26 +34,15 @@ def ray_plane(normal: wp.vec3, offset: float, origin: wp.vec3, direction: wp.vec
     return wp.clamp((offset - wp.dot(normal, origin)) / dn, 0.0, t_max)
 
 
-@wp.kernel
-def cast_scan(
-    params: ScanParams,
-    scene: Scene,
-    body_q: wp.array(dtype=wp.transform),
-    seed: int,
-    counter: int,
-    mask: wp.array(dtype=bool),
-    ranges: wp.array2d(dtype=float),
-):
-    """Range [m] of every beam of every masked world (dim = (N, B)); other worlds keep their ranges."""
-    world, beam = wp.tid()
-    if not mask[world]:
-        return
-    X = body_q[world * params.bodies_per_world + params.chassis_body] * params.mount
+@wp.func
+def cast_beam(params: ScanParams, scene: Scene, world: int, beam: int, X: wp.transform, stream: int,
+              beams: int) -> float:
+    """Range [m] of one beam of one world from the scanner frame ``X``; ``stream`` seeds this scan's noise."""
     origin = wp.transform_get_translation(X)
     a = params.angles[beam]
     direction = wp.transform_vector(X, wp.vec3(wp.cos(a), wp.sin(a), 0.0))
     t = params.max_range
-    for k in range(scene.planes.normal.shape[0]):
+    for k in range(ARENA_PLANES):  # a constant bound, which Warp unrolls
         if k > 0 or scene.terrain.enabled == 0:
             t = wp.min(t, ray_plane(scene.planes.normal[k], scene.planes.offset[k], origin, direction, t))
     obstacles = scene.obstacles
@@ -65,11 +54,38 @@ def cast_scan(
     if scene.terrain.enabled != 0:  # last: the nearest other hit bounds the march
         t = wp.min(t, ray_terrain(scene.terrain, scene.terrain.tile[world], origin, direction, t, params.march_step))
     if params.noise_std > 0.0 or params.dropout > 0.0:
-        state = wp.rand_init(wp.int32(wp.rand_init(seed, counter)), world * ranges.shape[1] + beam)
+        state = wp.rand_init(stream, world * beams + beam)
         if wp.randf(state) < params.dropout:
             t = params.max_range
         elif t < params.max_range:
             t = t + params.noise_std * wp.randn(state)
     if not wp.isfinite(t):  # a blown-up world (the simulator flags it): no return
         t = params.max_range
-    ranges[world, beam] = wp.clamp(t, params.min_range, params.max_range)
+    return wp.clamp(t, params.min_range, params.max_range)
+
+
+@wp.kernel
+def cast_scan(
+    params: ScanParams,
+    scene: Scene,
+    body_q: wp.array(dtype=wp.transform),
+    seed: int,
+    counter: int,
+    mask: wp.array(dtype=bool),
+    beams_per_thread: int,
+    ranges: wp.array2d(dtype=float),
+):
+    """Range [m] of every beam of every masked world; other worlds keep their ranges.
+
+    dim = (N, ceil(B / beams_per_thread)): each thread casts ``beams_per_thread`` consecutive beams of
+    one world. 1 (a thread per beam) suits a GPU; B (a thread per world) suits the CPU, where threads
+    run one after another and a masked-out world should cost one call. Same ranges either way."""
+    world, group = wp.tid()
+    if not mask[world]:
+        return
+    X = body_q[world * params.bodies_per_world + params.chassis_body] * params.mount
+    stream = wp.int32(wp.rand_init(seed, counter))
+    beams = ranges.shape[1]
+    first = group * beams_per_thread
+    for beam in range(first, wp.min(first + beams_per_thread, beams)):
+        ranges[world, beam] = cast_beam(params, scene, world, beam, X, stream, beams)
