@@ -12,8 +12,8 @@ ways: non-finite worlds after ``--nan-steps`` steps of ``--worlds`` worlds under
 ±20 N·m drawn fresh each step (the rovers jiggle about their start), and after ``--held-steps``
 steps with each world's random torques held (they reach top speed and hit walls at it; worlds
 that ever exceed 1.2x the motor's top speed are counted too); and the wall-impact sweep of
-:func:`atrv_warp.sim.checks.wall_impacts` (256 rovers driven into the walls at top speed from every
-heading; the fastest any leaves a wall). ``--plain-law`` substep counts run a second time with the
+:func:`atrv_warp.sim.checks.wall_impacts` (``--worlds`` rovers driven into the walls at top speed from
+every heading; the fastest any leaves a wall). ``--plain-law`` substep counts run a second time with the
 plain Hunt–Crossley law (no ``ContactConfig.damping_limit``). Figures are printed and written to
 ``benchmarks/results/substep_study.json``.
 """
@@ -106,10 +106,10 @@ def _held(sim_cfg, contact, worlds: int, steps: int) -> dict:
             "held_world_steps": worlds * steps}
 
 
-def _impacts(sim_cfg, contact) -> dict:
+def _impacts(sim_cfg, contact, worlds: int) -> dict:
     from atrv_warp.sim.checks import wall_impacts
 
-    got = wall_impacts(sim=sim_cfg, contact=contact)
+    got = wall_impacts(worlds, sim=sim_cfg, contact=contact)
     return {"impact_max_speed": got.max_speed, "impact_top_speed": got.top_speed,
             "impact_overspeed_worlds": got.overspeed_worlds, "impact_nonfinite_worlds": got.nonfinite_worlds}
 
@@ -156,7 +156,7 @@ def main() -> int:
                **_reference_drive(cfg, contact), **_acceleration(cfg, contact),
                "nonfinite_worlds": _nonfinite(cfg, contact, args.worlds, args.nan_steps),
                "world_steps": args.worlds * args.nan_steps,
-               **_held(cfg, contact, args.worlds, args.held_steps), **_impacts(cfg, contact)}
+               **_held(cfg, contact, args.worlds, args.held_steps), **_impacts(cfg, contact, args.worlds)}
         rows.append(row)
         speedup = f" ({row['speedup_vs_5']:.2f}x)" if base else ""
         print(f"substeps {n}, {law} law: {row['env_steps_per_s']:8.0f} env-steps/s{speedup} | reference drive x "

@@ -3,8 +3,9 @@
 ``tests/data/flat_reference_rollout.npz`` was written by the release of 2026-11-21 (commit 2d88b0e),
 which integrated at the reference's 0.01 s with the plain Hunt–Crossley law: 16 worlds, seed 123, 120
 steps of seeded random actions with resets. ``SimConfig(sim_dt=REFERENCE_SIM_DT)`` with
-``ContactConfig(damping_limit=None)`` must still reproduce it exactly. The defaults (three substeps, the
-damping ceiling) are pinned the same way by ``flat_default_rollout.npz``, written by
+``ContactConfig(damping_limit=None)`` must still reproduce it exactly. The defaults (the same step, with
+the damping ceiling, which engages in this rollout's deep wall impacts) are pinned the same way by
+``flat_default_rollout.npz``, written by
 ``python tests/write_golden.py``. Any change to either path (kernels, contact, sampling) shows up
 here as a mismatch, not as a tolerance.
 """

@@ -8,10 +8,11 @@
 - :mod:`.terrain`: seeded heightfields (:class:`TerrainConfig`, presets, :class:`HeightGrid`).
 - :mod:`.scanner`: :class:`LaserScanner`, the 2-D laser range finder.
 - :mod:`.diff`: :class:`DiffRollout`, gradients through the simulator.
-- :mod:`.checks`: the reference drive protocol shared by the physics report and tests.
+- :mod:`.checks`: the reference drive protocol and the wall-impact sweep, shared by benchmarks and tests.
 """
 
 from atrv_warp.sim.config import (
+    FAST_SIM_DT,
     REFERENCE_SIM_DT,
     VARIANTS,
     ArenaConfig,
@@ -30,6 +31,7 @@ from atrv_warp.sim.urdf import URDFError, load_rover
 
 __all__ = [
     "DRIVE_MODE_TORQUES",
+    "FAST_SIM_DT",
     "REFERENCE_SIM_DT",
     "TERRAIN_PRESETS",
     "VARIANTS",

@@ -95,7 +95,8 @@ class Scene:
 
 @wp.func
 def hunt_crossley(depth: float, depth_rate: float, p: ContactParams) -> float:
-    """Normal force [N] for penetration ``depth`` [m] growing at ``depth_rate`` [m/s]."""
+    """Normal force [N] for penetration ``depth`` [m] growing at ``depth_rate`` [m/s]; the damping
+    coefficient ``kc d^n`` is held at ``damping_cap`` (``ContactConfig.damping_limit``)."""
     if depth <= 0.0:
         return 0.0
     s = 0.0
