@@ -19,6 +19,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 
 def main() -> int:
     from atrv_warp import RoverSim
+    from atrv_warp.sim import FAST_SIM_DT, SimConfig
     from atrv_warp.sim.checks import reference_drive, rolling_acceleration
 
     rows: list[tuple[str, float, str]] = []
@@ -68,6 +69,14 @@ def main() -> int:
         ("realistic: rotate_left yaw rate [rad/s]", f"{turned / 1.5:.3f}", "turns in place"),
         ("realistic: rotate_left translation [m]", f"{(sim.root_pose[1, :2] - p1).norm().item():.4f}", "< 0.10"),
     ]
+
+    # 3. where the damping ceiling (ContactConfig.damping_limit) takes over: kc d^n = its cap
+    onset = []
+    for rovers in (sim, RoverSim(1, sim=SimConfig(sim_dt=FAST_SIM_DT))):
+        law = rovers.contact.params
+        onset.append(1e3 * (law.damping_cap / law.damping) ** (1.0 / law.exponent))
+    rows.append(("realistic: damping ceiling engages beyond [mm], 0.01 / 1/60 s", f"{onset[0]:.1f} / {onset[1]:.1f}",
+                 "(c_max / kc)^(1/n), c_max = 0.1 (m/4) / sim_dt"))
 
     width = max(len(r[0]) for r in rows)
     print(f"{'quantity':{width}s}  {'atrv_warp':>16s}  reference / analytic")

@@ -105,8 +105,8 @@ class ContactConfig:
     coefficient grows with depth, and an explicit step integrates a damper stably only while
     ``coefficient x sim_dt / m_eff`` stays small: past that it overshoots, and a deep impact leaves
     faster than it came in (at :data:`FAST_SIM_DT` without it, up to 1.43x top speed). 0.1 engages
-    only in impacts, beyond 3.7 cm of penetration at ``sim_dt`` = 0.01 s (2.7 cm at 1/60 s; a wheel at
-    rest sinks 1.3 cm). ``None``: the plain law."""
+    only in impacts, beyond 37.5 mm of penetration at ``sim_dt`` = 0.01 s (26.6 mm at 1/60 s; a wheel
+    at rest sinks 12.6 mm; ``benchmarks/physics_report.py``). ``None``: the plain law."""
     stiction: float = 0.0
     """Elastic stick phase of the wheels' ground friction: a bristle of stiffness
     ``stiction x slope / sim_dt`` per direction (0.5 puts it at a quarter of the explicit stability
