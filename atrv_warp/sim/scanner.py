@@ -114,7 +114,7 @@ class LaserScanner:
         if layout not in ("beam", "world"):
             raise ValueError(f"layout must be 'beam' or 'world', got {layout!r}")
         per_thread = self.cfg.beams if layout == "world" else 1
-        wp.launch(cast_scan, dim=(self.sim.num_worlds, self.cfg.beams // per_thread),
+        wp.launch(cast_scan, dim=(self.sim.num_worlds, -(-self.cfg.beams // per_thread)),  # ceil, as the kernel expects
                   inputs=[self._params, self.sim.contact.scene, self.sim.buffers.body_q, self.seed, self.count,
                           self._all if mask is None else mask, per_thread],
                   outputs=[self._ranges], device=self.sim.device)
