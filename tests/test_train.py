@@ -45,6 +45,17 @@ def test_config_files_and_errors(tmp_path):
         load_train_config(str(bad))
 
 
+def test_substeps_reach_the_training_and_evaluation_envs():
+    from atrv_warp.rl.trainer import Evaluator
+
+    cfg = load_train_config(SMOKE, {"substeps": "3", "eval_episodes": "4"})
+    assert dict(cfg.env.env_kwargs())["sim"].substeps == 3 and dict(TrainConfig().env.env_kwargs())["sim"].substeps == 5
+    evaluator = Evaluator(cfg, actor=None, loggers=[])
+    assert evaluator.env.sim.substeps == 3
+    with pytest.raises(ValueError, match="substeps must be > 0, got 0"):
+        load_train_config(None, {"substeps": "0"})
+
+
 def test_cli_rejects_bad_config_before_work(tmp_path):
     proc = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", "num_envs=-3", check=False)
     assert proc.returncode == 2 and "num_envs must be > 0" in proc.stderr

@@ -60,6 +60,18 @@ class EnvConfig:
     """Worlds stepped together by the collector."""
     steps_per_batch: int = 8
     """Steps per world in one collected batch (frames per batch = num_envs x steps_per_batch)."""
+    substeps: int = 5
+    """Solver substeps per 0.05 s step, in training and its evaluations: 5 (``sim_dt`` 0.01 s, the
+    simulator's default) or 3 (:data:`~atrv_warp.sim.FAST_SIM_DT`, a step about 1.4x cheaper; README,
+    'Simulator speed')."""
+
+    def env_kwargs(self) -> tuple[tuple[str, object], ...]:
+        """:class:`~atrv_warp.task.env.ATRVjrEnv` keyword arguments of these environments, as
+        (name, value) pairs (:class:`~atrv_warp.task.env.EnvFactory` takes them so)."""
+        from atrv_warp.sim.config import SimConfig
+
+        step_dt = SimConfig().step_dt
+        return (("task", self.task), ("sim", SimConfig(sim_dt=step_dt / self.substeps)))
 
 
 @dataclass(frozen=True)
@@ -170,7 +182,7 @@ class TrainConfig:
 
     def validate(self) -> TrainConfig:
         """Raise ``ValueError`` naming the first bad value."""
-        positive = {"run": ("total_frames", "threads"), "env": ("num_envs", "steps_per_batch"),
+        positive = {"run": ("total_frames", "threads"), "env": ("num_envs", "steps_per_batch", "substeps"),
                     "collector": ("num_collectors",),
                     "optim": ("buffer_size", "batch_size", "lr", "tau", "init_alpha", "utd_ratio"),
                     "network": ("width", "depth"),

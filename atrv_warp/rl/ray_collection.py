@@ -124,7 +124,7 @@ def make_ray_collector(cfg: TrainConfig, actor, *, total_frames: int, init_rando
     if c.ray_resource:
         remote["resources"] = {c.ray_resource: 1}
     envs = [EnvFactory(cfg.worlds_per_collector, seed=env_seed + i * _SEED_STRIDE,
-                       env_kwargs=(("task", cfg.env.task),)) for i in range(c.num_collectors)]
+                       env_kwargs=cfg.env.env_kwargs()) for i in range(c.num_collectors)]
     # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
     kwargs = [{"postproc": StampWorker(i), "auto_register_policy_transforms": False} for i in range(c.num_collectors)]
     with warnings.catch_warnings():

@@ -348,7 +348,7 @@ def make_collector(cfg: TrainConfig, actor, frames_done: int):
         return make_ray_collector(cfg, actor, total_frames=whole_batches, init_random_frames=random_left,
                                   env_seed=env_seed)
     if cfg.collector.kind == "async":
-        factory = EnvFactory(cfg.env.num_envs, seed=env_seed, core=1, env_kwargs=(("task", cfg.env.task),))
+        factory = EnvFactory(cfg.env.num_envs, seed=env_seed, core=1, env_kwargs=cfg.env.env_kwargs())
         failure = None
         try:
             return MultiAsyncCollector([factory], actor, frames_per_batch=fpb, total_frames=whole_batches,
@@ -362,7 +362,7 @@ def make_collector(cfg: TrainConfig, actor, frames_done: int):
         gc.collect()
         raise RuntimeError(f"the collector's worker process failed to start: {failure}")
     # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
-    return Collector(ATRVjrEnv(cfg.env.num_envs, seed=env_seed, task=cfg.env.task), actor, frames_per_batch=fpb,
+    return Collector(ATRVjrEnv(cfg.env.num_envs, seed=env_seed, **dict(cfg.env.env_kwargs())), actor, frames_per_batch=fpb,
                      total_frames=whole_batches, init_random_frames=random_left,
                      auto_register_policy_transforms=False)
 
@@ -388,7 +388,7 @@ class Evaluator:
 
     def __init__(self, cfg: TrainConfig, actor, loggers: list):
         self.cfg, self.actor = cfg, actor
-        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=EVAL_SEED, task=cfg.env.task)
+        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=EVAL_SEED, **dict(cfg.env.env_kwargs()))
         self.recorder = None
         if cfg.logging.logger == "rerun":  # periodic evaluations go into the same recording as the scalars
             from atrv_warp.integrations.rerun import RerunRecorder
@@ -593,7 +593,7 @@ def _finish(cfg: TrainConfig, state: RunState, run_dir: Path, evaluator: Evaluat
     best_path = run_dir / "best_policy.pt"
     if best_path.is_file():
         final = evaluate(load_policy(best_path), num_episodes=cfg.logging.final_eval_episodes, seed=EVAL_SEED,
-                         task=cfg.env.task)
+                         **dict(cfg.env.env_kwargs()))
         print(format_result("best policy, final evaluation", final))
         result["final_eval"] = final.as_dict()
     (run_dir / "final_eval.json").write_text(json.dumps(result, indent=2) + "\n")
