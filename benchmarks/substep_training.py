@@ -89,8 +89,8 @@ def summarize() -> dict:
         print(f"| {f:,} | " + " | ".join(cells) + f" | {'n/a' if t is None else f'{t:+.2f}'} |")
     for arm, s in summary["arms"].items():
         if s["reached_90"]:
-            print(f"{arm} substeps: 90 % in {s['reached_90']} of {s['runs']} runs, median after {s['median_frames_to_90']:,} "
-                  f"frames / {s['median_seconds_to_90']:.0f} s; final success of the best policies "
+            print(f"{arm} substeps: 90 % in {s['reached_90']} of {s['runs']} runs, median of those after "
+                  f"{s['median_frames_to_90']:,.0f} frames / {s['median_seconds_to_90']:.0f} s; final success of the best policies "
                   f"{min(s['final_success_percent']):.1f}-{max(s['final_success_percent']):.1f} %")
         else:
             print(f"{arm} substeps: 90 % in none of {s['runs']} runs")

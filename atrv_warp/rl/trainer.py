@@ -457,8 +457,10 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     loggers = make_loggers(cfg, run_dir, resume)
     collector = make_collector(cfg, actor, state.frames)
     evaluator = Evaluator(cfg, actor, loggers)
-    print(f"run folder: {run_dir}  ({_describe_collection(cfg)}, batch {cfg.frames_per_batch} frames; budget "
-          f"{cfg.run.total_frames:,} frames or {cfg.run.max_minutes:g} min, whichever ends first)")
+    budget = (f"{cfg.run.total_frames:,} frames or {cfg.run.max_minutes:g} min, whichever ends first"
+              if cfg.run.max_minutes else f"{cfg.run.total_frames:,} frames, no time limit")
+    print(f"run folder: {run_dir}  ({_describe_collection(cfg)}, batch {cfg.frames_per_batch} frames, "
+          f"{cfg.env.substeps} substeps per step; budget {budget})")
     print(device_summary("cpu"))
     loop = _TrainLoop(cfg, state, actor, normalize, buffer, learner, loggers, evaluator, checkpoint, run_dir)
     try:
