@@ -62,8 +62,8 @@ class EnvConfig:
     """Steps per world in one collected batch (frames per batch = num_envs x steps_per_batch)."""
     substeps: int = 5
     """Solver substeps per 0.05 s step, in training and its evaluations: 5 (``sim_dt`` 0.01 s, the
-    simulator's default) or 3 (:data:`~atrv_warp.sim.FAST_SIM_DT`, a step about 1.4x cheaper; README,
-    'Simulator speed')."""
+    simulator's default) or 3 (:data:`~atrv_warp.sim.FAST_SIM_DT`, a step about 1.4x cheaper, learning a
+    little less per frame; README, 'Simulator speed')."""
 
     def env_kwargs(self) -> tuple[tuple[str, object], ...]:
         """:class:`~atrv_warp.task.env.ATRVjrEnv` keyword arguments of these environments, as
