@@ -208,8 +208,16 @@ class SimConfig:
     use_tile_gemm: bool = True
     """Use Warp's tile API for the mass-matrix factorisation: 2.4x faster at N=1024 on CPU
     (67k vs 28k env-steps/s, benchmarks/sim_throughput.py)."""
+    fuse_cholesky: bool | None = None
+    """With the tile GEMM, factorise the mass matrix in the kernel that forms it (``True``, Newton's
+    default) or in a kernel of its own (``False``). ``None``: separate on the CPU, where it is about
+    1.05x faster at N=1024 and bit-identical (``benchmarks/solver_options.py``), fused elsewhere."""
     use_graph: bool = True
     """Record the whole step once (``wp.ScopedCapture``) and replay it."""
+
+    def resolve_fuse_cholesky(self, on_cpu: bool) -> bool:
+        """:attr:`fuse_cholesky` as set, or when ``None``: separate on the CPU, fused elsewhere."""
+        return (not on_cpu) if self.fuse_cholesky is None else self.fuse_cholesky
 
     @property
     def substeps(self) -> int:

@@ -177,7 +177,8 @@ class RoverSim:
                              "must fall on every step boundary so a reset never meets a stale mass matrix")
         self.solver = newton.solvers.SolverFeatherstone(
             self.model, angular_damping=0.0, update_mass_matrix_interval=interval,
-            use_tile_gemm=self.sim_cfg.use_tile_gemm)
+            use_tile_gemm=self.sim_cfg.use_tile_gemm,
+            fuse_cholesky=self.sim_cfg.resolve_fuse_cholesky(self.device.is_cpu))
         self.state_0 = self.model.state()
         self.state_1 = self.model.state()
         self.control = self.model.control()
