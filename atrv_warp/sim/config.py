@@ -206,12 +206,12 @@ class SimConfig:
     """Featherstone mass-matrix refresh interval in substeps; ``None`` = once per step
     (``substeps``), aligned with step boundaries so a reset never meets a stale matrix."""
     use_tile_gemm: bool = True
-    """Use Warp's tile API for the mass-matrix factorisation: 2.4x faster at N=1024 on CPU
-    (67k vs 28k env-steps/s, benchmarks/sim_throughput.py)."""
+    """Use Warp's tile API for the mass-matrix factorisation: 2.6x faster at N=1024 on CPU
+    (69k vs 27k env-steps/s, benchmarks/sim_throughput.py)."""
     fuse_cholesky: bool | None = None
     """With the tile GEMM, factorise the mass matrix in the kernel that forms it (``True``, Newton's
     default) or in a kernel of its own (``False``). ``None``: separate on the CPU, where it is about
-    1.05x faster at N=1024 and bit-identical (``benchmarks/solver_options.py``), fused elsewhere."""
+    1.03x faster at N=1024 and bit-identical (``benchmarks/solver_options.py``), fused elsewhere."""
     use_graph: bool = True
     """Record the whole step once (``wp.ScopedCapture``) and replay it."""
 
