@@ -2,6 +2,7 @@
 
     python benchmarks/compare_revisions.py --old 98b8398            # sim and env throughput
     python benchmarks/compare_revisions.py --old HEAD~3 --sizes 64 1024 --rounds 5
+    python benchmarks/compare_revisions.py --old 2d88b0e --new-substeps 3   # this tree on 3 substeps
 
 Absolute figures on a shared machine drift by tens of percent between runs, so this script
 checks out ``--old`` into a temporary git worktree and measures both trees alternately
@@ -9,7 +10,9 @@ checks out ``--old`` into a temporary git worktree and measures both trees alter
 thread, after a warm-up (kernels compiled and cached beforehand). Per size it reports the median
 env-steps/s of ``RoverSim.step`` (random torques) and of ``ATRVjrEnv.rollout`` (random actions)
 for both trees and their ratio. Prints the table and writes
-``benchmarks/results/compare_revisions.json``.
+``benchmarks/results/compare_revisions.json``. ``--new-substeps K`` runs this tree's simulator and
+environment on K solver substeps per step (``SimConfig(sim_dt=0.05 / K)``) and the old tree on its
+defaults.
 """
 
 from __future__ import annotations
@@ -36,9 +39,13 @@ import torch
 torch.set_num_threads(1)
 from atrv_warp import ATRVjrEnv, RoverSim
 kind, n, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+kwargs = {}
+if len(sys.argv) > 4:  # only this tree is given a substep count
+    from atrv_warp import SimConfig
+    kwargs["sim"] = SimConfig(sim_dt=0.05 / int(sys.argv[4]))
 gen = torch.Generator().manual_seed(0)
 if kind == "sim":
-    sim = RoverSim(n)
+    sim = RoverSim(n, **kwargs)
     sim.reset(poses=(torch.rand(n, 3, generator=gen) * 2 - 1) * torch.tensor([12.0, 12.0, 3.14]))
     cmds = [(torch.rand(n, 2, generator=gen) * 2 - 1) * 20 for _ in range(8)]
     def run():
@@ -46,7 +53,7 @@ if kind == "sim":
             sim.step(c)
     frames = 8 * n
 else:
-    env = ATRVjrEnv(n, seed=0)
+    env = ATRVjrEnv(n, seed=0, **kwargs)
     env.reset()
     def run():
         env.rollout(20, auto_reset=False, tensordict=env.reset(), break_when_any_done=False)
@@ -64,9 +71,10 @@ print(json.dumps({"rate": calls * frames / elapsed, "module": __import__("atrv_w
 """
 
 
-def _measure(tree: Path, kind: str, n: int, seconds: float) -> float:
+def _measure(tree: Path, kind: str, n: int, seconds: float, substeps: int | None = None) -> float:
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    proc = subprocess.run([sys.executable, "-c", _PROBE, kind, str(n), str(seconds)], capture_output=True,
+    extra = [] if substeps is None else [str(substeps)]
+    proc = subprocess.run([sys.executable, "-c", _PROBE, kind, str(n), str(seconds), *extra], capture_output=True,
                           text=True, env=env, check=False, cwd=tree)
     if proc.returncode != 0:
         raise SystemExit(f"measurement in {tree} failed:\n{proc.stderr[-3000:]}")
@@ -83,8 +91,12 @@ def main() -> int:
     parser.add_argument("--kinds", nargs="+", default=["sim", "env"], choices=["sim", "env"])
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--seconds", type=float, default=3.0, help="timed wall time per measurement [s]")
+    parser.add_argument("--new-substeps", type=int, default=None,
+                        help="solver substeps per step for this tree (default: its SimConfig)")
     parser.add_argument("--out", default=str(RESULTS / "compare_revisions.json"))
     args = parser.parse_args()
+    if args.new_substeps is not None and args.new_substeps < 1:
+        parser.error(f"--new-substeps must be a positive integer, got {args.new_substeps}")
 
     old_rev = subprocess.run(["git", "rev-parse", "--short", args.old], cwd=ROOT, capture_output=True, text=True,
                              check=True).stdout.strip()
@@ -97,12 +109,13 @@ def main() -> int:
         try:
             for kind in args.kinds:
                 for n in args.sizes:
-                    for tree in (old_tree, ROOT):  # warm-up: compile both trees' kernels before timing
-                        _measure(tree, kind, n, 0.2)
+                    # warm-up: compile both trees' kernels before timing
+                    _measure(old_tree, kind, n, 0.2)
+                    _measure(ROOT, kind, n, 0.2, args.new_substeps)
                     old, new = [], []
                     for _ in range(args.rounds):
                         old.append(_measure(old_tree, kind, n, args.seconds))
-                        new.append(_measure(ROOT, kind, n, args.seconds))
+                        new.append(_measure(ROOT, kind, n, args.seconds, args.new_substeps))
                     row = {"kind": kind, "num_worlds": n, "old_median": statistics.median(old),
                            "new_median": statistics.median(new), "old": old, "new": new}
                     row["ratio"] = row["new_median"] / row["old_median"]
@@ -111,7 +124,8 @@ def main() -> int:
                           f"env-steps/s  new/old {row['ratio']:.3f}", flush=True)
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(old_tree)], cwd=ROOT, check=False)
-    result = {"old": old_rev, "new": new_rev, "rounds": args.rounds, "seconds": args.seconds, "rows": rows}
+    result = {"old": old_rev, "new": new_rev, "new_substeps": args.new_substeps, "rounds": args.rounds,
+              "seconds": args.seconds, "rows": rows}
     write_results(args.out, result)
     print(f"wrote {args.out}")
     return 0
