@@ -84,9 +84,12 @@ print(json.dumps({"steps_per_s": 8 * n * calls / elapsed, "first_step_s": first_
 
 def _measure(n: int, seconds: float, variant: str, cache: Path) -> dict:
     setup, sim_kwargs = VARIANTS[variant]
-    out = subprocess.run([sys.executable, "-c", _PROBE, str(n), str(seconds), json.dumps(sim_kwargs), str(cache), setup],
-                         check=True, capture_output=True, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    proc = subprocess.run([sys.executable, "-c", _PROBE, str(n), str(seconds), json.dumps(sim_kwargs), str(cache),
+                           setup], check=False, capture_output=True, text=True, cwd=ROOT,
+                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+    if proc.returncode != 0:
+        raise SystemExit(f"measurement of {variant} at N={n} failed:\n{proc.stderr[-3000:]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
 def main() -> int:
@@ -110,19 +113,22 @@ def main() -> int:
                     m = _measure(n, args.seconds, v, caches[v])
                     compile_s.setdefault(v, m["first_step_s"])
                     runs[n][v].append(m)
-                    print(f"round {r + 1}/{args.rounds}  N={n:5d}  {v:18s} {m['steps_per_s']:10,.0f} env-steps/s", flush=True)
+                    print(f"round {r + 1}/{args.rounds}  N={n:5d}  {v:18s} {m['steps_per_s']:10,.0f} env-steps/s",
+                          flush=True)
 
     result: dict = {"rounds": args.rounds, "seconds": args.seconds, "cold_compile_and_first_step_s": compile_s,
                     "sizes": {}}
     print()
-    print("| variant | cold compile + first step [s] | " + " | ".join(f"N = {n}: env-steps/s, vs default" for n in args.sizes)
+    print("| variant | cold compile + first step [s] | "
+          + " | ".join(f"N = {n}: env-steps/s, vs default" for n in args.sizes)
           + " | bit-identical to default |")
     print("|---|---:|" + "---:|" * len(args.sizes) + "---|")
     for v in variants:
         cells, identical = [], True
         for n in args.sizes:
             base = runs[n]["default"]
-            ratio = statistics.median(m["steps_per_s"] / b["steps_per_s"] for m, b in zip(runs[n][v], base, strict=True))
+            ratio = statistics.median(m["steps_per_s"] / b["steps_per_s"]
+                                      for m, b in zip(runs[n][v], base, strict=True))
             median = statistics.median(m["steps_per_s"] for m in runs[n][v])
             same = all(m["poses_after_40"] == base[0]["poses_after_40"] for m in runs[n][v])
             identical &= same

@@ -90,7 +90,8 @@ def summarize() -> dict:
     for arm, s in summary["arms"].items():
         if s["reached_90"]:
             print(f"{arm} substeps: 90 % in {s['reached_90']} of {s['runs']} runs, median of those after "
-                  f"{s['median_frames_to_90']:,.0f} frames / {s['median_seconds_to_90']:.0f} s; final success of the best policies "
+                  f"{s['median_frames_to_90']:,.0f} frames / {s['median_seconds_to_90']:.0f} s; "
+                  f"final success of the best policies "
                   f"{min(s['final_success_percent']):.1f}-{max(s['final_success_percent']):.1f} %")
         else:
             print(f"{arm} substeps: 90 % in none of {s['runs']} runs")

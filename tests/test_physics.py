@@ -152,11 +152,12 @@ def test_separate_cholesky_drives_as_the_fused_one():
     torch.manual_seed(2)
     cmds = (torch.rand(30, 4, 2) * 2 - 1) * 20
     poses = (torch.rand(4, 3) * 2 - 1) * torch.tensor([12.0, 12.0, np.pi])
+    assert SimConfig().resolve_fuse_cholesky(on_cpu=True) is False  # the CPU default: separate
+    assert SimConfig().resolve_fuse_cholesky(on_cpu=False) is True  # elsewhere Newton's fused kernel
     out = []
     for fuse in (True, False):
         sim = RoverSim(4, sim=SimConfig(fuse_cholesky=fuse))
         assert sim.solver.fuse_cholesky is fuse
-        assert SimConfig().resolve_fuse_cholesky(on_cpu=True) is False  # the CPU default: separate
         sim.reset(poses=poses)
         for c in cmds:
             sim.step(c)

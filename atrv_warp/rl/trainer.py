@@ -362,8 +362,8 @@ def make_collector(cfg: TrainConfig, actor, frames_done: int):
         gc.collect()
         raise RuntimeError(f"the collector's worker process failed to start: {failure}")
     # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
-    return Collector(ATRVjrEnv(cfg.env.num_envs, seed=env_seed, **dict(cfg.env.env_kwargs())), actor, frames_per_batch=fpb,
-                     total_frames=whole_batches, init_random_frames=random_left,
+    env = ATRVjrEnv(cfg.env.num_envs, seed=env_seed, **dict(cfg.env.env_kwargs()))
+    return Collector(env, actor, frames_per_batch=fpb, total_frames=whole_batches, init_random_frames=random_left,
                      auto_register_policy_transforms=False)
 
 
