@@ -11,7 +11,7 @@ thread, after a warm-up (kernels compiled and cached beforehand). Per size it re
 env-steps/s of ``RoverSim.step`` (random torques) and of ``ATRVjrEnv.rollout`` (random actions)
 for both trees and their ratio. Prints the table and writes
 ``benchmarks/results/compare_revisions.json``. ``--new-substeps K`` runs this tree's simulator and
-environment on K solver substeps per step (``SimConfig(sim_dt=0.05 / K)``) and the old tree on its
+environment on K solver substeps per step (``SimConfig(sim_dt=step_dt / K)``) and the old tree on its
 defaults.
 """
 
@@ -42,7 +42,7 @@ kind, n, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 kwargs = {}
 if len(sys.argv) > 4:  # only this tree is given a substep count
     from atrv_warp import SimConfig
-    kwargs["sim"] = SimConfig(sim_dt=0.05 / int(sys.argv[4]))
+    kwargs["sim"] = SimConfig(sim_dt=SimConfig().step_dt / int(sys.argv[4]))
 gen = torch.Generator().manual_seed(0)
 if kind == "sim":
     sim = RoverSim(n, **kwargs)

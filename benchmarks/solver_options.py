@@ -39,12 +39,12 @@ from _common import write_results
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 
-VARIANTS = {
-    "default": ("", {}),
-    "fused_cholesky": ("", {"fuse_cholesky": True}),
-    "opt_level_3": ("wp.config.optimization_level = 3", {}),
-    "no_grid_stride": ("wp.config.default_grid_stride = False", {}),
-    "no_backward": ("wp.config.enable_backward = False", {}),
+VARIANTS = {  # name: (wp.config settings, SimConfig fields)
+    "default": ({}, {}),
+    "fused_cholesky": ({}, {"fuse_cholesky": True}),
+    "opt_level_3": ({"optimization_level": 3}, {}),
+    "no_grid_stride": ({"default_grid_stride": False}, {}),
+    "no_backward": ({"enable_backward": False}, {}),
 }
 
 _PROBE = r"""
@@ -53,7 +53,8 @@ if hasattr(os, "sched_setaffinity"):
     os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
 import warp as wp
 wp.config.kernel_cache_dir = sys.argv[4]
-exec(sys.argv[5])
+for key, value in json.loads(sys.argv[5]).items():
+    setattr(wp.config, key, value)
 import torch
 torch.set_num_threads(1)
 from atrv_warp import RoverSim, SimConfig
@@ -83,9 +84,9 @@ print(json.dumps({"steps_per_s": 8 * n * calls / elapsed, "first_step_s": first_
 
 
 def _measure(n: int, seconds: float, variant: str, cache: Path) -> dict:
-    setup, sim_kwargs = VARIANTS[variant]
+    warp_config, sim_kwargs = VARIANTS[variant]
     proc = subprocess.run([sys.executable, "-c", _PROBE, str(n), str(seconds), json.dumps(sim_kwargs), str(cache),
-                           setup], check=False, capture_output=True, text=True, cwd=ROOT,
+                           json.dumps(warp_config)], check=False, capture_output=True, text=True, cwd=ROOT,
                           env={**os.environ, "PYTHONPATH": str(ROOT)})
     if proc.returncode != 0:
         raise SystemExit(f"measurement of {variant} at N={n} failed:\n{proc.stderr[-3000:]}")
