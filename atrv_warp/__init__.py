@@ -36,7 +36,7 @@ _EXPORTS = {
     "DiffRollout": "sim.diff",
     "URDFError": "sim.urdf",
     "load_rover": "sim.urdf",
-    "load_policy": "rl.agents",
+    "load_policy": "policy",
 }
 
 __all__ = [

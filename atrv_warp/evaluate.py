@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
 
         policy, name = scripted_policy(), f"scripted baseline ({task})"
     else:
-        from atrv_warp.rl.agents import load_policy, policy_task, pretrained_nav_policy_path, pretrained_policy_path
+        from atrv_warp.policy import load_policy, policy_task, pretrained_nav_policy_path, pretrained_policy_path
         from atrv_warp.storage import FileFormatError
 
         shipped = pretrained_nav_policy_path() if args.task == "nav" else pretrained_policy_path()

@@ -162,7 +162,7 @@ def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
     from matplotlib.patches import Circle, Polygon
 
     from atrv_warp import load_policy
-    from atrv_warp.rl.agents import pretrained_nav_policy_path
+    from atrv_warp.policy import pretrained_nav_policy_path
     from atrv_warp.task.baseline import scripted_policy
 
     runs = {"scripted driver": nav_paths(scripted_policy(), episodes, seed),

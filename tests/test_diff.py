@@ -9,7 +9,9 @@ from pathlib import Path
 import pytest
 import torch
 
-from atrv_warp.sim.diff import DiffRollout, NonFiniteGradientError, progress_reward
+from atrv_warp.sim.diff import DEFAULT_ACTION_SCALE, DiffRollout, NonFiniteGradientError
+from atrv_warp.task.config import TaskConfig
+from atrv_warp.task.reward import progress_reward
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -165,7 +167,7 @@ def test_errors_are_clear():
 
 
 def test_progress_reward_matches_the_environment():
-    """diff.progress_reward, applied to the poses the env visited, gives the env's non-terminal rewards."""
+    """task.reward.progress_reward, applied to the poses the env visited, gives the env's non-terminal rewards."""
     from tensordict import TensorDict
 
     from atrv_warp import ATRVjrEnv
@@ -184,6 +186,17 @@ def test_progress_reward_matches_the_environment():
     dense = progress_reward(torch.stack(poses), targets)
     assert dense.shape == (12, 4)
     assert torch.allclose(dense, torch.stack(rewards), atol=2e-5)
+
+
+def test_action_scale_is_an_argument_that_defaults_to_the_reference_task():
+    """The simulator knows no task: the task's action scale is passed in, and the default is the task's."""
+    assert DEFAULT_ACTION_SCALE == TaskConfig().action_scale
+    half = DiffRollout(1, steps=4, action_scale=0.5 * DEFAULT_ACTION_SCALE)
+    full = DiffRollout(1, steps=4)
+    actions = torch.full((4, 1, 2), 0.8)
+    # the same torques: half the scale, twice the action
+    assert torch.allclose(half(2 * actions), full(actions), atol=1e-6)
+    assert not torch.allclose(half(actions), full(actions), atol=1e-4)
 
 
 def test_progress_reward_gradient_reaches_the_actions(roll20):

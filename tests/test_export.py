@@ -10,7 +10,7 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from atrv_warp.rl.agents import load_policy
+from atrv_warp.policy import load_policy
 from atrv_warp.rl.export import export_policy, load_exported
 from atrv_warp.storage import FileFormatError
 from atrv_warp.task.spec import OBSERVATION

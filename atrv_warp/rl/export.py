@@ -29,7 +29,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from atrv_warp.rl.agents import load_policy, pretrained_policy_path
+from atrv_warp.policy import load_policy, pretrained_policy_path
 from atrv_warp.task.config import get_task
 from atrv_warp.task.spec import ACTION_DIM, observation_fields
 

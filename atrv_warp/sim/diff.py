@@ -34,12 +34,15 @@ import warp as wp
 
 from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant
 from atrv_warp.sim.simulator import RoverSim
-from atrv_warp.task.config import TaskConfig
 
-__all__ = ["DiffRollout", "NonFiniteGradientError", "progress_reward", "restore_external_wrench"]
+__all__ = ["DEFAULT_ACTION_SCALE", "DiffRollout", "NonFiniteGradientError", "restore_external_wrench"]
 
 
 _SCRATCH = ("M", "J", "P", "H", "L")
+
+DEFAULT_ACTION_SCALE = 20.0
+"""Wheel torque per unit action [N·m] when none is given: the reference task's
+(``TaskConfig.action_scale``; the simulator knows no task, so a test keeps the two equal)."""
 
 
 class NonFiniteGradientError(FloatingPointError):
@@ -108,6 +111,8 @@ class DiffRollout:
         device: Warp device.
         wrench_fix: Apply :func:`restore_external_wrench` (keep ``True``; ``False`` reproduces
             Newton 1.8's wrong steering gradient, for comparison).
+        action_scale: Wheel torque per unit action [N·m]; a task passes its own
+            (``TaskConfig.action_scale``).
 
     Calling the object runs the rollout; see :meth:`__call__`.
     """
@@ -115,7 +120,7 @@ class DiffRollout:
     def __init__(self, num_worlds: int = 1, steps: int = 20, *, variant: str = "realistic",
                  rover: RoverConfig | None = None, contact: ContactConfig | None = None,
                  arena: ArenaConfig | None = None, sim: SimConfig | None = None, device: str = "cpu",
-                 wrench_fix: bool = True):
+                 wrench_fix: bool = True, action_scale: float = DEFAULT_ACTION_SCALE):
         if steps < 1:
             raise ValueError(f"steps must be >= 1, got {steps}")
         if contact is not None and contact.stiction:
@@ -130,7 +135,8 @@ class DiffRollout:
         self.wrench_fix = wrench_fix
         """Record :func:`restore_external_wrench` after each solver step (``False`` only to measure
         what the workaround fixes, as ``benchmarks/diff_gradients.py --without-wrench-fix`` does)."""
-        self.action_scale = TaskConfig().action_scale
+        self.action_scale = float(action_scale)
+        """Wheel torque per unit action [N·m]."""
         model = self.sim.model
         n_sub = steps * self.sim.substeps
         self.states = [model.state(requires_grad=True) for _ in range(n_sub + 1)]
@@ -262,7 +268,7 @@ class DiffRollout:
         """Roll out and return chassis poses (steps + 1, N, 7): x, y, z [m], quaternion (x, y, z, w).
 
         Args:
-            actions: (steps, N, 2) in [-1, 1] (x 20 N·m), differentiable.
+            actions: (steps, N, 2) in [-1, 1] (x :attr:`action_scale` N·m), differentiable.
             initial_state: (joint_q, joint_qd) from :meth:`initial_state` (default: every rover at
                 the origin, at rest); differentiable.
             friction: Coulomb coefficient (default: the contact config's), differentiable.
@@ -305,29 +311,3 @@ class _RolloutFn(torch.autograd.Function):
     def backward(ctx, grad_poses):
         g_a, g_q, g_qd, g_mu, g_mass = ctx.roll.backward(grad_poses, ctx.rollout_id)
         return None, g_a, g_q, g_qd, g_mu, g_mass
-
-
-def progress_reward(poses: torch.Tensor, targets: torch.Tensor, task: TaskConfig | None = None) -> torch.Tensor:
-    """The task's dense reward of every step of a rollout, differentiable: (steps, N).
-
-    ``(previous distance - distance) + heading_weight * (previous |heading error| - |heading error|)
-    - step_penalty``: the non-terminal terms of :data:`atrv_warp.task.spec.REWARD_TERMS`
-    (progress, heading, step_penalty), as the environment's ``compute_step_outcome`` kernel
-    computes them (tested against the environment). The terminal rewards (+4 within 1 m,
-    -4 on a wall or flip) are discrete events without a gradient and are left out.
-
-    Args:
-        poses: (steps + 1, N, 7) chassis poses from :class:`DiffRollout`.
-        targets: (N, 2) target x, y [m].
-        task: Reward weights (default :class:`~atrv_warp.task.config.TaskConfig`).
-    """
-    task = task or TaskConfig()
-    qx, qy, qz, qw = poses[..., 3:7].unbind(-1)
-    yaw = torch.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-    to_target = targets.to(poses).unsqueeze(0) - poses[..., :2]
-    distance = to_target.norm(dim=-1)
-    bearing = torch.atan2(to_target[..., 1], to_target[..., 0]) - yaw
-    heading_error = torch.atan2(torch.sin(bearing), torch.cos(bearing)).abs()
-    return ((distance[:-1] - distance[1:]) + task.heading_weight * (heading_error[:-1] - heading_error[1:])
-            - task.step_penalty)
-

@@ -2,7 +2,7 @@
 
 Everything that reads or writes the task's tensors derives from here: the environment's
 specs, the Warp kernels (observation indices, bounds, end reasons, reward terms), the scripted
-baseline, the Gymnasium spaces, the ROS goal mode and :func:`atrv_warp.sim.diff.progress_reward`.
+baseline, the Gymnasium spaces, the ROS goal mode and :func:`atrv_warp.task.reward.progress_reward`.
 
 - :data:`OBSERVATION`: the observation's fields in order, each with its clip bound;
   :func:`observation_fields` adds a task's scan sectors after them.

@@ -354,7 +354,7 @@ class RoverSimNode(Node):
         if self.policy is None:
             from tensordict import TensorDict
 
-            from atrv_warp.rl.agents import load_policy, pretrained_nav_policy_path
+            from atrv_warp.policy import load_policy, pretrained_nav_policy_path
 
             shipped = pretrained_nav_policy_path() if self.params["task"] == "nav" else None
             self.policy = (load_policy(self.params["policy"] or shipped), TensorDict)

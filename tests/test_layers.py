@@ -1,0 +1,105 @@
+"""Layers point down only: read every module's imports (lazy ones inside functions included) and
+fail on one that reaches a higher layer.
+
+From the bottom: ``runtime`` and ``storage``; ``sim/`` (the simulator knows no task); ``task/`` (the
+task knows no trainer); ``policy`` (a saved policy, loaded without the trainer); ``integrations/``
+(Rerun, ROS 2, Gymnasium: no trainer internals); ``rl/`` (training); the command-line modules and
+the package's lazy namespace on top.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGE = ROOT / "atrv_warp"
+
+LAYERS = (
+    ("atrv_warp.runtime", "atrv_warp.storage"),
+    ("atrv_warp.sim",),
+    ("atrv_warp.task",),
+    ("atrv_warp.policy",),
+    ("atrv_warp.integrations",),
+    ("atrv_warp.rl",),
+)
+"""Module prefixes, lowest layer first. Anything else in the package (the command-line modules,
+``atrv_warp`` itself) is the top layer."""
+TOP = len(LAYERS)
+
+
+def layer(module: str) -> int:
+    for i, prefixes in enumerate(LAYERS):
+        if any(module == p or module.startswith(p + ".") for p in prefixes):
+            return i
+    return TOP
+
+
+def layer_name(i: int) -> str:
+    return "/".join(p.removeprefix("atrv_warp.") for p in LAYERS[i]) if i < TOP else "the top (CLIs, atrv_warp)"
+
+
+def imports(module: str, source: str, is_package: bool) -> set[str]:
+    """Every ``atrv_warp`` module ``source`` imports, absolute or relative, at any depth."""
+    out = set()
+    package = module if is_package else module.rpartition(".")[0]
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                parts = parts[: len(parts) - node.level + 1]
+                base = ".".join(parts + ([base] if base else []))
+            # `from atrv_warp.sim import diff` imports the module atrv_warp.sim.diff: count the deeper one
+            out.update(f"{base}.{a.name}" if f"{base}.{a.name}" in MODULES else base for a in node.names)
+    return {m for m in out if m == "atrv_warp" or m.startswith("atrv_warp.")}
+
+
+def _modules() -> dict[str, tuple[Path, bool]]:
+    mods = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(ROOT).with_suffix("")
+        is_package = rel.name == "__init__"
+        name = ".".join(rel.parent.parts if is_package else rel.parts)
+        mods[name] = (path, is_package)
+    return mods
+
+
+MODULES = _modules()
+
+
+def upward_imports(sources: dict[str, tuple[str, bool]]) -> list[str]:
+    """One line per import of a higher layer in ``sources`` (module -> (source, is_package))."""
+    problems = []
+    for module, (source, is_package) in sorted(sources.items()):
+        here = layer(module)
+        for target in sorted(imports(module, source, is_package)):
+            if layer(target) > here:
+                problems.append(f"{module} ({layer_name(here)}) imports {target} ({layer_name(layer(target))})")
+    return problems
+
+
+def test_no_module_imports_a_higher_layer():
+    sources = {m: (p.read_text(), pkg) for m, (p, pkg) in MODULES.items()}
+    problems = upward_imports(sources)
+    assert not problems, "\n".join(problems)
+
+
+def test_the_check_catches_an_upward_import():
+    """The two imports issue 28 found, a relative one, and one through the package's lazy namespace."""
+    found = upward_imports({
+        "atrv_warp.sim.diff": ("def f():\n    from atrv_warp.task.config import TaskConfig\n", False),
+        "atrv_warp.integrations.ros.node": ("from atrv_warp.rl import loop\n", False),
+        "atrv_warp.task.env": ("from ..rl.config import TrainConfig\n", False),
+        "atrv_warp.sim.scanner": ("import atrv_warp\n", False),
+        "atrv_warp.task.kernels": ("from atrv_warp.sim.kernels.contact import FLAG_OBSTACLE\n", False),
+    })
+    assert found == [
+        "atrv_warp.integrations.ros.node (integrations) imports atrv_warp.rl.loop (rl)",
+        "atrv_warp.sim.diff (sim) imports atrv_warp.task.config (task)",
+        "atrv_warp.sim.scanner (sim) imports atrv_warp (the top (CLIs, atrv_warp))",
+        "atrv_warp.task.env (task) imports atrv_warp.rl.config (rl)",
+    ], found
+    assert layer("atrv_warp.simulation") == TOP  # a prefix is a whole module name, not a string prefix
