@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 
 from atrv_warp.rl.config import TrainConfig, cli_args, load_train_config, preset_names
-from atrv_warp.rl.trainer import train
+from atrv_warp.rl.loop import train
 from atrv_warp.runtime import add_verbose_argument, error_line, set_verbose
 from atrv_warp.storage import FileFormatError
 

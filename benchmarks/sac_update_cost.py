@@ -8,7 +8,7 @@ halving the batch from 512 saves only about a quarter, and a second thread buys 
 would take the core the collector needs.
 
 Then the candidates for a cheaper update (issue #16), at the default preset's width and batch on
-one thread, each built by the trainer's own :class:`~atrv_warp.rl.trainer.Learner`: the three
+one thread, each built by the trainer's own :class:`~atrv_warp.rl.learner.Learner`: the three
 losses ``loss=`` switches between (TorchRL's SAC, CrossQ, REDQ), SAC with TorchRL's vmap over the
 critics replaced by a loop, and SAC with the loss and its backward under ``torch.compile`` (its
 compile time reported apart). Written to ``benchmarks/results/sac_update_cost.json``.
@@ -51,9 +51,9 @@ def variants(skip_compile: bool) -> list[dict]:
     """Update cost of each candidate at the default preset's width and batch, one thread."""
     import torch
 
-    from atrv_warp.rl.agents import Normalize, make_actor
+    from atrv_warp.policy import Normalize, make_actor
     from atrv_warp.rl.config import load_train_config
-    from atrv_warp.rl.trainer import Learner
+    from atrv_warp.rl.learner import Learner
 
     torch.set_num_threads(1)
     rows = []
@@ -76,7 +76,7 @@ def variants(skip_compile: bool) -> list[dict]:
     cfg = load_train_config("default", {})
     from torchrl.objectives import SACLoss, SoftUpdate
 
-    from atrv_warp.rl.agents import make_qvalue
+    from atrv_warp.rl.learner import make_qvalue
 
     loop = SACLoss(make_actor(cfg.network.width, cfg.network.depth), make_qvalue(cfg.network.width, cfg.network.depth),
                    num_qvalue_nets=2, target_entropy=-2.0, deactivate_vmap=True)
@@ -123,7 +123,8 @@ def main() -> int:
     from tensordict import TensorDict
     from torchrl.objectives import SACLoss, SoftUpdate
 
-    from atrv_warp.rl.agents import make_actor, make_qvalue
+    from atrv_warp.policy import make_actor
+    from atrv_warp.rl.learner import make_qvalue
 
     rows = []
     for threads in (1, 2):

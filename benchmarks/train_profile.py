@@ -48,14 +48,16 @@ def main() -> int:
     import torch
     from tensordict import TensorDict
 
-    from atrv_warp.rl.agents import Normalize, make_actor
+    from atrv_warp.policy import Normalize, make_actor
+    from atrv_warp.rl.collectors import make_collector, pin_to_core
     from atrv_warp.rl.config import load_train_config
-    from atrv_warp.rl.trainer import Evaluator, Learner, _pin_to_core, make_buffer, make_collector
+    from atrv_warp.rl.learner import Learner, make_buffer
+    from atrv_warp.rl.loop import Evaluator
 
     cfg = load_train_config("default")
     torch.manual_seed(0)
     torch.set_num_threads(cfg.run.threads)
-    _pin_to_core(0)
+    pin_to_core(0)
     normalize = Normalize()
     actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize)
     buffer = make_buffer(cfg)
@@ -93,7 +95,7 @@ def main() -> int:
         with iso("sample"):
             batch = buffer.sample()
         learner.update(batch, phase=iso)
-    evaluator = Evaluator(cfg, actor, [])  # the periodic evaluation, on this core as in train()
+    evaluator = Evaluator(cfg, actor)  # the periodic evaluation, on this core as in train()
     evaluator(frames)  # warm: its environment's first steps
     t_eval = time.perf_counter()
     evaluator(frames)

@@ -39,7 +39,7 @@ def _series(path: Path) -> list[tuple[int, float]]:
 
 def _one_seed(config: str, overrides: dict, threshold: float) -> dict:
     from atrv_warp.rl.config import load_train_config
-    from atrv_warp.rl.trainer import train
+    from atrv_warp.rl.loop import train
 
     cfg = load_train_config(config, overrides)
     run_dir = Path(cfg.run.out_dir) / cfg.run.name

@@ -26,7 +26,7 @@ EXTRA_USERS = {
     "test": ("tests/",),
     "browser": ("atrv_warp/integrations/browser.py", "docs/make_pictures.py"),
     "onnx": ("atrv_warp/rl/export.py",),
-    "ray": ("atrv_warp/rl/ray_collection.py", "tests/test_ray.py", "benchmarks/ray_collection.py"),
+    "ray": ("atrv_warp/rl/collectors.py", "tests/test_ray.py", "benchmarks/ray_collection.py"),
     "bench": ("benchmarks/sim_vs_mujoco.py", "benchmarks/mujoco_twin/"),
 }
 SCANNED = ("atrv_warp", "tests", "benchmarks", "examples", "docs")
@@ -101,7 +101,7 @@ def test_the_check_catches_a_removed_dependency():
     pruned = re.sub(r'^\s*"matplotlib[^"]*",.*\n', "", text, flags=re.MULTILINE)
     assert pruned != text
     problems = undeclared_imports(pruned, _project_files())
-    assert any(p.startswith("atrv_warp/rl/trainer.py: imports 'matplotlib'") for p in problems), problems
+    assert any(p.startswith("atrv_warp/rl/reporting.py: imports 'matplotlib'") for p in problems), problems
     # and an extra's module used from a core module is caught too
     leaky = undeclared_imports(text, {"atrv_warp/sim/simulator.py": "import rclpy\n"})
     assert len(leaky) == 1 and leaky[0].startswith("atrv_warp/sim/simulator.py: imports 'rclpy' from [")

@@ -136,9 +136,9 @@ def test_collector_weights_follow_the_learner(no_ray_before):
     """After each batch, the collector that delivered it holds the learner's weights of that moment."""
     import ray
 
-    from atrv_warp.rl.agents import Normalize, make_actor
+    from atrv_warp.policy import Normalize, make_actor
+    from atrv_warp.rl.collectors import WORKER_KEY, make_ray_collector, worker_weights
     from atrv_warp.rl.config import load_train_config
-    from atrv_warp.rl.ray_collection import WORKER_KEY, make_ray_collector, worker_weights
 
     cfg = load_train_config("smoke", {"collector": "ray", "envs_per_collector": "16"})
     normalize = Normalize()
@@ -211,15 +211,15 @@ def test_ctrl_c_and_errors_leave_no_ray_behind(tmp_path, no_ray_before):
     assert_no_ray_left(no_ray_before)
 
     failing = ("import sys, ray\n"
-               "from atrv_warp.rl import trainer\n"
+               "from atrv_warp.rl import learner, loop\n"
                "from atrv_warp.rl.config import load_train_config\n"
                "def broken(self, batch, phase=None):\n"
                "    raise RuntimeError('injected failure')\n"
-               "trainer.Learner.update = broken  # the first gradient step fails\n"
+               "learner.Learner.update = broken  # the first gradient step fails\n"
                f"cfg = load_train_config('smoke', {{'collector': 'ray', 'out_dir': {str(tmp_path / 'error')!r}, "
                "'init_random_frames': '0', 'envs_per_collector': '16'})\n"
                "try:\n"
-               "    trainer.train(cfg)\n"
+               "    loop.train(cfg)\n"
                "except RuntimeError as err:\n"
                "    print('raised:', err)\n"
                "print('ray initialized:', ray.is_initialized(), flush=True)\n"

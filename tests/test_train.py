@@ -46,11 +46,11 @@ def test_config_files_and_errors(tmp_path):
 
 
 def test_substeps_reach_the_training_and_evaluation_envs():
-    from atrv_warp.rl.trainer import Evaluator
+    from atrv_warp.rl.loop import Evaluator
 
     cfg = load_train_config(SMOKE, {"substeps": "3", "eval_episodes": "4"})
     assert dict(cfg.env.env_kwargs())["sim"].substeps == 3 and dict(TrainConfig().env.env_kwargs())["sim"].substeps == 5
-    evaluator = Evaluator(cfg, actor=None, loggers=[])
+    evaluator = Evaluator(cfg, actor=None)
     assert evaluator.env.sim.substeps == 3
     with pytest.raises(ValueError, match="substeps must be > 0, got 0"):
         load_train_config(None, {"substeps": "0"})
@@ -131,7 +131,7 @@ def test_resume_continues_step_counter(smoke_run, tmp_path):
 
 
 def test_shipped_policy_beats_scripted_baseline():
-    from atrv_warp.rl.agents import load_policy, pretrained_policy_path
+    from atrv_warp.policy import load_policy, pretrained_policy_path
     from atrv_warp.task.baseline import scripted_policy
     from atrv_warp.task.evaluation import evaluate
 
@@ -146,7 +146,7 @@ def test_shipped_policy_beats_scripted_baseline():
 def test_shipped_nav_policy_beats_scripted_driver_on_nav():
     """Learning matters on the nav task: the scripted turn-then-drive driver runs into the obstacle
     across its path; the shipped nav policy drives around it."""
-    from atrv_warp.rl.agents import load_policy, policy_task, pretrained_nav_policy_path
+    from atrv_warp.policy import load_policy, policy_task, pretrained_nav_policy_path
     from atrv_warp.task.baseline import scripted_policy
     from atrv_warp.task.evaluation import evaluate
 
@@ -205,7 +205,7 @@ def test_evaluate_names_a_bad_file_in_one_line_and_unpickles_nothing(smoke_run, 
         assert proc.returncode == 2 and len(lines) == 1, (kind, proc.stderr)
         assert str(files[kind]) in lines[0] and expected[kind] in lines[0], lines[0]
         assert "Traceback" not in proc.stderr
-    from atrv_warp.rl.agents import load_policy
+    from atrv_warp.policy import load_policy
     from atrv_warp.storage import FileFormatError
 
     for kind, path in files.items():
@@ -260,8 +260,8 @@ def _fixed_batch(n: int = 256):
 def test_each_loss_learns_and_its_state_round_trips(loss):
     """``loss=`` switches TorchRL's SAC, CrossQ or REDQ loss: each fits its critics on a fixed batch,
     CrossQ without target networks, and a learner rebuilt from the state dict takes the same step."""
-    from atrv_warp.rl.agents import Normalize, make_actor
-    from atrv_warp.rl.trainer import Learner
+    from atrv_warp.policy import Normalize, make_actor
+    from atrv_warp.rl.learner import Learner
 
     cfg = load_train_config(SMOKE, {"loss": loss})
     torch.manual_seed(0)

@@ -1,6 +1,13 @@
-"""Collection on Ray (``collector=ray``): TorchRL's :class:`~torchrl.collectors.distributed.RayCollector`
-over ``num_collectors`` actors, each stepping ``envs_per_collector`` worlds, on this machine or a cluster.
+"""Collectors: one table (:data:`COLLECTORS`) from ``collector.kind`` to what differs between the
+ways of collecting, and :func:`make_collector`, which builds the one a configuration names.
 
+- ``async``: one worker process on the second core steps the worlds while the trainer updates on
+  the first; the trainer sends it the weights after each batch's updates.
+- ``sync``: collect and update in turn, in this process, with the learner's own actor (bit-reproducible).
+- ``ray``: ``num_collectors`` Ray actors, on this machine or a cluster (below).
+
+Collection on Ray (``collector=ray``): TorchRL's :class:`~torchrl.collectors.distributed.RayCollector`
+over ``num_collectors`` actors, each stepping ``envs_per_collector`` worlds.
 ``python -m atrv_warp.train --config smoke collector=ray`` trains with two collectors on a local Ray;
 ``ray_address=auto`` joins the cluster this node belongs to (README, 'Scale out on Ray'). Needs the
 ``ray`` extra: ``pip install -e ".[ray]"``.
@@ -21,18 +28,22 @@ from __future__ import annotations
 
 import importlib.util
 import logging
+import math
 import os
 import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.collectors import Collector
 
 from atrv_warp.rl.config import TrainConfig
-from atrv_warp.task.env import EnvFactory
+from atrv_warp.task.env import ATRVjrEnv, EnvFactory
 
-__all__ = ["INSTALL_HINT", "OBJECT_STORE_BYTES", "WORKER_KEY", "RayWorker", "StampWorker", "describe_placements",
-           "make_ray_collector", "placements", "ray_init_config", "require_ray", "worker_weights"]
+__all__ = ["COLLECTORS", "INSTALL_HINT", "OBJECT_STORE_BYTES", "WORKER_KEY", "CollectorKind", "RayWorker",
+           "StampWorker", "describe_placements", "make_collector", "make_ray_collector", "pin_to_core", "placements",
+           "ray_init_config", "require_ray", "worker_weights"]
 
 INSTALL_HINT = 'collector=ray needs Ray, the optional extra [ray]: pip install -e ".[ray]"'
 """What ``collector=ray`` says, before any work, where Ray is not installed."""
@@ -156,3 +167,88 @@ def describe_placements(collector) -> str:
 def worker_weights(collector) -> list[TensorDictBase]:
     """:meth:`RayWorker.policy_weights` of every collector of ``collector``, in order."""
     return collector.map_fn("policy_weights")
+
+
+def pin_to_core(index: int) -> None:
+    """Pin this process to the ``index``-th core it may run on (modulo their number)."""
+    if hasattr(os, "sched_setaffinity"):
+        cores = sorted(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, {cores[index % len(cores)]})
+
+
+def make_sync_collector(cfg: TrainConfig, actor, *, total_frames: int, init_random_frames: int, env_seed: int):
+    """Collect in this process, stepping the learner's own ``actor``."""
+    # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
+    env = ATRVjrEnv(cfg.env.num_envs, seed=env_seed, **dict(cfg.env.env_kwargs()))
+    return Collector(env, actor, frames_per_batch=cfg.frames_per_batch, total_frames=total_frames,
+                     init_random_frames=init_random_frames, auto_register_policy_transforms=False)
+
+
+def make_async_collector(cfg: TrainConfig, actor, *, total_frames: int, init_random_frames: int, env_seed: int):
+    """One worker process, pinned to the second core, with a copy of ``actor``."""
+    from torchrl.collectors import MultiAsyncCollector
+
+    factory = EnvFactory(cfg.env.num_envs, seed=env_seed, core=1, env_kwargs=cfg.env.env_kwargs())
+    failure = None
+    try:
+        return MultiAsyncCollector([factory], actor, frames_per_batch=cfg.frames_per_batch, total_frames=total_frames,
+                                   init_random_frames=init_random_frames)
+    except Exception as err:  # noqa: BLE001 - re-raised below, once the half-built collector is gone
+        failure = f"{type(err).__name__}: {err}"
+    # The half-built collector dies with the exception's frames, here: torchrl 0.14's weight-sync
+    # scheme shuts down in __del__, which deadlocks if it is left for interpreter exit.
+    import gc
+
+    gc.collect()
+    raise RuntimeError(f"the collector's worker process failed to start: {failure}")
+
+
+def _describe_local(cfg: TrainConfig) -> str:
+    return f"{cfg.collector.kind} collector, {cfg.env.num_envs} worlds"
+
+
+def _describe_ray(cfg: TrainConfig) -> str:
+    where = f"Ray at {cfg.collector.ray_address}" if cfg.collector.ray_address else "local Ray"
+    return f"{cfg.collector.num_collectors} ray collectors x {cfg.worlds_per_collector} worlds ({where})"
+
+
+@dataclass(frozen=True)
+class CollectorKind:
+    """What differs between the ways of collecting; the trainer asks this, never the kind's name."""
+
+    make: Callable
+    """``make(cfg, actor, *, total_frames, init_random_frames, env_seed)``: the TorchRL collector."""
+    describe: Callable[[TrainConfig], str]
+    """One line for the console: ``'async collector, 256 worlds'``, ``'2 ray collectors x 64 worlds (local Ray)'``."""
+    push_weights: bool = False
+    """The collector steps a copy of the policy, which the trainer updates after each batch's updates
+    (``sync`` shares the learner's actor; Ray's collectors fetch the weights themselves)."""
+    trainer_core: int | None = None
+    """Pin the trainer to this core (``async``: the worker has the other one)."""
+    require: Callable[[], None] | None = None
+    """Raises, before any work, where what the kind needs is not installed."""
+    placements: Callable | None = None
+    """``placements(collector)``: one line saying where the collectors run, printed at the start."""
+
+
+def make_collector(cfg: TrainConfig, actor, frames_done: int):
+    """The collector ``cfg.collector.kind`` names (:data:`COLLECTORS`), for the frames still to collect.
+
+    A resumed run (``frames_done`` > 0) collects only what is left, random frames included, and
+    draws new episodes.
+    """
+    fpb = cfg.frames_per_batch
+    remaining = max(cfg.run.total_frames - frames_done, 0)
+    random_left = max(cfg.collector.init_random_frames - frames_done, 0)
+    env_seed = cfg.run.seed + 7919 * (frames_done // fpb + 1)  # a resumed run draws new episodes
+    whole_batches = max(math.ceil(remaining / fpb), 1) * fpb  # the loop stops at total_frames itself
+    return COLLECTORS[cfg.collector.kind].make(cfg, actor, total_frames=whole_batches, init_random_frames=random_left,
+                                               env_seed=env_seed)
+
+
+COLLECTORS: dict[str, CollectorKind] = {
+    "async": CollectorKind(make_async_collector, _describe_local, push_weights=True, trainer_core=0),
+    "sync": CollectorKind(make_sync_collector, _describe_local),
+    "ray": CollectorKind(make_ray_collector, _describe_ray, require=require_ray, placements=describe_placements),
+}
+"""Every ``collector.kind`` (:class:`~atrv_warp.rl.config.CollectorConfig`) and what it means for the trainer."""

@@ -1,0 +1,124 @@
+"""SAC's learner: the critics, the TorchRL loss of the SAC family, its optimisers and target
+update (:class:`Learner`), and the replay buffer it samples (:func:`make_buffer`)."""
+
+from __future__ import annotations
+
+import contextlib
+
+import torch
+from torch import nn
+from torchrl.modules import MLP, ValueOperator
+
+from atrv_warp.policy import Normalize
+from atrv_warp.rl.config import TrainConfig
+from atrv_warp.task.spec import ACTION_DIM
+
+__all__ = ["Learner", "make_buffer", "make_loss", "make_qvalue"]
+
+
+class _QNet(nn.Module):
+    def __init__(self, normalize: Normalize, width: int, depth: int, batch_renorm: bool = False):
+        super().__init__()
+        self.normalize = normalize
+        norm = {}
+        if batch_renorm:
+            from torchrl.modules.models.batchrenorm import BatchRenorm1d
+
+            norm = {"norm_class": BatchRenorm1d, "norm_kwargs": {"num_features": width, "momentum": 0.01}}
+        self.mlp = MLP(in_features=normalize.loc.numel() + ACTION_DIM, out_features=1, num_cells=[width] * depth,
+                       activation_class=nn.ReLU, **norm)
+
+    def forward(self, observation: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        return self.mlp(torch.cat([self.normalize(observation), action], dim=-1))
+
+
+def make_qvalue(width: int = 128, depth: int = 2, normalize: Normalize | None = None, *,
+                batch_renorm: bool = False) -> ValueOperator:
+    """Q-network ``(observation, action) -> state_action_value``; shares ``normalize``'s statistics.
+
+    ``batch_renorm``: batch renormalisation after every hidden layer, as CrossQ's critics need.
+    """
+    return ValueOperator(_QNet(normalize if normalize is not None else Normalize(), width, depth, batch_renorm),
+                         in_keys=["observation", "action"])
+
+
+def make_buffer(cfg: TrainConfig):
+    """The replay buffer: ``buffer_size`` frames in memory, sampled ``batch_size`` at a time."""
+    from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+
+    return TensorDictReplayBuffer(storage=LazyTensorStorage(cfg.optim.buffer_size), batch_size=cfg.optim.batch_size)
+
+
+def make_loss(cfg: TrainConfig, actor, normalize: Normalize):
+    """The TorchRL loss ``cfg.optim.loss`` names, with new critics that share ``normalize``."""
+    from torchrl.objectives import CrossQLoss, REDQLoss, SACLoss
+
+    width, depth = cfg.network.width, cfg.network.depth
+    common = {"alpha_init": cfg.optim.init_alpha, "target_entropy": -2.0}
+    if cfg.optim.loss == "crossq":
+        qvalue = make_qvalue(width, depth, normalize=normalize, batch_renorm=True)
+        loss = CrossQLoss(actor, qvalue, num_qvalue_nets=2, **common)
+    elif cfg.optim.loss == "redq":
+        qvalue = make_qvalue(width, depth, normalize=normalize)
+        # REDQLoss needs temperature bounds; its default floor (0.1) would outweigh this task's rewards
+        loss = REDQLoss(actor, qvalue, num_qvalue_nets=10, sub_sample_len=2, min_alpha=1e-4, max_alpha=10.0,
+                        **common)
+    else:
+        loss = SACLoss(actor, make_qvalue(width, depth, normalize=normalize), num_qvalue_nets=2, **common)
+    loss.make_value_estimator(gamma=cfg.optim.gamma)
+    _ = loss.target_entropy  # REDQ registers this buffer lazily: a resumed run's state dict must find it
+    return loss
+
+
+class Learner:
+    """SAC's critics, loss, target-network update and optimisers.
+
+    Built once the observation statistics are final, so the critics' (copied) normalisation
+    matches the actor's.
+    """
+
+    def __init__(self, cfg: TrainConfig, actor, normalize: Normalize):
+        self.loss = make_loss(cfg, actor, normalize)
+        self.target_update = None
+        if cfg.optim.loss != "crossq":  # CrossQ has no target networks
+            from torchrl.objectives import SoftUpdate
+
+            self.target_update = SoftUpdate(self.loss, tau=cfg.optim.tau)
+        self.opts = {
+            "actor": torch.optim.Adam(self.loss.actor_network_params.flatten_keys().values(), lr=cfg.optim.lr),
+            "critic": torch.optim.Adam(self.loss.qvalue_network_params.flatten_keys().values(), lr=cfg.optim.lr),
+            "alpha": torch.optim.Adam([self.loss.log_alpha], lr=cfg.optim.lr),
+        }
+
+    def update(self, batch, phase=None):
+        """One gradient step on every network and the temperature; returns the loss TensorDict.
+
+        ``phase``: optional ``phase(name)`` context-manager factory that times each part (loss,
+        backward, optimiser, target), as ``benchmarks/train_profile.py`` does.
+        """
+        phase = phase or (lambda name: contextlib.nullcontext())
+        with phase("loss"):
+            out = self.loss(batch)
+        with phase("backward"):
+            for opt in self.opts.values():
+                opt.zero_grad(set_to_none=True)
+            (out["loss_actor"] + out["loss_qvalue"] + out["loss_alpha"]).backward()
+        with phase("optimiser"):
+            for opt in self.opts.values():
+                opt.step()
+        if self.target_update is not None:
+            with phase("target"):
+                self.target_update.step()
+        return out
+
+    @property
+    def alpha(self) -> float:
+        return float(self.loss.log_alpha.detach().exp())
+
+    def state_dict(self) -> dict:
+        return {"loss": self.loss.state_dict(), "opts": {k: o.state_dict() for k, o in self.opts.items()}}
+
+    def load_state_dict(self, sd: dict) -> None:
+        self.loss.load_state_dict(sd["loss"])
+        for k, opt in self.opts.items():
+            opt.load_state_dict(sd["opts"][k])

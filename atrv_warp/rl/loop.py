@@ -1,0 +1,253 @@
+"""SAC training: :func:`train` reads top to bottom; it gets its parts from small factories
+(:mod:`.collectors`, :mod:`.learner`, :mod:`.checkpoint`, :mod:`.reporting`) and runs them in
+:class:`TrainLoop` until a budget ends the run. The command line is ``python -m atrv_warp.train``."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import torch
+from tensordict import TensorDict
+
+from atrv_warp.policy import Normalize, load_policy, make_actor, save_policy
+from atrv_warp.rl.checkpoint import Checkpoint, RunState, load_checkpoint
+from atrv_warp.rl.collectors import COLLECTORS, WORKER_KEY, make_collector, pin_to_core
+from atrv_warp.rl.config import TrainConfig, to_toml
+from atrv_warp.rl.learner import Learner, make_buffer
+from atrv_warp.rl.reporting import Loggers, LossMeans, Progress, Stats, make_loggers, pct, plot_curve
+from atrv_warp.runtime import device_summary
+from atrv_warp.task.config import get_task
+from atrv_warp.task.env import ATRVjrEnv
+from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result
+from atrv_warp.task.spec import observation_fields
+
+__all__ = ["Evaluator", "TrainLoop", "train"]
+
+
+def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
+    """Run SAC training with ``cfg``; returns the run folder."""
+    run_dir, ck = _prepare_run(cfg, resume)
+    torch.manual_seed(cfg.run.seed)
+    torch.set_num_threads(cfg.run.threads)
+    kind = COLLECTORS[cfg.collector.kind]
+    if kind.trainer_core is not None:
+        pin_to_core(kind.trainer_core)
+    obs_dim = len(observation_fields(get_task(cfg.env.task)))
+    normalize = Normalize(obs_dim)
+    actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize, obs_dim=obs_dim)
+    buffer = make_buffer(cfg)
+    checkpoint = Checkpoint(run_dir)
+    state, learner = RunState(next_eval=cfg.logging.eval_every_frames), None
+    if ck is not None:
+        state, learner = checkpoint.restore(ck, cfg, actor, normalize, buffer)
+        print(f"resumed {run_dir} at {state.frames:,} frames, {state.updates:,} updates, "
+              f"best success {100 * state.best_success:.1f}%")
+    if state.frames >= cfg.run.total_frames:
+        print(f"nothing to do: {state.frames:,} frames already collected (total_frames={cfg.run.total_frames:,}); "
+              "raise total_frames= to train further")
+        return run_dir
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "config.toml").write_text(to_toml(cfg))
+    loggers = make_loggers(cfg, run_dir, resume)
+    collector = make_collector(cfg, actor, state.frames)
+    evaluator = Evaluator(cfg, actor, recording=loggers.recording)
+    budget = (f"{cfg.run.total_frames:,} frames or {cfg.run.max_minutes:g} min, whichever ends first"
+              if cfg.run.max_minutes else f"{cfg.run.total_frames:,} frames, no time limit")
+    print(f"run folder: {run_dir}  ({kind.describe(cfg)}, batch {cfg.frames_per_batch} frames, "
+          f"{cfg.env.substeps} substeps per step; budget {budget})")
+    print(device_summary("cpu"))
+    loop = TrainLoop(cfg, state, actor, normalize, buffer, learner, loggers, evaluator, checkpoint, run_dir)
+    try:
+        if kind.placements is not None:
+            print(f"{cfg.collector.kind} collectors on: {kind.placements(collector)}")
+        stopped_by = loop.run(collector)
+    finally:
+        loop.progress.close()
+        collector.shutdown()
+        # TorchRL's shutdown resets torch's thread count (to the machine's cores); on the core this
+        # process is pinned to, two threads make every op of the final evaluation ~40x slower
+        torch.set_num_threads(cfg.run.threads)
+    state.elapsed_s = loop.elapsed()
+    print(f"training stopped by {stopped_by}: {state.frames:,} frames, {state.updates:,} updates, "
+          f"{state.elapsed_s / 60:.1f} min")
+    if loop.frames_by_collector:
+        print(f"frames per collector: {', '.join(f'{n:,}' for n in loop.frames_by_collector)}")
+    _finish(cfg, state, run_dir, evaluator, loggers)
+    return run_dir
+
+
+class Evaluator:
+    """The periodic deterministic evaluation on the fixed seeded set.
+
+    ``recording``: a Rerun recording (the one the scalars go to, with ``logger=rerun``) that gets
+    two worlds of every evaluation, on its ``frames`` timeline; ``None``: nothing is recorded.
+    """
+
+    def __init__(self, cfg: TrainConfig, actor, *, recording=None):
+        self.cfg, self.actor = cfg, actor
+        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=EVAL_SEED, **dict(cfg.env.env_kwargs()))
+        self.recorder = None
+        if recording is not None:
+            from atrv_warp.integrations.rerun import RerunRecorder
+
+            self.recorder = RerunRecorder(self.env.sim, recording=recording, worlds=range(2))
+
+    def __call__(self, frames: int):
+        self.actor.eval()
+        on_step = None
+        if self.recorder is not None:
+            self.recorder.rec.set_time("frames", sequence=frames)
+            on_step = self.recorder.env_hook()
+        result = evaluate(self.actor, num_episodes=self.cfg.logging.eval_episodes, seed=EVAL_SEED, env=self.env,
+                          on_step=on_step)
+        self.actor.train()
+        return result
+
+    def close(self) -> None:
+        if self.recorder is not None:
+            self.recorder.close()
+
+
+def _prepare_run(cfg: TrainConfig, resume: bool) -> tuple[Path, dict | None]:
+    """Check the run folder, and read the checkpoint to resume from before anything is written."""
+    if cfg.logging.logger == "tensorboard":
+        import importlib.util
+
+        if importlib.util.find_spec("tensorboard") is None:
+            raise ModuleNotFoundError("logger=tensorboard needs the tensorboard package: pip install -e '.[tensorboard]'")
+    require = COLLECTORS[cfg.collector.kind].require
+    if require is not None:
+        require()
+    run_dir = Path(cfg.run.out_dir) / cfg.run.name
+    ckpt_path = Checkpoint(run_dir).path
+    if resume and not ckpt_path.is_file():
+        raise FileNotFoundError(f"--resume: no checkpoint at {ckpt_path}")
+    if not resume and ckpt_path.exists():
+        raise FileExistsError(f"{run_dir} already holds a run; use --resume to continue it or another name=")
+    return run_dir, (load_checkpoint(ckpt_path) if resume else None)  # a bad file loses nothing
+
+
+class TrainLoop:
+    """Collect, learn, evaluate and checkpoint until a budget ends the run."""
+
+    def __init__(self, cfg: TrainConfig, state: RunState, actor, normalize: Normalize, buffer, learner: Learner | None,
+                 loggers: Loggers, evaluator: Evaluator, checkpoint: Checkpoint, run_dir: Path):
+        self.cfg, self.state, self.actor, self.normalize, self.buffer = cfg, state, actor, normalize, buffer
+        self.learner, self.loggers, self.evaluator, self.checkpoint = learner, loggers, evaluator, checkpoint
+        self.run_dir = run_dir
+        self.stats, self.losses = Stats(), LossMeans()
+        self.push_weights = COLLECTORS[cfg.collector.kind].push_weights
+        self.frames_by_collector: list[int] = []
+        """Frames from each Ray collector (their batches carry the collector's index); empty otherwise."""
+        self.progress = Progress(cfg, state.frames, state.elapsed_s)
+        self.last_eval, self.last_train = float("nan"), (float("nan"), float("nan"), {})
+        self.budget_s = cfg.run.max_minutes * 60.0 if cfg.run.max_minutes > 0 else math.inf
+        self.clock0 = (state.elapsed_s, time.perf_counter())
+
+    def elapsed(self) -> float:
+        """Training time of the whole run [s], earlier sessions of a resumed run included."""
+        return self.clock0[0] + time.perf_counter() - self.clock0[1]
+
+    def log(self, name: str, value: float) -> None:
+        self.loggers.log(name, value, step=self.state.frames)
+
+    def run(self, collector) -> str:
+        cfg, st = self.cfg, self.state
+        credit = 0.0
+        for data in collector:
+            n = data.numel()
+            st.frames += n
+            self.stats.update(data)
+            self.count_by_collector(data)
+            # the full-resolution scan is for viewers; the policy observes its sectors
+            self.buffer.extend(data.exclude("scan", ("next", "scan")).reshape(-1).cpu())
+            if st.frames >= cfg.collector.init_random_frames:
+                credit = self.learn(credit + n * cfg.optim.utd_ratio)
+                if self.push_weights:  # the worker holds a copy; the sync collector shares `actor`
+                    collector.update_policy_weights_(TensorDict.from_module(self.actor))
+                # ray: the RayCollector sends the weights to the collector that delivered `data` once
+                # this body is done (update_after_each_batch)
+            st.elapsed_s = self.elapsed()
+            if st.frames >= st.next_eval or st.frames >= cfg.run.total_frames or st.elapsed_s >= self.budget_s:
+                self.evaluate_and_save()
+            self.progress.update(st.frames, st.elapsed_s, f"eval {pct(self.last_eval)} | train "
+                                                           f"{pct(self.last_train[0])} | updates {st.updates:,}")
+            if st.elapsed_s >= self.budget_s:
+                return f"max_minutes={cfg.run.max_minutes}"
+            if st.frames >= cfg.run.total_frames:
+                break
+        return "total_frames"
+
+    def count_by_collector(self, data) -> None:
+        """Add each collector's frames in ``data`` to :attr:`frames_by_collector`, where its frames carry
+        the collector's index (Ray's do)."""
+        if WORKER_KEY in data.keys(include_nested=True):
+            counts = torch.bincount(data[WORKER_KEY].reshape(-1).long(), minlength=self.cfg.collector.num_collectors)
+            self.frames_by_collector = [a + int(b) for a, b in
+                                        zip(self.frames_by_collector or [0] * len(counts), counts, strict=True)]
+
+    def learn(self, credit: float) -> float:
+        """Freeze the observation statistics on first use, then spend whole update credits."""
+        if not self.state.stats_ready:
+            obs = self.buffer[:]["observation"]
+            self.normalize.set_stats(obs.mean(0), obs.std(0))
+            self.state.stats_ready = True
+            self.learner = Learner(self.cfg, self.actor, self.normalize)
+        while credit >= 1.0:
+            credit -= 1.0
+            self.losses.add(self.learner.update(self.buffer.sample()))
+            self.state.updates += 1
+        return credit
+
+    def evaluate_and_save(self) -> None:
+        cfg, st = self.cfg, self.state
+        self.last_train = self.stats.pop()
+        self.log("train_success_rate", self.last_train[0])
+        self.log("train_reward", self.last_train[1])
+        for name, value in self.last_train[2].items():
+            self.log(f"train_reward_{name}", value)
+        self.log("updates", st.updates)
+        for name, value in self.losses.pop().items():
+            self.log(name, value)
+        self.log("wall_time_s", st.elapsed_s)
+        if self.learner is not None:
+            self.log("alpha", self.learner.alpha)
+            result = self.evaluator(st.frames)
+            for k, v in result.as_dict().items():
+                if k != "episodes":
+                    self.log(f"eval_{k}", v)
+            self.last_eval = result.success_rate
+            # equal success (100 % is common once learnt): the higher mean return, a quicker drive, wins
+            if (self.last_eval, result.mean_return) > (st.best_success, st.best_return):
+                st.best_success, st.best_return = self.last_eval, result.mean_return
+                save_policy(self.actor, self.run_dir / "best_policy.pt", width=cfg.network.width, depth=cfg.network.depth,
+                            meta={"frames": st.frames, "eval_success": st.best_success, "task": cfg.env.task})
+        st.next_eval = (st.frames // cfg.logging.eval_every_frames + 1) * cfg.logging.eval_every_frames
+        st.elapsed_s = self.elapsed()  # the evaluation's time counts too
+        self.checkpoint.save(cfg, st, self.actor, self.learner, self.buffer)
+        self.progress.log(f"{st.frames:>11,} frames {st.elapsed_s / 60:5.1f} min  eval success "
+                          f"{pct(self.last_eval)}  training episodes {pct(self.last_train[0])}  reward "
+                          f"{self.last_train[1]:+.3f}  updates {st.updates:,}")
+
+
+def _finish(cfg: TrainConfig, state: RunState, run_dir: Path, evaluator: Evaluator, loggers: Loggers) -> None:
+    """Final evaluation of the best policy on the full set, results file, learning curve, summary."""
+    result = {"frames": state.frames, "updates": state.updates, "train_minutes": state.elapsed_s / 60,
+              "best_periodic_success": state.best_success}
+    best_path = run_dir / "best_policy.pt"
+    if best_path.is_file():
+        final = evaluate(load_policy(best_path), num_episodes=cfg.logging.final_eval_episodes, seed=EVAL_SEED,
+                         **dict(cfg.env.env_kwargs()))
+        print(format_result("best policy, final evaluation", final))
+        result["final_eval"] = final.as_dict()
+    (run_dir / "final_eval.json").write_text(json.dumps(result, indent=2) + "\n")
+    if evaluator.recorder is not None:
+        evaluator.close()
+        print(f"rerun recording: {loggers.rerun.path}")
+    if plot_curve(run_dir / "logs", run_dir / "learning_curve.png"):
+        print(f"learning curve: {run_dir / 'learning_curve.png'}")
+    print(f"checkpoint: {Checkpoint(run_dir).path}\nbest policy: {best_path if best_path.is_file() else '(none yet)'}\n"
+          f"logs: {run_dir / 'logs'}\nevaluate: python -m atrv_warp.evaluate {best_path}")

@@ -1,0 +1,187 @@
+"""What a run reports: the progress bar (:class:`Progress`), the training statistics
+(:class:`Stats`, :class:`LossMeans`), the scalar loggers (:class:`Loggers`) and the learning
+curve drawn from them (:func:`plot_curve`)."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import torch
+
+from atrv_warp.rl.config import TrainConfig
+from atrv_warp.task.spec import REWARD_TERMS, EndReason
+
+__all__ = ["Loggers", "LossMeans", "Progress", "Stats", "make_loggers", "pct", "plot_curve"]
+
+
+def pct(rate: float) -> str:
+    """``' 82.4%'``, or ``'  n/a'`` before there is anything to rate."""
+    return "  n/a" if math.isnan(rate) else f"{100 * rate:5.1f}%"
+
+
+class Progress:
+    """Progress toward whichever budget ends the run first: ``total_frames`` or ``max_minutes``.
+
+    On a terminal: a bar whose percentage is the larger of the two fractions, with frames,
+    minutes, ETA and the latest figures. Elsewhere (a log file, CI): one line per evaluation.
+    """
+
+    def __init__(self, cfg: TrainConfig, frames: int, elapsed_s: float):
+        from tqdm import tqdm
+
+        self.total_frames, self.budget_s = cfg.run.total_frames, cfg.run.max_minutes * 60.0
+        self.frames0, self.elapsed0 = frames, elapsed_s
+        self.interactive = cfg.logging.progress and sys.stderr.isatty()
+        self.bar = tqdm(total=1000, disable=not self.interactive, dynamic_ncols=True,
+                        bar_format="train {percentage:3.0f}%|{bar}| {desc}", mininterval=0.5)
+        self.enabled = cfg.logging.progress
+
+    def fraction(self, frames: int, elapsed_s: float) -> float:
+        f = frames / self.total_frames
+        if self.budget_s > 0:
+            f = max(f, elapsed_s / self.budget_s)
+        return min(f, 1.0)
+
+    def eta_s(self, frames: int, elapsed_s: float) -> float:
+        rate = (frames - self.frames0) / max(elapsed_s - self.elapsed0, 1e-9)
+        eta = (self.total_frames - frames) / rate if rate > 0 else math.inf
+        return min(eta, self.budget_s - elapsed_s) if self.budget_s > 0 else eta
+
+    def update(self, frames: int, elapsed_s: float, figures: str) -> None:
+        eta = self.eta_s(frames, elapsed_s)
+        self.bar.set_description_str(f"{frames / 1e6:.2f}M frames | {elapsed_s / 60:.1f} min | "
+                                     f"ETA {eta / 60:.1f} min | {figures}", refresh=False)
+        self.bar.update(round(1000 * self.fraction(frames, elapsed_s)) - self.bar.n)  # redraws at most 2/s
+
+    def log(self, line: str) -> None:
+        if self.interactive:
+            self.bar.write(line)
+        elif self.enabled:
+            print(line, flush=True)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+class Stats:
+    """Running training statistics from collected batches (episodes that ended in them), and the
+    mean of every reward term over the collected steps."""
+
+    def __init__(self):
+        self.ended = 0
+        self.success = 0
+        self.reward_sum = 0.0
+        self.reward_n = 0
+        self.term_sums = torch.zeros(len(REWARD_TERMS), dtype=torch.float64)
+
+    def update(self, data) -> None:
+        done = data["next", "done"].reshape(-1)
+        reasons = data["next", "end_reason"].reshape(-1)[done]
+        self.ended += int(done.sum())
+        self.success += int((reasons == EndReason.SUCCESS).sum())
+        r = data["next", "reward"]
+        self.reward_sum += float(r.sum())
+        self.reward_n += r.numel()
+        terms = data["next", "reward_terms"]
+        self.term_sums += torch.stack([terms[name].sum() for name in REWARD_TERMS]).double()
+
+    def pop(self) -> tuple[float, float, dict[str, float]]:
+        """(success rate, mean reward, mean of each reward term), then start over."""
+        rate = self.success / self.ended if self.ended else float("nan")
+        n = self.reward_n
+        reward = self.reward_sum / n if n else float("nan")
+        terms = {name: float(v) / n if n else float("nan") for name, v in zip(REWARD_TERMS, self.term_sums)}
+        self.__init__()
+        return rate, reward, terms
+
+
+class LossMeans:
+    """Means of SAC's losses and entropy over the updates since the last :meth:`pop`."""
+
+    KEYS = ("loss_actor", "loss_qvalue", "loss_alpha", "entropy")
+
+    def __init__(self):
+        self.sums = {k: 0.0 for k in self.KEYS}
+        self.n = 0
+
+    def add(self, out) -> None:
+        for k in self.KEYS:
+            self.sums[k] += float(out[k].detach())
+        self.n += 1
+
+    def pop(self) -> dict[str, float]:
+        means = {k: v / self.n for k, v in self.sums.items()} if self.n else {}
+        self.__init__()
+        return means
+
+
+def plot_curve(log_dir: Path, out: Path) -> bool:
+    """Learning curve PNG from the CSV scalars; returns False if there is nothing to plot."""
+    scalars = log_dir / "scalars"
+    series = {}
+    for name in ("eval_success_rate", "train_success_rate", "train_reward"):
+        f = scalars / f"{name}.csv"
+        if f.is_file():
+            rows = [line.split(",") for line in f.read_text().splitlines() if line.strip()]
+            series[name] = ([float(a) for a, _ in rows], [float(b) for _, b in rows])
+    if "eval_success_rate" not in series:
+        return False
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4), dpi=100)
+    x, y = series["eval_success_rate"]
+    ax.plot(x, [100 * v for v in y], "o-", label="evaluation success (deterministic)")
+    if "train_success_rate" in series:
+        x, y = series["train_success_rate"]
+        ax.plot(x, [100 * v for v in y], alpha=0.5, label="training episodes' success (stochastic)")
+    ax.set_xlabel("environment frames")
+    ax.set_ylabel("success rate [%]")
+    ax.set_ylim(0, 100)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    ax.set_title("ATRV-Jr drive-to-target, SAC")
+    fig.tight_layout()
+    fig.savefig(out)
+    plt.close(fig)
+    return True
+
+
+class Loggers:
+    """The run's scalar loggers: CSV always (the learning curve is drawn from it), plus
+    TensorBoard or a Rerun recording (:attr:`rerun`), which the evaluator records into too."""
+
+    def __init__(self, loggers: list, rerun=None):
+        self.loggers = loggers
+        self.rerun = rerun
+        """The :class:`~atrv_warp.integrations.rerun.RerunLogger` among :attr:`loggers` (``logger=rerun``), or ``None``."""
+
+    @property
+    def recording(self):
+        """The Rerun recording the scalars go to (``None`` unless ``logger=rerun``)."""
+        return None if self.rerun is None else self.rerun.experiment
+
+    def log(self, name: str, value: float, step: int) -> None:
+        for lg in self.loggers:
+            lg.log_scalar(name, value, step=step)
+
+
+def make_loggers(cfg: TrainConfig, run_dir: Path, resume: bool) -> Loggers:
+    """CSV always (the learning curve is drawn from it), plus TensorBoard or Rerun."""
+    from torchrl.record.loggers import CSVLogger
+
+    loggers, rerun = [CSVLogger(exp_name="logs", log_dir=str(run_dir))], None
+    if cfg.logging.logger == "tensorboard":
+        from torchrl.record.loggers import TensorboardLogger
+
+        loggers.append(TensorboardLogger(exp_name="logs", log_dir=str(run_dir)))
+    elif cfg.logging.logger == "rerun":
+        from atrv_warp.integrations.rerun import RerunLogger
+
+        rerun = RerunLogger("train", path=run_dir / ("train_resumed.rrd" if resume else "train.rrd"))
+        loggers.append(rerun)
+    return Loggers(loggers, rerun)
