@@ -29,19 +29,27 @@ def test_config_files_and_errors(tmp_path):
     assert smoke.network.width == 16 and smoke.collector.kind == "sync"
     assert load_train_config(SMOKE, {"optim.lr": "1e-3", "collector": "async"}).optim.lr == 1e-3
     mine = tmp_path / "mine.toml"
-    mine.write_text('name = "mine"\nwidth = 64\n[optim]\nlr = 1e-3\n')  # flat keys (older runs) and tables
-    assert load_train_config(str(mine)).network.width == 64 and load_train_config(str(mine)).optim.lr == 1e-3
+    mine.write_text('[run]\nname = "mine"\n[network]\nwidth = 64\n[optim]\nlr = 1e-3\n[logging]\nprogress = false\n')
+    assert load_train_config(str(mine)) == load_train_config(None, {"name": "mine", "width": "64", "lr": "1e-3",
+                                                                    "progress": "off"})
     with pytest.raises(FileNotFoundError, match=r"config 'smok' is neither a file nor a preset; presets: \["):
         load_train_config("smok")
     with pytest.raises(ValueError, match=r"unknown train config key\(s\) \['lerning_rate'\]"):
         load_train_config(None, {"lerning_rate": "1e-3"})
-    with pytest.raises(ValueError, match="batch_size expects int, got 'big'"):
+    with pytest.raises(ValueError, match="Error parsing --optim.batch-size: invalid literal for int.*'big'"):
         load_train_config(None, {"batch_size": "big"})
+    with pytest.raises(ValueError, match=r"invalid choice 'maybe' for argument '--logging.progress'"):
+        load_train_config(None, {"progress": "maybe"})
     with pytest.raises(ValueError, match="gamma must be in"):
         load_train_config(None, {"gamma": "1.5"})
+    flat = tmp_path / "flat.toml"  # what run folders from before 0.2.0 hold
+    flat.write_text('name = "old"\nwidth = 64\n')
+    with pytest.raises(ValueError, match=r"flat keys \['name', 'width'\] are from before atrv_warp 0.2.0.*"
+                                         r"write name under \[run\], width under \[network\]"):
+        load_train_config(str(flat))
     bad = tmp_path / "bad.toml"
-    bad.write_text("num_envs = 8\nnum_env = 4\n")
-    with pytest.raises(ValueError, match=r"unknown train config key\(s\) \['num_env'\] in .*bad.toml"):
+    bad.write_text("[env]\nnum_envs = 8\nnum_env = 4\n")
+    with pytest.raises(ValueError, match=r"unknown train config key\(s\) \['env.num_env'\] in .*bad.toml"):
         load_train_config(str(bad))
 
 
@@ -65,6 +73,9 @@ def test_cli_rejects_bad_config_before_work(tmp_path):
     bad = run_module("atrv_warp.train", f"out_dir={tmp_path}", "--optim.batch-size", "big", check=False)
     assert bad.returncode == 2 and "--optim.batch-size" in bad.stderr and "big" in bad.stderr
     assert not any(tmp_path.iterdir())  # nothing was started or written
+    helped = run_module("atrv_warp.train", "--config", SMOKE, "--help")  # one parser: our options and the fields
+    assert all(f in helped.stdout for f in ("--config", "--resume", "--verbose", "--optim.lr", "--collector.kind"))
+    assert "(default: smoke)" in helped.stdout  # the fields' defaults are the preset's
 
 
 @pytest.fixture(scope="module")
@@ -128,6 +139,18 @@ def test_resume_continues_step_counter(smoke_run, tmp_path):
     assert steps == sorted(steps) and steps[-1] >= 10240  # the log continues, it does not restart
     again = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", check=False)
     assert again.returncode != 0 and "already holds a run" in again.stderr
+
+
+def test_resume_of_a_run_with_a_flat_config_says_what_changed(tmp_path):
+    """Run folders from before 0.2.0 hold a flat config.toml: --resume names the change in one line."""
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "config.toml").write_text('name = "old"\nlr = 0.001\n[env]\nnum_envs = 64\n')
+    proc = run_module("atrv_warp.train", "--resume", str(old), check=False)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert "are from before atrv_warp 0.2.0" in lines[0] and "lr under [optim], name under [run]" in lines[0]
+    assert sorted(p.name for p in old.iterdir()) == ["config.toml"]  # nothing started
 
 
 def test_shipped_policy_beats_scripted_baseline():

@@ -1,31 +1,43 @@
 """Configuration of SAC training, grouped: run / env / collector / optim / network / logging.
 
 Every field is documented where it is defined (that text is also the command line's ``--help``).
-A configuration comes from, in order: the defaults here, a TOML preset or file (tables per
-group, or flat ``key = value`` with the field names, as older runs wrote them), then the command
-line, parsed by `tyro <https://brentyi.github.io/tyro/>`_: ``--optim.lr 1e-3``, or the short
-form ``lr=1e-3`` with a field's name alone. An unknown key or a bad value stops before any work.
+A configuration comes from, in order: the defaults here, a TOML preset or file (one table per
+group, read with ``tomllib``), then the command line. One parser reads the file's values and the
+command line alike: `tyro <https://brentyi.github.io/tyro/>`_, on :class:`TrainCommand`
+(``--optim.lr 1e-3``); the short form ``lr=1e-3`` (a field's name alone) and the true/false
+words are spelt out in one table, :data:`SPELLINGS`. An unknown key or a bad value stops before
+any work, in one line.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import io
 import tomllib
 import typing
 from dataclasses import dataclass, field
 from importlib import resources
-from typing import Literal
+from pathlib import Path
+from typing import Annotated, Literal
+
+import tyro
 
 __all__ = [
+    "BOOLEAN_SPELLINGS",
+    "DEFAULT_PRESET",
+    "SPELLINGS",
     "CollectorConfig",
     "EnvConfig",
     "LoggingConfig",
     "NetworkConfig",
     "OptimConfig",
     "RunConfig",
+    "TrainCommand",
     "TrainConfig",
     "cli_args",
     "load_train_config",
+    "parse_command",
     "preset_names",
     "to_toml",
 ]
@@ -205,81 +217,108 @@ class TrainConfig:
 
 
 _GROUP_TYPES = typing.get_type_hints(TrainConfig)
-_FIELD_GROUP: dict[str, str] = {f.name: g for g, cls in _GROUP_TYPES.items() for f in dataclasses.fields(cls)}
-"""Field name -> its group: every field name is unique across groups, so ``lr=3e-4`` is enough."""
-_ALIASES = {"collector": ("collector", "kind")}
-"""Short keys that are not field names: ``collector=sync`` is ``collector.kind``."""
+SPELLINGS: dict[str, str] = {
+    **{f.name: f"{group}.{f.name}" for group, cls in _GROUP_TYPES.items() for f in dataclasses.fields(cls)},
+    "collector": "collector.kind",
+}
+"""Short command-line keys and the ``group.field`` each names: every field by its name alone (field
+names are unique across groups, so ``lr=3e-4`` is enough), and ``collector=sync`` for ``collector.kind``."""
+BOOLEAN_SPELLINGS = {"1": "True", "true": "True", "yes": "True", "on": "True",
+                     "0": "False", "false": "False", "no": "False", "off": "False"}
+"""The words a true/false field accepts (any case), as tyro spells them."""
+DEFAULT_PRESET = "default"
+PROG = "python -m atrv_warp.train"
 
 
-def _locate(key: str) -> tuple[str, str]:
-    """``(group, field)`` of a short (``lr``, ``collector``) or dotted (``optim.lr``) key; ``("", key)``
-    if there is none."""
-    if key in _ALIASES:
-        return _ALIASES[key]
-    group, _, name = key.rpartition(".")
-    group = group or _FIELD_GROUP.get(name, "")
-    if group in _GROUP_TYPES and name in _field_types(group):
-        return group, name
-    return "", key
+@dataclass(frozen=True)
+class TrainCommand:
+    """The training command line: which configuration to start from, and the configuration."""
+
+    train: Annotated[TrainConfig, tyro.conf.arg(name=""), tyro.conf.FlagConversionOff] = field(
+        default_factory=TrainConfig)
+    config: str = DEFAULT_PRESET
+    """A preset shipped with the package (``default``, ``nav``, ``smoke``) or a TOML file."""
+    resume: str | None = None
+    """Continue the run in this folder (its ``config.toml``, then the command line)."""
+    verbose: Annotated[bool, tyro.conf.arg(aliases=("-v",))] = False
+    """Show library detail: Warp module loads, TorchRL INFO (same as ATRV_WARP_VERBOSE=1)."""
 
 
-def _known() -> list[str]:
-    return sorted(set(_FIELD_GROUP) | set(_ALIASES))
+def _field_type(dotted: str):
+    group, _, name = dotted.partition(".")
+    return typing.get_type_hints(_GROUP_TYPES[group])[name]
 
 
-def _field_types(group: str) -> dict:
-    return typing.get_type_hints(_GROUP_TYPES[group])
+def _token(dotted: str, value) -> list[str]:
+    """``--group.field VALUE`` for tyro, true/false spelt as tyro spells them."""
+    text = str(value)
+    if _field_type(dotted) is bool:
+        text = BOOLEAN_SPELLINGS.get(text.strip().lower(), text)
+    return [f"--{dotted.replace('_', '-')}", text]
 
 
-def _coerce(kind, name: str, value):
-    """Convert a TOML value or command-line string to a field's type, naming the field on failure."""
-    if typing.get_origin(kind) is Literal:
-        choices = typing.get_args(kind)
-        if value not in choices:
-            raise ValueError(f"train config: {name} must be one of {list(choices)}, got {value!r}")
-        return value
-    label = kind.__name__
-    if isinstance(value, str) and kind is not str:
-        text = value.strip().lower()
-        if kind is bool:
-            if text in ("1", "true", "yes", "on"):
-                return True
-            if text in ("0", "false", "no", "off"):
-                return False
-            raise ValueError(f"train config: {name} expects true/false, got {value!r}")
-        try:
-            value = float(text.replace("_", "")) if kind is float else int(text.replace("_", ""))
-        except ValueError:
-            raise ValueError(f"train config: {name} expects {label}, got {value!r}") from None
-    if kind is float and isinstance(value, int) and not isinstance(value, bool):
-        value = float(value)
-    if kind is int and isinstance(value, float) and value.is_integer():
-        value = int(value)
-    if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
-        raise ValueError(f"train config: {name} expects {label}, got {value!r}")
-    return value
+def _unknown(keys: list[str], where: str = "") -> ValueError:
+    return ValueError(f"unknown train config key(s) {sorted(keys)}{where}; known: {sorted(SPELLINGS)}")
 
 
-def _grouped(values: dict, where: str) -> dict[str, dict]:
-    """``{group: {field: value}}`` from TOML tables and/or flat ``field`` / ``group.field`` keys."""
-    out: dict[str, dict] = {g: {} for g in _GROUP_TYPES}
-    unknown = []
-    for key, value in values.items():
-        if key in _GROUP_TYPES and isinstance(value, dict):
-            for name, v in value.items():
-                if name in _field_types(key):
-                    out[key][name] = v
-                else:
-                    unknown.append(f"{key}.{name}")
+def cli_args(tokens: list[str]) -> list[str]:
+    """Command-line tokens for tyro: ``lr=1e-3`` or ``optim.lr=1e-3`` become ``--optim.lr 1e-3``
+    (:data:`SPELLINGS`); everything else passes through. An unknown key is a ``ValueError`` naming it."""
+    out = []
+    for token in tokens:
+        key, eq, value = token.partition("=")
+        if not eq or token.startswith("-"):
+            out.append(token)
             continue
-        group, name = _locate(key)
-        if group:
-            out[group][name] = value
-        else:
-            unknown.append(key)
-    if unknown:
-        raise ValueError(f"unknown train config key(s) {sorted(unknown)}{where}; known: {_known()}")
+        dotted = SPELLINGS.get(key, key)
+        if dotted not in SPELLINGS.values():
+            raise _unknown([key])
+        out += _token(dotted, value)
     return out
+
+
+def _toml_args(values: dict, label: str) -> list[str]:
+    """Tokens for tyro from a TOML document of one table per group; a flat key (as run folders
+    written before 0.2.0 hold) is a ``ValueError`` saying where it goes now."""
+    flat = [k for k, v in values.items() if not (k in _GROUP_TYPES and isinstance(v, dict))]
+    if flat:
+        where = ", ".join(f"{k} under [{SPELLINGS[k].partition('.')[0]}]" for k in sorted(flat) if k in SPELLINGS)
+        if where:
+            raise ValueError(f"{label}: flat keys {sorted(flat)} are from before atrv_warp 0.2.0, which reads one "
+                             f"table per group: write {where}")
+        raise _unknown(flat, f" in {label}")
+    out, unknown = [], []
+    for group, table in values.items():
+        for name, value in table.items():
+            if f"{group}.{name}" in SPELLINGS.values():
+                out += _token(f"{group}.{name}", value)
+            else:
+                unknown.append(f"{group}.{name}")
+    if unknown:
+        raise _unknown(unknown, f" in {label}")
+    return out
+
+
+def _tyro(tokens: list[str], default: TrainCommand | None, where: str = "") -> TrainCommand:
+    """Parse with tyro; a bad argument is a one-line ``ValueError`` (``--help`` prints and exits)."""
+    errors = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(errors):
+            return tyro.cli(TrainCommand, args=tokens, default=default, prog=PROG,
+                            description="Train a driver with TorchRL SAC. Configuration fields: --group.field "
+                                        "VALUE, or field=VALUE.")
+    except SystemExit as err:
+        if not err.code:
+            raise
+        # tyro's message is a title, a rule or a box border, the error, a rule, then help: keep the error
+        lines = [line.strip(" │╭╮╰╯") for line in errors.getvalue().splitlines()]
+        lines = [line for line in lines if line]
+        rules = [i for i, line in enumerate(lines) if set(line) <= set("─-")]
+        if len(rules) >= 2 and rules[0] == 1:  # title, rule, error, rule
+            body = lines[2:rules[1]]
+        else:  # a box whose top border holds the title
+            body = lines[1:rules[0]] if rules else lines
+        raise ValueError(f"train config{where}: {' '.join(' '.join(body).split())}") from None
 
 
 def preset_names() -> list[str]:
@@ -290,17 +329,27 @@ def preset_names() -> list[str]:
 
 def _read_config_source(source: str) -> tuple[str, bytes]:
     """``(label, TOML bytes)`` for a preset name (``smoke``) or a file path (``my.toml``)."""
-    import os
-
-    if os.path.isfile(source):
-        with open(source, "rb") as fh:
-            return source, fh.read()
+    path = Path(source)
+    if path.is_file():
+        return source, path.read_bytes()
     name = source
-    if source.endswith(".toml") and os.path.basename(os.path.dirname(source)) == "configs":
-        name = os.path.basename(source).removesuffix(".toml")  # `configs/smoke.toml`: the packaged preset
+    if source.endswith(".toml") and path.parent.name == "configs":
+        name = path.name.removesuffix(".toml")  # `configs/smoke.toml`: the packaged preset
     if name in preset_names():  # packaged, so a non-editable install has the same defaults
         return f"preset {name!r}", resources.files("atrv_warp.rl").joinpath(f"configs/{name}.toml").read_bytes()
     raise FileNotFoundError(f"config {source!r} is neither a file nor a preset; presets: {preset_names()}")
+
+
+def _file_config(source: str | None) -> TrainConfig:
+    """The :class:`TrainConfig` defaults, then the preset or TOML file ``source``."""
+    if source is None:
+        return TrainConfig()
+    label, text = _read_config_source(str(source))
+    try:
+        values = tomllib.loads(text.decode())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise ValueError(f"{label}: not valid TOML: {err}") from None
+    return _tyro(_toml_args(values, label), None, f" in {label}").train
 
 
 def load_train_config(source: str | None = None, overrides: dict | None = None) -> TrainConfig:
@@ -311,41 +360,28 @@ def load_train_config(source: str | None = None, overrides: dict | None = None) 
     (``configs/<preset>.toml`` that is not a file names the packaged preset), or ``None`` for the
     :class:`TrainConfig` defaults alone.
     """
-    values: dict = {}
-    label = None
-    if source is not None:
-        label, text = _read_config_source(str(source))
-        try:
-            values.update(tomllib.loads(text.decode()))
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-            raise ValueError(f"{label}: not valid TOML: {err}") from None
-    grouped = _grouped(values, f" in {label}" if label else "")
-    for group, fields in _grouped(dict(overrides or {}), "").items():
-        grouped[group].update(fields)
-    parts = {}
-    for group, fields in grouped.items():
-        types = _field_types(group)
-        parts[group] = _GROUP_TYPES[group](**{k: _coerce(types[k], k, v) for k, v in fields.items()})
-    return TrainConfig(**parts).validate()
+    base = _file_config(source)
+    tokens = cli_args([f"{k}={v}" for k, v in (overrides or {}).items()])
+    return _tyro(tokens, TrainCommand(train=base)).train.validate()
 
 
-def cli_args(tokens: list[str]) -> list[str]:
-    """Command-line tokens for tyro: ``lr=1e-3`` or ``optim.lr=1e-3`` become ``--optim.lr 1e-3``;
-    everything else passes through. An unknown short key is a ``ValueError`` naming it."""
-    out = []
-    for token in tokens:
-        key, eq, value = token.partition("=")
-        if not eq or token.startswith("-"):
-            out.append(token)
-            continue
-        group, name = _locate(key)
-        if not group:
-            raise ValueError(f"unknown train config key(s) [{key!r}]; known: {_known()}")
-        if _field_types(group)[name] is bool:  # tyro's spelling; a bad value is tyro's error to name
-            value = {"1": "True", "true": "True", "yes": "True", "on": "True", "0": "False", "false": "False",
-                     "no": "False", "off": "False"}.get(value.strip().lower(), value)
-        out += [f"--{group}.{name.replace('_', '-')}", value]
-    return out
+def parse_command(tokens: list[str]) -> TrainCommand:
+    r"""The training command line: ``--config`` (or the ``--resume``\ d run's ``config.toml``), then
+    every field given. ``ValueError`` or ``FileNotFoundError`` in one line on a bad one."""
+    args = cli_args(tokens)
+    first = _tyro([a for a in args if a not in ("-h", "--help")], None)  # which file to start from
+    if first.resume:
+        run_dir = Path(first.resume)
+        if not (run_dir / "config.toml").is_file():
+            raise FileNotFoundError(f"--resume: {run_dir / 'config.toml'} not found")
+        saved = _file_config(str(run_dir / "config.toml"))
+        base = dataclasses.replace(saved, run=dataclasses.replace(saved.run, out_dir=str(run_dir.parent),
+                                                                  name=run_dir.name))
+    else:
+        base = _file_config(first.config)
+    cmd = _tyro(args, dataclasses.replace(first, train=base))
+    cmd.train.validate()
+    return cmd
 
 
 def to_toml(cfg: TrainConfig) -> str:
