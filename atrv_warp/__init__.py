@@ -2,8 +2,8 @@
 
 Layout: :mod:`atrv_warp.sim` (the simulator), :mod:`atrv_warp.task` (the drive-to-target task
 and its TorchRL environment), :mod:`atrv_warp.rl` (SAC training), :mod:`atrv_warp.integrations`
-(Rerun, ROS 2, Gymnasium); the command-line tools are thin modules at the top
-(``python -m atrv_warp.train``, ``evaluate``, ``baseline``, ``demo``, ``model``, ``ros``).
+(Rerun, ROS 2, Gymnasium), :mod:`atrv_warp.policy` (saved policies); the command-line tools are thin modules at the top
+(``python -m atrv_warp.train``, ``evaluate``, ``demo``, ``model``, ``ros``, ``export``).
 
 Public names are imported lazily so that ``python -m atrv_warp.<tool>`` loads only what
 the tool needs.

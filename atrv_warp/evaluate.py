@@ -8,7 +8,7 @@ Examples::
 
     python -m atrv_warp.evaluate                          # the shipped policy, 1000 episodes
     python -m atrv_warp.evaluate runs/default/best_policy.pt --episodes 200 --seed 7
-    python -m atrv_warp.evaluate --baseline               # the scripted driver, for comparison
+    python -m atrv_warp.evaluate --baseline               # the scripted driver, for comparison (atrv-baseline)
     python -m atrv_warp.evaluate --task nav               # the shipped navigation policy
     python -m atrv_warp.evaluate --task nav --baseline --episodes 8 --rerun nav.rrd
     python -m atrv_warp.evaluate --episodes 8 --rerun eval.rrd      # record 4 worlds; view: rerun eval.rrd
@@ -21,6 +21,8 @@ import argparse
 import sys
 
 from atrv_warp.runtime import add_verbose_argument, device_summary, error_line, set_verbose
+
+__all__ = ["baseline_main", "main"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -76,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     seed = EVAL_SEED if args.seed is None else args.seed
     recorder, env, on_step = None, None, None
     if args.rerun or args.serve or args.real_time:
-        from atrv_warp.integrations.rerun import RerunRecorder
+        from atrv_warp.integrations.recorder import RerunRecorder
         from atrv_warp.task.env import ATRVjrEnv
 
         env = ATRVjrEnv(args.episodes, device=args.device, task=task)
@@ -97,6 +99,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         write_result(args.json, name, task, seed, result)
     return 0
+
+
+def baseline_main(argv: list[str] | None = None) -> int:
+    """``atrv-baseline [--task nav] [--json F] …``: ``evaluate --baseline``, the scripted driver on the
+    standard evaluation set."""
+    return main(["--baseline", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

@@ -207,7 +207,7 @@ def viewer_screenshot(out: Path, episodes: int = 4) -> None:
     """Record the shipped policy's evaluation into a served viewer and photograph the page."""
     from atrv_warp import ATRVjrEnv, load_policy
     from atrv_warp.integrations.browser import capture_viewer
-    from atrv_warp.integrations.rerun import RerunRecorder
+    from atrv_warp.integrations.recorder import RerunRecorder
     from atrv_warp.task.evaluation import evaluate
 
     env = ATRVjrEnv(episodes)

@@ -44,7 +44,7 @@ def test_viewer_loads_in_chromium_and_reads_the_recording(tmp_path):
 
     from atrv_warp import ATRVjrEnv
     from atrv_warp.integrations.browser import capture_viewer
-    from atrv_warp.integrations.rerun import RerunRecorder
+    from atrv_warp.integrations.recorder import RerunRecorder
     from atrv_warp.task.baseline import scripted_policy
     from atrv_warp.task.evaluation import evaluate
 

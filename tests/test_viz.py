@@ -10,7 +10,8 @@ import torch
 from rerun.chunk import RrdReader
 
 from atrv_warp import ATRVjrEnv
-from atrv_warp.integrations.rerun import RerunLogger, RerunRecorder
+from atrv_warp.integrations.recorder import RerunRecorder
+from atrv_warp.integrations.rerun_logger import RerunLogger
 from atrv_warp.task.baseline import scripted_policy
 from atrv_warp.task.evaluation import evaluate
 
@@ -138,7 +139,7 @@ def test_served_viewer_is_localhost_only_and_stops():
 def test_served_viewer_context_manager_refuses_a_busy_port():
     import socket
 
-    from atrv_warp.integrations.rerun import ServedViewer
+    from atrv_warp.integrations.viewer import ServedViewer
 
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))

@@ -1,3 +1,9 @@
-"""Bridges to other tools: :mod:`.rerun` (recordings and the web viewer), :mod:`.ros` (a ROS 2
-node), :mod:`.gymnasium` (Gymnasium and vector-env adapters). The simulator and the task know
-nothing about them."""
+"""Bridges to other tools, one job per module. The simulator and the task know nothing about them.
+
+- :mod:`.recorder`: :class:`~.recorder.RerunRecorder`, the simulator's worlds to a Rerun recording;
+- :mod:`.viewer`: :class:`~.viewer.ServedViewer`, Rerun's web viewer as a process on 127.0.0.1;
+  :mod:`.browser`: that viewer in headless Chromium (screenshots, tests);
+- :mod:`.rerun_logger`: :class:`~.rerun_logger.RerunLogger`, training scalars into a Rerun recording;
+- :mod:`.ros`: a ROS 2 node (:mod:`.ros.bag`: its MCAP bags);
+- :mod:`.gymnasium`: Gymnasium and vector-env adapters.
+"""

@@ -14,7 +14,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from atrv_warp.integrations.rerun import ServedViewer
+from atrv_warp.integrations.viewer import ServedViewer
 
 __all__ = ["CHROMIUM_ARGS", "PageReport", "capture_viewer", "find_chromium"]
 

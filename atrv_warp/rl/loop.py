@@ -91,7 +91,7 @@ class Evaluator:
         self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=EVAL_SEED, **dict(cfg.env.env_kwargs()))
         self.recorder = None
         if recording is not None:
-            from atrv_warp.integrations.rerun import RerunRecorder
+            from atrv_warp.integrations.recorder import RerunRecorder
 
             self.recorder = RerunRecorder(self.env.sim, recording=recording, worlds=range(2))
 

@@ -158,7 +158,7 @@ class Loggers:
     def __init__(self, loggers: list, rerun=None):
         self.loggers = loggers
         self.rerun = rerun
-        """The :class:`~atrv_warp.integrations.rerun.RerunLogger` among :attr:`loggers` (``logger=rerun``), or ``None``."""
+        """The :class:`~atrv_warp.integrations.rerun_logger.RerunLogger` among :attr:`loggers` (``logger=rerun``), or ``None``."""
 
     @property
     def recording(self):
@@ -180,7 +180,7 @@ def make_loggers(cfg: TrainConfig, run_dir: Path, resume: bool) -> Loggers:
 
         loggers.append(TensorboardLogger(exp_name="logs", log_dir=str(run_dir)))
     elif cfg.logging.logger == "rerun":
-        from atrv_warp.integrations.rerun import RerunLogger
+        from atrv_warp.integrations.rerun_logger import RerunLogger
 
         rerun = RerunLogger("train", path=run_dir / ("train_resumed.rrd" if resume else "train.rrd"))
         loggers.append(rerun)

@@ -3,7 +3,7 @@
 It reads only the observation (sin and cos of the heading error), so it is a TorchRL policy
 like any learned one: ``scripted_policy()`` returns a ``TensorDictModule`` writing ``action``.
 Its success rate on the fixed evaluation set tells what is reachable in 200 steps on our
-physics (see ``python -m atrv_warp.baseline``).
+physics (see ``python -m atrv_warp.evaluate --baseline``).
 """
 
 from __future__ import annotations

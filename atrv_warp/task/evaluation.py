@@ -87,6 +87,6 @@ def format_result(name: str, r: EvalResult) -> str:
 
 
 def write_result(path: str | Path, name: str, task: str, seed: int, r: EvalResult) -> None:
-    """Write an evaluation's figures as JSON (``--json`` of ``python -m atrv_warp.evaluate`` and ``.baseline``)."""
+    """Write an evaluation's figures as JSON (``--json`` of ``python -m atrv_warp.evaluate``)."""
     with open(path, "w") as fh:
         json.dump({"policy": name, "task": task, "seed": seed, **r.as_dict()}, fh, indent=2)

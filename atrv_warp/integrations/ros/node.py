@@ -23,7 +23,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState, LaserScan
 from std_msgs.msg import String
 
-from atrv_warp.integrations.ros import COMMANDS, GOAL, MAX_ROVERS, PARAMETERS, VELOCITY, BagWriter, pose_dict
+from atrv_warp.integrations.ros import COMMANDS, GOAL, MAX_ROVERS, PARAMETERS, VELOCITY
+from atrv_warp.integrations.ros.bag import BagWriter, pose_dict
 from atrv_warp.integrations.ros.base import BaseParams, VelocityController, WheelOdometry, imu_reading, yaw_quaternion
 from atrv_warp.sim.simulator import DRIVE_MODE_TORQUES, DriveMode
 from atrv_warp.task.env import ATRVjrEnv

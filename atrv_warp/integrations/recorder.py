@@ -1,4 +1,4 @@
-"""Rerun visualisation: the arena, the rovers drawn from the model's own shapes, targets,
+"""Rerun recordings of the simulator: the arena, the rovers drawn from the model's own shapes, targets,
 trajectories and per-world scalars, to an ``.rrd`` file or a live web viewer on localhost.
 
 Entities (``W`` = world index)::
@@ -11,7 +11,7 @@ Entities (``W`` = world index)::
     world_W/target                                 target disc
     world_W/trajectory                             chassis path of the current episode
     plots/world_W/{reward,distance,torque_left,torque_right}   Scalars
-    train/<name>                                   training scalars (:class:`RerunLogger`)
+    train/<name>                                   training scalars (:class:`~.rerun_logger.RerunLogger`)
 
 Timelines: ``step`` (env steps since the recorder started), ``sim_time`` (seconds), and
 ``frames`` (training frames, for training scalars and the evaluations recorded during training).
@@ -25,21 +25,15 @@ View a file with ``rerun FILE.rrd``.
 from __future__ import annotations
 
 import os
-import shutil
-import signal
-import socket
-import subprocess
-import sys
 import time
 from collections.abc import Sequence
-from pathlib import Path
-from typing import Self
 
 import numpy as np
 import rerun as rr
-from torchrl.record.loggers import Logger
 
-__all__ = ["DEFAULT_WORLDS", "RerunLogger", "RerunRecorder", "ServedViewer"]
+from atrv_warp.integrations.viewer import ServedViewer
+
+__all__ = ["DEFAULT_WORLDS", "RerunRecorder"]
 
 DEFAULT_WORLDS = 4
 """Worlds logged when none are named."""
@@ -69,116 +63,6 @@ def _terrain_mesh(heights: np.ndarray, half: float, base: float) -> rr.Mesh3D:
     t = (h - h.min()) / max(float(np.ptp(h)), 1e-6)
     colors = np.stack([110 + 70 * t, 140 + 50 * t, 90 + 40 * t], axis=-1).reshape(-1, 3).astype(np.uint8)
     return rr.Mesh3D(vertex_positions=vertices, triangle_indices=tris, vertex_colors=colors)
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _port_open(port: int) -> bool:
-    with socket.socket() as s:
-        return s.connect_ex(("127.0.0.1", port)) == 0
-
-
-class ServedViewer:
-    """Rerun's web viewer and gRPC proxy, bound to 127.0.0.1 only, as a context manager.
-
-    ``start()`` launches ``rerun --serve-web`` in its own process session and waits until the
-    gRPC proxy accepts connections and the web page answers; ``stop()`` signals the whole process
-    group (a launcher may exit before the viewer binary it started) and waits until both ports
-    are free. The SDK's own ``serve_grpc`` binds every interface, so it is not used.
-
-    Example::
-
-        with ServedViewer() as viewer:
-            viewer.connect(rec)            # a rr.RecordingStream
-            print(viewer.url)              # open in a browser
-    """
-
-    def __init__(self, *, grpc_port: int | None = None, web_port: int | None = None, timeout_s: float = 20.0):
-        self.grpc_port = grpc_port or _free_port()
-        self.web_port = web_port or _free_port()
-        self.timeout_s = timeout_s
-        self.process: subprocess.Popen | None = None
-
-    @property
-    def grpc_url(self) -> str:
-        """The proxy a recording streams to, and the viewer reads from."""
-        return f"rerun+http://127.0.0.1:{self.grpc_port}/proxy"
-
-    @property
-    def url(self) -> str:
-        """The web page to open: the viewer, pointed at the proxy."""
-        return f"http://127.0.0.1:{self.web_port}/?url={self.grpc_url.replace('+', '%2B')}"
-
-    def start(self) -> Self:
-        # the venv's own script first: a venv's python run without activating the venv has no bin/ on PATH
-        exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
-        if exe is None:
-            raise RuntimeError(f"the 'rerun' command (installed with rerun-sdk) is neither beside {sys.executable} "
-                               "nor on PATH")
-        for port in (self.grpc_port, self.web_port):
-            if _port_open(port):
-                raise RuntimeError(f"port {port} on 127.0.0.1 is already in use")
-        self.process = subprocess.Popen(
-            [exe, "--serve-web", "--bind", "127.0.0.1", "--port", str(self.grpc_port),
-             "--web-viewer-port", str(self.web_port)],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-        deadline = time.monotonic() + self.timeout_s
-        while not self.healthy():
-            if self.process.poll() is not None:
-                code = self.process.returncode
-                self.stop()
-                raise RuntimeError(f"rerun viewer server exited with code {code}")
-            if time.monotonic() > deadline:
-                self.stop()
-                raise RuntimeError(f"rerun viewer server did not answer within {self.timeout_s:g} s")
-            time.sleep(0.1)
-        return self
-
-    def healthy(self) -> bool:
-        """The proxy accepts connections and the web page answers HTTP 200."""
-        import urllib.request
-
-        if not (_port_open(self.grpc_port) and _port_open(self.web_port)):
-            return False
-        try:
-            with urllib.request.urlopen(f"http://127.0.0.1:{self.web_port}/", timeout=2.0) as resp:
-                return resp.status == 200
-        except OSError:
-            return False
-
-    def connect(self, rec: rr.RecordingStream) -> None:
-        """Stream ``rec`` to the proxy (the viewer shows it live)."""
-        rec.connect_grpc(self.grpc_url)
-
-    def stop(self) -> None:
-        """Stop the server's whole process group and wait until its ports are free (idempotent)."""
-        proc, self.process = self.process, None
-        if proc is None:
-            return
-        for sig, wait in ((signal.SIGTERM, 5.0), (signal.SIGKILL, None)):
-            try:
-                os.killpg(proc.pid, sig)
-            except ProcessLookupError:
-                break
-            if wait is not None:
-                try:
-                    proc.wait(timeout=wait)
-                except subprocess.TimeoutExpired:
-                    pass
-        proc.wait()
-        deadline = time.monotonic() + 10.0
-        while (_port_open(self.grpc_port) or _port_open(self.web_port)) and time.monotonic() < deadline:
-            time.sleep(0.1)
-
-    def __enter__(self) -> Self:
-        return self.start()
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
 
 
 class RerunRecorder:
@@ -221,9 +105,10 @@ class RerunRecorder:
         self._trails: dict[int, list[np.ndarray]] = {w: [] for w in self.worlds}
         self._drawn_tile: dict[int, int] = {}
         self._drawn_obstacles: dict[int, np.ndarray] = {}
-        built = sim.built
-        self._bodies = [built.chassis_body, *built.wheel_bodies]
-        labels = built.rover_builder.body_label
+        layout = sim.buffers.layout
+        # world 0's bodies: the chassis, then the wheels (a rover's fixed frames are lumped into the chassis)
+        self._bodies = [layout.chassis_body, *(b for b in range(layout.bodies_per_world) if b != layout.chassis_body)]
+        labels = sim.model.body_label
         self._body_names = [labels[b].split("/")[-1] for b in self._bodies]
         self._log_static()
 
@@ -243,24 +128,24 @@ class RerunRecorder:
         rec.log("arena/walls", rr.Boxes3D(centers=[c for _, c, _ in walls], half_sizes=[e for _, _, e in walls],
                                           colors=[_WALL_COLOR],
                                           fill_mode="solid"), static=True)
-        # Rover shapes from the model (a different URDF draws right): local frames of each body.
-        rb = self.sim.built.rover_builder
+        # Rover shapes from the model (a different URDF draws right): world 0's shapes, in the local
+        # frame of their body; every world's rover is the same.
         import newton
 
+        model = self.sim.model
+        shape_body, shape_type = model.shape_body.numpy(), model.shape_type.numpy()
+        shape_xf, shape_scale = model.shape_transform.numpy(), model.shape_scale.numpy()
         for w in self.worlds:
             for body, name in zip(self._bodies, self._body_names):
-                for s in range(rb.shape_count):
-                    if rb.shape_body[s] != body:
-                        continue
-                    xf = rb.shape_transform[s]
-                    pos, quat = list(xf.p), list(xf.q)
-                    scale = rb.shape_scale[s]
+                for s in np.flatnonzero(shape_body == body):
+                    pos, quat = shape_xf[s, :3].tolist(), shape_xf[s, 3:].tolist()
+                    scale = shape_scale[s].tolist()
                     ent = f"world_{w}/rover/{name}/shape_{s}"
-                    if rb.shape_type[s] == newton.GeoType.BOX:
+                    if shape_type[s] == newton.GeoType.BOX:
                         rec.log(ent, rr.Boxes3D(centers=[pos], half_sizes=[tuple(scale)],
                                                 quaternions=[rr.Quaternion(xyzw=quat)], colors=[_CHASSIS_COLOR],
                                                 fill_mode="solid"), static=True)
-                    elif rb.shape_type[s] == newton.GeoType.CYLINDER:
+                    elif shape_type[s] == newton.GeoType.CYLINDER:
                         rec.log(ent, rr.Cylinders3D(lengths=[2 * scale[1]], radii=[scale[0]], centers=[pos],
                                                     quaternions=[rr.Quaternion(xyzw=quat)], colors=[_WHEEL_COLOR],
                                                     fill_mode="solid"), static=True)
@@ -316,10 +201,10 @@ class RerunRecorder:
         rec.set_time("step", sequence=self.step)
         rec.set_time("sim_time", duration=sim.sim_time)
         scan_points = scanner.points(self.worlds) if scanner is not None else None
-        bpw = sim.layout.bodies_per_world
+        bpw = sim.buffers.layout.bodies_per_world
         # .numpy() of a CPU array is a view of live simulator memory; Rerun may read it after the next
         # step, so take a copy (one per logged step).
-        body_q = sim.state_0.body_q.numpy().reshape(sim.num_worlds, bpw, 7).copy()
+        body_q = sim.buffers.body_q.numpy().reshape(sim.num_worlds, bpw, 7).copy()
         torques = sim.wheel_torque.detach().cpu().numpy()
         sides = np.array([w.side for w in sim.description.wheels])
         for i, w in enumerate(self.worlds):
@@ -373,44 +258,3 @@ class RerunRecorder:
             self.rec.disconnect()
         if self.viewer is not None:
             self.viewer.stop()
-
-
-class RerunLogger(Logger):
-    """A TorchRL ``Logger`` writing training scalars into a Rerun recording (``frames`` timeline),
-    so that they share one recording with the evaluation episodes a :class:`RerunRecorder` logs."""
-
-    def __init__(self, exp_name: str = "train", *, recording: rr.RecordingStream | None = None,
-                 path: str | os.PathLike | None = None):
-        self._recording, self._path = recording, path
-        super().__init__(exp_name=exp_name, log_dir=None if path is None else os.fspath(path))
-
-    @property
-    def path(self) -> str | os.PathLike | None:
-        """The ``.rrd`` file the scalars are saved to (``None`` when writing to a given recording)."""
-        return self._path
-
-    def _create_experiment(self) -> rr.RecordingStream:
-        rec = self._recording or rr.RecordingStream("atrv_warp")
-        if self._recording is None and self._path is not None:
-            rec.save(os.fspath(self._path))
-        return rec
-
-    def log_scalar(self, name: str, value: float, step: int | None = None) -> None:
-        if step is not None:
-            self.experiment.set_time("frames", sequence=int(step))
-        self.experiment.log(f"{self.exp_name}/{name}", rr.Scalars(float(value)))
-
-    def log_video(self, name: str, video, step: int | None = None, **kwargs) -> None:
-        raise NotImplementedError("RerunLogger logs scalars; record rollouts with RerunRecorder")
-
-    def log_hparams(self, cfg) -> None:
-        items = cfg.items() if isinstance(cfg, dict) else vars(cfg).items()
-        text = "\n".join(f"- **{k}**: {v}" for k, v in items)
-        self.experiment.log(f"{self.exp_name}/hparams", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN),
-                            static=True)
-
-    def log_histogram(self, name: str, data, **kwargs) -> None:
-        raise NotImplementedError("RerunLogger does not log histograms")
-
-    def __repr__(self) -> str:
-        return f"RerunLogger(exp_name={self.exp_name!r}, path={self._path!r})"
