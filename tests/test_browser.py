@@ -12,13 +12,12 @@ console shows no panic, a screenshot is taken; and after the viewer stops, no po
 from __future__ import annotations
 
 import os
-import socket
 
 import pytest
 
 from atrv_warp.integrations.browser import find_chromium
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 
 def _require_browser():
@@ -33,12 +32,7 @@ def _require_browser():
         pytest.skip(f"missing: {missing}")
 
 
-def _port_free(port: int) -> bool:
-    with socket.socket() as s:
-        return s.connect_ex(("127.0.0.1", port)) != 0
-
-
-def test_viewer_loads_in_chromium_and_reads_the_recording(tmp_path):
+def test_viewer_loads_in_chromium_and_reads_the_recording(tmp_path, port_free):
     _require_browser()
     from PIL import Image
 
@@ -67,5 +61,5 @@ def test_viewer_loads_in_chromium_and_reads_the_recording(tmp_path):
     colours = Image.open(shot).convert("RGB").getcolors(maxcolors=1 << 20)
     assert colours is not None and len(colours) > 1000, len(colours or [])
     for port in (viewer.grpc_port, viewer.web_port):
-        assert _port_free(port), f"port {port} still bound after the viewer stopped"
+        assert port_free(port), f"port {port} still bound after the viewer stopped"
     assert viewer.process is None

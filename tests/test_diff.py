@@ -1,6 +1,6 @@
 """Differentiable rollouts: tape gradients against central finite differences, the worked
 examples, and clear errors. Tolerances and horizons are those measured by
-benchmarks/diff_gradients.py (README, 'Differentiable rollouts')."""
+benchmarks/diff_gradients.py (docs/differentiable.md)."""
 
 import importlib.util
 import math
@@ -122,6 +122,7 @@ def test_initial_heading_gradient_while_turning():
     assert tape == pytest.approx(fd, rel=0.02)
 
 
+@pytest.mark.slow  # an optimisation run of 40 iterations
 def test_trajectory_optimisation_example_reaches_target_pose():
     """3 s open loop to (1.5, 1.5) m arriving at 90 deg, in the example's 40 iterations."""
     example = load_example("trajectory_optimisation")
@@ -133,6 +134,7 @@ def test_trajectory_optimisation_example_reaches_target_pose():
     assert actions.abs().max() <= 1.0
 
 
+@pytest.mark.slow  # an identification run
 def test_friction_identification_example():
     example = load_example("friction_identification")
     mu, history = example.identify(true_mu=0.3, guess=0.5, verbose=False)

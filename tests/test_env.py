@@ -34,8 +34,8 @@ def run(env, actions):
     return torch.stack(out)
 
 
-def test_specs_and_rollout():
-    env = ATRVjrEnv(4, seed=0)
+def test_specs_and_rollout(tiny_env):
+    env = tiny_env
     check_env_specs(env)
     assert env.observation_spec["observation"].shape == (4, 10)
     assert env.action_spec.shape == (4, 2)
@@ -212,8 +212,8 @@ def test_nonfinite_world_is_contained():
     assert torch.isfinite(td_next["observation"]).all() and env.sim.nonfinite.sum() == 0
 
 
-def test_transforms():
-    env = TransformedEnv(ATRVjrEnv(4, seed=0))
+def test_transforms(tiny_env):
+    env = TransformedEnv(tiny_env)
     env.append_transform(StepCounter())
     env.append_transform(RewardSum())
     env.append_transform(InitTracker())
@@ -269,6 +269,7 @@ def test_collector_single_process():
     assert torch.isfinite(batches[-1]["next", "observation"]).all()
 
 
+@pytest.mark.slow  # two worker processes
 def test_multisync_collector_two_workers():
     from torchrl.collectors import MultiSyncCollector
 

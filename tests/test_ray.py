@@ -12,7 +12,6 @@ import json
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -83,12 +82,6 @@ def train_cmd(*overrides: str) -> list[str]:
     return [sys.executable, "-m", "atrv_warp.train", "--config", "smoke", "collector=ray", *overrides]
 
 
-def run(cmd: list[str], env: dict | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
-    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=env, timeout=timeout, check=False)
-    assert proc.returncode == 0, f"{cmd} failed ({proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
-    return proc
-
-
 def frames_per_collector(stdout: str) -> list[int]:
     line = re.search(r"^frames per collector: (.*)$", stdout, re.MULTILINE)
     assert line, stdout
@@ -102,12 +95,12 @@ def no_ray_before():
     return shm_entries()
 
 
-def test_without_the_extra_collector_ray_stops_before_any_work(tmp_path):
+def test_without_the_extra_collector_ray_stops_before_any_work(tmp_path, run_command):
     """With ``ray`` not importable, one line says how to install the extra, and nothing is written."""
     code = ("import sys; sys.modules['ray'] = None\n"  # as if not installed: find_spec('ray') is None
             "from atrv_warp.train import main\n"
             f"sys.exit(main(['--config', 'smoke', 'collector=ray', 'out_dir={tmp_path}']))")
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=False)
+    proc = run_command([sys.executable, "-c", code], check=False)
     assert proc.returncode == 2, proc.stderr
     expected = 'python -m atrv_warp.train: error: collector=ray needs Ray, the optional extra [ray]: pip install -e ".[ray]"'
     assert proc.stderr.strip().splitlines() == [expected]
@@ -115,9 +108,10 @@ def test_without_the_extra_collector_ray_stops_before_any_work(tmp_path):
 
 
 @needs_ray
-def test_local_ray_trains_end_to_end_with_frames_from_both_collectors(tmp_path, no_ray_before):
+@pytest.mark.slow  # a Ray cluster
+def test_local_ray_trains_end_to_end_with_frames_from_both_collectors(tmp_path, no_ray_before, run_command):
     """The acceptance command on a local Ray: two collectors, every file written, both deliver, no leftovers."""
-    proc = run(train_cmd(f"out_dir={tmp_path}"))
+    proc = run_command(train_cmd(f"out_dir={tmp_path}"), timeout=300)
     run_dir = tmp_path / "smoke"
     for name in ("config.toml", "checkpoint.pt", "best_policy.pt", "final_eval.json", "learning_curve.png"):
         assert (run_dir / name).is_file(), name
@@ -132,6 +126,7 @@ def test_local_ray_trains_end_to_end_with_frames_from_both_collectors(tmp_path, 
 
 
 @needs_ray
+@pytest.mark.slow  # a Ray cluster
 def test_collector_weights_follow_the_learner(no_ray_before):
     """After each batch, the collector that delivered it holds the learner's weights of that moment."""
     import ray
@@ -184,6 +179,7 @@ def same(a, b) -> bool:
 
 
 @needs_ray
+@pytest.mark.slow  # a Ray cluster
 def test_ctrl_c_and_errors_leave_no_ray_behind(tmp_path, no_ray_before):
     """SIGINT to a run mid-training; an exception inside the training loop (Ray gone while the process
     still lives); after both, no Ray process and no orphaned shared memory."""
@@ -244,30 +240,26 @@ def test_ctrl_c_and_errors_leave_no_ray_behind(tmp_path, no_ray_before):
     assert_no_ray_left(no_ray_before)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @needs_ray
-def test_two_node_cluster_on_loopback_runs_collectors_on_the_worker_node(tmp_path, no_ray_before):
+@pytest.mark.slow  # a Ray cluster
+def test_two_node_cluster_on_loopback_runs_collectors_on_the_worker_node(tmp_path, no_ray_before, run_command,
+                                                                          free_port):
     """``ray start --head`` and ``ray start --address`` (a node offering the custom resource), then a
     run with ``ray_address`` and ``ray_resource``: both collectors are on the worker node; ``ray stop``
     leaves nothing behind."""
     ray_bin = str(Path(sys.executable).with_name("ray"))
     # token authentication, as on a real cluster: every node and the driver share one token
     env = {**os.environ, "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": uuid.uuid4().hex}
-    port = _free_port()
+    port = free_port()
     address = f"127.0.0.1:{port}"
     common = ["--node-ip-address=127.0.0.1", "--object-store-memory=100000000", "--disable-usage-stats"]
     try:
-        run([ray_bin, "start", "--head", f"--port={port}", "--num-cpus=1", "--include-dashboard=false",
-             f"--ray-client-server-port={_free_port()}", f"--dashboard-agent-listen-port={_free_port()}", *common],
+        run_command([ray_bin, "start", "--head", f"--port={port}", "--num-cpus=1", "--include-dashboard=false",
+             f"--ray-client-server-port={free_port()}", f"--dashboard-agent-listen-port={free_port()}", *common],
             env=env, timeout=120)
-        run([ray_bin, "start", f"--address={address}", "--num-cpus=2", '--resources={"atrv_collector": 2}',
-             f"--dashboard-agent-listen-port={_free_port()}", *common], env=env, timeout=120)
-        proc = run(train_cmd(f"out_dir={tmp_path}", f"ray_address={address}", "ray_resource=atrv_collector",
+        run_command([ray_bin, "start", f"--address={address}", "--num-cpus=2", '--resources={"atrv_collector": 2}',
+             f"--dashboard-agent-listen-port={free_port()}", *common], env=env, timeout=120)
+        proc = run_command(train_cmd(f"out_dir={tmp_path}", f"ray_address={address}", "ray_resource=atrv_collector",
                              "envs_per_collector=32", "total_frames=2048", "init_random_frames=1024",
                              "eval_every_frames=1024"), env=env)
         assert f"(Ray at {address})" in proc.stdout
@@ -276,10 +268,10 @@ def test_two_node_cluster_on_loopback_runs_collectors_on_the_worker_node(tmp_pat
         placed = re.findall(r"node ([0-9a-f]{8})\)", re.search(r"^ray collectors on: .*$", proc.stdout, re.MULTILINE).group(0))
         query = (f"import json, ray; ray.init(address='{address}', logging_level='ERROR'); "
                  "print(json.dumps([(n['NodeID'], n['Resources']) for n in ray.nodes() if n['Alive']]))")
-        nodes = json.loads(run([sys.executable, "-c", query], env=env).stdout.strip().splitlines()[-1])
+        nodes = json.loads(run_command([sys.executable, "-c", query], env=env).stdout.strip().splitlines()[-1])
         worker = [node_id for node_id, res in nodes if "atrv_collector" in res]
         assert len(nodes) == 2 and len(worker) == 1, nodes
         assert placed == [worker[0][:8]] * 2, (placed, nodes)
     finally:
-        subprocess.run([ray_bin, "stop"], capture_output=True, env=env, timeout=120, check=False)
+        subprocess.run_command([ray_bin, "stop"], capture_output=True, env=env, timeout=120, check=False)
     assert_no_ray_left(no_ray_before)

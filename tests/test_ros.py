@@ -82,6 +82,7 @@ def yaw_of(msg):
     return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
 
 
+@pytest.mark.slow  # a live ROS 2 node
 def test_live_node_rate_stamps_and_commands(ros_env):
     proc = start_node(ros_env, "wait_for_subscribers:=1")
     client = Client("atrv_test_client")
@@ -120,6 +121,7 @@ def test_live_node_rate_stamps_and_commands(ros_env):
     assert proc.returncode == 0, out[-2000:]
 
 
+@pytest.mark.slow  # a live ROS 2 node
 def test_fast_run_matches_simulator_and_records_bag(ros_env, tmp_path):
     bag = tmp_path / "run.mcap"
     proc = start_node(ros_env, "real_time_factor:=0.0", "duration:=3.0", "mode:=forward", "x:=1.0", "y:=-2.0",
@@ -157,6 +159,7 @@ def test_fast_run_matches_simulator_and_records_bag(ros_env, tmp_path):
     assert topics.count("/pose") == 31
 
 
+@pytest.mark.slow  # a live ROS 2 node
 def test_goal_mode_drives_to_goal(ros_env):
     proc = start_node(ros_env, "real_time_factor:=0.0", "duration:=15.0", "wait_for_subscribers:=1")
     client = Client("atrv_goal_client")
@@ -251,6 +254,7 @@ def _paired(client, a, b):
     return next((m, stamps[_stamp(m)]) for m in reversed(client.msgs[a]) if _stamp(m) in stamps)
 
 
+@pytest.mark.slow  # a live ROS 2 node
 def test_base_driver_two_rovers_cmd_vel_odometry_imu_watchdog(ros_env):
     proc = start_node(ros_env, "num_rovers:=2", "wait_for_subscribers:=1", "duration:=40.0")
     client = DriverClient("atrv_driver_client", ["/rover_0", "/rover_1"])
@@ -316,6 +320,7 @@ def test_base_driver_two_rovers_cmd_vel_odometry_imu_watchdog(ros_env):
     assert proc.returncode == 0, out[-2000:]
 
 
+@pytest.mark.slow  # a live ROS 2 node
 def test_bad_parameters_are_refused_at_start(ros_env):
     for params, message in ((["bogus_param:=1"], "unknown parameter(s) ['bogus_param']"),
                             (["num_rovers:=0"], "num_rovers must be in 1"),

@@ -1,8 +1,6 @@
 """Training entry point: smoke run end to end, config errors, resume, evaluation CLI, shipped policy."""
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -12,13 +10,6 @@ from atrv_warp.rl.config import TrainConfig, load_train_config, preset_names
 
 ROOT = Path(__file__).resolve().parent.parent
 SMOKE = "smoke"  # a preset shipped inside the package
-
-
-def run_module(*args, check=True):
-    proc = subprocess.run([sys.executable, "-m", *args], check=False, capture_output=True, text=True, cwd=ROOT)
-    if check and proc.returncode != 0:
-        raise AssertionError(f"{args} failed ({proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    return proc
 
 
 def test_config_files_and_errors(tmp_path):
@@ -64,27 +55,34 @@ def test_substeps_reach_the_training_and_evaluation_envs():
         load_train_config(None, {"substeps": "0"})
 
 
-def test_cli_rejects_bad_config_before_work(tmp_path):
+def test_cli_rejects_bad_config_before_work(tmp_path, run_module, capsys):
     proc = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", "num_envs=-3", check=False)
     assert proc.returncode == 2 and "num_envs must be > 0" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1  # one line naming the problem, no usage dump
-    typo = run_module("atrv_warp.train", f"out_dir={tmp_path}", "lerning_rate=1e-3", check=False)
-    assert typo.returncode == 2 and "unknown train config key(s) ['lerning_rate']" in typo.stderr
-    bad = run_module("atrv_warp.train", f"out_dir={tmp_path}", "--optim.batch-size", "big", check=False)
-    assert bad.returncode == 2 and "--optim.batch-size" in bad.stderr and "big" in bad.stderr
+    from atrv_warp.train import main  # the same entry point, in this process (a subprocess costs ~10 s)
+
+    assert main([f"out_dir={tmp_path}", "lerning_rate=1e-3"]) == 2
+    assert "unknown train config key(s) ['lerning_rate']" in capsys.readouterr().err
+    assert main([f"out_dir={tmp_path}", "--optim.batch-size", "big"]) == 2
+    err = capsys.readouterr().err
+    assert "--optim.batch-size" in err and "big" in err and len(err.strip().splitlines()) == 1
     assert not any(tmp_path.iterdir())  # nothing was started or written
-    helped = run_module("atrv_warp.train", "--config", SMOKE, "--help")  # one parser: our options and the fields
-    assert all(f in helped.stdout for f in ("--config", "--resume", "--verbose", "--optim.lr", "--collector.kind"))
-    assert "(default: smoke)" in helped.stdout  # the fields' defaults are the preset's
+    with pytest.raises(SystemExit) as done:
+        main(["--config", SMOKE, "--help"])  # one parser: our options and the fields
+    helped = capsys.readouterr().out
+    assert done.value.code == 0
+    assert all(f in helped for f in ("--config", "--resume", "--verbose", "--optim.lr", "--collector.kind"))
+    assert "(default: smoke)" in helped  # the fields' defaults are the preset's
 
 
 @pytest.fixture(scope="module")
-def smoke_run(tmp_path_factory):
+def smoke_run(tmp_path_factory, run_module):
     out = tmp_path_factory.mktemp("runs")
     proc = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={out}", "--logging.progress", "True")
     return out / "smoke", proc.stdout + proc.stderr
 
 
+@pytest.mark.slow  # trains
 def test_smoke_training_end_to_end(smoke_run):
     run_dir, stdout = smoke_run
     for name in ("config.toml", "checkpoint.pt", "best_policy.pt", "final_eval.json", "learning_curve.png"):
@@ -110,7 +108,8 @@ def test_smoke_training_end_to_end(smoke_run):
     assert meta["frames"] == -max(evals)[2]
 
 
-def test_evaluate_cli_loads_checkpoint(smoke_run, tmp_path):
+@pytest.mark.slow  # trains
+def test_evaluate_cli_loads_checkpoint(smoke_run, tmp_path, run_module):
     run_dir, _ = smoke_run
     out = tmp_path / "eval.json"
     proc = run_module("atrv_warp.evaluate", str(run_dir / "checkpoint.pt"), "--episodes", "16", "--json", str(out))
@@ -123,7 +122,8 @@ def test_evaluate_cli_loads_checkpoint(smoke_run, tmp_path):
     assert bad.returncode == 2 and "policy file not found" in bad.stderr
 
 
-def test_resume_continues_step_counter(smoke_run, tmp_path):
+@pytest.mark.slow  # trains
+def test_resume_continues_step_counter(smoke_run, tmp_path, run_module):
     import shutil
 
     run_dir, _ = smoke_run
@@ -141,14 +141,16 @@ def test_resume_continues_step_counter(smoke_run, tmp_path):
     assert again.returncode != 0 and "already holds a run" in again.stderr
 
 
-def test_resume_of_a_run_with_a_flat_config_says_what_changed(tmp_path):
+def test_resume_of_a_run_with_a_flat_config_says_what_changed(tmp_path, capsys):
     """Run folders from before 0.2.0 hold a flat config.toml: --resume names the change in one line."""
+    from atrv_warp.train import main
+
     old = tmp_path / "old"
     old.mkdir()
     (old / "config.toml").write_text('name = "old"\nlr = 0.001\n[env]\nnum_envs = 64\n')
-    proc = run_module("atrv_warp.train", "--resume", str(old), check=False)
-    lines = proc.stderr.strip().splitlines()
-    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert main(["--resume", str(old)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1, lines
     assert "are from before atrv_warp 0.2.0" in lines[0] and "lr under [optim], name under [run]" in lines[0]
     assert sorted(p.name for p in old.iterdir()) == ["config.toml"]  # nothing started
 
@@ -180,7 +182,8 @@ def test_shipped_nav_policy_beats_scripted_driver_on_nav():
     assert shipped.success_rate >= 0.85 and baseline.success_rate < 0.3, (shipped, baseline)
 
 
-def test_sync_training_is_reproducible(smoke_run, tmp_path):
+@pytest.mark.slow  # trains
+def test_sync_training_is_reproducible(smoke_run, tmp_path, run_module):
     """Same seed, same result: the in-process (sync) collector gives bit-identical weights."""
     run_dir, _ = smoke_run
     run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}")
@@ -215,7 +218,8 @@ def _damaged_files(tmp_path: Path, good: Path) -> tuple[dict[str, Path], Path]:
     return files, marker
 
 
-def test_evaluate_names_a_bad_file_in_one_line_and_unpickles_nothing(smoke_run, tmp_path):
+@pytest.mark.slow  # trains
+def test_evaluate_names_a_bad_file_in_one_line_and_unpickles_nothing(smoke_run, tmp_path, run_module):
     run_dir, _ = smoke_run
     files, marker = _damaged_files(tmp_path, run_dir / "checkpoint.pt")
     expected = {"random": "not a complete file written by torch.save",
@@ -251,7 +255,8 @@ def test_evaluate_names_a_bad_file_in_one_line_and_unpickles_nothing(smoke_run, 
         load_policy(tmp_path / "shape.pt")
 
 
-def test_resume_refuses_a_damaged_checkpoint_and_keeps_the_run(smoke_run, tmp_path):
+@pytest.mark.slow  # trains
+def test_resume_refuses_a_damaged_checkpoint_and_keeps_the_run(smoke_run, tmp_path, run_module):
     import shutil
 
     run_dir, _ = smoke_run
@@ -307,7 +312,8 @@ def test_each_loss_learns_and_its_state_round_trips(loss):
     assert float(a["loss_qvalue"]) == float(b["loss_qvalue"]) and float(a["loss_actor"]) == float(b["loss_actor"])
 
 
-def test_crossq_trains_from_the_command_line(tmp_path):
+@pytest.mark.slow  # trains
+def test_crossq_trains_from_the_command_line(tmp_path, run_module):
     proc = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", "loss=crossq", "total_frames=4096")
     assert "best policy, final evaluation" in proc.stdout
     assert (tmp_path / "smoke" / "logs" / "scalars" / "eval_success_rate.csv").read_text().strip()
