@@ -13,6 +13,9 @@ from importlib import import_module
 
 from . import runtime as _runtime
 
+__version__ = "0.2.0"
+"""This package's version (``pyproject.toml``'s; ``CHANGELOG.md`` says what changed)."""
+
 _runtime.configure()  # quiet Warp/TorchRL console before Newton's import initialises Warp (ATRV_WARP_VERBOSE=1: all)
 
 _EXPORTS = {

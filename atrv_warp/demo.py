@@ -10,6 +10,8 @@ import math
 import sys
 import time
 
+__all__ = ["main"]
+
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.demo", description=__doc__.splitlines()[0])
