@@ -3,7 +3,7 @@
 Run: ``python benchmarks/terrain_contact_choice.py [--quick] [--cold]``
 
 Why atrv_warp samples its own heightfield under each wheel instead of running Newton's collision
-pipeline (README, "Physics choices"): per-call time at N = 256 and 1024 worlds of four wheel
+pipeline (docs/tasks.md, "Navigation"): per-call time at N = 256 and 1024 worlds of four wheel
 cylinders on a 61 x 61 heightfield, first-call (compile) time, and smoothness of depth and normal
 as one wheel is swept over a crest. Figures are printed and written to
 ``benchmarks/results/terrain_contact_choice.json`` (sweeps beside it as ``.npz``).

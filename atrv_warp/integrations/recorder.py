@@ -193,7 +193,8 @@ class RerunRecorder:
 
         Args:
             targets: (N, 2) target positions [m] (drawn as discs).
-            rewards, distances: (N,) or (N, 1) per-world scalars to plot.
+            rewards: (N,) or (N, 1) per-world rewards to plot.
+            distances: (N,) or (N, 1) per-world distances to the target [m] to plot.
             reset_mask: (N,) bool, worlds whose episode restarts here (their trail is cleared).
             scanner: A :class:`~atrv_warp.sim.scanner.LaserScanner` whose last scan is drawn.
         """

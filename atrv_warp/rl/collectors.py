@@ -9,7 +9,7 @@ ways of collecting, and :func:`make_collector`, which builds the one a configura
 Collection on Ray (``collector=ray``): TorchRL's :class:`~torchrl.collectors.distributed.RayCollector`
 over ``num_collectors`` actors, each stepping ``envs_per_collector`` worlds.
 ``python -m atrv_warp.train --config smoke collector=ray`` trains with two collectors on a local Ray;
-``ray_address=auto`` joins the cluster this node belongs to (README, 'Scale out on Ray'). Needs the
+``ray_address=auto`` joins the cluster this node belongs to (docs/training.md, 'Scale out on Ray'). Needs the
 ``ray`` extra: ``pip install -e ".[ray]"``.
 
 What runs where: the learner (SAC updates, replay buffer, evaluations) stays in the process that

@@ -74,8 +74,8 @@ class EnvConfig:
     """Steps per world in one collected batch (frames per batch = num_envs x steps_per_batch)."""
     substeps: int = 5
     """Solver substeps per 0.05 s step, in training and its evaluations: 5 (``sim_dt`` 0.01 s, the
-    simulator's default) or 3 (:data:`~atrv_warp.sim.FAST_SIM_DT`, a step about 1.4x cheaper, learning a
-    little less per frame; README, 'Simulator speed')."""
+    simulator's default) or 3 (:data:`~atrv_warp.sim.FAST_SIM_DT`, a cheaper step that learns a little
+    less per frame; docs/performance.md has the figures)."""
 
     def env_kwargs(self) -> tuple[tuple[str, object], ...]:
         """:class:`~atrv_warp.task.env.ATRVjrEnv` keyword arguments of these environments, as
@@ -94,7 +94,7 @@ class CollectorConfig:
     """``async``: a separate worker process collects on its own core while the trainer updates;
     ``sync``: collect and update in turn, in this process (bit-reproducible); ``ray``:
     ``num_collectors`` Ray actors collect, on this machine or a Ray cluster (needs the ``ray``
-    extra; README, 'Scale out on Ray')."""
+    extra; docs/training.md, 'Scale out on Ray')."""
     init_random_frames: int = 20_000
     """Frames collected with uniform random actions before learning starts (also the data the
     observation statistics are computed from)."""
@@ -123,13 +123,13 @@ class OptimConfig:
     buffer_size: int = 1_000_000
     """Replay capacity [frames]."""
     batch_size: int = 256
-    """Transitions per gradient step (256: a step costs ~25 % less than at 512 and learns as well,
-    README 'Training')."""
+    """Transitions per gradient step (256: a step is cheaper than at 512 and learns as well;
+    docs/training.md has the figures)."""
     utd_ratio: float = 0.03125
     """Gradient steps per collected frame (1/32: one update per 32 frames)."""
     lr: float = 1e-3
-    """Adam learning rate, actor, critics and temperature (on the reach task 1e-3 first passes 90 %
-    after about 2,500 gradient steps, 3e-4 after about 12,000: README 'Training')."""
+    """Adam learning rate, actor, critics and temperature (on the reach task 1e-3 first passes 90 % in
+    several times fewer gradient steps than 3e-4; docs/training.md has the figures)."""
     gamma: float = 0.99
     """Discount."""
     tau: float = 0.005
@@ -170,7 +170,7 @@ class LoggingConfig:
 class TrainConfig:
     """SAC training of the drive-to-target task (``python -m atrv_warp.train``).
 
-    Defaults are chosen by measurement on a 2-core CPU (README, 'Training').
+    Defaults are chosen by measurement on a 2-core CPU (docs/training.md).
     """
 
     run: RunConfig = field(default_factory=RunConfig)

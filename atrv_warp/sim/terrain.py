@@ -7,7 +7,7 @@ one per episode), so a few tiles give many different episodes at a fixed memory 
 Heights are relative to the flat ground's top (``ArenaConfig.ground_top``) and interpolated
 bilinearly. Contact samples the surface under each wheel's rim (``kernels/terrain.py``) with the
 same Hunt–Crossley law and friction as the flat ground; the scanner ray-marches it. Why our own
-kernel and not Newton's heightfield shape: see the README, "Choices".
+kernel and not Newton's heightfield shape: docs/tasks.md, "Navigation".
 
 Presets (``TERRAIN_PRESETS``): ``rolling``, ``rough``, ``hills``, ``slope``; ``None`` is the flat
 arena, the default, which keeps the reference task bit-identical.

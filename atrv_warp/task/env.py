@@ -78,7 +78,10 @@ class ATRVjrEnv(EnvBase):
         variant: Registered rover variant.
         task: Registered task name (``"reach"``, the default, or ``"nav"``) or a :class:`TaskConfig`;
             keyword overrides of it via ``**task_overrides``.
-        rover, contact, arena, sim: Simulator configuration (see :class:`RoverSim`).
+        rover: Rover configuration (see :class:`RoverSim`).
+        contact: Contact law (see :class:`RoverSim`).
+        arena: Arena geometry (see :class:`RoverSim`).
+        sim: Integrator settings (see :class:`RoverSim`).
         **task_overrides: Fields of :class:`TaskConfig` (e.g. ``max_steps=100``); an unknown
             name raises ``ValueError``.
     """

@@ -1,0 +1,41 @@
+"""The documentation's code runs: every ```python block of the README and of the docs pages,
+in order, one namespace per page (later blocks of a page may use earlier ones' names)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+BLOCK = re.compile(r"^```python\n(.*?)^```", re.MULTILINE | re.DOTALL)
+
+
+def python_blocks(text: str) -> list[str]:
+    return BLOCK.findall(text)
+
+
+def test_the_block_reader_finds_python_and_only_python():
+    text = "a\n```python\nx = 1\n```\n```bash\nls\n```\n```python\ny = x\n```\n"
+    assert python_blocks(text) == ["x = 1\n", "y = x\n"]
+
+
+def test_the_readme_is_a_door():
+    """A short README (issue 28: at most about 200 lines) with the two set-up commands."""
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 200
+    assert 'pip install -e . && python -m atrv_warp.train' in text
+    assert 'pip install -e ".[test,ros,ray,docs]" && mkdocs build --strict && python -m pytest' in text
+
+
+@pytest.mark.parametrize("page", [p for p in PAGES if python_blocks(p.read_text())], ids=lambda p: p.name)
+def test_code_blocks_run(page, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # a block that writes a file writes it here
+    namespace: dict = {"__name__": f"docs_{page.stem}"}
+    for i, block in enumerate(python_blocks(page.read_text())):
+        try:
+            exec(compile(block, f"{page.name}, python block {i + 1}", "exec"), namespace)  # noqa: S102
+        except Exception as err:
+            raise AssertionError(f"{page.relative_to(ROOT)}, python block {i + 1} fails:\n{block}") from err
