@@ -39,3 +39,30 @@ def test_code_blocks_run(page, tmp_path, monkeypatch):
             exec(compile(block, f"{page.name}, python block {i + 1}", "exec"), namespace)  # noqa: S102
         except Exception as err:
             raise AssertionError(f"{page.relative_to(ROOT)}, python block {i + 1} fails:\n{block}") from err
+
+
+def _hooks():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("docs_hooks", ROOT / "docs" / "hooks.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_results_tables_come_from_the_results_files():
+    """The docs' ``{{ results_table NAME }}`` lines render from benchmarks/results/, and only known names."""
+    import json
+
+    hooks = _hooks()
+    used = set()
+    for page in PAGES:
+        text = page.read_text()
+        used |= set(hooks.PLACEHOLDER.findall(text))
+        assert "{{ results_table" not in hooks.render(text), page.name
+    assert used == set(hooks.TABLES)  # every table is shown somewhere
+    last = json.loads((ROOT / "benchmarks" / "results" / "sim_throughput.json").read_text())["rows"][-1]
+    assert f"| {last['num_worlds']} | {last['env_steps_per_s']:,.0f} | {last['ms_per_step']:.3f} |" in \
+        hooks.sim_throughput()
+    with pytest.raises(KeyError, match="unknown results table 'nope'"):
+        hooks.render("{{ results_table nope }}")
