@@ -58,8 +58,8 @@ class RunConfig:
     total_frames: int = 3_000_000
     """Environment steps (all worlds together) to collect at most."""
     threads: int = 1
-    """torch threads of the trainer (benchmarks/sac_update_cost.py: a second thread saves about 20 % per
-    update, and the async collector needs that core)."""
+    """torch threads of the trainer (a second thread makes an update a little cheaper, and the async
+    collector needs that core: docs/training.md, from benchmarks/sac_update_cost.py)."""
 
 
 @dataclass(frozen=True)
