@@ -1,4 +1,4 @@
-"""Pictures for the README, straight from the simulator: ``python docs/make_pictures.py``.
+"""Pictures for the README and the docs pages, straight from the simulator: ``python docs/make_pictures.py``.
 
 Runs the shipped policy on the first episodes of the standard evaluation set (seed 2024) and
 draws, with matplotlib, from the chassis poses the simulator produced:
