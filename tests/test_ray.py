@@ -273,5 +273,5 @@ def test_two_node_cluster_on_loopback_runs_collectors_on_the_worker_node(tmp_pat
         assert len(nodes) == 2 and len(worker) == 1, nodes
         assert placed == [worker[0][:8]] * 2, (placed, nodes)
     finally:
-        subprocess.run_command([ray_bin, "stop"], capture_output=True, env=env, timeout=120, check=False)
+        subprocess.run([ray_bin, "stop"], capture_output=True, env=env, timeout=120, check=False)
     assert_no_ray_left(no_ray_before)
