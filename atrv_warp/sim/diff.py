@@ -270,8 +270,10 @@ class DiffRollout:
             friction: Coulomb coefficient (default: the contact config's), differentiable.
             chassis_mass: Chassis mass [kg] of every world, e.g. with a payload (default: the
                 URDF's, :attr:`nominal_chassis_mass`); its inertia scales with it. Differentiable.
-                The friction law's low-slip slope is sized for the nominal mass (half the
-                stable maximum), so stay above about half of it.
+                The wheels' friction solver predicts contact velocities with the nominal
+                rover (a constant of the tape, not differentiated): a heavier chassis makes it
+                under-correct (slip left for the next substep), one lighter than about half
+                the nominal would make it overshoot.
         """
         expected = (self.steps, self.num_worlds, 2)
         if tuple(actions.shape) != expected:
