@@ -21,10 +21,10 @@ What this kernel does instead, for the four wheels of one world at once (one thr
 
 Step 3 is exact for the per-contact problem (the sliding direction solves a scalar equation by
 Newton's method). One sweep per substep, warm-started, lets successive substeps' sweeps converge to
-the coupled problem together: on a slope at 0.8 atan(mu) a parked rover moves 0.2-5 mm in 5 s with
-one warm sweep, 2.5-5 cm with four cold ones, and the step costs a fraction of those four
-(``benchmarks/skid_calibration.py``). What is left, and the gap between the rigid-body model and
-Newton's articulation, is slip that the next substep removes. The result is Coulomb friction: no
+the coupled problem together, where several sweeps from zero each substep would cost several times
+as much and still leave a parked rover creeping. What is left, and the gap between the rigid-body
+model and Newton's articulation, is slip that the next substep removes
+(``benchmarks/skid_calibration.py`` measures what that leaves on slopes). The result is Coulomb friction: no
 creep at rest on a slope below ``atan(mu)``, rolling without slip under traction below
 ``mu f_n``, and turning set by the directions of the sliding forces, not by their magnitude.
 
