@@ -20,7 +20,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 def main() -> int:
     from atrv_warp import RoverSim
     from atrv_warp.sim import FAST_SIM_DT, SimConfig
-    from atrv_warp.sim.checks import reference_drive, rolling_acceleration
+    from atrv_warp.sim.checks import reference_drive, rolling_acceleration, wheel_contact_xy
 
     rows: list[tuple[str, float, str]] = []
 
@@ -61,12 +61,19 @@ def main() -> int:
         yaw_prev = sim.rpy[1, 2].item()
     accel = (sim.lin_vel[0, 0].item() - v0) / 1.5
     analytic = rolling_acceleration(sim, 2.0)
+    # The wheel torque a turn in place needs under pure Coulomb friction (equal loads): each wheel's
+    # force mu N points along its slip, at atan(y / x) from the rolling direction, and only its
+    # rolling part is the motor's.
+    xy = np.abs(wheel_contact_xy(sim)[0])
+    load = sim.description.total_mass * abs(sim.sim_cfg.gravity) / len(sim.description.wheels)
+    turn_torque = sim.rover_cfg.wheel_radius * sim.contact_cfg.friction * load * math.cos(math.atan2(xy[1], xy[0]))
     depth = sim.arena_cfg.ground_top + sim.rover_cfg.wheel_radius - sim.rest_height
     rows += [
         ("realistic: rest height [m]", f"{rest:.4f}", f"{sim.rest_height:.4f} (static HC equilibrium)"),
         ("realistic: static tyre depth of the law [mm]", f"{1e3 * depth:.1f}", "(m g / 4 kp)^(1/n), 58 kg"),
         ("realistic: accel at +2 N·m [m/s²]", f"{accel:.4f}", f"{analytic:.4f} = F/(M+ΣI/r²)"),
-        ("realistic: rotate_left yaw rate [rad/s]", f"{turned / 1.5:.3f}", "turns in place"),
+        ("realistic: rotate_left yaw rate [rad/s]", f"{turned / 1.5:.3f}",
+         f"spins up: 5 N·m > {turn_torque:.2f} N·m, a Coulomb turn in place"),
         ("realistic: rotate_left translation [m]", f"{(sim.root_pose[1, :2] - p1).norm().item():.4f}", "< 0.10"),
     ]
 

@@ -1,16 +1,24 @@
-"""Skid-steer calibration: how much slower the rover turns than a differential drive would.
+"""Skid-steer physics against Coulomb friction: turning, rolling, traction and slopes.
 
     python benchmarks/skid_calibration.py
 
-A skid-steer rover's wheels slide sideways in a turn, so its yaw rate is
-``r (w_right - w_left) / B_eff`` with an effective track ``B_eff`` larger than the wheel track.
-This drives one world per (linear, angular) command with the ROS node's own wheel-speed PI
-controller (:class:`atrv_warp.integrations.ros.base.VelocityController`, factor 1, so the wheel
-targets are a differential drive's), lets it settle for 3 s, and measures ``B_eff`` from the
-wheel speeds and the yaw rate. The node's default ``effective_track_factor`` is the median ratio
-``B_eff / track``. Then it runs the node's wheel odometry (:class:`WheelOdometry`, with that
-factor) from a standstill, straight at 0.5 m/s and in place at 0.3 rad/s for 4 s, against the
-simulator's truth. Prints a table and writes ``benchmarks/results/skid_calibration.json``.
+1. **Turning.** One world per (linear, angular) command, driven for 15 s by the ROS base's own
+   wheel-speed PI controller (:func:`atrv_warp.integrations.ros.base.turning_response`, factor 1, so
+   the wheel targets are a differential drive's; at high mu its integral takes several seconds to build
+   the torque a turn needs). Over the last 4 s: the effective track ratio
+   ``chi = r (w_right - w_left) / (yaw_rate x track)``, at mu = 0.3, 0.5, 0.8 and 1.0, against the
+   pure-Coulomb prediction for the same wheel speeds (:func:`atrv_warp.sim.checks.coulomb_twist`)
+   and against the 0.1.x viscous law (``ContactConfig(friction_law="viscous")``). The ROS node's
+   default ``effective_track_factor`` is the median chi at the default mu. Target band 1.3–2.0.
+2. **Rolling.** The slip ratio at +2 N·m per wheel (target under 3 %), and the node's wheel
+   odometry (with the new factor) from rest at 0.5 m/s and at 0.3 rad/s for 4 s against the truth
+   (target within 2 %).
+3. **Traction limit.** Full torque (20 N·m) from rest: the mean acceleration while the tyres slide
+   (:func:`atrv_warp.sim.checks.full_torque_acceleration`) against mu g.
+4. **Slopes.** A rover parked across a slope of 0.8 and 1.2 x atan(mu), its motors braking
+   (:func:`atrv_warp.sim.checks.parked_on_slope`): how far it moves in 5 s.
+
+Prints each table and writes ``benchmarks/results/skid_calibration.json``.
 """
 
 from __future__ import annotations
@@ -24,77 +32,137 @@ from _common import write_results
 
 RESULTS = Path(__file__).resolve().parent / "results"
 COMMANDS = [(0.0, 0.25), (0.0, 0.5), (0.0, 1.0), (0.3, 0.3), (0.5, 0.5), (0.5, -0.25), (1.0, 0.2)]
+FRICTIONS = (0.3, 0.5, 0.8, 1.0)
+BAND = (1.3, 2.0)
 
 
-def odometry_error(linear: float, angular: float, factor: float, seconds: float = 4.0) -> dict:
-    """Wheel odometry against the truth from a standstill, under the node's PI controller."""
+def track_width(sim) -> float:
+    """Distance between the left and right wheels' contact points [m]."""
+    from atrv_warp.sim.checks import wheel_contact_xy
+
+    y = wheel_contact_xy(sim)[:, 1]
+    return float(y.max() - y.min())
+
+
+def turning(mu: float, law: str = "coulomb") -> list[dict]:
+    """chi for every command at friction ``mu`` under ``law``, with the Coulomb prediction."""
+    import numpy as np
+
+    from atrv_warp import RoverSim
+    from atrv_warp.integrations.ros.base import BaseParams, turning_response
+    from atrv_warp.sim import ContactConfig
+    from atrv_warp.sim.checks import coulomb_twist, wheel_contact_xy
+
+    sim = RoverSim(len(COMMANDS), contact=ContactConfig(friction=mu, friction_law=law))
+    r, track = sim.rover_cfg.wheel_radius, track_width(sim)
+    base = BaseParams(wheel_radius=r, track_width=track, effective_track_factor=1.0)
+    contacts = wheel_contact_xy(sim)
+    side = np.array([w.side for w in sim.description.wheels])
+    rows = []
+    for row in turning_response(sim, COMMANDS, base, seconds=15.0, average=4.0):
+        left, right = row["wheel_left"], row["wheel_right"]
+        predicted = coulomb_twist(contacts, r * np.where(side == 0, left, right))[2]
+        row.update(mu=mu, law=law, chi=r * (right - left) / (row["yaw_rate"] * track),
+                   chi_coulomb=r * (right - left) / (predicted * track))
+        rows.append(row)
+    return rows
+
+
+def odometry(linear: float, angular: float, factor: float, seconds: float = 4.0) -> dict:
+    """The node's wheel odometry against the truth from a standstill, under its PI controller."""
     import torch
 
     from atrv_warp import RoverSim
-    from atrv_warp.integrations.ros.base import BaseParams, VelocityController, WheelOdometry
+    from atrv_warp.integrations.ros.base import BaseParams, VelocityController, WheelOdometry, side_speeds
 
     sim = RoverSim(1)
     side = torch.tensor([w.side for w in sim.description.wheels])
-    base = BaseParams(wheel_radius=sim.rover_cfg.wheel_radius, track_width=0.5, effective_track_factor=factor)
+    base = BaseParams(wheel_radius=sim.rover_cfg.wheel_radius, track_width=track_width(sim),
+                      effective_track_factor=factor)
     control, odo = VelocityController(base), WheelOdometry(base)
     control.command(linear, angular, now=0.0)
-
-    def speeds():
-        ws = sim.wheel_speed[0]
-        return torch.stack([ws[side == 0].mean(), ws[side == 1].mean()])
-
-    for _ in range(round(seconds / sim.sim_cfg.step_dt)):
-        sim.step(control.torques(speeds(), now=0.0, dt=sim.sim_cfg.step_dt).view(1, 2))
-        odo.update(speeds(), sim.sim_cfg.step_dt)
+    dt = sim.sim_cfg.step_dt
+    for _ in range(round(seconds / dt)):
+        sim.step(control.torques(side_speeds(sim.wheel_speed, side)[0], now=0.0, dt=dt).view(1, 2))
+        odo.update(side_speeds(sim.wheel_speed, side)[0], dt)
     true_xy = sim.root_pose[0, :2].tolist()
-    row = {"linear": linear, "angular": angular, "seconds": seconds, "true_distance": math.hypot(*true_xy),
-           "odometry_distance": math.hypot(odo.x, odo.y), "true_yaw": sim.rpy[0, 2].item(), "odometry_yaw": odo.yaw}
-    print(f"odometry from rest, cmd v {linear} m/s w {angular} rad/s for {seconds:g} s: distance "
-          f"{row['odometry_distance']:.3f} m (true {row['true_distance']:.3f} m), yaw {row['odometry_yaw']:.4f} rad "
-          f"(true {row['true_yaw']:.4f} rad)")
-    return row
+    return {"linear": linear, "angular": angular, "seconds": seconds, "true_distance": math.hypot(*true_xy),
+            "odometry_distance": math.hypot(odo.x, odo.y), "true_yaw": sim.rpy[0, 2].item(), "odometry_yaw": odo.yaw}
+
+
+def traction(mu: float) -> dict:
+    """Mean acceleration at full torque from rest, tyres sliding, against mu g."""
+    from atrv_warp.sim import ContactConfig
+    from atrv_warp.sim.checks import full_torque_acceleration
+
+    return {"mu": mu, "acceleration": full_torque_acceleration(ContactConfig(friction=mu)), "mu_g": mu * 9.81}
 
 
 def main() -> int:
     import torch
 
     torch.set_num_threads(1)
-    from atrv_warp import RoverSim
-    from atrv_warp.integrations.ros.base import BaseParams, VelocityController
+    from atrv_warp.sim import ContactConfig
+    from atrv_warp.sim.checks import parked_on_slope, slip_ratio
 
-    n = len(COMMANDS)
-    sim = RoverSim(n)
-    sim.reset(poses=[[0.0, 4.0 * (i - n / 2), 0.0] for i in range(n)])
-    desc = sim.description
-    side = torch.tensor([w.side for w in desc.wheels])
-    track = abs(float(desc.wheels[0].origin[1, 3]) - float(desc.wheels[-1].origin[1, 3])) + 2 * sim.rover_cfg.wheel_offset
-    base = BaseParams(wheel_radius=sim.rover_cfg.wheel_radius, track_width=track, effective_track_factor=1.0)
-    controllers = [VelocityController(base) for _ in COMMANDS]
-    for c, (v, w) in zip(controllers, COMMANDS):
-        c.command(v, w, now=0.0)
-    dt = sim.sim_cfg.step_dt
-    for _ in range(60):
-        ws = sim.wheel_speed
-        speeds = torch.stack([ws[:, side == 0].mean(-1), ws[:, side == 1].mean(-1)], -1)
-        sim.step(torch.stack([c.torques(speeds[i], now=0.0, dt=dt) for i, c in enumerate(controllers)]))
-    ws = sim.wheel_speed
+    print("1. Turning under the ROS base's PI controller (factor 1), 15 s per command, means over the last 4 s")
+    print(f"{'law':>8} {'mu':>4} {'v [m/s]':>8} {'w [rad/s]':>9} {'wheels L, R [rad/s]':>20} {'yaw rate':>9} "
+          f"{'chi':>6} {'Coulomb':>8}")
     rows = []
-    for i, (v, w) in enumerate(COMMANDS):
-        left, right = ws[i, side == 0].mean().item(), ws[i, side == 1].mean().item()
-        yaw_rate = sim.ang_vel[i, 2].item()
-        speed = sim.lin_vel[i, :2].norm().item()
-        b_eff = base.wheel_radius * (right - left) / yaw_rate if abs(w) > 0 else None
-        rows.append({"linear": v, "angular": w, "wheel_left": left, "wheel_right": right, "yaw_rate": yaw_rate,
-                     "speed": speed, "effective_track": b_eff, "factor": b_eff / track if b_eff else None})
-        print(f"cmd v {v:+.2f} m/s w {w:+.2f} rad/s: wheels {left:+6.2f} {right:+6.2f} rad/s, yaw rate "
-              f"{yaw_rate:+.3f} rad/s, speed {speed:.3f} m/s, effective track "
-              f"{b_eff if b_eff is None else round(b_eff, 3)} m")
-    factor = statistics.median(r["factor"] for r in rows if r["factor"])
-    print(f"wheel track {track:.3f} m; effective track factor (median) {factor:.2f}")
-    odometry = [odometry_error(v, w, factor) for v, w in ((0.5, 0.0), (0.0, 0.3))]
-    out = {"track_width": track, "effective_track_factor": factor, "rows": rows, "odometry": odometry}
+    for law, frictions in (("coulomb", FRICTIONS), ("viscous", (0.3, 0.8))):
+        for mu in frictions:
+            for row in turning(mu, law):
+                rows.append(row)
+                print(f"{law:>8} {mu:4.1f} {row['linear']:8.2f} {row['angular']:9.2f} "
+                      f"{row['wheel_left']:9.2f} {row['wheel_right']:9.2f} {row['yaw_rate']:9.4f} "
+                      f"{row['chi']:6.2f} {row['chi_coulomb']:8.2f}")
+    coulomb = [r for r in rows if r["law"] == "coulomb"]
+    chis = [r["chi"] for r in coulomb]
+    default_mu = ContactConfig().friction
+    factor = statistics.median(r["chi"] for r in coulomb if r["mu"] == default_mu)
+    inside = all(BAND[0] <= c <= BAND[1] for c in chis)
+    print(f"chi over every command and mu: {min(chis):.2f} .. {max(chis):.2f} (band {BAND[0]}–{BAND[1]}: "
+          f"{'inside' if inside else 'OUTSIDE'}); viscous law: "
+          f"{min(r['chi'] for r in rows if r['law'] == 'viscous'):.2f} .. "
+          f"{max(r['chi'] for r in rows if r['law'] == 'viscous'):.2f}")
+    print(f"effective track factor (median chi at mu = {default_mu}): {factor:.2f}")
+
+    print("\n2. Rolling")
+    slip = slip_ratio(2.0)
+    print(f"slip ratio at +2 N·m per wheel (1–2 s): {100 * slip:.3f} % (target < 3 %)")
+    odo = [odometry(v, w, factor) for v, w in ((0.5, 0.0), (0.0, 0.3))]
+    for o in odo:
+        err = (abs(o["odometry_distance"] - o["true_distance"]) / o["true_distance"] if o["true_distance"] > 0.05
+               else abs(o["odometry_yaw"] - o["true_yaw"]) / abs(o["true_yaw"]))
+        o["relative_error"] = err
+        print(f"odometry from rest, cmd v {o['linear']} m/s w {o['angular']} rad/s for {o['seconds']:g} s: "
+              f"distance {o['odometry_distance']:.3f} m (true {o['true_distance']:.3f}), yaw {o['odometry_yaw']:.4f} "
+              f"rad (true {o['true_yaw']:.4f}): {100 * err:.2f} % off (target < 2 %)")
+
+    print("\n3. Traction limit: full torque (20 N·m) from rest, mean acceleration while the tyres slide")
+    trac = [traction(mu) for mu in FRICTIONS]
+    for t in trac:
+        print(f"mu {t['mu']:.1f}: {t['acceleration']:.3f} m/s² (mu g = {t['mu_g']:.3f}, "
+              f"{t['acceleration'] / t['mu_g']:.3f} of it)")
+
+    print("\n4. Parked across a slope, motors braking, moved in 5 s")
+    slopes = []
+    for mu in (0.3, 0.5, 0.8):
+        limit = math.degrees(math.atan(mu))
+        degrees = (0.8 * limit, 1.2 * limit)
+        moved = parked_on_slope(degrees, contact=ContactConfig(friction=mu))
+        for deg, m, fraction in zip(degrees, moved, (0.8, 1.2)):
+            slopes.append({"mu": mu, "degrees": deg, "fraction_of_atan_mu": fraction, "moved": float(m)})
+            print(f"mu {mu:.1f}: {fraction:.1f} x atan(mu) = {deg:5.2f} deg: moved {m:.4f} m "
+                  f"({'holds' if m < 0.01 else 'slides'})")
+
+    from atrv_warp import RoverSim
+
+    out = {"track_width": track_width(RoverSim(1)), "effective_track_factor": factor, "band": BAND,
+           "chi_inside_band": inside, "turning": rows, "slip_ratio_2Nm": slip, "odometry": odo, "traction": trac,
+           "slopes": slopes}
     write_results(RESULTS / "skid_calibration.json", out)
-    print(f"wrote {RESULTS / 'skid_calibration.json'}")
+    print(f"\nwrote {RESULTS / 'skid_calibration.json'}")
     return 0
 
 

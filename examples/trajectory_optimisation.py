@@ -27,19 +27,23 @@ def final_pose(poses: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def optimise(target=(1.5, 1.5), heading: float | None = 90.0, steps: int = 60, segments: int = 10,
-             iterations: int = 40, lr: float = 0.05, verbose: bool = True):
+             iterations: int = 40, lr: float = 0.05, start: tuple[float, float] = (0.1, 0.4), verbose: bool = True):
     """Returns (best position miss [m], its heading miss [deg] or None, its actions (steps, 1, 2), loss history).
 
     The torques are piecewise constant over ``segments`` equal intervals (a smoother search space
     than one value per step) and pass through tanh so they stay in [-1, 1]. ``heading`` is the
-    final yaw [deg] to arrive with (``None``: position only).
+    final yaw [deg] to arrive with (``None``: position only). ``start`` is the first guess, (left,
+    right) in [-1, 1] on every segment: a gentle left arc. Not zero: with Coulomb friction a rover
+    turns only once the difference between its sides' torques overcomes its wheels' sideways grip
+    (about 2 x 3.2 N·m in place), so below that the final heading does not depend on the steering at
+    all, and a search that starts from zero torques sees no gradient to turn with.
     """
     if steps % segments:
         raise ValueError(f"steps ({steps}) must be a multiple of segments ({segments})")
     roll = DiffRollout(1, steps=steps)
     state = roll.initial_state()
     goal = torch.tensor(target, dtype=torch.float32)
-    raw = torch.zeros(segments, 1, 2, requires_grad=True)
+    raw = torch.atanh(torch.tensor(start, dtype=torch.float32)).expand(segments, 1, 2).clone().requires_grad_(True)
     opt = torch.optim.Adam([raw], lr=lr, betas=(0.6, 0.9))
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(opt, iterations, eta_min=0.1 * lr)
     history = []

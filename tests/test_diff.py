@@ -150,10 +150,6 @@ def test_errors_are_clear():
         roll(torch.full((2, 1, 2), float("nan")))
     with pytest.raises(ValueError, match="chassis_mass must be a positive"):
         roll(torch.zeros(2, 1, 2), chassis_mass=-1.0)
-    from atrv_warp.sim import ContactConfig
-
-    with pytest.raises(ValueError, match="stiction = 0"):
-        DiffRollout(1, steps=2, contact=ContactConfig(stiction=0.5))
     a = torch.zeros(2, 1, 2, requires_grad=True)
     poses = roll(a)
     with pytest.raises(NonFiniteGradientError, match="not finite"):

@@ -242,3 +242,44 @@ def test_wall_impacts_at_top_speed_stay_under_1_2x_top_speed(sim_dt):
     assert got.nonfinite_worlds == 0
     assert got.overspeed_worlds == 0, f"{got.overspeed_worlds} worlds left a wall faster than 1.2x top speed"
     assert got.max_speed < 1.2 * got.top_speed
+
+
+@pytest.mark.parametrize("mu", [0.3, 0.8])
+def test_skid_steer_turns_as_coulomb_friction_predicts(mu):
+    """The effective track ratio chi = r (w_right - w_left) / (yaw rate x track) under the ROS base's
+    wheel-speed controller, in place and on an arc: inside 1.3-2.0 (a Pioneer 3-AT measured about
+    1.5) and within 5 % of pure Coulomb friction on the same wheel speeds. The 0.1.x viscous law gave
+    8.28 whatever mu."""
+    from atrv_warp.integrations.ros.base import BaseParams, turning_response
+    from atrv_warp.sim import ContactConfig
+
+    sim = RoverSim(2, contact=ContactConfig(friction=mu))
+    xy = checks.wheel_contact_xy(sim)
+    track = float(xy[:, 1].max() - xy[:, 1].min())
+    r = sim.rover_cfg.wheel_radius
+    side = np.array([w.side for w in sim.description.wheels])
+    base = BaseParams(wheel_radius=r, track_width=track, effective_track_factor=1.0)
+    for row in turning_response(sim, [(0.0, 0.5), (0.5, 0.5)], base, seconds=10.0, average=3.0):
+        left, right = row["wheel_left"], row["wheel_right"]
+        chi = r * (right - left) / (row["yaw_rate"] * track)
+        coulomb = r * (right - left) / (checks.coulomb_twist(xy, r * np.where(side == 0, left, right))[2] * track)
+        assert 1.3 <= chi <= 2.0, row
+        assert chi == pytest.approx(coulomb, rel=0.05), row
+
+
+def test_rolls_without_slip_below_the_traction_limit_and_saturates_at_mu_g():
+    from atrv_warp.sim import ContactConfig
+
+    assert checks.slip_ratio(2.0) < 0.03  # +2 N·m per wheel, far below mu N r
+    for mu in (0.3, 0.5):  # full torque: the wheels spin, the tyres slide (the chassis pitching as they do)
+        assert checks.full_torque_acceleration(ContactConfig(friction=mu)) == pytest.approx(mu * 9.81, rel=0.15)
+
+
+@pytest.mark.parametrize(("field", "value"), [("friction", 0.0), ("friction", -0.3), ("friction", float("nan")),
+                                              ("friction", float("inf")), ("stiffness", -1.0),
+                                              ("friction_law", "sticky")])
+def test_bad_contact_config_is_named(field, value):
+    from atrv_warp.sim import ContactConfig
+
+    with pytest.raises(ValueError, match=f"ContactConfig.{field}"):
+        ContactConfig(**{field: value})

@@ -1,12 +1,11 @@
 """The flat reference task's rollouts are pinned bit for bit.
 
 ``tests/data/flat_reference_rollout.npz`` was written by the release of 2026-11-21 (commit 2d88b0e),
-which integrated at the reference's 0.01 s with the plain Hunt–Crossley law: 16 worlds, seed 123, 120
-steps of seeded random actions with resets. ``SimConfig(sim_dt=REFERENCE_SIM_DT)`` with
-``ContactConfig(damping_limit=None)`` must still reproduce it exactly. The defaults (the same step, with
-the damping ceiling, which engages in this rollout's deep wall impacts) are pinned the same way by
-``flat_default_rollout.npz``, written by
-``python tests/write_golden.py``. Any change to either path (kernels, contact, sampling) shows up
+which integrated at the reference's 0.01 s with the plain Hunt–Crossley law and viscous friction: 16
+worlds, seed 123, 120 steps of seeded random actions with resets. ``SimConfig(sim_dt=REFERENCE_SIM_DT)``
+with ``ContactConfig(damping_limit=None, friction_law="viscous")`` must still reproduce it exactly. The
+defaults (the same step, the damping ceiling, Coulomb friction at the wheels) are pinned the same way by
+``flat_default_rollout.npz``, written by ``python tests/write_golden.py``. Any change to either path (kernels, contact, sampling) shows up
 here as a mismatch, not as a tolerance.
 """
 
@@ -43,7 +42,8 @@ def reference_rollout(sim: SimConfig | None = None, contact: ContactConfig | Non
 
 
 @pytest.mark.parametrize(("sim", "contact", "golden"), [
-    (SimConfig(sim_dt=REFERENCE_SIM_DT), ContactConfig(damping_limit=None), DATA / "flat_reference_rollout.npz"),
+    (SimConfig(sim_dt=REFERENCE_SIM_DT), ContactConfig(damping_limit=None, friction_law="viscous"),
+     DATA / "flat_reference_rollout.npz"),
     (None, None, DEFAULT_GOLDEN),
 ], ids=["reference-as-2d88b0e", "default"])
 def test_flat_reference_rollout_is_bit_identical(sim, contact, golden):

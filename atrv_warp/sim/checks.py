@@ -87,3 +87,100 @@ def wall_impacts(worlds: int = 256, steps: int = 200, *, sim: SimConfig | None =
         bad |= rovers.nonfinite.bool()
         fastest = torch.maximum(fastest, torch.where(bad, 0.0, rovers.lin_vel.norm(dim=-1)))
     return WallImpacts(top, float(fastest.max()), int((fastest > 1.2 * top).sum()), int(bad.sum()))
+
+
+def wheel_contact_xy(sim: RoverSim) -> np.ndarray:
+    """(W, 2) each wheel's ground contact point in the chassis frame [m] (the axle's end, plus the
+    wheel's offset along it)."""
+    out = []
+    for w in sim.description.wheels:
+        axle = w.origin[:3, :3] @ np.asarray(w.axis, dtype=np.float64)
+        side = 1.0 if w.origin[1, 3] > 0 else -1.0
+        outward = axle * np.sign(axle[1] * side)  # the axle direction that points away from the chassis
+        out.append((w.origin[:3, 3] + sim.rover_cfg.wheel_offset * outward)[:2])
+    return np.array(out)
+
+
+def coulomb_twist(contacts: np.ndarray, rim_speeds: np.ndarray, iterations: int = 200) -> np.ndarray:
+    """Steady planar twist (vx [m/s], vy [m/s], yaw rate [rad/s]) of a rigid rover on equally loaded
+    wheels under pure Coulomb friction, its wheels' rims moving forward at ``rim_speeds`` (W,) [m/s]
+    at ``contacts`` (W, 2) [m] in the body frame.
+
+    Each wheel's force is ``mu N`` against its slip ``s_i = v + w x r_i - (rim_i, 0)``; force and moment
+    balance is the stationary point of the convex sum ``sum_i |s_i|``, which this minimises by
+    iteratively reweighted least squares. Only the slip directions matter, so mu and N drop out.
+    """
+    x, y = contacts[:, 0], contacts[:, 1]
+    # s_i = A_i @ (vx, vy, w) - b_i, two rows per wheel
+    a = np.zeros((2 * len(x), 3))
+    a[0::2, 0], a[0::2, 2] = 1.0, -y
+    a[1::2, 1], a[1::2, 2] = 1.0, x
+    b = np.zeros(2 * len(x))
+    b[0::2] = rim_speeds
+    twist = np.linalg.lstsq(a, b, rcond=None)[0]
+    for _ in range(iterations):
+        slip = (a @ twist - b).reshape(-1, 2)
+        weight = 1.0 / np.maximum(np.linalg.norm(slip, axis=1), 1e-9)
+        wa = a * np.repeat(weight, 2)[:, None]
+        twist = np.linalg.solve(a.T @ wa, wa.T @ b)
+    return twist
+
+
+def slip_ratio(torque: float, *, contact: ContactConfig | None = None, seconds: float = 2.0) -> float:
+    """Longitudinal slip ratio ``(r w - v) / (r w)`` [-] of a rover driven from rest by ``torque``
+    [N·m] on every wheel, averaged over the last half of ``seconds``."""
+    sim = RoverSim(1, contact=contact)
+    sim.set_commands([torque, torque])
+    r = sim.rover_cfg.wheel_radius
+    ratios = []
+    steps = round(seconds / sim.sim_cfg.step_dt)
+    for i in range(steps):
+        sim.step()
+        if i >= steps // 2:
+            rim = r * float(sim.wheel_speed[0].mean())
+            ratios.append((rim - float(sim.lin_vel[0, 0])) / rim)
+    return float(np.mean(ratios))
+
+
+def parked_on_slope(degrees: tuple[float, ...], *, contact: ContactConfig | None = None, seconds: float = 5.0,
+                    brake: float = 0.5) -> np.ndarray:
+    """How far [m] a rover parked across a slope of each angle [deg] (axles downhill) moves in
+    ``seconds`` after settling for 1 s; one simulator per slope.
+
+    Parked: no drive command, its motors braking each side's wheels with ``brake`` [N·m per rad/s]
+    of its wheel speed, as a DC motor with shorted windings does. Free wheels would not do: with
+    Coulomb friction and no rolling resistance, the smallest heading offset from the settling lets a
+    rover on free wheels roll down, as a real one with its motors declutched would."""
+    from atrv_warp.sim.terrain import TerrainConfig
+
+    moved = []
+    for deg in degrees:
+        sim = RoverSim(1, contact=contact, terrain=TerrainConfig(amplitude=0.0, roughness=0.0,
+                                                                 incline=math.radians(deg), tiles=1))
+        sim.reset(poses=[[0.0, 0.0, math.pi / 2]])
+        side = torch.tensor([w.side for w in sim.description.wheels])
+        start = None
+        for i in range(20 + round(seconds / sim.sim_cfg.step_dt)):
+            if i == 20:
+                start = sim.root_pose[0, :3].clone()
+            ws = sim.wheel_speed[0]
+            sim.step(-brake * torch.stack([ws[side == 0].mean(), ws[side == 1].mean()]))
+        finite = bool(torch.isfinite(sim.root_pose).all())
+        moved.append(float((sim.root_pose[0, :3] - start).norm()) if finite else math.inf)
+    return np.array(moved)
+
+
+def full_torque_acceleration(contact: ContactConfig | None = None) -> float:
+    """Mean acceleration [m/s²] of a rover at full torque (20 N·m on every wheel) from rest, its tyres
+    sliding: from 0.2 s (past the chassis' first squat) over 1 s or until 4 m/s, whichever is first
+    (before the rover nears its wheels' top speed). Coulomb friction bounds it by mu g."""
+    sim = RoverSim(1, contact=contact)
+    sim.set_commands([20.0, 20.0])
+    for _ in range(4):
+        sim.step()
+    v0, t0 = sim.lin_vel[0, 0].item(), sim.sim_time
+    for _ in range(20):
+        sim.step()
+        if sim.lin_vel[0, 0].item() > 4.0:
+            break
+    return (sim.lin_vel[0, 0].item() - v0) / (sim.sim_time - t0)

@@ -14,6 +14,7 @@ from importlib import resources
 
 __all__ = [
     "FAST_SIM_DT",
+    "FRICTION_LAWS",
     "REFERENCE_SIM_DT",
     "VARIANTS",
     "ArenaConfig",
@@ -74,14 +75,23 @@ class RoverConfig:
     """Mass-property replacements applied after loading the URDF."""
 
 
+FRICTION_LAWS = ("coulomb", "viscous")
+"""Values of :attr:`ContactConfig.friction_law`."""
+
+
 @dataclass(frozen=True)
 class ContactConfig:
-    """Hunt–Crossley penalty contact with regularised Coulomb friction.
+    """Hunt–Crossley penalty contact with Coulomb friction.
 
     Normal force per contact point, penetration ``d`` [m] and its rate ``d_dot`` [m/s]:
     ``f_n = kp d^n + kc d^n d_dot`` (clamped at 0, no adhesion). Below ``linear_region``
     the ``d^n`` factor is replaced by its secant ``linear_region^(n-1) d`` so the stiffness
     stays finite at first touch. Defaults are the reference simulation's figures.
+
+    Friction (:attr:`friction_law`): the wheels' ground contacts are solved together, per world and
+    substep, as a velocity-level Coulomb problem (``kernels/friction.py``): a wheel sticks, with
+    whatever force up to ``mu f_n`` keeps its contact point still, or slides with ``mu f_n`` against
+    its slip. Every other contact (walls, obstacles, the chassis) keeps the regularised law below.
     """
 
     stiffness: float = 1.0e5
@@ -94,25 +104,42 @@ class ContactConfig:
     """Penetration below which the law is linear [m]."""
     friction: float = 0.3
     """Coulomb coefficient mu [-]."""
+    friction_law: str = "coulomb"
+    """``"coulomb"``: the wheels' ground friction is solved at velocity level (stick and slide, as a
+    real tyre on firm ground). ``"viscous"``: every contact uses the regularised law of releases
+    0.1.x (force proportional to slip up to ``mu f_n``, see :attr:`friction_slope_fraction`), under
+    which a rover turns about five times slower than Coulomb friction allows and mu hardly matters;
+    kept to reproduce those releases' rollouts (``tests/test_reference_task.py``)."""
     friction_slope_fraction: float = 0.5
-    """Low-slip viscous slope of the friction law as a fraction of the largest slope an
+    """Low-slip viscous slope of the regularised friction law as a fraction of the largest slope an
     explicit step of ``sim_dt`` stays stable with (``m_eff / sim_dt`` per contact direction).
     Friction is ``mu f_n`` once slip exceeds ``mu f_n dt / (fraction m_eff)``; below it,
-    proportional to slip. 0.5 halves the slip velocity twice per substep without overshoot."""
+    proportional to slip. Used by walls, obstacles and the chassis, and by the wheels under the
+    ``"viscous"`` law."""
     damping_limit: float | None = 0.1
     """Ceiling on the damping coefficient ``kc d^n`` [N·s/m], as a fraction of the explicit
-    stability limit ``m_eff / sim_dt`` (``m_eff``: a quarter of the rover, as for friction). The
-    coefficient grows with depth, and an explicit step integrates a damper stably only while
+    stability limit ``m_eff / sim_dt`` (``m_eff``: a quarter of the rover). The coefficient grows
+    with depth, and an explicit step integrates a damper stably only while
     ``coefficient x sim_dt / m_eff`` stays small: past that it overshoots, and a deep impact leaves
-    faster than it came in (at :data:`FAST_SIM_DT` without it, up to 1.43x top speed). 0.1 engages
-    only in impacts, beyond 37.5 mm of penetration at ``sim_dt`` = 0.01 s (26.6 mm at 1/60 s; a wheel
-    at rest sinks 12.6 mm; ``benchmarks/physics_report.py``). ``None``: the plain law."""
-    stiction: float = 0.0
-    """Elastic stick phase of the wheels' ground friction: a bristle of stiffness
-    ``stiction x slope / sim_dt`` per direction (0.5 puts it at a quarter of the explicit stability
-    limit ``m_eff / sim_dt²``), held at ``mu f_n`` while sliding. 0 (the reference) is the viscous
-    law alone, under which a rover on any slope creeps (about 3 cm/s on 10 deg); 0.5 holds it within
-    a millimetre below atan(mu)."""
+    faster than it came in. It engages only in impacts (where, ``benchmarks/physics_report.py``
+    prints). ``None``: the plain law."""
+
+    def __post_init__(self):
+        for name in ("stiffness", "damping", "linear_region"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"ContactConfig.{name} must be a finite number >= 0, got {value!r}")
+        if not (math.isfinite(self.exponent) and self.exponent >= 1):
+            raise ValueError(f"ContactConfig.exponent must be a finite number >= 1, got {self.exponent!r}")
+        if not (math.isfinite(self.friction) and self.friction > 0):
+            raise ValueError(f"ContactConfig.friction must be a finite number > 0, got {self.friction!r}")
+        if self.friction_law not in FRICTION_LAWS:
+            raise ValueError(f"ContactConfig.friction_law must be one of {FRICTION_LAWS}, got {self.friction_law!r}")
+        if not (math.isfinite(self.friction_slope_fraction) and self.friction_slope_fraction > 0):
+            raise ValueError("ContactConfig.friction_slope_fraction must be a finite number > 0, got "
+                             f"{self.friction_slope_fraction!r}")
+        if self.damping_limit is not None and not (math.isfinite(self.damping_limit) and self.damping_limit > 0):
+            raise ValueError(f"ContactConfig.damping_limit must be > 0 or None (no ceiling), got {self.damping_limit!r}")
 
 
 @dataclass(frozen=True)

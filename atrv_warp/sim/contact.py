@@ -2,8 +2,8 @@
 obstacles) and the law.
 
 :class:`ContactModel` turns the configs and the built Newton model into the structs the
-Hunt–Crossley kernel (:mod:`atrv_warp.sim.kernels.contact`) reads, once per simulator, and launches
-it. :class:`~atrv_warp.sim.RoverSim` and :class:`~atrv_warp.sim.diff.DiffRollout` both step through
+Hunt–Crossley kernel (:mod:`atrv_warp.sim.kernels.contact`) and the wheels' Coulomb friction solver
+(:mod:`atrv_warp.sim.kernels.friction`) read, once per simulator, and launches them. :class:`~atrv_warp.sim.RoverSim` and :class:`~atrv_warp.sim.diff.DiffRollout` both step through
 it, so there is one contact model to change.
 """
 
@@ -23,15 +23,21 @@ from atrv_warp.sim.kernels.contact import (
     ContactParams,
     RoverShapes,
     Scene,
-    clear_bristles,
     compute_contact_forces,
+)
+from atrv_warp.sim.kernels.friction import (
+    WHEEL_SLOTS,
+    RoverInertia,
+    WheelSlots,
+    clear_impulses,
+    solve_wheel_friction,
 )
 from atrv_warp.sim.kernels.obstacles import OBSTACLE_BOX, OBSTACLE_CYLINDER, OBSTACLE_NONE, ObstacleSet
 from atrv_warp.sim.kernels.terrain import TerrainGrid
 from atrv_warp.sim.model import BuiltModel
 from atrv_warp.sim.terrain import HeightGrid
 
-__all__ = ["OBSTACLE_KINDS", "ContactModel", "Obstacles", "Terrain"]
+__all__ = ["OBSTACLE_KINDS", "ContactModel", "Obstacles", "Terrain", "rover_inertia"]
 
 OBSTACLE_KINDS = {"none": int(OBSTACLE_NONE), "box": int(OBSTACLE_BOX), "cylinder": int(OBSTACLE_CYLINDER)}
 """Codes of :attr:`Obstacles.kind`."""
@@ -39,17 +45,13 @@ OBSTACLE_KINDS = {"none": int(OBSTACLE_NONE), "box": int(OBSTACLE_BOX), "cylinde
 
 def _law(cfg: ContactConfig, sim_dt: float, m_share: float) -> ContactParams:
     """The kernel's law; ``m_share`` [kg] is the rover's mass per wheel (the damping ceiling's ``m_eff``)."""
-    if cfg.stiction < 0:
-        raise ValueError(f"ContactConfig.stiction must be >= 0, got {cfg.stiction}")
-    if cfg.damping_limit is not None and not cfg.damping_limit > 0:
-        raise ValueError(f"ContactConfig.damping_limit must be > 0 or None (no ceiling), got {cfg.damping_limit}")
     p = ContactParams()
     p.stiffness = cfg.stiffness
     p.damping = cfg.damping
     p.exponent = cfg.exponent
     p.linear_region = cfg.linear_region
     p.linear_coeff = cfg.linear_region ** (cfg.exponent - 1.0)
-    p.stiction = cfg.stiction
+    p.wheel_solver = int(cfg.friction_law == "coulomb")
     p.dt = sim_dt
     p.damping_cap = math.inf if cfg.damping_limit is None else cfg.damping_limit * m_share / sim_dt
     return p
@@ -208,22 +210,84 @@ def _shapes(built: BuiltModel, rover: RoverConfig, cfg: ContactConfig, sim_dt: f
     return sh
 
 
+def rover_inertia(model: newton.Model, bodies_per_world: int, chassis: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """World 0's rover as one rigid body, from the model's masses and its joints at zero: (mass [kg],
+    centre of mass [m] and inertia about it [kg·m²], both in the chassis body frame)."""
+    state = model.state()
+    newton.eval_fk(model, model.joint_q, model.joint_qd, state)
+    q = state.body_q.numpy()[:bodies_per_world].astype(np.float64)
+    mass = model.body_mass.numpy()[:bodies_per_world].astype(np.float64)
+    inertia = model.body_inertia.numpy()[:bodies_per_world].astype(np.float64)
+    com = model.body_com.numpy()[:bodies_per_world].astype(np.float64)
+
+    def rotation(quat):
+        x, y, z, w = quat
+        return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+    r_c = rotation(q[chassis, 3:])
+    # each body's rotation and COM in the chassis frame
+    rots = [r_c.T @ rotation(q[b, 3:]) for b in range(bodies_per_world)]
+    coms = [r_c.T @ (q[b, :3] + rotation(q[b, 3:]) @ com[b] - q[chassis, :3]) for b in range(bodies_per_world)]
+    total = float(mass.sum())
+    centre = sum(m * c for m, c in zip(mass, coms)) / total
+    tensor = np.zeros((3, 3))
+    for m, rot, i_b, c in zip(mass, rots, inertia, coms):
+        d = c - centre
+        tensor += rot @ i_b @ rot.T + m * (d @ d * np.eye(3) - np.outer(d, d))
+    return total, centre, tensor
+
+
+def _wheel_slots(built: BuiltModel, wheel_dofs: list[int], dofs_per_world: int, device) -> WheelSlots:
+    """The wheels' cylinders, joints and spin inertias, in the description's wheel order."""
+    rb, desc = built.rover_builder, built.description
+    if len(desc.wheels) != WHEEL_SLOTS:
+        raise ValueError(f"ContactConfig.friction_law='coulomb' solves {int(WHEEL_SLOTS)} wheels together; this rover "
+                         f"has {len(desc.wheels)}. Use friction_law='viscous' for other rovers.")
+    shape, axis, inv_spin = [], [], []
+    inertia = built.model.body_inertia.numpy()
+    for body, wheel in zip(built.wheel_bodies, desc.wheels):
+        cylinders = [s for s in built.rover_shapes
+                     if rb.shape_body[s] == body and rb.shape_type[s] == newton.GeoType.CYLINDER]
+        if len(cylinders) != 1:
+            raise ValueError(f"wheel {wheel.link!r} needs exactly one collision cylinder, has {len(cylinders)}")
+        shape.append(built.rover_shapes.index(cylinders[0]))
+        a = np.asarray(wheel.axis, dtype=np.float64)
+        axis.append(wp.vec3(*a))
+        inv_spin.append(1.0 / float(a @ inertia[body] @ a))
+    slots = WheelSlots()
+    slots.chassis = built.chassis_body
+    slots.dofs_per_world = dofs_per_world
+    slots.shape = wp.array(shape, dtype=int, device=device)
+    slots.dof = wp.array(wheel_dofs, dtype=int, device=device)
+    slots.axis = wp.array(axis, dtype=wp.vec3, device=device)
+    slots.inv_spin_inertia = wp.array(inv_spin, dtype=float, device=device)
+    return slots
+
+
 class ContactModel:
     """Hunt–Crossley contact of every world's rover against the arena, ready to launch.
 
-    Attributes (read-only; the kernel's inputs):
+    Attributes (read-only; the kernels' inputs):
         params: the law (:class:`~atrv_warp.sim.kernels.contact.ContactParams`).
         shapes: the template rover's shapes (:class:`~atrv_warp.sim.kernels.contact.RoverShapes`).
         planes: ground and walls (:class:`~atrv_warp.sim.kernels.contact.ArenaPlanes`).
         terrain: each world's ground (:class:`Terrain`); obstacles: each world's (:class:`Obstacles`).
         scene: planes, terrain and obstacles as the kernel's struct.
         friction: (1,) Coulomb coefficient, the default for :meth:`apply`.
+        wheels: the wheels the Coulomb friction solver handles
+            (:class:`~atrv_warp.sim.kernels.friction.WheelSlots`; ``None`` under the viscous law).
+        inertia: each world's rover as one rigid body, the solver's model of it
+            (:class:`~atrv_warp.sim.kernels.friction.RoverInertia`; ``None`` under the viscous law).
     """
 
     def __init__(self, built: BuiltModel, *, rover: RoverConfig, contact: ContactConfig, arena: ArenaConfig,
-                 sim_dt: float, device, terrain: HeightGrid | None = None, obstacles: ObstacleConfig | None = None):
+                 sim_dt: float, gravity: float, device, terrain: HeightGrid | None = None,
+                 obstacles: ObstacleConfig | None = None):
         self.num_worlds = built.num_worlds
-        self.bodies_per_world = built.rover_builder.body_count
+        rb = built.rover_builder
+        self.bodies_per_world = rb.body_count
         self.device = device
         desc = built.description
         self.params = _law(contact, sim_dt, desc.total_mass / max(len(desc.wheels), 1))
@@ -235,20 +299,45 @@ class ContactModel:
         scene.planes, scene.terrain, scene.obstacles = self.planes, self.terrain.kernel, self.obstacles.kernel
         self.scene = scene
         self.friction = wp.array([contact.friction], dtype=float, device=device)
-        self.bristles = wp.zeros(self.num_worlds * self.shapes.count, dtype=wp.vec3, device=device)
-        """(N x shapes) each wheel's stick deflection [m], kept between substeps (``ContactConfig.stiction``)."""
+        self.gravity = wp.vec3(0.0, 0.0, gravity)
+        self.wheels: WheelSlots | None = None
+        self.inertia: RoverInertia | None = None
+        if contact.friction_law == "coulomb":
+            self.wheels = _wheel_slots(built, [rb.joint_qd_start[j] for j in built.wheel_joints], rb.joint_dof_count,
+                                       device)
+            mass, com, tensor = rover_inertia(built.model, self.bodies_per_world, built.chassis_body)
+            n = self.num_worlds
+            inertia = RoverInertia()
+            inertia.inv_mass = wp.array(np.full(n, 1.0 / mass), dtype=float, device=device)
+            inertia.com = wp.array(np.tile(com, (n, 1)), dtype=wp.vec3, device=device)
+            inertia.inv_inertia = wp.array(np.tile(np.linalg.inv(tensor), (n, 1, 1)), dtype=wp.mat33, device=device)
+            self.inertia = inertia
+        self.impulses = wp.zeros(self.num_worlds * WHEEL_SLOTS, dtype=wp.vec3, device=device)
+        """(N x 4) each wheel's last friction impulse [N·s], world frame: where the next substep's
+        sweeps start (the Coulomb law's warm start)."""
 
-    def apply(self, state: newton.State, body_com: wp.array, flags: wp.array, friction: wp.array | None = None) -> None:
+    def apply(self, state: newton.State, body_com: wp.array, joint_f: wp.array, flags: wp.array,
+              friction: wp.array | None = None, warm_start: wp.array | None = None,
+              impulses: wp.array | None = None) -> None:
         """Add every contact wrench to ``state.body_f`` and OR the contact bits into ``flags``.
 
-        ``friction`` (1,) overrides the configured coefficient, e.g. a differentiable one.
+        ``joint_f`` holds this substep's drive torques (the friction solver predicts the wheels'
+        spin with them); ``friction`` (1,) overrides the configured coefficient, e.g. a differentiable one.
+        ``warm_start`` and ``impulses`` (N x 4 ``wp.vec3``) replace :attr:`impulses` as the previous
+        substep's friction impulses and this one's (a tape needs one array per substep).
         """
+        mu = self.friction if friction is None else friction
         wp.launch(compute_contact_forces, dim=self.num_worlds,
-                  inputs=[self.bodies_per_world, self.shapes, self.scene, self.params,
-                          self.friction if friction is None else friction, state.body_q, state.body_qd, body_com],
-                  outputs=[state.body_f, flags, self.bristles], device=self.device)
+                  inputs=[self.bodies_per_world, self.shapes, self.scene, self.params, mu, state.body_q,
+                          state.body_qd, body_com],
+                  outputs=[state.body_f, flags], device=self.device)
+        if self.wheels is not None:
+            wp.launch(solve_wheel_friction, dim=self.num_worlds,
+                      inputs=[self.bodies_per_world, self.shapes, self.wheels, self.inertia, self.scene, self.params,
+                              self.gravity, mu, state.body_q, state.body_qd, body_com, joint_f,
+                              self.impulses if warm_start is None else warm_start],
+                      outputs=[state.body_f, self.impulses if impulses is None else impulses], device=self.device)
 
     def reset(self, mask: wp.array) -> None:
-        """Clear the masked worlds' stick deflections (a reset rover starts unloaded)."""
-        wp.launch(clear_bristles, dim=self.num_worlds, inputs=[mask, self.shapes.count], outputs=[self.bristles],
-                  device=self.device)
+        """Forget the masked worlds' friction impulses (a reset rover starts unloaded)."""
+        wp.launch(clear_impulses, dim=self.num_worlds, inputs=[mask], outputs=[self.impulses], device=self.device)

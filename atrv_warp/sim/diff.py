@@ -123,9 +123,6 @@ class DiffRollout:
                  wrench_fix: bool = True, action_scale: float = DEFAULT_ACTION_SCALE):
         if steps < 1:
             raise ValueError(f"steps must be >= 1, got {steps}")
-        if contact is not None and contact.stiction:
-            raise ValueError("DiffRollout needs ContactConfig.stiction = 0: the stick phase keeps each wheel's "
-                             "deflection in one buffer across substeps, which a tape cannot differentiate")
         sim_cfg = sim or SimConfig()
         sim_cfg = SimConfig(step_dt=sim_cfg.step_dt, sim_dt=sim_cfg.sim_dt, gravity=sim_cfg.gravity,
                             mass_matrix_interval=1, use_tile_gemm=False, use_graph=False)
@@ -154,6 +151,9 @@ class DiffRollout:
         self.nominal_chassis_mass = float(model.body_mass.numpy()[chassis])
         self._nominal_chassis_inertia = wp.mat33(model.body_inertia.numpy()[chassis])
         self._flags = wp.zeros(num_worlds, dtype=wp.int32, device=dev)
+        # The friction solver starts each substep from the previous one's impulses: one array per
+        # substep boundary, so the tape differentiates through that chain too.
+        self._impulses = [wp.zeros_like(self.sim.contact.impulses, requires_grad=True) for _ in range(n_sub + 1)]
         self._torque = wp.zeros((num_worlds, len(self.sim.description.wheels)), dtype=float, device=dev)
         # Featherstone keeps its mass-matrix scratch (M, J, P, H, L) on the solver, shared by every
         # step. Under a tape each step must own them, or the adjoints of all steps mix in one buffer
@@ -198,7 +198,8 @@ class DiffRollout:
                 for name, arr in self._scratch[k].items():
                     setattr(sim.solver, name, arr)
                 sim.substep(s_in, s_out, self.controls[k], self._commands[t], friction=self._friction,
-                            flags=self._flags, torque=self._torque, solver_in=self._solver_in[k])
+                            flags=self._flags, torque=self._torque, solver_in=self._solver_in[k],
+                            warm_start=self._impulses[k], impulses=self._impulses[k + 1])
                 if self._tape is not None and self.wrench_fix:
                     self._tape.record_func(backward=restore_external_wrench(s_out, s_in), arrays=[])
                 k += 1
@@ -220,6 +221,7 @@ class DiffRollout:
         wp.to_torch(self._chassis_mass).copy_(chassis_mass.reshape(1))
         for s in self.states:
             s.body_f.zero_()
+        self._impulses[0].zero_()  # a rollout starts from rest, unloaded
         self._rollout_id += 1
         self._tape = wp.Tape() if record else None
         if record:
@@ -274,8 +276,10 @@ class DiffRollout:
             friction: Coulomb coefficient (default: the contact config's), differentiable.
             chassis_mass: Chassis mass [kg] of every world, e.g. with a payload (default: the
                 URDF's, :attr:`nominal_chassis_mass`); its inertia scales with it. Differentiable.
-                The friction law's low-slip slope is sized for the nominal mass (half the
-                stable maximum), so stay above about half of it.
+                The wheels' friction solver predicts contact velocities with the nominal
+                rover (a constant of the tape, not differentiated): a heavier chassis makes it
+                under-correct (slip left for the next substep), one lighter than about half
+                the nominal would make it overshoot.
         """
         expected = (self.steps, self.num_worlds, 2)
         if tuple(actions.shape) != expected:

@@ -188,8 +188,8 @@ class RoverSim:
         if isinstance(terrain, TerrainConfig):
             terrain = terrain.generate(self.arena_cfg.half_size)
         self.contact = ContactModel(self.built, rover=self.rover_cfg, contact=self.contact_cfg, arena=self.arena_cfg,
-                                    sim_dt=self.sim_cfg.sim_dt, device=self.device, terrain=terrain,
-                                    obstacles=obstacles)
+                                    sim_dt=self.sim_cfg.sim_dt, gravity=self.sim_cfg.gravity, device=self.device,
+                                    terrain=terrain, obstacles=obstacles)
         """The contact model every substep launches (:class:`~atrv_warp.sim.contact.ContactModel`)."""
 
         n, w = num_worlds, len(self.description.wheels)
@@ -307,19 +307,22 @@ class RoverSim:
     # ------------------------------------------------------------------ stepping
     def substep(self, s_in: newton.State, s_out: newton.State, control: newton.Control, commands: wp.array, *,
                 friction: wp.array | None = None, flags: wp.array | None = None, torque: wp.array | None = None,
-                solver_in: newton.State | None = None) -> None:
-        """One solver substep of ``sim_dt``: contact wrenches, wheel torques, one Featherstone step.
+                solver_in: newton.State | None = None, warm_start: wp.array | None = None,
+                impulses: wp.array | None = None) -> None:
+        """One solver substep of ``sim_dt``: wheel torques, contact wrenches, one Featherstone step.
 
         The simulator's own step calls it on its two states; :class:`~atrv_warp.sim.diff.DiffRollout`
         calls it on a tape with one state per substep, its own ``commands`` (N,) ``wp.vec2``,
-        ``friction`` (1,), ``flags`` (N,) and ``torque`` (N, W) outputs, and ``solver_in``: a view
-        of ``s_in`` with its own ``body_q`` for the solver to write.
+        ``friction`` (1,), ``flags`` (N,) and ``torque`` (N, W) outputs, ``solver_in``: a view
+        of ``s_in`` with its own ``body_q`` for the solver to write, and the wheels' friction impulses
+        of the previous substep (``warm_start``) and of this one (``impulses``), N x 4 ``wp.vec3`` each.
         """
         s_in.clear_forces()
-        self.contact.apply(s_in, self.model.body_com, self._contact_flags if flags is None else flags, friction)
         wp.launch(apply_wheel_torques, dim=self.num_worlds,
                   inputs=[self._layout, commands, self.rover_cfg.wheel_speed_limit, s_in.joint_qd],
                   outputs=[control.joint_f, self._wheel_torque if torque is None else torque], device=self.device)
+        self.contact.apply(s_in, self.model.body_com, control.joint_f, self._contact_flags if flags is None else flags,
+                           friction, warm_start, impulses)
         self.solver.step(s_in if solver_in is None else solver_in, s_out, control, None, self.sim_cfg.sim_dt)
 
     def _simulate(self) -> None:
@@ -431,8 +434,7 @@ class RoverSim:
             wp.launch(place_on_terrain, dim=self.num_worlds,
                       inputs=[self._layout.chassis_coord, self._layout.coords_per_world, self.terrain.kernel, mask,
                               poses, h, self._footprint], outputs=[s.joint_q], device=self.device)
-        if self.contact_cfg.stiction > 0:
-            self.contact.reset(mask)
+        self.contact.reset(mask)
         newton.eval_fk(self.model, s.joint_q, s.joint_qd, s, mask=mask)
         self._update_views()
 
@@ -450,7 +452,7 @@ class RoverSim:
         wp.to_torch(s.joint_qd).copy_(snapshot["joint_qd"])
         self.commands.copy_(snapshot["commands"])
         self.sim_time = float(snapshot["sim_time"])
-        self.contact.bristles.zero_()
+        self.contact.impulses.zero_()
         newton.eval_fk(self.model, s.joint_q, s.joint_qd, s)
         self._contact_flags.zero_()
         self._nonfinite.zero_()

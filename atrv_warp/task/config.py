@@ -54,8 +54,6 @@ class TaskConfig:
     min(range, scan_clip) / scan_clip in [0, 1]; ``scan_beams`` must be a multiple of it."""
     scan_clip: float = 5.0
     """Ranges beyond this [m] are observed as 1."""
-    stiction: float = 0.0
-    """``ContactConfig.stiction`` of the task's simulator (0: the reference friction law)."""
 
     def __post_init__(self):
         if self.scan_sectors and (self.scan_beams % self.scan_sectors or self.scan_sectors < 0):
@@ -74,11 +72,11 @@ TASK_VARIANTS: dict[str, TaskConfig] = {
     "reach": TaskConfig(),
     "nav": TaskConfig(
         terrain="rolling", target_distance=(5.0, 10.0), obstacles=6, obstacles_on_path=1, max_steps=300,
-        flip_roll=0.5, scan_beams=64, scan_sectors=16, stiction=0.5),
+        flip_roll=0.5, scan_beams=64, scan_sectors=16),
 }
 """Registered tasks. ``reach``: the reference task (flat, no obstacles, no scanner). ``nav``: rolling
 terrain, six obstacles (one across the straight line to the target), targets 5–10 m away, 15 s
-episodes, a 64-beam scan observed as 16 sectors, wheels that stick on slopes."""
+episodes, a 64-beam scan observed as 16 sectors."""
 
 
 def get_task(task: str | TaskConfig | None) -> TaskConfig:

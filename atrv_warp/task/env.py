@@ -103,8 +103,6 @@ class ATRVjrEnv(EnvBase):
         **task_overrides,
     ):
         self.task_cfg = c = replace_checked(get_task(task), **task_overrides)
-        if c.stiction:
-            contact = dataclasses.replace(contact or ContactConfig(), stiction=c.stiction)
         self.sim = RoverSim(num_envs, rover=rover or get_variant(variant), contact=contact, arena=arena, sim=sim,
                             terrain=c.terrain, obstacles=ObstacleConfig(slots=c.obstacles) if c.obstacles else None,
                             device=device)

@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-__all__ = ["BaseParams", "VelocityController", "WheelOdometry", "imu_reading", "yaw_quaternion"]
+__all__ = ["BaseParams", "VelocityController", "WheelOdometry", "imu_reading", "side_speeds", "turning_response",
+           "yaw_quaternion"]
 
 
 @dataclass(frozen=True)
@@ -22,10 +23,12 @@ class BaseParams:
     """[m]"""
     track_width: float
     """Distance between the left and right wheel centres [m] (from the URDF)."""
-    effective_track_factor: float = 8.28
+    effective_track_factor: float = 1.57
     """Skid-steer wheels slide sideways when turning, so the rover turns slower than a
     differential drive with the same track: ``yaw rate = r (w_right - w_left) / (factor x track)``.
-    8.28 is measured on our physics (``benchmarks/skid_calibration.py``; constant over speeds)."""
+    The median over turning commands measured on our physics by ``benchmarks/skid_calibration.py``
+    (``benchmarks/results/skid_calibration.json``); Coulomb friction predicts 1.58 for this
+    geometry, and Mandow et al. (IROS 2007) measured about 1.5 on a Pioneer 3-AT."""
     kp: float = 0.6
     """PI proportional gain [N·m per rad/s]. The controller runs once per 0.05 s step, and a
     slipping wheel's own inertia (0.02 kg·m²) bounds it: above ~0.8 it oscillates."""
@@ -126,3 +129,38 @@ def imu_reading(frame_pose: torch.Tensor, ang_vel: torch.Tensor, accel: torch.Te
     qy = math.copysign(math.sqrt(max(0.0, 1 - float(m[0, 0] - m[1, 1] + m[2, 2]))) / 2, float(m[0, 2] - m[2, 0]))
     qz = math.copysign(math.sqrt(max(0.0, 1 - float(m[0, 0] + m[1, 1] - m[2, 2]))) / 2, float(m[1, 0] - m[0, 1]))
     return {"orientation": (qx, qy, qz, qw), "angular_velocity": w.tolist(), "linear_acceleration": a.tolist()}
+
+
+def side_speeds(wheel_speed: torch.Tensor, side: torch.Tensor) -> torch.Tensor:
+    """(N, 2) mean (left, right) wheel speeds [rad/s] from (N, W) ``wheel_speed`` and each wheel's side (W,)."""
+    return torch.stack([wheel_speed[:, side == 0].mean(-1), wheel_speed[:, side == 1].mean(-1)], -1)
+
+
+def turning_response(sim, commands: list[tuple[float, float]], params: BaseParams, *, seconds: float = 8.0,
+                     average: float = 3.0) -> list[dict]:
+    """Drive world ``i`` of ``sim`` (at least ``len(commands)`` worlds, placed apart) with a
+    :class:`VelocityController` toward ``commands[i]`` = (linear [m/s], angular [rad/s]) for
+    ``seconds``, and return per command the mean left and right wheel speeds [rad/s], yaw rate
+    [rad/s] and speed [m/s] over the last ``average`` seconds: what a skid-steer calibration measures."""
+    n = len(commands)
+    sim.reset(poses=[[0.0, 4.0 * (i - sim.num_worlds / 2), 0.0] for i in range(sim.num_worlds)])
+    side = torch.tensor([w.side for w in sim.description.wheels])
+    controllers = [VelocityController(params) for _ in commands]
+    for c, (v, w) in zip(controllers, commands):
+        c.command(v, w, now=0.0)
+    dt = sim.sim_cfg.step_dt
+    steps, kept = round(seconds / dt), round(average / dt)
+    sums = torch.zeros(n, 4, dtype=torch.float64)
+    torques = torch.zeros(sim.num_worlds, 2)
+    for k in range(steps):
+        speeds = side_speeds(sim.wheel_speed, side)
+        for i, c in enumerate(controllers):
+            torques[i] = c.torques(speeds[i], now=0.0, dt=dt)
+        sim.step(torques)
+        if k >= steps - kept:
+            speeds = side_speeds(sim.wheel_speed, side)[:n]
+            sums += torch.cat([speeds, sim.ang_vel[:n, 2:3], sim.lin_vel[:n, :2].norm(dim=-1, keepdim=True)], -1)
+    mean = (sums / kept).tolist()
+    return [{"linear": v, "angular": w, "wheel_left": m[0], "wheel_right": m[1], "yaw_rate": m[2], "speed": m[3]}
+            for (v, w), m in zip(commands, mean)]
+

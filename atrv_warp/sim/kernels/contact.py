@@ -10,9 +10,12 @@ closed form is exact, cheap (one thread per world, no broad phase) and different
 On terrain (``kernels/terrain.py``) the ground is the tangent plane under the shape: for a wheel,
 the plane under its centre gives a first deepest rim point, and the plane under that point the
 final one; box corners use the plane under each corner. Obstacles (``kernels/obstacles.py``) are
-worked out in the ground plane. With ``ContactParams.stiction > 0`` a wheel's ground friction
-also has an elastic stick phase (a bristle per wheel, its deflection kept between substeps), so a
-rover parked on a slope below atan(mu) stays put instead of creeping at the viscous rate.
+worked out in the ground plane.
+
+Friction here is the regularised law: proportional to slip up to ``mu f_n``, with a slope an
+explicit step stays stable with. Under ``ContactConfig.friction_law = "coulomb"`` (the default) the
+wheels' ground contacts are left to ``kernels/friction.py``, which solves them as Coulomb friction;
+this kernel then handles the walls, obstacles and the chassis.
 
 Forces are written into ``State.body_f`` (world-frame wrench at the body COM, linear first),
 which Newton's solvers add to the articulated dynamics.
@@ -57,7 +60,7 @@ class ContactParams:
     exponent: float  # n [-]
     linear_region: float  # [m]
     linear_coeff: float  # linear_region^(n-1), so the law is continuous at linear_region
-    stiction: float  # bristle stiffness x sim_dt / friction slope [-]; 0 = regularised Coulomb only
+    wheel_solver: int  # 1: the wheels' ground contacts are solve_wheel_friction's (friction_law "coulomb")
     dt: float  # sim_dt [s]
     damping_cap: float  # ceiling on kc d^n [N·s/m] (ContactConfig.damping_limit)
 
@@ -205,46 +208,6 @@ def contact_flag(plane: int, is_wheel: int) -> wp.int32:
 
 
 @wp.func
-def bristle_contact_force(
-    p: wp.vec3,
-    depth: float,
-    normal: wp.vec3,
-    com: wp.vec3,
-    v_com: wp.vec3,
-    omega: wp.vec3,
-    axle: wp.vec3,
-    slope_lon: float,
-    slope_lat: float,
-    params: ContactParams,
-    friction: float,
-    deflection: wp.vec3,
-):
-    """Like :func:`point_contact_force`, with an elastic stick phase: the tangential force is
-    ``-k deflection - c slip`` (``k = stiction c / dt`` per direction), the deflection integrates the
-    slip and is held at the Coulomb limit while sliding. Returns (force, new deflection)."""
-    fn, vt, lat, ll = contact_kinematics(p, depth, normal, com, v_com, omega, axle, params)
-    if ll < 1.0e-6:
-        return point_contact_force(p, depth, normal, com, v_com, omega, axle, slope_lon, slope_lat, params,
-                                   friction), wp.vec3(0.0)
-    lat = lat / ll
-    lon = wp.cross(normal, lat)
-    d = deflection - wp.dot(deflection, normal) * normal + vt * params.dt
-    k_lon = params.stiction * slope_lon / params.dt
-    k_lat = params.stiction * slope_lat / params.dt
-    spring = -(k_lon * wp.dot(d, lon)) * lon - (k_lat * wp.dot(d, lat)) * lat
-    fmax = friction * fn
-    sl = wp.length(spring)
-    if sl > fmax:  # sliding: the bristle stays at the Coulomb limit
-        d = d * (fmax / sl)
-        spring = spring * (fmax / sl)
-    ft = spring - (slope_lon * wp.dot(vt, lon)) * lon - (slope_lat * wp.dot(vt, lat)) * lat
-    fl = wp.length(ft)
-    if fl > fmax:
-        ft = ft * (fmax / fl)
-    return fn * normal + ft, d
-
-
-@wp.func
 def plane_contact(
     wrench: wp.spatial_vector,
     flags: wp.int32,
@@ -274,6 +237,13 @@ def plane_contact(
             wrench += contact_wrench(p, depth, n, com, v_com, omega, axle, slope_lon, slope_lat, params, friction)
             flags = flags | contact_flag(plane, wheel)
     else:
+        # the box's lowest point along -n is its centre's height less this support extent; the corners
+        # are tested only when it may be in the half-space (1 µm of margin for rounding: exact either way)
+        extent = (size[0] * wp.abs(wp.dot(n, wp.transform_vector(xf, wp.vec3(1.0, 0.0, 0.0))))
+                  + size[1] * wp.abs(wp.dot(n, wp.transform_vector(xf, wp.vec3(0.0, 1.0, 0.0))))
+                  + size[2] * wp.abs(wp.dot(n, wp.transform_vector(xf, wp.vec3(0.0, 0.0, 1.0)))))
+        if wp.dot(n, wp.transform_get_translation(xf)) - off > extent + 1.0e-6:
+            return wrench, flags
         for corner in range(8):
             sx = float(2 * (corner & 1) - 1)
             sy = float(2 * ((corner >> 1) & 1) - 1)
@@ -285,6 +255,25 @@ def plane_contact(
                                          friction)
                 flags = flags | contact_flag(plane, wheel)
     return wrench, flags
+
+
+@wp.func
+def wheel_ground_point(scene: Scene, tile: int, xf: wp.transform, size: wp.vec3):
+    """A cylinder's deepest point on the ground (the terrain's tangent plane, or plane 0):
+    (point [m], ground normal, depth [m], > 0 when touching)."""
+    n = scene.planes.normal[0]
+    off = scene.planes.offset[0]
+    if scene.terrain.enabled != 0:
+        c = wp.transform_get_translation(xf)
+        h = terrain_sample(scene.terrain, tile, c[0], c[1])
+        n = terrain_normal(h)
+        off = terrain_plane_offset(n, c[0], c[1], h)
+        p0 = cylinder_deepest_point(xf, size[0], size[1], n)
+        h = terrain_sample(scene.terrain, tile, p0[0], p0[1])
+        n = terrain_normal(h)
+        off = terrain_plane_offset(n, p0[0], p0[1], h)
+    p = cylinder_deepest_point(xf, size[0], size[1], n)
+    return p, n, off - wp.dot(n, p)
 
 
 @wp.func
@@ -301,33 +290,13 @@ def cylinder_ground_contact(
     slope_lat: float,
     params: ContactParams,
     friction: float,
-    deflection: wp.vec3,
 ):
-    """A cylinder on the ground (the terrain's tangent plane, or plane 0), with stiction if enabled:
-    (wrench about the COM, new bristle deflection, 1 if touching)."""
-    n = scene.planes.normal[0]
-    off = scene.planes.offset[0]
-    if scene.terrain.enabled != 0:
-        c = wp.transform_get_translation(xf)
-        h = terrain_sample(scene.terrain, tile, c[0], c[1])
-        n = terrain_normal(h)
-        off = terrain_plane_offset(n, c[0], c[1], h)
-        p0 = cylinder_deepest_point(xf, size[0], size[1], n)
-        h = terrain_sample(scene.terrain, tile, p0[0], p0[1])
-        n = terrain_normal(h)
-        off = terrain_plane_offset(n, p0[0], p0[1], h)
-    p = cylinder_deepest_point(xf, size[0], size[1], n)
-    depth = off - wp.dot(n, p)
+    """A cylinder on the terrain under the regularised law: (wrench about the COM, 1 if touching)."""
+    p, n, depth = wheel_ground_point(scene, tile, xf, size)
     if depth <= 0.0:
-        return wp.spatial_vector(), wp.vec3(0.0), 0
-    f = wp.vec3(0.0)
-    d = wp.vec3(0.0)
-    if params.stiction > 0.0:
-        f, d = bristle_contact_force(p, depth, n, com, v_com, omega, axle, slope_lon, slope_lat, params, friction,
-                                     deflection)
-    else:
-        f = point_contact_force(p, depth, n, com, v_com, omega, axle, slope_lon, slope_lat, params, friction)
-    return wp.spatial_vector(f, wp.cross(p - com, f)), d, 1
+        return wp.spatial_vector(), 0
+    f = point_contact_force(p, depth, n, com, v_com, omega, axle, slope_lon, slope_lat, params, friction)
+    return wp.spatial_vector(f, wp.cross(p - com, f)), 1
 
 
 @wp.func
@@ -436,10 +405,9 @@ def compute_contact_forces(
     body_com: wp.array(dtype=wp.vec3),
     body_f: wp.array(dtype=wp.spatial_vector),
     contact_flags: wp.array(dtype=wp.int32),
-    bristles: wp.array(dtype=wp.vec3),
 ):
     """One thread per world: add every shape's contact wrenches (planes or terrain, obstacles) to
-    ``body_f``; ``bristles`` (N x shapes) keeps each wheel's stick deflection between substeps.
+    ``body_f``, and OR the world's contact bits into ``contact_flags``.
 
     ``friction`` is a one-element array (mu) so that gradients can flow to it.
     """
@@ -464,13 +432,12 @@ def compute_contact_forces(
         wheel = shapes.is_wheel[s]
         wrench = wp.spatial_vector()
         kind = shapes.kind[s]
-        # The ground: the terrain, or plane 0 (with stiction, a wheel's own law).
-        if kind == SHAPE_CYLINDER and (scene.terrain.enabled != 0 or params.stiction > 0.0):
-            w, d, touching = cylinder_ground_contact(scene, tile, xf, size, com, v_com, omega, axle,
-                                                     shapes.slope_lon[s], shapes.slope_lat[s], params, mu,
-                                                     bristles[world * shapes.count + s])
-            if params.stiction > 0.0:
-                bristles[world * shapes.count + s] = d
+        # The ground: the terrain or plane 0; a wheel's is solve_wheel_friction's under friction_law "coulomb".
+        if kind == SHAPE_CYLINDER and wheel != 0 and params.wheel_solver != 0:
+            touching = 0
+        elif kind == SHAPE_CYLINDER and scene.terrain.enabled != 0:
+            w, touching = cylinder_ground_contact(scene, tile, xf, size, com, v_com, omega, axle, shapes.slope_lon[s],
+                                                  shapes.slope_lat[s], params, mu)
             wrench += w
             if touching != 0:
                 flags = flags | contact_flag(0, wheel)
@@ -504,13 +471,3 @@ def compute_contact_forces(
         # atomic_add, not read-modify-write: it has an adjoint, so wp.Tape can differentiate it
         wp.atomic_add(body_f, b, wrench)
     contact_flags[world] = flags
-
-
-@wp.kernel
-def clear_bristles(mask: wp.array(dtype=bool), shape_count: int, bristles: wp.array(dtype=wp.vec3)):
-    """Zero the stick deflections of masked worlds (on reset)."""
-    world = wp.tid()
-    if not mask[world]:
-        return
-    for s in range(shape_count):
-        bristles[world * shape_count + s] = wp.vec3(0.0)

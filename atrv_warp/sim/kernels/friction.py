@@ -1,0 +1,297 @@
+"""Wheel–ground friction as a velocity-level Coulomb problem, solved per world every substep.
+
+Why not a force law: a wheel's rim is light along its rolling direction (its spin inertia, 0.02
+kg·m², is 1.25 kg at the rim), so an explicit step of 0.01 s can only apply a friction force that
+grows slowly with slip. Such a viscous law never reaches ``mu f_n`` in a turn, and a skid-steer
+rover then turns as the ratio of its viscous slopes dictates (8.3x slower than its wheels command,
+whatever mu), not as Coulomb friction does (about 1.6x).
+
+What this kernel does instead, for the four wheels of one world at once (one thread per world):
+
+1. each wheel's deepest rim point on the ground (plane 0 or the terrain's tangent plane), its
+   Hunt–Crossley normal force and the contact point's velocity;
+2. the velocity each contact point would have at the end of the substep without friction, from the
+   forces already known for it: gravity, the normal forces and the wheels' drive torques, applied to
+   a model of the rover as one rigid body plus four free-spinning wheels;
+3. friction impulses by projected Gauss–Seidel over the four contacts, starting from the previous
+   substep's impulses: each contact in turn either sticks (its end-of-substep slip is zero, with an
+   impulse inside the Coulomb disc ``mu f_n dt``) or slides (impulse ``mu f_n dt`` against its
+   end-of-substep slip), given the others' impulses;
+4. normal plus friction force on each wheel body (``body_f``), which Newton's solver integrates.
+
+Step 3 is exact for the per-contact problem (the sliding direction solves a scalar equation by
+Newton's method). One sweep per substep, warm-started, lets successive substeps' sweeps converge to
+the coupled problem together, where several sweeps from zero each substep would cost several times
+as much and still leave a parked rover creeping. What is left, and the gap between the rigid-body
+model and Newton's articulation, is slip that the next substep removes
+(``benchmarks/skid_calibration.py`` measures what that leaves on slopes). The result is Coulomb friction: no
+creep at rest on a slope below ``atan(mu)``, rolling without slip under traction below
+``mu f_n``, and turning set by the directions of the sliding forces, not by their magnitude.
+
+Every loop has a constant bound (Warp unrolls it), so ``wp.Tape`` differentiates the kernel. The law
+is piecewise smooth: a contact that switches between sticking and sliding has a kink there.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from atrv_warp.sim.kernels.contact import ContactParams, RoverShapes, Scene, hunt_crossley, wheel_ground_point
+
+WHEEL_SLOTS = wp.constant(4)
+"""Wheels the solver handles (the ATRV-Jr's four; :class:`~atrv_warp.sim.contact.ContactModel` checks)."""
+FRICTION_SWEEPS = wp.constant(1)
+"""Gauss–Seidel sweeps over the wheels per substep, each starting where the previous substep ended."""
+SLIDE_ITERATIONS = wp.constant(3)
+"""Newton iterations for a sliding contact's slip speed (relative error under 1e-4 after three)."""
+
+mat43 = wp.types.matrix(shape=(4, 3), dtype=float)
+mat42 = wp.types.matrix(shape=(4, 2), dtype=float)
+
+
+# Per-wheel values live in the rows of small matrices (and entries of vectors). A row is replaced by
+# building a new matrix, not
+# written in place: Warp 1.19's adjoint of a repeated in-place row write is wrong (its gradients
+# disagree with finite differences), while a rebuilt value is plain SSA and differentiates exactly.
+@wp.func
+def with_row(m: mat43, i: int, row: wp.vec3):
+    """``m`` with row ``i`` replaced by ``row``."""
+    r0 = m[0]
+    r1 = m[1]
+    r2 = m[2]
+    r3 = m[3]
+    if i == 0:
+        r0 = row
+    if i == 1:
+        r1 = row
+    if i == 2:
+        r2 = row
+    if i == 3:
+        r3 = row
+    return wp.matrix_from_rows(r0, r1, r2, r3)
+
+
+@wp.func
+def with_row(m: mat42, i: int, row: wp.vec2):  # noqa: F811 (a Warp overload, chosen by argument types)
+    """``m`` with row ``i`` replaced by ``row``."""
+    r0 = m[0]
+    r1 = m[1]
+    r2 = m[2]
+    r3 = m[3]
+    if i == 0:
+        r0 = row
+    if i == 1:
+        r1 = row
+    if i == 2:
+        r2 = row
+    if i == 3:
+        r3 = row
+    return wp.matrix_from_rows(r0, r1, r2, r3)
+
+
+@wp.struct
+class RoverInertia:
+    """Each world's rover as one rigid body (wheels included as if locked): what the solver predicts
+    the contact velocities with. Per world, so a payload can change it."""
+
+    inv_mass: wp.array(dtype=float)  # (N,) 1 / total mass [1/kg]
+    com: wp.array(dtype=wp.vec3)  # (N,) centre of mass in the chassis body frame [m]
+    inv_inertia: wp.array(dtype=wp.mat33)  # (N,) inverse inertia about the COM, chassis frame [1/(kg·m²)]
+
+
+@wp.struct
+class WheelSlots:
+    """The wheels the solver handles, in :class:`~atrv_warp.sim.kernels.rover.RoverLayout` wheel order."""
+
+    chassis: int  # chassis body index within a world
+    dofs_per_world: int
+    shape: wp.array(dtype=int)  # (WHEEL_SLOTS,) the wheel's cylinder in RoverShapes
+    dof: wp.array(dtype=int)  # the wheel joint's joint_f entry within a world
+    axis: wp.array(dtype=wp.vec3)  # the joint axis in the wheel body frame (positive joint_f spins about it)
+    inv_spin_inertia: wp.array(dtype=float)  # 1 / inertia about the axle [1/(kg·m²)]
+
+
+@wp.func
+def with_entry(v: wp.vec4, i: int, x: float):
+    """``v`` with entry ``i`` replaced by ``x``."""
+    return wp.vec4(wp.where(i == 0, x, v[0]), wp.where(i == 1, x, v[1]), wp.where(i == 2, x, v[2]),
+                   wp.where(i == 3, x, v[3]))
+
+
+@wp.func
+def coulomb_impulse(v0: wp.vec2, d: wp.vec2, inv_d: wp.vec2, limit: float) -> wp.vec2:
+    """Tangential impulse ``P`` [N·s] of one contact whose end-of-substep slip is ``v0 + d * P``
+    (componentwise, ``d`` [1/kg] > 0, ``inv_d = 1 / d``): zero slip if that takes ``|P| <= limit``, else
+    ``P = -limit v / |v|`` with ``v`` the resulting slip (the sliding direction solves
+    ``sum_i (v0_i / (s + limit d_i))^2 = 1`` for the slip speed ``s``)."""
+    stick = wp.vec2(-v0[0] * inv_d[0], -v0[1] * inv_d[1])
+    if wp.dot(stick, stick) <= limit * limit:
+        return stick
+    if limit <= 0.0:
+        return wp.vec2(0.0)
+    c0 = limit * d[0]
+    c1 = limit * d[1]
+    s = wp.max(wp.length(v0) - wp.max(c0, c1), 0.0)  # a lower bound on the root
+    for _ in range(SLIDE_ITERATIONS):
+        # Newton on 1 / |(v0_i / (s + c_i))| = 1, a function exactly linear in s for a single term
+        e0 = 1.0 / (s + c0)
+        e1 = 1.0 / (s + c1)
+        a = v0[0] * e0
+        b = v0[1] * e1
+        q = a * a + b * b
+        s = wp.max(s - (1.0 - wp.sqrt(q)) * q / (a * a * e0 + b * b * e1), 0.0)
+    a = v0[0] / (s + c0)
+    b = v0[1] / (s + c1)
+    return wp.vec2(a, b) * (-limit / wp.sqrt(a * a + b * b))
+
+
+@wp.func
+def effective_inverse_mass(t: wp.vec3, r: wp.vec3, inv_mass: float, inv_inertia: wp.mat33, spin: wp.vec3,
+                           inv_spin_inertia: float) -> float:
+    """Slip velocity change along ``t`` per unit impulse along ``t`` [1/kg] at a point ``r`` [m] from the
+    rover's COM on a wheel whose spin moves the point at ``spin`` [m/s per rad/s]."""
+    rt = wp.cross(r, t)
+    st = wp.dot(spin, t)
+    return inv_mass + wp.dot(rt, inv_inertia * rt) + inv_spin_inertia * st * st
+
+
+@wp.func
+def relax_contact(impulse: mat42, k: int, t1: wp.vec3, t2: wp.vec3, r: wp.vec3, spin: wp.vec3, free: wp.vec3,
+                  d: wp.vec2, inv_d: wp.vec2, inv_spin_inertia: float, limit: float, dv: wp.vec3, dw: wp.vec3,
+                  inv_mass: float, inv_inertia: wp.mat33):
+    """One Gauss–Seidel update of contact ``k``: its impulse given the others' (carried by the rigid
+    body's velocity change ``dv``, ``dw``). Returns (impulses, dv, dw)."""
+    pk = impulse[k]
+    p3 = t1 * pk[0] + t2 * pk[1]
+    v = free + dv + wp.cross(dw, r) + spin * (inv_spin_inertia * wp.dot(spin, p3))
+    v0 = wp.vec2(wp.dot(v, t1) - d[0] * pk[0], wp.dot(v, t2) - d[1] * pk[1])
+    new = coulomb_impulse(v0, d, inv_d, limit)
+    change = t1 * (new[0] - pk[0]) + t2 * (new[1] - pk[1])
+    return with_row(impulse, k, new), dv + change * inv_mass, dw + inv_inertia * wp.cross(r, change)
+
+
+@wp.kernel
+def solve_wheel_friction(
+    bodies_per_world: int,
+    shapes: RoverShapes,
+    slots: WheelSlots,
+    rover: RoverInertia,
+    scene: Scene,
+    params: ContactParams,
+    gravity: wp.vec3,
+    friction: wp.array(dtype=float),
+    body_q: wp.array(dtype=wp.transform),
+    body_qd: wp.array(dtype=wp.spatial_vector),
+    body_com: wp.array(dtype=wp.vec3),
+    joint_f: wp.array(dtype=float),
+    warm_start: wp.array(dtype=wp.vec3),
+    body_f: wp.array(dtype=wp.spatial_vector),
+    impulses: wp.array(dtype=wp.vec3),
+):
+    """One thread per world: the wheels' ground contact forces (normal and Coulomb friction), added to
+    ``body_f``. ``joint_f`` holds this substep's drive torques; ``friction`` (1,) is mu.
+
+    ``warm_start`` (N x WHEEL_SLOTS) holds the previous substep's friction impulses [N·s], where the
+    sweeps start; ``impulses`` receives this substep's (the simulator passes one array as both; a tape
+    passes one per substep)."""
+    world = wp.tid()
+    mu = friction[0]
+    dt = params.dt
+    base = world * bodies_per_world
+    tile = int(0)
+    if scene.terrain.enabled != 0:
+        tile = scene.terrain.tile[world]
+    chassis = body_q[base + slots.chassis]
+    centre = wp.transform_point(chassis, rover.com[world])
+    rot = wp.quat_to_matrix(wp.transform_get_rotation(chassis))
+    inv_inertia = rot * rover.inv_inertia[world] * wp.transpose(rot)
+    inv_mass = rover.inv_mass[world]
+
+    # 1. Contacts, and the known forces' wrench about the rover's COM (gravity, normal forces, the
+    # drive torques' reaction on the body).
+    lever = mat43()  # contact point - wheel COM [m]
+    arm = mat43()  # contact point - rover COM [m]
+    lon = mat43()  # rolling direction in the contact plane
+    lat = mat43()  # axle direction in the contact plane
+    spin = mat43()  # contact point velocity per unit wheel spin rate [m/s per rad/s]
+    free = mat43()  # contact point velocity without friction at the end of the substep (spin part) [m/s]
+    normal = mat43()  # normal force [N]
+    limit = wp.vec4()  # Coulomb disc radius mu f_n dt [N·s]
+    force = gravity / inv_mass
+    torque = wp.vec3()
+    for k in range(WHEEL_SLOTS):
+        s = slots.shape[k]
+        b = base + shapes.body[s]
+        X = body_q[b]
+        p, n, depth = wheel_ground_point(scene, tile, X * shapes.xform[s], shapes.size[s])
+        hub = wp.transform_point(X, body_com[b])
+        qd = body_qd[b]
+        lever = with_row(lever, k, p - hub)
+        v = wp.spatial_top(qd) + wp.cross(wp.spatial_bottom(qd), p - hub)
+        fn = float(0.0)
+        if depth > 0.0:
+            fn = hunt_crossley(depth, -wp.dot(v, n), params)
+        u = wp.transform_vector(X, slots.axis[k])
+        tau = joint_f[world * slots.dofs_per_world + slots.dof[k]]
+        w = wp.cross(u, p - hub)
+        a = u - wp.dot(u, n) * n
+        al = wp.length(a)
+        if al > 1.0e-6:
+            a = a / al
+        else:  # axle along the normal (a wheel on its side): any tangent pair will do
+            a = wp.normalize(wp.cross(n, wp.vec3(1.0, 0.0, 0.0)) + wp.vec3(0.0, 1.0e-3, 0.0))
+        arm = with_row(arm, k, p - centre)
+        lat = with_row(lat, k, a)
+        lon = with_row(lon, k, wp.cross(n, a))
+        spin = with_row(spin, k, w)
+        free = with_row(free, k, v + w * (tau * slots.inv_spin_inertia[k] * dt))
+        normal = with_row(normal, k, fn * n)
+        limit = with_entry(limit, k, mu * fn * dt)
+        force += fn * n
+        torque += wp.cross(p - centre, fn * n) - tau * u
+    dv = force * (inv_mass * dt)
+    dw = inv_inertia * torque * dt
+
+    # 2. Projected Gauss-Seidel on the friction impulses, from the previous substep's (clamped to this
+    # one's Coulomb discs); dv, dw carry the rigid body's velocity change.
+    impulse = mat42()
+    d = mat42()
+    inv_d = mat42()
+    for k in range(WHEEL_SLOTS):
+        ispin = slots.inv_spin_inertia[k]
+        dk = wp.vec2(effective_inverse_mass(lon[k], arm[k], inv_mass, inv_inertia, spin[k], ispin),
+                     effective_inverse_mass(lat[k], arm[k], inv_mass, inv_inertia, spin[k], ispin))
+        d = with_row(d, k, dk)
+        inv_d = with_row(inv_d, k, wp.vec2(1.0 / dk[0], 1.0 / dk[1]))
+        prev = warm_start[world * WHEEL_SLOTS + k]
+        pk = wp.vec2(wp.dot(prev, lon[k]), wp.dot(prev, lat[k]))
+        size = wp.length(pk)
+        if size > limit[k]:
+            pk = pk * (limit[k] / size)
+        impulse = with_row(impulse, k, pk)
+        p3 = lon[k] * pk[0] + lat[k] * pk[1]
+        dv += p3 * inv_mass
+        dw += inv_inertia * wp.cross(arm[k], p3)
+    for _sweep in range(FRICTION_SWEEPS):
+        for k in range(WHEEL_SLOTS):
+            impulse, dv, dw = relax_contact(impulse, k, lon[k], lat[k], arm[k], spin[k], free[k], d[k], inv_d[k],
+                                            slots.inv_spin_inertia[k], limit[k], dv, dw, inv_mass, inv_inertia)
+
+    # 3. Normal plus friction force on each wheel, as a wrench about its COM.
+    for k in range(WHEEL_SLOTS):
+        pk = impulse[k]
+        p3 = lon[k] * pk[0] + lat[k] * pk[1]
+        impulses[world * WHEEL_SLOTS + k] = p3
+        f = normal[k] + p3 / dt
+        wp.atomic_add(body_f, base + shapes.body[slots.shape[k]], wp.spatial_vector(f, wp.cross(lever[k], f)))
+
+
+@wp.kernel
+def clear_impulses(mask: wp.array(dtype=bool), impulses: wp.array(dtype=wp.vec3)):
+    """Zero the masked worlds' friction impulses (on reset)."""
+    world = wp.tid()
+    if not mask[world]:
+        return
+    for k in range(WHEEL_SLOTS):
+        impulses[world * WHEEL_SLOTS + k] = wp.vec3(0.0)
+
