@@ -13,7 +13,8 @@ import re
 from collections.abc import Callable
 from pathlib import Path
 
-RESULTS = Path(__file__).resolve().parent.parent / "benchmarks" / "results"
+DOCS = Path(__file__).resolve().parent
+RESULTS = DOCS.parent / "benchmarks" / "results"
 PLACEHOLDER = re.compile(r"^\{\{ results_table (\w+) \}\}$", re.MULTILINE)
 
 
@@ -51,7 +52,93 @@ def sim_vs_mujoco() -> str:
                     f"{r['ratio_ours_over_mujoco']:.2f}"] for r in rows])
 
 
+def physics_report() -> str:
+    """``physics_report.json``: the physics figures against the reference's and analytic ones."""
+    rows = _load("physics_report.json")["rows"]
+    return _table(["quantity", "atrv_warp", "reference / analytic"], ["---", "---:", "---"],
+                  [[r["quantity"], r["atrv_warp"], r["reference"]] for r in rows])
+
+
+def skid_turning() -> str:
+    """``skid_calibration.json``: the effective track ratio chi per command and mu, against Coulomb."""
+    d = _load("skid_calibration.json")
+    rows = d["turning"]
+    commands = sorted({(r["linear"], r["angular"]) for r in rows}, key=lambda c: (c[0], -abs(c[1])))
+    columns = [(r["law"], r["mu"]) for r in rows]
+    columns = sorted(set(columns), key=lambda c: (c[0] != "coulomb", c[1]))
+    chi = {(r["law"], r["mu"], r["linear"], r["angular"]): r["chi"] for r in rows}
+    coulomb = {(r["linear"], r["angular"]): r["chi_coulomb"] for r in rows if r["law"] == "coulomb"}
+    header = ["v [m/s], ω [rad/s]"] + [f"µ {mu:g}" + ("" if law == "coulomb" else f" ({law})") for law, mu in columns]
+    body = [[f"{v:g}, {w:g}"] + [f"{chi[(law, mu, v, w)]:.2f}" for law, mu in columns] for v, w in commands]
+    table = _table(header + ["pure Coulomb"], ["---"] + ["---:"] * (len(columns) + 1),
+                   [row + [f"{coulomb[c]:.2f}"] for row, c in zip(body, commands)])
+    return table + f"\n\nMedian chi at µ 0.3, the ROS node's `effective_track_factor`: **{d['effective_track_factor']:.2f}**."
+
+
+def skid_checks() -> str:
+    """``skid_calibration.json``: rolling slip, wheel odometry, traction limit and slopes."""
+    d = _load("skid_calibration.json")
+    rows = [["slip ratio at +2 N·m per wheel", f"{100 * d['slip_ratio_2Nm']:.2f} %", "< 3 %"]]
+    for o in d["odometry"]:
+        what = f"{o['linear']:g} m/s" if o["linear"] else f"{o['angular']:g} rad/s in place"
+        rows.append([f"wheel odometry from rest, {what}, {o['seconds']:g} s", f"{100 * o['relative_error']:.2f} % off",
+                     "< 2 %"])
+    for t in d["traction"]:
+        rows.append([f"full torque, µ {t['mu']:g}: acceleration [m/s²]", f"{t['acceleration']:.2f}",
+                     f"µ g = {t['mu_g']:.2f}"])
+    for s in d["slopes"]:
+        rows.append([f"parked, µ {s['mu']:g}, {s['fraction_of_atan_mu']:g} × atan µ = {s['degrees']:.1f}°: moved in 5 s",
+                     f"{1000 * s['moved']:,.1f} mm", "holds" if s["fraction_of_atan_mu"] < 1 else "slides"])
+    return _table(["check", "atrv_warp", "target"], ["---", "---:", "---"], rows)
+
+
+def _train_to_success(name: str) -> str:
+    d = _load(name)
+    rows = []
+    for s in d["seeds"]:
+        reached = s["reached"]
+        rows.append([str(s["seed"]), f"{s['wall_s_to_threshold']:.0f} s" if reached else "not reached",
+                     f"{s['frames_to_threshold']:,}" if reached else "", f"{100 * s['final_eval_best_policy']['success_rate']:.1f} %",
+                     f"{s['updates_per_s']:.1f}", f"{s['frames_per_s']:,.0f}"])
+    m = d["median"]
+    rows.append(["median", f"**{m['wall_s_to_threshold']:.0f} s**", "", f"**{100 * m['final_success_rate']:.1f} %**",
+                 f"{m['updates_per_s']:.1f}", f"{m['frames_per_s']:,.0f}"])
+    return _table(["seed", "90 % after", "frames then", "best policy, final (1,000 episodes)", "updates/s", "frames/s"],
+                  ["---:"] * 6, rows)
+
+
+def train_to_success() -> str:
+    """``train_to_success.json``: the reach task's time to 90 % per seed."""
+    return _train_to_success("train_to_success.json")
+
+
+def train_to_success_nav() -> str:
+    """``train_to_success_nav.json``: the nav task's time to 90 % per seed."""
+    return _train_to_success("train_to_success_nav.json")
+
+
+def evaluations() -> str:
+    """``docs/*_eval.json``: the shipped policies and the scripted baselines on 1,000 seeded episodes."""
+    names = [("pretrained_policy_eval.json", "shipped reach policy, SAC"), ("baseline_eval.json", "scripted driver, reach"),
+             ("nav_policy_eval.json", "shipped nav policy, SAC"), ("nav_baseline_eval.json", "scripted driver, nav")]
+    rows = []
+    for file, label in names:
+        e = json.loads((DOCS / file).read_text())
+        rows.append([label, f"**{100 * e['success_rate']:.1f} %**", f"{100 * e['wall_rate']:.1f} %",
+                     f"{100 * e.get('obstacle_rate', 0.0):.1f} %", f"{100 * e['flip_rate']:.1f} %",
+                     f"{100 * e['timeout_rate']:.1f} %", f"{e['mean_return']:.2f}", f"{e['mean_steps']:.1f}",
+                     f"`docs/{file}`"])
+    return _table(["policy", "success", "wall", "obstacle", "flip", "timeout", "mean return", "mean steps", "file"],
+                  ["---"] + ["---:"] * 7 + ["---"], rows)
+
+
 TABLES: dict[str, Callable[[], str]] = {
+    "physics_report": physics_report,
+    "skid_turning": skid_turning,
+    "skid_checks": skid_checks,
+    "train_to_success": train_to_success,
+    "train_to_success_nav": train_to_success_nav,
+    "evaluations": evaluations,
     "sim_throughput": sim_throughput,
     "sim_choices": sim_choices,
     "sim_vs_mujoco": sim_vs_mujoco,
