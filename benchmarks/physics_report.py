@@ -1,7 +1,7 @@
 """Physics figures against the reference: rest height, straight-line drive, acceleration, turning.
 
 Run: ``python benchmarks/physics_report.py``; prints a table and writes
-``benchmarks/results/physics_report.json``. The README's physics figures come from here.
+``benchmarks/results/physics_report.json``, which the docs' physics page shows.
 """
 
 from __future__ import annotations

@@ -14,6 +14,19 @@ import torch
 from atrv_warp.sim.config import ContactConfig, SimConfig
 from atrv_warp.sim.simulator import DriveMode, RoverSim
 
+__all__ = [
+    "ReferenceDrive",
+    "WallImpacts",
+    "coulomb_twist",
+    "full_torque_acceleration",
+    "parked_on_slope",
+    "reference_drive",
+    "rolling_acceleration",
+    "slip_ratio",
+    "wall_impacts",
+    "wheel_contact_xy",
+]
+
 
 def rolling_acceleration(sim: RoverSim, torque: float) -> float:
     """F / (M + sum I_axle / r^2) [m/s^2]: ``torque`` [N·m] on every wheel, no slip, from the model's masses."""

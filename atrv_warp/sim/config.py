@@ -206,22 +206,20 @@ class ObstacleConfig:
 
 REFERENCE_SIM_DT = 0.01
 """The reference's integration step [s] (RK4 at 0.01 s), and :class:`SimConfig`'s default: five
-substeps per step. With ``ContactConfig(damping_limit=None)`` it reproduces the releases before issue
-17 bit for bit."""
+substeps per step. With ``ContactConfig(damping_limit=None, friction_law="viscous")`` it reproduces
+the releases before issue 17 bit for bit."""
 
 FAST_SIM_DT = 0.05 / 3
-"""Three substeps per step [s]: ``SimConfig(sim_dt=FAST_SIM_DT)`` makes a step about 1.4x cheaper. The
-physics report's figures move by at most 2 %, no world goes non-finite in 10^7 random-torque
-world-steps, and with ``ContactConfig.damping_limit`` no wall impact at top speed comes out faster than
-1.2x top speed (1.12x at worst; 1.43x without the ceiling). Not the default: SAC on the reach task
-learns a little less per frame on it (at 100k frames 5 of 8 seeds had passed 90 % against 8 of 8 on
-five substeps; ``benchmarks/substep_training.py``, README 'Simulator speed'), and training, bound by
-its updates, is no quicker. ``EnvConfig.substeps = 3`` trains on it."""
+"""Three substeps per step [s]: ``SimConfig(sim_dt=FAST_SIM_DT)`` makes a step cheaper, with the physics
+report's figures, non-finite checks and wall impacts validated (``benchmarks/substep_study.py``). Not
+the default: SAC on the reach task learns a little less per frame on it
+(``benchmarks/substep_training.py``), and training, bound by its updates, is no quicker. The figures
+are on the docs' performance page. ``EnvConfig.substeps = 3`` trains on it."""
 
 
 @dataclass(frozen=True)
 class SimConfig:
-    """Integrator settings. Chosen by measurement (see README, 'Choices')."""
+    """Integrator settings. Chosen by measurement (the docs' physics and performance pages)."""
 
     step_dt: float = 0.05
     """Simulated time of one environment step [s]."""

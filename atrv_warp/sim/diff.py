@@ -2,7 +2,7 @@
 actions, the initial state, the friction coefficient and the chassis mass, through Newton's Featherstone solver
 and our contact kernel, recorded on a ``wp.Tape`` and exposed as a ``torch.autograd.Function``.
 
-What makes the gradients agree with finite differences (README, "Differentiable rollouts"):
+What makes the gradients agree with finite differences (the docs' differentiable-simulation page):
 
 - a backward-pass fix for Newton 1.8's Featherstone adjoint, whose in-place conversion of
   external wrenches corrupts every derivative that multiplies them: the steering gradient
@@ -13,7 +13,7 @@ What makes the gradients agree with finite differences (README, "Differentiable 
   wheel in the derivative as it does in the simulation.
 
 ``benchmarks/diff_gradients.py`` measures the agreement against the horizon over 0.05-5 s
-(README for the tables and the stated horizon).
+(the docs' page has the tables and the stated horizon).
 
 Example::
 

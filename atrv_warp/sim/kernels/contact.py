@@ -456,7 +456,7 @@ def compute_contact_forces(
         centre = wp.transform_get_translation(xf)
         reach = wp.length(size)
         for k in range(1, ARENA_PLANES):  # a constant bound, which Warp unrolls: 1.58x faster than a bound read
-            # from the planes array (step_profile.py, README "Simulator speed")
+            # from the planes array (step_profile.py, the docs' performance page)
             n = planes.normal[k]
             off = planes.offset[k]
             if wp.dot(n, centre) - off <= reach:
