@@ -3,8 +3,9 @@ obstacles) and the law.
 
 :class:`ContactModel` turns the configs and the built Newton model into the structs the
 Hunt–Crossley kernel (:mod:`atrv_warp.sim.kernels.contact`) and the wheels' Coulomb friction solver
-(:mod:`atrv_warp.sim.kernels.friction`) read, once per simulator, and launches them. :class:`~atrv_warp.sim.RoverSim` and :class:`~atrv_warp.sim.diff.DiffRollout` both step through
-it, so there is one contact model to change.
+(:mod:`atrv_warp.sim.kernels.friction`) read, once per simulator, and launches them.
+:class:`~atrv_warp.sim.RoverSim` and :class:`~atrv_warp.sim.diff.DiffRollout` both step through it, so
+there is one contact model to change.
 """
 
 from __future__ import annotations
@@ -220,7 +221,7 @@ def rover_inertia(model: newton.Model, bodies_per_world: int, chassis: int) -> t
     inertia = model.body_inertia.numpy()[:bodies_per_world].astype(np.float64)
     com = model.body_com.numpy()[:bodies_per_world].astype(np.float64)
 
-    def rotation(quat):
+    def rotation(quat) -> np.ndarray:  # (x, y, z, w) -> 3x3, in float64
         x, y, z, w = quat
         return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
                          [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
