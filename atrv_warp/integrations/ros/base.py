@@ -23,7 +23,7 @@ class BaseParams:
     """[m]"""
     track_width: float
     """Distance between the left and right wheel centres [m] (from the URDF)."""
-    effective_track_factor: float = 1.57
+    effective_track_factor: float = 1.56
     """Skid-steer wheels slide sideways when turning, so the rover turns slower than a
     differential drive with the same track: ``yaw rate = r (w_right - w_left) / (factor x track)``.
     The median over turning commands measured on our physics by ``benchmarks/skid_calibration.py``
@@ -141,9 +141,13 @@ def turning_response(sim, commands: list[tuple[float, float]], params: BaseParam
     """Drive world ``i`` of ``sim`` (at least ``len(commands)`` worlds, placed apart) with a
     :class:`VelocityController` toward ``commands[i]`` = (linear [m/s], angular [rad/s]) for
     ``seconds``, and return per command the mean left and right wheel speeds [rad/s], yaw rate
-    [rad/s] and speed [m/s] over the last ``average`` seconds: what a skid-steer calibration measures."""
+    [rad/s] and speed [m/s] over the last ``average`` seconds: what a skid-steer calibration measures.
+
+    Each rover starts facing +x where the circle it will drive (for an effective track ratio near
+    1.6) is centred on the arena's centre, so that it meets no wall; worlds never interact."""
     n = len(commands)
-    sim.reset(poses=[[0.0, 4.0 * (i - sim.num_worlds / 2), 0.0] for i in range(sim.num_worlds)])
+    start = [[0.0, -1.6 * v / w if w else 0.0, 0.0] for v, w in commands]
+    sim.reset(poses=start + [[0.0, 0.0, 0.0]] * (sim.num_worlds - n))
     side = torch.tensor([w.side for w in sim.description.wheels])
     controllers = [VelocityController(params) for _ in commands]
     for c, (v, w) in zip(controllers, commands):
