@@ -88,7 +88,8 @@ def skid_checks() -> str:
                      f"µ g = {t['mu_g']:.2f}"])
     for s in d["slopes"]:
         rows.append([f"parked, µ {s['mu']:g}, {s['fraction_of_atan_mu']:g} × atan µ = {s['degrees']:.1f}°: moved in 5 s",
-                     f"{1000 * s['moved']:,.1f} mm", "holds" if s["fraction_of_atan_mu"] < 1 else "slides"])
+                     f"{1000 * s['moved']:.1f} mm" if s["moved"] < 1.0 else f"{s['moved']:.2f} m",
+                     "holds" if s["fraction_of_atan_mu"] < 1 else "slides"])
     return _table(["check", "atrv_warp", "target"], ["---", "---:", "---"], rows)
 
 
