@@ -102,7 +102,8 @@ def _train_to_success(name: str) -> str:
                      f"{s['frames_to_threshold']:,}" if reached else "", f"{100 * s['final_eval_best_policy']['success_rate']:.1f} %",
                      f"{s['updates_per_s']:.1f}", f"{s['frames_per_s']:,.0f}"])
     m = d["median"]
-    rows.append(["median", f"**{m['wall_s_to_threshold']:.0f} s**", "", f"**{100 * m['final_success_rate']:.1f} %**",
+    median_wall = "not reached" if m["wall_s_to_threshold"] is None else f"{m['wall_s_to_threshold']:.0f} s"
+    rows.append(["median", f"**{median_wall}**", "", f"**{100 * m['final_success_rate']:.1f} %**",
                  f"{m['updates_per_s']:.1f}", f"{m['frames_per_s']:,.0f}"])
     return _table(["seed", "90 % after", "frames then", "best policy, final (1,000 episodes)", "updates/s", "frames/s"],
                   ["---:"] * 6, rows)
