@@ -109,7 +109,7 @@ def test_live_node_rate_stamps_and_commands(ros_env):
         # +-5 N·m exceeds what a Coulomb turn in place needs, so the rover spins up; summing the 10 Hz
         # poses' increments (each under half a turn) unwraps its yaw
         yaws = [yaw_of(p) for p in client.poses[start:]]
-        turned = sum((b - a + math.pi) % (2 * math.pi) - math.pi for a, b in zip(yaws, yaws[1:]))
+        turned = sum((b - a + math.pi) % (2 * math.pi) - math.pi for a, b in itertools.pairwise(yaws))
         assert turned > 0.3
         n = len(client.poses)
         client.send("fly to the moon")

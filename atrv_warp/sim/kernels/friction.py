@@ -34,6 +34,8 @@ is piecewise smooth: a contact that switches between sticking and sliding has a 
 
 from __future__ import annotations
 
+from typing import Any
+
 import warp as wp
 
 from atrv_warp.sim.kernels.contact import ContactParams, RoverShapes, Scene, hunt_crossley, wheel_ground_point
@@ -54,26 +56,8 @@ mat42 = wp.types.matrix(shape=(4, 2), dtype=float)
 # written in place: Warp 1.19's adjoint of a repeated in-place row write is wrong (its gradients
 # disagree with finite differences), while a rebuilt value is plain SSA and differentiates exactly.
 @wp.func
-def with_row(m: mat43, i: int, row: wp.vec3):
-    """``m`` with row ``i`` replaced by ``row``."""
-    r0 = m[0]
-    r1 = m[1]
-    r2 = m[2]
-    r3 = m[3]
-    if i == 0:
-        r0 = row
-    if i == 1:
-        r1 = row
-    if i == 2:
-        r2 = row
-    if i == 3:
-        r3 = row
-    return wp.matrix_from_rows(r0, r1, r2, r3)
-
-
-@wp.func
-def with_row(m: mat42, i: int, row: wp.vec2):  # noqa: F811 (a Warp overload, chosen by argument types)
-    """``m`` with row ``i`` replaced by ``row``."""
+def with_row(m: Any, i: int, row: Any):
+    """``m`` (4 rows) with row ``i`` replaced by ``row``."""
     r0 = m[0]
     r1 = m[1]
     r2 = m[2]
