@@ -134,7 +134,17 @@ def evaluations() -> str:
                   ["---"] + ["---:"] * 7 + ["---"], rows)
 
 
+def coulomb_cost() -> str:
+    """``compare_revisions_coulomb.json``: this tree's step against 0.1.x's (viscous friction), interleaved."""
+    d = _load("compare_revisions_coulomb.json")
+    return _table(["N", f"0.1.x ({d['old']}) env-steps/s", f"Coulomb ({d['new']}) env-steps/s", "new / old"],
+                  ["---:"] * 4,
+                  [[str(r["num_worlds"]), f"{r['old_median']:,.0f}", f"{r['new_median']:,.0f}", f"{r['ratio']:.3f}"]
+                   for r in d["rows"] if r["kind"] == "sim"])
+
+
 TABLES: dict[str, Callable[[], str]] = {
+    "coulomb_cost": coulomb_cost,
     "physics_report": physics_report,
     "skid_turning": skid_turning,
     "skid_checks": skid_checks,
