@@ -186,7 +186,9 @@ def parked_on_slope(degrees: tuple[float, ...], *, contact: ContactConfig | None
 def full_torque_acceleration(contact: ContactConfig | None = None) -> float:
     """Mean acceleration [m/s²] of a rover at full torque (20 N·m on every wheel) from rest, its tyres
     sliding: from 0.2 s (past the chassis' first squat) over 1 s or until 4 m/s, whichever is first
-    (before the rover nears its wheels' top speed). Coulomb friction bounds it by mu g."""
+    (before the rover nears its wheels' top speed). Coulomb friction bounds the drive force by mu times
+    the normal load, which averages M g; over so short a window the chassis' pitching under the load
+    transfer moves the figure by some percent either way."""
     sim = RoverSim(1, contact=contact)
     sim.set_commands([20.0, 20.0])
     for _ in range(4):
