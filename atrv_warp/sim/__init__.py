@@ -5,6 +5,7 @@
 - :mod:`.simulator`: :class:`RoverSim`, its public contract (:class:`SimBuffers`) and driving modes.
 - :mod:`.contact`: :class:`ContactModel`, each world's :class:`Terrain` and :class:`Obstacles`;
   :mod:`.kernels`: contact, terrain, obstacle, scan and rover Warp kernels.
+- :mod:`.params`: :class:`WorldParams`, each world's physical parameters (friction, payload, motors, wheels).
 - :mod:`.terrain`: seeded heightfields (:class:`TerrainConfig`, presets, :class:`HeightGrid`).
 - :mod:`.scanner`: :class:`LaserScanner`, the 2-D laser range finder.
 - :mod:`.diff`: :class:`DiffRollout`, gradients through the simulator.
@@ -24,6 +25,7 @@ from atrv_warp.sim.config import (
     get_variant,
 )
 from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
+from atrv_warp.sim.params import PARAMETERS, WorldParams
 from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
 from atrv_warp.sim.simulator import DRIVE_MODE_TORQUES, DriveMode, RoverSim, SimBuffers
 from atrv_warp.sim.terrain import TERRAIN_PRESETS, HeightGrid, TerrainConfig
@@ -32,6 +34,7 @@ from atrv_warp.sim.urdf import URDFError, load_rover
 __all__ = [
     "DRIVE_MODE_TORQUES",
     "FAST_SIM_DT",
+    "PARAMETERS",
     "REFERENCE_SIM_DT",
     "TERRAIN_PRESETS",
     "VARIANTS",
@@ -52,6 +55,7 @@ __all__ = [
     "Terrain",
     "TerrainConfig",
     "URDFError",
+    "WorldParams",
     "get_variant",
     "load_rover",
 ]

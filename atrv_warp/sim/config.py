@@ -73,6 +73,24 @@ class RoverConfig:
     unbounded torque source otherwise spins a slipping wheel to 1000+ rad/s."""
     inertial_overrides: tuple[InertialOverride, ...] = ()
     """Mass-property replacements applied after loading the URDF."""
+    torque_scale: float = 1.0
+    """Torque the motors deliver per unit of commanded torque [-] (a calibrated motor's gain)."""
+    payload_mass: float = 0.0
+    """A point payload on the chassis [kg]."""
+    payload_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Where the payload sits, from the chassis' centre of mass in the chassis frame [m]."""
+
+    def __post_init__(self):
+        for name in ("wheel_radius", "wheel_speed_limit"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"RoverConfig.{name} must be a finite number > 0, got {value!r}")
+        for name in ("torque_scale", "payload_mass"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"RoverConfig.{name} must be a finite number >= 0, got {value!r}")
+        if len(self.payload_offset) != 3 or not all(math.isfinite(v) for v in self.payload_offset):
+            raise ValueError(f"RoverConfig.payload_offset must be three finite numbers [m], got {self.payload_offset!r}")
 
 
 FRICTION_LAWS = ("coulomb", "viscous")
@@ -131,6 +149,8 @@ class ContactConfig:
                 raise ValueError(f"ContactConfig.{name} must be a finite number >= 0, got {value!r}")
         if not (math.isfinite(self.exponent) and self.exponent >= 1):
             raise ValueError(f"ContactConfig.exponent must be a finite number >= 1, got {self.exponent!r}")
+        if not (math.isfinite(self.stiffness) and self.stiffness > 0):
+            raise ValueError(f"ContactConfig.stiffness must be a finite number > 0, got {self.stiffness!r}")
         if not (math.isfinite(self.friction) and self.friction > 0):
             raise ValueError(f"ContactConfig.friction must be a finite number > 0, got {self.friction!r}")
         if self.friction_law not in FRICTION_LAWS:

@@ -34,6 +34,7 @@ from atrv_warp.sim.kernels.friction import (
     solve_wheel_friction,
 )
 from atrv_warp.sim.kernels.obstacles import OBSTACLE_BOX, OBSTACLE_CYLINDER, OBSTACLE_NONE, ObstacleSet
+from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics
 from atrv_warp.sim.kernels.terrain import TerrainGrid
 from atrv_warp.sim.model import BuiltModel
 from atrv_warp.sim.terrain import HeightGrid
@@ -276,11 +277,12 @@ class ContactModel:
         planes: ground and walls (:class:`~atrv_warp.sim.kernels.contact.ArenaPlanes`).
         terrain: each world's ground (:class:`Terrain`); obstacles: each world's (:class:`Obstacles`).
         scene: planes, terrain and obstacles as the kernel's struct.
-        friction: (1,) Coulomb coefficient, the default for :meth:`apply`.
         wheels: the wheels the Coulomb friction solver handles
             (:class:`~atrv_warp.sim.kernels.friction.WheelSlots`; ``None`` under the viscous law).
         inertia: each world's rover as one rigid body, the solver's model of it
-            (:class:`~atrv_warp.sim.kernels.friction.RoverInertia`; ``None`` under the viscous law).
+            (:class:`~atrv_warp.sim.kernels.friction.RoverInertia`), which a payload changes.
+        nominal_rover: the rover without payload as one rigid body
+            (:class:`~atrv_warp.sim.kernels.params.MassProperties`, chassis frame).
     """
 
     def __init__(self, built: BuiltModel, *, rover: RoverConfig, contact: ContactConfig, arena: ArenaConfig,
@@ -299,43 +301,47 @@ class ContactModel:
         scene = Scene()
         scene.planes, scene.terrain, scene.obstacles = self.planes, self.terrain.kernel, self.obstacles.kernel
         self.scene = scene
-        self.friction = wp.array([contact.friction], dtype=float, device=device)
         self.gravity = wp.vec3(0.0, 0.0, gravity)
         self.wheels: WheelSlots | None = None
-        self.inertia: RoverInertia | None = None
         if contact.friction_law == "coulomb":
             self.wheels = _wheel_slots(built, [rb.joint_qd_start[j] for j in built.wheel_joints], rb.joint_dof_count,
                                        device)
-            mass, com, tensor = rover_inertia(built.model, self.bodies_per_world, built.chassis_body)
-            n = self.num_worlds
-            inertia = RoverInertia()
-            inertia.inv_mass = wp.array(np.full(n, 1.0 / mass), dtype=float, device=device)
-            inertia.com = wp.array(np.tile(com, (n, 1)), dtype=wp.vec3, device=device)
-            inertia.inv_inertia = wp.array(np.tile(np.linalg.inv(tensor), (n, 1, 1)), dtype=wp.mat33, device=device)
-            self.inertia = inertia
+        mass, com, tensor = rover_inertia(built.model, self.bodies_per_world, built.chassis_body)
+        n = self.num_worlds
+        inertia = RoverInertia()
+        grad = built.model.requires_grad  # a tape differentiates through a payload's effect on this model
+        inertia.inv_mass = wp.array(np.full(n, 1.0 / mass), dtype=float, device=device, requires_grad=grad)
+        inertia.com = wp.array(np.tile(com, (n, 1)), dtype=wp.vec3, device=device, requires_grad=grad)
+        inertia.inv_inertia = wp.array(np.tile(np.linalg.inv(tensor), (n, 1, 1)), dtype=wp.mat33, device=device,
+                                       requires_grad=grad)
+        self.inertia = inertia
+        nominal = MassProperties()
+        nominal.mass, nominal.com, nominal.inertia = mass, wp.vec3(*com), wp.mat33(*tensor.flatten())
+        nominal.inv_mass = inertia.inv_mass.numpy()[0]
+        nominal.inv_inertia = wp.mat33(*inertia.inv_inertia.numpy()[0].flatten())
+        self.nominal_rover = nominal
         self.impulses = wp.zeros(self.num_worlds * WHEEL_SLOTS, dtype=wp.vec3, device=device)
         """(N x 4) each wheel's last friction impulse [N·s], world frame: where the next substep's
         sweeps start (the Coulomb law's warm start)."""
 
     def apply(self, state: newton.State, body_com: wp.array, joint_f: wp.array, flags: wp.array,
-              friction: wp.array | None = None, warm_start: wp.array | None = None,
-              impulses: wp.array | None = None) -> None:
+              physics: WorldPhysics, warm_start: wp.array | None = None, impulses: wp.array | None = None) -> None:
         """Add every contact wrench to ``state.body_f`` and OR the contact bits into ``flags``.
 
         ``joint_f`` holds this substep's drive torques (the friction solver predicts the wheels'
-        spin with them); ``friction`` (1,) overrides the configured coefficient, e.g. a differentiable one.
+        spin with them); ``physics`` each world's mu, stiffness and wheel radius
+        (:class:`~atrv_warp.sim.params.WorldParams`, or a tape's own with differentiable arrays).
         ``warm_start`` and ``impulses`` (N x 4 ``wp.vec3``) replace :attr:`impulses` as the previous
         substep's friction impulses and this one's (a tape needs one array per substep).
         """
-        mu = self.friction if friction is None else friction
         wp.launch(compute_contact_forces, dim=self.num_worlds,
-                  inputs=[self.bodies_per_world, self.shapes, self.scene, self.params, mu, state.body_q,
+                  inputs=[self.bodies_per_world, self.shapes, self.scene, self.params, physics, state.body_q,
                           state.body_qd, body_com],
                   outputs=[state.body_f, flags], device=self.device)
         if self.wheels is not None:
             wp.launch(solve_wheel_friction, dim=self.num_worlds,
                       inputs=[self.bodies_per_world, self.shapes, self.wheels, self.inertia, self.scene, self.params,
-                              self.gravity, mu, state.body_q, state.body_qd, body_com, joint_f,
+                              self.gravity, physics, state.body_q, state.body_qd, body_com, joint_f,
                               self.impulses if warm_start is None else warm_start],
                       outputs=[state.body_f, self.impulses if impulses is None else impulses], device=self.device)
 

@@ -33,6 +33,7 @@ import torch
 import warp as wp
 
 from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant
+from atrv_warp.sim.kernels.params import WorldPhysics, apply_payload
 from atrv_warp.sim.simulator import RoverSim
 
 __all__ = ["DEFAULT_ACTION_SCALE", "DiffRollout", "NonFiniteGradientError", "restore_external_wrench"]
@@ -56,14 +57,11 @@ def scale_actions(actions: wp.array2d(dtype=float), scale: float, commands: wp.a
 
 
 @wp.kernel
-def set_chassis_mass(mass: wp.array(dtype=float), nominal_mass: float, nominal_inertia: wp.mat33,
-                     bodies_per_world: int, chassis: int, body_mass: wp.array(dtype=float),
-                     body_inertia: wp.array(dtype=wp.mat33)):
-    """Chassis mass of every world from ``mass[0]``; its inertia scales with it (same shape, density)."""
+def payload_from_chassis_mass(chassis_mass: wp.array(dtype=float), nominal_mass: float,
+                              payload: wp.array(dtype=float)):
+    """Each world's chassis mass [kg] as a payload at the chassis' centre of mass."""
     world = wp.tid()
-    b = world * bodies_per_world + chassis
-    body_mass[b] = mass[0]
-    body_inertia[b] = nominal_inertia * (mass[0] / nominal_mass)
+    payload[world] = chassis_mass[world] - nominal_mass
 
 
 @wp.kernel
@@ -145,11 +143,18 @@ class DiffRollout:
         self._commands = [wp.zeros(num_worlds, dtype=wp.vec2, device=dev, requires_grad=True) for _ in range(steps)]
         self._poses = [wp.zeros((num_worlds, 7), dtype=float, device=dev, requires_grad=True)
                        for _ in range(steps + 1)]
-        self._friction = wp.zeros(1, dtype=float, device=dev, requires_grad=True)
-        self._chassis_mass = wp.zeros(1, dtype=float, device=dev, requires_grad=True)
-        chassis = self.sim.layout.chassis_body
-        self.nominal_chassis_mass = float(model.body_mass.numpy()[chassis])
-        self._nominal_chassis_inertia = wp.mat33(model.body_inertia.numpy()[chassis])
+        self._friction = wp.zeros(num_worlds, dtype=float, device=dev, requires_grad=True)
+        self._chassis_mass = wp.zeros(num_worlds, dtype=float, device=dev, requires_grad=True)
+        self._payload = wp.zeros(num_worlds, dtype=float, device=dev, requires_grad=True)
+        self._payload_offset = wp.zeros(num_worlds, dtype=wp.vec3, device=dev)
+        self._all = wp.full(num_worlds, True, dtype=bool, device=dev)
+        # the simulator's per-world physics, with a differentiable mu of the tape's own
+        physics = WorldPhysics()
+        params = self.sim.params.physics
+        physics.friction, physics.stiffness, physics.wheel_radius = self._friction, params.stiffness, params.wheel_radius
+        physics.torque_scale, physics.speed_limit = params.torque_scale, params.speed_limit
+        self._physics = physics
+        self.nominal_chassis_mass = float(model.body_mass.numpy()[self.sim.layout.chassis_body])
         self._flags = wp.zeros(num_worlds, dtype=wp.int32, device=dev)
         # The friction solver starts each substep from the previous one's impulses: one array per
         # substep boundary, so the tape differentiates through that chain too.
@@ -178,12 +183,17 @@ class DiffRollout:
     def _record(self) -> None:
         sim, lay = self.sim, self.sim.layout
         n = self.num_worlds
-        # The chassis mass (a payload) is an input of the tape: set it, then let the solver re-derive
-        # its spatial inertias (Newton's public route for runtime mass changes), both recorded.
-        wp.launch(set_chassis_mass, dim=n, inputs=[self._chassis_mass, self.nominal_chassis_mass,
-                                                   self._nominal_chassis_inertia, lay.bodies_per_world,
-                                                   lay.chassis_body],
-                  outputs=[sim.model.body_mass, sim.model.body_inertia], device=sim.device)
+        # The chassis mass (a payload at its centre of mass) is an input of the tape: the simulator's payload
+        # kernel sets the chassis and the friction solver's model of the rover, then the solver re-derives
+        # its spatial inertias (Newton's public route for runtime mass changes), all recorded.
+        wp.launch(payload_from_chassis_mass, dim=n, inputs=[self._chassis_mass, self.nominal_chassis_mass],
+                  outputs=[self._payload], device=sim.device)
+        model, inertia = sim.model, sim.contact.inertia
+        wp.launch(apply_payload, dim=n,
+                  inputs=[self._all, self._payload, self._payload_offset, lay.bodies_per_world, lay.chassis_body,
+                          sim.nominal_chassis, sim.contact.nominal_rover, 0],
+                  outputs=[model.body_mass, model.body_inv_mass, model.body_inertia, model.body_inv_inertia,
+                           model.body_com, inertia.inv_mass, inertia.com, inertia.inv_inertia], device=sim.device)
         sim.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
         s0 = self.states[0]
         newton.eval_fk(sim.model, s0.joint_q, s0.joint_qd, s0)
@@ -197,7 +207,7 @@ class DiffRollout:
                 s_in, s_out = self.states[k], self.states[k + 1]
                 for name, arr in self._scratch[k].items():
                     setattr(sim.solver, name, arr)
-                sim.substep(s_in, s_out, self.controls[k], self._commands[t], friction=self._friction,
+                sim.substep(s_in, s_out, self.controls[k], self._commands[t], physics=self._physics,
                             flags=self._flags, torque=self._torque, solver_in=self._solver_in[k],
                             warm_start=self._impulses[k], impulses=self._impulses[k + 1])
                 if self._tape is not None and self.wrench_fix:
@@ -217,8 +227,8 @@ class DiffRollout:
         s0 = self.states[0]
         wp.to_torch(s0.joint_q).copy_(joint_q.reshape(-1))
         wp.to_torch(s0.joint_qd).copy_(joint_qd.reshape(-1))
-        wp.to_torch(self._friction).copy_(friction.reshape(1))
-        wp.to_torch(self._chassis_mass).copy_(chassis_mass.reshape(1))
+        wp.to_torch(self._friction).copy_(friction.reshape(-1))
+        wp.to_torch(self._chassis_mass).copy_(chassis_mass.reshape(-1))
         for s in self.states:
             s.body_f.zero_()
         self._impulses[0].zero_()  # a rollout starts from rest, unloaded
@@ -273,13 +283,12 @@ class DiffRollout:
             actions: (steps, N, 2) in [-1, 1] (x :attr:`action_scale` N·m), differentiable.
             initial_state: (joint_q, joint_qd) from :meth:`initial_state` (default: every rover at
                 the origin, at rest); differentiable.
-            friction: Coulomb coefficient (default: the contact config's), differentiable.
-            chassis_mass: Chassis mass [kg] of every world, e.g. with a payload (default: the
-                URDF's, :attr:`nominal_chassis_mass`); its inertia scales with it. Differentiable.
-                The wheels' friction solver predicts contact velocities with the nominal
-                rover (a constant of the tape, not differentiated): a heavier chassis makes it
-                under-correct (slip left for the next substep), one lighter than about half
-                the nominal would make it overshoot.
+            friction: Coulomb coefficient, one for all worlds or (N,) one per world (default: the
+                contact config's), differentiable.
+            chassis_mass: Chassis mass [kg], one or (N,) one per world, e.g. with a payload (default:
+                the URDF's, :attr:`nominal_chassis_mass`). The difference is a point mass at the chassis'
+                centre of mass (the simulator's payload, :meth:`~atrv_warp.sim.RoverSim.set_params`), which
+                the wheels' friction solver's model of the rover carries too. Differentiable.
         """
         expected = (self.steps, self.num_worlds, 2)
         if tuple(actions.shape) != expected:
@@ -291,16 +300,29 @@ class DiffRollout:
             initial_state = self.initial_state()
         if friction is None:
             friction = self.sim.contact_cfg.friction
-        friction = torch.as_tensor(friction, dtype=torch.float32).reshape(1)
+        friction = self._per_world("friction", friction)
+        if not (torch.isfinite(friction).all() and bool((friction > 0.0).all())):
+            raise ValueError(f"friction must be > 0 and finite, got {friction.detach().tolist()}")
         if chassis_mass is None:
             chassis_mass = self.nominal_chassis_mass
-        chassis_mass = torch.as_tensor(chassis_mass, dtype=torch.float32).reshape(1)
-        if not (torch.isfinite(chassis_mass).all() and chassis_mass.item() > 0.0):
-            raise ValueError(f"chassis_mass must be a positive number of kg, got {chassis_mass.item()}")
+        chassis_mass = self._per_world("chassis_mass", chassis_mass)
+        if not (torch.isfinite(chassis_mass).all() and bool((chassis_mass > 0.0).all())):
+            raise ValueError(f"chassis_mass must be a positive number of kg, got {chassis_mass.detach().tolist()}")
         inputs = (actions.float(), initial_state[0].float(), initial_state[1].float(), friction, chassis_mass)
         if not (torch.is_grad_enabled() and any(t.requires_grad for t in inputs)):
             return self.forward(*inputs, record=False)[0]  # nothing to differentiate: no tape
         return _RolloutFn.apply(self, *inputs)
+
+
+    def _per_world(self, name: str, value) -> torch.Tensor:
+        """``value`` as (N,) float32: one number for every world, or one per world (differentiable)."""
+        v = torch.as_tensor(value, dtype=torch.float32)
+        if v.numel() == 1:
+            return v.reshape(1).expand(self.num_worlds)
+        if tuple(v.shape) != (self.num_worlds,):
+            raise ValueError(f"{name} must be one number or one per world ({self.num_worlds},), got shape "
+                             f"{tuple(v.shape)}")
+        return v
 
 
 class _RolloutFn(torch.autograd.Function):

@@ -20,9 +20,11 @@ import warp as wp
 from atrv_warp.sim.config import ArenaConfig, ContactConfig, ObstacleConfig, RoverConfig, SimConfig, get_variant
 from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
 from atrv_warp.sim.kernels.contact import FLAG_BODY_GROUND, FLAG_OBSTACLE, FLAG_WALL
+from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics, apply_payload
 from atrv_warp.sim.kernels.rover import RoverLayout, apply_wheel_torques, compute_rover_state, reset_worlds
 from atrv_warp.sim.kernels.terrain import place_on_terrain
 from atrv_warp.sim.model import BuiltModel, build_model
+from atrv_warp.sim.params import WorldParams, check_parameter
 from atrv_warp.sim.terrain import HeightGrid, TerrainConfig, get_terrain
 
 __all__ = ["DRIVE_MODE_TORQUES", "DriveMode", "RoverSim", "SimBuffers"]
@@ -143,7 +145,9 @@ class RoverSim:
         :attr:`contact` the contact model, and :meth:`substep` one solver substep, which
         :class:`~atrv_warp.sim.diff.DiffRollout` steps through too;
         :attr:`terrain` and :attr:`obstacles` each world's ground and obstacles (write a world's tile or
-        layout, then reset it).
+        layout, then reset it);
+        :attr:`params` each world's physical parameters (:meth:`set_params`, or a kernel's writes and
+        :meth:`apply_payload`).
     """
 
     def __init__(
@@ -191,6 +195,13 @@ class RoverSim:
                                     sim_dt=self.sim_cfg.sim_dt, gravity=self.sim_cfg.gravity, device=self.device,
                                     terrain=terrain, obstacles=obstacles)
         """The contact model every substep launches (:class:`~atrv_warp.sim.contact.ContactModel`)."""
+        self.params = WorldParams(num_worlds, rover=self.rover_cfg, contact=self.contact_cfg, device=self.device)
+        """Each world's physical parameters (:class:`~atrv_warp.sim.params.WorldParams`): friction, stiffness,
+        wheel radius, motor torque scale and speed limit, payload. Change them with :meth:`set_params`."""
+        self._nominal_chassis = self._chassis_mass_properties()
+        self._all_worlds = wp.full(num_worlds, True, dtype=bool, device=self.device)
+        if self.rover_cfg.payload_mass:
+            self.apply_payload(self._all_worlds)
 
         n, w = num_worlds, len(self.description.wheels)
         dev = self.device
@@ -250,11 +261,27 @@ class RoverSim:
         layout.wheel_sign = wp.array([w.drive_sign for w in wheels], dtype=float, device=dev)
         self._layout = layout
 
+    def _chassis_mass_properties(self) -> MassProperties:
+        """World 0's chassis as the model holds it (mass, COM, inertia, and their inverses)."""
+        m, c = self.model, self._layout.chassis_body
+        props = MassProperties()
+        props.mass = float(m.body_mass.numpy()[c])
+        props.inv_mass = float(m.body_inv_mass.numpy()[c])
+        props.com = wp.vec3(*m.body_com.numpy()[c].tolist())
+        props.inertia = wp.mat33(*m.body_inertia.numpy()[c].flatten().tolist())
+        props.inv_inertia = wp.mat33(*m.body_inv_inertia.numpy()[c].flatten().tolist())
+        return props
+
     # ------------------------------------------------------------------ the contract
     @property
     def layout(self) -> RoverLayout:
         """Where each world's rover lives in Newton's flat arrays (read-only)."""
         return self._layout
+
+    @property
+    def nominal_chassis(self) -> MassProperties:
+        """The chassis without payload, as the model was built (:class:`~atrv_warp.sim.kernels.params.MassProperties`)."""
+        return self._nominal_chassis
 
     @property
     def terrain(self) -> Terrain:
@@ -270,6 +297,45 @@ class RoverSim:
     def buffers(self) -> SimBuffers:
         """The Warp arrays behind the state views, for kernels (:class:`SimBuffers`, read-only)."""
         return self._buffers
+
+    # ------------------------------------------------------------------ per-world parameters
+    def set_params(self, worlds=None, **values) -> None:
+        """Set physical parameters of every world, or of the masked/indexed ``worlds``: any of
+        :data:`~atrv_warp.sim.params.PARAMETERS` (``friction=0.8, payload_mass=20.0`` …), each a number
+        (the same in every selected world) or one value per selected world. Checked before anything is
+        written: an unknown name or a bad value is a ``ValueError`` naming it. Takes effect from the next step.
+        """
+        m = _as_world_mask(worlds, self.num_worlds)
+        count = int(m.sum())
+        staged = {}
+        for name, value in values.items():
+            check_parameter(name, value)
+            v = torch.as_tensor(np.asarray(value, dtype=np.float32))
+            width = (3,) if name == "payload_offset" else ()
+            if v.shape not in ((*width,), (count, *width)):
+                raise ValueError(f"{name} must be one value {(*width,)} or one per selected world {(count, *width)}, "
+                                 f"got shape {tuple(v.shape)}")
+            staged[name] = v
+        sel = torch.as_tensor(m, device=self.params.friction.device)
+        for name, v in staged.items():
+            self.params.view(name)[sel] = v.to(self.params.friction.device)
+        if {"payload_mass", "payload_offset"} & set(staged):
+            self._reset_mask.assign(m)
+            self.apply_payload(self._reset_mask)
+
+    def apply_payload(self, mask: wp.array) -> None:
+        """Put each masked world's payload (:attr:`params` ``payload_mass`` at ``payload_offset``) on its chassis:
+        the solver's mass properties and the friction solver's model of the rover. A device-side call (no host
+        round trip), for a kernel that wrote the payload arrays; from the host, use :meth:`set_params`."""
+        lay, m = self._layout, self.model
+        inertia = self.contact.inertia
+        wp.launch(apply_payload, dim=self.num_worlds,
+                  inputs=[mask, self.params.payload_mass_array, self.params.payload_offset_array, lay.bodies_per_world,
+                          lay.chassis_body, self._nominal_chassis, self.contact.nominal_rover, 1],
+                  outputs=[m.body_mass, m.body_inv_mass, m.body_inertia, m.body_inv_inertia, m.body_com,
+                           inertia.inv_mass, inertia.com, inertia.inv_inertia], device=self.device)
+        # Newton's route for runtime mass changes: the solver re-derives its spatial inertias
+        self.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
 
     # ------------------------------------------------------------------ derived figures
     @property
@@ -306,23 +372,24 @@ class RoverSim:
 
     # ------------------------------------------------------------------ stepping
     def substep(self, s_in: newton.State, s_out: newton.State, control: newton.Control, commands: wp.array, *,
-                friction: wp.array | None = None, flags: wp.array | None = None, torque: wp.array | None = None,
+                physics: WorldPhysics | None = None, flags: wp.array | None = None, torque: wp.array | None = None,
                 solver_in: newton.State | None = None, warm_start: wp.array | None = None,
                 impulses: wp.array | None = None) -> None:
         """One solver substep of ``sim_dt``: wheel torques, contact wrenches, one Featherstone step.
 
         The simulator's own step calls it on its two states; :class:`~atrv_warp.sim.diff.DiffRollout`
         calls it on a tape with one state per substep, its own ``commands`` (N,) ``wp.vec2``,
-        ``friction`` (1,), ``flags`` (N,) and ``torque`` (N, W) outputs, ``solver_in``: a view
+        ``physics`` (:class:`~atrv_warp.sim.kernels.params.WorldPhysics`, with a differentiable mu), ``flags`` (N,) and ``torque`` (N, W) outputs, ``solver_in``: a view
         of ``s_in`` with its own ``body_q`` for the solver to write, and the wheels' friction impulses
         of the previous substep (``warm_start``) and of this one (``impulses``), N x 4 ``wp.vec3`` each.
         """
+        physics = self.params.physics if physics is None else physics
         s_in.clear_forces()
         wp.launch(apply_wheel_torques, dim=self.num_worlds,
-                  inputs=[self._layout, commands, self.rover_cfg.wheel_speed_limit, s_in.joint_qd],
+                  inputs=[self._layout, commands, physics, s_in.joint_qd],
                   outputs=[control.joint_f, self._wheel_torque if torque is None else torque], device=self.device)
         self.contact.apply(s_in, self.model.body_com, control.joint_f, self._contact_flags if flags is None else flags,
-                           friction, warm_start, impulses)
+                           physics, warm_start, impulses)
         self.solver.step(s_in if solver_in is None else solver_in, s_out, control, None, self.sim_cfg.sim_dt)
 
     def _simulate(self) -> None:

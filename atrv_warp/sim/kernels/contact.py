@@ -34,6 +34,7 @@ from atrv_warp.sim.kernels.obstacles import (
     footprint_vs_disc,
     rotate2,
 )
+from atrv_warp.sim.kernels.params import WorldPhysics
 from atrv_warp.sim.kernels.terrain import TerrainGrid, terrain_normal, terrain_plane_offset, terrain_sample
 
 SHAPE_CYLINDER = wp.constant(0)
@@ -97,9 +98,16 @@ class Scene:
 
 
 @wp.func
-def hunt_crossley(depth: float, depth_rate: float, p: ContactParams) -> float:
-    """Normal force [N] for penetration ``depth`` [m] growing at ``depth_rate`` [m/s]; the damping
-    coefficient ``kc d^n`` is held at ``damping_cap`` (``ContactConfig.damping_limit``)."""
+def wheel_size(size: wp.vec3, physics: WorldPhysics, world: int) -> wp.vec3:
+    """A wheel cylinder's (radius, half length, 0) with the world's rolling radius [m]."""
+    return wp.vec3(physics.wheel_radius[world], size[1], size[2])
+
+
+@wp.func
+def hunt_crossley(depth: float, depth_rate: float, p: ContactParams, stiffness: float) -> float:
+    """Normal force [N] for penetration ``depth`` [m] growing at ``depth_rate`` [m/s], with the world's
+    ``stiffness`` kp [N/m^n]; the damping coefficient ``kc d^n`` is held at ``damping_cap``
+    (``ContactConfig.damping_limit``)."""
     if depth <= 0.0:
         return 0.0
     s = 0.0
@@ -107,7 +115,7 @@ def hunt_crossley(depth: float, depth_rate: float, p: ContactParams) -> float:
         s = p.linear_coeff * depth
     else:
         s = wp.pow(depth, p.exponent)
-    return wp.max(p.stiffness * s + wp.min(p.damping * s, p.damping_cap) * depth_rate, 0.0)
+    return wp.max(stiffness * s + wp.min(p.damping * s, p.damping_cap) * depth_rate, 0.0)
 
 
 CYLINDER_EDGE_TILT = wp.constant(0.02)
@@ -134,13 +142,13 @@ def cylinder_deepest_point(xf: wp.transform, radius: float, half_length: float, 
 
 @wp.func
 def contact_kinematics(p: wp.vec3, depth: float, normal: wp.vec3, com: wp.vec3, v_com: wp.vec3, omega: wp.vec3,
-                       axle: wp.vec3, params: ContactParams):
+                       axle: wp.vec3, params: ContactParams, stiffness: float):
     """At contact point ``p`` of a body moving with (v_com, omega): (normal force [N], tangential slip
     velocity [m/s], the axle projected on the contact plane (the lateral direction, not normalised),
     its length)."""
     v = v_com + wp.cross(omega, p - com)
     vn = wp.dot(v, normal)
-    fn = hunt_crossley(depth, -vn, params)
+    fn = hunt_crossley(depth, -vn, params, stiffness)
     vt = v - vn * normal
     # Directions: lateral = axle projected on the contact plane; longitudinal = normal x lateral.
     lat = axle - wp.dot(axle, normal) * normal
@@ -159,10 +167,11 @@ def point_contact_force(
     slope_lon: float,
     slope_lat: float,
     params: ContactParams,
+    stiffness: float,
     friction: float,
 ) -> wp.vec3:
     """Normal plus friction force [N] at contact point ``p`` of a body moving with (v_com, omega)."""
-    fn, vt, lat, ll = contact_kinematics(p, depth, normal, com, v_com, omega, axle, params)
+    fn, vt, lat, ll = contact_kinematics(p, depth, normal, com, v_com, omega, axle, params, stiffness)
     ft = wp.vec3(0.0)
     if ll > 1.0e-6:
         lat = lat / ll
@@ -190,10 +199,11 @@ def contact_wrench(
     slope_lon: float,
     slope_lat: float,
     params: ContactParams,
+    stiffness: float,
     friction: float,
 ) -> wp.spatial_vector:
     """World-frame wrench about the COM [N, N·m] of one contact point."""
-    f = point_contact_force(p, depth, normal, com, v_com, omega, axle, slope_lon, slope_lat, params, friction)
+    f = point_contact_force(p, depth, normal, com, v_com, omega, axle, slope_lon, slope_lat, params, stiffness, friction)
     return wp.spatial_vector(f, wp.cross(p - com, f))
 
 
@@ -225,6 +235,7 @@ def plane_contact(
     slope_lon: float,
     slope_lat: float,
     params: ContactParams,
+    stiffness: float,
     friction: float,
 ):
     """A cylinder's deepest rim point, or each box corner, against the half-space ``n·x >= off``:
@@ -234,7 +245,7 @@ def plane_contact(
         p = cylinder_deepest_point(xf, size[0], size[1], n)
         depth = off - wp.dot(n, p)
         if depth > 0.0:
-            wrench += contact_wrench(p, depth, n, com, v_com, omega, axle, slope_lon, slope_lat, params, friction)
+            wrench += contact_wrench(p, depth, n, com, v_com, omega, axle, slope_lon, slope_lat, params, stiffness, friction)
             flags = flags | contact_flag(plane, wheel)
     else:
         # the box's lowest point along -n is its centre's height less this support extent; the corners
@@ -252,7 +263,7 @@ def plane_contact(
             depth = off - wp.dot(n, p)
             if depth > 0.0:  # boxes: isotropic friction slope
                 wrench += contact_wrench(p, depth, n, com, v_com, omega, axle, slope_lat, slope_lat, params,
-                                         friction)
+                                         stiffness, friction)
                 flags = flags | contact_flag(plane, wheel)
     return wrench, flags
 
@@ -289,13 +300,14 @@ def cylinder_ground_contact(
     slope_lon: float,
     slope_lat: float,
     params: ContactParams,
+    stiffness: float,
     friction: float,
 ):
     """A cylinder on the terrain under the regularised law: (wrench about the COM, 1 if touching)."""
     p, n, depth = wheel_ground_point(scene, tile, xf, size)
     if depth <= 0.0:
         return wp.spatial_vector(), 0
-    f = point_contact_force(p, depth, n, com, v_com, omega, axle, slope_lon, slope_lat, params, friction)
+    f = point_contact_force(p, depth, n, com, v_com, omega, axle, slope_lon, slope_lat, params, stiffness, friction)
     return wp.spatial_vector(f, wp.cross(p - com, f)), 1
 
 
@@ -311,6 +323,7 @@ def box_terrain_contact(
     axle: wp.vec3,
     slope: float,
     params: ContactParams,
+    stiffness: float,
     friction: float,
 ):
     """A box's corners on the terrain, each against the tangent plane under it: (wrench, 1 if touching)."""
@@ -327,7 +340,7 @@ def box_terrain_contact(
         n = terrain_normal(h)
         depth = terrain_plane_offset(n, p[0], p[1], h) - wp.dot(n, p)
         if depth > 0.0:
-            wrench += contact_wrench(p, depth, n, com, v_com, omega, axle, slope, slope, params, friction)
+            wrench += contact_wrench(p, depth, n, com, v_com, omega, axle, slope, slope, params, stiffness, friction)
             touching = 1
     return wrench, touching
 
@@ -345,6 +358,7 @@ def obstacle_contact(
     axle: wp.vec3,
     slope: float,
     params: ContactParams,
+    stiffness: float,
     friction: float,
 ):
     """A rover shape's footprint against every obstacle of the world: (wrench, 1 if touching)."""
@@ -388,7 +402,7 @@ def obstacle_contact(
                                              osize[1])
         if depth > 0.0:
             wrench += contact_wrench(wp.vec3(p2[0], p2[1], c3[2]), depth, wp.vec3(n2[0], n2[1], 0.0), com, v_com,
-                                     omega, axle, slope, slope, params, friction)
+                                     omega, axle, slope, slope, params, stiffness, friction)
             touching = 1
     return wrench, touching
 
@@ -399,7 +413,7 @@ def compute_contact_forces(
     shapes: RoverShapes,
     scene: Scene,
     params: ContactParams,
-    friction: wp.array(dtype=float),
+    physics: WorldPhysics,
     body_q: wp.array(dtype=wp.transform),
     body_qd: wp.array(dtype=wp.spatial_vector),
     body_com: wp.array(dtype=wp.vec3),
@@ -409,10 +423,12 @@ def compute_contact_forces(
     """One thread per world: add every shape's contact wrenches (planes or terrain, obstacles) to
     ``body_f``, and OR the world's contact bits into ``contact_flags``.
 
-    ``friction`` is a one-element array (mu) so that gradients can flow to it.
+    ``physics`` holds each world's mu, stiffness and wheel radius (arrays, so that gradients can flow
+    to them).
     """
     world = wp.tid()
-    mu = friction[0]
+    mu = physics.friction[world]
+    kp = physics.stiffness[world]
     base = world * bodies_per_world
     flags = contact_flags[world]
     planes = scene.planes
@@ -430,6 +446,8 @@ def compute_contact_forces(
         axle = wp.transform_vector(xf, wp.vec3(0.0, 0.0, 1.0))
         size = shapes.size[s]
         wheel = shapes.is_wheel[s]
+        if wheel != 0:
+            size = wheel_size(size, physics, world)
         wrench = wp.spatial_vector()
         kind = shapes.kind[s]
         # The ground: the terrain or plane 0; a wheel's is solve_wheel_friction's under friction_law "coulomb".
@@ -437,20 +455,20 @@ def compute_contact_forces(
             touching = 0
         elif kind == SHAPE_CYLINDER and scene.terrain.enabled != 0:
             w, touching = cylinder_ground_contact(scene, tile, xf, size, com, v_com, omega, axle, shapes.slope_lon[s],
-                                                  shapes.slope_lat[s], params, mu)
+                                                  shapes.slope_lat[s], params, kp, mu)
             wrench += w
             if touching != 0:
                 flags = flags | contact_flag(0, wheel)
         elif kind == SHAPE_BOX and scene.terrain.enabled != 0:
             w, touching = box_terrain_contact(scene, tile, xf, size, com, v_com, omega, axle, shapes.slope_lat[s],
-                                              params, mu)
+                                              params, kp, mu)
             wrench += w
             if touching != 0:
                 flags = flags | contact_flag(0, wheel)
         else:
             wrench, flags = plane_contact(wrench, flags, 0, planes.normal[0], planes.offset[0], kind, wheel, xf, size,
                                           com, v_com, omega, axle, shapes.slope_lon[s], shapes.slope_lat[s], params,
-                                          mu)
+                                          kp, mu)
         # The walls: only those within the shape's bounding sphere (cylinder sqrt(r² + (l/2)²), box half
         # diagonal); a wall beyond it cannot touch any point of the shape, so skipping it is exact.
         centre = wp.transform_get_translation(xf)
@@ -461,10 +479,10 @@ def compute_contact_forces(
             off = planes.offset[k]
             if wp.dot(n, centre) - off <= reach:
                 wrench, flags = plane_contact(wrench, flags, k, n, off, kind, wheel, xf, size, com, v_com, omega,
-                                              axle, shapes.slope_lon[s], shapes.slope_lat[s], params, mu)
+                                              axle, shapes.slope_lon[s], shapes.slope_lat[s], params, kp, mu)
         if scene.obstacles.count > 0:
             w, touching = obstacle_contact(scene.obstacles, world, shapes.kind[s], xf, size, com, v_com, omega, axle,
-                                           shapes.slope_lat[s], params, mu)
+                                           shapes.slope_lat[s], params, kp, mu)
             wrench += w
             if touching != 0:
                 flags = flags | FLAG_OBSTACLE

@@ -38,7 +38,15 @@ from typing import Any
 
 import warp as wp
 
-from atrv_warp.sim.kernels.contact import ContactParams, RoverShapes, Scene, hunt_crossley, wheel_ground_point
+from atrv_warp.sim.kernels.contact import (
+    ContactParams,
+    RoverShapes,
+    Scene,
+    hunt_crossley,
+    wheel_ground_point,
+    wheel_size,
+)
+from atrv_warp.sim.kernels.params import WorldPhysics
 
 WHEEL_SLOTS = wp.constant(4)
 """Wheels the solver handles (the ATRV-Jr's four; :class:`~atrv_warp.sim.contact.ContactModel` checks)."""
@@ -163,7 +171,7 @@ def solve_wheel_friction(
     scene: Scene,
     params: ContactParams,
     gravity: wp.vec3,
-    friction: wp.array(dtype=float),
+    physics: WorldPhysics,
     body_q: wp.array(dtype=wp.transform),
     body_qd: wp.array(dtype=wp.spatial_vector),
     body_com: wp.array(dtype=wp.vec3),
@@ -173,13 +181,15 @@ def solve_wheel_friction(
     impulses: wp.array(dtype=wp.vec3),
 ):
     """One thread per world: the wheels' ground contact forces (normal and Coulomb friction), added to
-    ``body_f``. ``joint_f`` holds this substep's drive torques; ``friction`` (1,) is mu.
+    ``body_f``. ``joint_f`` holds this substep's drive torques; ``physics`` each world's mu, stiffness and
+    wheel radius.
 
     ``warm_start`` (N x WHEEL_SLOTS) holds the previous substep's friction impulses [N·s], where the
     sweeps start; ``impulses`` receives this substep's (the simulator passes one array as both; a tape
     passes one per substep)."""
     world = wp.tid()
-    mu = friction[0]
+    mu = physics.friction[world]
+    kp = physics.stiffness[world]
     dt = params.dt
     base = world * bodies_per_world
     tile = int(0)
@@ -207,14 +217,14 @@ def solve_wheel_friction(
         s = slots.shape[k]
         b = base + shapes.body[s]
         X = body_q[b]
-        p, n, depth = wheel_ground_point(scene, tile, X * shapes.xform[s], shapes.size[s])
+        p, n, depth = wheel_ground_point(scene, tile, X * shapes.xform[s], wheel_size(shapes.size[s], physics, world))
         hub = wp.transform_point(X, body_com[b])
         qd = body_qd[b]
         lever = with_row(lever, k, p - hub)
         v = wp.spatial_top(qd) + wp.cross(wp.spatial_bottom(qd), p - hub)
         fn = float(0.0)
         if depth > 0.0:
-            fn = hunt_crossley(depth, -wp.dot(v, n), params)
+            fn = hunt_crossley(depth, -wp.dot(v, n), params, kp)
         u = wp.transform_vector(X, slots.axis[k])
         tau = joint_f[world * slots.dofs_per_world + slots.dof[k]]
         w = wp.cross(u, p - hub)

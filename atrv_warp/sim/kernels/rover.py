@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import warp as wp
 
+from atrv_warp.sim.kernels.params import WorldPhysics
+
 MOTOR_TAPER_START = wp.constant(0.8)
 """Fraction of the no-load speed at which drive torque starts to taper to zero."""
 
@@ -47,14 +49,16 @@ def motor_torque(command: float, forward_speed: float, speed_limit: float) -> fl
 def apply_wheel_torques(
     layout: RoverLayout,
     commands: wp.array(dtype=wp.vec2),
-    speed_limit: float,
+    physics: WorldPhysics,
     joint_qd: wp.array(dtype=float),
     joint_f: wp.array(dtype=float),
     wheel_torque: wp.array2d(dtype=float),
 ):
-    """Set each wheel's joint torque from its side's command [N·m], forward-positive."""
+    """Set each wheel's joint torque from its side's command [N·m], forward-positive, through the world's
+    motor (torque scale, no-load speed)."""
     world = wp.tid()
-    cmd = commands[world]
+    cmd = commands[world] * physics.torque_scale[world]
+    speed_limit = physics.speed_limit[world]
     for k in range(layout.wheel_count):
         dof = world * layout.dofs_per_world + layout.wheel_dof[k]
         sign = layout.wheel_sign[k]
