@@ -76,6 +76,9 @@ class EnvConfig:
     """Solver substeps per 0.05 s step, in training and its evaluations: 5 (``sim_dt`` 0.01 s, the
     simulator's default) or 3 (:data:`~atrv_warp.sim.FAST_SIM_DT`, a cheaper step that learns a little
     less per frame; docs/performance.md has the figures)."""
+    randomization: str = "none"
+    """Domain randomization of the training envs and of the evaluations during training: a preset of
+    :data:`atrv_warp.task.randomization.RANDOMIZATION_PRESETS` (``none``, ``mild``, ``wide``; docs/randomization.md)."""
 
     def env_kwargs(self) -> tuple[tuple[str, object], ...]:
         """:class:`~atrv_warp.task.env.ATRVjrEnv` keyword arguments of these environments, as
@@ -83,7 +86,8 @@ class EnvConfig:
         from atrv_warp.sim.config import SimConfig
 
         step_dt = SimConfig().step_dt
-        return (("task", self.task), ("sim", SimConfig(sim_dt=step_dt / self.substeps)))
+        return (("task", self.task), ("sim", SimConfig(sim_dt=step_dt / self.substeps)),
+                ("randomization", self.randomization))
 
 
 @dataclass(frozen=True)
@@ -213,6 +217,12 @@ class TrainConfig:
         from atrv_warp.task.config import get_task
 
         get_task(self.env.task)  # names the known tasks if this one is not
+        from atrv_warp.task.randomization import get_randomization
+
+        try:
+            get_randomization(self.env.randomization)
+        except ValueError as err:
+            raise ValueError(f"train config: randomization: {err}") from None
         return self
 
 

@@ -16,12 +16,14 @@ __all__ = [
     "FAST_SIM_DT",
     "FRICTION_LAWS",
     "REFERENCE_SIM_DT",
+    "SENSOR_NOISE",
     "VARIANTS",
     "ArenaConfig",
     "ContactConfig",
     "InertialOverride",
     "ObstacleConfig",
     "RoverConfig",
+    "SensorNoise",
     "SimConfig",
     "default_urdf_path",
     "get_variant",
@@ -222,6 +224,40 @@ class ObstacleConfig:
     """Obstacles per world at most."""
     height: float = 1.0
     """Height of every obstacle above the flat ground's top [m] (taller than the rover, 0.6 m)."""
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """Noise of the rover's sensors, declared once: the training environment's noisy observations
+    (:class:`atrv_warp.task.randomization.RandomizationConfig`) and the ROS node's topics read the same
+    settings, so a policy trains with the noise it meets when deployed. Standard deviations of zero-mean
+    Gaussian noise, drawn independently per reading."""
+
+    scan_range: float = 0.01
+    """Laser range noise [m] (a SICK LMS 2xx: about 0.01)."""
+    scan_dropout: float = 0.0
+    """Probability that a beam returns nothing (reads the maximum range) [-]."""
+    velocity: float = 0.05
+    """Noise of the velocity estimate (the observation's vx, vy; the odometry's twist) [m/s]."""
+    gyro: float = 0.005
+    """Gyroscope noise (the observation's yaw rate; /imu angular velocity) [rad/s]."""
+    attitude: float = 0.005
+    """Noise of the roll estimate (the observation's roll) [rad]."""
+    accel: float = 0.05
+    """Accelerometer noise (/imu linear acceleration) [m/s²]."""
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"SensorNoise.{f.name} must be a finite number >= 0, got {value!r}")
+        if self.scan_dropout > 1:
+            raise ValueError(f"SensorNoise.scan_dropout is a probability, got {self.scan_dropout!r}")
+
+
+SENSOR_NOISE = SensorNoise()
+"""The ATRV-Jr's sensors as the ROS node simulates them by default, and as the randomization presets
+train with."""
 
 
 REFERENCE_SIM_DT = 0.01

@@ -50,6 +50,20 @@ from atrv_warp.task.kernels import (
     sample_nav_episodes,
     write_scan_observation,
 )
+from atrv_warp.task.randomization import PHYSICS_DRAWS, RandomizationConfig, get_randomization
+from atrv_warp.task.randomization_kernels import (
+    DRAW_COUNT,
+    HISTORY,
+    MODE_CODES,
+    PHASE_EPISODE,
+    PHASE_TICK,
+    ActionDelay,
+    DrawSpec,
+    ObservationNoise,
+    add_observation_noise,
+    delay_actions,
+    draw_physics,
+)
 from atrv_warp.task.spec import (
     ACTION_DIM,
     END_REASONS,
@@ -82,6 +96,9 @@ class ATRVjrEnv(EnvBase):
         contact: Contact law (see :class:`RoverSim`).
         arena: Arena geometry (see :class:`RoverSim`).
         sim: Integrator settings (see :class:`RoverSim`).
+        randomization: Domain randomization: a preset name (``"none"``, ``"mild"``, ``"wide"``) or a
+            :class:`~atrv_warp.task.randomization.RandomizationConfig`; ``None``: none (the nominal rover,
+            perfect sensors, no delay, bit for bit as without it).
         **task_overrides: Fields of :class:`TaskConfig` (e.g. ``max_steps=100``); an unknown
             name raises ``ValueError``.
     """
@@ -100,13 +117,20 @@ class ATRVjrEnv(EnvBase):
         contact: ContactConfig | None = None,
         arena: ArenaConfig | None = None,
         sim: SimConfig | None = None,
+        randomization: RandomizationConfig | str | None = None,
         **task_overrides,
     ):
         self.task_cfg = c = replace_checked(get_task(task), **task_overrides)
+        self.randomization = get_randomization(randomization)
+        """What each world randomizes (:class:`~atrv_warp.task.randomization.RandomizationConfig`)."""
         self.sim = RoverSim(num_envs, rover=rover or get_variant(variant), contact=contact, arena=arena, sim=sim,
                             terrain=c.terrain, obstacles=ObstacleConfig(slots=c.obstacles) if c.obstacles else None,
                             device=device)
-        self.scanner = LaserScanner(self.sim, ScannerConfig(beams=c.scan_beams)) if c.scan_beams else None
+        self.scanner = None
+        if c.scan_beams:
+            noise = self.randomization.noise
+            self.scanner = LaserScanner(self.sim, ScannerConfig(beams=c.scan_beams) if noise is None else ScannerConfig(
+                beams=c.scan_beams, noise_std=noise.scan_range, dropout=noise.scan_dropout))
         """The rovers' laser scanner (:class:`~atrv_warp.sim.scanner.LaserScanner`), if the task has one."""
         super().__init__(device=_torch_device(self.sim.device), batch_size=torch.Size([num_envs]))
         self.num_envs = num_envs
@@ -114,6 +138,7 @@ class ATRVjrEnv(EnvBase):
         self._nav = c.target_distance is not None or c.obstacles > 0 or self.sim.terrain.enabled
         self._wp_device = self.sim.device
         self._make_task_buffers()
+        self._make_randomization()
         self._make_spec()
         self.nonfinite_count = 0
         """Worlds terminated and reset because their state stopped being finite."""
@@ -187,6 +212,63 @@ class ATRVjrEnv(EnvBase):
             self._task_views.update({"tile": self.sim.terrain.tile, "obstacle_kind": obstacles.kind,
                                      "obstacle_pose": obstacles.pose, "obstacle_size": obstacles.size})
 
+    def _make_randomization(self) -> None:
+        """The draws' spec, the action delay's buffers and the noise, as the kernels take them."""
+        r, n, dev = self.randomization, self.num_envs, self._wp_device
+        low, high, log, mode, every = ([0.0] * DRAW_COUNT, [0.0] * DRAW_COUNT, [0] * DRAW_COUNT, [0] * DRAW_COUNT,
+                                       [1] * DRAW_COUNT)
+        draws = [r.physics.get(name) for name in PHYSICS_DRAWS] + [None, r.motor_lag]  # DrawSpec's rows
+        for i, d in enumerate(draws):
+            if d is not None:
+                low[i], high[i], log[i], mode[i], every[i] = d.low, d.high, int(d.log), MODE_CODES[d.mode], max(d.every, 1)
+        if r.latency[1] > 0:  # whole steps in [low, high]: drawn from [low, high + 1) and rounded down
+            i = DRAW_COUNT - 2
+            low[i], high[i], mode[i] = float(r.latency[0]), float(r.latency[1] + 1), MODE_CODES["reset"]
+        spec = DrawSpec()
+        spec.low, spec.high = wp.array(low, dtype=float, device=dev), wp.array(high, dtype=float, device=dev)
+        spec.log, spec.mode = wp.array(log, dtype=int, device=dev), wp.array(mode, dtype=int, device=dev)
+        spec.every = wp.array(every, dtype=int, device=dev)
+        self._draw_spec = spec
+        self._draws_on_reset = any(m != 0 for m in mode)
+        self._draws_on_tick = any(m == MODE_CODES["interval"] for m in mode)
+        self._payload_draws = any(name in r.physics for name in ("payload_mass", "payload_offset"))
+        self._payload_on_tick = any(r.physics[name].mode == "interval" for name in ("payload_mass", "payload_offset")
+                                    if name in r.physics)
+        d = ActionDelay()
+        d.latency = wp.zeros(n, dtype=wp.int32, device=dev)
+        d.alpha = wp.ones(n, dtype=float, device=dev)
+        d.history = wp.zeros((n, HISTORY), dtype=wp.vec2, device=dev)
+        d.applied = wp.zeros(n, dtype=wp.vec2, device=dev)
+        self._delay = d
+        on = ObservationNoise()
+        if r.noise is not None:
+            on.velocity, on.gyro, on.attitude = r.noise.velocity, r.noise.gyro, r.noise.attitude
+        self._obs_noise = on
+        self._all = wp.full(n, True, dtype=bool, device=dev)
+        self.latency = wp.to_torch(d.latency)
+        """(N,) each world's action latency [steps] in the current episode (a view)."""
+        if r.enabled:  # the draws are part of the env's state (state_dict)
+            params = self.sim.params
+            self._task_views.update({f"physics.{name}": params.view(name) for name in PHYSICS_DRAWS})
+            self._task_views.update({"delay.latency": self.latency, "delay.alpha": wp.to_torch(d.alpha),
+                                     "delay.history": wp.to_torch(d.history), "delay.applied": wp.to_torch(d.applied)})
+
+    def _draw(self, phase: int, mask: wp.array) -> None:
+        """Draw the due quantities of the masked worlds (``PHASE_EPISODE`` on reset, ``PHASE_TICK`` after a step)."""
+        params = self.sim.params
+        wp.launch(draw_physics, dim=self.num_envs,
+                  inputs=[self._seed, phase, self.sim.sim_cfg.step_dt, mask, self._task, self._draw_spec,
+                          params.physics, params.payload_mass_array, params.payload_offset_array, self._delay],
+                  device=self._wp_device)
+        if self._payload_draws and (phase == PHASE_EPISODE or self._payload_on_tick):
+            self.sim.apply_payload(mask)
+
+    def _add_noise(self, mask: wp.array) -> None:
+        if self.randomization.noise is not None:
+            wp.launch(add_observation_noise, dim=self.num_envs,
+                      inputs=[self._seed, mask, self._task, self._obs_noise, self.sim.buffers.nonfinite],
+                      outputs=[self._obs], device=self._wp_device)
+
     def _make_spec(self) -> None:
         n, dev, dim = self.num_envs, self.device, self.obs_dim
         low, high = observation_bounds(task=self.task_cfg)
@@ -230,6 +312,8 @@ class ATRVjrEnv(EnvBase):
         else:
             self._mask_t.copy_(mask)
         sim = self.sim
+        if self._draws_on_reset:  # before the sampler counts the episode
+            self._draw(PHASE_EPISODE, self._mask)
         if self._nav:
             wp.launch(sample_nav_episodes, dim=self.num_envs,
                       inputs=[self._seed, self._params, self._scene_params, self._mask],
@@ -270,6 +354,7 @@ class ATRVjrEnv(EnvBase):
         wp.launch(observe_reset, dim=self.num_envs, inputs=[self._params, self._mask, self._task, self._rover],
                   outputs=[self._out], device=self._wp_device)
         self._launch_scan_observation()
+        self._add_noise(self._mask)
 
     def _launch_scan_observation(self) -> None:
         if self.task_cfg.scan_sectors:
@@ -279,14 +364,22 @@ class ATRVjrEnv(EnvBase):
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = self._check_action(tensordict.get("action"))
-        action_to_torque(action, self.task_cfg.action_scale, out=self.sim.commands)
         sim = self.sim
+        if self.randomization.delays_actions:
+            wp.launch(delay_actions, dim=self.num_envs,
+                      inputs=[wp.from_torch(action.contiguous()), self.task_cfg.action_scale, self._task, self._delay],
+                      outputs=[sim.buffers.commands], device=self._wp_device)
+        else:
+            action_to_torque(action, self.task_cfg.action_scale, out=sim.commands)
         sim.step()
         if self.scanner is not None:
             self.scanner.scan()
         wp.launch(compute_step_outcome, dim=self.num_envs, inputs=[self._params, self._task, self._rover],
                   outputs=[self._out], device=self._wp_device)
         self._launch_scan_observation()
+        self._add_noise(self._all)
+        if self._draws_on_tick:
+            self._draw(PHASE_TICK, self._all)
         if bool(sim.nonfinite.any()):  # one flag read per step; blown-up worlds are rare
             self.nonfinite_count += int(sim.nonfinite.sum())
         out = {"observation": self._obs_t.clone(), "reward": self._reward_t.clone(),
@@ -333,9 +426,15 @@ class ATRVjrEnv(EnvBase):
         missing = sorted({"joint_q", "joint_qd", "commands", "sim_time"} - set(sim_state))
         if missing:
             raise KeyError(f"state dict lacks simulator entries {missing}")
-        self.sim.set_state(sim_state)
+        missing = sorted(set(self._task_views) - set(task_state))
+        if missing:
+            raise KeyError(f"state dict lacks task entries {missing} (saved from an env with another task or "
+                           "randomization?)")
         for k, v in self._task_views.items():
             v.copy_(task_state[k])
+        if self.randomization.enabled:  # the payload first: the restored state's body velocities depend on it
+            self.sim.apply_payload(self._all)
+        self.sim.set_state(sim_state)
         self._seed = int(task_state["seed"])
         self.nonfinite_count = int(task_state["nonfinite_count"])
         if self.scanner is not None:
@@ -345,6 +444,7 @@ class ATRVjrEnv(EnvBase):
 
     def __repr__(self) -> str:
         return (f"ATRVjrEnv(num_envs={self.num_envs}, device={self.device}, terrain={self.task_cfg.terrain!r}, "
+                f"randomized={self.randomization.enabled}, "
                 f"obstacles={self.task_cfg.obstacles}, scan_beams={self.task_cfg.scan_beams}, "
                 f"urdf={self.sim.description.path!r})")
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import sys
 
 from atrv_warp.integrations.ros.base import BaseParams
+from atrv_warp.sim.config import SENSOR_NOISE
 from atrv_warp.sim.simulator import DriveMode
 
 __all__ = ["COMMANDS", "GOAL", "MAX_ROVERS", "MISSING_ROS_MESSAGE", "PARAMETERS", "VELOCITY", "parameter_help", "run"]
@@ -38,7 +39,8 @@ PARAMETERS = (
     ("variant", "realistic", "rover variant: realistic | reference"),
     ("task", "reach", "world: reach (the flat arena) | nav (terrain and obstacles, drawn once at start)"),
     ("scan_beams", 181, "/scan beams over 180 deg (181: 1 deg, as a SICK LMS); 0 = no /scan"),
-    ("scan_noise", 0.01, "/scan range noise, standard deviation [m]"),
+    ("scan_noise", SENSOR_NOISE.scan_range, "/scan range noise, standard deviation [m]"),
+    ("scan_dropout", SENSOR_NOISE.scan_dropout, "/scan: probability that a beam returns nothing [-]"),
     ("x", 0.0, "start x of rover 0 [m]"), ("y", 0.0, "start y of rover 0 [m]"), ("yaw", 0.0, "start yaw [rad]"),
     ("spacing", 2.0, "rover k starts at y + k * spacing [m]"),
     ("num_rovers", 1, f"rovers simulated (1 … {MAX_ROVERS}); more than one puts each under /rover_<k>"),
@@ -52,11 +54,12 @@ PARAMETERS = (
     ("wheel_kp", BaseParams.kp, "wheel-speed PI proportional gain [N·m per rad/s]"),
     ("wheel_ki", BaseParams.ki, "wheel-speed PI integral gain [N·m per rad]"),
     ("cmd_vel_timeout", BaseParams.timeout, "watchdog: stop when no /cmd_vel arrives for this long [s]"),
-    ("imu_accel_noise", 0.05, "IMU accelerometer noise, standard deviation [m/s²]"),
-    ("imu_gyro_noise", 0.005, "IMU gyroscope noise, standard deviation [rad/s]"),
+    ("imu_accel_noise", SENSOR_NOISE.accel, "IMU accelerometer noise, standard deviation [m/s²]"),
+    ("imu_gyro_noise", SENSOR_NOISE.gyro, "IMU gyroscope noise, standard deviation [rad/s]"),
     ("seed", 0, "seed of the IMU noise"),
 )
-"""(name, default, description) of every parameter the node declares."""
+"""(name, default, description) of every parameter the node declares. The sensor noise defaults are
+:data:`~atrv_warp.sim.config.SENSOR_NOISE`, the noise the randomization presets train with."""
 
 def parameter_help() -> str:
     """The node's parameters as ``name (default): description`` lines."""

@@ -264,8 +264,8 @@ class RoverSimNode(Node):
         if p["scan_beams"] > 0:
             from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
 
-            self.scanner = LaserScanner(self.sim, ScannerConfig(beams=p["scan_beams"], noise_std=p["scan_noise"]),
-                                        seed=int(p["seed"]))
+            scan = ScannerConfig(beams=p["scan_beams"], noise_std=p["scan_noise"], dropout=p["scan_dropout"])
+            self.scanner = LaserScanner(self.sim, scan, seed=int(p["seed"]))
         desc = self.sim.description
         self.every = max(1, round(1.0 / (p["publish_rate"] * self.sim.sim_cfg.step_dt)))
         self.frame_id = p["frame_id"] or desc.chassis
@@ -312,6 +312,8 @@ class RoverSimNode(Node):
             self._fail(f"task={p['task']!r} is not a task; use one of {sorted(TASK_VARIANTS)}")
         if p["scan_beams"] < 0 or p["scan_noise"] < 0:
             self._fail("scan_beams and scan_noise must be >= 0")
+        if not 0.0 <= p["scan_dropout"] <= 1.0:
+            self._fail(f"scan_dropout is a probability in [0, 1], got {p['scan_dropout']}")
 
     # ------------------------------------------------------------------ simulator reads
     def stamp_ns(self) -> int:

@@ -1,0 +1,216 @@
+"""Domain-randomization kernels: per-world draws of the physics, the action latency buffer and motor lag, and
+the observation noise (:mod:`atrv_warp.task.randomization` declares what they do).
+
+One thread per world. Every draw comes from a stream of its own: (seed, world) hashed with a salt that sets
+these streams apart from the episode sampler's, then the episode, then (``interval`` draws and noise) the
+step, then the parameter. So a world's draws do not depend on which other parameters are randomized, on
+the number of worlds, or on when other worlds reset.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from atrv_warp.sim.kernels.params import WorldPhysics
+from atrv_warp.task.kernels import (
+    OBS_ROLL,
+    OBS_ROVER_VX,
+    OBS_ROVER_VY,
+    OBS_YAW_RATE,
+    ROLL_BOUND,
+    VELOCITY_BOUND,
+    YAW_RATE_BOUND,
+    TaskBuffers,
+)
+from atrv_warp.task.randomization import MAX_LATENCY, PHYSICS_DRAWS
+
+# Rows of DrawSpec: the physical parameters in PHYSICS_DRAWS order, then the latency and the motor lag.
+DRAW_FRICTION = wp.constant(PHYSICS_DRAWS.index("friction"))
+DRAW_PAYLOAD_MASS = wp.constant(PHYSICS_DRAWS.index("payload_mass"))
+DRAW_PAYLOAD_OFFSET = wp.constant(PHYSICS_DRAWS.index("payload_offset"))
+DRAW_TORQUE_SCALE = wp.constant(PHYSICS_DRAWS.index("torque_scale"))
+DRAW_SPEED_LIMIT = wp.constant(PHYSICS_DRAWS.index("speed_limit"))
+DRAW_WHEEL_RADIUS = wp.constant(PHYSICS_DRAWS.index("wheel_radius"))
+DRAW_STIFFNESS = wp.constant(PHYSICS_DRAWS.index("stiffness"))
+DRAW_LATENCY = wp.constant(len(PHYSICS_DRAWS))
+DRAW_MOTOR_LAG = wp.constant(len(PHYSICS_DRAWS) + 1)
+DRAW_COUNT = len(PHYSICS_DRAWS) + 2
+
+# DrawSpec.mode codes (RandomizationConfig's DRAW_MODES, and 0 for a parameter left alone)
+MODE_OFF = wp.constant(0)
+MODE_STARTUP = wp.constant(1)
+MODE_RESET = wp.constant(2)
+MODE_INTERVAL = wp.constant(3)
+MODE_CODES = {"startup": 1, "reset": 2, "interval": 3}
+
+PHASE_EPISODE = wp.constant(0)
+"""draw_physics at an episode's start (a reset)"""
+PHASE_TICK = wp.constant(1)
+"""draw_physics after a step (the ``interval`` draws)"""
+
+HISTORY = wp.constant(MAX_LATENCY + 1)
+"""Slots of the action ring buffer."""
+
+STREAM_SALT = wp.constant(0x2B7E1516)
+"""Sets the randomization's streams apart from the episode sampler's (same seed, world and episode)."""
+
+
+@wp.struct
+class DrawSpec:
+    """Each randomized quantity's range and mode, DRAW_COUNT rows."""
+
+    low: wp.array(dtype=float)
+    high: wp.array(dtype=float)
+    log: wp.array(dtype=int)
+    mode: wp.array(dtype=int)
+    every: wp.array(dtype=int)
+
+
+@wp.struct
+class ActionDelay:
+    """Each world's latency [steps], motor-lag factor per step, ring buffer and lagged torques."""
+
+    latency: wp.array(dtype=wp.int32)
+    alpha: wp.array(dtype=float)  # 1 - exp(-step_dt / tau); 1 = no lag
+    history: wp.array2d(dtype=wp.vec2)  # (N, HISTORY) commanded torques [N·m]
+    applied: wp.array(dtype=wp.vec2)  # the lag filter's state [N·m]
+
+
+@wp.struct
+class ObservationNoise:
+    """Standard deviations of the observation noise (:class:`~atrv_warp.sim.config.SensorNoise`)."""
+
+    velocity: float  # [m/s]
+    gyro: float  # [rad/s]
+    attitude: float  # [rad]
+
+
+@wp.func
+def world_stream(seed: int, world: int, episode: int) -> wp.uint32:
+    h = wp.rand_init(seed, world)
+    return wp.rand_init(wp.int32(h) ^ STREAM_SALT, episode)
+
+
+@wp.func
+def due(spec: DrawSpec, p: int, phase: int, episode: int, steps: int) -> bool:
+    """Whether quantity ``p`` is drawn now."""
+    mode = spec.mode[p]
+    if mode == MODE_OFF:
+        return False
+    if phase == PHASE_EPISODE:
+        return mode != MODE_STARTUP or episode == 0
+    return mode == MODE_INTERVAL and steps > 0 and steps % spec.every[p] == 0
+
+
+@wp.func
+def sample(spec: DrawSpec, p: int, stream: wp.uint32, lane: int) -> float:
+    """A value of quantity ``p`` from its own sub-stream (``lane`` tells the payload offset's x and y apart)."""
+    state = wp.rand_init(wp.int32(stream), p * 2 + lane)
+    u = wp.randf(state)
+    lo = spec.low[p]
+    hi = spec.high[p]
+    if spec.log[p] != 0:
+        return wp.exp(wp.log(lo) + u * (wp.log(hi) - wp.log(lo)))
+    return lo + u * (hi - lo)
+
+
+@wp.kernel
+def draw_physics(
+    seed: int,
+    phase: int,
+    step_dt: float,
+    mask: wp.array(dtype=bool),
+    task: TaskBuffers,
+    spec: DrawSpec,
+    physics: WorldPhysics,
+    payload_mass: wp.array(dtype=float),
+    payload_offset: wp.array(dtype=wp.vec3),
+    delay: ActionDelay,
+):
+    """Draw the masked worlds' due quantities: at an episode's start (``PHASE_EPISODE``, before the episode
+    sampler counts it) or after a step (``PHASE_TICK``, the ``interval`` draws)."""
+    world = wp.tid()
+    if not mask[world]:
+        return
+    episode = task.episode[world]
+    steps = task.step_count[world]
+    stream = world_stream(seed, world, episode)
+    if phase == PHASE_TICK:
+        stream = wp.rand_init(wp.int32(stream), steps)
+    else:
+        delay.applied[world] = wp.vec2(0.0, 0.0)  # a new episode starts with the motors at rest
+    if due(spec, DRAW_FRICTION, phase, episode, steps):
+        physics.friction[world] = sample(spec, DRAW_FRICTION, stream, 0)
+    if due(spec, DRAW_PAYLOAD_MASS, phase, episode, steps):
+        payload_mass[world] = sample(spec, DRAW_PAYLOAD_MASS, stream, 0)
+    if due(spec, DRAW_PAYLOAD_OFFSET, phase, episode, steps):
+        payload_offset[world] = wp.vec3(sample(spec, DRAW_PAYLOAD_OFFSET, stream, 0),
+                                        sample(spec, DRAW_PAYLOAD_OFFSET, stream, 1), 0.0)
+    if due(spec, DRAW_TORQUE_SCALE, phase, episode, steps):
+        physics.torque_scale[world] = sample(spec, DRAW_TORQUE_SCALE, stream, 0)
+    if due(spec, DRAW_SPEED_LIMIT, phase, episode, steps):
+        physics.speed_limit[world] = sample(spec, DRAW_SPEED_LIMIT, stream, 0)
+    if due(spec, DRAW_WHEEL_RADIUS, phase, episode, steps):
+        physics.wheel_radius[world] = sample(spec, DRAW_WHEEL_RADIUS, stream, 0)
+    if due(spec, DRAW_STIFFNESS, phase, episode, steps):
+        physics.stiffness[world] = sample(spec, DRAW_STIFFNESS, stream, 0)
+    if due(spec, DRAW_LATENCY, phase, episode, steps):
+        # whole steps: the spec's range is [low, high + 1), rounded down
+        v = sample(spec, DRAW_LATENCY, stream, 0)
+        delay.latency[world] = wp.int32(wp.min(int(v), int(spec.high[DRAW_LATENCY]) - 1))
+    if due(spec, DRAW_MOTOR_LAG, phase, episode, steps):
+        tau = sample(spec, DRAW_MOTOR_LAG, stream, 0)
+        alpha = float(1.0)  # noqa: UP018 - a variable (Warp), not a constant
+        if tau > 0.0:
+            alpha = 1.0 - wp.exp(-step_dt / tau)
+        delay.alpha[world] = alpha
+
+
+@wp.kernel
+def delay_actions(
+    actions: wp.array2d(dtype=float),
+    action_scale: float,
+    task: TaskBuffers,
+    delay: ActionDelay,
+    commands: wp.array(dtype=wp.vec2),
+):
+    """Wheel torques [N·m] for this step: the world's action (clipped, scaled) goes into its ring buffer, the one
+    chosen ``latency`` steps ago comes out (zero torque before the episode's first), through the motor lag."""
+    world = wp.tid()
+    t = int(task.step_count[world])
+    cmd = wp.vec2(wp.clamp(actions[world, 0], -1.0, 1.0), wp.clamp(actions[world, 1], -1.0, 1.0)) * action_scale
+    delay.history[world, t % HISTORY] = cmd
+    lat = int(delay.latency[world])
+    delayed = wp.vec2(0.0, 0.0)
+    if t >= lat:
+        delayed = delay.history[world, (t - lat) % HISTORY]
+    prev = delay.applied[world]
+    out = prev + delay.alpha[world] * (delayed - prev)
+    delay.applied[world] = out
+    commands[world] = out
+
+
+@wp.kernel
+def add_observation_noise(
+    seed: int,
+    mask: wp.array(dtype=bool),
+    task: TaskBuffers,
+    noise: ObservationNoise,
+    nonfinite: wp.array(dtype=wp.int32),
+    obs: wp.array2d(dtype=float),
+):
+    """Zero-mean Gaussian noise on the velocity, roll and yaw-rate fields of the masked worlds' observation,
+    clipped to the fields' bounds, from the world's (episode, step) stream."""
+    world = wp.tid()
+    if not mask[world] or nonfinite[world] != 0:
+        return
+    stream = world_stream(seed, world, task.episode[world])
+    state = wp.rand_init(wp.int32(stream) ^ 0x5F3759DF, int(task.step_count[world]))
+    vx = obs[world, OBS_ROVER_VX] + noise.velocity * wp.randn(state)
+    vy = obs[world, OBS_ROVER_VY] + noise.velocity * wp.randn(state)
+    roll = obs[world, OBS_ROLL] + noise.attitude * wp.randn(state)
+    rate = obs[world, OBS_YAW_RATE] + noise.gyro * wp.randn(state)
+    obs[world, OBS_ROVER_VX] = wp.clamp(vx, -VELOCITY_BOUND, VELOCITY_BOUND)
+    obs[world, OBS_ROVER_VY] = wp.clamp(vy, -VELOCITY_BOUND, VELOCITY_BOUND)
+    obs[world, OBS_ROLL] = wp.clamp(roll, -ROLL_BOUND, ROLL_BOUND)
+    obs[world, OBS_YAW_RATE] = wp.clamp(rate, -YAW_RATE_BOUND, YAW_RATE_BOUND)

@@ -1,0 +1,154 @@
+"""Domain randomization in the training env: draws within their ranges, seeded and per world, on the schedule
+asked for; the latency buffer and the motor lag; noisy observations; bad settings refused before anything
+steps; and the trainer's key."""
+
+import pytest
+import torch
+
+from atrv_warp.rl.config import load_train_config
+from atrv_warp.sim.config import SENSOR_NOISE
+from atrv_warp.task.env import ATRVjrEnv
+from atrv_warp.task.randomization import RANDOMIZATION_PRESETS, Draw, RandomizationConfig, get_randomization
+from atrv_warp.task.spec import OBS_INDEX
+
+
+def roll(env, steps, action=0.5):
+    td = env.reset()
+    out = []
+    for _ in range(steps):
+        td = env.step(td.set("action", torch.full((env.num_envs, 2), action)))["next"]
+        out.append(td["observation"].clone())
+    return torch.stack(out)
+
+
+def test_none_steps_as_without_randomization():
+    plain = roll(ATRVjrEnv(4, seed=1), 20)
+    none = roll(ATRVjrEnv(4, seed=1, randomization="none"), 20)
+    empty = roll(ATRVjrEnv(4, seed=1, randomization=RandomizationConfig()), 20)
+    assert torch.equal(plain, none) and torch.equal(plain, empty)
+
+
+def test_wide_draws_lie_in_their_ranges_and_follow_the_seed():
+    wide = RANDOMIZATION_PRESETS["wide"]
+    env = ATRVjrEnv(256, seed=5, randomization="wide")
+    env.reset()
+    p = env.sim.params
+    for name, draw in wide.physics.items():
+        values = p.view(name) if name != "payload_offset" else p.payload_offset[:, :2]
+        assert float(values.min()) >= draw.low - 1e-6 and float(values.max()) <= draw.high + 1e-6, name
+        assert float(values.std()) > 0.1 * (draw.high - draw.low) / 3.5, name  # spread, not one value
+    # log-uniform friction: about as many worlds below the geometric mean as above it
+    below = (p.friction < (0.2 * 1.0) ** 0.5).float().mean().item()
+    assert 0.4 < below < 0.6
+    assert sorted(set(env.latency.tolist())) == [0, 1, 2]
+    # the payload reached the solver's model: chassis mass = nominal + payload
+    body = env.sim.model.body_mass.numpy().reshape(256, -1)[:, env.sim.layout.chassis_body]
+    assert body == pytest.approx(env.sim.nominal_chassis.mass + p.payload_mass.numpy(), rel=1e-6)
+    again = ATRVjrEnv(256, seed=5, randomization="wide")
+    again.reset()
+    other = ATRVjrEnv(256, seed=6, randomization="wide")
+    other.reset()
+    assert torch.equal(again.sim.params.friction, p.friction) and torch.equal(again.latency, env.latency)
+    assert not torch.equal(other.sim.params.friction, p.friction)
+
+
+def test_same_seed_same_randomized_rollout():
+    a = roll(ATRVjrEnv(4, seed=2, task="nav", randomization="wide"), 25)
+    b = roll(ATRVjrEnv(4, seed=2, task="nav", randomization="wide"), 25)
+    assert torch.equal(a, b)
+
+
+@pytest.mark.parametrize("mode,changes_on_reset,changes_within", [
+    ("startup", False, False), ("reset", True, False), ("interval", True, True)])
+def test_draw_modes(mode, changes_on_reset, changes_within):
+    cfg = RandomizationConfig(friction=Draw(0.2, 1.0, mode=mode, every=3))
+    env = ATRVjrEnv(8, seed=0, randomization=cfg)
+    td = env.reset()
+    first = env.sim.params.friction.clone()
+    for _ in range(3):
+        td = env.step(td.set("action", torch.zeros(8, 2)))["next"]
+    assert torch.equal(env.sim.params.friction, first) != changes_within
+    within = env.sim.params.friction.clone()
+    env.reset()
+    assert torch.equal(env.sim.params.friction, within) != changes_on_reset
+
+
+def test_latency_delays_the_commands_by_whole_steps():
+    env = ATRVjrEnv(2, seed=0, randomization=RandomizationConfig(latency=(2, 2)))
+    td = env.reset()
+    applied = []
+    for t in range(5):
+        action = torch.full((2, 2), 0.1 * (t + 1))
+        td = env.step(td.set("action", action))["next"]
+        applied.append(env.sim.commands[0, 0].item())
+    scale = env.task_cfg.action_scale
+    assert applied == pytest.approx([0.0, 0.0, 0.1 * scale, 0.2 * scale, 0.3 * scale])
+
+
+def test_motor_lag_is_first_order():
+    tau = 0.1
+    env = ATRVjrEnv(1, seed=0, randomization=RandomizationConfig(motor_lag=Draw(tau, tau)))
+    td = env.reset()
+    applied = []
+    for _ in range(4):
+        td = env.step(td.set("action", torch.ones(1, 2)))["next"]
+        applied.append(env.sim.commands[0, 0].item())
+    scale, keep = env.task_cfg.action_scale, torch.exp(torch.tensor(-0.05 / tau)).item()
+    assert applied == pytest.approx([scale * (1 - keep ** (n + 1)) for n in range(4)], rel=1e-5)
+
+
+def test_observation_and_scan_noise():
+    clean = ATRVjrEnv(512, seed=4, task="nav")
+    noisy = ATRVjrEnv(512, seed=4, task="nav", randomization=RandomizationConfig(noise=SENSOR_NOISE))
+    a, b = roll(clean, 3, 0.0)[-1], roll(noisy, 3, 0.0)[-1]
+    dv = (b - a)[:, OBS_INDEX["rover_vx"]]
+    assert float(dv.std()) == pytest.approx(SENSOR_NOISE.velocity, rel=0.15)
+    dr = (b - a)[:, OBS_INDEX["yaw_rate"]]
+    assert float(dr.std()) == pytest.approx(SENSOR_NOISE.gyro, rel=0.15)
+    assert torch.equal(a[:, OBS_INDEX["target_x"]], b[:, OBS_INDEX["target_x"]])  # the target is not sensed
+    assert noisy.scanner.cfg.noise_std == SENSOR_NOISE.scan_range
+
+
+@pytest.mark.parametrize("make,message", [
+    (lambda: get_randomization("wild"), "unknown randomization preset 'wild'; known: \\['mild', 'none', 'wide'\\]"),
+    (lambda: RandomizationConfig(friction=Draw(0.8, 0.2)), "randomization.friction: low 0.8 > high 0.2"),
+    (lambda: RandomizationConfig(friction=Draw(0.0, 0.5)), "randomization.friction: friction must be > 0"),
+    (lambda: RandomizationConfig(payload_mass=Draw(-5.0, 5.0)), "randomization.payload_mass: payload_mass must be >= 0"),
+    (lambda: RandomizationConfig(latency=(0, 20)), "randomization.latency: 20 steps exceed the action buffer"),
+    (lambda: RandomizationConfig(friction=Draw(0.2, 1.0, mode="sometimes")), "unknown mode 'sometimes'"),
+    (lambda: ATRVjrEnv(2, randomization="wild"), "unknown randomization preset"),
+])
+def test_bad_settings_are_one_line_errors(make, message):
+    with pytest.raises(ValueError, match=message):
+        make()
+
+
+def test_state_dict_restores_the_draws():
+    env = ATRVjrEnv(4, seed=3, randomization="wide")
+    roll(env, 5)
+    saved = env.state_dict()
+    roll_from(env, 10)  # wander off before restoring
+    env.load_state_dict(saved)
+    fresh = ATRVjrEnv(4, seed=9, randomization="wide")
+    fresh.load_state_dict(saved)
+    for e in (env, fresh):
+        assert torch.equal(e.sim.params.friction, saved["task.physics.friction"])
+        assert torch.equal(e.latency, saved["task.delay.latency"])
+    assert torch.equal(roll_from(env, 10), roll_from(fresh, 10))
+
+
+def roll_from(env, steps):
+    from tensordict import TensorDict
+
+    td = TensorDict({}, batch_size=env.batch_size)
+    out = []
+    for _ in range(steps):
+        td = env.step(td.set("action", torch.full((env.num_envs, 2), 0.3)))["next"]
+        out.append(td["observation"].clone())
+    return torch.stack(out)
+
+
+def test_train_config_key():
+    assert load_train_config("smoke", {"env.randomization": "wide"}).env.randomization == "wide"
+    with pytest.raises(ValueError, match="randomization: unknown randomization preset 'wild'"):
+        load_train_config("smoke", {"randomization": "wild"})
