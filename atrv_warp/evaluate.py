@@ -10,6 +10,7 @@ Examples::
     python -m atrv_warp.evaluate runs/default/best_policy.pt --episodes 200 --seed 7
     python -m atrv_warp.evaluate --baseline               # the scripted driver, for comparison (atrv-baseline)
     python -m atrv_warp.evaluate --task nav               # the shipped navigation policy
+    python -m atrv_warp.evaluate --task nav --randomization wide   # under shift: per-world physics, noise, latency
     python -m atrv_warp.evaluate --task nav --baseline --episodes 8 --rerun nav.rrd
     python -m atrv_warp.evaluate --episodes 8 --rerun eval.rrd      # record 4 worlds; view: rerun eval.rrd
     python -m atrv_warp.evaluate --episodes 4 --serve --real-time   # live web viewer on 127.0.0.1
@@ -34,6 +35,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--baseline", action="store_true", help="evaluate the scripted baseline instead")
     parser.add_argument("--task", default=None,
                         help="task: reach | nav (default: the policy's own; reach for the baseline)")
+    parser.add_argument("--randomization", default="none", metavar="PRESET",
+                        help="evaluate under domain randomization: none | mild | wide (each world draws its physics, "
+                             "sensor noise and latency from the evaluation seed); prints success by parameter bin")
     parser.add_argument("--device", default="cpu", help="simulation device")
     parser.add_argument("--json", metavar="FILE", help="also write the figures to FILE")
     parser.add_argument("--rerun", metavar="FILE.rrd", help="record the episodes to a Rerun file")
@@ -48,10 +52,23 @@ def main(argv: list[str] | None = None) -> int:
     if args.verbose:
         set_verbose()
     from atrv_warp.task.config import TASK_VARIANTS
-    from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result, write_result
+    from atrv_warp.task.evaluation import (
+        EVAL_SEED,
+        format_bins,
+        format_result,
+        run_episodes,
+        success_by_bin,
+        write_result,
+    )
 
     if args.task is not None and args.task not in TASK_VARIANTS:
         return error_line(parser.prog, f"unknown --task {args.task!r}; known: {sorted(TASK_VARIANTS)}")
+    from atrv_warp.task.randomization import get_randomization
+
+    try:
+        randomization = get_randomization(args.randomization)
+    except ValueError as err:
+        return error_line(parser.prog, f"--randomization: {err}")
     task = args.task or "reach"
     if args.baseline:
         from atrv_warp.task.baseline import scripted_policy
@@ -76,28 +93,34 @@ def main(argv: list[str] | None = None) -> int:
     except (RuntimeError, ValueError) as err:
         return error_line(parser.prog, f"--device {args.device!r}: {err}")
     seed = EVAL_SEED if args.seed is None else args.seed
-    recorder, env, on_step = None, None, None
+    from atrv_warp.task.env import ATRVjrEnv
+
+    recorder, on_step = None, None
+    env = ATRVjrEnv(args.episodes, device=args.device, task=task, randomization=randomization)
     if args.rerun or args.serve or args.real_time:
         from atrv_warp.integrations.recorder import RerunRecorder
-        from atrv_warp.task.env import ATRVjrEnv
 
-        env = ATRVjrEnv(args.episodes, device=args.device, task=task)
         recorder = RerunRecorder(env.sim, path=args.rerun, serve=args.serve, worlds=args.worlds,
                                  real_time=args.real_time)
         on_step = recorder.env_hook()
     try:
-        result = evaluate(policy, num_episodes=args.episodes, seed=seed, device=args.device, env=env,
-                          on_step=on_step, task=task)
+        record = run_episodes(policy, env, seed=seed, on_step=on_step)
     finally:
         if recorder is not None:
             recorder.close()
-    print(format_result(name, result))
+    result = record.summary()
+    extra = {}
+    print(format_result(name, result) + (f" | randomization {args.randomization}" if randomization.enabled else ""))
+    if randomization.enabled:
+        table = success_by_bin(record)
+        print(format_bins(table))
+        extra = {"randomization": args.randomization, "success_by_bin": table}
     if args.rerun:
         print(f"recording: {args.rerun}  (view with: rerun {args.rerun})")
     if args.serve and sys.stdin.isatty():
         input("viewer running; press Enter to stop ...")
     if args.json:
-        write_result(args.json, name, task, seed, result)
+        write_result(args.json, name, task, seed, result, **extra)
     return 0
 
 

@@ -78,9 +78,12 @@ def policy_task(path: str | Path) -> str:
     return str(payload.get("meta", {}).get("task", "reach"))
 
 
-def pretrained_nav_policy_path() -> Path:
-    """The navigation policy shipped inside the package (trained by ``python -m atrv_warp.train --config nav``)."""
-    return Path(str(resources.files("atrv_warp").joinpath("assets/nav_policy.pt")))
+def pretrained_nav_policy_path(randomized: bool = True) -> Path:
+    """The navigation policy shipped inside the package, trained by ``python -m atrv_warp.train --config nav``
+    under the ``wide`` domain randomization (the default); ``randomized=False``: the earlier one, trained on the
+    nominal rover with perfect sensors (``nav_policy_plain.pt``)."""
+    name = "nav_policy.pt" if randomized else "nav_policy_plain.pt"
+    return Path(str(resources.files("atrv_warp").joinpath(f"assets/{name}")))
 
 
 def pretrained_policy_path() -> Path:

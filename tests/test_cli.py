@@ -28,3 +28,19 @@ def test_atrv_baseline_is_evaluate_baseline(tmp_path, capsys):
     a, b = (json.loads((tmp_path / f"{n}.json").read_text()) for n in "ab")
     assert a == b and a["episodes"] == 4 and a["policy"] == "scripted baseline (reach)"
     assert "scripted baseline (reach)" in capsys.readouterr().out
+
+
+def test_evaluate_under_randomization_reports_success_by_bin(tmp_path, capsys):
+    from atrv_warp.evaluate import main
+
+    out = tmp_path / "wide.json"
+    assert main(["--task", "nav", "--randomization", "wide", "--episodes", "16", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["randomization"] == "wide" and result["episodes"] == 16
+    bins = result["success_by_bin"]
+    assert set(bins) == {"friction", "payload_mass", "latency"}
+    assert all(sum(r["episodes"] for r in rows) == 16 for rows in bins.values())
+    printed = capsys.readouterr().out
+    assert "randomization wide" in printed and "success by friction" in printed
+    assert main(["--task", "nav", "--randomization", "wild", "--episodes", "2"]) == 2
+    assert "unknown randomization preset 'wild'" in capsys.readouterr().err

@@ -129,6 +129,7 @@ def test_wheel_carries_configs_urdf_and_policy(tmp_path):
     names = set(zipfile.ZipFile(wheel).namelist())
     for needed in ("atrv_warp/rl/configs/default.toml", "atrv_warp/rl/configs/smoke.toml", "atrv_warp/assets/atrvjr.urdf",
                    "atrv_warp/assets/pretrained_policy.pt", "atrv_warp/assets/nav_policy.pt",
+                   "atrv_warp/assets/nav_policy_plain.pt",
                    "atrv_warp/rl/configs/nav.toml", "atrv_warp/py.typed"):
         assert needed in names, needed
     entry_points = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("entry_points.txt"))).decode()

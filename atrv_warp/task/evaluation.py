@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -10,7 +11,8 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
-__all__ = ["EVAL_SEED", "EvalResult", "evaluate", "format_result", "write_result"]
+__all__ = ["EVAL_SEED", "SHIFT_BINS", "EpisodeRecord", "EvalResult", "evaluate", "format_bins", "format_result",
+           "run_episodes", "success_by_bin", "write_result"]
 
 EVAL_SEED = 2024
 """Seed of the standard evaluation set (training never uses it)."""
@@ -32,33 +34,85 @@ class EvalResult:
         return asdict(self)
 
 
+@dataclass(frozen=True)
+class EpisodeRecord:
+    """Each episode of an evaluation: how it ended, and the physics its world drew."""
+
+    end_reason: torch.Tensor
+    """(N,) int64 :class:`~atrv_warp.task.spec.EndReason` codes."""
+    returns: torch.Tensor
+    """(N,) undiscounted returns."""
+    steps: torch.Tensor
+    """(N,) episode lengths [steps]."""
+    params: dict[str, torch.Tensor]
+    """Each world's physical parameters during its episode (:data:`atrv_warp.sim.params.PARAMETERS`), and
+    ``latency`` [steps]."""
+
+    @property
+    def success(self) -> torch.Tensor:
+        """(N,) bool: the episode reached its target."""
+        return self.end_reason == 1
+
+    def summary(self) -> EvalResult:
+        from atrv_warp.task.spec import END_REASONS
+
+        n = len(self.end_reason)
+        counts = torch.bincount(self.end_reason, minlength=len(END_REASONS)).float() / n
+        rate = dict(zip(END_REASONS, counts.tolist()))
+        return EvalResult(n, rate["success"], self.returns.mean().item(), self.steps.mean().item(), rate["wall"],
+                          rate["flip"], rate["timeout"], rate["nonfinite"], rate["obstacle"])
+
+
+SHIFT_BINS: dict[str, tuple[float, ...]] = {
+    "friction": (0.2, 0.3, 0.45, 0.65, 1.0),
+    "payload_mass": (0.0, 5.0, 10.0, 15.0, 20.0, 25.0),
+    "latency": (-0.5, 0.5, 1.5, 2.5),
+}
+"""Bin edges of the success-by-parameter table (``evaluate --randomization``): mu [-], payload [kg], latency
+[steps] (one bin per whole step)."""
+
+
+def success_by_bin(record: EpisodeRecord, bins: dict[str, tuple[float, ...]] = SHIFT_BINS) -> dict[str, list[dict]]:
+    """Success rate of the episodes in each bin of each parameter: ``{name: [{low, high, episodes, success}]}``."""
+    out = {}
+    for name, edges in bins.items():
+        values = record.params[name].reshape(len(record.end_reason), -1)[:, 0].double()
+        rows = []
+        for lo, hi in itertools.pairwise(edges):
+            inside = (values >= lo) & ((values < hi) | ((values == hi) & (hi == edges[-1])))
+            count = int(inside.sum())
+            rate = float(record.success[inside].float().mean()) if count else float("nan")
+            rows.append({"low": lo, "high": hi, "episodes": count, "success": rate})
+        out[name] = rows
+    return out
+
+
+def format_bins(table: dict[str, list[dict]]) -> str:
+    """The success-by-bin table as text lines."""
+    lines = []
+    for name, rows in table.items():
+        cells = []
+        for r in rows:
+            label = f"{r['low'] + 0.5:g}" if name == "latency" else f"{r['low']:g}-{r['high']:g}"
+            rate = "-" if r["episodes"] == 0 else f"{100 * r['success']:.1f}%"
+            cells.append(f"{label}: {rate} ({r['episodes']})")
+        lines.append(f"  success by {name}: " + " | ".join(cells))
+    return "\n".join(lines)
+
+
 @torch.no_grad()
-def evaluate(policy, *, num_episodes: int = 1000, seed: int = EVAL_SEED, env=None, on_step=None,
-             **env_kwargs) -> EvalResult:
-    """Run ``policy`` deterministically for one episode in each of ``num_episodes`` worlds.
-
-    Args:
-        policy: A TensorDict policy (reads ``observation``, writes ``action``), e.g. a
-            ``TensorDictModule`` or TorchRL actor; run under ``ExplorationType.DETERMINISTIC``.
-        num_episodes: Number of episodes (= worlds).
-        seed: Seed of the evaluation set; the same seed gives the same starts and targets.
-        env: An :class:`~atrv_warp.task.env.ATRVjrEnv` (possibly wrapped in transforms) with
-            ``num_episodes`` worlds to reuse; built if omitted.
-        on_step: Optional callback ``on_step(env, tensordict)`` after every step (recording).
-        **env_kwargs: Passed to :class:`~atrv_warp.task.env.ATRVjrEnv` when it is built here.
-    """
-    from atrv_warp.task.env import END_REASONS, ATRVjrEnv
-
-    if env is None:
-        env = ATRVjrEnv(num_episodes, **env_kwargs)
-    if env.batch_size != torch.Size([num_episodes]):
-        raise ValueError(f"env batch size {tuple(env.batch_size)} != ({num_episodes},)")
+def run_episodes(policy, env, *, seed: int = EVAL_SEED, on_step=None) -> EpisodeRecord:
+    """Run ``policy`` deterministically for one episode in each of ``env``'s worlds (seeded with ``seed``)."""
+    base = getattr(env, "base_env", env)
+    n = env.batch_size[0]
     env.set_seed(seed)
     td: TensorDictBase = env.reset()
-    returns = torch.zeros(num_episodes)
-    steps = torch.zeros(num_episodes)
-    reason = torch.zeros(num_episodes, dtype=torch.long)
-    finished = torch.zeros(num_episodes, dtype=torch.bool)
+    params = {name: torch.from_numpy(v) for name, v in base.sim.params.as_dict().items()}
+    params["latency"] = base.latency.detach().cpu().clone().float()
+    returns = torch.zeros(n)
+    steps = torch.zeros(n)
+    reason = torch.zeros(n, dtype=torch.long)
+    finished = torch.zeros(n, dtype=torch.bool)
     with set_exploration_type(ExplorationType.DETERMINISTIC):
         while not finished.all():
             td = env.step(policy(td))
@@ -73,10 +127,30 @@ def evaluate(policy, *, num_episodes: int = 1000, seed: int = EVAL_SEED, env=Non
             if on_step is not None:
                 on_step(env, td)
             td = step_mdp(td)
-    counts = torch.bincount(reason, minlength=len(END_REASONS)).float() / num_episodes
-    rate = dict(zip(END_REASONS, counts.tolist()))
-    return EvalResult(num_episodes, rate["success"], returns.mean().item(), steps.mean().item(), rate["wall"],
-                      rate["flip"], rate["timeout"], rate["nonfinite"], rate["obstacle"])
+    return EpisodeRecord(reason, returns, steps, params)
+
+
+def evaluate(policy, *, num_episodes: int = 1000, seed: int = EVAL_SEED, env=None, on_step=None,
+             **env_kwargs) -> EvalResult:
+    """Run ``policy`` deterministically for one episode in each of ``num_episodes`` worlds.
+
+    Args:
+        policy: A TensorDict policy (reads ``observation``, writes ``action``), e.g. a
+            ``TensorDictModule`` or TorchRL actor; run under ``ExplorationType.DETERMINISTIC``.
+        num_episodes: Number of episodes (= worlds).
+        seed: Seed of the evaluation set; the same seed gives the same starts and targets.
+        env: An :class:`~atrv_warp.task.env.ATRVjrEnv` (possibly wrapped in transforms) with
+            ``num_episodes`` worlds to reuse; built if omitted.
+        on_step: Optional callback ``on_step(env, tensordict)`` after every step (recording).
+        **env_kwargs: Passed to :class:`~atrv_warp.task.env.ATRVjrEnv` when it is built here.
+    """
+    from atrv_warp.task.env import ATRVjrEnv
+
+    if env is None:
+        env = ATRVjrEnv(num_episodes, **env_kwargs)
+    if env.batch_size != torch.Size([num_episodes]):
+        raise ValueError(f"env batch size {tuple(env.batch_size)} != ({num_episodes},)")
+    return run_episodes(policy, env, seed=seed, on_step=on_step).summary()
 
 
 def format_result(name: str, r: EvalResult) -> str:
@@ -86,7 +160,8 @@ def format_result(name: str, r: EvalResult) -> str:
             + (f" obstacle {100 * r.obstacle_rate:.1f}%" if r.obstacle_rate else ""))
 
 
-def write_result(path: str | Path, name: str, task: str, seed: int, r: EvalResult) -> None:
-    """Write an evaluation's figures as JSON (``--json`` of ``python -m atrv_warp.evaluate``)."""
+def write_result(path: str | Path, name: str, task: str, seed: int, r: EvalResult, **extra) -> None:
+    """Write an evaluation's figures as JSON (``--json`` of ``python -m atrv_warp.evaluate``); ``extra`` entries
+    (the randomization, the success-by-bin table) are added as they are."""
     with open(path, "w") as fh:
-        json.dump({"policy": name, "task": task, "seed": seed, **r.as_dict()}, fh, indent=2)
+        json.dump({"policy": name, "task": task, "seed": seed, **r.as_dict(), **extra}, fh, indent=2)
