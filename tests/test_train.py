@@ -141,6 +141,23 @@ def test_resume_continues_step_counter(smoke_run, tmp_path, run_module):
     assert again.returncode != 0 and "already holds a run" in again.stderr
 
 
+def test_init_from_fine_tunes_a_new_run_under_randomization(smoke_run, tmp_path, run_module):
+    """``init_from=``: a new run starts from another run's networks (here continued under the ``wide``
+    randomization): its first evaluation already drives like the source, and it counts its own frames."""
+    run_dir, _ = smoke_run
+    source = torch.load(run_dir / "checkpoint.pt", weights_only=True)
+    run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", "name=tuned", "randomization=wide",
+               f"init_from={run_dir / 'checkpoint.pt'}", "init_random_frames=0", "total_frames=1024")
+    tuned = torch.load(tmp_path / "tuned" / "checkpoint.pt", weights_only=True)
+    assert tuned["frames"] == 1024 and tuned["stats_ready"]
+    assert tuned["config"]["env"]["randomization"] == "wide"
+    norm = [k for k in source["policy"]["state_dict"] if "loc" in k or "scale" in k]
+    assert norm and all(torch.equal(source["policy"]["state_dict"][k], tuned["policy"]["state_dict"][k]) for k in norm)
+    bad = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", "name=bad",
+                     f"init_from={tmp_path / 'nope.pt'}", check=False)
+    assert bad.returncode != 0 and "nope.pt" in bad.stderr and not (tmp_path / "bad" / "checkpoint.pt").exists()
+
+
 def test_resume_of_a_run_with_a_flat_config_says_what_changed(tmp_path, capsys):
     """Run folders from before 0.2.0 hold a flat config.toml: --resume names the change in one line."""
     from atrv_warp.train import main

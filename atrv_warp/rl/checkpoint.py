@@ -86,5 +86,21 @@ class Checkpoint:
         return state, learner
 
 
+def warm_start(path: str | Path, cfg: TrainConfig, actor, normalize: Normalize) -> Learner | None:
+    """Load the actor (with its observation statistics) and the learner of the checkpoint at ``path`` into a
+    new run's networks (``run.init_from``); ``None`` when that run had not started learning."""
+    ck = load_checkpoint(Path(path))
+    try:
+        actor.load_state_dict(ck["policy"]["state_dict"])
+        if not ck["stats_ready"]:
+            return None
+        learner = Learner(cfg, actor, normalize)
+        learner.load_state_dict(ck)
+    except (KeyError, TypeError, ValueError, RuntimeError) as err:
+        raise FileFormatError(f"{path}: does not match this run's networks (width={cfg.network.width}, "
+                              f"depth={cfg.network.depth}, loss={cfg.optim.loss}): {_first_line(err)}") from None
+    return learner
+
+
 def _first_line(err: Exception) -> str:
     return (str(err).strip().splitlines() or [type(err).__name__])[0][:200]

@@ -57,6 +57,10 @@ class RunConfig:
     """Wall-clock budget for training, evaluations included [min]; 0 = no limit."""
     total_frames: int = 3_000_000
     """Environment steps (all worlds together) to collect at most."""
+    init_from: str = ""
+    """A training ``checkpoint.pt`` whose actor, critics and observation statistics start this run (fine-tuning:
+    e.g. a policy trained on the nominal rover, continued under ``randomization=wide``); a new run, with its own
+    frame count, best policy and evaluations. Empty: start from scratch."""
     threads: int = 1
     """torch threads of the trainer (a second thread makes an update a little cheaper, and the async
     collector needs that core: docs/training.md, from benchmarks/sac_update_cost.py)."""

@@ -13,7 +13,7 @@ import torch
 from tensordict import TensorDict
 
 from atrv_warp.policy import Normalize, load_policy, make_actor, save_policy
-from atrv_warp.rl.checkpoint import Checkpoint, RunState, load_checkpoint
+from atrv_warp.rl.checkpoint import Checkpoint, RunState, load_checkpoint, warm_start
 from atrv_warp.rl.collectors import COLLECTORS, WORKER_KEY, make_collector, pin_to_core
 from atrv_warp.rl.config import TrainConfig, to_toml
 from atrv_warp.rl.learner import Learner, make_buffer
@@ -45,6 +45,10 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
         state, learner = checkpoint.restore(ck, cfg, actor, normalize, buffer)
         print(f"resumed {run_dir} at {state.frames:,} frames, {state.updates:,} updates, "
               f"best success {100 * state.best_success:.1f}%")
+    elif cfg.run.init_from:
+        learner = warm_start(cfg.run.init_from, cfg, actor, normalize)
+        state.stats_ready = learner is not None
+        print(f"starting from the networks of {cfg.run.init_from}")
     if state.frames >= cfg.run.total_frames:
         print(f"nothing to do: {state.frames:,} frames already collected (total_frames={cfg.run.total_frames:,}); "
               "raise total_frames= to train further")
