@@ -24,6 +24,20 @@ from atrv_warp.task.kernels import (
 )
 from atrv_warp.task.randomization import MAX_LATENCY, PHYSICS_DRAWS
 
+__all__ = [
+    "DRAW_COUNT",
+    "HISTORY",
+    "MODE_CODES",
+    "PHASE_EPISODE",
+    "PHASE_TICK",
+    "ActionDelay",
+    "DrawSpec",
+    "ObservationNoise",
+    "add_observation_noise",
+    "delay_actions",
+    "draw_physics",
+]
+
 # Rows of DrawSpec: the physical parameters in PHYSICS_DRAWS order, then the latency and the motor lag.
 DRAW_FRICTION = wp.constant(PHYSICS_DRAWS.index("friction"))
 DRAW_PAYLOAD_MASS = wp.constant(PHYSICS_DRAWS.index("payload_mass"))
