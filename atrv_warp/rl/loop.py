@@ -203,8 +203,8 @@ class TrainLoop:
                 credit = self.learn(data, credit + n * cfg.optim.utd_ratio)
                 if self.push_weights:  # the worker holds a copy; the sync collector shares `actor`
                     collector.update_policy_weights_(TensorDict.from_module(self.actor))
-                # ray: the RayCollector sends the weights to the collector that delivered `data` once
-                # this body is done (update_after_each_batch)
+                # ray: the next request to the collector that delivered `data` carries the weights, once
+                # this body is done
             st.elapsed_s = self.elapsed()
             if st.frames >= st.next_eval or st.frames >= cfg.run.total_frames or st.elapsed_s >= self.budget_s:
                 self.evaluate_and_save()
