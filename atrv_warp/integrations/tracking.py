@@ -14,9 +14,12 @@ Nothing here knows the trainer: it takes names, folders and plain dicts.
 from __future__ import annotations
 
 import importlib.util
+import logging
 from pathlib import Path
 
 from torchrl.record.loggers import Logger, MLFlowLogger
+
+from atrv_warp.runtime import is_verbose
 
 __all__ = ["INSTALL_HINT", "TRACKING_BACKENDS", "MLflowLogger", "close_logger", "make_tracking_logger",
            "require_tracking", "tracking_run_id"]
@@ -111,6 +114,9 @@ def make_tracking_logger(backend: str, log_dir: Path, *, name: str, project: str
             kwargs.update(id=run_id, resume="allow")
         return get_logger("wandb", logger_name=str(log_dir), experiment_name=name, wandb_kwargs=kwargs)
     if backend == "mlflow":
+        if not is_verbose():  # the store's set-up (MLflow's and Alembic's INFO lines) is library detail
+            for library in ("mlflow", "alembic"):
+                logging.getLogger(library).setLevel(logging.WARNING)
         uri = mlflow_uri or f"sqlite:///{log_dir / 'mlflow.db'}"
         artifacts = None if mlflow_uri else (log_dir / "mlflow_artifacts").as_uri()
         return MLflowLogger(project, tracking_uri=uri, artifact_location=artifacts, run_name=name, run_id=run_id)
