@@ -265,7 +265,7 @@ def test_two_node_cluster_on_loopback_runs_collectors_on_the_worker_node(tmp_pat
         assert f"(Ray at {address})" in proc.stdout
         counts = frames_per_collector(proc.stdout)  # first ready, first served: not always an even split
         assert len(counts) == 2 and min(counts) > 0 and sum(counts) == 2048, counts
-        placed = re.findall(r"node ([0-9a-f]{8})\)", re.search(r"^ray collectors on: .*$", proc.stdout, re.MULTILINE).group(0))
+        placed = re.findall(r"node ([0-9a-f]{8}), pid \d+\)", re.search(r"^ray collectors on: .*$", proc.stdout, re.MULTILINE).group(0))
         query = (f"import json, ray; ray.init(address='{address}', logging_level='ERROR'); "
                  "print(json.dumps([(n['NodeID'], n['Resources']) for n in ray.nodes() if n['Alive']]))")
         nodes = json.loads(run_command([sys.executable, "-c", query], env=env).stdout.strip().splitlines()[-1])
