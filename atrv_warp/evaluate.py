@@ -14,6 +14,7 @@ Examples::
     python -m atrv_warp.evaluate --task nav --baseline --episodes 8 --rerun nav.rrd
     python -m atrv_warp.evaluate --episodes 8 --rerun eval.rrd      # record 4 worlds; view: rerun eval.rrd
     python -m atrv_warp.evaluate --episodes 4 --serve --real-time   # live web viewer on 127.0.0.1
+    python -m atrv_warp.evaluate --task nav --episodes 64 --video nav.mp4   # the first 4 episodes, top down
 """
 
 from __future__ import annotations
@@ -45,10 +46,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--real-time", action="store_true", help="slow the simulation to real time")
     parser.add_argument("--worlds", type=int, nargs="+", default=None,
                         help="worlds (episodes) to record (default: the first 4)")
+    parser.add_argument("--video", metavar="FILE.mp4", help="draw the first episodes top down into an MP4")
+    parser.add_argument("--video-episodes", type=int, default=4, help="episodes in the video (default: 4)")
     add_verbose_argument(parser)
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error("--episodes must be >= 1")
+    if args.video_episodes < 1:
+        parser.error("--video-episodes must be >= 1")
+    if args.video:
+        from atrv_warp.integrations.video import check_video_path
+
+        try:  # its folder is created now, before any work; a path that cannot be written stops here
+            check_video_path(args.video)
+        except ValueError as err:
+            return error_line(parser.prog, f"--{err}")
     if args.verbose:
         set_verbose()
     from atrv_warp.task.config import TASK_VARIANTS
@@ -95,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     seed = EVAL_SEED if args.seed is None else args.seed
     from atrv_warp.task.env import ATRVjrEnv
 
-    recorder, on_step = None, None
+    recorder, on_step, video = None, None, None
     env = ATRVjrEnv(args.episodes, device=args.device, task=task, randomization=randomization)
     if args.rerun or args.serve or args.real_time:
         from atrv_warp.integrations.recorder import RerunRecorder
@@ -103,6 +115,12 @@ def main(argv: list[str] | None = None) -> int:
         recorder = RerunRecorder(env.sim, path=args.rerun, serve=args.serve, worlds=args.worlds,
                                  real_time=args.real_time)
         on_step = recorder.env_hook()
+    if args.video:
+        from atrv_warp.integrations.video import EvalVideo
+
+        video = EvalVideo(env, episodes=args.video_episodes)
+        draw, rerun_step = video.env_hook(), on_step
+        on_step = draw if rerun_step is None else (lambda e, td: (rerun_step(e, td), draw(e, td)))
     try:
         record = run_episodes(policy, env, seed=seed, on_step=on_step)
     finally:
@@ -117,6 +135,10 @@ def main(argv: list[str] | None = None) -> int:
         extra = {"randomization": args.randomization, "success_by_bin": table}
     if args.rerun:
         print(f"recording: {args.rerun}  (view with: rerun {args.rerun})")
+    if video is not None:
+        written = video.write(args.video)
+        print(f"video: {written.path} ({written.frames} frames, {written.width}x{written.height}, "
+              f"{len(video.worlds)} episodes; drawn and encoded in {written.render_s:.2f} s)")
     if args.serve and sys.stdin.isatty():
         input("viewer running; press Enter to stop ...")
     if args.json:

@@ -45,8 +45,12 @@ class Normalize(nn.Module):
 
 
 def make_actor(width: int = 128, depth: int = 2, normalize: Normalize | None = None, *,
-               obs_dim: int = OBS_DIM) -> ProbabilisticActor:
-    """Tanh-Gaussian actor ``observation`` (``obs_dim``: the task's) ``-> action`` in [-1, 1]²."""
+               obs_dim: int = OBS_DIM, return_log_prob: bool = False) -> ProbabilisticActor:
+    """Tanh-Gaussian actor ``observation`` (``obs_dim``: the task's) ``-> action`` in [-1, 1]².
+
+    ``return_log_prob``: also write the sampled action's log-probability (``action_log_prob``), as
+    PPO's collection needs; the weights, and so the saved policy, are the same.
+    """
     net = nn.Sequential(
         normalize if normalize is not None else Normalize(obs_dim),
         MLP(in_features=obs_dim, out_features=2 * ACTION_DIM, num_cells=[width] * depth, activation_class=nn.ReLU),
@@ -54,7 +58,7 @@ def make_actor(width: int = 128, depth: int = 2, normalize: Normalize | None = N
     )
     module = TensorDictModule(net, in_keys=["observation"], out_keys=["loc", "scale"])
     return ProbabilisticActor(module, in_keys=["loc", "scale"], out_keys=["action"], distribution_class=TanhNormal,
-                              distribution_kwargs={"low": -1.0, "high": 1.0}, return_log_prob=False)
+                              distribution_kwargs={"low": -1.0, "high": 1.0}, return_log_prob=return_log_prob)
 
 
 def save_policy(actor: ProbabilisticActor, path: str | Path, *, width: int, depth: int, meta: dict | None = None):

@@ -1,10 +1,11 @@
-"""Wall time and environment steps until SAC's evaluation success first reaches 90 %, per seed.
+"""Wall time and environment steps until the evaluation success first reaches 90 %, per seed.
 
-Run: ``python benchmarks/train_to_success.py [--config default|nav] [--seeds 0 1 2] [--minutes 10]
+Run: ``python benchmarks/train_to_success.py [--config default|nav|ppo|nav_ppo] [--seeds 0 1 2] [--minutes 10]
 [--threshold 0.9] [--figure docs/learning_curve.png] [key=value ...]``
 
 Trains with a preset (``configs/default.toml`` by default, ``--config nav`` for the navigation
-task; overrides as in ``python -m atrv_warp.train``) once per seed, one after the other,
+task, ``--config ppo`` / ``nav_ppo`` for PPO on many worlds; overrides as in
+``python -m atrv_warp.train``) once per seed, one after the other,
 evaluating every 100k frames on the 1,000-episode seeded evaluation set. Per seed it reports when
 the success rate first reached the threshold (wall time since the start of training, evaluations
 included), the final rate of the best policy, and updates/s and frames/s; then the medians.
@@ -78,7 +79,7 @@ def _summarize(run_dir: Path, seed: int, threshold: float, total_s: float | None
 
 def _train_seed(args, name: str, extra: dict, seed: int) -> dict:
     overrides = {"name": name, "out_dir": str(ROOT / "runs"),
-                 "max_minutes": args.minutes, "seed": seed, "eval_every_frames": 100_000, "eval_episodes": 1000,
+                 "max_minutes": args.minutes, "seed": seed, "eval_every_frames": args.eval_every, "eval_episodes": 1000,
                  "final_eval_episodes": 1000, **extra}
     r = _one_seed(args.config, overrides, args.threshold)
     reached = f"{r['wall_s_to_threshold']:.0f} s" if r["reached"] else "not reached"
@@ -116,6 +117,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=10.0, help="training budget per seed [min]")
     parser.add_argument("--threshold", type=float, default=0.9)
+    parser.add_argument("--eval-every", type=int, default=100_000,
+                        help="frames between evaluations (PPO collects ~30k frames a batch: 327680 = every 10th batch)")
     parser.add_argument("--config", default="default", help="training preset (default, nav, ...)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="training seeds, run one after another")
     parser.add_argument("--out", default=None, help="results file (default: results/train_to_success[_CONFIG].json)")
@@ -165,7 +168,9 @@ def main() -> int:
         "updates_per_s": statistics.median(r["updates_per_s"] for r in runs),
         "frames_per_s": statistics.median(r["frames_per_s"] for r in runs),
     }
-    result = {"benchmark": "train_to_success", "preset": args.config, "threshold": args.threshold,
+    cfg = load_train_config(args.config, extra)
+    result = {"benchmark": "train_to_success", "preset": args.config, "algo": cfg.optim.algo, "task": cfg.env.task,
+              "num_envs": cfg.env.num_envs, "eval_every_frames": args.eval_every, "threshold": args.threshold,
               "minutes_per_seed": minutes, "overrides": extra, "compile_s": compile_s,
               "summarized_from_kept_runs": args.summarize, "seeds": runs,
               "median": median, "time": time.strftime("%Y-%m-%d %H:%M:%S")}
@@ -189,7 +194,8 @@ def main() -> int:
           f"{'n/a' if compile_s is None else f'{compile_s:.1f} s'}, excluded)")
     print(f"written to {out}")
     if args.figure:
-        _figure(runs, args.threshold, f"SAC, {args.config} preset: evaluation success per seed", Path(args.figure))
+        _figure(runs, args.threshold, f"{cfg.optim.algo.upper()}, {args.config} preset: evaluation success per seed",
+                Path(args.figure))
         print(f"figure: {args.figure}")
     return 0 if len(times) == len(runs) else 1
 

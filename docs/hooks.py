@@ -119,6 +119,45 @@ def train_to_success_nav() -> str:
     return _train_to_success("train_to_success_nav.json")
 
 
+PPO_VS_SAC = (("reach", "SAC", "train_to_success.json", "--seeds 0 1 2 --minutes 10"),
+              ("reach", "PPO", "train_to_success_ppo.json", "--config ppo --seeds 0 1 2 --minutes 10 --eval-every 327680"),
+              ("nav", "SAC", "train_to_success_nav.json", "--config nav --seeds 0 1 2 --minutes 20"),
+              ("nav", "PPO", "train_to_success_nav_ppo.json",
+               "--config nav_ppo --seeds 0 1 2 --minutes 20 --eval-every 327680"))
+"""(task, algorithm, results file of ``benchmarks/train_to_success.py``, its arguments) of the PPO-SAC table."""
+
+
+def ppo_vs_sac() -> str:
+    """``train_to_success*.json``: SAC and PPO on both tasks, medians over seeds; a file not written yet
+    is a row saying which command writes it."""
+    rows = []
+    for task, algo, name, args in PPO_VS_SAC:
+        if not (RESULTS / name).is_file():
+            rows.append([task, algo, "not measured yet", "", "", "", f"`python benchmarks/train_to_success.py {args}`"])
+            continue
+        d = _load(name)
+        m, seeds = d["median"], d["seeds"]
+        reached = sum(s["reached"] for s in seeds)
+        wall = "not reached by every seed" if m["wall_s_to_threshold"] is None else f"{m['wall_s_to_threshold']:.0f} s"
+        rows.append([task, algo, f"**{wall}** ({reached} of {len(seeds)} seeds)", f"**{100 * m['final_success_rate']:.1f} %**",
+                     f"{m['updates_per_s']:.1f}", f"{m['frames_per_s']:,.0f}",
+                     f"`{name}` ({d['preset']}, {d.get('num_envs', 'n/a')} worlds, {d['minutes_per_seed']:g} min per seed)"])
+    return _table(["task", "algorithm", "90 % after (median)", "final success (median)", "updates/s", "frames/s",
+                   "results file"], ["---", "---", "---:", "---:", "---:", "---:", "---"], rows)
+
+
+def video_cost() -> str:
+    """``video_cost.json``: what an evaluation video costs, per task."""
+    rows = []
+    for r in _load("video_cost.json")["rows"]:
+        m = r["median"]
+        rows.append([r["task"], f"{m['evaluation_s']:.2f} s", f"{r['recording_s']:.2f} s", f"{m['mp4_s']:.2f} s",
+                     f"{m['mp4_and_gif_s'] - m['mp4_s']:.2f} s", f"{100 * r['video_share_of_evaluation']:.0f} %",
+                     f"{r['frames']} ({r['width']}×{r['height']}, {r['fps']:g} fps)", f"{r['mp4_bytes'] / 1e6:.2f} MB"])
+    return _table(["task", "evaluation (256 episodes)", "recording", "drawing + MP4", "+ GIF (TensorBoard)",
+                   "video / evaluation", "frames", "MP4"], ["---"] + ["---:"] * 7, rows)
+
+
 def evaluations() -> str:
     """``docs/*_eval.json``: the shipped policies and the scripted baselines on 1,000 seeded episodes."""
     names = [("pretrained_policy_eval.json", "shipped reach policy, SAC"), ("baseline_eval.json", "scripted driver, reach"),
@@ -150,6 +189,8 @@ TABLES: dict[str, Callable[[], str]] = {
     "skid_checks": skid_checks,
     "train_to_success": train_to_success,
     "train_to_success_nav": train_to_success_nav,
+    "ppo_vs_sac": ppo_vs_sac,
+    "video_cost": video_cost,
     "evaluations": evaluations,
     "sim_throughput": sim_throughput,
     "sim_choices": sim_choices,

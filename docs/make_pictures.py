@@ -97,10 +97,11 @@ def draw_episode(run: dict, world: int, out: Path, every: int = 2) -> None:
     from matplotlib import animation
     from matplotlib.patches import Circle, Polygon
 
+    from atrv_warp.integrations.topdown import box_corners
+
     n = int(run["length"][world]) + 1
     traj = run["poses"][:n, world]
     lx, ly = run["footprint"][0] / 2, run["footprint"][1] / 2
-    corners = np.array([[lx, ly], [lx, -ly], [-lx, -ly], [-lx, ly]])
     fig, ax = plt.subplots(figsize=(4.2, 4.2), dpi=80)
     target = run["target"][world]
     lo = np.minimum(traj[:, :2].min(0), target) - 2.0
@@ -113,13 +114,11 @@ def draw_episode(run: dict, world: int, out: Path, every: int = 2) -> None:
     ax.add_patch(Circle(tuple(target), run["reach"], color="tab:blue", alpha=0.25))
     ax.plot(*target, "x", color="tab:blue", ms=9, mew=2)
     (trail,) = ax.plot([], [], color="tab:orange", lw=2)
-    body = ax.add_patch(Polygon(corners, closed=True, color="tab:red"))
+    body = ax.add_patch(Polygon(box_corners(0.0, 0.0, 0.0, lx, ly), closed=True, color="tab:red"))
     title = ax.set_title("")
 
     def frame(i: int):
-        x, y, yaw = traj[i]
-        rot = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
-        body.set_xy(corners @ rot.T + (x, y))
+        body.set_xy(box_corners(*traj[i], lx, ly))
         trail.set_data(traj[: i + 1, 0], traj[: i + 1, 1])
         title.set_text(f"t = {i * run['dt']:.2f} s")
         return body, trail, title
@@ -162,6 +161,7 @@ def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
     from matplotlib.patches import Circle, Polygon
 
     from atrv_warp import load_policy
+    from atrv_warp.integrations.topdown import obstacle_shapes
     from atrv_warp.policy import pretrained_nav_policy_path
     from atrv_warp.task.baseline import scripted_policy
 
@@ -176,14 +176,11 @@ def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
         h = base["half"]
         ax.imshow(base["heights"][base["tile"][w]].T, origin="lower", extent=(-h, h, -h, h), cmap="gist_earth",
                   alpha=0.6)
-        for k in range(base["kind"].shape[1]):
-            kind, (x, y, yaw), (a, b) = base["kind"][w, k], base["pose"][w, k], base["size"][w, k]
-            if kind == 2:
-                ax.add_patch(Circle((x, y), a, color="0.2"))
-            elif kind == 1:
-                c = np.array([[a, b], [a, -b], [-a, -b], [-a, b]])
-                rot = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
-                ax.add_patch(Polygon(c @ rot.T + (x, y), closed=True, color="0.2"))
+        for kind, shape in obstacle_shapes(base["kind"][w], base["pose"][w], base["size"][w]):
+            if kind == "cylinder":
+                ax.add_patch(Circle(tuple(shape[:2]), shape[2], color="0.2"))
+            else:
+                ax.add_patch(Polygon(shape, closed=True, color="0.2"))
         ax.add_patch(Circle(tuple(target), base["reach"], color="tab:blue", alpha=0.35))
         for (name, run), style in zip(runs.items(), ("--", "-")):
             xy = run["paths"][:, w]

@@ -26,7 +26,9 @@ EXTRA_USERS = {
     "test": ("tests/",),
     "browser": ("atrv_warp/integrations/browser.py", "docs/make_pictures.py"),
     "onnx": ("atrv_warp/rl/export.py",),
-    "ray": ("atrv_warp/rl/collectors.py", "tests/test_ray.py", "benchmarks/ray_collection.py"),
+    "track": ("atrv_warp/integrations/tracking.py", "atrv_warp/integrations/video.py"),
+    "tensorboard": ("atrv_warp/integrations/video.py",),
+    "ray": ("atrv_warp/rl/collectors.py", "atrv_warp/rl/ray_collector.py", "tests/test_ray.py", "benchmarks/ray_collection.py"),
     "bench": ("benchmarks/sim_vs_mujoco.py", "benchmarks/mujoco_twin/"),
 }
 SCANNED = ("atrv_warp", "tests", "benchmarks", "examples", "docs")

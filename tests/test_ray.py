@@ -265,7 +265,7 @@ def test_two_node_cluster_on_loopback_runs_collectors_on_the_worker_node(tmp_pat
         assert f"(Ray at {address})" in proc.stdout
         counts = frames_per_collector(proc.stdout)  # first ready, first served: not always an even split
         assert len(counts) == 2 and min(counts) > 0 and sum(counts) == 2048, counts
-        placed = re.findall(r"node ([0-9a-f]{8})\)", re.search(r"^ray collectors on: .*$", proc.stdout, re.MULTILINE).group(0))
+        placed = re.findall(r"node ([0-9a-f]{8}), pid \d+\)", re.search(r"^ray collectors on: .*$", proc.stdout, re.MULTILINE).group(0))
         query = (f"import json, ray; ray.init(address='{address}', logging_level='ERROR'); "
                  "print(json.dumps([(n['NodeID'], n['Resources']) for n in ray.nodes() if n['Alive']]))")
         nodes = json.loads(run_command([sys.executable, "-c", query], env=env).stdout.strip().splitlines()[-1])
@@ -274,4 +274,49 @@ def test_two_node_cluster_on_loopback_runs_collectors_on_the_worker_node(tmp_pat
         assert placed == [worker[0][:8]] * 2, (placed, nodes)
     finally:
         subprocess.run([ray_bin, "stop"], capture_output=True, env=env, timeout=120, check=False)
+    assert_no_ray_left(no_ray_before)
+
+
+@needs_ray
+@pytest.mark.slow  # a Ray cluster
+def test_a_killed_collector_costs_a_batch_not_the_run(tmp_path, no_ray_before, run_command):
+    """SIGKILL to one collector's process mid-run: its batch in flight is dropped, a replacement
+    collects again (the run says both, with the recovery time), the run ends normally with a complete
+    checkpoint, and ``--resume`` continues it."""
+    from atrv_warp.rl.checkpoint import load_checkpoint
+
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    total = 30720
+    proc = subprocess.Popen(train_cmd(f"out_dir={tmp_path}", f"total_frames={total}", "envs_per_collector=32", "progress=true"),
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT, env=env)
+    lines, killed = [], None
+    try:
+        for line in proc.stdout:
+            lines.append(line)
+            if line.startswith("ray collectors on:"):
+                pids = [int(p) for p in re.findall(r"pid (\d+)\)", line)]
+                assert len(pids) == 2, line
+            if killed is None and "eval success" in line:  # mid-run: learning, the first evaluation done
+                os.kill(pids[1], signal.SIGKILL)
+                killed = time.monotonic()
+        proc.wait(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    out = "".join(lines)
+    assert proc.returncode == 0 and killed is not None, out[-3000:]
+    lost = [line for line in lines if line.startswith("ray collector 1 lost")]
+    assert len(lost) == 1 and "ActorDiedError" in lost[0] and "its batch in flight is dropped" in lost[0], out[-3000:]
+    back = re.search(r"^ray collector 1 is back: its replacement delivered ([0-9.]+) s after the loss$", out, re.MULTILINE)
+    assert back, out[-3000:]
+    print(f"recovery: the replacement delivered {float(back.group(1)):.1f} s after the loss was seen")
+    counts = frames_per_collector(out)
+    assert len(counts) == 2 and min(counts) > 0 and sum(counts) == total, counts
+    run_dir = tmp_path / "smoke"
+    ck = load_checkpoint(run_dir / "checkpoint.pt")  # complete: every entry, learner state included
+    assert ck["frames"] == total and ck["updates"] > 0 and {"loss", "opts"} <= ck.keys()
+    assert json.loads((run_dir / "final_eval.json").read_text())["frames"] == total
+    resumed = run_command(train_cmd("--resume", str(run_dir), f"total_frames={total + 2048}"), env=env, timeout=300)
+    assert f"resumed {run_dir} at {total:,} frames" in resumed.stdout
+    assert load_checkpoint(run_dir / "checkpoint.pt")["frames"] == total + 2048
     assert_no_ray_left(no_ray_before)

@@ -31,6 +31,7 @@ from collections.abc import Sequence
 import numpy as np
 import rerun as rr
 
+from atrv_warp.integrations.topdown import terrain_colors
 from atrv_warp.integrations.viewer import ServedViewer
 
 __all__ = ["DEFAULT_WORLDS", "RerunRecorder"]
@@ -60,8 +61,7 @@ def _terrain_mesh(heights: np.ndarray, half: float, base: float) -> rr.Mesh3D:
     i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
     a = (i * n + j).reshape(-1)
     tris = np.concatenate([np.stack([a, a + n, a + n + 1], 1), np.stack([a, a + n + 1, a + 1], 1)])
-    t = (h - h.min()) / max(float(np.ptp(h)), 1e-6)
-    colors = np.stack([110 + 70 * t, 140 + 50 * t, 90 + 40 * t], axis=-1).reshape(-1, 3).astype(np.uint8)
+    colors = terrain_colors(h).reshape(-1, 3)
     return rr.Mesh3D(vertex_positions=vertices, triangle_indices=tris, vertex_colors=colors)
 
 

@@ -36,8 +36,17 @@ class RerunLogger(Logger):
             self.experiment.set_time("frames", sequence=int(step))
         self.experiment.log(f"{self.exp_name}/{name}", rr.Scalars(float(value)))
 
-    def log_video(self, name: str, video, step: int | None = None, **kwargs) -> None:
-        raise NotImplementedError("RerunLogger logs scalars; record rollouts with atrv_warp.integrations.recorder.RerunRecorder")
+    def log_video(self, name: str, video: str | os.PathLike, step: int | None = None, **kwargs) -> None:
+        """Log the MP4 file ``video`` as a video asset at ``<exp_name>/videos/<name>/<step>``, its frames on
+        the ``video_time`` timeline (an evaluation video, :mod:`atrv_warp.integrations.video`)."""
+        if not isinstance(video, (str, os.PathLike)):
+            raise TypeError("RerunLogger.log_video takes the path of an MP4 file (atrv_warp.integrations.video)")
+        entity = f"{self.exp_name}/videos/{name}/{0 if step is None else int(step)}"
+        asset = rr.AssetVideo(path=os.fspath(video))
+        self.experiment.log(entity, asset, static=True)
+        stamps = asset.read_frame_timestamps_nanos()
+        self.experiment.send_columns(entity, indexes=[rr.TimeColumn("video_time", duration=stamps * 1e-9)],
+                                     columns=rr.VideoFrameReference.columns_nanos(stamps))
 
     def log_hparams(self, cfg) -> None:
         items = cfg.items() if isinstance(cfg, dict) else vars(cfg).items()

@@ -12,7 +12,7 @@ import torch
 
 from atrv_warp.policy import Normalize, policy_payload
 from atrv_warp.rl.config import TrainConfig
-from atrv_warp.rl.learner import Learner
+from atrv_warp.rl.learner import make_learner
 from atrv_warp.storage import FileFormatError, atomic_save, load_weights
 
 __all__ = ["CHECKPOINT_KEYS", "Checkpoint", "RunState", "load_checkpoint"]
@@ -34,6 +34,8 @@ class RunState:
     next_eval: int = 0
     stats_ready: bool = False
     """Observation statistics are frozen and the learner exists (after ``init_random_frames``)."""
+    tracking_id: str = ""
+    """The W&B or MLflow run the scalars go to (``logger=wandb|mlflow``): a resumed run continues it."""
 
 
 def load_checkpoint(path: Path) -> dict:
@@ -53,7 +55,10 @@ class Checkpoint:
     def __init__(self, run_dir: Path):
         self.path, self.buffer_dir = run_dir / "checkpoint.pt", run_dir / "buffer"
 
-    def save(self, cfg: TrainConfig, state: RunState, actor, learner: Learner | None, buffer) -> None:
+    def save(self, cfg: TrainConfig, state: RunState, actor, learner, buffer) -> None:
+        """Write the checkpoint atomically, then the replay buffer beside it (``learner``: SAC's
+        :class:`~atrv_warp.rl.learner.Learner`, PPO's :class:`~atrv_warp.rl.ppo.PPOLearner`, or ``None``
+        before learning starts)."""
         payload = {**dataclasses.asdict(state), "rng": torch.get_rng_state(), "config": dataclasses.asdict(cfg),
                    "policy": policy_payload(actor, width=cfg.network.width, depth=cfg.network.depth,
                                           meta={"frames": state.frames, "task": cfg.env.task})}
@@ -63,7 +68,7 @@ class Checkpoint:
         if learner is not None and len(buffer):
             buffer.dumps(self.buffer_dir)
 
-    def restore(self, ck: dict, cfg: TrainConfig, actor, normalize: Normalize, buffer) -> tuple[RunState, Learner | None]:
+    def restore(self, ck: dict, cfg: TrainConfig, actor, normalize: Normalize, buffer) -> tuple[RunState, object]:
         """Load a checkpoint read by :func:`load_checkpoint` into fresh networks and buffer."""
         # keys added after a checkpoint was written take their defaults
         state = RunState(**{f.name: ck[f.name] for f in dataclasses.fields(RunState) if f.name in ck})
@@ -71,7 +76,7 @@ class Checkpoint:
         try:
             actor.load_state_dict(ck["policy"]["state_dict"])
             if state.stats_ready:
-                learner = Learner(cfg, actor, normalize)
+                learner = make_learner(cfg, actor, normalize)
                 learner.load_state_dict(ck)
         except (KeyError, TypeError, ValueError, RuntimeError) as err:
             raise FileFormatError(f"{self.path}: does not match this run's networks (width={cfg.network.width}, "
@@ -86,7 +91,7 @@ class Checkpoint:
         return state, learner
 
 
-def warm_start(path: str | Path, cfg: TrainConfig, actor, normalize: Normalize) -> Learner | None:
+def warm_start(path: str | Path, cfg: TrainConfig, actor, normalize: Normalize) -> object | None:
     """Load the actor (with its observation statistics) and the learner of the checkpoint at ``path`` into a
     new run's networks (``run.init_from``); ``None`` when that run had not started learning."""
     ck = load_checkpoint(Path(path))
@@ -94,11 +99,11 @@ def warm_start(path: str | Path, cfg: TrainConfig, actor, normalize: Normalize) 
         actor.load_state_dict(ck["policy"]["state_dict"])
         if not ck["stats_ready"]:
             return None
-        learner = Learner(cfg, actor, normalize)
+        learner = make_learner(cfg, actor, normalize)
         learner.load_state_dict(ck)
     except (KeyError, TypeError, ValueError, RuntimeError) as err:
-        raise FileFormatError(f"{path}: does not match this run's networks (width={cfg.network.width}, "
-                              f"depth={cfg.network.depth}, loss={cfg.optim.loss}): {_first_line(err)}") from None
+        raise FileFormatError(f"{path}: does not match this run's networks (algo={cfg.optim.algo}, width="
+                              f"{cfg.network.width}, depth={cfg.network.depth}): {_first_line(err)}") from None
     return learner
 
 

@@ -6,22 +6,23 @@ ways of collecting, and :func:`make_collector`, which builds the one a configura
 - ``sync``: collect and update in turn, in this process, with the learner's own actor (bit-reproducible).
 - ``ray``: ``num_collectors`` Ray actors, on this machine or a cluster (below).
 
-Collection on Ray (``collector=ray``): TorchRL's :class:`~torchrl.collectors.distributed.RayCollector`
-over ``num_collectors`` actors, each stepping ``envs_per_collector`` worlds.
+Collection on Ray (``collector=ray``): :class:`~atrv_warp.rl.ray_collector.RayCollection` over
+``num_collectors`` :class:`RayWorker` actors, each stepping ``envs_per_collector`` worlds.
 ``python -m atrv_warp.train --config smoke collector=ray`` trains with two collectors on a local Ray;
 ``ray_address=auto`` joins the cluster this node belongs to (docs/training.md, 'Scale out on Ray'). Needs the
 ``ray`` extra: ``pip install -e ".[ray]"``.
 
-What runs where: the learner (SAC updates, replay buffer, evaluations) stays in the process that
+What runs where: the learner (updates, replay buffer, evaluations) stays in the process that
 runs ``atrv_warp.train``; each collector is a Ray actor holding one :class:`ATRVjrEnv` and a copy of
-the policy. The collectors deliver their batches first ready, first served; after each batch the
-:class:`RayCollector` sends the learner's current weights to the collector that delivered it,
-through TorchRL's :class:`~torchrl.weight_update.RayWeightSyncScheme` (a Gloo process group;
-its TCP store listens on a random port of the learner's host).
+the policy. The collectors deliver their batches first ready, first served; each request for a
+batch carries the learner's current weights through Ray's object store, so the collector that
+delivered a batch gets the weights of the moment the loop body that used it is done. A collector
+whose process dies costs its batch in flight: it is replaced, and the run says so
+(:mod:`atrv_warp.rl.ray_collector`).
 
-Ray itself: an already initialised Ray is reused and left running; otherwise the
-:class:`RayCollector` starts (``ray_address`` empty) or joins (``auto``, ``HOST:PORT``) one and
-its ``shutdown()`` stops or leaves it again, so a run leaves no Ray process behind.
+Ray itself: an already initialised Ray is reused and left running; otherwise :func:`make_ray_collector`
+starts (``ray_address`` empty) or joins (``auto``, ``HOST:PORT``) one and the collection's
+``shutdown()`` stops or leaves it again, so a run leaves no Ray process behind.
 """
 
 from __future__ import annotations
@@ -30,7 +31,6 @@ import importlib.util
 import logging
 import math
 import os
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -89,7 +89,8 @@ class StampWorker:
 class RayWorker(Collector):
     """One Ray collector: TorchRL's single-process :class:`Collector`, named briefly (Ray prefixes
     every line an actor prints with the actor's repr, and Collector's spans dozens of lines), with
-    two queries the trainer and the tests make through :meth:`RayCollector.map_fn`."""
+    queries the trainer and the tests make through :meth:`~atrv_warp.rl.ray_collector.RayCollection.map_fn`, and
+    :meth:`collect`, which the collection calls for every batch."""
 
     def __repr__(self) -> str:
         return f"RayWorker({self.worker_idx})"
@@ -108,50 +109,66 @@ class RayWorker(Collector):
         """A copy of the weights (parameters and buffers) of this collector's policy."""
         return TensorDict.from_module(self.policy).data.clone()
 
+    def collect(self, weights: TensorDictBase | None = None) -> TensorDictBase:
+        """Copy ``weights`` (the learner's, as :meth:`policy_weights` gives them) into this collector's
+        policy, then collect and return the next batch."""
+        if weights is not None:
+            TensorDict.from_module(self.policy).data.update_(weights)
+        return self.next()
+
 
 def make_ray_collector(cfg: TrainConfig, actor, *, total_frames: int, init_random_frames: int, env_seed: int):
-    """A :class:`RayCollector` of ``cfg.collector.num_collectors`` :class:`RayWorker` actors.
+    """A :class:`~atrv_warp.rl.ray_collector.RayCollection` of ``cfg.collector.num_collectors`` :class:`RayWorker`
+    actors, on the Ray ``cfg.collector.ray_address`` names (started or joined here unless one is running).
 
     Each actor needs one CPU (and one unit of ``ray_resource`` if set), builds its env with
-    :class:`EnvFactory` (no core pinning: Ray places the actor; one torch thread), and gets ``actor``'s
-    weights before it collects; afterwards, the collector that delivered a batch gets the learner's
-    weights once the loop body that used the batch is done (``update_after_each_batch``).
+    :class:`EnvFactory` (no core pinning: Ray places the actor; one torch thread), and starts from
+    ``actor``'s weights; every request for a batch carries the learner's weights of that moment.
 
     Args:
         cfg: The training configuration (``collector`` group: count, worlds, address, resource).
         actor: The learner's policy; its weights are sent, it is not shared.
         total_frames: Frames after which the iterator stops.
-        init_random_frames: Frames collected with random actions first, split evenly between collectors.
-        env_seed: Seed of collector 0's worlds; collector ``i`` adds ``i * 1_000_003``.
+        init_random_frames: Frames collected with random actions first, split evenly between collectors
+            (a replacement collector acts with the policy from its first frame).
+        env_seed: Seed of collector 0's worlds; collector ``i`` adds ``i * 1_000_003``, its ``k``-th
+            replacement ``k * 7_919``.
 
     Returns:
-        The collector; its ``shutdown()`` stops the actors, and Ray if it started it.
+        The collection; its ``shutdown()`` stops the actors, and Ray if it started it.
     """
     require_ray()
-    from torchrl.collectors.distributed import RayCollector
+    import ray
+
+    from atrv_warp.rl.ray_collector import RayCollection
 
     c = cfg.collector
     remote = {"num_cpus": 1}
     if c.ray_resource:
         remote["resources"] = {c.ray_resource: 1}
-    envs = [EnvFactory(cfg.worlds_per_collector, seed=env_seed + i * _SEED_STRIDE,
-                       env_kwargs=cfg.env.env_kwargs()) for i in range(c.num_collectors)]
-    # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
-    kwargs = [{"postproc": StampWorker(i), "auto_register_policy_transforms": False} for i in range(c.num_collectors)]
-    with warnings.catch_warnings():
-        # TorchRL warns that asynchronous collectors may still act randomly while others use the policy;
-        # SAC learns off-policy from the buffer, and learning starts only once init_random_frames are in
-        warnings.filterwarnings("ignore", message="async distributed data collection with init_random_frames")
-        collector = RayCollector(envs, actor, collector_class=RayWorker, collector_kwargs=kwargs,
-                                 remote_configs=remote, ray_init_config=ray_init_config(c.ray_address),
-                                 frames_per_batch=cfg.frames_per_batch, total_frames=total_frames,
-                                 init_random_frames=init_random_frames, update_after_each_batch=True)
+    started = not ray.is_initialized()
+    if started:
+        ray.init(**ray_init_config(c.ray_address))
+    worker_class = ray.remote(**remote)(RayWorker)
+
+    def make_worker(index: int, generation: int):
+        seed = env_seed + index * _SEED_STRIDE + generation * 7_919
+        # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
+        return worker_class.remote(EnvFactory(cfg.worlds_per_collector, seed=seed, env_kwargs=cfg.env.env_kwargs()),
+                                   policy=actor, frames_per_batch=cfg.frames_per_batch, total_frames=-1,
+                                   init_random_frames=init_random_frames // c.num_collectors if generation == 0 else 0,
+                                   postproc=StampWorker(index), auto_register_policy_transforms=False,
+                                   split_trajs=False, worker_idx=index)
+
     try:
-        collector.update_policy_weights_(actor)  # opens the weight-sync group; every worker gets the weights
+        collection = RayCollection(make_worker, c.num_collectors, actor, total_frames=total_frames,
+                                   started_ray=started)
+        collection.map_fn("placement")  # every actor is up (or its error shows here, before training)
     except BaseException:
-        collector.shutdown()
+        if started:
+            ray.shutdown()
         raise
-    return collector
+    return collection
 
 
 def placements(collector) -> list[dict]:
@@ -160,8 +177,9 @@ def placements(collector) -> list[dict]:
 
 
 def describe_placements(collector) -> str:
-    """One line: each collector's node IP, host and node id (first 8 hex digits)."""
-    return ", ".join(f"{p['node_ip']} ({p['host']}, node {p['node_id'][:8]})" for p in placements(collector))
+    """One line: each collector's node IP, host, node id (first 8 hex digits) and process id."""
+    return ", ".join(f"{p['node_ip']} ({p['host']}, node {p['node_id'][:8]}, pid {p['pid']})"
+                     for p in placements(collector))
 
 
 def worker_weights(collector) -> list[TensorDictBase]:

@@ -1,4 +1,4 @@
-"""Configuration of SAC training, grouped: run / env / collector / optim / network / logging.
+"""Configuration of training (SAC or PPO), grouped: run / env / collector / optim / ppo / network / logging.
 
 Every field is documented where it is defined (that text is also the command line's ``--help``).
 A configuration comes from, in order: the defaults here, a TOML preset or file (one table per
@@ -32,10 +32,12 @@ __all__ = [
     "LoggingConfig",
     "NetworkConfig",
     "OptimConfig",
+    "PPOConfig",
     "RunConfig",
     "TrainCommand",
     "TrainConfig",
     "cli_args",
+    "flat_config",
     "load_train_config",
     "parse_command",
     "preset_names",
@@ -121,8 +123,12 @@ class CollectorConfig:
 
 @dataclass(frozen=True)
 class OptimConfig:
-    """SAC's updates: the loss, replay, batch, learning rates and targets."""
+    """The algorithm, and SAC's updates: the loss, replay, batch, learning rates and targets."""
 
+    algo: Literal["sac", "ppo"] = "sac"
+    """``sac``: off-policy, from a replay buffer (the ``loss`` below); ``ppo``: on-policy, TorchRL's
+    ``ClipPPOLoss`` on GAE advantages of each collected batch (the ``ppo`` group; ``lr`` and ``gamma``
+    apply to both; presets ``ppo`` and ``nav_ppo``)."""
     loss: Literal["sac", "crossq", "redq"] = "sac"
     """TorchRL loss of the SAC family: ``sac`` (two critics with target networks); ``crossq``
     (CrossQ: batch-renormalised critics and no target networks, ``tau`` unused); ``redq`` (REDQ: ten
@@ -147,6 +153,26 @@ class OptimConfig:
 
 
 @dataclass(frozen=True)
+class PPOConfig:
+    """PPO's updates (``algo=ppo``): several passes of minibatches over each collected batch."""
+
+    epochs: int = 4
+    """Passes over each collected batch."""
+    minibatch_size: int = 4096
+    """Transitions per gradient step (a batch of ``num_envs x steps_per_batch`` frames is split into these)."""
+    clip_epsilon: float = 0.2
+    """Clip range of the probability ratio."""
+    gae_lambda: float = 0.95
+    """GAE's lambda (bias-variance trade-off of the advantages)."""
+    entropy_coef: float = 0.001
+    """Weight of the entropy bonus."""
+    critic_coef: float = 0.5
+    """Weight of the value loss."""
+    max_grad_norm: float = 1.0
+    """Gradient-norm clip of every step."""
+
+
+@dataclass(frozen=True)
 class NetworkConfig:
     """Actor and critic networks."""
 
@@ -166,17 +192,29 @@ class LoggingConfig:
     """Seeded episodes per periodic evaluation (fixed set, seed EVAL_SEED)."""
     final_eval_episodes: int = 1000
     """Episodes of the final evaluation of the best policy."""
-    logger: Literal["csv", "tensorboard", "rerun"] = "csv"
+    logger: Literal["csv", "tensorboard", "rerun", "wandb", "mlflow"] = "csv"
     """Scalars always go to CSV (the learning curve is drawn from it); ``tensorboard`` adds a
     TensorBoard log, ``rerun`` a Rerun recording (``train.rrd``) that also holds two worlds of
-    every periodic evaluation."""
+    every periodic evaluation; ``wandb`` a Weights & Biases run, ``mlflow`` an MLflow run (the
+    ``track`` extra). Every one but CSV also gets the hyperparameters and the evaluation videos."""
+    project: str = "atrv_warp"
+    """``wandb``: the W&B project; ``mlflow``: the MLflow experiment."""
+    wandb_mode: Literal["offline", "online"] = "offline"
+    """``offline``: the W&B run folder is written under ``logs/wandb`` (upload it later with ``wandb
+    sync``); ``online``: logged live (needs ``wandb login``)."""
+    mlflow_uri: str = ""
+    """MLflow tracking URI; empty = a SQLite store in the run folder (``logs/mlflow.db``, artifacts in
+    ``logs/mlflow_artifacts``)."""
+    video_episodes: int = 4
+    """Episodes of every periodic evaluation drawn top down into an MP4 (``videos/`` in the run
+    folder, and to the logger); 0 = no video."""
     progress: bool = True
     """Show a progress bar on a terminal (one line per evaluation otherwise)."""
 
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """SAC training of the drive-to-target task (``python -m atrv_warp.train``).
+    """Training of the drive-to-target task, SAC or PPO (``python -m atrv_warp.train``).
 
     Defaults are chosen by measurement on a 2-core CPU (docs/training.md).
     """
@@ -185,6 +223,7 @@ class TrainConfig:
     env: EnvConfig = field(default_factory=EnvConfig)
     collector: CollectorConfig = field(default_factory=CollectorConfig)
     optim: OptimConfig = field(default_factory=OptimConfig)
+    ppo: PPOConfig = field(default_factory=PPOConfig)
     network: NetworkConfig = field(default_factory=NetworkConfig)
     logging: LoggingConfig = field(default_factory=LoggingConfig)
 
@@ -205,6 +244,7 @@ class TrainConfig:
         positive = {"run": ("total_frames", "threads"), "env": ("num_envs", "steps_per_batch", "substeps"),
                     "collector": ("num_collectors",),
                     "optim": ("buffer_size", "batch_size", "lr", "tau", "init_alpha", "utd_ratio"),
+                    "ppo": ("epochs", "minibatch_size", "clip_epsilon", "max_grad_norm"),
                     "network": ("width", "depth"),
                     "logging": ("eval_every_frames", "eval_episodes", "final_eval_episodes")}
         for group, names in positive.items():
@@ -216,6 +256,10 @@ class TrainConfig:
             raise ValueError(f"train config: gamma must be in (0, 1], got {self.optim.gamma}")
         if self.run.max_minutes < 0 or self.collector.init_random_frames < 0 or self.collector.envs_per_collector < 0:
             raise ValueError("train config: max_minutes, init_random_frames and envs_per_collector must be >= 0")
+        if self.logging.video_episodes < 0:
+            raise ValueError(f"train config: video_episodes must be >= 0, got {self.logging.video_episodes}")
+        if not 0.0 <= self.ppo.gae_lambda <= 1.0:
+            raise ValueError(f"train config: gae_lambda must be in [0, 1], got {self.ppo.gae_lambda}")
         if self.optim.batch_size > self.optim.buffer_size:
             raise ValueError("train config: batch_size must not exceed buffer_size")
         from atrv_warp.task.config import get_task
@@ -251,7 +295,7 @@ class TrainCommand:
     train: Annotated[TrainConfig, tyro.conf.arg(name=""), tyro.conf.FlagConversionOff] = field(
         default_factory=TrainConfig)
     config: str = DEFAULT_PRESET
-    """A preset shipped with the package (``default``, ``nav``, ``smoke``) or a TOML file."""
+    """A preset shipped with the package (``default``, ``nav``, ``ppo``, ``nav_ppo``, ``smoke``) or a TOML file."""
     resume: str | None = None
     """Continue the run in this folder (its ``config.toml``, then the command line)."""
     verbose: Annotated[bool, tyro.conf.arg(aliases=("-v",))] = False
@@ -319,7 +363,7 @@ def _tyro(tokens: list[str], default: TrainCommand | None, where: str = "") -> T
     try:
         with contextlib.redirect_stderr(errors):
             return tyro.cli(TrainCommand, args=tokens, default=default, prog=PROG,
-                            description="Train a driver with TorchRL SAC. Configuration fields: --group.field "
+                            description="Train a driver with TorchRL SAC or PPO. Configuration fields: --group.field "
                                         "VALUE, or field=VALUE.")
     except SystemExit as err:
         if not err.code:
@@ -396,6 +440,12 @@ def parse_command(tokens: list[str]) -> TrainCommand:
     cmd = _tyro(args, dataclasses.replace(first, train=base))
     cmd.train.validate()
     return cmd
+
+
+def flat_config(cfg: TrainConfig) -> dict[str, object]:
+    """Every field as ``{"group.field": value}``: the hyperparameters a logger records."""
+    return {f"{group}.{f.name}": getattr(getattr(cfg, group), f.name)
+            for group in _GROUP_TYPES for f in dataclasses.fields(getattr(cfg, group))}
 
 
 def to_toml(cfg: TrainConfig) -> str:

@@ -1,9 +1,12 @@
 """SAC's learner: the critics, the TorchRL loss of the SAC family, its optimisers and target
-update (:class:`Learner`), and the replay buffer it samples (:func:`make_buffer`)."""
+update (:class:`Learner`), and the replay buffer it samples (:func:`make_buffer`); and one table,
+:data:`ALGOS`, from ``optim.algo`` to the learner the loop builds (PPO's is in :mod:`.ppo`)."""
 
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import torch
 from torch import nn
@@ -11,9 +14,13 @@ from torchrl.modules import MLP, ValueOperator
 
 from atrv_warp.policy import Normalize
 from atrv_warp.rl.config import TrainConfig
+from atrv_warp.rl.ppo import PPO_LOSS_KEYS, PPOLearner
 from atrv_warp.task.spec import ACTION_DIM
 
-__all__ = ["Learner", "make_buffer", "make_loss", "make_qvalue"]
+__all__ = ["ALGOS", "SAC_LOSS_KEYS", "Algo", "Learner", "make_buffer", "make_learner", "make_loss", "make_qvalue"]
+
+SAC_LOSS_KEYS = ("loss_actor", "loss_qvalue", "loss_alpha", "entropy")
+"""The means of SAC's losses logged at every evaluation."""
 
 
 class _QNet(nn.Module):
@@ -115,6 +122,10 @@ class Learner:
     def alpha(self) -> float:
         return float(self.loss.log_alpha.detach().exp())
 
+    def scalars(self) -> dict[str, float]:
+        """Figures of the learner itself, logged at every evaluation: the entropy temperature."""
+        return {"alpha": self.alpha}
+
     def state_dict(self) -> dict:
         return {"loss": self.loss.state_dict(), "opts": {k: o.state_dict() for k, o in self.opts.items()}}
 
@@ -122,3 +133,29 @@ class Learner:
         self.loss.load_state_dict(sd["loss"])
         for k, opt in self.opts.items():
             opt.load_state_dict(sd["opts"][k])
+
+
+@dataclass(frozen=True)
+class Algo:
+    """What differs between the algorithms; the loop asks this, never the algorithm's name."""
+
+    make: Callable
+    """``make(cfg, actor, normalize)``: the learner, once the observation statistics are final."""
+    loss_keys: tuple[str, ...]
+    """Entries of every update's output whose means are logged."""
+    on_policy: bool
+    """Learns from each batch as it comes, collected by the policy with its log-probabilities (PPO),
+    and keeps only the random frames (for the statistics); else from a replay buffer of every frame,
+    ``utd_ratio`` updates per frame (SAC)."""
+
+
+ALGOS: dict[str, Algo] = {
+    "sac": Algo(Learner, SAC_LOSS_KEYS, on_policy=False),
+    "ppo": Algo(PPOLearner, PPO_LOSS_KEYS, on_policy=True),
+}
+"""Every ``optim.algo`` (:class:`~atrv_warp.rl.config.OptimConfig`) and what it means for the loop."""
+
+
+def make_learner(cfg: TrainConfig, actor, normalize: Normalize):
+    """The learner ``cfg.optim.algo`` names (:data:`ALGOS`)."""
+    return ALGOS[cfg.optim.algo].make(cfg, actor, normalize)

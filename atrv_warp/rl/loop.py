@@ -1,6 +1,6 @@
-"""SAC training: :func:`train` reads top to bottom; it gets its parts from small factories
-(:mod:`.collectors`, :mod:`.learner`, :mod:`.checkpoint`, :mod:`.reporting`) and runs them in
-:class:`TrainLoop` until a budget ends the run. The command line is ``python -m atrv_warp.train``."""
+"""Training, SAC or PPO: :func:`train` reads top to bottom; it gets its parts from small factories
+(:mod:`.collectors`, :mod:`.learner` and :mod:`.ppo`, :mod:`.checkpoint`, :mod:`.reporting`) and runs
+them in :class:`TrainLoop` until a budget ends the run. The command line is ``python -m atrv_warp.train``."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from tensordict import TensorDict
 from atrv_warp.policy import Normalize, load_policy, make_actor, save_policy
 from atrv_warp.rl.checkpoint import Checkpoint, RunState, load_checkpoint, warm_start
 from atrv_warp.rl.collectors import COLLECTORS, WORKER_KEY, make_collector, pin_to_core
-from atrv_warp.rl.config import TrainConfig, to_toml
-from atrv_warp.rl.learner import Learner, make_buffer
+from atrv_warp.rl.config import TrainConfig, flat_config, to_toml
+from atrv_warp.rl.learner import ALGOS, make_buffer, make_learner
 from atrv_warp.rl.reporting import Loggers, LossMeans, Progress, Stats, make_loggers, pct, plot_curve
 from atrv_warp.runtime import device_summary
 from atrv_warp.task.config import get_task
@@ -28,7 +28,7 @@ __all__ = ["Evaluator", "TrainLoop", "train"]
 
 
 def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
-    """Run SAC training with ``cfg``; returns the run folder."""
+    """Train with ``cfg`` (SAC or PPO, ``cfg.optim.algo``); returns the run folder."""
     run_dir, ck = _prepare_run(cfg, resume)
     torch.manual_seed(cfg.run.seed)
     torch.set_num_threads(cfg.run.threads)
@@ -37,7 +37,8 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
         pin_to_core(kind.trainer_core)
     obs_dim = len(observation_fields(get_task(cfg.env.task)))
     normalize = Normalize(obs_dim)
-    actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize, obs_dim=obs_dim)
+    actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize, obs_dim=obs_dim,
+                       return_log_prob=ALGOS[cfg.optim.algo].on_policy)
     buffer = make_buffer(cfg)
     checkpoint = Checkpoint(run_dir)
     state, learner = RunState(next_eval=cfg.logging.eval_every_frames), None
@@ -55,12 +56,15 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
         return run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.toml").write_text(to_toml(cfg))
-    loggers = make_loggers(cfg, run_dir, resume)
+    loggers = make_loggers(cfg, run_dir, resume, state.tracking_id)
+    state.tracking_id = loggers.tracking_id
+    loggers.log_hparams(flat_config(cfg))
     collector = make_collector(cfg, actor, state.frames)
-    evaluator = Evaluator(cfg, actor, recording=loggers.recording)
+    evaluator = Evaluator(cfg, actor, recording=loggers.recording,
+                          video_dir=run_dir / "videos" if cfg.logging.video_episodes else None, gif=loggers.wants_gif)
     budget = (f"{cfg.run.total_frames:,} frames or {cfg.run.max_minutes:g} min, whichever ends first"
               if cfg.run.max_minutes else f"{cfg.run.total_frames:,} frames, no time limit")
-    print(f"run folder: {run_dir}  ({kind.describe(cfg)}, batch {cfg.frames_per_batch} frames, "
+    print(f"run folder: {run_dir}  ({cfg.optim.algo}, {kind.describe(cfg)}, batch {cfg.frames_per_batch} frames, "
           f"{cfg.env.substeps} substeps per step; budget {budget})")
     print(device_summary("cpu"))
     loop = TrainLoop(cfg, state, actor, normalize, buffer, learner, loggers, evaluator, checkpoint, run_dir)
@@ -88,9 +92,11 @@ class Evaluator:
 
     ``recording``: a Rerun recording (the one the scalars go to, with ``logger=rerun``) that gets
     two worlds of every evaluation, on its ``frames`` timeline; ``None``: nothing is recorded.
+    ``video_dir``: every evaluation's first ``video_episodes`` episodes are drawn into
+    ``video_dir/eval_<frames>.mp4`` (:attr:`last_video`; with ``gif``, also as a GIF for TensorBoard).
     """
 
-    def __init__(self, cfg: TrainConfig, actor, *, recording=None):
+    def __init__(self, cfg: TrainConfig, actor, *, recording=None, video_dir: Path | None = None, gif: bool = False):
         self.cfg, self.actor = cfg, actor
         self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=EVAL_SEED, **dict(cfg.env.env_kwargs()))
         self.recorder = None
@@ -98,21 +104,44 @@ class Evaluator:
             from atrv_warp.integrations.recorder import RerunRecorder
 
             self.recorder = RerunRecorder(self.env.sim, recording=recording, worlds=range(2))
+        self.video, self.video_dir, self.gif = None, video_dir, gif
+        if video_dir is not None:
+            from atrv_warp.integrations.video import EvalVideo
+
+            self.video = EvalVideo(self.env, episodes=cfg.logging.video_episodes)
+        self.last_video = None
+        """The video of the latest evaluation (:class:`~atrv_warp.integrations.video.VideoFile`), or ``None``."""
 
     def __call__(self, frames: int):
         self.actor.eval()
-        on_step = None
+        hooks = []
         if self.recorder is not None:
             self.recorder.rec.set_time("frames", sequence=frames)
-            on_step = self.recorder.env_hook()
+            hooks.append(self.recorder.env_hook())
+        if self.video is not None:
+            hooks.append(self.video.env_hook())
         result = evaluate(self.actor, num_episodes=self.cfg.logging.eval_episodes, seed=EVAL_SEED, env=self.env,
-                          on_step=on_step)
+                          on_step=_each(hooks))
         self.actor.train()
+        if self.video is not None:
+            self.last_video = self.video.write(self.video_dir / f"eval_{frames:011d}.mp4", gif=self.gif)
         return result
 
     def close(self) -> None:
         if self.recorder is not None:
             self.recorder.close()
+
+
+def _each(hooks: list):
+    """One ``on_step`` callback that calls every one of ``hooks`` (``None`` for none)."""
+    if not hooks:
+        return None
+
+    def on_step(env, td):
+        for hook in hooks:
+            hook(env, td)
+
+    return on_step
 
 
 def _prepare_run(cfg: TrainConfig, resume: bool) -> tuple[Path, dict | None]:
@@ -122,6 +151,10 @@ def _prepare_run(cfg: TrainConfig, resume: bool) -> tuple[Path, dict | None]:
 
         if importlib.util.find_spec("tensorboard") is None:
             raise ModuleNotFoundError("logger=tensorboard needs the tensorboard package: pip install -e '.[tensorboard]'")
+    if cfg.logging.logger in ("wandb", "mlflow"):
+        from atrv_warp.integrations.tracking import require_tracking
+
+        require_tracking(cfg.logging.logger)
     require = COLLECTORS[cfg.collector.kind].require
     if require is not None:
         require()
@@ -137,12 +170,13 @@ def _prepare_run(cfg: TrainConfig, resume: bool) -> tuple[Path, dict | None]:
 class TrainLoop:
     """Collect, learn, evaluate and checkpoint until a budget ends the run."""
 
-    def __init__(self, cfg: TrainConfig, state: RunState, actor, normalize: Normalize, buffer, learner: Learner | None,
+    def __init__(self, cfg: TrainConfig, state: RunState, actor, normalize: Normalize, buffer, learner,
                  loggers: Loggers, evaluator: Evaluator, checkpoint: Checkpoint, run_dir: Path):
         self.cfg, self.state, self.actor, self.normalize, self.buffer = cfg, state, actor, normalize, buffer
         self.learner, self.loggers, self.evaluator, self.checkpoint = learner, loggers, evaluator, checkpoint
         self.run_dir = run_dir
-        self.stats, self.losses = Stats(), LossMeans()
+        self.algo = ALGOS[cfg.optim.algo]
+        self.stats, self.losses = Stats(), LossMeans(self.algo.loss_keys)
         self.push_weights = COLLECTORS[cfg.collector.kind].push_weights
         self.frames_by_collector: list[int] = []
         """Frames from each Ray collector (their batches carry the collector's index); empty otherwise."""
@@ -166,14 +200,15 @@ class TrainLoop:
             st.frames += n
             self.stats.update(data)
             self.count_by_collector(data)
-            # the full-resolution scan is for viewers; the policy observes its sectors
-            self.buffer.extend(data.exclude("scan", ("next", "scan")).reshape(-1).cpu())
+            if not (self.algo.on_policy and st.stats_ready):  # PPO keeps the random frames only, for the statistics
+                # the full-resolution scan is for viewers; the policy observes its sectors
+                self.buffer.extend(data.exclude("scan", ("next", "scan")).reshape(-1).cpu())
             if st.frames >= cfg.collector.init_random_frames:
-                credit = self.learn(credit + n * cfg.optim.utd_ratio)
+                credit = self.learn(data, credit + n * cfg.optim.utd_ratio)
                 if self.push_weights:  # the worker holds a copy; the sync collector shares `actor`
                     collector.update_policy_weights_(TensorDict.from_module(self.actor))
-                # ray: the RayCollector sends the weights to the collector that delivered `data` once
-                # this body is done (update_after_each_batch)
+                # ray: the next request to the collector that delivered `data` carries the weights, once
+                # this body is done
             st.elapsed_s = self.elapsed()
             if st.frames >= st.next_eval or st.frames >= cfg.run.total_frames or st.elapsed_s >= self.budget_s:
                 self.evaluate_and_save()
@@ -193,13 +228,21 @@ class TrainLoop:
             self.frames_by_collector = [a + int(b) for a, b in
                                         zip(self.frames_by_collector or [0] * len(counts), counts, strict=True)]
 
-    def learn(self, credit: float) -> float:
-        """Freeze the observation statistics on first use, then spend whole update credits."""
+    def learn(self, data, credit: float) -> float:
+        """Freeze the observation statistics on first use; then SAC spends whole update credits on
+        replayed samples, PPO learns from ``data`` (a batch the policy collected)."""
         if not self.state.stats_ready:
             obs = self.buffer[:]["observation"]
             self.normalize.set_stats(obs.mean(0), obs.std(0))
             self.state.stats_ready = True
-            self.learner = Learner(self.cfg, self.actor, self.normalize)
+            self.learner = make_learner(self.cfg, self.actor, self.normalize)
+            if self.algo.on_policy:
+                return 0.0  # this batch's actions were random (init_random_frames): not the policy's
+        if self.algo.on_policy:
+            for out in self.learner.learn_batch(data):
+                self.losses.add(out)
+                self.state.updates += 1
+            return 0.0
         while credit >= 1.0:
             credit -= 1.0
             self.losses.add(self.learner.update(self.buffer.sample()))
@@ -218,8 +261,13 @@ class TrainLoop:
             self.log(name, value)
         self.log("wall_time_s", st.elapsed_s)
         if self.learner is not None:
-            self.log("alpha", self.learner.alpha)
+            for name, value in self.learner.scalars().items():
+                self.log(name, value)
             result = self.evaluator(st.frames)
+            video = self.evaluator.last_video
+            if video is not None:
+                self.log("video_render_s", video.render_s)
+                self.loggers.log_video("eval_video", video, st.frames)
             for k, v in result.as_dict().items():
                 if k != "episodes":
                     self.log(f"eval_{k}", v)
@@ -247,11 +295,14 @@ def _finish(cfg: TrainConfig, state: RunState, run_dir: Path, evaluator: Evaluat
                          **dict(cfg.env.env_kwargs()))
         print(format_result("best policy, final evaluation", final))
         result["final_eval"] = final.as_dict()
+        for k, v in final.as_dict().items():
+            loggers.log(f"final_eval_{k}", v, step=state.frames)
     (run_dir / "final_eval.json").write_text(json.dumps(result, indent=2) + "\n")
     if evaluator.recorder is not None:
         evaluator.close()
         print(f"rerun recording: {loggers.rerun.path}")
-    if plot_curve(run_dir / "logs", run_dir / "learning_curve.png"):
+    loggers.close()
+    if plot_curve(run_dir / "logs", run_dir / "learning_curve.png", f"ATRV-Jr {cfg.env.task}, {cfg.optim.algo.upper()}"):
         print(f"learning curve: {run_dir / 'learning_curve.png'}")
     print(f"checkpoint: {Checkpoint(run_dir).path}\nbest policy: {best_path if best_path.is_file() else '(none yet)'}\n"
           f"logs: {run_dir / 'logs'}\nevaluate: python -m atrv_warp.evaluate {best_path}")

@@ -1,6 +1,6 @@
 """What a run reports: the progress bar (:class:`Progress`), the training statistics
-(:class:`Stats`, :class:`LossMeans`), the scalar loggers (:class:`Loggers`) and the learning
-curve drawn from them (:func:`plot_curve`)."""
+(:class:`Stats`, :class:`LossMeans`), the loggers (:class:`Loggers`: scalars, hyperparameters,
+evaluation videos) and the learning curve drawn from the CSV scalars (:func:`plot_curve`)."""
 
 from __future__ import annotations
 
@@ -98,26 +98,26 @@ class Stats:
 
 
 class LossMeans:
-    """Means of SAC's losses and entropy over the updates since the last :meth:`pop`."""
+    """Means of the learner's losses (``keys``: :attr:`~atrv_warp.rl.learner.Algo.loss_keys`) over the
+    updates since the last :meth:`pop`."""
 
-    KEYS = ("loss_actor", "loss_qvalue", "loss_alpha", "entropy")
-
-    def __init__(self):
-        self.sums = {k: 0.0 for k in self.KEYS}
+    def __init__(self, keys: tuple[str, ...]):
+        self.keys = keys
+        self.sums = {k: 0.0 for k in keys}
         self.n = 0
 
     def add(self, out) -> None:
-        for k in self.KEYS:
+        for k in self.keys:
             self.sums[k] += float(out[k].detach())
         self.n += 1
 
     def pop(self) -> dict[str, float]:
         means = {k: v / self.n for k, v in self.sums.items()} if self.n else {}
-        self.__init__()
+        self.sums, self.n = {k: 0.0 for k in self.keys}, 0
         return means
 
 
-def plot_curve(log_dir: Path, out: Path) -> bool:
+def plot_curve(log_dir: Path, out: Path, title: str = "ATRV-Jr drive-to-target, SAC") -> bool:
     """Learning curve PNG from the CSV scalars; returns False if there is nothing to plot."""
     scalars = log_dir / "scalars"
     series = {}
@@ -144,7 +144,7 @@ def plot_curve(log_dir: Path, out: Path) -> bool:
     ax.set_ylim(0, 100)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
-    ax.set_title("ATRV-Jr drive-to-target, SAC")
+    ax.set_title(title)
     fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)
@@ -152,13 +152,46 @@ def plot_curve(log_dir: Path, out: Path) -> bool:
 
 
 class Loggers:
-    """The run's scalar loggers: CSV always (the learning curve is drawn from it), plus
-    TensorBoard or a Rerun recording (:attr:`rerun`), which the evaluator records into too."""
+    """The run's loggers: CSV always (the learning curve is drawn from it), plus TensorBoard, W&B,
+    MLflow or a Rerun recording (:attr:`rerun`), which the evaluator records into too."""
 
     def __init__(self, loggers: list, rerun=None):
         self.loggers = loggers
         self.rerun = rerun
         """The :class:`~atrv_warp.integrations.rerun_logger.RerunLogger` among :attr:`loggers` (``logger=rerun``), or ``None``."""
+
+    @property
+    def tracking_id(self) -> str:
+        """The W&B or MLflow run these loggers write to (empty for the others): a resumed run continues it."""
+        from atrv_warp.integrations.tracking import tracking_run_id
+
+        return next((i for i in map(tracking_run_id, self.loggers) if i), "")
+
+    @property
+    def wants_gif(self) -> bool:
+        """A logger shows videos as GIFs only (TensorBoard)."""
+        from torchrl.record.loggers import TensorboardLogger
+
+        return any(isinstance(lg, TensorboardLogger) for lg in self.loggers)
+
+    def log_hparams(self, params: dict) -> None:
+        """The configuration (:func:`~atrv_warp.rl.config.flat_config`) to every logger."""
+        for lg in self.loggers:
+            lg.log_hparams(params)
+
+    def log_video(self, name: str, video, step: int) -> list[str]:
+        """An evaluation video (:class:`~atrv_warp.integrations.video.VideoFile`) to every logger that
+        takes one; returns their names."""
+        from atrv_warp.integrations.video import log_video
+
+        return [type(lg).__name__ for lg in self.loggers if log_video(lg, name, video, step)]
+
+    def close(self) -> None:
+        """Finish the W&B or MLflow run; flush the others."""
+        from atrv_warp.integrations.tracking import close_logger
+
+        for lg in self.loggers:
+            close_logger(lg)
 
     @property
     def recording(self):
@@ -170,8 +203,9 @@ class Loggers:
             lg.log_scalar(name, value, step=step)
 
 
-def make_loggers(cfg: TrainConfig, run_dir: Path, resume: bool) -> Loggers:
-    """CSV always (the learning curve is drawn from it), plus TensorBoard or Rerun."""
+def make_loggers(cfg: TrainConfig, run_dir: Path, resume: bool, tracking_id: str = "") -> Loggers:
+    """CSV always (the learning curve is drawn from it), plus TensorBoard, W&B, MLflow or Rerun
+    (``tracking_id``: the W&B or MLflow run a resumed run continues)."""
     from torchrl.record.loggers import CSVLogger
 
     loggers, rerun = [CSVLogger(exp_name="logs", log_dir=str(run_dir))], None
@@ -184,4 +218,10 @@ def make_loggers(cfg: TrainConfig, run_dir: Path, resume: bool) -> Loggers:
 
         rerun = RerunLogger("train", path=run_dir / ("train_resumed.rrd" if resume else "train.rrd"))
         loggers.append(rerun)
+    elif cfg.logging.logger in ("wandb", "mlflow"):
+        from atrv_warp.integrations.tracking import make_tracking_logger
+
+        loggers.append(make_tracking_logger(cfg.logging.logger, run_dir / "logs", name=cfg.run.name,
+                                            project=cfg.logging.project, wandb_mode=cfg.logging.wandb_mode,
+                                            mlflow_uri=cfg.logging.mlflow_uri, run_id=tracking_id or None))
     return Loggers(loggers, rerun)
