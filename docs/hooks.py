@@ -158,10 +158,52 @@ def video_cost() -> str:
                    "video / evaluation", "frames", "MP4"], ["---"] + ["---:"] * 7, rows)
 
 
+def train_to_success_nav_wide() -> str:
+    """``train_to_success_nav_wide.json``: the nav task's time to 90 % per seed under the ``wide`` randomization."""
+    return _train_to_success("train_to_success_nav_wide.json")
+
+
+def randomization_eval() -> str:
+    """``randomization_eval.json``: the randomized and the plain nav policy, nominal and under ``wide``."""
+    d = _load("randomization_eval.json")
+    rows = []
+    for name, p in d["policies"].items():
+        rows.append([f"{name} (`{Path(p['path']).name}`)", f"**{100 * p['wide']['success_rate']:.1f} %**",
+                     f"{100 * p['none']['success_rate']:.1f} %", f"{100 * p['wide']['obstacle_rate']:.1f} %",
+                     f"{100 * p['wide']['wall_rate']:.1f} %", f"{100 * p['wide']['timeout_rate']:.1f} %"])
+    return _table([f"nav policy ({d['episodes']:,} episodes each)", "success, `wide`", "success, nominal rover",
+                   "obstacle, `wide`", "wall, `wide`", "timeout, `wide`"], ["---"] + ["---:"] * 5, rows)
+
+
+def randomization_bins() -> str:
+    """``randomization_eval.json``: success by parameter bin under ``wide``, both policies."""
+    d = _load("randomization_eval.json")
+    policies = list(d["policies"])
+    rows = []
+    for param, label in (("friction", "µ"), ("payload_mass", "payload [kg]"), ("latency", "latency [steps]")):
+        bins = [d["policies"][p]["wide"]["success_by_bin"][param] for p in policies]
+        for i, r in enumerate(bins[0]):
+            span = f"{r['low'] + 0.5:g}" if param == "latency" else f"{r['low']:g}–{r['high']:g}"
+            rows.append([f"{label} {span}", f"{r['episodes']}",
+                         *(f"{100 * b[i]['success']:.1f} %" for b in bins)])
+    return _table(["bin", "episodes", *(f"{p} policy" for p in policies)], ["---"] + ["---:"] * (1 + len(policies)),
+                  rows)
+
+
+def randomization_cost() -> str:
+    """``randomization_cost.json``: env-steps/s with ``wide`` against ``none``, interleaved."""
+    d = _load("randomization_cost.json")
+    return _table(["task", "N", "`none` env-steps/s", "`wide` env-steps/s", "wide / none", "step time"],
+                  ["---", "---:", "---:", "---:", "---:", "---:"],
+                  [[r["task"], str(r["num_envs"]), f"{r['none_env_steps_per_s']:,.0f}",
+                    f"{r['wide_env_steps_per_s']:,.0f}", f"{r['wide_over_none']:.3f}", f"{r['slowdown_pct']:+.1f} %"]
+                   for r in d["rows"]])
+
+
 def evaluations() -> str:
     """``docs/*_eval.json``: the shipped policies and the scripted baselines on 1,000 seeded episodes."""
     names = [("pretrained_policy_eval.json", "shipped reach policy, SAC"), ("baseline_eval.json", "scripted driver, reach"),
-             ("nav_policy_eval.json", "shipped nav policy, SAC"), ("nav_baseline_eval.json", "scripted driver, nav")]
+             ("nav_policy_eval.json", "shipped nav policy, SAC trained under `wide`"), ("nav_baseline_eval.json", "scripted driver, nav")]
     rows = []
     for file, label in names:
         e = json.loads((DOCS / file).read_text())
@@ -191,6 +233,10 @@ TABLES: dict[str, Callable[[], str]] = {
     "train_to_success_nav": train_to_success_nav,
     "ppo_vs_sac": ppo_vs_sac,
     "video_cost": video_cost,
+    "train_to_success_nav_wide": train_to_success_nav_wide,
+    "randomization_eval": randomization_eval,
+    "randomization_bins": randomization_bins,
+    "randomization_cost": randomization_cost,
     "evaluations": evaluations,
     "sim_throughput": sim_throughput,
     "sim_choices": sim_choices,
