@@ -18,14 +18,14 @@ from atrv_warp.sim.kernels.params import WorldPhysics
 
 __all__ = ["PARAMETERS", "WorldParams", "check_parameter"]
 
-PARAMETERS: dict[str, str] = {
+PARAMETERS: dict[str, str] = {  # this order is also the randomization's draw streams' (PHYSICS_DRAWS): keep it
     "friction": "Coulomb coefficient mu of the wheels (and every other contact) [-]",
-    "stiffness": "Hunt-Crossley contact stiffness kp [N/m^n]",
-    "wheel_radius": "rolling radius of the wheels [m] (odometry keeps assuming RoverConfig.wheel_radius)",
-    "torque_scale": "motor torque per unit of commanded torque [-]",
-    "speed_limit": "motor no-load speed [rad/s]",
     "payload_mass": "point payload on the chassis [kg]",
     "payload_offset": "payload position from the chassis' centre of mass, chassis frame (x, y, z) [m]",
+    "torque_scale": "motor torque per unit of commanded torque [-]",
+    "speed_limit": "motor no-load speed [rad/s]",
+    "wheel_radius": "rolling radius of the wheels [m] (odometry keeps assuming RoverConfig.wheel_radius)",
+    "stiffness": "Hunt-Crossley contact stiffness kp [N/m^n]",
 }
 """Each per-world parameter, with its meaning and unit."""
 
@@ -93,11 +93,3 @@ class WorldParams:
         """Copies of every parameter (of all worlds, or of ``worlds``), as numpy arrays."""
         idx = slice(None) if worlds is None else np.asarray(worlds)
         return {name: self.view(name).detach().cpu().numpy()[idx].copy() for name in PARAMETERS}
-
-    def is_nominal(self) -> bool:
-        """Whether every world holds the configs' values."""
-        for name, value in self.nominal.items():
-            ref = torch.as_tensor(value, dtype=torch.float32, device=self.friction.device)
-            if not bool((self.view(name) == ref).all()):
-                return False
-        return True

@@ -199,9 +199,8 @@ class RoverSim:
         """Each world's physical parameters (:class:`~atrv_warp.sim.params.WorldParams`): friction, stiffness,
         wheel radius, motor torque scale and speed limit, payload. Change them with :meth:`set_params`."""
         self._nominal_chassis = self._chassis_mass_properties()
-        self._all_worlds = wp.full(num_worlds, True, dtype=bool, device=self.device)
         if self.rover_cfg.payload_mass:
-            self.apply_payload(self._all_worlds)
+            self.apply_payload(wp.full(num_worlds, True, dtype=bool, device=self.device))
 
         n, w = num_worlds, len(self.description.wheels)
         dev = self.device

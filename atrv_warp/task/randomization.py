@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass
 
 from atrv_warp.sim.config import SENSOR_NOISE, SensorNoise
-from atrv_warp.sim.params import check_parameter
+from atrv_warp.sim.params import PARAMETERS, check_parameter
 
 __all__ = [
     "DRAW_MODES",
@@ -37,8 +37,7 @@ start of every episode, ``interval`` at every episode start and then every :attr
 MAX_LATENCY = 8
 """Longest action latency [steps] the device ring buffer holds (0.4 s at 0.05 s a step)."""
 
-PHYSICS_DRAWS = ("friction", "payload_mass", "payload_offset", "torque_scale", "speed_limit", "wheel_radius",
-                 "stiffness")
+PHYSICS_DRAWS = tuple(PARAMETERS)
 """The fields of :class:`RandomizationConfig` that draw a per-world physical parameter
 (:data:`atrv_warp.sim.params.PARAMETERS` says what each is and its unit)."""
 
