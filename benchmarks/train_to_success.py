@@ -1,7 +1,7 @@
 """Wall time and environment steps until the evaluation success first reaches 90 %, per seed.
 
 Run: ``python benchmarks/train_to_success.py [--config default|nav|ppo|nav_ppo] [--seeds 0 1 2] [--minutes 10]
-[--threshold 0.9] [--figure docs/learning_curve.png] [key=value ...]``
+[--threshold 0.9] [--figure docs/learning_curve.png [--figure-only]] [key=value ...]``
 
 Trains with a preset (``configs/default.toml`` by default, ``--config nav`` for the navigation
 task, ``--config ppo`` / ``nav_ppo`` for PPO on many worlds; overrides as in
@@ -126,6 +126,8 @@ def main() -> int:
                         help="train nothing: rebuild the results (and figure) from the run folders an earlier "
                              "invocation kept, e.g. for another --threshold")
     parser.add_argument("--figure", default=None, help="PNG of every seed's evaluation success against wall time")
+    parser.add_argument("--figure-only", action="store_true",
+                        help="train nothing: draw --figure from the results file an earlier invocation wrote")
     parser.add_argument("overrides", nargs="*", help="key=value TrainConfig overrides")
     args = parser.parse_args()
 
@@ -140,6 +142,16 @@ def main() -> int:
     from atrv_warp.rl.config import load_train_config
     from atrv_warp.task.env import ATRVjrEnv
 
+    if args.figure_only:
+        if not args.figure:
+            parser.error("--figure-only needs --figure PATH")
+        if not out.is_file():
+            parser.error(f"--figure-only: no results file at {out}")
+        earlier = json.loads(out.read_text())
+        _figure(earlier["seeds"], earlier["threshold"],
+                f"{earlier['algo'].upper()}, {earlier['preset']} preset: evaluation success per seed", Path(args.figure))
+        print(f"figure: {args.figure} (from {out})")
+        return 0
     if args.summarize:
         runs = []
         for seed in args.seeds:
