@@ -148,7 +148,7 @@ def test_errors_are_clear():
         roll(torch.zeros(3, 1, 2))
     with pytest.raises(ValueError, match="NaN/inf"):
         roll(torch.full((2, 1, 2), float("nan")))
-    with pytest.raises(ValueError, match="chassis_mass must be a positive"):
+    with pytest.raises(ValueError, match=r"chassis_mass must be > 0 and finite, got \[-1.0\]"):
         roll(torch.zeros(2, 1, 2), chassis_mass=-1.0)
     a = torch.zeros(2, 1, 2, requires_grad=True)
     poses = roll(a)

@@ -26,6 +26,7 @@ import tyro
 __all__ = [
     "BOOLEAN_SPELLINGS",
     "DEFAULT_PRESET",
+    "FLAG_ALIASES",
     "SPELLINGS",
     "CollectorConfig",
     "EnvConfig",
@@ -85,6 +86,9 @@ class EnvConfig:
     randomization: str = "none"
     """Domain randomization of the training envs and of the evaluations during training: a preset of
     :data:`atrv_warp.task.randomization.RANDOMIZATION_PRESETS` (``none``, ``mild``, ``wide``; docs/randomization.md)."""
+    sim_config: str = ""
+    """A simulator-config TOML file applied to every world (``[rover]`` and ``[contact]`` tables), e.g. the
+    calibration ``atrv-calibrate`` fitted to a real rover's bag (docs/calibration.md); empty: the nominal rover."""
 
     def env_kwargs(self) -> tuple[tuple[str, object], ...]:
         """:class:`~atrv_warp.task.env.ATRVjrEnv` keyword arguments of these environments, as
@@ -92,8 +96,9 @@ class EnvConfig:
         from atrv_warp.sim.config import SimConfig
 
         step_dt = SimConfig().step_dt
-        return (("task", self.task), ("sim", SimConfig(sim_dt=step_dt / self.substeps)),
-                ("randomization", self.randomization))
+        kwargs = (("task", self.task), ("sim", SimConfig(sim_dt=step_dt / self.substeps)),
+                  ("randomization", self.randomization))
+        return (*kwargs, ("sim_config", self.sim_config)) if self.sim_config else kwargs
 
 
 @dataclass(frozen=True)
@@ -271,6 +276,10 @@ class TrainConfig:
             get_randomization(self.env.randomization)
         except ValueError as err:
             raise ValueError(f"train config: randomization: {err}") from None
+        if self.env.sim_config:
+            from atrv_warp.sim.config import load_sim_config
+
+            load_sim_config(self.env.sim_config)  # names the file and the key that is wrong
         return self
 
 
@@ -284,6 +293,8 @@ names are unique across groups, so ``lr=3e-4`` is enough), and ``collector=sync`
 BOOLEAN_SPELLINGS = {"1": "True", "true": "True", "yes": "True", "on": "True",
                      "0": "False", "false": "False", "no": "False", "off": "False"}
 """The words a true/false field accepts (any case), as tyro spells them."""
+FLAG_ALIASES = {"--sim-config": "--env.sim-config"}
+"""Flags shared with the other commands (``atrv-calibrate`` writes what ``--sim-config`` reads), and the field each sets."""
 DEFAULT_PRESET = "default"
 PROG = "python -m atrv_warp.train"
 
@@ -324,6 +335,10 @@ def cli_args(tokens: list[str]) -> list[str]:
     (:data:`SPELLINGS`); everything else passes through. An unknown key is a ``ValueError`` naming it."""
     out = []
     for token in tokens:
+        flag, eq, value = token.partition("=")
+        if flag in FLAG_ALIASES:
+            out += [FLAG_ALIASES[flag], value] if eq else [FLAG_ALIASES[flag]]
+            continue
         key, eq, value = token.partition("=")
         if not eq or token.startswith("-"):
             out.append(token)

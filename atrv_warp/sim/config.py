@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import tomllib
 from dataclasses import dataclass
 from importlib import resources
+from pathlib import Path
 
 __all__ = [
     "FAST_SIM_DT",
@@ -27,6 +29,7 @@ __all__ = [
     "SimConfig",
     "default_urdf_path",
     "get_variant",
+    "load_sim_config",
     "replace_checked",
 ]
 
@@ -245,6 +248,8 @@ class SensorNoise:
     """Noise of the roll estimate (the observation's roll) [rad]."""
     accel: float = 0.05
     """Accelerometer noise (/imu linear acceleration) [m/s²]."""
+    wheel_speed: float = 0.02
+    """Wheel-encoder speed noise (/joint_states velocity) [rad/s]."""
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
@@ -341,3 +346,54 @@ def replace_checked(cfg, **changes):
     if unknown:
         raise ValueError(f"unknown {type(cfg).__name__} key(s) {unknown}; known: {sorted(names)}")
     return dataclasses.replace(cfg, **changes)
+
+
+SIM_CONFIG_TABLES = ("rover", "contact")
+"""Tables of a simulator-config TOML file that change the simulation: ``[rover]`` holds
+:class:`RoverConfig` fields, ``[contact]`` :class:`ContactConfig` fields. Any other table
+(``[calibration]``, as ``atrv-calibrate`` writes) is a record for people and is not read."""
+
+
+def load_sim_config(path, rover: RoverConfig | None = None,
+                    contact: ContactConfig | None = None) -> tuple[RoverConfig, ContactConfig]:
+    """``rover`` and ``contact`` (default: the realistic variant's and the default contact) with the
+    ``[rover]`` and ``[contact]`` tables of the TOML file at ``path`` applied.
+
+    This is the ``--sim-config FILE`` of ``RoverSim(sim_config=...)``, ``ATRVjrEnv(sim_config=...)``,
+    ``python -m atrv_warp.train --env.sim-config`` and the ROS node's ``sim_config`` parameter; the file
+    ``atrv-calibrate`` writes is one. A missing file, bad TOML, an unknown key or a bad value is a
+    ``ValueError`` naming the file and the key. Example::
+
+        [rover]
+        torque_scale = 0.82
+        payload_mass = 11.5    # kg, at the chassis' centre of mass unless payload_offset says otherwise
+        [contact]
+        friction = 0.55
+    """
+    rover = rover or get_variant("realistic")
+    contact = contact or ContactConfig()
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as err:
+        raise ValueError(f"sim config {path}: cannot read it ({err.strerror or err})") from None
+    try:
+        tables = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ValueError(f"sim config {path}: not valid TOML ({err})") from None
+    configs = {"rover": rover, "contact": contact}
+    for table in SIM_CONFIG_TABLES:
+        values = tables.get(table, {})
+        if not isinstance(values, dict):
+            raise ValueError(f"sim config {path}: [{table}] must be a table of keys, got {values!r}")  # noqa: TRY004
+        values = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
+        for key, value in values.items():
+            current = getattr(configs[table], key, None)
+            number = isinstance(current, (int, float)) and not isinstance(current, bool)
+            if number and (isinstance(value, bool) or not isinstance(value, (int, float))):
+                raise ValueError(f"sim config {path}: [{table}] {key} must be a number, got {value!r}")
+        try:
+            configs[table] = replace_checked(configs[table], **values)
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"sim config {path}: [{table}] {err}") from None
+    return configs["rover"], configs["contact"]

@@ -27,6 +27,7 @@ Example::
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 
 import newton
 import torch
@@ -34,9 +35,11 @@ import warp as wp
 
 from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant
 from atrv_warp.sim.kernels.params import WorldPhysics, apply_payload
+from atrv_warp.sim.kernels.rover import RoverLayout, motor_torque
 from atrv_warp.sim.simulator import RoverSim
 
-__all__ = ["DEFAULT_ACTION_SCALE", "DiffRollout", "NonFiniteGradientError", "restore_external_wrench"]
+__all__ = ["DEFAULT_ACTION_SCALE", "DIFF_PARAMETERS", "DiffRollout", "NonFiniteGradientError", "WheelSpeedPI",
+           "restore_external_wrench"]
 
 
 _SCRATCH = ("M", "J", "P", "H", "L")
@@ -44,6 +47,26 @@ _SCRATCH = ("M", "J", "P", "H", "L")
 DEFAULT_ACTION_SCALE = 20.0
 """Wheel torque per unit action [N·m] when none is given: the reference task's
 (``TaskConfig.action_scale``; the simulator knows no task, so a test keeps the two equal)."""
+
+
+DIFF_PARAMETERS = ("friction", "chassis_mass", "torque_scale", "speed_limit", "wheel_radius")
+"""The physical parameters a rollout differentiates, one value per world each: Coulomb mu [-], chassis
+mass [kg] (the URDF's plus a payload at its centre of mass), motor torque scale [-], motor no-load speed
+[rad/s] and wheel rolling radius [m] (:data:`atrv_warp.sim.params.PARAMETERS`)."""
+
+
+@dataclass(frozen=True)
+class WheelSpeedPI:
+    """A base driver's wheel-speed PI controller, run inside the rollout: each step it turns each side's
+    speed target [rad/s] and the side's mean wheel speed into a torque within ``torque_limit``, with
+    anti-windup (``integrations.ros.base.VelocityController`` does the same on a live rover)."""
+
+    kp: float
+    """[N·m per rad/s]"""
+    ki: float
+    """[N·m per rad]"""
+    torque_limit: float
+    """[N·m]"""
 
 
 class NonFiniteGradientError(FloatingPointError):
@@ -62,6 +85,54 @@ def payload_from_chassis_mass(chassis_mass: wp.array(dtype=float), nominal_mass:
     """Each world's chassis mass [kg] as a payload at the chassis' centre of mass."""
     world = wp.tid()
     payload[world] = chassis_mass[world] - nominal_mass
+
+
+@wp.kernel
+def gather_side_speeds(layout: RoverLayout, joint_qd: wp.array(dtype=float), wheel_weight: wp.array(dtype=float),
+                       out: wp.array2d(dtype=float)):
+    """(N, 2) mean forward speed of each side's wheels [rad/s] (``out`` zeroed before; one thread per wheel)."""
+    world, k = wp.tid()
+    v = joint_qd[world * layout.dofs_per_world + layout.wheel_dof[k]]
+    wp.atomic_add(out, world, layout.wheel_side[k], wheel_weight[k] * v)
+
+
+@wp.kernel
+def gather_side_torques(layout: RoverLayout, commands: wp.array(dtype=wp.vec2), physics: WorldPhysics,
+                        joint_qd: wp.array(dtype=float), side_weight: wp.array(dtype=float),
+                        out: wp.array2d(dtype=float)):
+    """(N, 2) mean torque each side's motors apply [N·m], forward-positive: the world's motor (torque scale,
+    no-load taper) at the wheel speeds of ``joint_qd``, as ``apply_wheel_torques`` computes it (``out`` zeroed
+    before; one thread per wheel)."""
+    world, k = wp.tid()
+    side = layout.wheel_side[k]
+    sign = layout.wheel_sign[k]
+    v = joint_qd[world * layout.dofs_per_world + layout.wheel_dof[k]]
+    tau = motor_torque(commands[world][side] * physics.torque_scale[world], sign * v, physics.speed_limit[world])
+    wp.atomic_add(out, world, side, side_weight[k] * tau)
+
+
+@wp.func
+def pi_side(target: float, speed: float, integral: float, kp: float, ki: float, limit: float, dt: float):
+    """One side of the wheel-speed PI (as ``integrations.ros.base.VelocityController``): torque [N·m] within
+    ``limit``, and the new integral (held while the output saturates: anti-windup)."""
+    error = target - speed
+    candidate = integral + error * dt
+    new = candidate
+    if wp.abs(kp * error + ki * candidate) > limit:
+        new = integral
+    return wp.clamp(kp * error + ki * new, -limit, limit), new
+
+
+@wp.kernel
+def wheel_speed_pi(targets: wp.array2d(dtype=float), speeds: wp.array2d(dtype=float),
+                   integral_in: wp.array2d(dtype=float), kp: float, ki: float, limit: float, dt: float,
+                   commands: wp.array(dtype=wp.vec2), integral_out: wp.array2d(dtype=float)):
+    world = wp.tid()
+    left, i_left = pi_side(targets[world, 0], speeds[world, 0], integral_in[world, 0], kp, ki, limit, dt)
+    right, i_right = pi_side(targets[world, 1], speeds[world, 1], integral_in[world, 1], kp, ki, limit, dt)
+    commands[world] = wp.vec2(left, right)
+    integral_out[world, 0] = i_left
+    integral_out[world, 1] = i_right
 
 
 @wp.kernel
@@ -111,6 +182,9 @@ class DiffRollout:
             Newton 1.8's wrong steering gradient, for comparison).
         action_scale: Wheel torque per unit action [N·m]; a task passes its own
             (``TaskConfig.action_scale``).
+        controller: A :class:`WheelSpeedPI` run inside the rollout: the actions are then each side's
+            wheel-speed targets [rad/s], as a base driver receives them, and the controller's integral is
+            part of the initial state (a calibration from a ``/cmd_vel`` log does this).
 
     Calling the object runs the rollout; see :meth:`__call__`.
     """
@@ -118,7 +192,8 @@ class DiffRollout:
     def __init__(self, num_worlds: int = 1, steps: int = 20, *, variant: str = "realistic",
                  rover: RoverConfig | None = None, contact: ContactConfig | None = None,
                  arena: ArenaConfig | None = None, sim: SimConfig | None = None, device: str = "cpu",
-                 wrench_fix: bool = True, action_scale: float = DEFAULT_ACTION_SCALE):
+                 wrench_fix: bool = True, action_scale: float = DEFAULT_ACTION_SCALE,
+                 controller: WheelSpeedPI | None = None):
         if steps < 1:
             raise ValueError(f"steps must be >= 1, got {steps}")
         sim_cfg = sim or SimConfig()
@@ -132,6 +207,8 @@ class DiffRollout:
         what the workaround fixes, as ``benchmarks/diff_gradients.py --without-wrench-fix`` does)."""
         self.action_scale = float(action_scale)
         """Wheel torque per unit action [N·m]."""
+        self.controller = controller
+        """The :class:`WheelSpeedPI` inside the rollout, or ``None`` (the actions are torques)."""
         model = self.sim.model
         n_sub = steps * self.sim.substeps
         self.states = [model.state(requires_grad=True) for _ in range(n_sub + 1)]
@@ -139,27 +216,40 @@ class DiffRollout:
         for c in self.controls:
             c.joint_f.requires_grad = True
         dev = self.sim.device
-        self._actions = [wp.zeros((num_worlds, 2), dtype=float, device=dev, requires_grad=True) for _ in range(steps)]
-        self._commands = [wp.zeros(num_worlds, dtype=wp.vec2, device=dev, requires_grad=True) for _ in range(steps)]
-        self._poses = [wp.zeros((num_worlds, 7), dtype=float, device=dev, requires_grad=True)
-                       for _ in range(steps + 1)]
-        self._friction = wp.zeros(num_worlds, dtype=float, device=dev, requires_grad=True)
-        self._chassis_mass = wp.zeros(num_worlds, dtype=float, device=dev, requires_grad=True)
-        self._payload = wp.zeros(num_worlds, dtype=float, device=dev, requires_grad=True)
-        self._payload_offset = wp.zeros(num_worlds, dtype=wp.vec3, device=dev)
+
+        def zeros(shape, dtype=float, grad=True):
+            return wp.zeros(shape, dtype=dtype, device=dev, requires_grad=grad)
+
+        self._actions = [zeros((num_worlds, 2)) for _ in range(steps)]
+        self._commands = [zeros(num_worlds, wp.vec2) for _ in range(steps)]
+        self._poses = [zeros((num_worlds, 7)) for _ in range(steps + 1)]
+        self._speeds = [zeros((num_worlds, 2)) for _ in range(steps + 1)]
+        self._side_torques = [zeros((num_worlds, 2)) for _ in range(steps)]
+        self._integral = [zeros((num_worlds, 2)) for _ in range(steps + 1)]
+        self._params = {name: zeros(num_worlds) for name in DIFF_PARAMETERS}
+        self._payload = zeros(num_worlds)
+        self._payload_offset = zeros(num_worlds, wp.vec3, grad=False)
         self._all = wp.full(num_worlds, True, dtype=bool, device=dev)
-        # the simulator's per-world physics, with a differentiable mu of the tape's own
+        wheels = self.sim.description.wheels
+        per_side = [sum(w.side == side for w in wheels) for side in (0, 1)]
+        self._wheel_weight = wp.array([w.drive_sign / per_side[w.side] for w in wheels], dtype=float, device=dev)
+        self._side_weight = wp.array([1.0 / per_side[w.side] for w in wheels], dtype=float, device=dev)
+        # the simulator's per-world physics, every parameter but the stiffness an input of the tape
         physics = WorldPhysics()
-        params = self.sim.params.physics
-        physics.friction, physics.stiffness, physics.wheel_radius = self._friction, params.stiffness, params.wheel_radius
-        physics.torque_scale, physics.speed_limit = params.torque_scale, params.speed_limit
+        physics.stiffness = self.sim.params.physics.stiffness
+        for name in ("friction", "wheel_radius", "torque_scale", "speed_limit"):
+            setattr(physics, name, self._params[name])
         self._physics = physics
         self.nominal_chassis_mass = float(model.body_mass.numpy()[self.sim.layout.chassis_body])
+        self._nominal = {"friction": self.sim.contact_cfg.friction, "chassis_mass": self.nominal_chassis_mass,
+                         "torque_scale": self.sim.rover_cfg.torque_scale,
+                         "speed_limit": self.sim.rover_cfg.wheel_speed_limit,
+                         "wheel_radius": self.sim.rover_cfg.wheel_radius}
         self._flags = wp.zeros(num_worlds, dtype=wp.int32, device=dev)
         # The friction solver starts each substep from the previous one's impulses: one array per
         # substep boundary, so the tape differentiates through that chain too.
         self._impulses = [wp.zeros_like(self.sim.contact.impulses, requires_grad=True) for _ in range(n_sub + 1)]
-        self._torque = wp.zeros((num_worlds, len(self.sim.description.wheels)), dtype=float, device=dev)
+        self._torque = wp.zeros((num_worlds, len(wheels)), dtype=float, device=dev)
         # Featherstone keeps its mass-matrix scratch (M, J, P, H, L) on the solver, shared by every
         # step. Under a tape each step must own them, or the adjoints of all steps mix in one buffer
         # (gradients explode with the horizon); so each substep gets its own set, swapped in below.
@@ -180,13 +270,24 @@ class DiffRollout:
         self._rollout_id = 0
 
     # ------------------------------------------------------------------ recording
+    def _gather(self, k: int, t: int) -> None:
+        """Chassis pose and side wheel speeds of substep state ``k`` into step ``t``'s outputs."""
+        sim, lay = self.sim, self.sim.layout
+        state = self.states[k]
+        wp.launch(gather_chassis_pose, dim=self.num_worlds, inputs=[state.body_q, lay.bodies_per_world,
+                                                                   lay.chassis_body],
+                  outputs=[self._poses[t]], device=sim.device)
+        wp.launch(gather_side_speeds, dim=(self.num_worlds, len(sim.description.wheels)),
+                  inputs=[sim.layout, state.joint_qd, self._wheel_weight], outputs=[self._speeds[t]],
+                  device=sim.device)
+
     def _record(self) -> None:
         sim, lay = self.sim, self.sim.layout
         n = self.num_worlds
         # The chassis mass (a payload at its centre of mass) is an input of the tape: the simulator's payload
         # kernel sets the chassis and the friction solver's model of the rover, then the solver re-derives
         # its spatial inertias (Newton's public route for runtime mass changes), all recorded.
-        wp.launch(payload_from_chassis_mass, dim=n, inputs=[self._chassis_mass, self.nominal_chassis_mass],
+        wp.launch(payload_from_chassis_mass, dim=n, inputs=[self._params["chassis_mass"], self.nominal_chassis_mass],
                   outputs=[self._payload], device=sim.device)
         model, inertia = sim.model, sim.contact.inertia
         wp.launch(apply_payload, dim=n,
@@ -197,12 +298,18 @@ class DiffRollout:
         sim.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
         s0 = self.states[0]
         newton.eval_fk(sim.model, s0.joint_q, s0.joint_qd, s0)
-        wp.launch(gather_chassis_pose, dim=n, inputs=[s0.body_q, lay.bodies_per_world, lay.chassis_body],
-                  outputs=[self._poses[0]], device=sim.device)
+        self._gather(0, 0)
+        pi = self.controller
         k = 0
         for t in range(self.steps):
-            wp.launch(scale_actions, dim=n, inputs=[self._actions[t], self.action_scale], outputs=[self._commands[t]],
-                      device=sim.device)
+            if pi is None:
+                wp.launch(scale_actions, dim=n, inputs=[self._actions[t], self.action_scale],
+                          outputs=[self._commands[t]], device=sim.device)
+            else:
+                wp.launch(wheel_speed_pi, dim=n,
+                          inputs=[self._actions[t], self._speeds[t], self._integral[t], pi.kp, pi.ki,
+                                  pi.torque_limit, sim.sim_cfg.step_dt],
+                          outputs=[self._commands[t], self._integral[t + 1]], device=sim.device)
             for _ in range(sim.substeps):
                 s_in, s_out = self.states[k], self.states[k + 1]
                 for name, arr in self._scratch[k].items():
@@ -213,24 +320,31 @@ class DiffRollout:
                 if self._tape is not None and self.wrench_fix:
                     self._tape.record_func(backward=restore_external_wrench(s_out, s_in), arrays=[])
                 k += 1
-            wp.launch(gather_chassis_pose, dim=n, inputs=[self.states[k].body_q, lay.bodies_per_world,
-                                                         lay.chassis_body], outputs=[self._poses[t + 1]],
-                      device=sim.device)
+            # the torque of the step's last substep, as the simulator's wheel_torque (and a ROS node's effort)
+            wp.launch(gather_side_torques, dim=(n, len(sim.description.wheels)),
+                      inputs=[lay, self._commands[t], self._physics, self.states[k - 1].joint_qd, self._side_weight],
+                      outputs=[self._side_torques[t]], device=sim.device)
+            self._gather(k, t + 1)
 
     @torch.no_grad()
-    def forward(self, actions: torch.Tensor, joint_q: torch.Tensor, joint_qd: torch.Tensor,
-                friction: torch.Tensor, chassis_mass: torch.Tensor, record: bool = True) -> tuple[torch.Tensor, int]:
-        """Run the rollout, on a fresh tape if ``record``; returns poses (steps + 1, N, 7) and the
-        rollout's number (which :meth:`backward` checks against the tape it holds)."""
+    def forward(self, actions: torch.Tensor, joint_q: torch.Tensor, joint_qd: torch.Tensor, integral: torch.Tensor,
+                params: dict[str, torch.Tensor], record: bool = True
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, int]:
+        """Run the rollout, on a fresh tape if ``record``; returns poses (steps + 1, N, 7), side wheel speeds
+        (steps + 1, N, 2), side motor torques (steps, N, 2) and the rollout's number (which :meth:`backward`
+        checks against the tape it holds)."""
         for t in range(self.steps):
             wp.to_torch(self._actions[t]).copy_(actions[t])
         s0 = self.states[0]
         wp.to_torch(s0.joint_q).copy_(joint_q.reshape(-1))
         wp.to_torch(s0.joint_qd).copy_(joint_qd.reshape(-1))
-        wp.to_torch(self._friction).copy_(friction.reshape(-1))
-        wp.to_torch(self._chassis_mass).copy_(chassis_mass.reshape(-1))
+        wp.to_torch(self._integral[0]).copy_(integral)
+        for name in DIFF_PARAMETERS:
+            wp.to_torch(self._params[name]).copy_(params[name].reshape(-1))
         for s in self.states:
             s.body_f.zero_()
+        for a in self._speeds + self._side_torques:
+            a.zero_()  # accumulated into
         self._impulses[0].zero_()  # a rollout starts from rest, unloaded
         self._rollout_id += 1
         self._tape = wp.Tape() if record else None
@@ -239,10 +353,15 @@ class DiffRollout:
                 self._record()
         else:
             self._record()
-        return torch.stack([wp.to_torch(p).clone() for p in self._poses]), self._rollout_id
+        return (torch.stack([wp.to_torch(p).clone() for p in self._poses]),
+                torch.stack([wp.to_torch(p).clone() for p in self._speeds]),
+                torch.stack([wp.to_torch(p).clone() for p in self._side_torques]), self._rollout_id)
 
-    def backward(self, grad_poses: torch.Tensor, rollout_id: int):
-        """Back-propagate ``grad_poses`` through rollout number ``rollout_id`` (the latest recorded)."""
+    def backward(self, grad_poses: torch.Tensor, grad_speeds: torch.Tensor | None, rollout_id: int,
+                 grad_torques: torch.Tensor | None = None):
+        """Back-propagate ``grad_poses`` (and ``grad_speeds``, ``grad_torques``) through rollout number
+        ``rollout_id`` (the latest recorded); returns the gradients of the actions, initial joint_q, joint_qd, controller integral and of
+        each of :data:`DIFF_PARAMETERS`."""
         tape = self._tape
         if tape is None or rollout_id != self._rollout_id:
             raise RuntimeError(
@@ -250,22 +369,25 @@ class DiffRollout:
                 "tape serves one backward pass. Call backward before running the same DiffRollout again "
                 "(or use one DiffRollout per rollout awaiting its backward pass).")
         grads = {p: wp.from_torch(grad_poses[i].contiguous()) for i, p in enumerate(self._poses)}
+        if grad_speeds is not None:
+            grads.update({p: wp.from_torch(grad_speeds[i].contiguous()) for i, p in enumerate(self._speeds)})
+        if grad_torques is not None:
+            grads.update({p: wp.from_torch(grad_torques[i].contiguous()) for i, p in enumerate(self._side_torques)})
         tape.backward(grads=grads)
-        g_actions = torch.stack([wp.to_torch(a.grad).clone() for a in self._actions])
         s0 = self.states[0]
-        g_q = wp.to_torch(s0.joint_q.grad).clone()
-        g_qd = wp.to_torch(s0.joint_qd.grad).clone()
-        g_mu = wp.to_torch(self._friction.grad).clone()
-        g_mass = wp.to_torch(self._chassis_mass.grad).clone()
+        out = {"actions": torch.stack([wp.to_torch(a.grad).clone() for a in self._actions]),
+               "initial joint_q": wp.to_torch(s0.joint_q.grad).clone(),
+               "initial joint_qd": wp.to_torch(s0.joint_qd.grad).clone(),
+               "controller integral": wp.to_torch(self._integral[0].grad).clone()}
+        out.update({name: wp.to_torch(self._params[name].grad).clone() for name in DIFF_PARAMETERS})
         tape.zero()
         self._tape = None
-        for name, g in (("actions", g_actions), ("initial joint_q", g_q), ("initial joint_qd", g_qd),
-                        ("friction", g_mu), ("chassis mass", g_mass)):
+        for name, g in out.items():
             if not torch.isfinite(g).all():
                 raise NonFiniteGradientError(
-                    f"gradient w.r.t. {name} is not finite after a {self.steps}-step rollout; shorten the "
-                    "horizon or soften the actions")
-        return g_actions, g_q, g_qd, g_mu, g_mass
+                    f"gradient w.r.t. {name.replace('_', ' ')} is not finite after a {self.steps}-step rollout; "
+                    "shorten the horizon or soften the actions")
+        return tuple(out.values())
 
     # ------------------------------------------------------------------ torch entry point
     def initial_state(self, poses: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
@@ -274,21 +396,60 @@ class DiffRollout:
         sim.reset(poses=poses)
         return (wp.to_torch(sim.state_0.joint_q).detach().clone(), wp.to_torch(sim.state_0.joint_qd).detach().clone())
 
+    def moving_state(self, poses: torch.Tensor, velocity: torch.Tensor, yaw_rate: torch.Tensor,
+                     wheel_speed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Generalised coordinates (joint_q, joint_qd) of level rovers on flat ground, in motion: at (x, y, yaw)
+        ``poses`` (N, 3), with chassis-origin velocity ``velocity`` (N, 2) (forward, left) in the chassis
+        frame [m/s], ``yaw_rate`` (N,) [rad/s], and each side's forward wheel speed ``wheel_speed`` (N, 2)
+        (left, right) [rad/s] (a state recorded on a real rover: its pose, twist and wheel encoders)."""
+        q, qd = self.initial_state(poses)
+        sim, lay = self.sim, self.sim.layout
+        n = self.num_worlds
+        q, qd = q.view(n, -1), qd.view(n, -1)
+        yaw = torch.as_tensor(poses, dtype=torch.float32)[:, 2]
+        cos, sin = torch.cos(yaw), torch.sin(yaw)
+        v = torch.as_tensor(velocity, dtype=torch.float32)
+        w = torch.as_tensor(yaw_rate, dtype=torch.float32)
+        vx, vy = cos * v[:, 0] - sin * v[:, 1], sin * v[:, 0] + cos * v[:, 1]
+        # Featherstone's free joint: the centre of mass' velocity, world frame, then the angular velocity
+        com = [float(c) for c in sim.nominal_chassis.com]
+        rx, ry = cos * com[0] - sin * com[1], sin * com[0] + cos * com[1]
+        d = lay.chassis_dof
+        qd[:, d + 0], qd[:, d + 1] = vx - w * ry, vy + w * rx
+        qd[:, d + 5] = w
+        ws = torch.as_tensor(wheel_speed, dtype=torch.float32)
+        for j, wheel in enumerate(sim.description.wheels):
+            qd[:, int(lay.wheel_dof.numpy()[j])] = wheel.drive_sign * ws[:, wheel.side]
+        return q.reshape(-1), qd.reshape(-1)
+
     def __call__(self, actions: torch.Tensor, initial_state: tuple[torch.Tensor, torch.Tensor] | None = None,
                  friction: torch.Tensor | float | None = None,
-                 chassis_mass: torch.Tensor | float | None = None) -> torch.Tensor:
+                 chassis_mass: torch.Tensor | float | None = None, *,
+                 torque_scale: torch.Tensor | float | None = None, speed_limit: torch.Tensor | float | None = None,
+                 wheel_radius: torch.Tensor | float | None = None, integral: torch.Tensor | None = None,
+                 wheel_speeds: bool = False, wheel_torques: bool = False
+                 ) -> torch.Tensor | tuple[torch.Tensor, ...]:
         """Roll out and return chassis poses (steps + 1, N, 7): x, y, z [m], quaternion (x, y, z, w).
 
         Args:
-            actions: (steps, N, 2) in [-1, 1] (x :attr:`action_scale` N·m), differentiable.
-            initial_state: (joint_q, joint_qd) from :meth:`initial_state` (default: every rover at
-                the origin, at rest); differentiable.
+            actions: (steps, N, 2) in [-1, 1] (x :attr:`action_scale` N·m), differentiable; with a
+                :attr:`controller`, each side's wheel-speed target [rad/s] instead.
+            initial_state: (joint_q, joint_qd) from :meth:`initial_state` or :meth:`moving_state` (default:
+                every rover at the origin, at rest); differentiable.
             friction: Coulomb coefficient, one for all worlds or (N,) one per world (default: the
                 contact config's), differentiable.
             chassis_mass: Chassis mass [kg], one or (N,) one per world, e.g. with a payload (default:
                 the URDF's, :attr:`nominal_chassis_mass`). The difference is a point mass at the chassis'
                 centre of mass (the simulator's payload, :meth:`~atrv_warp.sim.RoverSim.set_params`), which
                 the wheels' friction solver's model of the rover carries too. Differentiable.
+            torque_scale, speed_limit, wheel_radius: The motor's torque scale [-] and no-load speed [rad/s],
+                and the wheels' rolling radius [m]; one or (N,) each (default: the rover config's),
+                differentiable.
+            integral: (N, 2) the controller's integral at the start [rad] (default zero), differentiable.
+            wheel_speeds: Also return each side's mean forward wheel speed (steps + 1, N, 2) [rad/s].
+            wheel_torques: Also return each side's mean motor torque in each step's last substep (steps, N, 2)
+                [N·m], forward-positive (what the simulator's ``wheel_torque`` and the ROS node's joint
+                efforts report), after the poses and the wheel speeds if asked for.
         """
         expected = (self.steps, self.num_worlds, 2)
         if tuple(actions.shape) != expected:
@@ -298,21 +459,26 @@ class DiffRollout:
             raise ValueError("actions contain NaN/inf")
         if initial_state is None:
             initial_state = self.initial_state()
-        if friction is None:
-            friction = self.sim.contact_cfg.friction
-        friction = self._per_world("friction", friction)
-        if not (torch.isfinite(friction).all() and bool((friction > 0.0).all())):
-            raise ValueError(f"friction must be > 0 and finite, got {friction.detach().tolist()}")
-        if chassis_mass is None:
-            chassis_mass = self.nominal_chassis_mass
-        chassis_mass = self._per_world("chassis_mass", chassis_mass)
-        if not (torch.isfinite(chassis_mass).all() and bool((chassis_mass > 0.0).all())):
-            raise ValueError(f"chassis_mass must be a positive number of kg, got {chassis_mass.detach().tolist()}")
-        inputs = (actions.float(), initial_state[0].float(), initial_state[1].float(), friction, chassis_mass)
+        given = {"friction": friction, "chassis_mass": chassis_mass, "torque_scale": torque_scale,
+                 "speed_limit": speed_limit, "wheel_radius": wheel_radius}
+        params = []
+        for name in DIFF_PARAMETERS:
+            value = self._per_world(name, self._nominal[name] if given[name] is None else given[name])
+            low_ok = (value >= 0.0) if name == "torque_scale" else (value > 0.0)
+            if not (torch.isfinite(value).all() and bool(low_ok.all())):
+                raise ValueError(f"{name} must be {'>= 0' if name == 'torque_scale' else '> 0'} and finite, got "
+                                 f"{value.detach().tolist()}")
+            params.append(value)
+        integral = torch.zeros(self.num_worlds, 2) if integral is None else torch.as_tensor(integral).float()
+        if tuple(integral.shape) != (self.num_worlds, 2):
+            raise ValueError(f"integral must have shape ({self.num_worlds}, 2), got {tuple(integral.shape)}")
+        inputs = (actions.float(), initial_state[0].float(), initial_state[1].float(), integral, *params)
         if not (torch.is_grad_enabled() and any(t.requires_grad for t in inputs)):
-            return self.forward(*inputs, record=False)[0]  # nothing to differentiate: no tape
-        return _RolloutFn.apply(self, *inputs)
-
+            poses, speeds, torques, _ = self.forward(*inputs[:4], dict(zip(DIFF_PARAMETERS, params)), record=False)
+        else:
+            poses, speeds, torques = _RolloutFn.apply(self, *inputs)
+        out = (poses,) + ((speeds,) if wheel_speeds else ()) + ((torques,) if wheel_torques else ())
+        return out if len(out) > 1 else poses
 
     def _per_world(self, name: str, value) -> torch.Tensor:
         """``value`` as (N,) float32: one number for every world, or one per world (differentiable)."""
@@ -327,13 +493,13 @@ class DiffRollout:
 
 class _RolloutFn(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, roll: DiffRollout, actions, joint_q, joint_qd, friction, chassis_mass):
-        poses, ctx.rollout_id = roll.forward(actions.detach(), joint_q.detach(), joint_qd.detach(), friction.detach(),
-                                             chassis_mass.detach())
+    def forward(ctx, roll: DiffRollout, actions, joint_q, joint_qd, integral, *params):
+        poses, speeds, torques, ctx.rollout_id = roll.forward(
+            actions.detach(), joint_q.detach(), joint_qd.detach(), integral.detach(),
+            {name: p.detach() for name, p in zip(DIFF_PARAMETERS, params)})
         ctx.roll = roll
-        return poses
+        return poses, speeds, torques
 
     @staticmethod
-    def backward(ctx, grad_poses):
-        g_a, g_q, g_qd, g_mu, g_mass = ctx.roll.backward(grad_poses, ctx.rollout_id)
-        return None, g_a, g_q, g_qd, g_mu, g_mass
+    def backward(ctx, grad_poses, grad_speeds, grad_torques):
+        return None, *ctx.roll.backward(grad_poses, grad_speeds, ctx.rollout_id, grad_torques)

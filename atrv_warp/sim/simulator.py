@@ -11,13 +11,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import Enum
+from pathlib import Path
 
 import newton
 import numpy as np
 import torch
 import warp as wp
 
-from atrv_warp.sim.config import ArenaConfig, ContactConfig, ObstacleConfig, RoverConfig, SimConfig, get_variant
+from atrv_warp.sim.config import (
+    ArenaConfig,
+    ContactConfig,
+    ObstacleConfig,
+    RoverConfig,
+    SimConfig,
+    get_variant,
+    load_sim_config,
+)
 from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
 from atrv_warp.sim.kernels.contact import FLAG_BODY_GROUND, FLAG_OBSTACLE, FLAG_WALL
 from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics, apply_payload
@@ -126,6 +135,10 @@ class RoverSim:
             or a :class:`~atrv_warp.sim.terrain.HeightGrid`.
         obstacles: Room for static obstacles per world (:class:`ObstacleConfig`); ``None``: none.
         device: Warp device (``"cpu"`` default, ``"cuda:0"`` …).
+        requires_grad: Build the model for gradients (what :class:`~atrv_warp.sim.diff.DiffRollout` does).
+        sim_config: A TOML file whose ``[rover]`` and ``[contact]`` tables change ``rover`` and
+            ``contact`` (:func:`~atrv_warp.sim.config.load_sim_config`), e.g. the calibration that
+            ``atrv-calibrate`` wrote from a recorded bag.
 
     State views (torch tensors on the sim device, updated in place by :meth:`step`; clone to keep):
         ``root_pose`` (N, 7): chassis position [m] and quaternion (x, y, z, w), world frame.
@@ -163,9 +176,12 @@ class RoverSim:
         obstacles: ObstacleConfig | None = None,
         device: str | None = "cpu",
         requires_grad: bool = False,
+        sim_config: str | Path | None = None,
     ):
         self.rover_cfg = rover or get_variant(variant)
         self.contact_cfg = contact or ContactConfig()
+        if sim_config:
+            self.rover_cfg, self.contact_cfg = load_sim_config(sim_config, self.rover_cfg, self.contact_cfg)
         self.arena_cfg = arena or ArenaConfig()
         self.sim_cfg = sim or SimConfig()
         self.device = wp.get_device(device)
@@ -514,9 +530,10 @@ class RoverSim:
     def set_state(self, snapshot: dict[str, torch.Tensor]) -> None:
         """Restore a snapshot taken by :meth:`get_state`."""
         s = self.state_0
-        wp.to_torch(s.joint_q).copy_(snapshot["joint_q"])
-        wp.to_torch(s.joint_qd).copy_(snapshot["joint_qd"])
-        self.commands.copy_(snapshot["commands"])
+        with torch.no_grad():  # a differentiable simulator's arrays are leaves that require grad
+            wp.to_torch(s.joint_q).copy_(snapshot["joint_q"])
+            wp.to_torch(s.joint_qd).copy_(snapshot["joint_qd"])
+            self.commands.copy_(snapshot["commands"])
         self.sim_time = float(snapshot["sim_time"])
         self.contact.impulses.zero_()
         newton.eval_fk(self.model, s.joint_q, s.joint_qd, s)

@@ -99,6 +99,8 @@ class ATRVjrEnv(EnvBase):
         randomization: Domain randomization: a preset name (``"none"``, ``"mild"``, ``"wide"``) or a
             :class:`~atrv_warp.task.randomization.RandomizationConfig`; ``None``: none (the nominal rover,
             perfect sensors, no delay, bit for bit as without it).
+        sim_config: A simulator-config TOML file (see :class:`RoverSim`), e.g. ``atrv-calibrate``'s
+            calibration of a real rover.
         **task_overrides: Fields of :class:`TaskConfig` (e.g. ``max_steps=100``); an unknown
             name raises ``ValueError``.
     """
@@ -118,6 +120,7 @@ class ATRVjrEnv(EnvBase):
         arena: ArenaConfig | None = None,
         sim: SimConfig | None = None,
         randomization: RandomizationConfig | str | None = None,
+        sim_config: str | None = None,
         **task_overrides,
     ):
         self.task_cfg = c = replace_checked(get_task(task), **task_overrides)
@@ -125,7 +128,7 @@ class ATRVjrEnv(EnvBase):
         """What each world randomizes (:class:`~atrv_warp.task.randomization.RandomizationConfig`)."""
         self.sim = RoverSim(num_envs, rover=rover or get_variant(variant), contact=contact, arena=arena, sim=sim,
                             terrain=c.terrain, obstacles=ObstacleConfig(slots=c.obstacles) if c.obstacles else None,
-                            device=device)
+                            device=device, sim_config=sim_config)
         self.scanner = None
         if c.scan_beams:
             noise = self.randomization.noise

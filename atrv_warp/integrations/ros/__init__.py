@@ -47,7 +47,9 @@ PARAMETERS = (
     ("frame_id", "", "frame_id of /pose (default: the URDF's chassis link)"),
     ("odom_frame", "odom", "frame of /odom (REP 105)"), ("base_frame", "base_link", "child frame of /odom"),
     ("policy", "", "policy file for goal mode (default: the shipped one)"),
-    ("bag", "", "write an MCAP ROS 2 bag of /pose, /command, /goal and /goal_status here"),
+    ("bag", "", ("write an MCAP ROS 2 bag here: /cmd_vel, /joint_states, /odom, /ground_truth/odom, /pose, "
+                 "/command, /goal, /goal_status (what atrv-calibrate reads; not /imu or /scan)")),
+    ("sim_config", "", "simulator-config TOML ([rover], [contact]; e.g. atrv-calibrate's output) applied to every rover"),
     ("wait_for_subscribers", 0, "wait for this many /pose subscribers before starting"),
     ("reach_radius", 1.0, "goal mode: reached within this distance [m]"),
     ("effective_track_factor", BaseParams.effective_track_factor, "skid: effective track / wheel track"),
@@ -56,7 +58,10 @@ PARAMETERS = (
     ("cmd_vel_timeout", BaseParams.timeout, "watchdog: stop when no /cmd_vel arrives for this long [s]"),
     ("imu_accel_noise", SENSOR_NOISE.accel, "IMU accelerometer noise, standard deviation [m/s²]"),
     ("imu_gyro_noise", SENSOR_NOISE.gyro, "IMU gyroscope noise, standard deviation [rad/s]"),
-    ("seed", 0, "seed of the IMU noise"),
+    ("wheel_speed_noise", SENSOR_NOISE.wheel_speed, "/joint_states velocity noise, standard deviation [rad/s]"),
+    ("truth_noise", 0.0, "/ground_truth/odom position noise, standard deviation [m] (as motion capture or RTK GPS)"),
+    ("truth_yaw_noise", 0.0, "/ground_truth/odom heading noise, standard deviation [rad]"),
+    ("seed", 0, "seed of the sensor noise"),
 )
 """(name, default, description) of every parameter the node declares. The sensor noise defaults are
 :data:`~atrv_warp.sim.config.SENSOR_NOISE`, the noise the randomization presets train with."""

@@ -43,6 +43,13 @@ class BaseParams:
     def effective_track(self) -> float:
         return self.effective_track_factor * self.track_width
 
+    @staticmethod
+    def track_of(description, rover) -> float:
+        """Wheel track [m] of a rover: the distance between its outermost wheels' contact centres
+        (a :class:`~atrv_warp.sim.urdf.RoverDescription` and its :class:`~atrv_warp.sim.config.RoverConfig`)."""
+        wheels = description.wheels
+        return abs(float(wheels[0].origin[1, 3]) - float(wheels[-1].origin[1, 3])) + 2 * rover.wheel_offset
+
 
 @dataclass
 class VelocityController:

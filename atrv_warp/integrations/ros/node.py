@@ -24,7 +24,7 @@ from sensor_msgs.msg import Imu, JointState, LaserScan
 from std_msgs.msg import String
 
 from atrv_warp.integrations.ros import COMMANDS, GOAL, MAX_ROVERS, PARAMETERS, VELOCITY
-from atrv_warp.integrations.ros.bag import BagWriter, pose_dict
+from atrv_warp.integrations.ros.bag import BagWriter, joint_state_dict, odometry_dict, pose_dict, twist_dict
 from atrv_warp.integrations.ros.base import BaseParams, VelocityController, WheelOdometry, imu_reading, yaw_quaternion
 from atrv_warp.sim.simulator import DRIVE_MODE_TORQUES, DriveMode
 from atrv_warp.task.env import ATRVjrEnv
@@ -105,6 +105,7 @@ class RoverIO:
         if not (math.isfinite(v) and math.isfinite(w)):
             self.node.log.warning(f"ignored non-finite {self.prefix}/cmd_vel (linear.x={v}, angular.z={w})")
             return
+        self.node.record(f"{self.prefix}/cmd_vel", "geometry_msgs/msg/Twist", twist_dict(msg))
         self.controller.command(v, w, self.node.sim.sim_time)
         self.pending = VELOCITY
 
@@ -169,11 +170,22 @@ class RoverIO:
         msg.twist.twist.linear.x, msg.twist.twist.angular.z = odo.linear, odo.angular
         msg.twist.covariance = [v if i == j else 0.0 for i in range(6) for j, v in enumerate(_ODOM_TWIST_VAR)]
         self.odom_pub.publish(msg)
+        node.record(f"{self.prefix}/odom", "nav_msgs/msg/Odometry", odometry_dict(msg), ns)
         truth = Odometry()
         truth.header.stamp, truth.header.frame_id, truth.child_frame_id = _stamp(ns), "world", node.base_frame
         t = truth.pose.pose
         t.position.x, t.position.y, t.position.z = pose[0], pose[1], pose[2]
         t.orientation.x, t.orientation.y, t.orientation.z, t.orientation.w = pose[3], pose[4], pose[5], pose[6]
+        if node.params["truth_noise"] > 0 or node.params["truth_yaw_noise"] > 0:  # a motion-capture or RTK fix
+            e = torch.randn(3, generator=node.noise, dtype=torch.float64).tolist()
+            t.position.x += node.params["truth_noise"] * e[0]
+            t.position.y += node.params["truth_noise"] * e[1]
+            dq = yaw_quaternion(node.params["truth_yaw_noise"] * e[2])  # q <- rotation about world z, times q
+            x, y, z, w = pose[3], pose[4], pose[5], pose[6]
+            t.orientation.x = dq[3] * x - dq[2] * y
+            t.orientation.y = dq[3] * y + dq[2] * x
+            t.orientation.z = dq[3] * z + dq[2] * w
+            t.orientation.w = dq[3] * w - dq[2] * z
         rot = node.chassis_rotation(k)
         v_body = rot.T @ sim.lin_vel[k].to(torch.float64)
         w_body = rot.T @ sim.ang_vel[k].to(torch.float64)
@@ -181,6 +193,7 @@ class RoverIO:
         tw.linear.x, tw.linear.y, tw.linear.z = v_body.tolist()
         tw.angular.x, tw.angular.y, tw.angular.z = w_body.tolist()
         self.truth_pub.publish(truth)
+        node.record(f"{self.prefix}/ground_truth/odom", "nav_msgs/msg/Odometry", odometry_dict(truth), ns)
 
     def publish_joints(self, ns: int) -> None:
         node, k = self.node, self.index
@@ -188,8 +201,17 @@ class RoverIO:
         msg.header.stamp = _stamp(ns)
         msg.name = node.joint_names
         msg.position = node.wheel_positions(k)
-        msg.velocity = node.wheel_velocities(k)
+        noise = node.params["wheel_speed_noise"]
+        velocity = torch.tensor(node.wheel_velocities(k), dtype=torch.float64)
+        if noise > 0:
+            velocity += noise * torch.randn(len(velocity), generator=node.noise, dtype=torch.float64)
+        msg.velocity = velocity.tolist()
+        # effort: the torque each motor applied at the end of the step [N·m] (torque scale and the taper near
+        # its no-load speed included; a real drive reports it from its current), in each joint's sense
+        torque = node.sim.wheel_torque[k].tolist()
+        msg.effort = [node.wheel_sign[j] * torque[j] for j in range(len(torque))]
         self.joint_pub.publish(msg)
+        node.record(f"{self.prefix}/joint_states", "sensor_msgs/msg/JointState", joint_state_dict(msg), ns)
 
     def publish_scan(self, ns: int) -> None:
         """The last scan as ``sensor_msgs/LaserScan`` in the scanner's frame; no return is +inf (REP 117)."""
@@ -248,7 +270,15 @@ class RoverSimNode(Node):
         p = self.params
         k = p["num_rovers"]
         # goal mode reads the policy's observation kernel
-        self.env = ATRVjrEnv(k, variant=p["variant"], task=p["task"], seed=int(p["seed"]))
+        try:
+            self.env = ATRVjrEnv(k, variant=p["variant"], task=p["task"], seed=int(p["seed"]),
+                                 sim_config=p["sim_config"] or None)
+        except ValueError as err:
+            self._fail(f"parameter sim_config: {err}" if p["sim_config"] else str(err))
+        if p["sim_config"]:
+            self.log.info(f"simulator config {p['sim_config']}: {self.env.sim.rover_cfg.torque_scale:g}x motor torque, "
+                          f"{self.env.sim.rover_cfg.payload_mass:g} kg payload, friction "
+                          f"{self.env.sim.contact_cfg.friction:g}, wheel radius {self.env.sim.rover_cfg.wheel_radius:g} m")
         self.sim = self.env.sim
         starts = [[p["x"], p["y"] + i * p["spacing"], p["yaw"]] for i in range(k)]
         if p["task"] != "reach":  # terrain tiles and obstacle layouts come with the task's first episodes
@@ -272,10 +302,10 @@ class RoverSimNode(Node):
         self.odom_frame, self.base_frame, self.imu_frame = p["odom_frame"], p["base_frame"], "cbimu_frame"
         self.joint_names = [w.joint for w in desc.wheels]
         self.side = torch.tensor([w.side for w in desc.wheels])
+        self.wheel_sign = [float(w.drive_sign) for w in desc.wheels]
         self.noise = torch.Generator().manual_seed(int(p["seed"]))
-        track = abs(float(desc.wheels[0].origin[1, 3]) - float(desc.wheels[-1].origin[1, 3])) \
-            + 2 * self.sim.rover_cfg.wheel_offset
-        base = BaseParams(wheel_radius=self.sim.rover_cfg.wheel_radius, track_width=track,
+        base = BaseParams(wheel_radius=self.sim.rover_cfg.wheel_radius,
+                          track_width=BaseParams.track_of(desc, self.sim.rover_cfg),
                           effective_track_factor=p["effective_track_factor"], kp=p["wheel_kp"], ki=p["wheel_ki"],
                           torque_limit=self.env.task_cfg.action_scale, timeout=p["cmd_vel_timeout"])
         qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
@@ -312,6 +342,10 @@ class RoverSimNode(Node):
             self._fail(f"task={p['task']!r} is not a task; use one of {sorted(TASK_VARIANTS)}")
         if p["scan_beams"] < 0 or p["scan_noise"] < 0:
             self._fail("scan_beams and scan_noise must be >= 0")
+        negative = [n for n in ("wheel_speed_noise", "truth_noise", "truth_yaw_noise", "imu_accel_noise",
+                                "imu_gyro_noise") if not p[n] >= 0]
+        if negative:
+            self._fail(f"noise parameter(s) {negative} must be >= 0 (standard deviations)")
         if not 0.0 <= p["scan_dropout"] <= 1.0:
             self._fail(f"scan_dropout is a probability in [0, 1], got {p['scan_dropout']}")
 
@@ -393,9 +427,10 @@ class RoverSimNode(Node):
             accel = (self.sim.lin_vel[rover.index] - rover.prev_vel) / dt
             rover.publish_state(ns, frames[rover.index], accel)
 
-    def spin_simulation(self) -> None:
+    def spin_simulation(self, executor=None) -> None:
         """Step on a timer (period ``step_dt / real_time_factor``; 0 = as fast as possible) until
-        ``duration`` of sim time or shutdown; the executor serves the subscriptions between steps."""
+        ``duration`` of sim time or shutdown; the executor serves the subscriptions between steps
+        (``executor``: one that also serves other nodes of this process, e.g. a scripted driver)."""
         p, sim = self.params, self.sim
         first = self.rovers[0].pose_pub
         while p["wait_for_subscribers"] > 0 and rclpy.ok() and first.get_subscription_count() < p["wait_for_subscribers"]:
@@ -408,7 +443,10 @@ class RoverSimNode(Node):
         self.publish_state()
         period = sim.sim_cfg.step_dt / p["real_time_factor"] if p["real_time_factor"] > 0 else 0.0
         self.step_timer = self.create_timer(period, self.on_step_timer)
-        rclpy.spin_until_future_complete(self, self.finished)
+        if executor is None:
+            rclpy.spin_until_future_complete(self, self.finished)
+        else:
+            executor.spin_until_future_complete(self.finished)
 
     def on_step_timer(self) -> None:
         """One simulator step; state topics every ``publish_rate``; finish at the deadline."""
