@@ -224,7 +224,37 @@ def coulomb_cost() -> str:
                    for r in d["rows"] if r["kind"] == "sim"])
 
 
+def calibration() -> str:
+    """``calibration.json``: a hidden rover's parameters against the fitted ones, per command source."""
+    d = _load("calibration.json")
+    runs = d["runs"]
+    header = ["", "truth"] + [f"fitted ({name} replay)" for name in runs]
+    rows = []
+    for p in runs["cmd_vel"]["fitted"]:
+        truth = d["truth"]["wheel_speed_limit" if p == "speed_limit" else p]
+        cells = []
+        for run in runs.values():
+            if p in run["fitted"]:
+                se, spread = (("—" if v != v else f"{v:.2g}") for v in (run["standard_error"][p], run["spread"][p]))
+                cells.append(f"{run['fitted'][p]:.4g} ± {se}, spread {spread} ({100 * run['relative_error'][p]:.1f} % off)")
+            else:
+                cells.append("not fitted (applied as recorded)")
+        rows.append([p, f"{truth:g}", *cells])
+    for split in ("train", "held_out"):
+        cells = []
+        for run in runs.values():
+            e = run["error_summary"][split]
+            cells.append(f"{100 * e['before_m']:.1f} → {100 * e['after_m']:.1f} cm ({e['reduction']:.1f}×)")
+        rows.append([f"position error, {split.replace('_', '-')} (median)", "", *cells])
+    rows.append(["converged", "", *[("yes" if r["converged"] else "no: " + r["reason"].split(": ", 1)[-1])
+                                     for r in runs.values()]])
+    rows.append(["fit wall time (2 cores)", "", *[f"{r['fit_s']:.0f} s (+ {r['compile_s']:.0f} s compiling)"
+                                                for r in runs.values()]])
+    return _table(header, ["---", "---:"] + ["---"] * len(runs), rows)
+
+
 TABLES: dict[str, Callable[[], str]] = {
+    "calibration": calibration,
     "coulomb_cost": coulomb_cost,
     "physics_report": physics_report,
     "skid_turning": skid_turning,

@@ -1,0 +1,164 @@
+"""Fit the simulator to a drive recorded on a rover: ``python -m atrv_warp.calibrate BAG [--out calibrated.toml]``.
+
+The bag (MCAP; ``ros2 bag record -s mcap /cmd_vel /joint_states /ground_truth/odom``) needs the wheel joint
+states and a reference pose, and the velocity commands or the wheel efforts. The fit replays segments of it
+in many worlds at once and adjusts friction, motor torque scale, payload and wheel radius (``--params``)
+through the simulator's gradients. It writes:
+
+- ``--out`` (``calibrated.toml``): the fitted values, for ``--sim-config`` of ``python -m atrv_warp.train``,
+  ``RoverSim(sim_config=...)``, ``ATRVjrEnv(sim_config=...)`` and the ROS node (``-p sim_config:=...``);
+- a report (``<out>.report.json``): each value with its spread over the starts, and each segment's position
+  error before and after, on the training and the held-out segments;
+- a plot (``<out>.png``): recorded against simulated paths of held-out segments.
+
+A bad bag is one line naming the file and the problem (exit 2), and nothing is written. A fit that does not
+converge says so and writes no calibration file (exit 1).
+
+``--record-example OUT.mcap`` records a bag to try it on: the simulator node driven over ROS 2 by a scripted
+driver (needs the ``ros`` extra); ``--truth FILE`` gives that rover a simulator config the fit is not told.
+docs/calibration.md walks through both.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+__all__ = ["main"]
+
+
+def _parser():
+    from atrv_warp.integrations.calibration.fit import COMMAND_SOURCES, DEFAULT_FIT, FIT_PARAMETERS, CalibrationConfig
+    from atrv_warp.integrations.calibration.log import Topics
+
+    d = CalibrationConfig()
+    p = argparse.ArgumentParser(prog="python -m atrv_warp.calibrate", description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
+                                epilog="docs/calibration.md: how to record a bag on a real rover, and a worked example.")
+    p.add_argument("bag", nargs="?", help="the MCAP bag to fit to")
+    p.add_argument("--out", default="calibrated.toml", help="simulator config to write (default %(default)s)")
+    p.add_argument("--report", help="JSON report (default: <out>.report.json)")
+    p.add_argument("--plot", help="PNG of recorded and simulated paths (default: <out>.png)")
+    p.add_argument("--pose-topic", default=Topics.pose,
+                   help="reference pose, nav_msgs/Odometry or geometry_msgs/PoseStamped (default %(default)s)")
+    p.add_argument("--cmd-vel-topic", default=Topics.cmd_vel, help="velocity commands (default %(default)s)")
+    p.add_argument("--joint-states-topic", default=Topics.joint_states, help="wheel joints (default %(default)s)")
+    p.add_argument("--params", default=",".join(DEFAULT_FIT),
+                   help=f"parameters to fit, comma-separated, from {','.join(FIT_PARAMETERS)} (default %(default)s)")
+    p.add_argument("--command", choices=COMMAND_SOURCES, default=d.command,
+                   help="replay the velocity commands through the base's PI controller, or the wheel efforts")
+    p.add_argument("--sim-config", help="the rover to start from (default: the nominal realistic rover)")
+    p.add_argument("--segment", type=float, default=d.segment_seconds, help="segment length [s] (%(default)s)")
+    p.add_argument("--starts", type=int, default=d.starts, help="starting points (%(default)s)")
+    p.add_argument("--iterations", type=int, default=d.iterations,
+                   help="Adam steps on minibatches, every start at once (%(default)s)")
+    p.add_argument("--polish", type=int, default=d.polish,
+                   help="then L-BFGS iterations on every training segment (%(default)s) ...")
+    p.add_argument("--polish-starts", type=int, default=d.polish_starts,
+                   help="... from each of this many best starts (%(default)s)")
+    p.add_argument("--pose-smoothing", type=float, default=d.pose_smoothing,
+                   help="centred moving average over the reference poses [s] (%(default)s; 0: none)")
+    p.add_argument("--batch", type=int, default=d.batch, help="training segments per start and step (%(default)s)")
+    p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument("--wheel-kp", type=float, default=d.kp, help="the base's wheel-speed PI gains (the node's)")
+    p.add_argument("--wheel-ki", type=float, default=d.ki)
+    p.add_argument("--effective-track-factor", type=float, default=d.effective_track_factor)
+    p.add_argument("--record-example", metavar="OUT.mcap",
+                   help="record a bag to try this on: the simulator node, driven over ROS 2 (needs the ros extra)")
+    p.add_argument("--minutes", type=float, default=5.0, help="--record-example: sim minutes (%(default)s)")
+    p.add_argument("--truth", help="--record-example: the recorded rover's simulator config (hidden from the fit)")
+    p.add_argument("--noise", type=float, default=0.01,
+                   help="--record-example: reference position noise [m] (yaw: noise / 0.5 m) (%(default)s)")
+    return p
+
+
+def _record(args) -> int:
+    try:
+        from atrv_warp.integrations.ros.drive import record_drive_bag
+    except ImportError:
+        from atrv_warp.integrations.ros import MISSING_ROS_MESSAGE
+
+        print(MISSING_ROS_MESSAGE, file=sys.stderr)
+        return 2
+    params = {"truth_noise": args.noise, "truth_yaw_noise": args.noise / 0.5}
+    if args.truth:
+        from atrv_warp.sim.config import load_sim_config
+
+        try:
+            load_sim_config(args.truth)
+        except ValueError as err:
+            print(f"error: --truth: {err}", file=sys.stderr)
+            return 2
+        params["sim_config"] = str(Path(args.truth).resolve())
+    t0 = time.perf_counter()
+    print(f"recording {args.minutes:g} min of scripted driving to {args.record_example} …", flush=True)
+    record_drive_bag(args.record_example, args.minutes, seed=args.seed, parameters=params)
+    print(f"wrote {args.record_example} ({Path(args.record_example).stat().st_size / 1e6:.1f} MB) in "
+          f"{time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    if args.record_example:
+        return _record(args)
+    if not args.bag:
+        _parser().error("give a BAG to fit to (or --record-example OUT.mcap)")
+    from atrv_warp.integrations.calibration import (
+        BagError,
+        CalibrationConfig,
+        CalibrationError,
+        Topics,
+        calibrate,
+        read_drive_log,
+    )
+    from atrv_warp.integrations.calibration.output import format_report, plot_paths, write_report, write_sim_config
+    from atrv_warp.sim.config import load_sim_config
+    from atrv_warp.sim.urdf import load_rover
+
+    out = Path(args.out)
+    report = Path(args.report) if args.report else out.with_suffix(".report.json")
+    plot = Path(args.plot) if args.plot else out.with_suffix(".png")
+    for path in (out, report, plot):
+        if not path.parent.is_dir():
+            print(f"error: {path}: folder {path.parent} does not exist", file=sys.stderr)
+            return 2
+    try:
+        rover, contact = load_sim_config(args.sim_config) if args.sim_config else (None, None)
+        cfg = CalibrationConfig(params=tuple(p.strip() for p in args.params.split(",") if p.strip()),
+                                command=args.command, segment_seconds=args.segment, starts=args.starts,
+                                iterations=args.iterations, polish=args.polish, polish_starts=args.polish_starts,
+                                pose_smoothing=args.pose_smoothing,
+                                batch=args.batch, seed=args.seed, kp=args.wheel_kp,
+                                ki=args.wheel_ki, effective_track_factor=args.effective_track_factor)
+        wheels = {w.joint: (w.side, w.drive_sign) for w in load_rover(rover).wheels}
+        t0 = time.perf_counter()
+        log = read_drive_log(args.bag, wheels, Topics(cmd_vel=args.cmd_vel_topic,
+                                                       joint_states=args.joint_states_topic, pose=args.pose_topic))
+        print(f"{args.bag}: {log.duration:.1f} s of drive, {len(log.pose_time)} poses on {args.pose_topic}, "
+              f"{len(log.joint_time)} joint states, {len(log.cmd_time)} commands "
+              f"(read in {time.perf_counter() - t0:.1f} s)", flush=True)
+        result = calibrate(log, cfg, rover=rover, contact=contact, progress=lambda s: print(s, flush=True))
+    except (BagError, CalibrationError, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(format_report(result))
+    print(f"fit {result.seconds:.1f} s (+ {result.compile_seconds:.1f} s building the rollout and compiling "
+          "its kernels on first use)")
+    write_report(report, result, args.bag)
+    plot_paths(plot, result, args.bag)
+    if not result.converged:
+        print(f"{result.reason}; wrote no calibration (report {report}, plot {plot}). Try more --iterations "
+              "or --starts, or a longer drive with more turns and accelerations.", file=sys.stderr)
+        return 1
+    write_sim_config(out, result, args.bag)
+    spread_note = "" if not any(math.isnan(v) for v in result.spread.values()) else " (one converged start: no spread)"
+    print(f"wrote {out}{spread_note}, {report} and {plot}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

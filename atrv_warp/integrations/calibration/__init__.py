@@ -1,0 +1,19 @@
+"""Calibration of the simulator from a drive recorded on a rover (``python -m atrv_warp.calibrate``).
+
+- :mod:`.log`: the drive read from a ROS 2 bag (MCAP): commands, wheel encoders, reference pose;
+- :mod:`.fit`: the fit of the physical parameters through the simulator's gradients, and its report;
+- :mod:`.output`: the simulator-config TOML, the JSON report and the plot of the paths.
+"""
+
+from atrv_warp.integrations.calibration.fit import (
+    DEFAULT_FIT,
+    FIT_PARAMETERS,
+    CalibrationConfig,
+    CalibrationError,
+    CalibrationResult,
+    calibrate,
+)
+from atrv_warp.integrations.calibration.log import BagError, DriveLog, Topics, read_drive_log
+
+__all__ = ["DEFAULT_FIT", "FIT_PARAMETERS", "BagError", "CalibrationConfig", "CalibrationError", "CalibrationResult",
+           "DriveLog", "Topics", "calibrate", "read_drive_log"]

@@ -1,0 +1,256 @@
+"""Calibration from a recorded bag (#30): the simulator-config file, the bag reader's errors, the rollout's new
+parameters and controller, and a fit that recovers a rover it is not told, recorded from the live ROS 2 node."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import tomllib
+
+import numpy as np
+import pytest
+import torch
+
+from atrv_warp.integrations.calibration import BagError, CalibrationConfig, CalibrationError, read_drive_log
+from atrv_warp.integrations.calibration.fit import make_segments
+from atrv_warp.integrations.ros.bag import BagWriter
+from atrv_warp.integrations.ros.base import BaseParams, VelocityController, side_speeds
+from atrv_warp.sim.config import SimConfig, load_sim_config
+from atrv_warp.sim.urdf import load_rover
+
+WHEELS = {w.joint: (w.side, w.drive_sign) for w in load_rover().wheels}
+TRUTH = {"friction": 0.5, "payload_mass": 12.0, "torque_scale": 0.8, "wheel_radius": 0.125}
+"""examples/calibration_truth.toml, which the hidden-truth test's bag is recorded with."""
+
+
+def _stamp(t: float) -> dict:
+    ns = round(t * 1e9)
+    return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
+
+
+def _odometry(t: float, x: float, y: float, yaw: float, v: float = 0.5) -> dict:
+    vec = {"x": 0.0, "y": 0.0, "z": 0.0}
+    return {"header": {"stamp": _stamp(t), "frame_id": "world"}, "child_frame_id": "base_link",
+            "pose": {"pose": {"position": {"x": x, "y": y, "z": 0.1},
+                              "orientation": {"x": 0.0, "y": 0.0, "z": np.sin(yaw / 2), "w": np.cos(yaw / 2)}},
+                     "covariance": [0.0] * 36},
+            "twist": {"twist": {"linear": {**vec, "x": v}, "angular": vec}, "covariance": [0.0] * 36}}
+
+
+def _joints(t: float, speed: float, names=tuple(WHEELS)) -> dict:
+    return {"header": {"stamp": _stamp(t), "frame_id": ""}, "name": list(names),
+            "position": [0.0] * len(names), "velocity": [WHEELS.get(n, (0, 1.0))[1] * speed for n in names],
+            "effort": [0.0] * len(names)}
+
+
+def _bag(path, seconds=20.0, *, skip=(), pose_type="nav_msgs/msg/Odometry", backwards_at=None, names=tuple(WHEELS)):
+    """A kinematic drive at 0.5 m/s written with BagWriter (the simulator node's writer)."""
+    w = BagWriter(str(path))
+    for k in range(round(seconds / 0.05) + 1):
+        t = k * 0.05
+        if backwards_at is not None and k == backwards_at:
+            t -= 1.0
+        ns = round(t * 1e9)
+        if "/cmd_vel" not in skip and k % 2 == 0:
+            w.write("/cmd_vel", "geometry_msgs/msg/Twist", {"linear": {"x": 0.5, "y": 0.0, "z": 0.0},
+                                                            "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}, ns)
+        if "/ground_truth/odom" not in skip:
+            if pose_type == "nav_msgs/msg/Odometry":
+                w.write("/ground_truth/odom", pose_type, _odometry(t, 0.5 * t, 0.0, 0.0), ns)
+            else:
+                w.write("/ground_truth/odom", "geometry_msgs/msg/Twist",
+                        {"linear": {"x": 0.5, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}, ns)
+        if "/joint_states" not in skip:
+            w.write("/joint_states", "sensor_msgs/msg/JointState", _joints(t, 4.0, names), ns)
+    w.close()
+    return path
+
+
+# ------------------------------------------------------------------ the simulator-config file
+def test_sim_config_file_is_read_by_the_simulator_and_checked(tmp_path):
+    from atrv_warp import RoverSim
+
+    good = tmp_path / "rover.toml"
+    good.write_text("[rover]\ntorque_scale = 0.8\npayload_mass = 12.0\n[contact]\nfriction = 0.5\n"
+                    "[calibration]\nbag = 'x.mcap'\n")
+    rover, contact = load_sim_config(good)
+    assert (rover.torque_scale, rover.payload_mass, contact.friction) == (0.8, 12.0, 0.5)
+    sim = RoverSim(1, sim_config=good)
+    assert sim.params.friction.item() == pytest.approx(0.5)
+    assert sim.params.torque_scale.item() == pytest.approx(0.8)
+    assert sim.model.body_mass.numpy()[sim.layout.chassis_body] == pytest.approx(
+        RoverSim(1).model.body_mass.numpy()[sim.layout.chassis_body] + 12.0)
+    for text, words in (("[rover]\ntorque_scael = 1.0\n", ["torque_scael", "known"]),
+                        ("[rover]\npayload_mass = -3.0\n", ["payload_mass", ">= 0"]),
+                        ("[contact]\nfriction = 'high'\n", ["friction"]),
+                        ("[rover\nx = 1\n", ["not valid TOML"])):
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text)
+        with pytest.raises(ValueError) as err:
+            load_sim_config(bad)
+        assert str(bad) in str(err.value) and all(w in str(err.value) for w in words), str(err.value)
+    with pytest.raises(ValueError, match="cannot read"):
+        load_sim_config(tmp_path / "missing.toml")
+
+
+def test_train_and_env_accept_sim_config(tmp_path):
+    from atrv_warp.rl.config import parse_command
+    from atrv_warp.task.env import ATRVjrEnv
+
+    path = tmp_path / "cal.toml"
+    path.write_text("[contact]\nfriction = 0.7\n")
+    cmd = parse_command(["--sim-config", str(path), "max_minutes=0.1"])
+    assert cmd.train.env.sim_config == str(path)
+    assert dict(cmd.train.env.env_kwargs())["sim_config"] == str(path)
+    env = ATRVjrEnv(2, **dict(cmd.train.env.env_kwargs()))
+    assert env.sim.contact_cfg.friction == 0.7
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[rover]\nwheel_radius = 0\n")
+    with pytest.raises(ValueError, match="wheel_radius"):
+        parse_command([f"sim_config={bad}"])
+
+
+# ------------------------------------------------------------------ the bag
+def test_reader_reads_a_drive(tmp_path):
+    log = read_drive_log(_bag(tmp_path / "ok.mcap"), WHEELS)
+    assert log.duration == pytest.approx(20.0)
+    assert np.allclose(log.wheel_speed, 4.0) and log.effort is not None
+    assert log.pose[-1, 0] == pytest.approx(10.0) and np.allclose(log.body_velocity[:, 0], 0.5)
+    assert len(log.cmd_time) == 201 and np.allclose(log.cmd[:, 0], 0.5)
+
+
+@pytest.mark.parametrize("case", ["not_mcap", "truncated", "no_joint_states", "wrong_type", "backwards",
+                                  "missing_wheel", "too_short"])
+def test_bad_bags_are_one_line_errors_naming_the_file(tmp_path, case):
+    path = tmp_path / f"{case}.mcap"
+    expect = {"not_mcap": "not an MCAP file", "truncated": "truncated", "no_joint_states": "no topic /joint_states",
+              "wrong_type": "expected nav_msgs/msg/Odometry", "backwards": "timestamps go backwards",
+              "missing_wheel": "lacks wheel joint", "too_short": "too short to fit"}[case]
+    if case == "not_mcap":
+        path.write_text("this is a CSV file, not a bag\n1,2,3\n")
+    elif case == "truncated":
+        data = _bag(tmp_path / "full.mcap").read_bytes()
+        path.write_bytes(data[: len(data) // 2])
+    elif case == "no_joint_states":
+        _bag(path, skip=("/joint_states",))
+    elif case == "wrong_type":
+        _bag(path, pose_type="geometry_msgs/msg/Twist")
+    elif case == "backwards":
+        _bag(path, backwards_at=100)
+    elif case == "missing_wheel":
+        _bag(path, names=tuple(WHEELS)[:3])
+    else:
+        _bag(path, seconds=3.0)
+    with pytest.raises((BagError, CalibrationError)) as err:
+        log = read_drive_log(path, WHEELS)
+        make_segments(log, CalibrationConfig(), BaseParams(wheel_radius=0.125, track_width=0.6))
+    message = str(err.value)
+    assert expect in message and str(path) in message and "\n" not in message, message
+    if case == "no_joint_states":
+        assert "/ground_truth/odom (nav_msgs/msg/Odometry)" in message  # lists what the bag has
+
+
+def test_cli_bad_bag_writes_nothing(tmp_path, run_module):
+    path = tmp_path / "notes.mcap"
+    path.write_text("hello")
+    out = tmp_path / "cal.toml"
+    proc = run_module("atrv_warp.calibrate", str(path), "--out", str(out), check=False)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().count("\n") == 0 and "not an MCAP file" in proc.stderr and str(path) in proc.stderr
+    assert list(tmp_path.iterdir()) == [path]
+    good = _bag(tmp_path / "good.mcap")
+    proc = run_module("atrv_warp.calibrate", str(good), "--out", str(tmp_path / "missing" / "cal.toml"), check=False)
+    assert proc.returncode == 2 and "does not exist" in proc.stderr and str(tmp_path / "missing") in proc.stderr
+    assert sorted(tmp_path.iterdir()) == sorted([path, good])
+
+
+# ------------------------------------------------------------------ the rollout
+def test_rollout_controller_matches_the_base_driver():
+    """The PI inside the differentiable rollout drives as the ROS base's VelocityController does on RoverSim."""
+    from atrv_warp import RoverSim
+    from atrv_warp.sim.diff import DiffRollout, WheelSpeedPI
+
+    base = BaseParams(wheel_radius=0.125, track_width=0.6)
+    steps = 30
+    sim = RoverSim(1, sim=SimConfig(mass_matrix_interval=1, use_tile_gemm=False, use_graph=False))  # as the rollout
+    side = torch.tensor([w.side for w in sim.description.wheels])
+    ctl = VelocityController(base)
+    ctl.command(0.8, 0.6, now=0.0)
+    targets = torch.zeros(steps, 1, 2)
+    applied = torch.zeros(steps, 2)  # each side's mean motor torque in the step's last substep (the node's effort)
+    for t in range(steps):
+        targets[t, 0] = ctl.wheel_targets(0.0)
+        sim.step(ctl.torques(side_speeds(sim.wheel_speed, side)[0], now=0.0, dt=0.05)[None])
+        applied[t] = torch.stack([sim.wheel_torque[0, side == s].mean() for s in (0, 1)])
+    roll = DiffRollout(1, steps=steps, controller=WheelSpeedPI(base.kp, base.ki, base.torque_limit))
+    poses, torques = roll(targets, wheel_torques=True)
+    assert poses[-1, 0, :3].tolist() == pytest.approx(sim.root_pose[0, :3].tolist(), abs=2e-4)
+    assert applied.abs().max() > 5.0  # the motors worked
+    assert torques[:, 0].flatten().tolist() == pytest.approx(applied.flatten().tolist(), abs=0.05)
+
+
+def test_rollout_gradients_of_motor_and_wheel_parameters():
+    """d(final x)/d(torque scale) and /d(wheel radius), per world, against central differences."""
+    from atrv_warp.sim.diff import DiffRollout
+
+    roll = DiffRollout(2, steps=10)
+    actions = torch.full((10, 2, 2), 0.2)
+    state = roll.initial_state(torch.tensor([[0.0, -2.0, 0.0], [0.0, 2.0, 0.0]]))
+    for name, value, h in (("torque_scale", torch.tensor([1.0, 0.8]), 1e-2),
+                           ("wheel_radius", torch.tensor([0.125, 0.13]), 5e-4)):
+        v = value.clone().requires_grad_(True)
+        (roll(actions, state, **{name: v})[-1, :, 0].sum()).backward()
+        fd = [(roll(actions, state, **{name: value + h * e})[-1, i, 0]
+               - roll(actions, state, **{name: value - h * e})[-1, i, 0]).item() / (2 * h)
+              for i, e in enumerate(torch.eye(2))]
+        assert v.grad.tolist() == pytest.approx(fd, rel=0.05), name
+    # the motors' torques (what the fit matches to recorded efforts) carry the torque scale's gradient too
+    scale = torch.tensor([1.0, 0.8])
+    v = scale.clone().requires_grad_(True)
+    roll(actions, state, torque_scale=v, wheel_torques=True)[1].sum().backward()
+    fd = [(roll(actions, state, torque_scale=scale + 1e-2 * e, wheel_torques=True)[1][:, i].sum()
+           - roll(actions, state, torque_scale=scale - 1e-2 * e, wheel_torques=True)[1][:, i].sum()).item() / 2e-2
+          for i, e in enumerate(torch.eye(2))]
+    assert v.grad.tolist() == pytest.approx(fd, rel=0.05)
+
+
+def test_moving_state_sets_the_recorded_motion():
+    from atrv_warp.sim.diff import DiffRollout
+
+    roll = DiffRollout(1, steps=1)
+    q, qd = roll.moving_state(torch.tensor([[1.0, 2.0, 0.7]]), torch.tensor([[0.6, 0.1]]), torch.tensor([0.4]),
+                              torch.tensor([[3.0, 5.0]]))
+    sim = roll.sim
+    sim.set_state({"joint_q": q.detach(), "joint_qd": qd.detach(), "commands": torch.zeros(1, 2),
+                   "sim_time": torch.tensor(0.0, dtype=torch.float64)})
+    c, s = np.cos(0.7), np.sin(0.7)
+    assert sim.lin_vel[0, :2].tolist() == pytest.approx([c * 0.6 - s * 0.1, s * 0.6 + c * 0.1], abs=1e-5)
+    assert sim.ang_vel[0, 2].item() == pytest.approx(0.4, abs=1e-6)
+    expected = [3.0 if w.side == 0 else 5.0 for w in sim.description.wheels]
+    assert sim.wheel_speed[0].tolist() == pytest.approx(expected, abs=1e-5)
+
+
+# ------------------------------------------------------------------ the whole thing, hidden truth
+@pytest.fixture(scope="module")
+def ros_env():
+    pytest.importorskip("rclpy", reason="ROS 2 extra not installed: pip install -e '.[ros]'")
+    return dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(random.randint(101, 200)),
+                PYTHONUNBUFFERED="1")
+
+
+@pytest.mark.slow  # a live ROS 2 node records the bag; the fit takes about a minute
+def test_fit_recovers_a_hidden_rover_from_a_recorded_bag(tmp_path, run_module, ros_env):
+    bag, out = tmp_path / "drive.mcap", tmp_path / "calibrated.toml"
+    run_module("atrv_warp.calibrate", "--record-example", str(bag), "--minutes", "4", "--truth",
+               "examples/calibration_truth.toml", "--noise", "0.01", "--seed", "3", env=ros_env, timeout=600)
+    proc = run_module("atrv_warp.calibrate", str(bag), "--out", str(out), timeout=900)
+    fitted = tomllib.loads(out.read_text())
+    values = {**fitted["rover"], **fitted["contact"]}
+    for name, truth in TRUTH.items():
+        assert values[name] == pytest.approx(truth, rel=0.05), (name, values, proc.stdout[-3000:])
+    report = json.loads(out.with_suffix(".report.json").read_text())
+    assert report["converged"]
+    assert report["error_summary"]["held_out"]["reduction"] >= 5.0, report["error_summary"]
+    assert out.with_suffix(".png").stat().st_size > 10_000
+    load_sim_config(out)  # what it wrote is a simulator config
