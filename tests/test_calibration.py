@@ -118,6 +118,13 @@ def test_reader_reads_a_drive(tmp_path):
     assert np.allclose(log.wheel_speed, 4.0) and log.effort is not None
     assert log.pose[-1, 0] == pytest.approx(10.0) and np.allclose(log.body_velocity[:, 0], 0.5)
     assert len(log.cmd_time) == 201 and np.allclose(log.cmd[:, 0], 0.5)
+    folder = tmp_path / "rosbag2"  # what `ros2 bag record -s mcap -o rosbag2` leaves: a folder with one .mcap
+    folder.mkdir()
+    (tmp_path / "ok.mcap").rename(folder / "rosbag2_0.mcap")
+    assert read_drive_log(folder, WHEELS).duration == pytest.approx(20.0)
+    (folder / "rosbag2_1.mcap").write_bytes(b"")
+    with pytest.raises(BagError, match="2 .mcap files; give one of them"):
+        read_drive_log(folder, WHEELS)
 
 
 @pytest.mark.parametrize("case", ["not_mcap", "truncated", "no_joint_states", "wrong_type", "backwards",

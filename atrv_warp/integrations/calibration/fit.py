@@ -504,13 +504,14 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
             paths = {"recorded": seg.ref_pose[index], "nominal": path0.transpose(1, 0, 2),
                      "calibrated": path1.transpose(1, 0, 2), "t0": seg.t0[index]}
     # converged: the best start stopped moving (over the last quarter of the steps, within 2 % of each
-    # parameter's range) and fits the training segments better than the rover it started from
+    # parameter's range) and fits the training and the held-out segments better than the rover it started from
     tail = tail[:, best]
     drift = ((tail.max(0).values - tail.min(0).values) / span).max().item()
-    improved = errors["train"]["loss_after"] < errors["train"]["loss_before"]
+    improved = all(errors[split]["loss_after"] < errors[split]["loss_before"] for split in errors)
     converged = drift < 0.02 and polish_moved < 0.05 and improved
     reason = ("converged" if converged else
-              "did not converge: the fit is no better than the starting rover" if not improved else
+              "did not converge: the fit is no better than the starting rover on the training or the held-out "
+              "segments" if not improved else
               f"did not converge: the parameters still moved {100 * drift:.1f} % of their range over the last "
               f"{len(tail)} steps" if drift >= 0.02 else
               f"did not converge: the final full-batch steps moved a parameter {100 * polish_moved:.1f} % of its range")

@@ -108,6 +108,12 @@ def read_drive_log(path, wheels: dict[str, tuple[int, float]], topics: Topics = 
     from mcap_ros2.decoder import DecoderFactory
 
     path = Path(path)
+    if path.is_dir():  # a rosbag2 folder (metadata.yaml and its .mcap files)
+        files = sorted(path.glob("*.mcap"))
+        if len(files) != 1:
+            raise BagError(f"{path}: a bag folder with {len(files)} .mcap files; give one of them"
+                           + (f" ({', '.join(f.name for f in files)})" if files else ""))
+        path = files[0]
     if not path.is_file():
         raise BagError(f"{path}: no such file")
     needed = {topics.pose: POSE_TYPES, topics.joint_states: _JOINT_TYPES, topics.cmd_vel: _CMD_TYPES}
