@@ -9,6 +9,7 @@ fails the build (mkdocs.yml: ``hooks: [docs/hooks.py]``).
 from __future__ import annotations
 
 import json
+import math
 import re
 from collections.abc import Callable
 from pathlib import Path
@@ -235,7 +236,7 @@ def calibration() -> str:
         cells = []
         for run in runs.values():
             if p in run["fitted"]:
-                se, spread = (("—" if v != v else f"{v:.2g}") for v in (run["standard_error"][p], run["spread"][p]))
+                se, spread = (("—" if math.isnan(v) else f"{v:.2g}") for v in (run["standard_error"][p], run["spread"][p]))
                 cells.append(f"{run['fitted'][p]:.4g} ± {se}, spread {spread} ({100 * run['relative_error'][p]:.1f} % off)")
             else:
                 cells.append("not fitted (applied as recorded)")
