@@ -39,6 +39,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--randomization", default="none", metavar="PRESET",
                         help="evaluate under domain randomization: none | mild | wide (each world draws its physics, "
                              "sensor noise and latency from the evaluation seed); prints success by parameter bin")
+    parser.add_argument("--sim-config", metavar="FILE",
+                        help="simulator-config TOML, e.g. atrv-calibrate's fit of a real rover (docs/calibration.md)")
     parser.add_argument("--device", default="cpu", help="simulation device")
     parser.add_argument("--json", metavar="FILE", help="also write the figures to FILE")
     parser.add_argument("--rerun", metavar="FILE.rrd", help="record the episodes to a Rerun file")
@@ -105,10 +107,18 @@ def main(argv: list[str] | None = None) -> int:
     except (RuntimeError, ValueError) as err:
         return error_line(parser.prog, f"--device {args.device!r}: {err}")
     seed = EVAL_SEED if args.seed is None else args.seed
+    if args.sim_config:
+        from atrv_warp.sim.config import load_sim_config
+
+        try:
+            load_sim_config(args.sim_config)
+        except ValueError as err:
+            return error_line(parser.prog, f"--sim-config: {err}")
     from atrv_warp.task.env import ATRVjrEnv
 
     recorder, on_step, video = None, None, None
-    env = ATRVjrEnv(args.episodes, device=args.device, task=task, randomization=randomization)
+    env = ATRVjrEnv(args.episodes, device=args.device, task=task, randomization=randomization,
+                    sim_config=args.sim_config)
     if args.rerun or args.serve or args.real_time:
         from atrv_warp.integrations.recorder import RerunRecorder
 

@@ -111,6 +111,17 @@ def test_train_and_env_accept_sim_config(tmp_path):
         parse_command([f"sim_config={bad}"])
 
 
+def test_evaluate_runs_on_a_sim_config_and_refuses_a_bad_one(tmp_path, run_module):
+    path = tmp_path / "cal.toml"
+    path.write_text("[contact]\nfriction = 0.7\n")
+    proc = run_module("atrv_warp.evaluate", "--episodes", "4", "--sim-config", str(path))
+    assert "success" in proc.stdout
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[contact]\nfriction = -1.0\n")
+    proc = run_module("atrv_warp.evaluate", "--episodes", "4", "--sim-config", str(bad), check=False)
+    assert proc.returncode == 2 and str(bad) in proc.stderr and "friction" in proc.stderr
+
+
 # ------------------------------------------------------------------ the bag
 def test_reader_reads_a_drive(tmp_path):
     log = read_drive_log(_bag(tmp_path / "ok.mcap"), WHEELS)
