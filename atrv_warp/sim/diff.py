@@ -1,6 +1,7 @@
-"""Differentiable rollouts: gradients of a chassis trajectory with respect to wheel-torque
-actions, the initial state, the friction coefficient and the chassis mass, through Newton's Featherstone solver
-and our contact kernel, recorded on a ``wp.Tape`` and exposed as a ``torch.autograd.Function``.
+"""Differentiable rollouts: gradients of a chassis trajectory (and of the wheel speeds and motor torques) with
+respect to wheel-torque actions or wheel-speed targets, the initial state, and each world's friction coefficient,
+chassis mass, motor torque scale and speed limit and wheel radius, through Newton's Featherstone solver and our
+contact kernel, recorded on a ``wp.Tape`` and exposed as a ``torch.autograd.Function``.
 
 What makes the gradients agree with finite differences (the docs' differentiable-simulation page):
 
