@@ -321,7 +321,8 @@ class DiffRollout:
                 if self._tape is not None and self.wrench_fix:
                     self._tape.record_func(backward=restore_external_wrench(s_out, s_in), arrays=[])
                 k += 1
-            # the torque of the step's last substep, as the simulator's wheel_torque (and a ROS node's effort)
+            # the torque of the step's last substep, as the simulator's wheel_torque (and a ROS node's effort);
+            # recomputed from that substep's inputs, because the substeps' shared torque scratch is overwritten
             wp.launch(gather_side_torques, dim=(n, len(sim.description.wheels)),
                       inputs=[lay, self._commands[t], self._physics, self.states[k - 1].joint_qd, self._side_weight],
                       outputs=[self._side_torques[t]], device=sim.device)
@@ -419,8 +420,9 @@ class DiffRollout:
         qd[:, d + 0], qd[:, d + 1] = vx - w * ry, vy + w * rx
         qd[:, d + 5] = w
         ws = torch.as_tensor(wheel_speed, dtype=torch.float32)
+        dofs = lay.wheel_dof.numpy()
         for j, wheel in enumerate(sim.description.wheels):
-            qd[:, int(lay.wheel_dof.numpy()[j])] = wheel.drive_sign * ws[:, wheel.side]
+            qd[:, int(dofs[j])] = wheel.drive_sign * ws[:, wheel.side]
         return q.reshape(-1), qd.reshape(-1)
 
     def __call__(self, actions: torch.Tensor, initial_state: tuple[torch.Tensor, torch.Tensor] | None = None,

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from atrv_warp.integrations.calibration.log import DriveLog
-from atrv_warp.integrations.ros.base import BaseParams
+from atrv_warp.integrations.ros.base import BaseParams, VelocityController
 from atrv_warp.sim.config import ContactConfig, RoverConfig, get_variant
 
 __all__ = ["COMMAND_SOURCES", "DEFAULT_FIT", "FIT_PARAMETERS", "MOTOR_PARAMETERS", "CalibrationConfig",
@@ -193,22 +193,18 @@ class CalibrationResult:
 
 
 def _controller(log: DriveLog, base: BaseParams, grid: np.ndarray, wheel: np.ndarray, dt: float):
-    """The base's PI controller replayed along the log: wheel-speed targets and the integral before each step."""
-    targets = np.zeros((len(grid), 2))
-    if len(log.cmd_time):
-        idx = np.searchsorted(log.cmd_time, grid + 1e-6, side="right") - 1
-        live = (idx >= 0) & (grid - log.cmd_time[np.maximum(idx, 0)] <= base.timeout + 1e-9)
-        v, w = log.cmd[np.maximum(idx, 0), 0], log.cmd[np.maximum(idx, 0), 1]
-        half = 0.5 * w * base.effective_track
-        targets = np.where(live[:, None], np.stack([v - half, v + half], -1) / base.wheel_radius, 0.0)
-    integral = np.zeros((len(grid), 2))
-    acc = np.zeros(2)
-    for k in range(len(grid)):
-        integral[k] = acc
-        error = targets[k] - wheel[k]
-        candidate = acc + error * dt
-        saturated = np.abs(base.kp * error + base.ki * candidate) > base.torque_limit
-        acc = np.where(saturated, acc, candidate)
+    """The base's own controller (:class:`~atrv_warp.integrations.ros.base.VelocityController`) replayed along the
+    log on the recorded wheel speeds: each step's wheel-speed targets, and its PI integral before the step."""
+    ctl = VelocityController(base)
+    targets, integral = np.zeros((len(grid), 2)), np.zeros((len(grid), 2))
+    received = np.searchsorted(log.cmd_time, grid + 1e-6, side="right")  # commands received by each step
+    for k, now in enumerate(grid):
+        if received[k] and (k == 0 or received[k] != received[k - 1]):
+            i = received[k] - 1
+            ctl.command(float(log.cmd[i, 0]), float(log.cmd[i, 1]), float(log.cmd_time[i]))
+        integral[k] = ctl.integral.numpy()
+        targets[k] = ctl.wheel_targets(float(now)).numpy()
+        ctl.torques(torch.as_tensor(wheel[k], dtype=torch.float32), float(now), dt)
     return targets, integral
 
 
