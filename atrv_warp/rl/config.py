@@ -149,6 +149,10 @@ class OptimConfig:
     lr: float = 1e-3
     """Adam learning rate, actor, critics and temperature (on the reach task 1e-3 first passes 90 % in
     several times fewer gradient steps than 3e-4; docs/training.md has the figures)."""
+    lr_final_fraction: float = 1.0
+    """The learning rate falls linearly with the frames collected, from ``lr`` at the start to ``lr`` x this at
+    ``total_frames`` (1: constant). Annealing lets a run settle on a policy instead of drifting past its best
+    (docs/randomization.md has the figures)."""
     gamma: float = 0.99
     """Discount."""
     tau: float = 0.005
@@ -257,6 +261,8 @@ class TrainConfig:
                 value = getattr(getattr(self, group), name)
                 if not value > 0:
                     raise ValueError(f"train config: {name} must be > 0, got {value}")
+        if not 0.0 <= self.optim.lr_final_fraction <= 1.0:
+            raise ValueError(f"train config: lr_final_fraction must be in [0, 1], got {self.optim.lr_final_fraction}")
         if not 0.0 < self.optim.gamma <= 1.0:
             raise ValueError(f"train config: gamma must be in (0, 1], got {self.optim.gamma}")
         if self.run.max_minutes < 0 or self.collector.init_random_frames < 0 or self.collector.envs_per_collector < 0:

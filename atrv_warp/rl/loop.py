@@ -16,7 +16,7 @@ from atrv_warp.policy import Normalize, load_policy, make_actor, save_policy
 from atrv_warp.rl.checkpoint import Checkpoint, RunState, load_checkpoint, warm_start
 from atrv_warp.rl.collectors import COLLECTORS, WORKER_KEY, make_collector, pin_to_core
 from atrv_warp.rl.config import TrainConfig, flat_config, to_toml
-from atrv_warp.rl.learner import ALGOS, make_buffer, make_learner
+from atrv_warp.rl.learner import ALGOS, annealed_lr, make_buffer, make_learner, set_lr
 from atrv_warp.rl.reporting import Loggers, LossMeans, Progress, Stats, make_loggers, pct, plot_curve
 from atrv_warp.runtime import device_summary
 from atrv_warp.task.config import get_task
@@ -238,6 +238,8 @@ class TrainLoop:
             self.learner = make_learner(self.cfg, self.actor, self.normalize)
             if self.algo.on_policy:
                 return 0.0  # this batch's actions were random (init_random_frames): not the policy's
+        if self.cfg.optim.lr_final_fraction != 1.0:
+            set_lr(self.learner, annealed_lr(self.cfg, self.state.frames))
         if self.algo.on_policy:
             for out in self.learner.learn_batch(data):
                 self.losses.add(out)
@@ -261,6 +263,7 @@ class TrainLoop:
             self.log(name, value)
         self.log("wall_time_s", st.elapsed_s)
         if self.learner is not None:
+            self.log("lr", annealed_lr(cfg, st.frames))
             for name, value in self.learner.scalars().items():
                 self.log(name, value)
             result = self.evaluator(st.frames)

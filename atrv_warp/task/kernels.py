@@ -370,16 +370,44 @@ def write_scan_observation(
     ranges: wp.array2d(dtype=float),
     nonfinite: wp.array(dtype=wp.int32),
     first_column: int,
+    sectors: int,
     clip: float,
     obs: wp.array2d(dtype=float),
 ):
     """Observed scan (dim = (N, sectors)): each sector's nearest return, min(r, clip) / clip; a
     non-finite world observes an empty scan (1)."""
     world, sector = wp.tid()
-    sectors = obs.shape[1] - first_column
     per = ranges.shape[1] // sectors
     r = clip
     if nonfinite[world] == 0:
         for i in range(per):
             r = wp.min(r, ranges[world, sector * per + i])
     obs[world, first_column + sector] = r / clip
+
+
+@wp.kernel
+def record_actions(actions: wp.array2d(dtype=float), history: wp.array2d(dtype=wp.vec2)):
+    """Push each world's action, clipped to [-1, 1], onto the front of its history (newest first; dim = N)."""
+    world = wp.tid()
+    n = history.shape[1]
+    for j in range(n - 1):
+        k = n - 1 - j
+        history[world, k] = history[world, k - 1]
+    history[world, 0] = wp.vec2(wp.clamp(actions[world, 0], -1.0, 1.0), wp.clamp(actions[world, 1], -1.0, 1.0))
+
+
+@wp.kernel
+def clear_actions(mask: wp.array(dtype=bool), history: wp.array2d(dtype=wp.vec2)):
+    """Forget the masked worlds' actions (a new episode has chosen none yet; dim = (N, history))."""
+    world, k = wp.tid()
+    if mask[world]:
+        history[world, k] = wp.vec2(0.0, 0.0)
+
+
+@wp.kernel
+def write_action_observation(history: wp.array2d(dtype=wp.vec2), first_column: int, obs: wp.array2d(dtype=float)):
+    """Observed last actions (dim = (N, history)): step k's [left, right] at ``first_column + 2 k``."""
+    world, k = wp.tid()
+    a = history[world, k]
+    obs[world, first_column + 2 * k] = a[0]
+    obs[world, first_column + 2 * k + 1] = a[1]
