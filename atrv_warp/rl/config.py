@@ -198,7 +198,8 @@ class LoggingConfig:
     eval_every_frames: int = 100_000
     """Deterministic evaluation interval [frames]."""
     eval_episodes: int = 256
-    """Seeded episodes per periodic evaluation (fixed set, seed EVAL_SEED)."""
+    """Seeded episodes per periodic evaluation (a fixed validation set, seed ``VALIDATION_SEED``; the best policy is
+    picked on it, and only the final evaluation sees the test set, seed ``EVAL_SEED``)."""
     final_eval_episodes: int = 1000
     """Episodes of the final evaluation of the best policy."""
     logger: Literal["csv", "tensorboard", "rerun", "wandb", "mlflow"] = "csv"

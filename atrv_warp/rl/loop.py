@@ -21,7 +21,7 @@ from atrv_warp.rl.reporting import Loggers, LossMeans, Progress, Stats, make_log
 from atrv_warp.runtime import device_summary
 from atrv_warp.task.config import get_task
 from atrv_warp.task.env import ATRVjrEnv
-from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result
+from atrv_warp.task.evaluation import EVAL_SEED, VALIDATION_SEED, evaluate, format_result
 from atrv_warp.task.spec import observation_fields
 
 __all__ = ["Evaluator", "TrainLoop", "train"]
@@ -88,7 +88,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
 
 
 class Evaluator:
-    """The periodic deterministic evaluation on the fixed seeded set.
+    """The periodic deterministic evaluation on the fixed seeded validation set (``VALIDATION_SEED``).
 
     ``recording``: a Rerun recording (the one the scalars go to, with ``logger=rerun``) that gets
     two worlds of every evaluation, on its ``frames`` timeline; ``None``: nothing is recorded.
@@ -98,7 +98,7 @@ class Evaluator:
 
     def __init__(self, cfg: TrainConfig, actor, *, recording=None, video_dir: Path | None = None, gif: bool = False):
         self.cfg, self.actor = cfg, actor
-        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=EVAL_SEED, **dict(cfg.env.env_kwargs()))
+        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=VALIDATION_SEED, **dict(cfg.env.env_kwargs()))
         self.recorder = None
         if recording is not None:
             from atrv_warp.integrations.recorder import RerunRecorder
@@ -120,7 +120,7 @@ class Evaluator:
             hooks.append(self.recorder.env_hook())
         if self.video is not None:
             hooks.append(self.video.env_hook())
-        result = evaluate(self.actor, num_episodes=self.cfg.logging.eval_episodes, seed=EVAL_SEED, env=self.env,
+        result = evaluate(self.actor, num_episodes=self.cfg.logging.eval_episodes, seed=VALIDATION_SEED, env=self.env,
                           on_step=_each(hooks))
         self.actor.train()
         if self.video is not None:

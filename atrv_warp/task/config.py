@@ -28,6 +28,14 @@ class TaskConfig:
     """Weight of the heading-progress term (previous |error| - |error|) [1/rad]."""
     step_penalty: float = 0.03
     """Subtracted from every non-terminal reward."""
+    clearance_weight: float = 0.0
+    """Weight of the clearance term [1/m]: each non-terminal step costs this times how far the nearest obstacle's
+    bounding circle reaches inside ``clearance_radius`` of the chassis origin (0: no term). A dense cost of
+    passing close, which a rare collision penalty alone does not teach a policy that cannot be sure of its grip
+    or its delay."""
+    clearance_radius: float = 1.0
+    """Distance from the chassis origin [m] inside which an obstacle costs (the rover's half length, 0.45 m,
+    plus the margin it should keep)."""
     action_scale: float = 20.0
     """Wheel torque per unit action [N·m]."""
 
@@ -69,6 +77,9 @@ class TaskConfig:
             raise ValueError(f"obstacle_size must be 0 < low <= high, got {self.obstacle_size}")
         if self.action_history < 0:
             raise ValueError(f"action_history must be >= 0 steps, got {self.action_history}")
+        if self.clearance_weight < 0 or self.clearance_radius < 0:
+            raise ValueError(f"clearance_weight and clearance_radius must be >= 0, got {self.clearance_weight}, "
+                             f"{self.clearance_radius}")
         if self.target_distance is not None and not 0 < self.target_distance[0] <= self.target_distance[1]:
             raise ValueError(f"target_distance must be 0 < low <= high, got {self.target_distance}")
 
@@ -77,7 +88,8 @@ TASK_VARIANTS: dict[str, TaskConfig] = {
     "reach": TaskConfig(),
     "nav": TaskConfig(
         terrain="rolling", target_distance=(5.0, 10.0), obstacles=6, obstacles_on_path=1, max_steps=300,
-        flip_roll=0.5, scan_beams=64, scan_sectors=16, action_history=3),
+        flip_roll=0.5, scan_beams=64, scan_sectors=16, action_history=3, failure_reward=-10.0, heading_weight=1.0,
+        clearance_weight=0.5),
 }
 """Registered tasks. ``reach``: the reference task (flat, no obstacles, no scanner). ``nav``: rolling
 terrain, six obstacles (one across the straight line to the target), targets 5–10 m away, 15 s

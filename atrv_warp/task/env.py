@@ -163,6 +163,8 @@ class ATRVjrEnv(EnvBase):
         p.failure_reward = c.failure_reward
         p.heading_weight = c.heading_weight
         p.step_penalty = c.step_penalty
+        p.clearance_weight = c.clearance_weight
+        p.clearance_radius = c.clearance_radius
         self._params = p
         sp = SceneParams()
         sp.distance_min, sp.distance_max = c.target_distance or (c.reach_radius, 2.0 * c.spawn_bound)
@@ -402,8 +404,9 @@ class ATRVjrEnv(EnvBase):
         sim.step()
         if self.scanner is not None:
             self.scanner.scan()
-        wp.launch(compute_step_outcome, dim=self.num_envs, inputs=[self._params, self._task, self._rover],
-                  outputs=[self._out], device=self._wp_device)
+        wp.launch(compute_step_outcome, dim=self.num_envs,
+                  inputs=[self._params, self._task, self._rover, sim.obstacles.kernel], outputs=[self._out],
+                  device=self._wp_device)
         self._launch_observation_tail()
         self._add_noise(self._all)
         if self._draws_on_tick:

@@ -103,14 +103,16 @@ class EndReason(IntEnum):
 END_REASONS: tuple[str, ...] = tuple(r.name.lower() for r in EndReason)
 """``END_REASONS[end_reason]`` names an end reason."""
 
-REWARD_TERMS: tuple[str, ...] = ("progress", "heading", "step_penalty", "success", "failure")
+REWARD_TERMS: tuple[str, ...] = ("progress", "heading", "step_penalty", "success", "failure", "clearance")
 """Terms of the reward, in the order of the ``reward_terms`` kernel output; they sum to ``reward``.
 
 - ``progress``: previous distance to the target minus the distance now [m] (non-terminal steps);
 - ``heading``: ``heading_weight`` x (previous |heading error| - |heading error|) (non-terminal);
 - ``step_penalty``: ``-step_penalty`` on every non-terminal step;
 - ``success``: ``success_reward`` on reaching the target;
-- ``failure``: ``failure_reward`` on a wall, chassis or obstacle contact, or a flip.
+- ``failure``: ``failure_reward`` on a wall, chassis or obstacle contact, or a flip;
+- ``clearance``: ``-clearance_weight`` x how far the nearest obstacle's bounding circle reaches inside
+  ``clearance_radius`` of the chassis origin [m] (non-terminal; 0 without obstacles or weight).
 """
 
 
