@@ -90,6 +90,11 @@ def _train_seed(args, name: str, extra: dict, seed: int) -> dict:
     return r
 
 
+def _title(algo: str, preset: str, overrides: dict | None) -> str:
+    shown = "".join(f" {k}={v}" for k, v in (overrides or {}).items())
+    return f"{algo.upper()}, {preset} preset{shown}: validation success per seed"
+
+
 def _figure(runs: list[dict], threshold: float, title: str, path: Path) -> None:
     import matplotlib
 
@@ -149,8 +154,8 @@ def main() -> int:
         if not out.is_file():
             parser.error(f"--figure-only: no results file at {out}")
         earlier = json.loads(out.read_text())
-        _figure(earlier["seeds"], earlier["threshold"],
-                f"{earlier['algo'].upper()}, {earlier['preset']} preset: evaluation success per seed", Path(args.figure))
+        _figure(earlier["seeds"], earlier["threshold"], _title(earlier["algo"], earlier["preset"], earlier.get("overrides")),
+                Path(args.figure))
         print(f"figure: {args.figure} (from {out})")
         return 0
     if args.summarize:
@@ -207,8 +212,7 @@ def main() -> int:
           f"{'n/a' if compile_s is None else f'{compile_s:.1f} s'}, excluded)")
     print(f"written to {out}")
     if args.figure:
-        _figure(runs, args.threshold, f"{cfg.optim.algo.upper()}, {args.config} preset: evaluation success per seed",
-                Path(args.figure))
+        _figure(runs, args.threshold, _title(cfg.optim.algo, args.config, extra), Path(args.figure))
         print(f"figure: {args.figure}")
     return 0 if len(times) == len(runs) else 1
 

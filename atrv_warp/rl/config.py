@@ -151,8 +151,7 @@ class OptimConfig:
     several times fewer gradient steps than 3e-4; docs/training.md has the figures)."""
     lr_final_fraction: float = 1.0
     """The learning rate falls linearly with the frames collected, from ``lr`` at the start to ``lr`` x this at
-    ``total_frames`` (1: constant). Annealing lets a run settle on a policy instead of drifting past its best
-    (docs/randomization.md has the figures)."""
+    ``total_frames`` (1: constant), so that a run's last updates are small ones (the nav preset: 0.1)."""
     gamma: float = 0.99
     """Discount."""
     tau: float = 0.005
