@@ -95,12 +95,12 @@ def main(argv: list[str] | None = None) -> int:
         shipped = pretrained_nav_policy_path() if args.task == "nav" else pretrained_policy_path()
         path = args.checkpoint or str(shipped)
         try:
-            policy = load_policy(path)
             trained_on = policy_task(path)
+            if args.task is not None and args.task != trained_on:
+                return error_line(parser.prog, f"{path} was trained on task {trained_on!r}, not {args.task!r}")
+            policy = load_policy(path, task=trained_on)
         except (FileNotFoundError, FileFormatError) as err:
             return error_line(parser.prog, f"cannot load policy: {err}")
-        if args.task is not None and args.task != trained_on:
-            return error_line(parser.prog, f"{path} was trained on task {trained_on!r}, not {args.task!r}")
         task, name = trained_on, path
     try:
         print(device_summary(args.device))

@@ -19,7 +19,7 @@ from torch import nn
 from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
 
 from atrv_warp.storage import FileFormatError, atomic_save, load_weights
-from atrv_warp.task.spec import ACTION_DIM, OBS_DIM
+from atrv_warp.task.spec import ACTION_DIM, OBS_DIM, observation_fields
 
 __all__ = ["POLICY_FORMAT", "Normalize", "load_policy", "make_actor", "policy_payload", "policy_task",
            "pretrained_nav_policy_path", "pretrained_policy_path", "save_policy"]
@@ -95,14 +95,16 @@ def pretrained_policy_path() -> Path:
     return Path(str(resources.files("atrv_warp").joinpath("assets/pretrained_policy.pt")))
 
 
-def load_policy(path: str | Path | None = None, *, deterministic: bool = True) -> TensorDictSequential:
+def load_policy(path: str | Path | None = None, *, deterministic: bool = True, task=None) -> TensorDictSequential:
     """Load a saved policy (default: the shipped one) as a TorchRL policy module.
 
     The module reads raw ``observation`` from :class:`~atrv_warp.task.env.ATRVjrEnv` and writes
-    ``action``; with ``deterministic=True`` it returns the distribution's mode.
+    ``action``; with ``deterministic=True`` it returns the distribution's mode. ``task`` (a task name or
+    :class:`~atrv_warp.task.config.TaskConfig`): the policy must observe that task's observation.
 
     Raises ``FileNotFoundError``, or :class:`~atrv_warp.storage.FileFormatError` naming the file
-    and the problem for anything that is not a complete policy (nothing is unpickled).
+    and the problem for anything that is not a complete policy (nothing is unpickled), or for a policy
+    that observes another observation than ``task``'s.
     """
     path = Path(path) if path is not None else pretrained_policy_path()
     payload = load_weights(path, "policy file")
@@ -111,6 +113,8 @@ def load_policy(path: str | Path | None = None, *, deterministic: bool = True) -
     if payload.get("format") != POLICY_FORMAT:
         raise FileFormatError(f"{path}: not an atrv_warp policy (format {payload.get('format')!r}, "
                               f"expected {POLICY_FORMAT!r})")
+    if task is not None:
+        _check_observes(path, int(payload.get("obs_dim", OBS_DIM)), task)
     try:
         actor = make_actor(int(payload["width"]), int(payload["depth"]), obs_dim=int(payload.get("obs_dim", OBS_DIM)))
         actor.load_state_dict(payload["state_dict"])
@@ -126,6 +130,17 @@ def load_policy(path: str | Path | None = None, *, deterministic: bool = True) -
     from torchrl.envs.utils import ExplorationType
 
     return _Deterministic(actor, ExplorationType.DETERMINISTIC)
+
+
+def _check_observes(path: Path, obs_dim: int, task) -> None:
+    from atrv_warp.task.config import get_task
+
+    fields = observation_fields(get_task(task))
+    if obs_dim != len(fields):
+        name = f"task {task!r}" if isinstance(task, str) else "the task"
+        raise FileFormatError(
+            f"{path}: the policy observes {obs_dim} values, {name} observes {len(fields)} "
+            f"({fields[0].name} … {fields[-1].name}); it was trained on another version of the task: train it again")
 
 
 class _Deterministic(TensorDictSequential):

@@ -6,9 +6,10 @@ Run: ``python benchmarks/train_to_success.py [--config default|nav|ppo|nav_ppo] 
 Trains with a preset (``configs/default.toml`` by default, ``--config nav`` for the navigation
 task, ``--config ppo`` / ``nav_ppo`` for PPO on many worlds; overrides as in
 ``python -m atrv_warp.train``) once per seed, one after the other,
-evaluating every 100k frames on the 1,000-episode seeded evaluation set. Per seed it reports when
-the success rate first reached the threshold (wall time since the start of training, evaluations
-included), the final rate of the best policy, and updates/s and frames/s; then the medians.
+evaluating every 100k frames on 1,000 seeded validation episodes (``VALIDATION_SEED``, on which the run picks
+its best policy). Per seed it reports when the success rate first reached the threshold (wall time since the
+start of training, evaluations included), the best policy's rate on the 1,000-episode test set (``EVAL_SEED``,
+unseen by training), and updates/s and frames/s; then the medians.
 Kernel compilation is paid once, before the first seed, and reported separately. Figures are
 printed and written to ``benchmarks/results/train_to_success.json``
 (``train_to_success_<config>.json`` for another preset); the run folders are kept under
@@ -89,6 +90,11 @@ def _train_seed(args, name: str, extra: dict, seed: int) -> dict:
     return r
 
 
+def _title(algo: str, preset: str, overrides: dict | None) -> str:
+    shown = "".join(f" {k}={v}" for k, v in (overrides or {}).items())
+    return f"{algo.upper()}, {preset} preset{shown}: validation success per seed"
+
+
 def _figure(runs: list[dict], threshold: float, title: str, path: Path) -> None:
     import matplotlib
 
@@ -102,7 +108,7 @@ def _figure(runs: list[dict], threshold: float, title: str, path: Path) -> None:
                 label=f"seed {r['seed']}")
     ax.axhline(100 * threshold, color="grey", ls="--", lw=1)
     ax.set_xlabel("wall time since the start of training [s] (2 CPU cores, evaluations included)")
-    ax.set_ylabel("evaluation success, 1,000 episodes [%]")
+    ax.set_ylabel("validation success, 1,000 episodes [%]")
     ax.set_ylim(0, 101)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
@@ -148,8 +154,8 @@ def main() -> int:
         if not out.is_file():
             parser.error(f"--figure-only: no results file at {out}")
         earlier = json.loads(out.read_text())
-        _figure(earlier["seeds"], earlier["threshold"],
-                f"{earlier['algo'].upper()}, {earlier['preset']} preset: evaluation success per seed", Path(args.figure))
+        _figure(earlier["seeds"], earlier["threshold"], _title(earlier["algo"], earlier["preset"], earlier.get("overrides")),
+                Path(args.figure))
         print(f"figure: {args.figure} (from {out})")
         return 0
     if args.summarize:
@@ -194,7 +200,7 @@ def main() -> int:
                 else "not reached | -")
         print(f"| {r['seed']} | {when} | {100 * r['final_eval_best_policy']['success_rate']:.1f} % | "
               f"{r['updates_per_s']:.1f} | {r['frames_per_s']:.0f} |")
-    print("\n| seed | frames | wall [s] | eval success (1,000 episodes) |\n|---:|---:|---:|---:|")
+    print("\n| seed | frames | wall [s] | validation success (1,000 episodes) |\n|---:|---:|---:|---:|")
     for r in runs:
         for row in r["eval_curve"]:
             print(f"| {r['seed']} | {row['frames']:,} | {row['wall_s']:.0f} | {100 * row['success_rate']:.1f}% |")
@@ -206,8 +212,7 @@ def main() -> int:
           f"{'n/a' if compile_s is None else f'{compile_s:.1f} s'}, excluded)")
     print(f"written to {out}")
     if args.figure:
-        _figure(runs, args.threshold, f"{cfg.optim.algo.upper()}, {args.config} preset: evaluation success per seed",
-                Path(args.figure))
+        _figure(runs, args.threshold, _title(cfg.optim.algo, args.config, extra), Path(args.figure))
         print(f"figure: {args.figure}")
     return 0 if len(times) == len(runs) else 1
 

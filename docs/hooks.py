@@ -122,7 +122,7 @@ def train_to_success_nav() -> str:
 
 PPO_VS_SAC = (("reach", "SAC", "train_to_success.json", "--seeds 0 1 2 --minutes 10"),
               ("reach", "PPO", "train_to_success_ppo.json", "--config ppo --seeds 0 1 2 --minutes 10 --eval-every 327680"),
-              ("nav", "SAC", "train_to_success_nav.json", "--config nav --seeds 0 1 2 --minutes 8"),
+              ("nav", "SAC", "train_to_success_nav.json", "--config nav --seeds 0 1 2 --minutes 12"),
               ("nav", "PPO", "train_to_success_nav_ppo.json",
                "--config nav_ppo --seeds 0 1 2 --minutes 20 --eval-every 327680"))
 """(task, algorithm, results file of ``benchmarks/train_to_success.py``, its arguments) of the PPO-SAC table."""

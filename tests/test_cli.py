@@ -8,6 +8,8 @@ import json
 import tomllib
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -44,3 +46,20 @@ def test_evaluate_under_randomization_reports_success_by_bin(tmp_path, capsys):
     assert "randomization wide" in printed and "success by friction" in printed
     assert main(["--task", "nav", "--randomization", "wild", "--episodes", "2"]) == 2
     assert "unknown randomization preset 'wild'" in capsys.readouterr().err
+
+
+def test_a_policy_for_another_version_of_the_task_is_refused_by_name(tmp_path, capsys):
+    """A nav policy saved before the nav task observed its last actions (26 values, not 32): one line naming
+    the file and both sizes, exit 2, nothing run."""
+    from atrv_warp.evaluate import main
+    from atrv_warp.policy import load_policy, make_actor, save_policy
+    from atrv_warp.storage import FileFormatError
+
+    old = tmp_path / "old_nav.pt"
+    save_policy(make_actor(16, 1, obs_dim=26), old, width=16, depth=1, meta={"task": "nav"})
+    assert main([str(old), "--episodes", "2"]) == 2
+    err = capsys.readouterr().err
+    assert str(old) in err and "observes 26 values, task 'nav' observes 32" in err and len(err.splitlines()) == 1
+    with pytest.raises(FileFormatError, match="train it again"):
+        load_policy(old, task="nav")
+    load_policy(old)  # without a task to check against, it loads

@@ -85,6 +85,38 @@ def test_latency_delays_the_commands_by_whole_steps():
     assert applied == pytest.approx([0.0, 0.0, 0.1 * scale, 0.2 * scale, 0.3 * scale])
 
 
+def test_the_observation_shows_the_pending_actions():
+    """The nav task observes its last three actions, newest first: under a latency of L steps, the command the
+    motors apply next is the one the observation shows L steps back. A reset clears a world's history, and the
+    history is part of the env's state."""
+    from atrv_warp.task.spec import observation_fields
+
+    env = ATRVjrEnv(3, seed=0, task="nav", randomization=RandomizationConfig(latency=(2, 2)))
+    names = [f.name for f in observation_fields(env.task_cfg)]
+    cols = [names.index(f"last_action_{k}_{side}") for k in (1, 2, 3) for side in ("left", "right")]
+    assert cols == list(range(env.obs_dim - 6, env.obs_dim))  # after the scan sectors
+    td = env.reset()
+    assert torch.equal(td["observation"][:, cols], torch.zeros(3, 6))
+    actions = [torch.tensor([[0.1 * t, -0.2 * t]] * 3) for t in range(1, 6)]
+    actions[-1] = torch.tensor([[3.0, -3.0]] * 3)  # observed as the motors take it: clipped to [-1, 1]
+    for action in actions:
+        shown = td["observation"][:, cols].reshape(3, 3, 2)
+        td = env.step(td.set("action", action))["next"]
+        # latency 2: this step applied the action shown two steps back (none, zero torque, at first)
+        assert torch.allclose(env.sim.commands, shown[:, 1] * env.task_cfg.action_scale)
+    expected = torch.stack([actions[-1].clamp(-1, 1), actions[-2], actions[-3]], 1).reshape(3, 6)
+    assert torch.allclose(td["observation"][:, cols], expected)
+    saved = env.state_dict()
+    reset = env.reset(td.set("_reset", torch.tensor([[True], [False], [False]])))
+    assert torch.equal(reset["observation"][0, cols], torch.zeros(6))
+    assert torch.equal(reset["observation"][1:, cols], expected[1:])
+    env.load_state_dict(saved)
+    assert torch.equal(env.observe(env.target.clone())[:, cols], expected)
+    env.record_actions(torch.full((3, 2), 0.5))  # driving outside the step loop (the ROS node)
+    assert torch.allclose(env.observe(env.target.clone())[:, cols[:2]], torch.full((3, 2), 0.5))
+    assert ATRVjrEnv(2).obs_dim == len(OBS_INDEX)  # the reference task observes no actions
+
+
 def test_motor_lag_is_first_order():
     tau = 0.1
     env = ATRVjrEnv(1, seed=0, randomization=RandomizationConfig(motor_lag=Draw(tau, tau)))

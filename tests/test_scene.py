@@ -178,6 +178,35 @@ def test_nav_episode_ends_on_obstacle_with_its_own_reason():
     assert (rewards[reasons == EndReason.OBSTACLE] == env.task_cfg.failure_reward).all()
 
 
+def test_clearance_term_costs_how_far_the_nearest_obstacle_reaches_inside_the_radius():
+    """The nav reward's clearance term against a torch computation from the obstacles' poses and sizes: the
+    scripted driver heads into the on-path obstacle, so the term grows as it closes in; the reach task, with no
+    obstacles, never has one."""
+    from atrv_warp.task.baseline import scripted_policy
+
+    env = ATRVjrEnv(64, task="nav", seed=3)
+    c, obstacles, policy = env.task_cfg, env.sim.obstacles, scripted_policy()
+    assert c.clearance_weight > 0
+    td, seen = env.reset(), 0.0
+    for _ in range(60):
+        td, root = env.step_and_maybe_reset(policy(td))  # resets only the finished worlds
+        nxt = td["next"]
+        p = env.sim.root_pose[:, None, :2]
+        kind, size = obstacles.kind, obstacles.size
+        radius = torch.where(kind == 2, size[..., 0], size.norm(dim=-1))  # cylinder: r; box: half diagonal
+        gap = torch.where(kind > 0, (obstacles.pose[..., :2] - p).norm(dim=-1) - radius, torch.inf)
+        expected = -c.clearance_weight * (c.clearance_radius - gap.min(-1).values).clamp(min=0)
+        running = nxt["end_reason"].reshape(-1) == EndReason.RUNNING
+        got = nxt["reward_terms", "clearance"].reshape(-1)
+        assert torch.allclose(got[running], expected[running], atol=1e-5)
+        assert (got[~running] == 0).all()  # terminal steps have only their terminal term
+        seen = min(seen, float(got.min()))
+        td = root
+    assert seen < -0.2  # the driver came well inside the radius of some obstacle
+    reach = ATRVjrEnv(4).rollout(10)
+    assert (reach["next", "reward_terms", "clearance"] == 0).all()
+
+
 def test_same_seed_same_terrain_and_layout():
     assert np.array_equal(TerrainConfig(seed=4).generate(HALF).heights, TerrainConfig(seed=4).generate(HALF).heights)
     assert not np.array_equal(TerrainConfig(seed=4).generate(HALF).heights,
@@ -229,7 +258,7 @@ def test_gymnasium_nav_id_carries_the_scan():
     env = gymnasium.make("atrv_warp.integrations.gymnasium:ATRVjrNav-v0")
     check_env(env.unwrapped)
     obs, _ = env.reset(seed=1)
-    assert obs.shape == (26,)
+    assert obs.shape == (32,)  # the 10 fields, 16 scan sectors, the last 3 actions
     _, _, _, _, info = env.step(env.action_space.sample())
     assert info["scan"].shape == (64,)
     venv = gymnasium.make_vec("ATRVjrNav-v0", num_envs=2)

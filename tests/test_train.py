@@ -34,6 +34,8 @@ def test_config_files_and_errors(tmp_path):
         load_train_config(None, {"progress": "maybe"})
     with pytest.raises(ValueError, match="gamma must be in"):
         load_train_config(None, {"gamma": "1.5"})
+    with pytest.raises(ValueError, match=r"lr_final_fraction must be in \[0, 1\], got 1.5"):
+        load_train_config(None, {"lr_final_fraction": "1.5"})
     flat = tmp_path / "flat.toml"  # what run folders from before 0.2.0 hold
     flat.write_text('name = "old"\nwidth = 64\n')
     with pytest.raises(ValueError, match=r"flat keys \['name', 'width'\] are from before atrv_warp 0.2.0.*"
@@ -300,6 +302,25 @@ def _fixed_batch(n: int = 256):
                        ("next", "terminated"): torch.zeros(n, 1, dtype=torch.bool),
                        ("next", "reward"): torch.randn(n, 1, generator=g),
                        ("next", "observation"): torch.randn(n, 10, generator=g)}, [n])
+
+
+@pytest.mark.slow  # trains
+def test_learning_rate_anneals_with_the_frames(tmp_path, run_module):
+    """``lr_final_fraction``: every optimiser's rate falls linearly from ``lr`` to ``lr x fraction`` at
+    ``total_frames``; the logged rate follows the frames, and the checkpoint's optimisers end at the floor."""
+    from atrv_warp.rl.learner import annealed_lr
+
+    run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", "lr=1e-3", "lr_final_fraction=0.1")
+    cfg = load_train_config(SMOKE, {"lr": "1e-3", "lr_final_fraction": "0.1"})
+    assert annealed_lr(cfg, 0) == 1e-3 and annealed_lr(cfg, 10 * cfg.run.total_frames) == pytest.approx(1e-4)
+    assert annealed_lr(cfg, cfg.run.total_frames // 2) == pytest.approx(5.5e-4)
+    logged = [tuple(map(float, line.split(","))) for line in
+              (tmp_path / "smoke" / "logs" / "scalars" / "lr.csv").read_text().split()]
+    assert len(logged) == 3 and all(lr == pytest.approx(annealed_lr(cfg, int(f))) for f, lr in logged)
+    assert [lr for _, lr in logged] == sorted((lr for _, lr in logged), reverse=True)
+    ck = torch.load(tmp_path / "smoke" / "checkpoint.pt", weights_only=True)
+    rates = [group["lr"] for opt in ck["opts"].values() for group in opt["param_groups"]]
+    assert len(rates) == 3 and all(rate == pytest.approx(1e-4) for rate in rates)  # actor, critics, temperature
 
 
 @pytest.mark.parametrize("loss", ["sac", "crossq", "redq"])

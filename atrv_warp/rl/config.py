@@ -149,6 +149,9 @@ class OptimConfig:
     lr: float = 1e-3
     """Adam learning rate, actor, critics and temperature (on the reach task 1e-3 first passes 90 % in
     several times fewer gradient steps than 3e-4; docs/training.md has the figures)."""
+    lr_final_fraction: float = 1.0
+    """The learning rate falls linearly with the frames collected, from ``lr`` at the start to ``lr`` x this at
+    ``total_frames`` (1: constant), so that a run's last updates are small ones (the nav preset: 0.1)."""
     gamma: float = 0.99
     """Discount."""
     tau: float = 0.005
@@ -194,7 +197,8 @@ class LoggingConfig:
     eval_every_frames: int = 100_000
     """Deterministic evaluation interval [frames]."""
     eval_episodes: int = 256
-    """Seeded episodes per periodic evaluation (fixed set, seed EVAL_SEED)."""
+    """Seeded episodes per periodic evaluation (a fixed validation set, seed ``VALIDATION_SEED``; the best policy is
+    picked on it, and only the final evaluation sees the test set, seed ``EVAL_SEED``)."""
     final_eval_episodes: int = 1000
     """Episodes of the final evaluation of the best policy."""
     logger: Literal["csv", "tensorboard", "rerun", "wandb", "mlflow"] = "csv"
@@ -257,6 +261,8 @@ class TrainConfig:
                 value = getattr(getattr(self, group), name)
                 if not value > 0:
                     raise ValueError(f"train config: {name} must be > 0, got {value}")
+        if not 0.0 <= self.optim.lr_final_fraction <= 1.0:
+            raise ValueError(f"train config: lr_final_fraction must be in [0, 1], got {self.optim.lr_final_fraction}")
         if not 0.0 < self.optim.gamma <= 1.0:
             raise ValueError(f"train config: gamma must be in (0, 1], got {self.optim.gamma}")
         if self.run.max_minutes < 0 or self.collector.init_random_frames < 0 or self.collector.envs_per_collector < 0:

@@ -17,7 +17,8 @@ from atrv_warp.rl.config import TrainConfig
 from atrv_warp.rl.ppo import PPO_LOSS_KEYS, PPOLearner
 from atrv_warp.task.spec import ACTION_DIM
 
-__all__ = ["ALGOS", "SAC_LOSS_KEYS", "Algo", "Learner", "make_buffer", "make_learner", "make_loss", "make_qvalue"]
+__all__ = ["ALGOS", "SAC_LOSS_KEYS", "Algo", "Learner", "annealed_lr", "make_buffer", "make_learner", "make_loss",
+           "make_qvalue", "set_lr"]
 
 SAC_LOSS_KEYS = ("loss_actor", "loss_qvalue", "loss_alpha", "entropy")
 """The means of SAC's losses logged at every evaluation."""
@@ -154,6 +155,20 @@ ALGOS: dict[str, Algo] = {
     "ppo": Algo(PPOLearner, PPO_LOSS_KEYS, on_policy=True),
 }
 """Every ``optim.algo`` (:class:`~atrv_warp.rl.config.OptimConfig`) and what it means for the loop."""
+
+
+def annealed_lr(cfg: TrainConfig, frames: int) -> float:
+    """The learning rate after ``frames`` collected frames: ``lr`` falling linearly to ``lr x lr_final_fraction``
+    at ``total_frames``, then held."""
+    done = min(frames / cfg.run.total_frames, 1.0)
+    return cfg.optim.lr * (1.0 - (1.0 - cfg.optim.lr_final_fraction) * done)
+
+
+def set_lr(learner, lr: float) -> None:
+    """Set every optimiser of ``learner`` (SAC's or PPO's: their ``opts``) to ``lr``."""
+    for opt in learner.opts.values():
+        for group in opt.param_groups:
+            group["lr"] = lr
 
 
 def make_learner(cfg: TrainConfig, actor, normalize: Normalize):

@@ -16,12 +16,12 @@ from atrv_warp.policy import Normalize, load_policy, make_actor, save_policy
 from atrv_warp.rl.checkpoint import Checkpoint, RunState, load_checkpoint, warm_start
 from atrv_warp.rl.collectors import COLLECTORS, WORKER_KEY, make_collector, pin_to_core
 from atrv_warp.rl.config import TrainConfig, flat_config, to_toml
-from atrv_warp.rl.learner import ALGOS, make_buffer, make_learner
+from atrv_warp.rl.learner import ALGOS, annealed_lr, make_buffer, make_learner, set_lr
 from atrv_warp.rl.reporting import Loggers, LossMeans, Progress, Stats, make_loggers, pct, plot_curve
 from atrv_warp.runtime import device_summary
 from atrv_warp.task.config import get_task
 from atrv_warp.task.env import ATRVjrEnv
-from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result
+from atrv_warp.task.evaluation import EVAL_SEED, VALIDATION_SEED, evaluate, format_result
 from atrv_warp.task.spec import observation_fields
 
 __all__ = ["Evaluator", "TrainLoop", "train"]
@@ -88,7 +88,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
 
 
 class Evaluator:
-    """The periodic deterministic evaluation on the fixed seeded set.
+    """The periodic deterministic evaluation on the fixed seeded validation set (``VALIDATION_SEED``).
 
     ``recording``: a Rerun recording (the one the scalars go to, with ``logger=rerun``) that gets
     two worlds of every evaluation, on its ``frames`` timeline; ``None``: nothing is recorded.
@@ -98,7 +98,7 @@ class Evaluator:
 
     def __init__(self, cfg: TrainConfig, actor, *, recording=None, video_dir: Path | None = None, gif: bool = False):
         self.cfg, self.actor = cfg, actor
-        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=EVAL_SEED, **dict(cfg.env.env_kwargs()))
+        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=VALIDATION_SEED, **dict(cfg.env.env_kwargs()))
         self.recorder = None
         if recording is not None:
             from atrv_warp.integrations.recorder import RerunRecorder
@@ -120,7 +120,7 @@ class Evaluator:
             hooks.append(self.recorder.env_hook())
         if self.video is not None:
             hooks.append(self.video.env_hook())
-        result = evaluate(self.actor, num_episodes=self.cfg.logging.eval_episodes, seed=EVAL_SEED, env=self.env,
+        result = evaluate(self.actor, num_episodes=self.cfg.logging.eval_episodes, seed=VALIDATION_SEED, env=self.env,
                           on_step=_each(hooks))
         self.actor.train()
         if self.video is not None:
@@ -238,6 +238,8 @@ class TrainLoop:
             self.learner = make_learner(self.cfg, self.actor, self.normalize)
             if self.algo.on_policy:
                 return 0.0  # this batch's actions were random (init_random_frames): not the policy's
+        if self.cfg.optim.lr_final_fraction != 1.0:
+            set_lr(self.learner, annealed_lr(self.cfg, self.state.frames))
         if self.algo.on_policy:
             for out in self.learner.learn_batch(data):
                 self.losses.add(out)
@@ -261,6 +263,7 @@ class TrainLoop:
             self.log(name, value)
         self.log("wall_time_s", st.elapsed_s)
         if self.learner is not None:
+            self.log("lr", annealed_lr(cfg, st.frames))
             for name, value in self.learner.scalars().items():
                 self.log(name, value)
             result = self.evaluator(st.frames)

@@ -28,6 +28,14 @@ class TaskConfig:
     """Weight of the heading-progress term (previous |error| - |error|) [1/rad]."""
     step_penalty: float = 0.03
     """Subtracted from every non-terminal reward."""
+    clearance_weight: float = 0.0
+    """Weight of the clearance term [1/m]: each non-terminal step costs this times how far the nearest obstacle's
+    bounding circle reaches inside ``clearance_radius`` of the chassis origin (0: no term). A dense cost of
+    passing close, which a rare collision penalty alone does not teach a policy that cannot be sure of its grip
+    or its delay."""
+    clearance_radius: float = 1.0
+    """Distance from the chassis origin [m] inside which an obstacle costs: the ATRV-Jr's footprint reaches 0.43 m
+    from it at the wheels' outer corners, so 1 m keeps a margin of about 0.6 m."""
     action_scale: float = 20.0
     """Wheel torque per unit action [N·m]."""
 
@@ -54,6 +62,9 @@ class TaskConfig:
     min(range, scan_clip) / scan_clip in [0, 1]; ``scan_beams`` must be a multiple of it."""
     scan_clip: float = 5.0
     """Ranges beyond this [m] are observed as 1."""
+    action_history: int = 0
+    """The actions chosen at the last this-many steps, newest first, observed after the scan: what a rover
+    with action latency has commanded but not yet applied (Isaac Lab's ``last_action`` term)."""
 
     def __post_init__(self):
         if self.scan_sectors and (self.scan_beams % self.scan_sectors or self.scan_sectors < 0):
@@ -64,6 +75,11 @@ class TaskConfig:
         lo, hi = self.obstacle_size
         if not 0 < lo <= hi:
             raise ValueError(f"obstacle_size must be 0 < low <= high, got {self.obstacle_size}")
+        if self.action_history < 0:
+            raise ValueError(f"action_history must be >= 0 steps, got {self.action_history}")
+        if self.clearance_weight < 0 or self.clearance_radius < 0:
+            raise ValueError(f"clearance_weight and clearance_radius must be >= 0, got {self.clearance_weight}, "
+                             f"{self.clearance_radius}")
         if self.target_distance is not None and not 0 < self.target_distance[0] <= self.target_distance[1]:
             raise ValueError(f"target_distance must be 0 < low <= high, got {self.target_distance}")
 
@@ -72,11 +88,13 @@ TASK_VARIANTS: dict[str, TaskConfig] = {
     "reach": TaskConfig(),
     "nav": TaskConfig(
         terrain="rolling", target_distance=(5.0, 10.0), obstacles=6, obstacles_on_path=1, max_steps=300,
-        flip_roll=0.5, scan_beams=64, scan_sectors=16),
+        flip_roll=0.5, scan_beams=64, scan_sectors=16, action_history=3, failure_reward=-10.0, heading_weight=1.0,
+        clearance_weight=0.5),
 }
 """Registered tasks. ``reach``: the reference task (flat, no obstacles, no scanner). ``nav``: rolling
 terrain, six obstacles (one across the straight line to the target), targets 5–10 m away, 15 s
-episodes, a 64-beam scan observed as 16 sectors."""
+episodes, a 64-beam scan observed as 16 sectors, and the last three actions observed (a delayed rover's
+pending commands: docs/randomization.md)."""
 
 
 def get_task(task: str | TaskConfig | None) -> TaskConfig:

@@ -7,7 +7,7 @@ the next step overwrites.
 
 Keys produced (the contract is declared in :mod:`atrv_warp.task.spec`):
     ``observation`` (N, 10) float32: target x, y; rover x, y; vx, vy (world); roll; yaw rate;
-    sin and cos of the heading error (``OBSERVATION``), then a task's scan sectors
+    sin and cos of the heading error (``OBSERVATION``), then a task's scan sectors and last actions
     (``observation_fields``). ``scan`` (N, beams) [m] with a scanner. ``reward`` (N, 1);
     ``("reward_terms", name)`` (N, 1) for each of ``REWARD_TERMS``, which sum to the reward;
     ``done`` / ``terminated`` / ``truncated`` (N, 1) bool; ``end_reason`` (N, 1) int64
@@ -44,10 +44,13 @@ from atrv_warp.task.kernels import (
     StepOutputs,
     TaskBuffers,
     TaskParams,
+    clear_actions,
     compute_step_outcome,
     observe_reset,
+    record_actions,
     sample_episodes,
     sample_nav_episodes,
+    write_action_observation,
     write_scan_observation,
 )
 from atrv_warp.task.randomization import PHYSICS_DRAWS, RandomizationConfig, get_randomization
@@ -160,6 +163,8 @@ class ATRVjrEnv(EnvBase):
         p.failure_reward = c.failure_reward
         p.heading_weight = c.heading_weight
         p.step_penalty = c.step_penalty
+        p.clearance_weight = c.clearance_weight
+        p.clearance_radius = c.clearance_radius
         self._params = p
         sp = SceneParams()
         sp.distance_min, sp.distance_max = c.target_distance or (c.reach_radius, 2.0 * c.spawn_bound)
@@ -184,6 +189,8 @@ class ATRVjrEnv(EnvBase):
         self._distance = wp.zeros(n, dtype=float, device=dev)
         self._mask = wp.zeros(n, dtype=bool, device=dev)
         self._reset_poses = wp.zeros(n, dtype=wp.vec3, device=dev)  # the sampler's starts (x, y, yaw)
+        # the last actions, newest first ([left, right] in [-1, 1]), observed after the scan sectors
+        self._actions = wp.zeros((n, c.action_history), dtype=wp.vec2, device=dev) if c.action_history else None
         b, rover, out = self.sim.buffers, RoverState(), StepOutputs()  # the kernels' inputs and outputs, once
         rover.body_q, rover.lin_vel, rover.ang_vel, rover.rpy = b.body_q, b.lin_vel, b.ang_vel, b.rpy
         rover.bodies_per_world, rover.chassis_body = b.layout.bodies_per_world, b.layout.chassis_body
@@ -210,6 +217,8 @@ class ATRVjrEnv(EnvBase):
             "prev_heading_error": wp.to_torch(t.prev_heading_error), "step_count": self.step_count,
             "episode": self._episode_t, "observation": self._obs_t,
         }
+        if self._actions is not None:
+            self._task_views["action_history"] = wp.to_torch(self._actions)
         if self._nav:  # the episode's layout is part of the task's state
             obstacles = self.sim.obstacles
             self._task_views.update({"tile": self.sim.terrain.tile, "obstacle_kind": obstacles.kind,
@@ -326,6 +335,9 @@ class ATRVjrEnv(EnvBase):
             wp.launch(sample_episodes, dim=self.num_envs, inputs=[self._seed, self._params, self._mask],
                       outputs=[self._task, self._reset_poses], device=self._wp_device)
         sim.reset_worlds(self._mask, self._reset_poses)
+        if self._actions is not None:
+            wp.launch(clear_actions, dim=(self.num_envs, self.task_cfg.action_history), inputs=[self._mask],
+                      outputs=[self._actions], device=self._wp_device)
         self._launch_observe()
         self._end_reason_t.masked_fill_(self._mask_t.unsqueeze(-1), 0)
         zeros = torch.zeros((self.num_envs, 1), dtype=torch.bool, device=self.device)
@@ -356,14 +368,28 @@ class ATRVjrEnv(EnvBase):
             self.scanner.scan(self._mask)
         wp.launch(observe_reset, dim=self.num_envs, inputs=[self._params, self._mask, self._task, self._rover],
                   outputs=[self._out], device=self._wp_device)
-        self._launch_scan_observation()
+        self._launch_observation_tail()
         self._add_noise(self._mask)
 
-    def _launch_scan_observation(self) -> None:
-        if self.task_cfg.scan_sectors:
-            wp.launch(write_scan_observation, dim=(self.num_envs, self.task_cfg.scan_sectors),
-                      inputs=[self.scanner.buffer, self.sim.buffers.nonfinite, OBS_DIM, self.task_cfg.scan_clip],
+    def record_actions(self, actions: torch.Tensor) -> None:
+        """Note the actions (N, 2) chosen for every world's next step in the observed action history (a task with
+        ``action_history``; nothing otherwise), as :meth:`step` does; for driving outside TorchRL's step loop,
+        e.g. the ROS node, whose next :meth:`observe` then shows them."""
+        if self._actions is not None:
+            actions = torch.as_tensor(actions, dtype=torch.float32, device=self.device).reshape(self.num_envs, 2)
+            wp.launch(record_actions, dim=self.num_envs, inputs=[wp.from_torch(actions.contiguous())],
+                      outputs=[self._actions], device=self._wp_device)
+
+    def _launch_observation_tail(self) -> None:
+        """The observation's columns after :data:`OBSERVATION`: the scan sectors, then the last actions."""
+        c = self.task_cfg
+        if c.scan_sectors:
+            wp.launch(write_scan_observation, dim=(self.num_envs, c.scan_sectors),
+                      inputs=[self.scanner.buffer, self.sim.buffers.nonfinite, OBS_DIM, c.scan_sectors, c.scan_clip],
                       outputs=[self._obs], device=self._wp_device)
+        if self._actions is not None:
+            wp.launch(write_action_observation, dim=(self.num_envs, c.action_history),
+                      inputs=[self._actions, OBS_DIM + c.scan_sectors], outputs=[self._obs], device=self._wp_device)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = self._check_action(tensordict.get("action"))
@@ -374,12 +400,14 @@ class ATRVjrEnv(EnvBase):
                       outputs=[sim.buffers.commands], device=self._wp_device)
         else:
             action_to_torque(action, self.task_cfg.action_scale, out=sim.commands)
+        self.record_actions(action)
         sim.step()
         if self.scanner is not None:
             self.scanner.scan()
-        wp.launch(compute_step_outcome, dim=self.num_envs, inputs=[self._params, self._task, self._rover],
-                  outputs=[self._out], device=self._wp_device)
-        self._launch_scan_observation()
+        wp.launch(compute_step_outcome, dim=self.num_envs,
+                  inputs=[self._params, self._task, self._rover, sim.obstacles.kernel], outputs=[self._out],
+                  device=self._wp_device)
+        self._launch_observation_tail()
         self._add_noise(self._all)
         if self._draws_on_tick:
             self._draw(PHASE_TICK, self._all)

@@ -11,11 +11,14 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
-__all__ = ["EVAL_SEED", "SHIFT_BINS", "EpisodeRecord", "EvalResult", "evaluate", "format_bins", "format_result",
+__all__ = ["EVAL_SEED", "SHIFT_BINS", "VALIDATION_SEED", "EpisodeRecord", "EvalResult", "evaluate", "format_bins", "format_result",
            "run_episodes", "success_by_bin", "write_result"]
 
 EVAL_SEED = 2024
-"""Seed of the standard evaluation set (training never uses it)."""
+"""Seed of the standard evaluation set, the test set (training never uses it, nor picks its best policy on it)."""
+VALIDATION_SEED = 2023
+"""Seed of the episodes training evaluates on periodically and picks its best policy by (a validation set: the
+evaluation set's episodes stay unseen until the final evaluation)."""
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,13 @@ from __future__ import annotations
 import warp as wp
 
 from atrv_warp.sim.kernels.contact import FLAG_OBSTACLE
-from atrv_warp.sim.kernels.obstacles import OBSTACLE_BOX, OBSTACLE_CYLINDER, ObstacleSet, bounding_radius
+from atrv_warp.sim.kernels.obstacles import (
+    OBSTACLE_BOX,
+    OBSTACLE_CYLINDER,
+    OBSTACLE_NONE,
+    ObstacleSet,
+    bounding_radius,
+)
 from atrv_warp.sim.kernels.terrain import TerrainGrid
 from atrv_warp.task.spec import OBS_DIM, OBS_INDEX, OBSERVATION, REWARD_TERMS, EndReason
 
@@ -50,6 +56,7 @@ TERM_HEADING = wp.constant(REWARD_TERMS.index("heading"))
 TERM_STEP_PENALTY = wp.constant(REWARD_TERMS.index("step_penalty"))
 TERM_SUCCESS = wp.constant(REWARD_TERMS.index("success"))
 TERM_FAILURE = wp.constant(REWARD_TERMS.index("failure"))
+TERM_CLEARANCE = wp.constant(REWARD_TERMS.index("clearance"))
 NUM_TERMS = wp.constant(len(REWARD_TERMS))
 
 
@@ -63,6 +70,8 @@ class TaskParams:
     failure_reward: float  # (negative) on wall or flip
     heading_weight: float  # weight of heading progress
     step_penalty: float  # subtracted every step
+    clearance_weight: float  # cost per metre an obstacle reaches inside clearance_radius [1/m]
+    clearance_radius: float  # [m] from the chassis origin
 
 
 @wp.struct
@@ -210,6 +219,23 @@ def step_penalty_term(step_penalty: float) -> float:
 
 
 @wp.func
+def clearance_term(params: TaskParams, obstacles: ObstacleSet, world: int, pose: wp.transform) -> float:
+    """``-clearance_weight`` x how far the nearest obstacle's bounding circle reaches inside ``clearance_radius``
+    of the chassis origin [m]."""
+    if params.clearance_weight == 0.0:
+        return 0.0
+    p = wp.transform_get_translation(pose)
+    inside = float(0.0)  # a variable the loop changes (Warp)
+    for o in range(obstacles.count):
+        kind = obstacles.kind[world, o]
+        if kind != OBSTACLE_NONE:
+            q = obstacles.pose[world, o]
+            gap = wp.length(wp.vec2(q[0] - p[0], q[1] - p[1])) - bounding_radius(kind, obstacles.size[world, o])
+            inside = wp.max(inside, params.clearance_radius - gap)
+    return -params.clearance_weight * inside
+
+
+@wp.func
 def clear_terms(terms: wp.array2d(dtype=float), world: int):
     for i in range(NUM_TERMS):
         terms[world, i] = 0.0
@@ -220,6 +246,7 @@ def compute_step_outcome(
     params: TaskParams,
     task: TaskBuffers,
     rover: RoverState,
+    obstacles: ObstacleSet,
     out: StepOutputs,
 ):
     """Observation, reward (and its terms, which sum to it) and termination of every world after
@@ -269,6 +296,7 @@ def compute_step_outcome(
         out.reward_terms[world, TERM_HEADING] = heading_term(params.heading_weight, task.prev_heading_error[world],
                                                          wp.abs(err))
         out.reward_terms[world, TERM_STEP_PENALTY] = step_penalty_term(params.step_penalty)
+        out.reward_terms[world, TERM_CLEARANCE] = clearance_term(params, obstacles, world, pose)
     rew = wp.float32(0.0)
     for i in range(NUM_TERMS):  # in REWARD_TERMS order: progress + heading - penalty as before
         rew += out.reward_terms[world, i]
@@ -370,16 +398,44 @@ def write_scan_observation(
     ranges: wp.array2d(dtype=float),
     nonfinite: wp.array(dtype=wp.int32),
     first_column: int,
+    sectors: int,
     clip: float,
     obs: wp.array2d(dtype=float),
 ):
     """Observed scan (dim = (N, sectors)): each sector's nearest return, min(r, clip) / clip; a
     non-finite world observes an empty scan (1)."""
     world, sector = wp.tid()
-    sectors = obs.shape[1] - first_column
     per = ranges.shape[1] // sectors
     r = clip
     if nonfinite[world] == 0:
         for i in range(per):
             r = wp.min(r, ranges[world, sector * per + i])
     obs[world, first_column + sector] = r / clip
+
+
+@wp.kernel
+def record_actions(actions: wp.array2d(dtype=float), history: wp.array2d(dtype=wp.vec2)):
+    """Push each world's action, clipped to [-1, 1], onto the front of its history (newest first; dim = N)."""
+    world = wp.tid()
+    n = history.shape[1]
+    for j in range(n - 1):
+        k = n - 1 - j
+        history[world, k] = history[world, k - 1]
+    history[world, 0] = wp.vec2(wp.clamp(actions[world, 0], -1.0, 1.0), wp.clamp(actions[world, 1], -1.0, 1.0))
+
+
+@wp.kernel
+def clear_actions(mask: wp.array(dtype=bool), history: wp.array2d(dtype=wp.vec2)):
+    """Forget the masked worlds' actions (a new episode has chosen none yet; dim = (N, history))."""
+    world, k = wp.tid()
+    if mask[world]:
+        history[world, k] = wp.vec2(0.0, 0.0)
+
+
+@wp.kernel
+def write_action_observation(history: wp.array2d(dtype=wp.vec2), first_column: int, obs: wp.array2d(dtype=float)):
+    """Observed last actions (dim = (N, history)): step k's [left, right] at ``first_column + 2 k``."""
+    world, k = wp.tid()
+    a = history[world, k]
+    obs[world, first_column + 2 * k] = a[0]
+    obs[world, first_column + 2 * k + 1] = a[1]

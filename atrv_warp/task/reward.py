@@ -20,8 +20,10 @@ def progress_reward(poses: torch.Tensor, targets: torch.Tensor, task: TaskConfig
     ``(previous distance - distance) + heading_weight * (previous |heading error| - |heading error|)
     - step_penalty``: the non-terminal terms of :data:`atrv_warp.task.spec.REWARD_TERMS`
     (progress, heading, step_penalty), as the environment's ``compute_step_outcome`` kernel
-    computes them (tested against the environment). The terminal rewards (+4 within 1 m,
-    -4 on a wall or flip) are discrete events without a gradient and are left out.
+    computes them (tested against the environment). The terminal rewards (``success_reward`` within
+    ``reach_radius``, ``failure_reward`` on a wall or flip) are discrete events without a gradient and are
+    left out, and so is the clearance term, which needs obstacles (a :class:`~atrv_warp.sim.diff.DiffRollout`
+    has none).
 
     Args:
         poses: (steps + 1, N, 7) chassis poses from :class:`~atrv_warp.sim.diff.DiffRollout`.

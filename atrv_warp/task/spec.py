@@ -5,7 +5,7 @@ specs, the Warp kernels (observation indices, bounds, end reasons, reward terms)
 baseline, the Gymnasium spaces, the ROS goal mode and :func:`atrv_warp.task.reward.progress_reward`.
 
 - :data:`OBSERVATION`: the observation's fields in order, each with its clip bound;
-  :func:`observation_fields` adds a task's scan sectors after them.
+  :func:`observation_fields` adds a task's scan sectors, then its last actions, after them.
 - :class:`EndReason`: why an episode ended (the ``end_reason`` entry).
 - :data:`REWARD_TERMS`: the reward's terms; their sum is ``reward``, and each is reported per
   step as ``("reward_terms", name)``.
@@ -63,11 +63,17 @@ OBSERVATION: tuple[ObservationField, ...] = (
 
 def observation_fields(task=None) -> tuple[ObservationField, ...]:
     """The observation of ``task`` (a :class:`~atrv_warp.task.config.TaskConfig`): :data:`OBSERVATION`,
-    then ``scan_0 … scan_{S-1}`` for its ``scan_sectors`` (right to left), in [0, 1]."""
+    then ``scan_0 … scan_{S-1}`` for its ``scan_sectors`` (right to left), in [0, 1], then
+    ``last_action_1_left``, ``last_action_1_right`` … ``last_action_K_right`` for its ``action_history``
+    (the actions chosen 1 … K steps before, newest first, in [-1, 1])."""
     sectors = getattr(task, "scan_sectors", 0)
-    return OBSERVATION + tuple(
-        ObservationField(f"scan_{i}", 1.0, f"nearest return in scan sector {i} of {sectors} (right to left), "
-                         "min(range, scan_clip) / scan_clip") for i in range(sectors))
+    history = getattr(task, "action_history", 0)
+    scan = tuple(ObservationField(f"scan_{i}", 1.0, f"nearest return in scan sector {i} of {sectors} (right to left), "
+                                  "min(range, scan_clip) / scan_clip") for i in range(sectors))
+    actions = tuple(ObservationField(f"last_action_{k}_{side}", 1.0, f"the {side} action chosen {k} step(s) before "
+                                     "(what a delayed rover has yet to apply), in [-1, 1]")
+                    for k in range(1, history + 1) for side in ("left", "right"))
+    return OBSERVATION + scan + actions
 
 
 OBSERVATION_NAMES: tuple[str, ...] = tuple(f.name for f in OBSERVATION)
@@ -97,14 +103,16 @@ class EndReason(IntEnum):
 END_REASONS: tuple[str, ...] = tuple(r.name.lower() for r in EndReason)
 """``END_REASONS[end_reason]`` names an end reason."""
 
-REWARD_TERMS: tuple[str, ...] = ("progress", "heading", "step_penalty", "success", "failure")
+REWARD_TERMS: tuple[str, ...] = ("progress", "heading", "step_penalty", "success", "failure", "clearance")
 """Terms of the reward, in the order of the ``reward_terms`` kernel output; they sum to ``reward``.
 
 - ``progress``: previous distance to the target minus the distance now [m] (non-terminal steps);
 - ``heading``: ``heading_weight`` x (previous |heading error| - |heading error|) (non-terminal);
 - ``step_penalty``: ``-step_penalty`` on every non-terminal step;
 - ``success``: ``success_reward`` on reaching the target;
-- ``failure``: ``failure_reward`` on a wall, chassis or obstacle contact, or a flip.
+- ``failure``: ``failure_reward`` on a wall, chassis or obstacle contact, or a flip;
+- ``clearance``: ``-clearance_weight`` x how far the nearest obstacle's bounding circle reaches inside
+  ``clearance_radius`` of the chassis origin [m] (non-terminal; 0 without obstacles or weight).
 """
 
 

@@ -348,6 +348,14 @@ class RoverSimNode(Node):
             self._fail(f"noise parameter(s) {negative} must be >= 0 (standard deviations)")
         if not 0.0 <= p["scan_dropout"] <= 1.0:
             self._fail(f"scan_dropout is a probability in [0, 1], got {p['scan_dropout']}")
+        if p["policy"]:  # goal mode's policy: a file the task can run, checked before any rover starts
+            from atrv_warp.policy import load_policy
+            from atrv_warp.storage import FileFormatError
+
+            try:
+                load_policy(p["policy"], task=p["task"])
+            except (FileNotFoundError, FileFormatError) as err:
+                self._fail(f"parameter policy: {err}")
 
     # ------------------------------------------------------------------ simulator reads
     def stamp_ns(self) -> int:
@@ -394,7 +402,7 @@ class RoverSimNode(Node):
             from atrv_warp.policy import load_policy, pretrained_nav_policy_path
 
             shipped = pretrained_nav_policy_path() if self.params["task"] == "nav" else None
-            self.policy = (load_policy(self.params["policy"] or shipped), TensorDict)
+            self.policy = (load_policy(self.params["policy"] or shipped, task=self.params["task"]), TensorDict)
         policy, td_cls = self.policy
         targets = self.sim.root_pose[:, :2].clone()  # rovers not in goal mode: their own position
         for rover in self.rovers:
@@ -408,6 +416,8 @@ class RoverSimNode(Node):
         """Every rover's torques for its mode, one simulator step, odometry, /clock."""
         speeds = self.side_speeds()
         torques = torch.stack([rover.torques(speeds[rover.index], self.goal_action) for rover in self.rovers])
+        # what every rover commanded, as the policy's actions: a task that observes its last actions sees them
+        self.env.record_actions(torques / self.env.task_cfg.action_scale)
         for rover in self.rovers:
             rover.prev_vel = self.sim.lin_vel[rover.index].clone()
         self.sim.set_commands(torques)
