@@ -154,8 +154,8 @@ def main() -> int:
         if not out.is_file():
             parser.error(f"--figure-only: no results file at {out}")
         earlier = json.loads(out.read_text())
-        _figure(earlier["seeds"], earlier["threshold"], _title(earlier["algo"], earlier["preset"], earlier.get("overrides")),
-                Path(args.figure))
+        title = _title(earlier["algo"], earlier["preset"], earlier.get("overrides"))
+        _figure(earlier["seeds"], earlier["threshold"], title, Path(args.figure))
         print(f"figure: {args.figure} (from {out})")
         return 0
     if args.summarize:

@@ -324,10 +324,16 @@ def test_base_driver_two_rovers_cmd_vel_odometry_imu_watchdog(ros_env):
 
 
 @pytest.mark.slow  # a live ROS 2 node
-def test_bad_parameters_are_refused_at_start(ros_env):
+def test_bad_parameters_are_refused_at_start(ros_env, tmp_path):
+    from atrv_warp.policy import make_actor, save_policy
+
+    old = tmp_path / "old_nav.pt"  # a nav policy from before the nav task observed its last actions
+    save_policy(make_actor(16, 1, obs_dim=26), old, width=16, depth=1, meta={"task": "nav"})
     for params, message in ((["bogus_param:=1"], "unknown parameter(s) ['bogus_param']"),
                             (["num_rovers:=0"], "num_rovers must be in 1"),
-                            (["task:=maze"], "task='maze' is not a task")):
+                            (["task:=maze"], "task='maze' is not a task"),
+                            (["task:=nav", f"policy:={old}"], "observes 26 values, task 'nav' observes 32"),
+                            ([f"policy:={tmp_path / 'none.pt'}"], "parameter policy: policy file not found")):
         proc = start_node(ros_env, *params)
         out, _ = proc.communicate(timeout=120)
         assert proc.returncode == 2, out[-2000:]

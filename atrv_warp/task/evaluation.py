@@ -11,8 +11,8 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
-__all__ = ["EVAL_SEED", "SHIFT_BINS", "VALIDATION_SEED", "EpisodeRecord", "EvalResult", "evaluate", "format_bins", "format_result",
-           "run_episodes", "success_by_bin", "write_result"]
+__all__ = ["EVAL_SEED", "SHIFT_BINS", "VALIDATION_SEED", "EpisodeRecord", "EvalResult", "evaluate", "format_bins",
+           "format_result", "run_episodes", "success_by_bin", "write_result"]
 
 EVAL_SEED = 2024
 """Seed of the standard evaluation set, the test set (training never uses it, nor picks its best policy on it)."""

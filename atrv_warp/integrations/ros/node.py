@@ -264,6 +264,7 @@ class RoverSimNode(Node):
         self.sim = None
         self.scanner = None
         self.rovers: list[RoverIO] = []
+        self.policy = None  # goal mode's (policy, TensorDict): a -p policy file once checked, else loaded on first use
 
     def setup(self) -> None:
         self._check_parameters()
@@ -317,7 +318,6 @@ class RoverSimNode(Node):
         for rover, (x, y, yaw) in zip(self.rovers, starts):  # the odom frame starts at the start pose
             rover.odometry.x, rover.odometry.y, rover.odometry.yaw = x, y, yaw
         self.bag = BagWriter(p["bag"]) if p["bag"] else None
-        self.policy = None
 
     def _fail(self, message: str):
         self.log.error(message)
@@ -349,11 +349,13 @@ class RoverSimNode(Node):
         if not 0.0 <= p["scan_dropout"] <= 1.0:
             self._fail(f"scan_dropout is a probability in [0, 1], got {p['scan_dropout']}")
         if p["policy"]:  # goal mode's policy: a file the task can run, checked before any rover starts
+            from tensordict import TensorDict
+
             from atrv_warp.policy import load_policy
             from atrv_warp.storage import FileFormatError
 
             try:
-                load_policy(p["policy"], task=p["task"])
+                self.policy = (load_policy(p["policy"], task=p["task"]), TensorDict)
             except (FileNotFoundError, FileFormatError) as err:
                 self._fail(f"parameter policy: {err}")
 
@@ -402,7 +404,7 @@ class RoverSimNode(Node):
             from atrv_warp.policy import load_policy, pretrained_nav_policy_path
 
             shipped = pretrained_nav_policy_path() if self.params["task"] == "nav" else None
-            self.policy = (load_policy(self.params["policy"] or shipped, task=self.params["task"]), TensorDict)
+            self.policy = (load_policy(shipped, task=self.params["task"]), TensorDict)
         policy, td_cls = self.policy
         targets = self.sim.root_pose[:, :2].clone()  # rovers not in goal mode: their own position
         for rover in self.rovers:
