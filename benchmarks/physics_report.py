@@ -14,6 +14,9 @@ from pathlib import Path
 import numpy as np
 from _common import write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
@@ -91,7 +94,7 @@ def main() -> int:
         print(f"{name:{width}s}  {ours:>16s}  {ref}")
     out = write_results(RESULTS / "physics_report.json",
                         {"rows": [dict(zip(("quantity", "atrv_warp", "reference"), r)) for r in rows],
-                         "time": time.strftime("%Y-%m-%d %H:%M:%S")})
+                         "time": time.strftime("%Y-%m-%d %H:%M:%S")}, version=VERSION)
     print(f"\nwritten to {out}")
     return 0
 
