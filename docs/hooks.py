@@ -1,26 +1,173 @@
-"""mkdocs hook: tables drawn from ``benchmarks/results/*.json`` at build time, so a measured figure
-lives in its results file alone.
+"""mkdocs hook: figures drawn from the results files at build time, and checked against the code.
 
-A page writes ``{{ results_table NAME }}`` on a line of its own; :data:`TABLES` maps ``NAME`` to the
-function that reads the file and returns the Markdown table. An unknown name or a missing file
-fails the build (mkdocs.yml: ``hooks: [docs/hooks.py]``).
+A measured figure lives in its results file alone (``benchmarks/results/*.json``, written by
+``benchmarks/_common.write_results`` with its provenance). A page cites it in one of two ways:
+
+- ``{{ results_table NAME }}`` on a line of its own: :data:`TABLES` maps ``NAME`` to the function
+  that reads the file(s) and returns the Markdown table;
+- ``{{ result FILE:KEY.PATH | FORMAT }}`` inline: one value. ``FILE`` is relative to
+  ``benchmarks/results/`` (or to the repository when it starts with ``docs/`` or ``benchmarks/``);
+  ``KEY.PATH`` is dict keys and list indices joined by dots, and ``[field=value]`` picks the first
+  list element whose ``field`` is ``value``; ``FORMAT`` is a Python format spec (``.1f``, ``,.0f``,
+  ``.1%``), optional.
+
+Every file a page cites is checked against the code as it is now (:func:`status`): the benchmark
+script's ``VERSION``, the dynamics fingerprint (``atrv_warp.sim.checks.dynamics_fingerprint``,
+recomputed once per build) and the sha256 of each policy file it ran. A file that no longer matches,
+or that records no provenance (written before it was recorded), fails the build unless the page marks
+it historical with a line ``{{ historical FILE }}``, which renders as a note with the file's date and
+the command that redraws it. A missing file or key, an unknown table, or a historical mark for a file
+the page does not cite fails the build too, naming the page, the file and the key.
+
+``python docs/hooks.py --stale`` lists every stale or unknown figure of every page, and the
+benchmark that redraws it; it exits 1 if one is not marked historical.
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import json
 import math
 import re
+import subprocess
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
 DOCS = Path(__file__).resolve().parent
-RESULTS = DOCS.parent / "benchmarks" / "results"
+ROOT = DOCS.parent
+RESULTS = ROOT / "benchmarks" / "results"
+BENCHMARKS = ROOT / "benchmarks"
 PLACEHOLDER = re.compile(r"^\{\{ results_table (\w+) \}\}$", re.MULTILINE)
+RESULT = re.compile(r"\{\{ result (?P<file>[\w./-]+\.json):(?P<key>[^|}]+?)(?: \| (?P<fmt>[^}]*?))? \}\}")
+HISTORICAL = re.compile(r"^\{\{ historical (?P<file>[\w./-]+\.json) \}\}$", re.MULTILINE)
+VERSION_LINE = re.compile(r"^VERSION = (\d+)$", re.MULTILINE)
+
+
+class FigureError(Exception):
+    """A page cites a figure that cannot be drawn (a missing file or key) or is stale."""
+
+
+def results_path(name: str) -> Path:
+    """A cited file's path: under ``benchmarks/results/``, or the repository's for ``docs/...``, ``benchmarks/...``."""
+    return ROOT / name if name.startswith(("docs/", "benchmarks/")) else RESULTS / name
+
+
+_cited: list[str] | None = None
+"""While a page renders, the files its tables and values read (:func:`render`)."""
 
 
 def _load(name: str) -> dict:
-    return json.loads((RESULTS / name).read_text())
+    if _cited is not None and name not in _cited:
+        _cited.append(name)
+    path = results_path(name)
+    if not path.is_file():
+        raise FigureError(f"results file {name} not found ({path})")
+    return json.loads(path.read_text())
+
+
+# --- provenance ---------------------------------------------------------------------------------
+
+@functools.cache
+def current_dynamics() -> str:
+    """The dynamics fingerprint of the code as it is now (computed once per process: a 2-s rollout)."""
+    from atrv_warp.sim.checks import dynamics_fingerprint
+
+    return dynamics_fingerprint()
+
+
+def script_version(script: str) -> int | None:
+    """``VERSION`` of a benchmark script as it is now, read from its text (no import)."""
+    path = ROOT / script
+    m = VERSION_LINE.search(path.read_text()) if path.is_file() else None
+    return int(m.group(1)) if m else None
+
+
+def redraw_command(name: str) -> str:
+    """The command that writes results file ``name``: its recorded script, else the benchmark whose
+    name is the longest prefix of the file's."""
+    d = json.loads(results_path(name).read_text()) if results_path(name).is_file() else {}
+    script = d.get("provenance", {}).get("script")
+    if script is None and name.startswith("docs/"):
+        return "python -m atrv_warp.evaluate --json " + name
+    if script is None:
+        stem = Path(name).parent.name if "/" in name else Path(name).stem
+        scripts = sorted((p for p in BENCHMARKS.glob("*.py") if stem.startswith(p.stem)), key=lambda p: -len(p.stem))
+        script = str(scripts[0].relative_to(ROOT)) if scripts else "?"
+    return f"python {script}"
+
+
+class Status:
+    """Whether a results file's figures match the code as it is now: ``state`` is ``"current"``,
+    ``"stale"`` (with ``reasons``) or ``"unknown"`` (no provenance recorded); ``date`` is when it was measured."""
+
+    def __init__(self, file: str, state: str, reasons: list[str], date: str):
+        self.file, self.state, self.reasons, self.date = file, state, reasons, date
+
+    @property
+    def current(self) -> bool:
+        return self.state == "current"
+
+
+def _git_date(path: Path) -> str:
+    out = subprocess.run(["git", "log", "-1", "--format=%cs", "--", str(path)], cwd=ROOT, capture_output=True,
+                         text=True, check=False).stdout.strip()
+    return out or "unknown date"
+
+
+@functools.cache
+def status(name: str) -> Status:
+    """Check results file ``name``'s provenance against the script's ``VERSION``, the dynamics and the policies now."""
+    d = _load(name)
+    p = d.get("provenance") if isinstance(d, dict) else None
+    if p is None:
+        when = d.get("time", "") if isinstance(d, dict) else ""
+        return Status(name, "unknown", ["no provenance recorded"],
+                      (when[:10] if when else f"last committed {_git_date(results_path(name))}"))
+    reasons = []
+    version = script_version(p["script"])
+    if version != p["script_version"]:
+        reasons.append(f"{p['script']} VERSION is {version}, the file was written by VERSION {p['script_version']}")
+    if "dynamics" in p and p["dynamics"] != current_dynamics():
+        reasons.append(f"dynamics fingerprint {p['dynamics']} != {current_dynamics()} now")
+    for policy, digest in p.get("policies", {}).items():
+        path = ROOT / policy
+        if not path.is_file():
+            reasons.append(f"policy {policy} is gone")
+        elif hashlib.sha256(path.read_bytes()).hexdigest() != digest:
+            reasons.append(f"policy {policy} has changed")
+    return Status(name, "stale" if reasons else "current", reasons, p["date"][:10])
+
+
+def lookup(d: object, key: str, *, name: str = "") -> object:
+    """``d``'s value at ``key`` (dots between keys and indices, ``[field=value]`` selectors)."""
+    value = d
+    for i, (select, part) in enumerate(re.findall(r"\[([^\]]*)\]|([^.\[\]]+)", key)):
+        where = f"{name}:{key}"
+        if select:
+            f, _, want = select.partition("=")
+            found = [e for e in value if isinstance(e, dict) and str(e.get(f)) == want] \
+                if isinstance(value, list) else []
+            if not found:
+                raise FigureError(f"results file {name} has no key {key!r}: no element with {f} = {want!r} ({where})")
+            value = found[0]
+        elif isinstance(value, dict) and part in value:
+            value = value[part]
+        elif isinstance(value, list) and part.lstrip("-").isdigit() and -len(value) <= int(part) < len(value):
+            value = value[int(part)]
+        else:
+            raise FigureError(f"results file {name} has no key {key!r} (missing {part!r}, part {i + 1})")
+    return value
+
+
+def result(name: str, key: str, fmt: str = "") -> str:
+    """The value at ``key`` in results file ``name``, formatted with ``fmt``."""
+    value = lookup(_load(name), key, name=name)
+    try:
+        return format(value, fmt)
+    except (TypeError, ValueError) as err:
+        raise FigureError(f"results file {name}, key {key!r}: cannot format {value!r} as {fmt!r}") from err
 
 
 def _table(header: list[str], align: list[str], rows: list[list[str]]) -> str:
@@ -207,7 +354,7 @@ def evaluations() -> str:
              ("nav_policy_eval.json", "shipped nav policy, SAC trained under `wide`"), ("nav_baseline_eval.json", "scripted driver, nav")]
     rows = []
     for file, label in names:
-        e = json.loads((DOCS / file).read_text())
+        e = _load(f"docs/{file}")
         rows.append([label, f"**{100 * e['success_rate']:.1f} %**", f"{100 * e['wall_rate']:.1f} %",
                      f"{100 * e.get('obstacle_rate', 0.0):.1f} %", f"{100 * e['flip_rate']:.1f} %",
                      f"{100 * e['timeout_rate']:.1f} %", f"{e['mean_return']:.2f}", f"{e['mean_steps']:.1f}",
@@ -275,17 +422,97 @@ TABLES: dict[str, Callable[[], str]] = {
 }
 
 
-def render(markdown: str) -> str:
-    """``markdown`` with every placeholder replaced by its table."""
-
-    def table(match: re.Match) -> str:
-        name = match.group(1)
-        if name not in TABLES:
-            raise KeyError(f"unknown results table {name!r}; known: {sorted(TABLES)}")
-        return TABLES[name]()
-
-    return PLACEHOLDER.sub(table, markdown)
+def historical_note(name: str) -> str:
+    """The visible note a ``{{ historical FILE }}`` line renders as."""
+    st = status(name)
+    why = ("written before results files recorded their provenance" if st.state == "unknown"
+           else "measured on code that has changed since: " + "; ".join(st.reasons))
+    return (f'!!! note "Historical figures: `{name}`"\n    Measured {st.date}, {why}. '
+            f"`{redraw_command(name)}` redraws them.")
 
 
-def on_page_markdown(markdown: str, **kwargs) -> str:
-    return render(markdown)
+def render(markdown: str, page: str = "<page>") -> str:
+    """``markdown`` with every table and value placeholder replaced, every historical mark turned into its
+    note, and every cited file checked (:func:`status`).
+
+    Raises:
+        FigureError: naming ``page``, the file and the key, for a missing file or key, an unknown table, a
+            historical mark for a file the page does not cite, or a cited file that is stale or of unknown
+            provenance and not marked historical.
+    """
+    global _cited
+    _cited = []
+    try:
+        def table(match: re.Match) -> str:
+            name = match.group(1)
+            if name not in TABLES:
+                raise FigureError(f"unknown results table {name!r}; known: {sorted(TABLES)}")
+            return TABLES[name]()
+
+        def value(match: re.Match) -> str:
+            return result(match["file"], match["key"].strip(), (match["fmt"] or "").strip())
+
+        try:
+            out = RESULT.sub(value, PLACEHOLDER.sub(table, markdown))
+        except FigureError as err:
+            raise FigureError(f"{page}: {err}") from err
+        cited = list(_cited)
+    finally:
+        _cited = None
+    marked = set(HISTORICAL.findall(markdown))
+    problems = [f"{page}: marks {name} historical but cites nothing from it" for name in sorted(marked - set(cited))]
+    for name in cited:
+        st = status(name)
+        if not st.current and name not in marked:
+            problems.append(f"{page}: cites {name}, whose figures are {st.state} ({'; '.join(st.reasons)}); "
+                            f"redraw them (`{redraw_command(name)}`) or mark them with a line "
+                            f"{{{{ historical {name} }}}}")
+    if problems:
+        raise FigureError("\n".join(problems))
+    return HISTORICAL.sub(lambda m: historical_note(m["file"]), out)
+
+
+def citations(markdown: str) -> list[str]:
+    """The results files a page cites, in order (rendering it without the checks)."""
+    global _cited
+    _cited = []
+    try:
+        for name in PLACEHOLDER.findall(markdown):
+            if name in TABLES:
+                TABLES[name]()
+        for m in RESULT.finditer(markdown):
+            _load(m["file"])
+        return list(_cited)
+    finally:
+        _cited = None
+
+
+def stale_report(pages: list[Path]) -> tuple[list[str], int]:
+    """Lines naming every page's stale or unknown figures and the command that redraws them, and how many are
+    not marked historical."""
+    lines, unmarked = [], 0
+    for page in pages:
+        text = page.read_text()
+        marked = set(HISTORICAL.findall(text))
+        for name in citations(text):
+            st = status(name)
+            if st.current:
+                continue
+            unmarked += name not in marked
+            label = "historical" if name in marked else "NOT MARKED"
+            where = page.relative_to(ROOT) if page.is_relative_to(ROOT) else page
+            lines.append(f"{where}: {name} is {st.state} ({'; '.join(st.reasons)}; {st.date}) "
+                         f"[{label}] -> {redraw_command(name)}")
+    return lines, unmarked
+
+
+def on_page_markdown(markdown: str, page=None, **kwargs) -> str:
+    return render(markdown, page.file.src_uri if page is not None else "<page>")
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] != ["--stale"]:
+        sys.exit("usage: python docs/hooks.py --stale")
+    report, unmarked = stale_report(sorted(DOCS.glob("*.md")))
+    print("\n".join(report) or "every cited figure is current")
+    sys.exit(1 if unmarked else 0)
