@@ -124,7 +124,7 @@ def status(name: str) -> Status:
     if p is None:
         when = d.get("time", "") if isinstance(d, dict) else ""
         return Status(name, "unknown", ["no provenance recorded"],
-                      (when[:10] if when else f"last committed {_git_date(results_path(name))}"))
+                      (when[:10] if when else f"{_git_date(results_path(name))} or earlier"))
     reasons = []
     version = script_version(p["script"])
     if version != p["script_version"]:
