@@ -401,7 +401,124 @@ def calibration() -> str:
     return _table(header, ["---", "---:"] + ["---"] * len(runs), rows)
 
 
+def _diff_gradients(kind: str) -> str:
+    d = _load("diff_gradients.json")
+    rows = d["agreement"]
+    horizons = sorted({r["horizon_s"] for r in rows})
+    scenarios = list(dict.fromkeys(r["scenario"] for r in rows))
+    cell = {(r["scenario"], r["horizon_s"]): r for r in rows}
+
+    def fmt(r: dict) -> str:
+        if r[f"{kind}_negligible"]:
+            return "~0"
+        return f"{100 * r[f'{kind}_rel_err']:.1f} %" + ("†" if r[f"{kind}_fd_rough"] else "")
+
+    return _table(["scenario", *(f"{h:.2f} s" for h in horizons)], ["---"] + ["---:"] * len(horizons),
+                  [[sc, *(fmt(cell[(sc, h)]) for h in horizons)] for sc in scenarios])
+
+
+def diff_gradients_common() -> str:
+    """``diff_gradients.json``: both wheels together, tape against central differences."""
+    return _diff_gradients("common")
+
+
+def diff_gradients_differential() -> str:
+    """``diff_gradients.json``: left against right (steering)."""
+    return _diff_gradients("differential")
+
+
+def diff_gradients_friction() -> str:
+    """``diff_gradients.json``: the friction coefficient."""
+    return _diff_gradients("friction")
+
+
+def diff_gradients_mass() -> str:
+    """``diff_gradients.json``: the chassis mass."""
+    return _diff_gradients("mass")
+
+
+def diff_cost() -> str:
+    """``diff_gradients.json``: forward and backward cost of the taped rollout per world-step."""
+    return _table(["worlds", "forward [µs / world-step]", "backward [µs / world-step]", "backward / forward"],
+                  ["---:"] * 4,
+                  [[str(r["num_worlds"]), f"{r['forward_us_per_world_step']:.0f}", f"{r['backward_us_per_world_step']:.0f}",
+                    f"{r['backward_over_forward']:.2f}"] for r in _load("diff_gradients.json")["cost"]])
+
+
+def env_throughput() -> str:
+    """``env_throughput.json``: raw simulator, ``env.rollout`` and ``Collector`` frames/s."""
+    return _table(["N", "raw sim frames/s", "env.rollout", "overhead", "Collector", "overhead"], ["---:"] * 6,
+                  [[str(r["num_envs"]), f"{r['raw_sim_fps']:,.0f}", f"{r['rollout_fps']:,.0f}",
+                    f"{100 * r['rollout_overhead']:.1f} %", f"{r['collector_fps']:,.0f}",
+                    f"{100 * r['collector_overhead']:.1f} %"] for r in _load("env_throughput.json")["rows"]])
+
+
+def env_scaling() -> str:
+    """``env_throughput.json``: one and two collector workers."""
+    d = _load("env_throughput.json")
+    return _table([f"collector ({d['worker_envs']} worlds per worker, {d['steps_per_worker_batch']} steps per worker batch)",
+                   "1 worker frames/s", "2 workers frames/s", "speed-up"], ["---", "---:", "---:", "---:"],
+                  [[f"`{name}`", f"{r['1_worker_fps']:,.0f}", f"{r['2_workers_fps']:,.0f}", f"{r['speedup']:.2f}×"]
+                   for name, r in d["scaling"].items()])
+
+
+def nav_throughput() -> str:
+    """``nav_throughput.json``: the nav task's env-steps/s against the reach task's."""
+    rows = []
+    for r in _load("nav_throughput.json")["rows"]:
+        us = r["us_per_world_step"]
+        rows.append([str(r["num_envs"]), f"{r['reach_env_steps_per_s']:,.0f}", f"{r['nav_env_steps_per_s']:,.0f}",
+                     f"{r['nav_over_reach']:.2f}", f"{us['sim_flat']:.1f} / {us['sim_nav']:.1f} / {us['scan']:.1f} µs"])
+    return _table(["N", "reach env-steps/s", "nav env-steps/s", "nav / reach",
+                   "per world-step: sim flat / sim terrain + obstacles / scan"], ["---:"] * 4 + ["---"], rows)
+
+
+def ray_collection() -> str:
+    """``ray_collection.json``: TorchRL's ``RayCollector`` against ``MultiSyncCollector``."""
+    d = _load("ray_collection.json")
+    fps, ratio = d["best_fps"], d["ray_over_local"]
+    return _table([f"workers x {d['worlds_per_worker']} worlds", "MultiSyncCollector frames/s", "RayCollector frames/s",
+                   "Ray / local"], ["---:"] * 4,
+                  [[k, f"{fps[f'MultiSyncCollector x{k}']:,.0f}", f"{fps[f'RayCollector x{k}']:,.0f}", f"{ratio[k]:.2f}"]
+                   for k in sorted(ratio)])
+
+
+def step_profile() -> str:
+    """``step_profile.json``: where one step's kernel time goes, by kernel, at its number of worlds."""
+    d = _load("step_profile.json")
+    owner = {"newton": "Newton", "atrv_warp": "ours"}
+    rows = [[owner.get(r["owner"], r["owner"]), f"`{r['name']}`", f"{r['ms_per_step']:.2f}", f"{100 * r['share']:.1f} %",
+             f"{r['calls_per_step']:g}"] for r in d["rows"][:10]]
+    ms = d["ms_by_owner"]
+    rows.append(["", "all of Newton / all of ours", f"{ms['newton']:.2f} / {ms['atrv_warp']:.2f}",
+                 f"{100 * d['by_owner']['newton']:.1f} % / {100 * d['by_owner']['atrv_warp']:.1f} %", ""])
+    return _table(["owner", "kernel", "ms per step", "share", "launches per step"], ["---", "---", "---:", "---:", "---:"],
+                  rows)
+
+
+def substep_speed() -> str:
+    """``substep_study_coulomb_1e7.json``: today's step (Coulomb friction) at five and three substeps."""
+    d = _load("substep_study_coulomb_1e7.json")
+    rows = [[f"{r['substeps']} ({r['sim_dt']:.3g} s)" + (", the default" if r["substeps"] == 5 else ""),
+             f"**{r['env_steps_per_s']:,.0f}**", f"{r['speedup_vs_5']:.2f}", f"{r['world_steps']:,}", str(r["nonfinite_worlds"]),
+             f"{r['impact_max_speed']:.2f}"] for r in d["rows"]]
+    return _table([f"substeps (sim_dt), {d['worlds']:,} worlds", "env-steps/s, one core", "vs 5",
+                   "random-torque world-steps", "non-finite worlds", "wall impacts: fastest [m/s]"],
+                  ["---", "---:", "---:", "---:", "---:", "---:"], rows)
+
+
 TABLES: dict[str, Callable[[], str]] = {
+    "diff_gradients_common": diff_gradients_common,
+    "diff_gradients_differential": diff_gradients_differential,
+    "diff_gradients_friction": diff_gradients_friction,
+    "diff_gradients_mass": diff_gradients_mass,
+    "diff_cost": diff_cost,
+    "env_throughput": env_throughput,
+    "env_scaling": env_scaling,
+    "nav_throughput": nav_throughput,
+    "ray_collection": ray_collection,
+    "step_profile": step_profile,
+    "substep_speed": substep_speed,
     "calibration": calibration,
     "coulomb_cost": coulomb_cost,
     "physics_report": physics_report,
