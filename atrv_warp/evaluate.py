@@ -24,10 +24,11 @@ import sys
 
 from atrv_warp.runtime import add_verbose_argument, device_summary, error_line, set_verbose
 
-__all__ = ["baseline_main", "main"]
+__all__ = ["baseline_main", "build_parser", "main"]
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser (the docs' command table reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.evaluate", description=__doc__.splitlines()[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     parser.add_argument("checkpoint", nargs="?", default=None, help="policy or checkpoint file (default: shipped)")
@@ -51,6 +52,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--video", metavar="FILE.mp4", help="draw the first episodes top down into an MP4")
     parser.add_argument("--video-episodes", type=int, default=4, help="episodes in the video (default: 4)")
     add_verbose_argument(parser)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error("--episodes must be >= 1")

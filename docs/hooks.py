@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import itertools
 import json
 import math
 import re
@@ -507,6 +508,22 @@ def substep_speed() -> str:
                   ["---", "---:", "---:", "---:", "---:", "---:"], rows)
 
 
+def substep_study() -> str:
+    """``substep_study.json``: speed, accuracy and stability per substep count (viscous friction law)."""
+    rows = []
+    for r in _load("substep_study.json")["rows"]:
+        name = f"{r['substeps']} ({r['sim_dt']:.3g} s)" + (", plain law" if r["damping_limit"] is None else "")
+        rows.append([name, f"{r['env_steps_per_s']:,.0f}", f"{r['speedup_vs_5']:.2f}",
+                     f"{r['x_after_1.0_s']:.3f} / {r['x_after_3.0_s']:.3f} / {r['x_after_4.9_s']:.3f}",
+                     f"{r['accel_2Nm']:.4f}", str(r["nonfinite_worlds"]),
+                     f"{r['held_nonfinite_worlds']} / {r['held_overspeed_worlds']}",
+                     f"{r['impact_max_speed']:.2f} / {r['impact_overspeed_worlds']}"])
+    return _table(["substeps (sim_dt)", "env-steps/s", "vs 5", "reference drive x after 1 / 3 / 4.9 s [m]",
+                   "accel at +2 N·m [m/s²]", "fresh torques: non-finite",
+                   "held torques: non-finite / over 1.2× top speed", "wall impacts: fastest [m/s] / over 1.2×"],
+                  ["---"] + ["---:"] * 7, rows)
+
+
 TABLES: dict[str, Callable[[], str]] = {
     "diff_gradients_common": diff_gradients_common,
     "diff_gradients_differential": diff_gradients_differential,
@@ -519,6 +536,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "ray_collection": ray_collection,
     "step_profile": step_profile,
     "substep_speed": substep_speed,
+    "substep_study": substep_study,
     "calibration": calibration,
     "coulomb_cost": coulomb_cost,
     "physics_report": physics_report,
@@ -537,6 +555,109 @@ TABLES: dict[str, Callable[[], str]] = {
     "sim_choices": sim_choices,
     "sim_vs_mujoco": sim_vs_mujoco,
 }
+
+
+# --- the command table, from the command-line tools' own parsers ------------------------------
+
+COMMANDS = (("train", "atrv-train"), ("evaluate", "atrv-evaluate"), ("demo", "atrv-demo"), ("model", "atrv-model"),
+            ("export", "atrv-export"), ("calibrate", "atrv-calibrate"), ("ros", "atrv-ros"))
+"""(``atrv_warp.<module>``, the command ``pyproject.toml`` installs) of every command-line tool."""
+COMMANDS_LINE = re.compile(r"^\{\{ command_table( \w+)? \}\}$", re.MULTILINE)
+
+
+def _cell(text: str) -> str:
+    return " ".join(str(text).split()).replace("``", "`").replace("|", "\\|")
+
+
+def _argparse_rows(parser) -> list[list[str]]:
+    import argparse
+
+    rows = []
+    for action in parser._actions:  # noqa: SLF001 - argparse keeps its arguments here and nowhere public
+        if isinstance(action, argparse._HelpAction):  # noqa: SLF001
+            continue
+        value = "" if action.nargs == 0 else " " + (action.metavar or action.dest.upper())
+        name = ", ".join(f"`{o}{value}`" for o in action.option_strings) or f"`{action.metavar or action.dest}`"
+        default = "" if action.default in (None, False, argparse.SUPPRESS) else f"`{action.default}`"
+        text = (action.help or "").replace("%(default)s", str(action.default))
+        rows.append([name, default, _cell(text)])
+    return rows
+
+
+def _train_rows() -> list[list[str]]:
+    import dataclasses
+    import typing
+
+    from atrv_warp.rl.config import TrainCommand, TrainConfig
+
+    rows = []
+    docs = _attribute_docs(TrainCommand)
+    for f in dataclasses.fields(TrainCommand):
+        if f.name == "train":
+            continue
+        default = f.default if f.default is not dataclasses.MISSING else ""
+        rows.append([f"`--{f.name}`", f"`{default}`" if default not in (None, False, "") else "", _cell(docs.get(f.name, ""))])
+    groups = [f.name for f in dataclasses.fields(TrainConfig)]
+    hints = typing.get_type_hints(TrainConfig)
+    rows.append(["`FIELD=VALUE`, `--GROUP.FIELD VALUE`", "",
+                 (f"any field of the configuration's groups ({', '.join(f'`{g}`' for g in groups if g in hints)}); "
+                  "`--help` lists every field with its documentation")])
+    return rows
+
+
+def _attribute_docs(cls) -> dict[str, str]:
+    """The docstrings written under a dataclass's fields."""
+    import ast
+    import inspect
+    import textwrap
+
+    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
+    body, docs = tree.body[0].body, {}
+    for a, b in itertools.pairwise(body):
+        if isinstance(a, ast.AnnAssign) and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant):
+            docs[a.target.id] = str(b.value.value)
+    return docs
+
+
+def _ros_rows() -> list[list[str]]:
+    from atrv_warp.integrations.ros import PARAMETERS
+
+    return [[f"`-p {name}:=…`", f"`{default!r}`", _cell(text)] for name, default, text in PARAMETERS]
+
+
+def _command(module: str):
+    import importlib
+
+    return importlib.import_module(f"atrv_warp.{module}")
+
+
+def command_summary(module: str) -> str:
+    """A command's one-line description, from its parser (or, for train and ros, its module docstring)."""
+    if module in ("train", "ros"):  # their docstrings, read without importing torchrl or ROS
+        import ast
+
+        text = ast.get_docstring(ast.parse((ROOT / "atrv_warp" / f"{module}.py").read_text()))
+    else:
+        text = _command(module).build_parser().description
+    return _cell(text.split("\n")[0].split(": ``")[0].rstrip(".") + ".")
+
+
+def command_options(module: str) -> list[list[str]]:
+    """A command's arguments: name, default, help."""
+    if module == "train":
+        return _train_rows()
+    if module == "ros":
+        return _ros_rows()
+    return _argparse_rows(_command(module).build_parser())
+
+
+def command_table(which: str | None = None) -> str:
+    """The overview of every command, or one command's options (``which``), from the parsers themselves."""
+    if which is None:
+        return _table(["command", "installed as", "what it does"], ["---", "---", "---"],
+                      [[f"[`python -m atrv_warp.{m}`](#{m})", f"`{script}`", command_summary(m)] for m, script in COMMANDS]
+                      + [["`python -m atrv_warp.evaluate --baseline`", "`atrv-baseline`", "the scripted driver's evaluation"]])
+    return _table(["argument", "default", "meaning"], ["---", "---", "---"], command_options(which))
 
 
 def historical_note(name: str) -> str:
@@ -571,6 +692,7 @@ def render(markdown: str, page: str = "<page>") -> str:
 
         try:
             out = RESULT.sub(value, PLACEHOLDER.sub(table, markdown))
+            out = COMMANDS_LINE.sub(lambda m: command_table(m.group(1).strip() if m.group(1) else None), out)
         except FigureError as err:
             raise FigureError(f"{page}: {err}") from err
         cited = list(_cited)

@@ -7,7 +7,6 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import pytest
@@ -102,10 +101,10 @@ def test_every_shipped_page_renders_and_a_current_file_matches_the_code():
     assert hooks.status("physics_report.json").current, hooks.status("physics_report.json").reasons
 
 
-def test_write_results_records_provenance(tmp_path, monkeypatch):
-    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
-    import _common
-
+def test_write_results_records_provenance(tmp_path):
+    spec = importlib.util.spec_from_file_location("benchmarks_common", ROOT / "benchmarks" / "_common.py")
+    _common = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(_common)
     out = _common.write_results(tmp_path / "r.json", {"x": 1}, version=3, dynamics=False,
                                 policies=(ROOT / "atrv_warp" / "assets" / "pretrained_policy.pt",))
     p = json.loads(out.read_text())["provenance"]
@@ -113,7 +112,6 @@ def test_write_results_records_provenance(tmp_path, monkeypatch):
     assert "dynamics" not in p
     digest = hashlib.sha256((ROOT / "atrv_warp/assets/pretrained_policy.pt").read_bytes()).hexdigest()
     assert p["policies"] == {"atrv_warp/assets/pretrained_policy.pt": digest}
-    sys.modules.pop("_common", None)
 
 
 def test_the_dynamics_fingerprint_is_behaviour():
@@ -123,3 +121,26 @@ def test_the_dynamics_fingerprint_is_behaviour():
     now = dynamics_fingerprint()
     assert now == dynamics_fingerprint() and len(now) == 16
     assert dynamics_fingerprint(contact=ContactConfig(friction_law="viscous")) != now
+
+
+def test_the_command_table_comes_from_the_parsers():
+    """Every installed command is in the table, and every argument of every argparse tool is listed."""
+    import tomllib
+
+    spec = importlib.util.spec_from_file_location("docs_hooks_commands", ROOT / "docs" / "hooks.py")
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    overview = hooks.command_table()
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    for script in scripts:
+        assert f"`{script}`" in overview, script
+    for module, _ in hooks.COMMANDS:
+        if module in ("train", "ros"):
+            continue
+        table = hooks.command_table(module)
+        parser = importlib.import_module(f"atrv_warp.{module}").build_parser()
+        for action in parser._actions:  # noqa: SLF001
+            for option in action.option_strings:
+                assert option in table or option in ("-h", "--help"), (module, option)
+    assert "`--resume`" in hooks.command_table("train") and "`-p num_rovers:=…`" in hooks.command_table("ros")
+    assert "{{ command_table }}" in (ROOT / "docs" / "commands.md").read_text()
