@@ -8,8 +8,8 @@ A measured figure lives in its results file alone (``benchmarks/results/*.json``
 - ``{{ result FILE:KEY.PATH | FORMAT }}`` inline: one value. ``FILE`` is relative to
   ``benchmarks/results/`` (or to the repository when it starts with ``docs/`` or ``benchmarks/``);
   ``KEY.PATH`` is dict keys and list indices joined by dots, and ``[field=value]`` picks the first
-  list element whose ``field`` is ``value``; ``FORMAT`` is a Python format spec (``.1f``, ``,.0f``,
-  ``.1%``), optional.
+  list element whose ``field`` is ``value``; ``FORMAT`` is a Python format spec (``.1f``, ``,.0f``),
+  optional; ``.1%`` gives a percentage as the pages write it (``91.3 %``).
 
 Every file a page cites is checked against the code as it is now (:func:`status`): the benchmark
 script's ``VERSION``, the dynamics fingerprint (``atrv_warp.sim.checks.dynamics_fingerprint``,
@@ -166,6 +166,8 @@ def result(name: str, key: str, fmt: str = "") -> str:
     """The value at ``key`` in results file ``name``, formatted with ``fmt``."""
     value = lookup(_load(name), key, name=name)
     try:
+        if fmt.endswith("%"):  # the house style: "91.3 %", a space before the sign
+            return format(100 * value, fmt[:-1] + "f") + " %"
         return format(value, fmt)
     except (TypeError, ValueError) as err:
         raise FigureError(f"results file {name}, key {key!r}: cannot format {value!r} as {fmt!r}") from err
