@@ -7,8 +7,8 @@ A measured figure lives in its results file alone (``benchmarks/results/*.json``
   that reads the file(s) and returns the Markdown table;
 - ``{{ result FILE:KEY.PATH | FORMAT }}`` inline: one value. ``FILE`` is relative to
   ``benchmarks/results/`` (or to the repository when it starts with ``docs/`` or ``benchmarks/``);
-  ``KEY.PATH`` is dict keys and list indices joined by dots, and ``[field=value]`` picks the first
-  list element whose ``field`` is ``value``; ``FORMAT`` is a Python format spec (``.1f``, ``,.0f``),
+  ``KEY.PATH`` is dict keys and list indices joined by dots, and ``[field=value,other=value]`` picks the first
+  list element with those fields; ``FORMAT`` is a Python format spec (``.1f``, ``,.0f``),
   optional; ``.1%`` gives a percentage as the pages write it (``91.3 %``).
 
 Every file a page cites is checked against the code as it is now (:func:`status`): the benchmark
@@ -147,11 +147,11 @@ def lookup(d: object, key: str, *, name: str = "") -> object:
     for i, (select, part) in enumerate(re.findall(r"\[([^\]]*)\]|([^.\[\]]+)", key)):
         where = f"{name}:{key}"
         if select:
-            f, _, want = select.partition("=")
-            found = [e for e in value if isinstance(e, dict) and str(e.get(f)) == want] \
+            wants = [c.partition("=")[::2] for c in select.split(",")]
+            found = [e for e in value if isinstance(e, dict) and all(str(e.get(f)) == w for f, w in wants)] \
                 if isinstance(value, list) else []
             if not found:
-                raise FigureError(f"results file {name} has no key {key!r}: no element with {f} = {want!r} ({where})")
+                raise FigureError(f"results file {name} has no key {key!r}: no element with {select} ({where})")
             value = found[0]
         elif isinstance(value, dict) and part in value:
             value = value[part]
@@ -526,6 +526,22 @@ def substep_study() -> str:
                   ["---"] + ["---:"] * 7, rows)
 
 
+def sac_update_cost() -> str:
+    """``sac_update_cost.json``: one gradient step of the trainer's ``Learner`` per loss and batch, one thread."""
+    names = {"loss=sac": "SAC", "sac, critics in a loop": "SAC, critics in a Python loop instead of TorchRL's vmap",
+             "sac, torch.compile": "SAC, loss and backward under `torch.compile`", "loss=crossq": "CrossQ",
+             "loss=redq": "REDQ (10 critics)"}
+    cells: dict[str, dict[int, str]] = {}
+    for v in _load("sac_update_cost.json")["variants"]:
+        text = f"{v['ms_per_update']:.1f} ms"
+        if v["warmup_s"] > 5:
+            text += f", after {v['warmup_s']:.0f} s of compilation"
+        cells.setdefault(names.get(v["variant"], v["variant"]), {})[v["batch"]] = text
+    order = [n for n in names.values() if n in cells]
+    return _table(["variant", "batch 256", "batch 512"], ["---", "---:", "---:"],
+                  [[n, cells[n].get(256, ""), cells[n].get(512, "")] for n in order])
+
+
 TABLES: dict[str, Callable[[], str]] = {
     "diff_gradients_common": diff_gradients_common,
     "diff_gradients_differential": diff_gradients_differential,
@@ -539,6 +555,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "step_profile": step_profile,
     "substep_speed": substep_speed,
     "substep_study": substep_study,
+    "sac_update_cost": sac_update_cost,
     "calibration": calibration,
     "coulomb_cost": coulomb_cost,
     "physics_report": physics_report,

@@ -33,8 +33,9 @@ def _write(folder: Path, name: str, figures: dict, **provenance) -> None:
 
 def test_a_current_figure_renders_from_its_file(hooks, tmp_path):
     _write(tmp_path, "r.json", {"rows": [{"n": 64, "rate": 1234.5}, {"n": 1024, "rate": 0.9132}]})
-    page = "A {{ result r.json:rows.0.rate | ,.0f }}, B {{ result r.json:rows[n=1024].rate | .1% }}, C {{ result r.json:rows.1.n }}."
-    assert hooks.render(page, "p.md") == "A 1,234, B 91.3 %, C 1024."
+    page = ("A {{ result r.json:rows.0.rate | ,.0f }}, B {{ result r.json:rows[n=1024].rate | .1% }}, "
+            "C {{ result r.json:rows.1.n }}, D {{ result r.json:rows[n=64,rate=1234.5].n }}.")
+    assert hooks.render(page, "p.md") == "A 1,234, B 91.3 %, C 1024, D 64."
 
 
 def test_a_missing_file_or_key_names_the_page_file_and_key(hooks, tmp_path):
@@ -43,7 +44,7 @@ def test_a_missing_file_or_key_names_the_page_file_and_key(hooks, tmp_path):
         hooks.render("{{ result gone.json:x }}", "p.md")
     with pytest.raises(hooks.FigureError, match=r"p\.md: results file r\.json has no key 'rows\.0\.rate'"):
         hooks.render("{{ result r.json:rows.0.rate }}", "p.md")
-    with pytest.raises(hooks.FigureError, match=r"p\.md: results file r\.json has no key 'rows\[n=5\]\.n'"):
+    with pytest.raises(hooks.FigureError, match=r"p\.md: results file r\.json has no key 'rows\[n=5\]\.n': no element with n=5"):
         hooks.render("{{ result r.json:rows[n=5].n }}", "p.md")
 
 
