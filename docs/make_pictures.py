@@ -173,18 +173,23 @@ def nav_caption(outcomes: dict[str, list[str]], seed: int) -> str:
             f"{_count(policy, 'success')} and touches an obstacle in {_count(policy, 'obstacle')}.")
 
 
-def write_caption(out: Path, outcomes: dict[str, list[str]], seed: int, policy: Path) -> None:
-    """``out`` (JSON): the outcomes, the caption and the provenance, as ``benchmarks/_common`` records it."""
+def provenance(policy: Path) -> dict:
+    """The picture's provenance, as ``benchmarks/_common`` records a results file's (taken before anything is written)."""
     import importlib.util
-    import json
 
     spec = importlib.util.spec_from_file_location("benchmarks_common", DOCS.parent / "benchmarks" / "_common.py")
     common = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(common)
-    record = {"rule": f"the first {len(outcomes['nav policy (SAC)'])} episodes of the test set", "seed": seed,
-              "outcomes": outcomes, "caption": nav_caption(outcomes, seed),
-              "provenance": common.provenance(VERSION, script=__file__, policies=(policy,))}
-    out.write_text(json.dumps(record, indent=2) + "\n")
+    return common.provenance(VERSION, script=__file__, policies=(policy,))
+
+
+def write_caption(out: Path, outcomes: dict[str, list[str]], seed: int, record: dict) -> None:
+    """``out`` (JSON): the outcomes, the caption written from them, and the provenance ``record``."""
+    import json
+
+    out.write_text(json.dumps({"rule": f"the first {len(outcomes['nav policy (SAC)'])} episodes of the test set",
+                               "seed": seed, "outcomes": outcomes, "caption": nav_caption(outcomes, seed),
+                               "provenance": record}, indent=2) + "\n")
 
 
 def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
@@ -197,6 +202,7 @@ def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
     from atrv_warp.policy import pretrained_nav_policy_path
     from atrv_warp.task.baseline import scripted_policy
 
+    record = provenance(pretrained_nav_policy_path())
     runs = {"scripted driver": nav_paths(scripted_policy(), episodes, seed),
             "nav policy (SAC)": nav_paths(load_policy(pretrained_nav_policy_path()), episodes, seed)}
     fig, axes = plt.subplots(1, episodes, figsize=(4.0 * episodes, 4.3), dpi=90)
@@ -229,8 +235,7 @@ def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
     fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)
-    write_caption(out.with_suffix(".json"), {name: run["reason"] for name, run in runs.items()}, seed,
-                  pretrained_nav_policy_path())
+    write_caption(out.with_suffix(".json"), {name: run["reason"] for name, run in runs.items()}, seed, record)
     return [f"{name}: {', '.join(run['reason'])}" for name, run in runs.items()]
 
 
