@@ -145,3 +145,21 @@ def test_the_command_table_comes_from_the_parsers():
                 assert option in table or option in ("-h", "--help"), (module, option)
     assert "`--resume`" in hooks.command_table("train") and "`-p num_rovers:=…`" in hooks.command_table("ros")
     assert "{{ command_table }}" in (ROOT / "docs" / "commands.md").read_text()
+
+
+def test_the_nav_caption_is_written_from_the_outcomes():
+    """docs/make_pictures.py writes the picture's caption from how its episodes ended; the shipped one matches
+    its outcomes and the policy it ran."""
+    spec = importlib.util.spec_from_file_location("docs_make_pictures", ROOT / "docs" / "make_pictures.py")
+    pictures = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(pictures)
+    caption = pictures.nav_caption({"scripted driver": ["obstacle", "wall", "obstacle"],
+                                    "nav policy (SAC)": ["success", "success", "success"]}, 7)
+    assert "first 3 episodes" in caption and "(seed 7)" in caption
+    assert "reaches the target in none of the 3 and runs into an obstacle in 2 of the 3" in caption
+    assert "reaches it in all 3 and touches an obstacle in none of the 3" in caption
+    shipped = json.loads((ROOT / "docs" / "nav.json").read_text())
+    assert shipped["caption"] == pictures.nav_caption(shipped["outcomes"], shipped["seed"])
+    policy = ROOT / "atrv_warp" / "assets" / "nav_policy.pt"
+    assert shipped["provenance"]["policies"] == {"atrv_warp/assets/nav_policy.pt":
+                                                 hashlib.sha256(policy.read_bytes()).hexdigest()}
