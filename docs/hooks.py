@@ -17,7 +17,11 @@ recomputed once per build) and the sha256 of each policy file it ran. A file tha
 or that records no provenance (written before it was recorded), fails the build unless the page marks
 it historical with a line ``{{ historical FILE }}``, which renders as a note with the file's date and
 the command that redraws it. A missing file or key, an unknown table, or a historical mark for a file
-the page does not cite fails the build too, naming the page, the file and the key.
+the page does not cite or whose figures are current fails the build too, naming the page, the file and
+the key.
+
+A line ``{{ command_table }}`` (or ``{{ command_table TOOL }}``) renders the command-line tools' table
+(or one tool's arguments) from their own parsers (:func:`command_table`).
 
 ``python docs/hooks.py --stale`` lists every stale or unknown figure of every page, and the
 benchmark that redraws it; it exits 1 if one is not marked historical.
@@ -721,6 +725,8 @@ def render(markdown: str, page: str = "<page>") -> str:
     problems = [f"{page}: marks {name} historical but cites nothing from it" for name in sorted(marked - set(cited))]
     for name in cited:
         st = status(name)
+        if st.current and name in marked:
+            problems.append(f"{page}: marks {name} historical, but its figures match the code: remove the mark")
         if not st.current and name not in marked:
             problems.append(f"{page}: cites {name}, whose figures are {st.state} ({'; '.join(st.reasons)}); "
                             f"redraw them (`{redraw_command(name)}`) or mark them with a line "
@@ -762,6 +768,12 @@ def stale_report(pages: list[Path]) -> tuple[list[str], int]:
             lines.append(f"{where}: {name} is {st.state} ({'; '.join(st.reasons)}; {st.date}) "
                          f"[{label}] -> {redraw_command(name)}")
     return lines, unmarked
+
+
+def on_pre_build(**kwargs) -> None:
+    """A new build (``mkdocs serve`` rebuilds in one process) checks the files and the code afresh."""
+    status.cache_clear()
+    current_dynamics.cache_clear()
 
 
 def on_page_markdown(markdown: str, page=None, **kwargs) -> str:

@@ -57,6 +57,9 @@ def test_a_stale_fingerprint_fails_unless_the_page_marks_it_historical(hooks, tm
     assert out.startswith("x = 0.5\n")
     assert '!!! note "Historical figures: `old.json`"' in out
     assert "Measured 2026-11-20" in out and "`python benchmarks/physics_report.py` redraws them" in out
+    _write(tmp_path, "new.json", {"x": 0.5})
+    with pytest.raises(hooks.FigureError, match="p.md: marks new.json historical, but its figures match the code"):
+        hooks.render("{{ result new.json:x }}\n{{ historical new.json }}\n", "p.md")
 
 
 def test_a_changed_script_version_or_policy_is_stale(hooks, tmp_path, monkeypatch):
