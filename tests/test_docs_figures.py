@@ -166,3 +166,19 @@ def test_the_nav_caption_is_written_from_the_outcomes():
     policy = ROOT / "atrv_warp" / "assets" / "nav_policy.pt"
     assert shipped["provenance"]["policies"] == {"atrv_warp/assets/nav_policy.pt":
                                                  hashlib.sha256(policy.read_bytes()).hexdigest()}
+
+
+def test_mkdocs_build_fails_naming_the_page_file_and_key(tmp_path):
+    """End to end: a site built with docs/hooks.py fails on a page that cites a key its results file lacks."""
+    import shutil
+    import subprocess
+
+    mkdocs = shutil.which("mkdocs")
+    if mkdocs is None:
+        pytest.skip("mkdocs is not installed (the docs extra)")
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "index.md").write_text("# Site\n\nx = {{ result physics_report.json:rows.0.no_such_key }}\n")
+    (tmp_path / "mkdocs.yml").write_text(f"site_name: t\nstrict: true\nhooks:\n  - {ROOT / 'docs' / 'hooks.py'}\n")
+    run = subprocess.run([mkdocs, "build", "--strict", "-q"], cwd=tmp_path, capture_output=True, text=True, check=False)
+    assert run.returncode != 0
+    assert "index.md: results file physics_report.json has no key 'rows.0.no_such_key'" in run.stderr, run.stderr[-2000:]
