@@ -98,6 +98,8 @@ def main() -> int:
     out = write_results(RESULTS / "physics_report.json",
                         {"rows": [dict(zip(("quantity", "atrv_warp", "reference"), r)) for r in rows],
                          "reference_drive": drive,
+                         "static_depth_mm": {"reference": 1e3 * ref_depth, "realistic": 1e3 * depth},
+                         "damping_ceiling": {"sim_dt_s": [0.01, FAST_SIM_DT], "onset_mm": onset},
                          "time": time.strftime("%Y-%m-%d %H:%M:%S")}, version=VERSION)
     print(f"\nwritten to {out}")
     return 0
