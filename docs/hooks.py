@@ -373,7 +373,7 @@ def evaluations() -> str:
 def coulomb_cost() -> str:
     """``compare_revisions_coulomb.json``: this tree's step against 0.1.x's (viscous friction), interleaved."""
     d = _load("compare_revisions_coulomb.json")
-    return _table(["N", f"0.1.x ({d['old']}) env-steps/s", f"Coulomb ({d['new']}) env-steps/s", "new / old"],
+    return _table(["N", "0.1.x (viscous) env-steps/s", "Coulomb env-steps/s", "Coulomb / 0.1.x"],
                   ["---:"] * 4,
                   [[str(r["num_worlds"]), f"{r['old_median']:,.0f}", f"{r['new_median']:,.0f}", f"{r['ratio']:.3f}"]
                    for r in d["rows"] if r["kind"] == "sim"])
