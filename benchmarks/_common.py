@@ -13,6 +13,7 @@ import datetime
 import hashlib
 import json
 import os
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -57,14 +58,17 @@ def provenance(version: int, *, script: str | Path | None = None, dynamics: bool
 
     Returns:
         ``date`` (UTC), ``commit`` and ``dirty`` (uncommitted changes to tracked files), ``script``,
-        ``script_version``, and ``dynamics`` and ``policies`` where they apply.
+        ``script_version``, ``command`` (the command line that ran, when the script is the one being run),
+        and ``dynamics`` and ``policies`` where they apply.
     """
-    if script is None:
-        script = getattr(sys.modules["__main__"], "__file__", None) or sys.argv[0]
+    main = getattr(sys.modules["__main__"], "__file__", None) or sys.argv[0]
+    script = script or main
     record = {"date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
               "commit": _git("rev-parse", "HEAD"),
               "dirty": bool(_git("status", "--porcelain", "--untracked-files=no")),
               "script": _relative(script), "script_version": int(version)}
+    if Path(script).resolve() == Path(main).resolve():  # the command that wrote it, to run again
+        record["command"] = shlex.join(["python", _relative(script), *sys.argv[1:]])
     if dynamics:
         from atrv_warp.sim.checks import dynamics_fingerprint
 

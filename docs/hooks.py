@@ -90,9 +90,11 @@ def script_version(script: str) -> int | None:
 
 
 def redraw_command(name: str) -> str:
-    """The command that writes results file ``name``: its recorded script, else the benchmark whose
-    name is the longest prefix of the file's."""
+    """The command that writes results file ``name``: the one it recorded, else its recorded script, else
+    the benchmark whose name is the longest prefix of the file's."""
     d = json.loads(results_path(name).read_text()) if results_path(name).is_file() else {}
+    if "command" in d.get("provenance", {}):
+        return d["provenance"]["command"]
     script = d.get("provenance", {}).get("script")
     if script is None and name.startswith("docs/"):
         return "python -m atrv_warp.evaluate --json " + name

@@ -113,7 +113,7 @@ def test_write_results_records_provenance(tmp_path):
                                 policies=(ROOT / "atrv_warp" / "assets" / "pretrained_policy.pt",))
     p = json.loads(out.read_text())["provenance"]
     assert p["script_version"] == 3 and len(p["commit"]) == 40 and isinstance(p["dirty"], bool)
-    assert "dynamics" not in p
+    assert "dynamics" not in p and p["command"].startswith("python ")  # pytest is the script being run here
     digest = hashlib.sha256((ROOT / "atrv_warp/assets/pretrained_policy.pt").read_bytes()).hexdigest()
     assert p["policies"] == {"atrv_warp/assets/pretrained_policy.pt": digest}
 
