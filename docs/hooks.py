@@ -358,18 +358,14 @@ def randomization_cost() -> str:
 
 
 def evaluations() -> str:
-    """``docs/*_eval.json``: the shipped policies and the scripted baselines on 1,000 seeded episodes."""
-    names = [("pretrained_policy_eval.json", "shipped reach policy, SAC"), ("baseline_eval.json", "scripted driver, reach"),
-             ("nav_policy_eval.json", "shipped nav policy, SAC trained under `wide`"), ("nav_baseline_eval.json", "scripted driver, nav")]
+    """``evaluations.json``: the shipped policies and the scripted drivers on the 1,000 test episodes."""
     rows = []
-    for file, label in names:
-        e = _load(f"docs/{file}")
-        rows.append([label, f"**{100 * e['success_rate']:.1f} %**", f"{100 * e['wall_rate']:.1f} %",
+    for e in _load("evaluations.json")["rows"]:
+        rows.append([e["label"], f"**{100 * e['success_rate']:.1f} %**", f"{100 * e['wall_rate']:.1f} %",
                      f"{100 * e.get('obstacle_rate', 0.0):.1f} %", f"{100 * e['flip_rate']:.1f} %",
-                     f"{100 * e['timeout_rate']:.1f} %", f"{e['mean_return']:.2f}", f"{e['mean_steps']:.1f}",
-                     f"`docs/{file}`"])
-    return _table(["policy", "success", "wall", "obstacle", "flip", "timeout", "mean return", "mean steps", "file"],
-                  ["---"] + ["---:"] * 7 + ["---"], rows)
+                     f"{100 * e['timeout_rate']:.1f} %", f"{e['mean_return']:.2f}", f"{e['mean_steps']:.1f}"])
+    return _table(["policy", "success", "wall", "obstacle", "flip", "timeout", "mean return", "mean steps"],
+                  ["---"] + ["---:"] * 7, rows)
 
 
 def coulomb_cost() -> str:
