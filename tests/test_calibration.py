@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 import torch
 
+from atrv_warp.core.kinematics import side_speeds
 from atrv_warp.integrations.calibration import BagError, CalibrationConfig, CalibrationError, read_drive_log
 from atrv_warp.integrations.calibration.fit import make_segments
 from atrv_warp.integrations.ros.bag import BagWriter
-from atrv_warp.integrations.ros.base import BaseParams, VelocityController, side_speeds
+from atrv_warp.integrations.ros.base import BaseParams, VelocityController
 from atrv_warp.sim.config import SimConfig, load_sim_config
 from atrv_warp.sim.urdf import load_rover
 

@@ -138,37 +138,62 @@ def test_partial_reset_leaves_other_worlds_bit_identical():
     assert env.step_count[[1, 3]].tolist() == [0, 0] and env.step_count[keep].tolist() == [10, 10]
 
 
-def test_seed_determinism_and_save_restore():
+def test_seed_determinism():
     actions = random_actions(8, 60, 1)
     a = run(ATRVjrEnv(8, seed=42), actions)
     b = run(ATRVjrEnv(8, seed=42), actions)
     c = run(ATRVjrEnv(8, seed=43), actions)
     assert torch.equal(a["observation"], b["observation"]) and torch.equal(a["reward"], b["reward"])
     assert not torch.equal(a["observation"], c["observation"])
-    # save mid-rollout, restore into a fresh env, continue: identical to continuing the original
-    env = ATRVjrEnv(8, seed=7)
+
+
+def _go_on(env, td, actions) -> torch.Tensor:
+    """Step on from ``td`` with ``actions`` (resetting ended worlds); every step's observation, reward and end."""
+    seq = []
+    for act in actions:
+        td, td_next = env.step_and_maybe_reset(td.set("action", act))
+        nxt = td["next"]
+        seq.append(torch.cat([nxt["observation"], nxt["reward"], nxt["end_reason"].float()], -1).clone())
+        td = td_next
+    return torch.stack(seq)
+
+
+@pytest.mark.parametrize("task", ["reach", "nav"])
+def test_restore_then_continue_equals_continuing(task):
+    """A snapshot is everything the next step reads: restoring it and stepping on gives, bit for bit, what the
+    original gave when it stepped on (under 'wide': per-world physics, delay, motor lag, sensor noise)."""
+    actions = random_actions(8, 40, 3)
+    env = ATRVjrEnv(8, seed=7, task=task, randomization="wide")
     td = env.reset()
-    for act in actions[:25]:
-        td["action"] = act
-        td = env.step_and_maybe_reset(td)[1]
+    for act in actions[:20]:
+        td = env.step_and_maybe_reset(td.set("action", act))[1]
     saved, saved_td = env.state_dict(), td.clone()
-    for act in actions[25:35]:  # wander off before restoring
-        td["action"] = act
-        td = env.step_and_maybe_reset(td)[1]
+    original = _go_on(env, td, actions[20:])  # the original goes on
     env.load_state_dict(saved)
-    env2 = ATRVjrEnv(8, seed=0)
-    env2.load_state_dict(saved)
-    outs = []
-    for e in (env, env2):
-        t = saved_td.clone()
-        seq = []
-        for act in actions[25:]:
-            t["action"] = act
-            t, t_next = e.step_and_maybe_reset(t)
-            seq.append(t["next", "observation"].clone())
-            t = t_next
-        outs.append(torch.stack(seq))
-    assert torch.equal(outs[0], outs[1])
+    assert torch.equal(_go_on(env, saved_td.clone(), actions[20:]), original)
+    fresh = ATRVjrEnv(8, seed=0, task=task, randomization="wide")  # into another env of the same kind
+    fresh.load_state_dict(saved)
+    assert torch.equal(_go_on(fresh, saved_td.clone(), actions[20:]), original)
+    assert not torch.equal(original[0], original[-1])  # the worlds moved
+
+
+def test_a_snapshot_that_does_not_fit_is_refused_and_the_env_is_unchanged():
+    env = ATRVjrEnv(4, seed=1)
+    env.reset()
+    before = env.state_dict()
+    cases = [
+        (ATRVjrEnv(2, seed=1).state_dict(), "the snapshot is of 2 worlds, this env has 4"),
+        (ATRVjrEnv(4, seed=1, max_steps=100).state_dict(), r"task differs .*max_steps=100 \(here 200\)"),
+        (ATRVjrEnv(4, seed=1, randomization="mild").state_dict(), "randomization differs"),
+        ({k: v for k, v in before.items() if k != "sim.impulses"}, r"simulator snapshot lacks \['impulses'\]"),
+        ({k: v for k, v in before.items() if k != "snapshot.format"}, "not a snapshot this version restores"),
+    ]
+    for snapshot, message in cases:
+        with pytest.raises(ValueError, match=message):
+            env.load_state_dict(snapshot)
+    after = env.state_dict()
+    assert all(torch.equal(torch.as_tensor(before[k]), torch.as_tensor(after[k])) for k in before
+               if not k.startswith("snapshot."))
 
 
 def test_bad_actions_raise_clear_errors():

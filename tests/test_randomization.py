@@ -188,7 +188,7 @@ def test_train_config_key():
 
 def test_the_ros_node_reads_the_same_sensor_noise():
     """Training and deployment match by construction: the node's noise parameters default to SENSOR_NOISE."""
-    from atrv_warp.integrations.ros import PARAMETERS
+    from atrv_warp.integrations.ros.parameters import PARAMETERS
 
     defaults = {name: value for name, value, _ in PARAMETERS}
     assert defaults["scan_noise"] == SENSOR_NOISE.scan_range and defaults["scan_dropout"] == SENSOR_NOISE.scan_dropout

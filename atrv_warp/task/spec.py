@@ -10,6 +10,7 @@ baseline, the Gymnasium spaces, the ROS goal mode and :func:`atrv_warp.task.rewa
 - :data:`REWARD_TERMS`: the reward's terms; their sum is ``reward``, and each is reported per
   step as ``("reward_terms", name)``.
 - :func:`action_to_torque`: action in [-1, 1]² to wheel torques.
+- :func:`scan_sectors`: the observed scan sectors' angular edges (:class:`~atrv_warp.core.scan.ScanSectors`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 import torch
+
+from atrv_warp.core.scan import ScanSectors
 
 __all__ = [
     "ACTION_DIM",
@@ -32,6 +35,7 @@ __all__ = [
     "action_to_torque",
     "observation_bounds",
     "observation_fields",
+    "scan_sectors",
 ]
 
 
@@ -68,8 +72,9 @@ def observation_fields(task=None) -> tuple[ObservationField, ...]:
     (the actions chosen 1 … K steps before, newest first, in [-1, 1])."""
     sectors = getattr(task, "scan_sectors", 0)
     history = getattr(task, "action_history", 0)
-    scan = tuple(ObservationField(f"scan_{i}", 1.0, f"nearest return in scan sector {i} of {sectors} (right to left), "
-                                  "min(range, scan_clip) / scan_clip") for i in range(sectors))
+    scan = tuple(ObservationField(f"scan_{i}", 1.0, f"nearest return in scan sector {i} of {sectors} (right to left, "
+                                  "edges: scan_sectors(task)), min(range, scan_clip) / scan_clip; no return 1, too "
+                                  "close 0") for i in range(sectors))
     actions = tuple(ObservationField(f"last_action_{k}_{side}", 1.0, f"the {side} action chosen {k} step(s) before "
                                      "(what a delayed rover has yet to apply), in [-1, 1]")
                     for k in range(1, history + 1) for side in ("left", "right"))
@@ -122,6 +127,15 @@ def observation_bounds(dtype: torch.dtype = torch.float32, task=None) -> tuple[t
     high = torch.tensor([f.bound for f in fields], dtype=dtype)
     low = torch.tensor([0.0 if f.name.startswith("scan_") else -f.bound for f in fields], dtype=dtype)
     return low, high
+
+
+def scan_sectors(task) -> ScanSectors | None:
+    """The sectors a task observes of its scan (``None`` without them): ``scan_sectors`` equal sectors over the
+    scanner's ``scan_fov`` plus one beam spacing, so that each holds ``scan_beams / scan_sectors`` of the
+    simulated beams; any other scan (a real scanner's ``LaserScan``) reduces through the same edges."""
+    if not getattr(task, "scan_sectors", 0):
+        return None
+    return ScanSectors.for_beams(task.scan_beams, task.scan_fov, task.scan_sectors, task.scan_clip)
 
 
 def action_to_torque(action: torch.Tensor, action_scale: float, out: torch.Tensor | None = None) -> torch.Tensor:
