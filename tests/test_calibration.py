@@ -241,8 +241,7 @@ def test_moving_state_sets_the_recorded_motion():
     q, qd = roll.moving_state(torch.tensor([[1.0, 2.0, 0.7]]), torch.tensor([[0.6, 0.1]]), torch.tensor([0.4]),
                               torch.tensor([[3.0, 5.0]]))
     sim = roll.sim
-    sim.set_state({"joint_q": q.detach(), "joint_qd": qd.detach(), "commands": torch.zeros(1, 2),
-                   "sim_time": torch.tensor(0.0, dtype=torch.float64)})
+    sim.set_joints(q.detach(), qd.detach())
     c, s = np.cos(0.7), np.sin(0.7)
     assert sim.lin_vel[0, :2].tolist() == pytest.approx([c * 0.6 - s * 0.1, s * 0.6 + c * 0.1], abs=1e-5)
     assert sim.ang_vel[0, 2].item() == pytest.approx(0.4, abs=1e-6)

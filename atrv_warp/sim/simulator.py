@@ -569,6 +569,21 @@ class RoverSim:
         self._contact_flags.zero_()
         self._update_views()
 
+    def set_joints(self, joint_q: torch.Tensor, joint_qd: torch.Tensor) -> None:
+        """Put every world in the generalised state ``joint_q``, ``joint_qd`` (Newton's flat arrays, e.g.
+        :meth:`~atrv_warp.sim.diff.DiffRollout.moving_state`'s): the bodies follow by forward kinematics and the
+        wheels start unloaded (no friction warm start), as after a reset. To resume a run exactly, use
+        :meth:`get_state` and :meth:`set_state` instead."""
+        s = self.state_0
+        with torch.no_grad():  # a differentiable simulator's arrays are leaves that require grad
+            wp.to_torch(s.joint_q, requires_grad=False).copy_(joint_q)
+            wp.to_torch(s.joint_qd, requires_grad=False).copy_(joint_qd)
+        self.contact.impulses.zero_()
+        newton.eval_fk(self.model, s.joint_q, s.joint_qd, s)
+        self._contact_flags.zero_()
+        self._nonfinite.zero_()
+        self._update_views()
+
     # ------------------------------------------------------------------ convenience
     @property
     def collision(self) -> torch.Tensor:
