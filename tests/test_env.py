@@ -321,13 +321,40 @@ def test_observe_matches_reset_observation():
     assert moved[:, :2].tolist() == [[5.0, 5.0]] * 3 and torch.equal(moved[:, 2:8], td["observation"][:, 2:8])
 
 
+def test_the_spec_bounds_clip_the_observation():
+    """Measured from a step: a target far outside the arena and a rover thrown through the air (2 m up, touching
+    nothing during the step) at 20 m/s, or spinning at 8 rad/s, observe exactly the spec's bounds, in both signs; the
+    spec the env declares has the same bounds."""
+    from atrv_warp.task.spec import OBS_INDEX, observation_bounds
+
+    env = ATRVjrEnv(4, seed=5)
+    env.reset()
+    sim, d = env.sim, env.sim.layout.chassis_dof
+    q, qd = wp.to_torch(sim.buffers.joint_q).clone(), wp.to_torch(sim.buffers.joint_qd).clone()
+    thrown = {0: [20.0, 20.0, 0, 0, 0, 0], 1: [-20.0, -20.0, 0, 0, 0, 0], 2: [0, 0, 0, 0, 0, 8.0], 3: [0, 0, 0, 0, 0, -8.0]}
+    for world, velocity in thrown.items():  # vx, vy, vz [m/s]; roll, pitch, yaw rate [rad/s]
+        k = world * sim.layout.dofs_per_world + d
+        qd[k:k + 6] = torch.tensor(velocity)
+        q[world * sim.layout.coords_per_world + sim.layout.chassis_coord + 2] += 2.0  # z [m]
+    sim.set_joints(q, qd)
+    env.target.copy_(torch.tensor([[50.0, 50.0], [-50.0, -50.0]] * 2))
+    obs = env.step(TensorDict(action=torch.zeros(4, 2), batch_size=[4]))["next", "observation"]
+    low, high = observation_bounds()
+    for name, (up, down) in {"target_x": (0, 1), "target_y": (0, 1), "rover_vx": (0, 1), "rover_vy": (0, 1),
+                             "yaw_rate": (2, 3)}.items():
+        i = OBS_INDEX[name]
+        assert obs[up, i] == high[i] and obs[down, i] == low[i], (name, obs[:, i])
+    assert ((obs >= low) & (obs <= high)).all()
+    spec = env.observation_spec["observation"].space
+    assert torch.equal(spec.low[0], low) and torch.equal(spec.high[0], high)
+
+
 def test_reward_terms_sum_to_the_reward_and_follow_the_spec():
     from atrv_warp.task.baseline import scripted_policy
-    from atrv_warp.task.spec import END_REASONS, OBS_DIM, REWARD_TERMS, EndReason, observation_bounds
+    from atrv_warp.task.spec import END_REASONS, OBS_DIM, REWARD_TERMS, EndReason
 
     env = ATRVjrEnv(32, seed=5)
     assert env.observation_spec["observation"].shape[-1] == OBS_DIM
-    assert torch.equal(env.observation_spec["observation"].space.high[0], observation_bounds()[1])
     assert END_REASONS[EndReason.NONFINITE] == "nonfinite"
     td = env.rollout(200, scripted_policy(), break_when_any_done=False)
     nxt = td["next"]
