@@ -85,3 +85,48 @@ def test_onnx_export_checked_with_onnxruntime(tmp_path):
     expected = load_policy()(TensorDict(observation=obs, batch_size=[1000]))["action"].numpy()
     assert np.abs(got - expected).max() < 1e-5
     assert path.is_file()
+
+
+def test_the_shipped_nav_policy_exports_its_whole_contract_and_runs_from_the_file_alone(tmp_path):
+    """The .pt2 of the shipped nav policy, run with torch alone on observations of the nav env, gives the TorchRL
+    policy's actions; its contract names every field with unit and frame, the rate, the scan and the history."""
+    from atrv_warp import ATRVjrEnv
+    from atrv_warp.policy import pretrained_nav_policy_path
+    from atrv_warp.sim.config import SimConfig
+    from atrv_warp.task.spec import observation_fields, scan_sectors
+
+    path = export_policy(pretrained_nav_policy_path(), tmp_path / "nav.pt2")
+    env = ATRVjrEnv(64, seed=11, task="nav")
+    policy = load_policy(pretrained_nav_policy_path(), task="nav")
+    td = env.rollout(20, policy, break_when_any_done=False)
+    obs = td["observation"].reshape(-1, env.obs_dim)
+    torch.save(obs, tmp_path / "obs.pt")
+    proc = subprocess.run([sys.executable, "-c", _STANDALONE, str(path), str(tmp_path / "obs.pt"),
+                           str(tmp_path / "actions.pt")], capture_output=True, text=True, check=False)
+    assert proc.returncode == 0 and "loaded: []" in proc.stdout, proc.stderr[-3000:]
+    expected = td["action"].reshape(-1, 2)
+    assert (torch.load(tmp_path / "actions.pt") - expected).abs().max().item() < 1e-5
+    _, spec = load_exported(path)
+    fields = observation_fields(env.task_cfg)
+    assert [f["name"] for f in spec["observation"]] == [f.name for f in fields] and len(fields) == env.obs_dim == 32
+    assert all(f["unit"] and f["frame"] and f["low"] < f["high"] for f in spec["observation"])
+    assert spec["step_dt"] == SimConfig().step_dt and spec["action"]["kind"] == "wheel_torque"
+    scan = spec["scan"]
+    assert (scan["beams"], scan["range_max_m"]) == (env.scanner.cfg.beams, env.scanner.cfg.max_range)
+    assert scan["sectors"]["edges_rad"] == list(scan_sectors(env.task_cfg).edges) and scan["sectors"]["clip_m"] == 5.0
+    assert "+inf" in scan["sectors"]["no_return"] and spec["action_history"]["steps"] == 3
+
+
+def test_export_refuses_a_policy_that_does_not_fit_its_task(tmp_path):
+    """A nav policy from before the task observed its last actions (26 values, the task 32): one line, exit 2,
+    nothing written."""
+    from atrv_warp.policy import make_actor, save_policy
+
+    old = tmp_path / "old_nav.pt"
+    save_policy(make_actor(16, 1, obs_dim=26), old, width=16, depth=1, meta={"task": "nav"})
+    proc = subprocess.run([sys.executable, "-m", "atrv_warp.export", str(old), str(tmp_path / "old.pt2")],
+                          capture_output=True, text=True, check=False)
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "observes 26 values, task 'nav' observes 32" in lines[0], proc.stderr
+    assert not list(tmp_path.glob("*.pt2"))

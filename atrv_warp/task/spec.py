@@ -45,21 +45,26 @@ class ObservationField:
 
     name: str
     bound: float
-    """The value is clipped to [-bound, bound] (unit of the quantity)."""
+    """The value is clipped to [-bound, bound] ([0, bound] for a scan sector), in :attr:`unit`."""
     description: str
+    unit: str
+    """SI unit of the value (``-``: dimensionless)."""
+    frame: str
+    """The frame the value is expressed in (``-``: none)."""
 
 
 OBSERVATION: tuple[ObservationField, ...] = (
-    ObservationField("target_x", 12.0, "target x, world frame [m]"),
-    ObservationField("target_y", 12.0, "target y, world frame [m]"),
-    ObservationField("rover_x", 30.0, "chassis x, world frame [m]"),
-    ObservationField("rover_y", 30.0, "chassis y, world frame [m]"),
-    ObservationField("rover_vx", 6.0, "chassis-origin velocity x, world frame [m/s]"),
-    ObservationField("rover_vy", 6.0, "chassis-origin velocity y, world frame [m/s]"),
-    ObservationField("roll", 0.25, "chassis roll [rad]"),
-    ObservationField("yaw_rate", 6.0, "chassis yaw rate [rad/s]"),
-    ObservationField("sin_heading_error", 1.0, "sine of the angle from the heading to the target direction"),
-    ObservationField("cos_heading_error", 1.0, "its cosine"),
+    ObservationField("target_x", 12.0, "target x", "m", "world (the arena's centre, z up)"),
+    ObservationField("target_y", 12.0, "target y", "m", "world (the arena's centre, z up)"),
+    ObservationField("rover_x", 30.0, "chassis origin x", "m", "world (the arena's centre, z up)"),
+    ObservationField("rover_y", 30.0, "chassis origin y", "m", "world (the arena's centre, z up)"),
+    ObservationField("rover_vx", 6.0, "chassis-origin velocity x", "m/s", "world (the arena's centre, z up)"),
+    ObservationField("rover_vy", 6.0, "chassis-origin velocity y", "m/s", "world (the arena's centre, z up)"),
+    ObservationField("roll", 0.25, "chassis roll (intrinsic Z-Y-X)", "rad", "chassis"),
+    ObservationField("yaw_rate", 6.0, "chassis angular velocity about z", "rad/s", "world z"),
+    ObservationField("sin_heading_error", 1.0, "sine of the angle from the heading to the target direction "
+                     "(counter-clockwise positive)", "-", "chassis heading"),
+    ObservationField("cos_heading_error", 1.0, "its cosine", "-", "chassis heading"),
 )
 """The observation, in order (the reference task's fields and bounds)."""
 
@@ -74,9 +79,9 @@ def observation_fields(task=None) -> tuple[ObservationField, ...]:
     history = getattr(task, "action_history", 0)
     scan = tuple(ObservationField(f"scan_{i}", 1.0, f"nearest return in scan sector {i} of {sectors} (right to left, "
                                   "edges: scan_sectors(task)), min(range, scan_clip) / scan_clip; no return 1, too "
-                                  "close 0") for i in range(sectors))
+                                  "close 0", "-", "scanner (the URDF's lrf_frame)") for i in range(sectors))
     actions = tuple(ObservationField(f"last_action_{k}_{side}", 1.0, f"the {side} action chosen {k} step(s) before "
-                                     "(what a delayed rover has yet to apply), in [-1, 1]")
+                                     "(what a delayed rover has yet to apply), in [-1, 1]", "-", "-")
                     for k in range(1, history + 1) for side in ("left", "right"))
     return OBSERVATION + scan + actions
 
