@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -91,9 +92,8 @@ def test_the_shipped_nav_policy_exports_its_whole_contract_and_runs_from_the_fil
     """The .pt2 of the shipped nav policy, run with torch alone on observations of the nav env, gives the TorchRL
     policy's actions; its contract names every field with unit and frame, the rate, the scan and the history."""
     from atrv_warp import ATRVjrEnv
+    from atrv_warp.core.scan import ScanSectors, sector_readings
     from atrv_warp.policy import pretrained_nav_policy_path
-    from atrv_warp.sim.config import SimConfig
-    from atrv_warp.task.spec import observation_fields, scan_sectors
 
     path = export_policy(pretrained_nav_policy_path(), tmp_path / "nav.pt2")
     env = ATRVjrEnv(64, seed=11, task="nav")
@@ -106,15 +106,21 @@ def test_the_shipped_nav_policy_exports_its_whole_contract_and_runs_from_the_fil
     assert proc.returncode == 0 and "loaded: []" in proc.stdout, proc.stderr[-3000:]
     expected = td["action"].reshape(-1, 2)
     assert (torch.load(tmp_path / "actions.pt") - expected).abs().max().item() < 1e-5
+    # a consumer that knows only the contract builds the env's scan sectors from the env's ranges
     _, spec = load_exported(path)
-    fields = observation_fields(env.task_cfg)
-    assert [f["name"] for f in spec["observation"]] == [f.name for f in fields] and len(fields) == env.obs_dim == 32
-    assert all(f["unit"] and f["frame"] and f["low"] < f["high"] for f in spec["observation"])
-    assert spec["step_dt"] == SimConfig().step_dt and spec["action"]["kind"] == "wheel_torque"
-    scan = spec["scan"]
-    assert (scan["beams"], scan["range_max_m"]) == (env.scanner.cfg.beams, env.scanner.cfg.max_range)
-    assert scan["sectors"]["edges_rad"] == list(scan_sectors(env.task_cfg).edges) and scan["sectors"]["clip_m"] == 5.0
-    assert "+inf" in scan["sectors"]["no_return"] and spec["action_history"]["steps"] == 3
+    assert len(spec["observation"]) == 32 and all(f["unit"] and f["frame"] for f in spec["observation"])
+    assert (spec["step_dt"], spec["rate_hz"], spec["action"]["scale"]) == (0.05, 20.0, 20.0)
+    scan, names = spec["scan"], [f["name"] for f in spec["observation"]]
+    angles = torch.linspace(-scan["fov_rad"] / 2, scan["fov_rad"] / 2, scan["beams"], dtype=torch.float64)
+    sectors = ScanSectors(tuple(scan["sectors"]["edges_rad"]), scan["sectors"]["clip_m"])
+    ranges = td["next", "scan"].reshape(-1, scan["beams"]).clone()
+    ranges[ranges >= scan["range_max_m"]] = math.inf  # as a LaserScan carries no return
+    readings = sector_readings(ranges, angles, sectors, range_min=scan["range_min_m"], range_max=scan["range_max_m"])
+    columns = [names.index(f"scan_{k}") for k in range(sectors.count)]
+    assert torch.equal(readings, td["next", "observation"].reshape(-1, 32)[:, columns])
+    low = torch.tensor([f["low"] for f in spec["observation"]])
+    high = torch.tensor([f["high"] for f in spec["observation"]])
+    assert ((obs >= low) & (obs <= high)).all() and (obs == high).any()  # the bounds the env clips to
 
 
 def test_export_refuses_a_policy_that_does_not_fit_its_task(tmp_path):

@@ -184,9 +184,3 @@ def test_train_config_key():
     assert load_train_config("smoke", {"env.randomization": "wide"}).env.randomization == "wide"
     with pytest.raises(ValueError, match="randomization: unknown randomization preset 'wild'"):
         load_train_config("smoke", {"randomization": "wild"})
-
-
-def test_the_presets_train_with_the_sensor_noise_a_node_gives():
-    """The presets' noise is SENSOR_NOISE, the ROS node's default (tests/test_ros.py measures it in the node's
-    messages)."""
-    assert RANDOMIZATION_PRESETS["wide"].noise is SENSOR_NOISE and RANDOMIZATION_PRESETS["mild"].noise is SENSOR_NOISE

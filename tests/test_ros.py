@@ -275,7 +275,7 @@ def _planar(odom):
 
 def _yaw(odom):
     q = odom.pose.pose.orientation
-    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+    return float(quat_to_yaw((q.x, q.y, q.z, q.w)))
 
 
 def _wrap(angle):

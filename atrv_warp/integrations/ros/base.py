@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from atrv_warp.core.geometry import matrix_to_quat
+from atrv_warp.core.geometry import matrix_to_quat, wrap_angle
 from atrv_warp.core.kinematics import SkidSteer, side_speeds
 
 __all__ = ["BaseParams", "VelocityController", "WheelOdometry", "imu_reading", "turning_response"]
@@ -89,7 +89,7 @@ class WheelOdometry:
         mid = self.yaw + 0.5 * self.angular * dt
         self.x += self.linear * math.cos(mid) * dt
         self.y += self.linear * math.sin(mid) * dt
-        self.yaw = math.atan2(math.sin(self.yaw + self.angular * dt), math.cos(self.yaw + self.angular * dt))
+        self.yaw = float(wrap_angle(self.yaw + self.angular * dt))
 
 
 def imu_reading(frame_pose: torch.Tensor, ang_vel: torch.Tensor, accel: torch.Tensor, gravity: float,

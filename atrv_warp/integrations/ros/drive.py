@@ -16,7 +16,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
-from atrv_warp.core.geometry import quat_to_yaw
+from atrv_warp.core.geometry import quat_to_yaw, wrap_angle
 
 __all__ = ["ExcitationDriver", "record_drive_bag"]
 
@@ -44,8 +44,7 @@ class ExcitationDriver(Node):
     def draw(self) -> tuple[float, float]:
         x, y, yaw = self.pose
         if math.hypot(x, y) > self.radius:  # head home: turn toward the start while rolling
-            error = math.atan2(-y, -x) - yaw
-            error = math.atan2(math.sin(error), math.cos(error))
+            error = float(wrap_angle(math.atan2(-y, -x) - yaw))
             return (0.3 if abs(error) > 1.0 else 0.8), max(-1.0, min(1.0, 1.5 * error))
         kind = self.rng.random()
         if kind < 0.12:
