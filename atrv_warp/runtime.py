@@ -112,6 +112,7 @@ def set_verbose(verbose: bool = True) -> None:
 
 def device_summary(device: str | None = None) -> str:
     """One line naming the device that simulates, e.g. ``simulation on cpu (no CUDA device found)``."""
+    configure()  # Warp initialised quietly, if the simulator has not been imported yet
     import warp as wp
 
     dev = wp.get_device(device)

@@ -50,7 +50,7 @@ WITHOUT_ALL: tuple[str, ...] = ()
 
 @pytest.mark.parametrize("module", _modules())
 def test_every_module_has_what_its_all_names(module):
-    if module.startswith("atrv_warp.integrations.ros.node"):
+    if module.startswith(("atrv_warp.integrations.ros.node", "atrv_warp.integrations.ros.drive")):
         pytest.importorskip("rclpy")
     mod = importlib.import_module(module)
     names = getattr(mod, "__all__", None)

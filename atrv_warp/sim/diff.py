@@ -502,6 +502,8 @@ class DiffRollout:
 class _RolloutFn(torch.autograd.Function):
     @staticmethod
     def forward(ctx, roll: DiffRollout, actions, joint_q, joint_qd, integral, *params):
+        # autograd wants each gradient on its input's device; the rollout's live on the simulator's
+        ctx.devices = [t.device for t in (actions, joint_q, joint_qd, integral, *params)]
         poses, speeds, torques, ctx.rollout_id = roll.forward(
             actions.detach(), joint_q.detach(), joint_qd.detach(), integral.detach(),
             {name: p.detach() for name, p in zip(DIFF_PARAMETERS, params)})
@@ -510,4 +512,5 @@ class _RolloutFn(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, grad_poses, grad_speeds, grad_torques):
-        return None, *ctx.roll.backward(grad_poses, grad_speeds, ctx.rollout_id, grad_torques)
+        grads = ctx.roll.backward(grad_poses, grad_speeds, ctx.rollout_id, grad_torques)
+        return None, *(g.to(d) for g, d in zip(grads, ctx.devices))
