@@ -641,7 +641,7 @@ def _attribute_docs(cls) -> dict[str, str]:
 
 
 def _ros_rows() -> list[list[str]]:
-    from atrv_warp.integrations.ros import PARAMETERS
+    from atrv_warp.integrations.ros.parameters import PARAMETERS
 
     return [[f"`-p {name}:=…`", f"`{default!r}`", _cell(text)] for name, default, text in PARAMETERS]
 
