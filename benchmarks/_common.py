@@ -45,7 +45,7 @@ def _relative(path: str | Path) -> str:
     return str(p.relative_to(ROOT)) if p.is_relative_to(ROOT) else str(p)
 
 
-def provenance(version: int, *, script: str | Path | None = None, dynamics: bool = True,
+def provenance(version: int, *, script: str | Path | None = None, dynamics: bool = True, task: bool = False,
                policies: tuple[str | Path, ...] = ()) -> dict:
     """What a results file's figures depend on, recorded beside them (``docs/hooks.py`` checks it).
 
@@ -54,12 +54,14 @@ def provenance(version: int, *, script: str | Path | None = None, dynamics: bool
         script: the benchmark script; by default the one being run (``__main__``).
         dynamics: whether the figures depend on the simulator's dynamics; if so, the current
             :func:`atrv_warp.sim.checks.dynamics_fingerprint` is recorded.
+        task: whether they depend on the tasks (observations, rewards, resets, randomization); if so, the
+            current :func:`atrv_warp.task.evaluation.task_fingerprint` is recorded.
         policies: the policy files the script ran; each one's sha256 is recorded.
 
     Returns:
         ``date`` (UTC), ``commit`` and ``dirty`` (uncommitted changes to tracked files), ``script``,
         ``script_version``, ``command`` (the command line that ran, when the script is the one being run),
-        and ``dynamics`` and ``policies`` where they apply.
+        and ``dynamics``, ``task`` and ``policies`` where they apply.
     """
     main = getattr(sys.modules["__main__"], "__file__", None) or sys.argv[0]
     script = script or main
@@ -73,12 +75,16 @@ def provenance(version: int, *, script: str | Path | None = None, dynamics: bool
         from atrv_warp.sim.checks import dynamics_fingerprint
 
         record["dynamics"] = dynamics_fingerprint()
+    if task:
+        from atrv_warp.task.evaluation import task_fingerprint
+
+        record["task"] = task_fingerprint()
     if policies:
         record["policies"] = {_relative(p): file_sha256(p) for p in policies}
     return record
 
 
-def write_results(path: str | Path, result: dict, *, version: int, dynamics: bool = True,
+def write_results(path: str | Path, result: dict, *, version: int, dynamics: bool = True, task: bool = False,
                   policies: tuple[str | Path, ...] = ()) -> Path:
     """Write ``result`` as indented JSON to ``path``, creating its folder, with its
     :func:`provenance` under the key ``"provenance"``; returns the path.
@@ -88,9 +94,10 @@ def write_results(path: str | Path, result: dict, *, version: int, dynamics: boo
         result: the figures.
         version: the calling script's ``VERSION``.
         dynamics: whether the figures depend on the simulator's dynamics.
+        task: whether they depend on the tasks (an environment ran).
         policies: the policy files the script ran.
     """
-    result = {**result, "provenance": provenance(version, dynamics=dynamics, policies=tuple(policies))}
+    result = {**result, "provenance": provenance(version, dynamics=dynamics, task=task, policies=tuple(policies))}
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")

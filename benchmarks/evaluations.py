@@ -47,7 +47,7 @@ def main() -> int:
         print(format_result(name, result), f"({time.perf_counter() - t0:.1f} s)", flush=True)
         rows.append({"task": task, "driver": driver, "label": label, "policy": name, **result.as_dict()})
     out = write_results(args.out, {"benchmark": "evaluations", "seed": EVAL_SEED, "episodes": args.episodes,
-                                   "rows": rows}, version=VERSION, policies=tuple(policies))
+                                   "rows": rows}, version=VERSION, task=True, policies=tuple(policies))
     print(f"written to {out}")
     return 0
 

@@ -113,7 +113,7 @@ def main() -> int:
               f"{layouts['world_reset_5pct_ms']:.2f}", flush=True)
     result = {"benchmark": "nav_throughput", "target": "nav >= 0.5 x reach at N = 1024", "compile_s": compile_s,
               "rows": rows, "time": time.strftime("%Y-%m-%d %H:%M:%S"), "python": sys.version.split()[0]}
-    out = write_results(args.out, result, version=VERSION)
+    out = write_results(args.out, result, version=VERSION, task=True)
     print(f"written to {out}")
     return 0
 

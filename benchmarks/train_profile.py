@@ -145,7 +145,7 @@ def main() -> int:
               "threads_after_collector_shutdown": threads_after, "update_ms_after_shutdown": after_shutdown,
               "update_ms_threads_restored": restored, "evaluation_s": eval_s, "evaluation_share": eval_share,
               "config": "default preset", "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    write_results(args.out, result, version=VERSION)
+    write_results(args.out, result, version=VERSION, task=True)
     print(f"wrote {args.out}")
     return 0
 

@@ -12,8 +12,9 @@ A measured figure lives in its results file alone (``benchmarks/results/*.json``
   optional; ``.1%`` gives a percentage as the pages write it (``91.3 %``).
 
 Every file a page cites is checked against the code as it is now (:func:`status`): the benchmark
-script's ``VERSION``, the dynamics fingerprint (``atrv_warp.sim.checks.dynamics_fingerprint``,
-recomputed once per build) and the sha256 of each policy file it ran. A file that no longer matches,
+script's ``VERSION``, the dynamics fingerprint (``atrv_warp.sim.checks.dynamics_fingerprint``) and, for
+figures that ran an environment, the task fingerprint (``atrv_warp.task.evaluation.task_fingerprint``),
+each recomputed once per build, and the sha256 of each policy file it ran. A file that no longer matches,
 or that records no provenance (written before it was recorded), fails the build unless the page marks
 it historical with a line ``{{ historical FILE }}``, which renders as a note with the file's date and
 the command that redraws it. A missing file or key, an unknown table, or a historical mark for a file
@@ -82,6 +83,14 @@ def current_dynamics() -> str:
     return dynamics_fingerprint()
 
 
+@functools.cache
+def current_task() -> str:
+    """The task fingerprint of the code as it is now (computed once per process: short rollouts of both tasks)."""
+    from atrv_warp.task.evaluation import task_fingerprint
+
+    return task_fingerprint()
+
+
 def script_version(script: str) -> int | None:
     """``VERSION`` of a benchmark script as it is now, read from its text (no import)."""
     path = ROOT / script
@@ -138,6 +147,8 @@ def status(name: str) -> Status:
         reasons.append(f"{p['script']} VERSION is {version}, the file was written by VERSION {p['script_version']}")
     if "dynamics" in p and p["dynamics"] != current_dynamics():
         reasons.append(f"dynamics fingerprint {p['dynamics']} != {current_dynamics()} now")
+    if "task" in p and p["task"] != current_task():
+        reasons.append(f"task fingerprint {p['task']} != {current_task()} now")
     for policy, digest in p.get("policies", {}).items():
         path = ROOT / policy
         if not path.is_file():
@@ -772,6 +783,7 @@ def on_pre_build(**kwargs) -> None:
     """A new build (``mkdocs serve`` rebuilds in one process) checks the files and the code afresh."""
     status.cache_clear()
     current_dynamics.cache_clear()
+    current_task.cache_clear()
 
 
 def on_page_markdown(markdown: str, page=None, **kwargs) -> str:

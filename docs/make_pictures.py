@@ -180,7 +180,7 @@ def provenance(policy: Path) -> dict:
     spec = importlib.util.spec_from_file_location("benchmarks_common", DOCS.parent / "benchmarks" / "_common.py")
     common = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(common)
-    return common.provenance(VERSION, script=__file__, policies=(policy,))
+    return common.provenance(VERSION, script=__file__, task=True, policies=(policy,))
 
 
 def write_caption(out: Path, outcomes: dict[str, list[str]], seed: int, record: dict) -> None:

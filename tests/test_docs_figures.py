@@ -22,6 +22,7 @@ def hooks(tmp_path, monkeypatch):
     spec.loader.exec_module(module)
     monkeypatch.setattr(module, "RESULTS", tmp_path)
     monkeypatch.setattr(module, "current_dynamics", lambda: "now")
+    monkeypatch.setattr(module, "current_task", lambda: "now")
     return module
 
 
@@ -60,6 +61,13 @@ def test_a_stale_fingerprint_fails_unless_the_page_marks_it_historical(hooks, tm
     _write(tmp_path, "new.json", {"x": 0.5})
     with pytest.raises(hooks.FigureError, match="p.md: marks new.json historical, but its figures match the code"):
         hooks.render("{{ result new.json:x }}\n{{ historical new.json }}\n", "p.md")
+
+
+def test_a_changed_task_is_stale(hooks, tmp_path):
+    _write(tmp_path, "t.json", {"x": 1}, task="before")
+    assert hooks.status("t.json").reasons == ["task fingerprint before != now now"]
+    _write(tmp_path, "u.json", {"x": 1}, task="now")
+    assert hooks.status("u.json").current
 
 
 def test_a_changed_script_version_or_policy_is_stale(hooks, tmp_path, monkeypatch):
@@ -113,7 +121,7 @@ def test_write_results_records_provenance(tmp_path):
                                 policies=(ROOT / "atrv_warp" / "assets" / "pretrained_policy.pt",))
     p = json.loads(out.read_text())["provenance"]
     assert p["script_version"] == 3 and len(p["commit"]) == 40 and isinstance(p["dirty"], bool)
-    assert "dynamics" not in p and p["command"].startswith("python ")  # pytest is the script being run here
+    assert "dynamics" not in p and "task" not in p and p["command"].startswith("python ")  # pytest is the script being run here
     digest = hashlib.sha256((ROOT / "atrv_warp/assets/pretrained_policy.pt").read_bytes()).hexdigest()
     assert p["policies"] == {"atrv_warp/assets/pretrained_policy.pt": digest}
 
