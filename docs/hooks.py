@@ -196,11 +196,16 @@ def _table(header: list[str], align: list[str], rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
-def sim_throughput() -> str:
+def sim_throughput(name: str = "sim_throughput.json") -> str:
     """``sim_throughput.json``: env-steps/s and ms per step against the number of worlds."""
-    rows = _load("sim_throughput.json")["rows"]
+    rows = _load(name)["rows"]
     return _table(["worlds", "env-steps/s", "ms/step"], ["---:"] * 3,
-                  [[str(r["num_worlds"]), f"{r['env_steps_per_s']:,.0f}", f"{r['ms_per_step']:.3f}"] for r in rows])
+                  [[f"{r['num_worlds']:,}", f"{r['env_steps_per_s']:,.0f}", f"{r['ms_per_step']:.3f}"] for r in rows])
+
+
+def sim_throughput_cuda() -> str:
+    """``sim_throughput_cuda.json``: the same on one GPU."""
+    return sim_throughput("sim_throughput_cuda.json")
 
 
 def sim_choices() -> str:
@@ -584,6 +589,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "randomization_cost": randomization_cost,
     "evaluations": evaluations,
     "sim_throughput": sim_throughput,
+    "sim_throughput_cuda": sim_throughput_cuda,
     "sim_choices": sim_choices,
     "sim_vs_mujoco": sim_vs_mujoco,
 }
