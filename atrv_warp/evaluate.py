@@ -63,6 +63,13 @@ def main(argv: list[str] | None = None) -> int:
             check_video_path(args.video)
         except ValueError as err:
             return error_line(parser.prog, f"--{err}")
+    if args.rerun:
+        from atrv_warp.integrations.recorder import check_recording_path
+
+        try:  # as --video: a recording that cannot be written stops here, before the simulator is built
+            check_recording_path(args.rerun)
+        except ValueError as err:
+            return error_line(parser.prog, f"--rerun: {err}")
     if args.verbose:
         set_verbose()
     from atrv_warp.task.config import TASK_VARIANTS
