@@ -42,7 +42,7 @@ def _eye(offsets: dict[int, np.ndarray], half_size: float) -> rrb.EyeControls3D:
     lo, hi = centres.min(0) - half_size, centres.max(0) + half_size
     target = 0.5 * (lo + hi)
     extent = float(np.max(hi - lo))
-    position = target + extent * np.array([-0.35, -0.85, 0.65])
+    position = target + extent * np.array([-0.3, -0.75, 0.6])
     return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=position.tolist(), look_target=target.tolist(),
                              eye_up=[0.0, 0.0, 1.0])
 
@@ -53,8 +53,8 @@ def viewer_blueprint(worlds: Sequence[int], half_size: float, *, training: bool 
     Left, ``1 - PLOTS_SHARE`` of the window's width and its full height: a 3D view of everything
     but the plots, its eye framing the worlds laid out by :func:`world_offsets`. Right: one tab of
     plots (reward, distance, wheel torques) per recorded world, and with ``training`` a first tab
-    of the training scalars (``/train``). The blueprint and selection panels start collapsed; the
-    time panel stays, for scrubbing.
+    of the training scalars (``/train``). The blueprint and selection panels start collapsed, and the
+    time panel to its one line of play controls and time slider.
     """
     offsets = world_offsets(worlds, half_size)
     scene = rrb.Spatial3DView(origin="/", name="worlds", contents=["+ /**", "- /plots/**", "- /train/**"],
@@ -64,7 +64,7 @@ def viewer_blueprint(worlds: Sequence[int], half_size: float, *, training: bool 
         tabs.insert(0, rrb.TimeSeriesView(origin="/train", name="training"))
     return rrb.Blueprint(
         rrb.Horizontal(scene, rrb.Tabs(*tabs, active_tab=0), column_shares=[1.0 - PLOTS_SHARE, PLOTS_SHARE]),
-        rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"), rrb.TimePanel(state="expanded"),
+        rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"), rrb.TimePanel(state="collapsed"),
         auto_views=False)
 
 
