@@ -19,9 +19,10 @@ from atrv_warp.sim.simulator import DriveMode
 __all__ = ["COMMANDS", "GOAL", "MAX_ROVERS", "MISSING_ROS_MESSAGE", "PARAMETERS", "VELOCITY", "parameter_help", "run"]
 
 MISSING_ROS_MESSAGE = (
-    "ROS 2 Python packages are not installed (needed: rclpy, geometry_msgs, std_msgs, rosgraph_msgs).\n"
+    "ROS 2 Python packages are not installed (needed: rclpy, geometry_msgs, std_msgs, rosgraph_msgs, "
+    "visualization_msgs).\n"
     "Install the extra:  pip install -e '.[ros]'   (ros-rclpy[fastrtps], ros-geometry-msgs, ros-std-msgs, "
-    "mcap-ros2-support from PyPI), or source a ROS 2 installation."
+    "ros-visualization-msgs, mcap-ros2-support from PyPI), or source a ROS 2 installation."
 )
 
 GOAL = "goal"
@@ -48,7 +49,8 @@ PARAMETERS = (
     ("odom_frame", "odom", "frame of /odom (REP 105)"), ("base_frame", "base_link", "child frame of /odom"),
     ("policy", "", "policy file for goal mode (default: the shipped one)"),
     ("bag", "", ("write an MCAP ROS 2 bag here: /cmd_vel, /joint_states, /odom, /ground_truth/odom, /pose, "
-                 "/command, /goal, /goal_status (what atrv-calibrate reads; not /imu or /scan)")),
+                 "/command, /goal, /goal_status (what atrv-calibrate reads), /tf, /tf_static and "
+                 "/robot_description (what a 3D view draws the rover from); not /imu or /scan")),
     ("sim_config", "", "simulator-config TOML ([rover], [contact]; e.g. atrv-calibrate's output) applied to every rover"),
     ("wait_for_subscribers", 0, "wait for this many /pose subscribers before starting"),
     ("reach_radius", 1.0, "goal mode: reached within this distance [m]"),
