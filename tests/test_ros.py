@@ -490,3 +490,25 @@ def test_latched_markers_show_the_nav_world_and_the_goal(ros_env):
     env.reset()
     kind, xy = env.sim.obstacles.kind[0].numpy(), env.sim.obstacles.pose[0, :, :2].numpy()
     assert obstacles and np.allclose(obstacles, sorted(map(tuple, xy[kind > 0].tolist())), atol=1e-5)
+
+
+def test_foxglove_layout_shows_what_the_node_publishes():
+    """docs/foxglove_layout.json: a 3D panel with the URDF from /robot_description, the markers, the scan and
+    the odometry, following base_link; every topic it names is one the node publishes."""
+    import json
+    from pathlib import Path
+
+    layout = json.loads((Path(__file__).resolve().parent.parent / "docs" / "foxglove_layout.json").read_text())
+    panels = layout["configById"]
+    scene = next(v for k, v in panels.items() if k.startswith("3D!"))
+    assert scene["followTf"] == "base_link"
+    assert {"/visualization_marker_array", "/scan", "/odom", "/ground_truth/odom"} <= set(scene["topics"])
+    urdf = [layer for layer in scene["layers"].values() if layer["layerId"] == "foxglove.Urdf"]
+    assert urdf and urdf[0]["topic"] == "/robot_description"
+    named = set(scene["topics"]) | {p["value"].split(".")[0] for k, v in panels.items() if k.startswith("Plot!")
+                                    for p in v["paths"]} | {v["topicPath"] for v in panels.values() if "topicPath" in v}
+    published = {"/visualization_marker_array", "/scan", "/odom", "/ground_truth/odom", "/pose", "/goal_status",
+                 "/joint_states", "/imu", "/robot_description"}
+    assert named <= published, named - published
+    ids = json.dumps(layout["layout"])
+    assert all(k in ids for k in panels)  # every configured panel is placed
