@@ -42,7 +42,7 @@ def _eye(offsets: dict[int, np.ndarray], half_size: float) -> rrb.EyeControls3D:
     lo, hi = centres.min(0) - half_size, centres.max(0) + half_size
     target = 0.5 * (lo + hi)
     extent = float(np.max(hi - lo))
-    position = target + extent * np.array([-0.3, -0.75, 0.6])
+    position = target + extent * np.array([-0.25, -0.75, 0.95])
     return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=position.tolist(), look_target=target.tolist(),
                              eye_up=[0.0, 0.0, 1.0])
 

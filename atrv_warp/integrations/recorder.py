@@ -55,6 +55,7 @@ _GROUND_COLOR = (150, 150, 140)
 _WALL_COLOR = (120, 120, 130)
 _OBSTACLE_COLOR = (200, 140, 40)
 _SCAN_COLOR = (230, 30, 200)
+_SCAN_RAY_COLOR = (250, 200, 245)
 _TERRAIN_MAX_SIDE = 121
 """Terrain meshes are drawn from at most this many samples per side."""
 
@@ -292,7 +293,7 @@ class RerunRecorder:
         hit = scanner.ranges[w].detach().cpu().numpy() < scanner.cfg.max_range
         self.rec.log(f"world_{w}/scan/hits", rr.Points3D(points[hit], colors=[_SCAN_COLOR], radii=0.04))
         self.rec.log(f"world_{w}/scan/rays", rr.LineStrips3D([[origin, p] for p in points],
-                                                             colors=[(*_SCAN_COLOR, 60)], radii=0.004))
+                                                             colors=[(*_SCAN_RAY_COLOR, 50)], radii=0.003))
 
     def log_step(self, *, targets=None, rewards=None, distances=None, reset_mask=None, scanner=None) -> None:
         """Log the current state of the selected worlds at the next ``step``.

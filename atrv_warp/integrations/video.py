@@ -36,7 +36,9 @@ _TARGET = (120, 160, 240)
 _PATH = (230, 140, 20)
 _ROVER = (200, 30, 30)
 _SCAN = (215, 40, 190)
-_RAY = (236, 196, 228)
+_RAY = (250, 215, 245)
+_RAY_ALPHA = 90
+"""Opacity of a drawn beam [0-255]."""
 _TEXT = (20, 20, 20)
 
 
@@ -247,8 +249,11 @@ class EvalVideo:
                     points, hits = self.scans[t]
                     (origin,) = px(path_px[t, i])
                     ends = self._to_px(points[i])
+                    rays = Image.new("L", panel.size, 0)  # the beams, faint: the ground stays readable
+                    ray_draw = ImageDraw.Draw(rays)
                     for end in px(ends):
-                        draw.line([origin, end], fill=_RAY)
+                        ray_draw.line([origin, end], fill=_RAY_ALPHA)
+                    panel.paste(_RAY, mask=rays)
                     draw.point(px(ends[hits[i]]), fill=_SCAN)
                 if t > 0:
                     draw.line(px(path_px[: t + 1, i]), fill=_PATH, width=2)

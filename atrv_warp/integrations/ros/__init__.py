@@ -2,7 +2,8 @@
 
 - this package: the node's parameters and :func:`run`;
 - :mod:`.node`: the rclpy node; :mod:`.base`: the base driver (velocity control, odometry, IMU);
-- :mod:`.bag`: the MCAP bag writer.
+- :mod:`.bag`: the MCAP bag writer; :mod:`.frames`: the frame tree its bags record as /tf;
+- :mod:`.markers`: the world as ``visualization_msgs/MarkerArray``.
 
 rclpy is optional: this package imports without it, :func:`run` says how to install it, and
 :mod:`.node` (the rclpy node) is imported only when it is there.
