@@ -458,19 +458,40 @@ def test_bad_parameters_are_refused_at_start(ros_env, tmp_path):
 @pytest.mark.slow  # a live ROS 2 node
 def test_latched_markers_show_the_nav_world_and_the_goal(ros_env):
     """A late subscriber gets the world (transient local): the nav world's obstacles where the node's
-    simulator put them, its terrain; after a /goal, the goal disc."""
+    simulator put them, its terrain; after a /goal, the goal disc. Live /tf places base_link at the
+    true pose; /tf_static holds the URDF's sensor frames."""
     import numpy as np
+    from nav_msgs.msg import Odometry
     from visualization_msgs.msg import MarkerArray
 
+    from atrv_warp.integrations.ros.tf2_build import load_tf_message
+
+    TFMessage, where = load_tf_message()
+    assert TFMessage is not None, where
     proc = start_node(ros_env, "task:=nav", "seed:=4", "wait_for_subscribers:=1", "duration:=30.0")
     client = Client("atrv_marker_client")
-    arrays = []
+    arrays, tf, tf_static, truth = [], [], [], []
     latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
+    client.node.create_subscription(TFMessage, "/tf", tf.append, 100)
+    client.node.create_subscription(Odometry, "/ground_truth/odom", truth.append, 100)
     try:
         assert client.wait_for(lambda: len(client.poses) > 0, timeout=120), "no /pose received"
         client.node.create_subscription(MarkerArray, "/visualization_marker_array", arrays.append, latched)
-        assert client.wait_for(lambda: bool(arrays), timeout=30), "no latched marker array"
+        client.node.create_subscription(TFMessage, "/tf_static", tf_static.append, latched)
+        assert client.wait_for(lambda: bool(arrays) and bool(tf_static), timeout=30), "no latched markers or /tf_static"
+        # live /tf (tf2_msgs built from its definition where no ROS install has it): the true pose, composed
+        assert client.wait_for(lambda: len(tf) > 5, timeout=30), "no live /tf"
+        static = {t.child_frame_id: t for t in tf_static[-1].transforms}
+        assert static["lrf_frame"].header.frame_id == "center_link"
+        stamps = {_stamp(m): m for m in truth}
+        live = [{t.child_frame_id: t for t in m.transforms} for m in tf]
+        both = [f for f in live if _stamp(f["odom"]) in stamps]
+        assert both, "no /tf with the stamp of a /ground_truth/odom"
+        for f in both:
+            g = stamps[_stamp(f["odom"])].pose.pose
+            world_base = _matrix(f["odom"]) @ _matrix(f["base_link"])
+            assert world_base[:3, 3] == pytest.approx([g.position.x, g.position.y, g.position.z], abs=1e-5)
         first = {m.ns for m in arrays[-1].markers[1:]}
         assert first == {"arena", "obstacles", "terrain"}, first
         obstacles = sorted((m.pose.position.x, m.pose.position.y) for m in arrays[-1].markers if m.ns == "obstacles")
@@ -512,3 +533,12 @@ def test_foxglove_layout_shows_what_the_node_publishes():
     assert named <= published, named - published
     ids = json.dumps(layout["layout"])
     assert all(k in ids for k in panels)  # every configured panel is placed
+
+
+def test_tf2_build_without_a_compiler_says_so(tmp_path, monkeypatch):
+    from atrv_warp.integrations.ros.tf2_build import build_tf2_msgs
+
+    monkeypatch.setenv("PATH", str(tmp_path))  # no gcc, no g++
+    with pytest.raises(RuntimeError, match=r"no gcc on PATH \(a C and C\+\+ compiler builds tf2_msgs's type support\)"):
+        build_tf2_msgs(tmp_path / "tf2")
+    assert not (tmp_path / "tf2").exists()

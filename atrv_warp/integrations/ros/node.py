@@ -14,7 +14,7 @@ import numpy as np
 import rclpy
 import torch
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped, Twist
+from geometry_msgs.msg import PoseStamped, TransformStamped, Twist
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
@@ -48,6 +48,17 @@ class NodeConfigError(ValueError):
 
 def _stamp(ns: int) -> Time:
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def _transform_msg(t: dict) -> TransformStamped:
+    """A :func:`~.frames.transform_dict` as a ``geometry_msgs/TransformStamped``."""
+    msg = TransformStamped()
+    msg.header.stamp = Time(**t["header"]["stamp"])
+    msg.header.frame_id, msg.child_frame_id = t["header"]["frame_id"], t["child_frame_id"]
+    tr, rot = msg.transform.translation, msg.transform.rotation
+    tr.x, tr.y, tr.z = (t["transform"]["translation"][k] for k in "xyz")
+    rot.x, rot.y, rot.z, rot.w = (t["transform"]["rotation"][k] for k in "xyzw")
+    return msg
 
 
 def unknown_parameters(args: list[str] | None) -> list[str]:
@@ -162,7 +173,7 @@ class RoverIO:
         self.pose_pub.publish(msg)
         node.record(f"{self.prefix}/pose", "geometry_msgs/msg/PoseStamped", pose_dict(msg), ns)
         self.publish_odometry(ns, p)
-        self.record_frames(ns, p)
+        self.publish_frames(ns, p)
         self.publish_joints(ns)
         self.publish_imu(ns, frame_pose, accel)
         if self.scan_pub is not None:
@@ -215,18 +226,18 @@ class RoverIO:
         return out + [transform_dict(self.tf_chassis, self.tf_prefix + f.name, ns, np.asarray(f.transform, dtype=float))
                       for f in desc.frames]
 
-    def record_frames(self, ns: int, pose: list[float]) -> None:
-        """Write this rover's /tf to the bag: world -> odom -> base_link (odometry, corrected to the true
-        pose) and the turning wheels (:mod:`.frames`). A non-finite pose is never written: the rover's
-        /tf is left out for the step, with one line logged."""
+    def publish_frames(self, ns: int, pose: list[float]) -> None:
+        """This rover's /tf, live (where tf2_msgs loads) and to the bag: world -> odom -> base_link (odometry,
+        corrected to the true pose) and the turning wheels (:mod:`.frames`). A non-finite pose is never
+        published: the rover's /tf is left out for the step, with one line logged."""
         node = self.node
-        if node.bag is None:
+        if node.bag is None and node.tf_pub is None:
             return
         odo, wheels = self.odometry, node.wheel_positions(self.index)
         if not all(math.isfinite(v) for v in (*pose, odo.x, odo.y, odo.yaw, *wheels)):
             if not self.tf_skipped:
-                node.log.warning(f"{self.prefix or 'rover'}: non-finite pose, its /tf is not recorded until it is "
-                                 "finite again")
+                node.log.warning(f"{self.prefix or 'rover'}: non-finite pose, its /tf is not published until it "
+                                 "is finite again")
             self.tf_skipped = True
             return
         self.tf_skipped = False
@@ -237,6 +248,8 @@ class RoverIO:
                                       np.asarray(w.origin, dtype=float) @ turn_matrix(w.axis, q))
                        for w, q in zip(node.sim.description.wheels, wheels)]
         node.record("/tf", "tf2_msgs/msg/TFMessage", {"transforms": transforms}, ns)
+        if node.tf_pub is not None:
+            node.tf_pub.publish(node.tf_message(transforms))
 
     def publish_joints(self, ns: int) -> None:
         node, k = self.node, self.index
@@ -304,6 +317,8 @@ class RoverSimNode(Node):
         self.log = self.get_logger()
         self.args = args
         self.bag: BagWriter | None = None
+        self.tf_pub = None
+        """Live /tf's publisher, where tf2_msgs loads (parameter ``tf``)."""
         self.sim = None
         self.scanner = None
         self.rovers: list[RoverIO] = []
@@ -363,6 +378,9 @@ class RoverSimNode(Node):
         for rover, (x, y, yaw) in zip(self.rovers, starts):  # the odom frame starts at the start pose
             rover.odometry.x, rover.odometry.y, rover.odometry.yaw = x, y, yaw
         self.publish_markers()
+        self.tf_pub = self.tf_message = None
+        if p["tf"]:
+            self._start_tf(latched)
         self.bag = BagWriter(p["bag"]) if p["bag"] else None
         if self.bag is not None:  # what a 3D panel needs to draw the rover from the bag alone
             self.record("/robot_description", "std_msgs/msg/String", {"data": urdf})
@@ -408,6 +426,22 @@ class RoverSimNode(Node):
                 self.policy = (load_policy(p["policy"], task=p["task"]), TensorDict)
             except (FileNotFoundError, FileFormatError) as err:
                 self._fail(f"parameter policy: {err}")
+
+    def _start_tf(self, latched: QoSProfile) -> None:
+        """Live /tf and /tf_static, where tf2_msgs loads (a ROS install's, or built from its definition on
+        first use: :mod:`.tf2_build`); otherwise one line says why and the node goes on without."""
+        from atrv_warp.integrations.ros.tf2_build import load_tf_message
+
+        cls, where = load_tf_message()
+        if cls is None:
+            self.log.warning(f"no live /tf: {where}")
+            return
+        self.log.info(f"/tf and /tf_static from {where}")
+        self.tf_message = lambda transforms: cls(transforms=[_transform_msg(t) for t in transforms])
+        self.tf_pub = self.create_publisher(cls, "/tf", 100)
+        ns = self.stamp_ns()
+        self.create_publisher(cls, "/tf_static", latched).publish(
+            self.tf_message([t for r in self.rovers for t in r.static_frames(ns)]))
 
     def publish_markers(self) -> None:
         """The latched /visualization_marker_array (world frame): walls, each rover's obstacles, goal and
