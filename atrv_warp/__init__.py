@@ -6,7 +6,8 @@ and its TorchRL environment), :mod:`atrv_warp.rl` (SAC training), :mod:`atrv_war
 (``python -m atrv_warp.train``, ``evaluate``, ``demo``, ``model``, ``ros``, ``export``).
 
 Public names are imported lazily so that ``python -m atrv_warp.<tool>`` loads only what
-the tool needs.
+the tool needs: importing the package loads neither Warp, Newton nor TorchRL, and :mod:`atrv_warp.core`
+(the rover's geometry and kinematics in torch) runs with torch alone.
 """
 
 from importlib import import_module
@@ -16,7 +17,7 @@ from . import runtime as _runtime
 __version__ = "0.2.0"
 """This package's version (``pyproject.toml``'s; ``CHANGELOG.md`` says what changed)."""
 
-_runtime.configure()  # quiet Warp/TorchRL console before Newton's import initialises Warp (ATRV_WARP_VERBOSE=1: all)
+_runtime.configure_logging()  # TorchRL's console level; Warp is configured when the simulator is imported
 
 _EXPORTS = {
     "ArenaConfig": "sim.config",

@@ -131,6 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     recorder, on_step, video = None, None, None
     env = ATRVjrEnv(args.episodes, device=args.device, task=task, randomization=randomization,
                     sim_config=args.sim_config)
+    policy = policy.to(env.device)  # loaded on the CPU; the env's observations live on its device
     if args.rerun or args.serve or args.real_time:
         from atrv_warp.integrations.recorder import RerunRecorder
 

@@ -95,7 +95,8 @@ def pretrained_policy_path() -> Path:
     return Path(str(resources.files("atrv_warp").joinpath("assets/pretrained_policy.pt")))
 
 
-def load_policy(path: str | Path | None = None, *, deterministic: bool = True, task=None) -> TensorDictSequential:
+def load_policy(path: str | Path | None = None, *, deterministic: bool = True, task=None,
+                device: str | torch.device = "cpu") -> TensorDictSequential:
     """Load a saved policy (default: the shipped one) as a TorchRL policy module.
 
     The module reads raw ``observation`` from :class:`~atrv_warp.task.env.ATRVjrEnv` and writes
@@ -104,7 +105,8 @@ def load_policy(path: str | Path | None = None, *, deterministic: bool = True, t
 
     Raises ``FileNotFoundError``, or :class:`~atrv_warp.storage.FileFormatError` naming the file
     and the problem for anything that is not a complete policy (nothing is unpickled), or for a policy
-    that observes another observation than ``task``'s.
+    that observes another observation than ``task``'s. ``device``: where the weights go; the env's
+    (``env.device``) for an :class:`~atrv_warp.task.env.ATRVjrEnv` on a GPU.
     """
     path = Path(path) if path is not None else pretrained_policy_path()
     payload = load_weights(path, "policy file")
@@ -124,7 +126,7 @@ def load_policy(path: str | Path | None = None, *, deterministic: bool = True, t
     bad = [k for k, v in actor.state_dict().items() if v.is_floating_point() and not torch.isfinite(v).all()]
     if bad:
         raise FileFormatError(f"{path}: damaged atrv_warp policy (non-finite values in {bad[:3]})")
-    actor.eval()
+    actor.to(device).eval()
     if not deterministic:
         return actor
     from torchrl.envs.utils import ExplorationType

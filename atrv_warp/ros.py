@@ -42,7 +42,8 @@ from __future__ import annotations
 
 import sys
 
-from atrv_warp.integrations.ros import parameter_help, run
+from atrv_warp.integrations.ros import run
+from atrv_warp.integrations.ros.parameters import parameter_help
 
 __all__ = ["main"]
 

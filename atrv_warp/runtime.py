@@ -9,8 +9,10 @@ By default the package keeps the console to what a user needs:
 - TorchRL's INFO messages are hidden (``RL_LOGGING_LEVEL=WARNING`` unless you set it).
 
 ``ATRV_WARP_VERBOSE=1`` in the environment, or ``--verbose`` on a command (which calls
-:func:`set_verbose`), brings all of it back, in worker processes too. Importing ``atrv_warp``
-runs :func:`configure` once, before any module imports Newton (whose import initialises Warp).
+:func:`set_verbose`), brings all of it back, in worker processes too. Importing ``atrv_warp`` runs
+:func:`configure_logging` (an environment variable, nothing imported); importing the simulator
+(:mod:`atrv_warp.sim`) runs :func:`configure` once, before any module imports Newton (whose import
+initialises Warp). So the package and its light core (:mod:`atrv_warp.core`) load without Warp.
 """
 
 from __future__ import annotations
@@ -19,8 +21,8 @@ import os
 import sys
 import tempfile
 
-__all__ = ["VERBOSE_ENV", "add_verbose_argument", "configure", "device_summary", "error_line", "is_verbose",
-           "set_verbose"]
+__all__ = ["VERBOSE_ENV", "add_verbose_argument", "configure", "configure_logging", "device_summary", "error_line",
+           "is_configured", "is_verbose", "set_verbose"]
 
 VERBOSE_ENV = "ATRV_WARP_VERBOSE"
 """Environment variable: ``1`` (or ``true``/``yes``/``on``) shows library detail."""
@@ -50,13 +52,31 @@ def _init_warp_quietly() -> str:
         return sink.read().decode(errors="replace")
 
 
+def configure_logging() -> None:
+    """TorchRL's console level (``RL_LOGGING_LEVEL``, read when TorchRL is imported), unless you set it;
+    imports nothing."""
+    os.environ.setdefault("RL_LOGGING_LEVEL", "INFO" if is_verbose() else "WARNING")
+
+
+_configured = False
+
+
+def is_configured() -> bool:
+    """Whether :func:`configure` has run in this process (Warp is initialised and quiet)."""
+    return _configured
+
+
 def configure() -> None:
-    """Apply the console policy to Warp and TorchRL; idempotent, cheap after the first call."""
-    global _held_back
+    """Apply the console policy to Warp and TorchRL and initialise Warp; once per process (the simulator's
+    package runs it on import), a no-op after."""
+    global _held_back, _configured
+    if _configured:
+        return
+    _configured = True
     import warp as wp
 
     verbose = is_verbose()
-    os.environ.setdefault("RL_LOGGING_LEVEL", "INFO" if verbose else "WARNING")
+    configure_logging()
     wp.config.log_level = wp.LOG_INFO if verbose else wp.LOG_WARNING
     if verbose:
         wp.init()
@@ -92,6 +112,7 @@ def set_verbose(verbose: bool = True) -> None:
 
 def device_summary(device: str | None = None) -> str:
     """One line naming the device that simulates, e.g. ``simulation on cpu (no CUDA device found)``."""
+    configure()  # Warp initialised quietly, if the simulator has not been imported yet
     import warp as wp
 
     dev = wp.get_device(device)

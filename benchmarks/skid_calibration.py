@@ -73,7 +73,8 @@ def odometry(linear: float, angular: float, factor: float, seconds: float = 4.0)
     import torch
 
     from atrv_warp import RoverSim
-    from atrv_warp.integrations.ros.base import BaseParams, VelocityController, WheelOdometry, side_speeds
+    from atrv_warp.core.kinematics import side_speeds
+    from atrv_warp.integrations.ros.base import BaseParams, VelocityController, WheelOdometry
 
     sim = RoverSim(1)
     side = torch.tensor([w.side for w in sim.description.wheels])

@@ -17,13 +17,13 @@ import sys
 
 import torch
 
+from atrv_warp.core.geometry import quat_to_yaw
 from atrv_warp.sim.diff import DiffRollout
 
 
 def final_pose(poses: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """(x, y) [m] and yaw [rad] of world 0 at the end of a rollout."""
-    qz, qw = poses[-1, 0, 5], poses[-1, 0, 6]  # level chassis: q ~ (0, 0, sin(yaw/2), cos(yaw/2))
-    return poses[-1, 0, :2], 2.0 * torch.atan2(qz, qw)
+    return poses[-1, 0, :2], quat_to_yaw(poses[-1, 0, 3:7])
 
 
 def optimise(target=(1.5, 1.5), heading: float | None = 90.0, steps: int = 60, segments: int = 10,

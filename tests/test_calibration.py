@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 import torch
 
+from atrv_warp.core.kinematics import side_speeds
 from atrv_warp.integrations.calibration import BagError, CalibrationConfig, CalibrationError, read_drive_log
 from atrv_warp.integrations.calibration.fit import make_segments
 from atrv_warp.integrations.ros.bag import BagWriter
-from atrv_warp.integrations.ros.base import BaseParams, VelocityController, side_speeds
+from atrv_warp.integrations.ros.base import BaseParams, VelocityController
 from atrv_warp.sim.config import SimConfig, load_sim_config
 from atrv_warp.sim.urdf import load_rover
 
@@ -240,8 +241,7 @@ def test_moving_state_sets_the_recorded_motion():
     q, qd = roll.moving_state(torch.tensor([[1.0, 2.0, 0.7]]), torch.tensor([[0.6, 0.1]]), torch.tensor([0.4]),
                               torch.tensor([[3.0, 5.0]]))
     sim = roll.sim
-    sim.set_state({"joint_q": q.detach(), "joint_qd": qd.detach(), "commands": torch.zeros(1, 2),
-                   "sim_time": torch.tensor(0.0, dtype=torch.float64)})
+    sim.set_joints(q.detach(), qd.detach())
     c, s = np.cos(0.7), np.sin(0.7)
     assert sim.lin_vel[0, :2].tolist() == pytest.approx([c * 0.6 - s * 0.1, s * 0.6 + c * 0.1], abs=1e-5)
     assert sim.ang_vel[0, 2].item() == pytest.approx(0.4, abs=1e-6)

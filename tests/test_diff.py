@@ -191,10 +191,30 @@ def test_action_scale_is_an_argument_that_defaults_to_the_reference_task():
     assert DEFAULT_ACTION_SCALE == TaskConfig().action_scale
     half = DiffRollout(1, steps=4, action_scale=0.5 * DEFAULT_ACTION_SCALE)
     full = DiffRollout(1, steps=4)
-    actions = torch.full((4, 1, 2), 0.8)
-    # the same torques: half the scale, twice the action
+    actions = torch.full((4, 1, 2), 0.4)
+    # the same torques: half the scale, twice the action (both within [-1, 1])
     assert torch.allclose(half(2 * actions), full(actions), atol=1e-6)
     assert not torch.allclose(half(actions), full(actions), atol=1e-4)
+
+
+def test_actions_are_clipped_as_the_env_clips_them():
+    """One rule per input: an action of 1.6 drives as 1.0 does, in the env and in a rollout, and its gradient is
+    zero (the clamp's), while an in-range action's is not."""
+    roll = DiffRollout(1, steps=4)
+    inside = torch.full((4, 1, 2), 0.9, requires_grad=True)
+    outside = torch.full((4, 1, 2), 1.6, requires_grad=True)
+    assert torch.equal(roll(outside), roll(torch.ones(4, 1, 2)))
+    for actions in (inside, outside):
+        roll(actions)[-1, 0, 0].backward()
+    assert inside.grad.abs().sum() > 0 and torch.equal(outside.grad, torch.zeros_like(outside.grad))
+    from tensordict import TensorDict
+
+    from atrv_warp import ATRVjrEnv
+
+    env = ATRVjrEnv(1, seed=0)
+    env.reset()
+    env.step(TensorDict(action=torch.full((1, 2), 1.6), batch_size=[1]))
+    assert torch.equal(env.sim.commands, torch.full((1, 2), DEFAULT_ACTION_SCALE))
 
 
 def test_progress_reward_gradient_reaches_the_actions(roll20):

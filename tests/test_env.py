@@ -138,37 +138,62 @@ def test_partial_reset_leaves_other_worlds_bit_identical():
     assert env.step_count[[1, 3]].tolist() == [0, 0] and env.step_count[keep].tolist() == [10, 10]
 
 
-def test_seed_determinism_and_save_restore():
+def test_seed_determinism():
     actions = random_actions(8, 60, 1)
     a = run(ATRVjrEnv(8, seed=42), actions)
     b = run(ATRVjrEnv(8, seed=42), actions)
     c = run(ATRVjrEnv(8, seed=43), actions)
     assert torch.equal(a["observation"], b["observation"]) and torch.equal(a["reward"], b["reward"])
     assert not torch.equal(a["observation"], c["observation"])
-    # save mid-rollout, restore into a fresh env, continue: identical to continuing the original
-    env = ATRVjrEnv(8, seed=7)
+
+
+def _go_on(env, td, actions) -> torch.Tensor:
+    """Step on from ``td`` with ``actions`` (resetting ended worlds); every step's observation, reward and end."""
+    seq = []
+    for act in actions:
+        td, td_next = env.step_and_maybe_reset(td.set("action", act))
+        nxt = td["next"]
+        seq.append(torch.cat([nxt["observation"], nxt["reward"], nxt["end_reason"].float()], -1).clone())
+        td = td_next
+    return torch.stack(seq)
+
+
+@pytest.mark.parametrize("task", ["reach", "nav"])
+def test_restore_then_continue_equals_continuing(task):
+    """A snapshot is everything the next step reads: restoring it and stepping on gives, bit for bit, what the
+    original gave when it stepped on (under 'wide': per-world physics, delay, motor lag, sensor noise)."""
+    actions = random_actions(8, 40, 3)
+    env = ATRVjrEnv(8, seed=7, task=task, randomization="wide")
     td = env.reset()
-    for act in actions[:25]:
-        td["action"] = act
-        td = env.step_and_maybe_reset(td)[1]
+    for act in actions[:20]:
+        td = env.step_and_maybe_reset(td.set("action", act))[1]
     saved, saved_td = env.state_dict(), td.clone()
-    for act in actions[25:35]:  # wander off before restoring
-        td["action"] = act
-        td = env.step_and_maybe_reset(td)[1]
+    original = _go_on(env, td, actions[20:])  # the original goes on
     env.load_state_dict(saved)
-    env2 = ATRVjrEnv(8, seed=0)
-    env2.load_state_dict(saved)
-    outs = []
-    for e in (env, env2):
-        t = saved_td.clone()
-        seq = []
-        for act in actions[25:]:
-            t["action"] = act
-            t, t_next = e.step_and_maybe_reset(t)
-            seq.append(t["next", "observation"].clone())
-            t = t_next
-        outs.append(torch.stack(seq))
-    assert torch.equal(outs[0], outs[1])
+    assert torch.equal(_go_on(env, saved_td.clone(), actions[20:]), original)
+    fresh = ATRVjrEnv(8, seed=0, task=task, randomization="wide")  # into another env of the same kind
+    fresh.load_state_dict(saved)
+    assert torch.equal(_go_on(fresh, saved_td.clone(), actions[20:]), original)
+    assert not torch.equal(original[0], original[-1])  # the worlds moved
+
+
+def test_a_snapshot_that_does_not_fit_is_refused_and_the_env_is_unchanged():
+    env = ATRVjrEnv(4, seed=1)
+    env.reset()
+    before = env.state_dict()
+    cases = [
+        (ATRVjrEnv(2, seed=1).state_dict(), "the snapshot is of 2 worlds, this env has 4"),
+        (ATRVjrEnv(4, seed=1, max_steps=100).state_dict(), r"task differs .*max_steps=100 \(here 200\)"),
+        (ATRVjrEnv(4, seed=1, randomization="mild").state_dict(), "randomization differs"),
+        ({k: v for k, v in before.items() if k != "sim.impulses"}, r"simulator snapshot lacks \['impulses'\]"),
+        ({k: v for k, v in before.items() if k != "snapshot.format"}, "not a snapshot this version restores"),
+    ]
+    for snapshot, message in cases:
+        with pytest.raises(ValueError, match=message):
+            env.load_state_dict(snapshot)
+    after = env.state_dict()
+    assert all(torch.equal(torch.as_tensor(before[k]), torch.as_tensor(after[k])) for k in before
+               if not k.startswith("snapshot."))
 
 
 def test_bad_actions_raise_clear_errors():
@@ -296,14 +321,42 @@ def test_observe_matches_reset_observation():
     assert moved[:, :2].tolist() == [[5.0, 5.0]] * 3 and torch.equal(moved[:, 2:8], td["observation"][:, 2:8])
 
 
+def test_the_spec_bounds_clip_the_observation():
+    """Measured from a step: a target far outside the arena and a rover thrown through the air (2 m up, touching
+    nothing during the step) at 20 m/s, or spinning at 8 rad/s, observe exactly the spec's bounds, in both signs; the
+    spec the env declares has the same bounds."""
+    from atrv_warp.task.spec import OBS_INDEX, observation_bounds
+
+    env = ATRVjrEnv(4, seed=5)
+    env.reset()
+    sim, d = env.sim, env.sim.layout.chassis_dof
+    q, qd = wp.to_torch(sim.buffers.joint_q).clone(), wp.to_torch(sim.buffers.joint_qd).clone()
+    thrown = {0: [20.0, 20.0, 0, 0, 0, 0], 1: [-20.0, -20.0, 0, 0, 0, 0], 2: [0, 0, 0, 0, 0, 8.0], 3: [0, 0, 0, 0, 0, -8.0]}
+    for world, velocity in thrown.items():  # vx, vy, vz [m/s]; roll, pitch, yaw rate [rad/s]
+        k = world * sim.layout.dofs_per_world + d
+        qd[k:k + 6] = torch.tensor(velocity)
+        q[world * sim.layout.coords_per_world + sim.layout.chassis_coord + 2] += 2.0  # z [m]
+    sim.set_joints(q, qd)
+    env.target.copy_(torch.tensor([[50.0, 50.0], [-50.0, -50.0]] * 2))
+    obs = env.step(TensorDict(action=torch.zeros(4, 2), batch_size=[4]))["next", "observation"]
+    low, high = observation_bounds()
+    for name, (up, down) in {"target_x": (0, 1), "target_y": (0, 1), "rover_vx": (0, 1), "rover_vy": (0, 1),
+                             "yaw_rate": (2, 3)}.items():
+        i = OBS_INDEX[name]
+        assert obs[up, i] == high[i] and obs[down, i] == low[i], (name, obs[:, i])
+    spec = env.observation_spec["observation"].space
+    assert torch.equal(spec.low[0], low) and torch.equal(spec.high[0], high)
+
+
 def test_reward_terms_sum_to_the_reward_and_follow_the_spec():
     from atrv_warp.task.baseline import scripted_policy
-    from atrv_warp.task.spec import END_REASONS, OBS_DIM, REWARD_TERMS, EndReason, observation_bounds
+    from atrv_warp.task.spec import END_REASONS, OBS_DIM, REWARD_TERMS, EndReason
 
     env = ATRVjrEnv(32, seed=5)
     assert env.observation_spec["observation"].shape[-1] == OBS_DIM
-    assert torch.equal(env.observation_spec["observation"].space.high[0], observation_bounds()[1])
-    assert END_REASONS[EndReason.NONFINITE] == "nonfinite"
+    # the codes a results file or a consumer stores
+    assert END_REASONS == ("running", "success", "wall", "flip", "timeout", "nonfinite", "obstacle")
+    assert [int(r) for r in EndReason] == list(range(len(END_REASONS)))
     td = env.rollout(200, scripted_policy(), break_when_any_done=False)
     nxt = td["next"]
     terms = torch.cat([nxt["reward_terms", name] for name in REWARD_TERMS], -1)

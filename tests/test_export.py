@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -85,3 +86,53 @@ def test_onnx_export_checked_with_onnxruntime(tmp_path):
     expected = load_policy()(TensorDict(observation=obs, batch_size=[1000]))["action"].numpy()
     assert np.abs(got - expected).max() < 1e-5
     assert path.is_file()
+
+
+def test_the_shipped_nav_policy_exports_its_whole_contract_and_runs_from_the_file_alone(tmp_path):
+    """The .pt2 of the shipped nav policy, run with torch alone on observations of the nav env, gives the TorchRL
+    policy's actions; its contract names every field with unit and frame, the rate, the scan and the history."""
+    from atrv_warp import ATRVjrEnv
+    from atrv_warp.core.scan import ScanSectors, sector_readings
+    from atrv_warp.policy import pretrained_nav_policy_path
+
+    path = export_policy(pretrained_nav_policy_path(), tmp_path / "nav.pt2")
+    env = ATRVjrEnv(64, seed=11, task="nav")
+    policy = load_policy(pretrained_nav_policy_path(), task="nav")
+    td = env.rollout(20, policy, break_when_any_done=False)
+    obs = td["observation"].reshape(-1, env.obs_dim)
+    torch.save(obs, tmp_path / "obs.pt")
+    proc = subprocess.run([sys.executable, "-c", _STANDALONE, str(path), str(tmp_path / "obs.pt"),
+                           str(tmp_path / "actions.pt")], capture_output=True, text=True, check=False)
+    assert proc.returncode == 0 and "loaded: []" in proc.stdout, proc.stderr[-3000:]
+    expected = td["action"].reshape(-1, 2)
+    assert (torch.load(tmp_path / "actions.pt") - expected).abs().max().item() < 1e-5
+    # a consumer that knows only the contract builds the env's scan sectors from the env's ranges
+    _, spec = load_exported(path)
+    assert len(spec["observation"]) == 32 and all(f["unit"] and f["frame"] for f in spec["observation"])
+    assert (spec["step_dt"], spec["rate_hz"], spec["action"]["scale"]) == (0.05, 20.0, 20.0)
+    scan, names = spec["scan"], [f["name"] for f in spec["observation"]]
+    angles = torch.linspace(-scan["fov_rad"] / 2, scan["fov_rad"] / 2, scan["beams"], dtype=torch.float64)
+    sectors = ScanSectors(tuple(scan["sectors"]["edges_rad"]), scan["sectors"]["clip_m"])
+    ranges = td["next", "scan"].reshape(-1, scan["beams"]).clone()
+    ranges[ranges >= scan["range_max_m"]] = math.inf  # as a LaserScan carries no return
+    readings = sector_readings(ranges, angles, sectors, range_min=scan["range_min_m"], range_max=scan["range_max_m"])
+    columns = [names.index(f"scan_{k}") for k in range(sectors.count)]
+    assert torch.equal(readings, td["next", "observation"].reshape(-1, 32)[:, columns])
+    low = torch.tensor([f["low"] for f in spec["observation"]])
+    high = torch.tensor([f["high"] for f in spec["observation"]])
+    assert ((obs >= low) & (obs <= high)).all() and (obs == high).any()  # the bounds the env clips to
+
+
+def test_export_refuses_a_policy_that_does_not_fit_its_task(tmp_path):
+    """A nav policy from before the task observed its last actions (26 values, the task 32): one line, exit 2,
+    nothing written."""
+    from atrv_warp.policy import make_actor, save_policy
+
+    old = tmp_path / "old_nav.pt"
+    save_policy(make_actor(16, 1, obs_dim=26), old, width=16, depth=1, meta={"task": "nav"})
+    proc = subprocess.run([sys.executable, "-m", "atrv_warp.export", str(old), str(tmp_path / "old.pt2")],
+                          capture_output=True, text=True, check=False)
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "observes 26 values, task 'nav' observes 32" in lines[0], proc.stderr
+    assert not list(tmp_path.glob("*.pt2"))

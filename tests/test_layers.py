@@ -1,7 +1,7 @@
 """Layers point down only: read every module's imports (lazy ones inside functions included) and
 fail on one that reaches a higher layer.
 
-From the bottom: ``runtime`` and ``storage``; ``sim/`` (the simulator knows no task); ``task/`` (the
+From the bottom: ``core`` (the light core: torch and the standard library only); ``runtime`` and ``storage``; ``sim/`` (the simulator knows no task); ``task/`` (the
 task knows no trainer); ``policy`` (a saved policy, loaded without the trainer); ``integrations/``
 (Rerun, ROS 2, Gymnasium: no trainer internals); ``rl/`` (training); the command-line modules and
 the package's lazy namespace on top.
@@ -10,12 +10,15 @@ the package's lazy namespace on top.
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "atrv_warp"
 
 LAYERS = (
+    ("atrv_warp.core",),
     ("atrv_warp.runtime", "atrv_warp.storage"),
     ("atrv_warp.sim",),
     ("atrv_warp.task",),
@@ -103,3 +106,40 @@ def test_the_check_catches_an_upward_import():
         "atrv_warp.task.env (task) imports atrv_warp.rl.config (rl)",
     ], found
     assert layer("atrv_warp.simulation") == TOP  # a prefix is a whole module name, not a string prefix
+
+
+def third_party_imports(source: str) -> set[str]:
+    """Top-level names of every module ``source`` imports that is neither the standard library nor this package."""
+    names = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            names.update(a.name.split(".")[0] for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            names.add(node.module.split(".")[0])
+    return {n for n in names if n not in sys.stdlib_module_names and n != "atrv_warp"}
+
+
+def test_the_light_core_imports_only_torch():
+    core = {m: p for m, (p, _) in MODULES.items() if layer(m) == 0}
+    assert "atrv_warp.core.geometry" in core and "atrv_warp.core.scan" in core
+    found = {m: third_party_imports(p.read_text()) - {"torch"} for m, p in core.items()}
+    assert not any(found.values()), found
+    assert third_party_imports("import warp as wp\nfrom torchrl.envs import EnvBase\nimport math\n") == {
+        "warp", "torchrl"}
+
+
+LIGHT = ("atrv_warp", "atrv_warp.core", "atrv_warp.task.spec", "atrv_warp.integrations.ros",
+         "atrv_warp.integrations.ros.base")
+"""Modules a robot's computer imports without the simulator: none of them loads Warp, Newton or TorchRL."""
+
+
+def test_the_package_and_its_light_core_load_without_the_simulator():
+    """In a fresh interpreter: importing the light modules loads none of warp, newton, torchrl; the simulator then
+    configures Warp on its first import (the quiet console)."""
+    code = (f"import sys\nimport {', '.join(LIGHT)}\n"
+            "print(sorted(m for m in ('warp', 'newton', 'torchrl') if m in sys.modules))\n"
+            "import atrv_warp.sim, atrv_warp.runtime as r\nprint(sorted(m for m in ('warp', 'newton') if m in "
+            "sys.modules), r.is_configured())\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.splitlines() == ["[]", "['newton', 'warp'] True"], out.stdout + out.stderr
+    assert out.stderr == "", out.stderr  # quiet: no Warp banner, no CUDA-driver notice

@@ -28,7 +28,7 @@ def test_packaged_urdf_has_spec_links_and_geometry_inertias():
         m, r, length = 2.5, 0.125, 0.075
         np.testing.assert_allclose(np.diag(w.inertial.inertia),
                                    [m * (3 * r * r + length * length) / 12] * 2 + [m * r * r / 2], rtol=1e-9)
-    assert 45.0 <= desc.chassis_inertial.mass <= 55.0
+    assert desc.total_mass == pytest.approx(58.0)  # the chassis and four 2.5 kg wheels: the realistic rover
     x = sorted({round(abs(w.origin[0, 3]), 6) for w in desc.wheels})
     assert x == [0.19]  # wheelbase 0.38 m
     track = 2 * (abs(desc.wheels[0].origin[1, 3]) + 0.03)

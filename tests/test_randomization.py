@@ -164,7 +164,7 @@ def test_state_dict_restores_the_draws():
     fresh = ATRVjrEnv(4, seed=9, randomization="wide")
     fresh.load_state_dict(saved)
     for e in (env, fresh):
-        assert torch.equal(e.sim.params.friction, saved["task.physics.friction"])
+        assert torch.equal(e.sim.params.friction, saved["sim.params.friction"])
         assert torch.equal(e.latency, saved["task.delay.latency"])
     assert torch.equal(roll_from(env, 10), roll_from(fresh, 10))
 
@@ -184,13 +184,3 @@ def test_train_config_key():
     assert load_train_config("smoke", {"env.randomization": "wide"}).env.randomization == "wide"
     with pytest.raises(ValueError, match="randomization: unknown randomization preset 'wild'"):
         load_train_config("smoke", {"randomization": "wild"})
-
-
-def test_the_ros_node_reads_the_same_sensor_noise():
-    """Training and deployment match by construction: the node's noise parameters default to SENSOR_NOISE."""
-    from atrv_warp.integrations.ros import PARAMETERS
-
-    defaults = {name: value for name, value, _ in PARAMETERS}
-    assert defaults["scan_noise"] == SENSOR_NOISE.scan_range and defaults["scan_dropout"] == SENSOR_NOISE.scan_dropout
-    assert defaults["imu_gyro_noise"] == SENSOR_NOISE.gyro and defaults["imu_accel_noise"] == SENSOR_NOISE.accel
-    assert RANDOMIZATION_PRESETS["wide"].noise is SENSOR_NOISE and RANDOMIZATION_PRESETS["mild"].noise is SENSOR_NOISE

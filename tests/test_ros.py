@@ -15,6 +15,8 @@ from geometry_msgs.msg import PoseStamped, Twist
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
+from atrv_warp.core.geometry import quat_to_yaw
+
 
 @pytest.fixture(scope="module")
 def ros_env():
@@ -79,7 +81,7 @@ def stop(proc):
 
 def yaw_of(msg):
     q = msg.pose.orientation
-    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+    return float(quat_to_yaw((q.x, q.y, q.z, q.w)))
 
 
 @pytest.mark.slow  # a live ROS 2 node
@@ -219,13 +221,14 @@ def check_bag_frames(messages):
 def test_frames_round_trip_quaternions():
     import numpy as np
 
-    from atrv_warp.integrations.ros.frames import matrix_quaternion, pose_matrix, transform_dict, turn_matrix
+    from atrv_warp.integrations.ros.frames import pose_matrix, transform_dict, turn_matrix
 
     rng = np.random.default_rng(0)
     for q in rng.normal(size=(200, 4)):
         q = q / np.linalg.norm(q)
         q = q if q[3] >= 0 else -q
-        assert matrix_quaternion(pose_matrix((0, 0, 0), q)) == pytest.approx(tuple(q), abs=1e-9)
+        rotation = transform_dict("a", "b", 0, pose_matrix((0, 0, 0), q))["transform"]["rotation"]
+        assert [rotation[k] for k in "xyzw"] == pytest.approx(q.tolist(), abs=1e-6)
     m = turn_matrix((0, 0, 1), np.pi / 2)
     np.testing.assert_allclose(m[:3, :3] @ [1, 0, 0], [0, 1, 0], atol=1e-12)
     t = transform_dict("a", "b", 1_500_000_000, pose_matrix((1, 2, 3), (0, 0, 0, 1)))
@@ -297,9 +300,42 @@ def test_goal_mode_drives_to_goal(ros_env):
 
 
 def test_missing_extra_message():
-    from atrv_warp.integrations.ros import MISSING_ROS_MESSAGE
+    """Without rclpy (its import blocked in a fresh interpreter) the node says how to install the extra, exit 2."""
+    code = "import sys\nsys.modules['rclpy'] = None\nfrom atrv_warp.ros import main\nsys.exit(main(['atrv-ros']))\n"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    assert "ROS 2 Python packages are not installed" in proc.stderr and "pip install -e '.[ros]'" in proc.stderr
+    assert "Traceback" not in proc.stderr
 
-    assert "pip install -e '.[ros]'" in MISSING_ROS_MESSAGE
+
+@pytest.mark.slow  # a live ROS 2 node
+def test_the_node_noise_reaches_its_messages(ros_env):
+    """The node's default sensor noise is the noise training randomizes with (SENSOR_NOISE), measured in its
+    messages: a rover at rest, its /imu, /joint_states and /scan over 80 readings."""
+    import statistics
+
+    from atrv_warp.sim.config import SENSOR_NOISE
+
+    proc = start_node(ros_env, "wait_for_subscribers:=1", "real_time_factor:=0.0", "publish_rate:=20.0")
+    client = DriverClient("atrv_noise_client", [""])
+    try:
+        assert client.wait(lambda: len(client.msgs["/imu"]) >= 100 and len(client.msgs["/scan"]) >= 100
+                           and len(client.msgs["/joint_states"]) >= 100, timeout=120), "too few messages"
+    finally:
+        client.node.destroy_node()
+        stop(proc)
+    imu, scans, joints = (client.msgs[k][20:100] for k in ("/imu", "/scan", "/joint_states"))  # after settling
+    accel = statistics.stdev(m.linear_acceleration.z for m in imu)
+    gyro = statistics.stdev(m.angular_velocity.z for m in imu)
+    wheel = statistics.stdev(v for m in joints for v in m.velocity)
+    beams = list(zip(*(m.ranges for m in scans)))
+    scan = statistics.mean(statistics.stdev(b) for b in beams if all(math.isfinite(r) for r in b))
+    for got, want in ((accel, SENSOR_NOISE.accel), (gyro, SENSOR_NOISE.gyro), (wheel, SENSOR_NOISE.wheel_speed),
+                      (scan, SENSOR_NOISE.scan_range)):
+        assert got == pytest.approx(want, rel=0.3), (accel, gyro, wheel, scan)
+    seen = [b for b in beams if any(math.isfinite(r) for r in b)]  # beams that hit something (walls in range)
+    dropped = sum(not math.isfinite(r) for b in seen for r in b) / sum(len(b) for b in seen)
+    assert dropped == pytest.approx(SENSOR_NOISE.scan_dropout, abs=0.02)
 
 
 class DriverClient:
@@ -355,7 +391,7 @@ def _planar(odom):
 
 def _yaw(odom):
     q = odom.pose.pose.orientation
-    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+    return float(quat_to_yaw((q.x, q.y, q.z, q.w)))
 
 
 def _wrap(angle):

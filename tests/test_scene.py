@@ -94,7 +94,7 @@ def test_scan_layouts_give_the_same_ranges_bit_for_bit():
     a, b = by_beam.scan(layout="beam").clone(), by_world.scan(layout="world").clone()
     assert torch.equal(a, b)
     assert (a < cfg.max_range).any() and (a == cfg.max_range).any()  # hits, and dropped beams
-    mask = wp.array(np.arange(16) % 3 == 0, dtype=bool)
+    mask = wp.array(np.arange(16) % 3 == 0, dtype=bool, device=env.sim.device)
     env.sim.step()
     assert torch.equal(by_beam.scan(mask, layout="beam"), by_world.scan(mask, layout="world"))
     assert torch.equal(by_world.ranges[1], b[1])  # unmasked worlds keep their ranges

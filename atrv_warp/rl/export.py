@@ -1,10 +1,13 @@
 """A trained policy that leaves the simulator: a file that runs with torch alone.
 
 :func:`export_policy` writes the deterministic policy (observation normalisation included) as a
-``torch.export`` program (``.pt2``): raw observation (B, 10) in, action (B, 2) in [-1, 1] out,
+``torch.export`` program (``.pt2``): raw observation (B, D) in, action (B, 2) in [-1, 1] out,
 the action TorchRL's deterministic exploration gives (tanh of the Gaussian's mean). The file
-also carries ``atrv_warp.json``: the observation fields with their bounds, the action's meaning
-and the policy's metadata, so a robot stack can build the observation without this package.
+also carries ``atrv_warp.json``, the whole contract a robot stack needs to run it without this package
+(:func:`contract`): every observation field with its bound, unit and frame; the action's kind, units and
+scale; the control period (``step_dt``, the simulator's); the scan's geometry (beams, field of view, range
+limits, the sectors' angular edges and clip) and how a missing or too-close return reads; and what the
+action history means. The exporter checks the policy against its task first, as ``load_policy`` does.
 
 Load it anywhere torch runs, with no Warp, Newton or TorchRL::
 
@@ -30,12 +33,15 @@ import torch
 from torch import nn
 
 from atrv_warp.policy import load_policy, pretrained_policy_path
+from atrv_warp.sim.config import SimConfig
+from atrv_warp.sim.scanner import ScannerConfig
 from atrv_warp.task.config import get_task
-from atrv_warp.task.spec import ACTION_DIM, observation_fields
+from atrv_warp.task.spec import ACTION_DIM, observation_bounds, observation_fields, scan_sectors
 
-__all__ = ["EXPORT_FORMAT", "PolicyNet", "export_onnx", "export_policy", "load_exported"]
+__all__ = ["EXPORT_FORMAT", "PolicyNet", "contract", "export_onnx", "export_policy", "load_exported"]
 
-EXPORT_FORMAT = "atrv_warp.exported_policy/1"
+EXPORT_FORMAT = "atrv_warp.exported_policy/2"
+"""Format tag of an exported policy's ``atrv_warp.json`` (2: the whole contract, :func:`contract`)."""
 
 
 class PolicyNet(nn.Module):
@@ -51,14 +57,43 @@ class PolicyNet(nn.Module):
         return torch.tanh(loc)
 
 
-def _spec(source: Path, meta: dict) -> dict:
-    task = get_task(meta.get("task", "reach"))
-    return {"format": EXPORT_FORMAT, "source": str(source), "policy_meta": meta, "task": meta.get("task", "reach"),
-            "observation": [{"name": f.name, "bound": f.bound, "description": f.description}
-                            for f in observation_fields(task)],
-            "action": {"names": ["left", "right"], "low": -1.0, "high": 1.0, "scale": task.action_scale,
-                       "unit_after_scale": "N·m wheel torque, per side"},
-            "step_dt": 0.05}
+def contract(source: Path, meta: dict, sim: SimConfig | None = None) -> dict:
+    """What the exported program expects and gives, as plain values (the file's ``atrv_warp.json``).
+
+    Args:
+        source: The policy file it was exported from.
+        meta: The policy's metadata (``meta["task"]``: the task it observes, ``reach`` if absent).
+        sim: The simulator's settings it was trained at (default: :class:`~atrv_warp.sim.config.SimConfig`'s);
+            the control period is its ``step_dt``.
+    """
+    name = meta.get("task", "reach")
+    task, sim = get_task(name), sim or SimConfig()
+    fields = observation_fields(task)
+    low, high = observation_bounds(task=task)
+    sectors = scan_sectors(task)
+    scan = None
+    if task.scan_beams:
+        sc = ScannerConfig(beams=task.scan_beams, fov=task.scan_fov)
+        scan = {"beams": sc.beams, "fov_rad": sc.fov, "angles": "evenly spaced over fov, centred on the scanner's +x, "
+                "counter-clockwise (right to left), as sensor_msgs/LaserScan orders them", "frame": sc.frame,
+                "range_min_m": sc.min_range, "range_max_m": sc.max_range,
+                "sectors": sectors.describe() if sectors is not None else None}
+    history = None
+    if task.action_history:
+        history = {"steps": task.action_history, "meaning": "last_action_k_left/right: the action (in [-1, 1], "
+                   "clipped) the policy chose k steps before this observation, newest first; zero after a reset"}
+    return {
+        "format": EXPORT_FORMAT, "source": str(source), "policy_meta": meta, "task": name,
+        "observation": [{"name": f.name, "index": i, "low": float(lo), "high": float(hi), "bound": f.bound,
+                         "unit": f.unit, "frame": f.frame, "description": f.description}
+                        for i, (f, lo, hi) in enumerate(zip(fields, low.tolist(), high.tolist()))],
+        "observation_clipped": "each value is clipped to [low, high] before the policy sees it",
+        "action": {"kind": "wheel_torque", "names": ["left", "right"], "low": -1.0, "high": 1.0,
+                   "scale": task.action_scale, "unit_after_scale": "N·m", "meaning": "action x scale is the torque "
+                   "of every wheel on that side; actions are clipped to [-1, 1]"},
+        "step_dt": sim.step_dt, "rate_hz": 1.0 / sim.step_dt,
+        "scan": scan, "action_history": history,
+    }
 
 
 def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = False) -> Path:
@@ -73,9 +108,11 @@ def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = Fa
         import onnxruntime  # noqa: F401
         import onnxscript  # noqa: F401
     source = Path(policy) if policy is not None else pretrained_policy_path()
-    actor = load_policy(source, deterministic=False)  # checks the file, names any problem
-    payload = load_weights(source, "policy file")
-    meta = payload.get("policy", payload).get("meta", {})
+    payload = load_weights(source, "policy file")  # a file that is no policy is named
+    payload = payload["policy"] if isinstance(payload.get("policy"), dict) else payload  # a training checkpoint's
+    meta = payload.get("meta", {})
+    # the contract is the task's: a policy trained on another version of it is refused, naming both widths
+    actor = load_policy(source, deterministic=False, task=meta.get("task", "reach"))
     net = PolicyNet(actor.module[0].module).eval()
     example = torch.zeros(2, net.obs_dim)
     batch = torch.export.Dim("batch")
@@ -84,7 +121,7 @@ def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = Fa
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.stem}.tmp.pt2")  # atomic: written beside, then renamed
-    spec = json.dumps(_spec(source, meta), default=str)
+    spec = json.dumps(contract(source, meta), default=str)
     torch.export.save(program, tmp, extra_files={"atrv_warp.json": spec})
     tmp.replace(out)
     if onnx:

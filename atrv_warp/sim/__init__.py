@@ -10,7 +10,14 @@
 - :mod:`.scanner`: :class:`LaserScanner`, the 2-D laser range finder.
 - :mod:`.diff`: :class:`DiffRollout`, gradients through the simulator.
 - :mod:`.checks`: the reference drive protocol and the wall-impact sweep, shared by benchmarks and tests.
+
+Importing this package configures Warp (:func:`atrv_warp.runtime.configure`: a quiet console) before any of
+its modules imports Newton, whose import initialises Warp.
 """
+
+from atrv_warp import runtime
+
+runtime.configure()
 
 from atrv_warp.sim.config import (
     FAST_SIM_DT,

@@ -17,6 +17,7 @@ import numpy as np
 import torch
 import warp as wp
 
+from atrv_warp.core.geometry import quat_to_matrix
 from atrv_warp.sim.config import ArenaConfig, ContactConfig, ObstacleConfig, RoverConfig
 from atrv_warp.sim.kernels.contact import (
     ARENA_PLANES,
@@ -223,10 +224,7 @@ def rover_inertia(model: newton.Model, bodies_per_world: int, chassis: int) -> t
     com = model.body_com.numpy()[:bodies_per_world].astype(np.float64)
 
     def rotation(quat) -> np.ndarray:  # (x, y, z, w) -> 3x3, in float64
-        x, y, z, w = quat
-        return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+        return quat_to_matrix(torch.from_numpy(quat)).numpy()
 
     r_c = rotation(q[chassis, 3:])
     # each body's rotation and COM in the chassis frame

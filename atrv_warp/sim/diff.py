@@ -76,8 +76,12 @@ class NonFiniteGradientError(FloatingPointError):
 
 @wp.kernel
 def scale_actions(actions: wp.array2d(dtype=float), scale: float, commands: wp.array(dtype=wp.vec2)):
+    """Wheel torques [N·m] of actions clipped to [-1, 1], as the environment's ``action_to_torque``: the clamp's
+    derivative is zero outside the range, so an action past it gets no gradient."""
     world = wp.tid()
-    commands[world] = wp.vec2(scale * actions[world, 0], scale * actions[world, 1])
+    left = wp.clamp(actions[world, 0], -1.0, 1.0)
+    right = wp.clamp(actions[world, 1], -1.0, 1.0)
+    commands[world] = wp.vec2(scale * left, scale * right)
 
 
 @wp.kernel
@@ -435,8 +439,9 @@ class DiffRollout:
         """Roll out and return chassis poses (steps + 1, N, 7): x, y, z [m], quaternion (x, y, z, w).
 
         Args:
-            actions: (steps, N, 2) in [-1, 1] (x :attr:`action_scale` N·m), differentiable; with a
-                :attr:`controller`, each side's wheel-speed target [rad/s] instead.
+            actions: (steps, N, 2) (x :attr:`action_scale` N·m), differentiable; clipped to [-1, 1] as the
+                environment clips them, so an action outside the range gets a zero gradient. With a
+                :attr:`controller`, each side's wheel-speed target [rad/s] instead (not clipped).
             initial_state: (joint_q, joint_qd) from :meth:`initial_state` or :meth:`moving_state` (default:
                 every rover at the origin, at rest); differentiable.
             friction: Coulomb coefficient, one for all worlds or (N,) one per world (default: the
@@ -497,6 +502,8 @@ class DiffRollout:
 class _RolloutFn(torch.autograd.Function):
     @staticmethod
     def forward(ctx, roll: DiffRollout, actions, joint_q, joint_qd, integral, *params):
+        # autograd wants each gradient on its input's device; the rollout's live on the simulator's
+        ctx.devices = [t.device for t in (actions, joint_q, joint_qd, integral, *params)]
         poses, speeds, torques, ctx.rollout_id = roll.forward(
             actions.detach(), joint_q.detach(), joint_qd.detach(), integral.detach(),
             {name: p.detach() for name, p in zip(DIFF_PARAMETERS, params)})
@@ -505,4 +512,5 @@ class _RolloutFn(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, grad_poses, grad_speeds, grad_torques):
-        return None, *ctx.roll.backward(grad_poses, grad_speeds, ctx.rollout_id, grad_torques)
+        grads = ctx.roll.backward(grad_poses, grad_speeds, ctx.rollout_id, grad_torques)
+        return None, *(g.to(d) for g, d in zip(grads, ctx.devices))

@@ -9,6 +9,7 @@ views of Warp arrays that the step updates in place (no copy per step).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
@@ -18,6 +19,7 @@ import numpy as np
 import torch
 import warp as wp
 
+from atrv_warp.core.geometry import quat_to_matrix
 from atrv_warp.sim.config import (
     ArenaConfig,
     ContactConfig,
@@ -33,7 +35,7 @@ from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics, apply_pay
 from atrv_warp.sim.kernels.rover import RoverLayout, apply_wheel_torques, compute_rover_state, reset_worlds
 from atrv_warp.sim.kernels.terrain import place_on_terrain
 from atrv_warp.sim.model import BuiltModel, build_model
-from atrv_warp.sim.params import WorldParams, check_parameter
+from atrv_warp.sim.params import PARAMETERS, WorldParams, check_parameter
 from atrv_warp.sim.terrain import HeightGrid, TerrainConfig, get_terrain
 
 __all__ = ["DRIVE_MODE_TORQUES", "DriveMode", "RoverSim", "SimBuffers"]
@@ -375,11 +377,7 @@ class RoverSim:
         if name not in frames:
             raise KeyError(f"unknown frame {name!r}; known: {sorted(frames)}")
         pose = self.root_pose.detach().to(torch.float64).cpu()
-        x, y, z, w = pose[:, 3], pose[:, 4], pose[:, 5], pose[:, 6]
-        rot = torch.stack([
-            1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
-            2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
-            2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], dim=-1).view(-1, 3, 3)
+        rot = quat_to_matrix(pose[:, 3:7])
         chassis = torch.eye(4, dtype=torch.float64).repeat(self.num_worlds, 1, 1)
         chassis[:, :3, :3] = rot
         chassis[:, :3, 3] = pose[:, :3]
@@ -521,20 +519,65 @@ class RoverSim:
         self._update_views()
 
     # ------------------------------------------------------------------ snapshots
-    def get_state(self) -> dict[str, torch.Tensor]:
-        """Copy of the full simulation state (restore with :meth:`set_state`)."""
-        s = self.state_0
-        return {"joint_q": wp.to_torch(s.joint_q).clone(), "joint_qd": wp.to_torch(s.joint_qd).clone(),
-                "commands": self.commands.clone(), "sim_time": torch.tensor(self.sim_time, dtype=torch.float64)}
+    def _snapshot_views(self) -> dict[str, torch.Tensor]:
+        """Torch views of everything the next step reads, by snapshot key."""
+        s, m, inertia = self.state_0, self.model, self.contact.inertia
+        views = {"joint_q": s.joint_q, "joint_qd": s.joint_qd, "body_q": s.body_q, "body_qd": s.body_qd,
+                 "impulses": self.contact.impulses, "commands": self._commands, "nonfinite": self._nonfinite,
+                 # the mass properties a payload changed, as the solver and the friction solver read them
+                 "body_mass": m.body_mass, "body_inv_mass": m.body_inv_mass, "body_inertia": m.body_inertia,
+                 "body_inv_inertia": m.body_inv_inertia, "body_com": m.body_com,
+                 "rover_inv_mass": inertia.inv_mass, "rover_com": inertia.com, "rover_inv_inertia": inertia.inv_inertia}
+        views = {k: wp.to_torch(v, requires_grad=False) for k, v in views.items()}
+        views.update({f"params.{name}": self.params.view(name) for name in PARAMETERS})
+        return views
 
-    def set_state(self, snapshot: dict[str, torch.Tensor]) -> None:
-        """Restore a snapshot taken by :meth:`get_state`."""
+    def get_state(self) -> dict[str, torch.Tensor]:
+        """Copy of everything the next step reads (restore with :meth:`set_state`): the bodies' and joints' state,
+        the friction solver's warm-start impulses, the commands, each world's parameters and the mass properties
+        a payload changed, the non-finite flags and the sim time. Restoring it and stepping equals stepping on,
+        bit for bit on the CPU."""
+        state = {k: v.clone() for k, v in self._snapshot_views().items()}
+        state["sim_time"] = torch.tensor(self.sim_time, dtype=torch.float64)
+        return state
+
+    def check_state(self, snapshot: Mapping[str, torch.Tensor]) -> None:
+        """Raise ``ValueError`` naming the first entry of ``snapshot`` that :meth:`set_state` cannot restore here
+        (missing, or another shape: a snapshot of another world count or rover); nothing is written."""
+        views = self._snapshot_views()
+        missing = sorted(set(views) - set(snapshot))
+        if missing or "sim_time" not in snapshot:
+            raise ValueError(f"simulator snapshot lacks {missing or ['sim_time']} (taken by an older version of "
+                             "atrv_warp, or not a snapshot)")
+        for k, v in views.items():
+            got = tuple(torch.as_tensor(snapshot[k]).shape)
+            if got != tuple(v.shape):
+                worlds = f" ({self.num_worlds} worlds here)" if k == "commands" else ""
+                raise ValueError(f"simulator snapshot entry {k!r} has shape {got}, this simulator's is "
+                                 f"{tuple(v.shape)}{worlds}")
+
+    def set_state(self, snapshot: Mapping[str, torch.Tensor]) -> None:
+        """Restore a snapshot taken by :meth:`get_state` (checked first by :meth:`check_state`: a mismatch is a
+        ``ValueError`` naming it, and nothing is restored)."""
+        self.check_state(snapshot)
+        with torch.no_grad():  # a differentiable simulator's arrays are leaves that require grad
+            for k, v in self._snapshot_views().items():
+                v.copy_(torch.as_tensor(snapshot[k]))
+        self.sim_time = float(snapshot["sim_time"])
+        # Newton's route for runtime mass changes: the solver re-derives its spatial inertias from the model
+        self.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
+        self._contact_flags.zero_()
+        self._update_views()
+
+    def set_joints(self, joint_q: torch.Tensor, joint_qd: torch.Tensor) -> None:
+        """Put every world in the generalised state ``joint_q``, ``joint_qd`` (Newton's flat arrays, e.g.
+        :meth:`~atrv_warp.sim.diff.DiffRollout.moving_state`'s): the bodies follow by forward kinematics and the
+        wheels start unloaded (no friction warm start), as after a reset. To resume a run exactly, use
+        :meth:`get_state` and :meth:`set_state` instead."""
         s = self.state_0
         with torch.no_grad():  # a differentiable simulator's arrays are leaves that require grad
-            wp.to_torch(s.joint_q).copy_(snapshot["joint_q"])
-            wp.to_torch(s.joint_qd).copy_(snapshot["joint_qd"])
-            self.commands.copy_(snapshot["commands"])
-        self.sim_time = float(snapshot["sim_time"])
+            wp.to_torch(s.joint_q, requires_grad=False).copy_(joint_q)
+            wp.to_torch(s.joint_qd, requires_grad=False).copy_(joint_qd)
         self.contact.impulses.zero_()
         newton.eval_fk(self.model, s.joint_q, s.joint_qd, s)
         self._contact_flags.zero_()

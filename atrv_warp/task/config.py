@@ -4,6 +4,7 @@ obstacles, seen through the laser scanner)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 __all__ = ["TASK_VARIANTS", "TaskConfig", "get_task"]
@@ -57,9 +58,12 @@ class TaskConfig:
     """No obstacle's bounding circle comes closer than this to the start or the target [m]."""
     scan_beams: int = 0
     """Scanner beams (0: no scanner). The full scan is the step's ``scan`` entry [m]."""
+    scan_fov: float = math.pi
+    """The scanner's field of view [rad], centred on its +x (a SICK LMS 2xx: 180 deg)."""
     scan_sectors: int = 0
-    """Observed scan: the minimum range over each of this many equal sectors, as
-    min(range, scan_clip) / scan_clip in [0, 1]; ``scan_beams`` must be a multiple of it."""
+    """Observed scan: the nearest return in each of this many equal sectors, as min(range, scan_clip) /
+    scan_clip in [0, 1]; the sectors' edges are :func:`atrv_warp.task.spec.scan_sectors`'s, and
+    ``scan_beams`` must be a multiple of it (so each sector holds as many of the scanner's beams)."""
     scan_clip: float = 5.0
     """Ranges beyond this [m] are observed as 1."""
     action_history: int = 0

@@ -17,6 +17,7 @@ Keys produced (the contract is declared in :mod:`atrv_warp.task.spec`):
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 from collections.abc import Mapping
 
@@ -40,6 +41,7 @@ from atrv_warp.sim.simulator import RoverSim
 from atrv_warp.task.config import TaskConfig, get_task
 from atrv_warp.task.kernels import (
     RoverState,
+    ScanReading,
     SceneParams,
     StepOutputs,
     TaskBuffers,
@@ -76,9 +78,13 @@ from atrv_warp.task.spec import (
     action_to_torque,
     observation_bounds,
     observation_fields,
+    scan_sectors,
 )
 
-__all__ = ["END_REASONS", "OBSERVATION_NAMES", "REWARD_TERMS", "ATRVjrEnv", "EnvFactory"]
+__all__ = ["END_REASONS", "OBSERVATION_NAMES", "REWARD_TERMS", "SNAPSHOT_FORMAT", "ATRVjrEnv", "EnvFactory"]
+
+SNAPSHOT_FORMAT = 2
+"""Version of :meth:`ATRVjrEnv.state_dict`'s snapshot (2: everything the next step reads, restored bit for bit)."""
 
 
 def _torch_device(device: wp.context.Device) -> torch.device:
@@ -135,8 +141,9 @@ class ATRVjrEnv(EnvBase):
         self.scanner = None
         if c.scan_beams:
             noise = self.randomization.noise
-            self.scanner = LaserScanner(self.sim, ScannerConfig(beams=c.scan_beams) if noise is None else ScannerConfig(
-                beams=c.scan_beams, noise_std=noise.scan_range, dropout=noise.scan_dropout))
+            self.scanner = LaserScanner(self.sim, ScannerConfig(beams=c.scan_beams, fov=c.scan_fov) if noise is None else
+                                        ScannerConfig(beams=c.scan_beams, fov=c.scan_fov, noise_std=noise.scan_range,
+                                                      dropout=noise.scan_dropout))
         """The rovers' laser scanner (:class:`~atrv_warp.sim.scanner.LaserScanner`), if the task has one."""
         super().__init__(device=_torch_device(self.sim.device), batch_size=torch.Size([num_envs]))
         self.num_envs = num_envs
@@ -198,6 +205,16 @@ class ATRVjrEnv(EnvBase):
         out.obs, out.reward, out.reward_terms, out.distance = self._obs, self._reward, self._reward_terms, self._distance
         out.terminated, out.truncated, out.end_reason = self._terminated, self._truncated, self._end_reason
         self._rover, self._out = rover, out
+        self.scan_sectors = scan_sectors(c)
+        """The observed scan's sectors (:class:`~atrv_warp.core.scan.ScanSectors`; ``None`` without them)."""
+        if self.scan_sectors is not None:
+            sc = self.scanner.cfg
+            bounds = self.scan_sectors.beam_bounds(torch.as_tensor(sc.angles)).to(torch.int32)
+            reading = ScanReading()
+            reading.first = wp.array(bounds[:, 0].numpy(), dtype=wp.int32, device=dev)
+            reading.end = wp.array(bounds[:, 1].numpy(), dtype=wp.int32, device=dev)
+            reading.clip, reading.range_min, reading.range_max = c.scan_clip, sc.min_range, sc.max_range
+            self._scan_reading = reading
         # torch views (no copies)
         self.target = wp.to_torch(t.target)
         self.step_count = wp.to_torch(t.step_count)
@@ -259,9 +276,7 @@ class ATRVjrEnv(EnvBase):
         self._all = wp.full(n, True, dtype=bool, device=dev)
         self.latency = wp.to_torch(d.latency)
         """(N,) each world's action latency [steps] in the current episode (a view)."""
-        if r.enabled:  # the draws are part of the env's state (state_dict)
-            params = self.sim.params
-            self._task_views.update({f"physics.{name}": params.view(name) for name in PHYSICS_DRAWS})
+        if r.enabled:  # the delay is part of the env's state (state_dict); the physical draws are the simulator's
             self._task_views.update({"delay.latency": self.latency, "delay.alpha": wp.to_torch(d.alpha),
                                      "delay.history": wp.to_torch(d.history), "delay.applied": wp.to_torch(d.applied)})
 
@@ -385,7 +400,7 @@ class ATRVjrEnv(EnvBase):
         c = self.task_cfg
         if c.scan_sectors:
             wp.launch(write_scan_observation, dim=(self.num_envs, c.scan_sectors),
-                      inputs=[self.scanner.buffer, self.sim.buffers.nonfinite, OBS_DIM, c.scan_sectors, c.scan_clip],
+                      inputs=[self.scanner.buffer, self.sim.buffers.nonfinite, OBS_DIM, self._scan_reading],
                       outputs=[self._obs], device=self._wp_device)
         if self._actions is not None:
             wp.launch(write_action_observation, dim=(self.num_envs, c.action_history),
@@ -437,10 +452,21 @@ class ATRVjrEnv(EnvBase):
         return action.to(self.device, torch.float32)
 
     # ------------------------------------------------------------------ save / restore
+    def _identity(self) -> dict[str, str]:
+        """What a snapshot must match to be restored here: the world count, the task and the randomization."""
+        return {"num_envs": str(self.num_envs),
+                "task": json.dumps(dataclasses.asdict(self.task_cfg), sort_keys=True, default=str),
+                "randomization": json.dumps(dataclasses.asdict(self.randomization), sort_keys=True, default=str)}
+
     def state_dict(self, *args, **kwargs):
+        """A snapshot of everything the next step reads: the simulator's :meth:`~RoverSim.get_state`, the task's
+        buffers (targets, progress, counters, the episode's layout, the observation, the action history), the
+        randomization's delay, the seed and the scanner's draw count. :meth:`load_state_dict` then steps on bit for
+        bit as this env would have (on the CPU)."""
         sd = super().state_dict(*args, **kwargs)
-        snapshot = self.sim.get_state()
-        for k, v in snapshot.items():
+        sd["snapshot.format"] = SNAPSHOT_FORMAT
+        sd.update({f"snapshot.{k}": v for k, v in self._identity().items()})
+        for k, v in self.sim.get_state().items():
             sd[f"sim.{k}"] = v
         for k, v in self._task_views.items():
             sd[f"task.{k}"] = v.clone()
@@ -450,21 +476,48 @@ class ATRVjrEnv(EnvBase):
             sd["task.scan_count"] = torch.tensor(self.scanner.count)
         return sd
 
+    def check_state_dict(self, state_dict: Mapping) -> None:
+        """Raise ``ValueError`` in one line naming why ``state_dict`` cannot be restored here (another snapshot
+        format, world count, task or randomization, or a missing or misshapen entry); nothing is written."""
+        fmt = state_dict.get("snapshot.format")
+        if fmt != SNAPSHOT_FORMAT:
+            raise ValueError(f"not a snapshot this version restores: format {fmt!r}, expected {SNAPSHOT_FORMAT} (a "
+                             "state_dict of this package's ATRVjrEnv; older snapshots left out the friction solver's "
+                             "warm start and cannot be restored exactly)")
+        here = self._identity()
+        saved = {k: state_dict.get(f"snapshot.{k}") for k in here}
+        if saved["num_envs"] != here["num_envs"]:
+            raise ValueError(f"the snapshot is of {saved['num_envs']} worlds, this env has {here['num_envs']}")
+        for what in ("task", "randomization"):
+            if saved[what] != here[what]:
+                theirs, ours = json.loads(saved[what] or "{}"), json.loads(here[what])
+                diff = [f"{k}={theirs.get(k)!r} (here {ours.get(k)!r})" for k in sorted(set(ours) | set(theirs))
+                        if theirs.get(k) != ours.get(k)]
+                raise ValueError(f"the snapshot's {what} differs from this env's: {', '.join(diff)}")
+        self.sim.check_state({k[4:]: v for k, v in state_dict.items() if k.startswith("sim.")})
+        need = {**self._task_views, "seed": None, "nonfinite_count": None}
+        if self.scanner is not None:
+            need["scan_count"] = None
+        missing = sorted(k for k in need if f"task.{k}" not in state_dict)
+        if missing:
+            raise ValueError(f"the snapshot lacks task entries {missing}")
+        for k, v in self._task_views.items():
+            got = tuple(torch.as_tensor(state_dict[f"task.{k}"]).shape)
+            if got != tuple(v.shape):
+                raise ValueError(f"snapshot entry 'task.{k}' has shape {got}, this env's is {tuple(v.shape)}")
+
     def load_state_dict(self, state_dict: Mapping, strict: bool = True, assign: bool = False):
+        """Restore a snapshot from :meth:`state_dict`, checked first (:meth:`check_state_dict`: a mismatch is a
+        ``ValueError`` naming it, and the env is unchanged)."""
+        self.check_state_dict(state_dict)
         state_dict = dict(state_dict)
         sim_state = {k[4:]: state_dict.pop(k) for k in list(state_dict) if k.startswith("sim.")}
         task_state = {k[5:]: state_dict.pop(k) for k in list(state_dict) if k.startswith("task.")}
-        missing = sorted({"joint_q", "joint_qd", "commands", "sim_time"} - set(sim_state))
-        if missing:
-            raise KeyError(f"state dict lacks simulator entries {missing}")
-        missing = sorted(set(self._task_views) - set(task_state))
-        if missing:
-            raise KeyError(f"state dict lacks task entries {missing} (saved from an env with another task or "
-                           "randomization?)")
+        for k in list(state_dict):
+            if k.startswith("snapshot."):
+                del state_dict[k]
         for k, v in self._task_views.items():
             v.copy_(task_state[k])
-        if self.randomization.enabled:  # the payload first: the restored state's body velocities depend on it
-            self.sim.apply_payload(self._all)
         self.sim.set_state(sim_state)
         self._seed = int(task_state["seed"])
         self.nonfinite_count = int(task_state["nonfinite_count"])

@@ -393,24 +393,50 @@ def sample_nav_episodes(
     task.step_count[world] = 0
 
 
+@wp.struct
+class ScanReading:
+    """How the observation reads a scan: the sectors' beams and REP 117's range rule (``atrv_warp.core.scan``)."""
+
+    first: wp.array(dtype=wp.int32)  # (S,) each sector's first beam
+    end: wp.array(dtype=wp.int32)  # (S,) one past its last beam
+    clip: float  # [m]
+    range_min: float  # [m]
+    range_max: float  # [m]
+
+
+@wp.func
+def beam_reading(r: float, reading: ScanReading) -> float:
+    """One beam as the observation reads it (REP 117): beyond range_max clear (1), below range_min blocked (0),
+    else min(r, clip) / clip; NaN (an invalid beam) reads 2, which no sector keeps."""
+    if wp.isnan(r):
+        return 2.0
+    if r > reading.range_max:
+        return 1.0
+    if r < reading.range_min:
+        return 0.0
+    return wp.min(r, reading.clip) / reading.clip
+
+
 @wp.kernel
 def write_scan_observation(
     ranges: wp.array2d(dtype=float),
     nonfinite: wp.array(dtype=wp.int32),
     first_column: int,
-    sectors: int,
-    clip: float,
+    reading: ScanReading,
     obs: wp.array2d(dtype=float),
 ):
-    """Observed scan (dim = (N, sectors)): each sector's nearest return, min(r, clip) / clip; a
-    non-finite world observes an empty scan (1)."""
+    """Observed scan (dim = (N, sectors)): each sector's nearest valid return (:func:`beam_reading`), blocked (0)
+    without a valid beam; a non-finite world observes an empty scan (1). ``atrv_warp.core.scan.sector_readings``
+    is its torch twin."""
     world, sector = wp.tid()
-    per = ranges.shape[1] // sectors
-    r = clip
-    if nonfinite[world] == 0:
-        for i in range(per):
-            r = wp.min(r, ranges[world, sector * per + i])
-    obs[world, first_column + sector] = r / clip
+    r = float(2.0)
+    for i in range(reading.first[sector], reading.end[sector]):
+        r = wp.min(r, beam_reading(ranges[world, i], reading))
+    if r > 1.0:
+        r = 0.0
+    if nonfinite[world] != 0:
+        r = 1.0
+    obs[world, first_column + sector] = r
 
 
 @wp.kernel

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import torch
 
+from atrv_warp.core.geometry import quat_to_yaw, wrap_angle
 from atrv_warp.task.config import TaskConfig
 
 __all__ = ["progress_reward"]
@@ -31,12 +32,11 @@ def progress_reward(poses: torch.Tensor, targets: torch.Tensor, task: TaskConfig
         task: Reward weights (default :class:`~atrv_warp.task.config.TaskConfig`).
     """
     task = task or TaskConfig()
-    qx, qy, qz, qw = poses[..., 3:7].unbind(-1)
-    yaw = torch.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    yaw = quat_to_yaw(poses[..., 3:7])
     to_target = targets.to(poses).unsqueeze(0) - poses[..., :2]
     distance = to_target.norm(dim=-1)
     bearing = torch.atan2(to_target[..., 1], to_target[..., 0]) - yaw
-    heading_error = torch.atan2(torch.sin(bearing), torch.cos(bearing)).abs()
+    heading_error = wrap_angle(bearing).abs()
     return ((distance[:-1] - distance[1:]) + task.heading_weight * (heading_error[:-1] - heading_error[1:])
             - task.step_penalty)
 

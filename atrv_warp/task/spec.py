@@ -10,6 +10,7 @@ baseline, the Gymnasium spaces, the ROS goal mode and :func:`atrv_warp.task.rewa
 - :data:`REWARD_TERMS`: the reward's terms; their sum is ``reward``, and each is reported per
   step as ``("reward_terms", name)``.
 - :func:`action_to_torque`: action in [-1, 1]² to wheel torques.
+- :func:`scan_sectors`: the observed scan sectors' angular edges (:class:`~atrv_warp.core.scan.ScanSectors`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 import torch
+
+from atrv_warp.core.scan import ScanSectors
 
 __all__ = [
     "ACTION_DIM",
@@ -32,6 +35,7 @@ __all__ = [
     "action_to_torque",
     "observation_bounds",
     "observation_fields",
+    "scan_sectors",
 ]
 
 
@@ -41,21 +45,26 @@ class ObservationField:
 
     name: str
     bound: float
-    """The value is clipped to [-bound, bound] (unit of the quantity)."""
+    """The value is clipped to [-bound, bound] ([0, bound] for a scan sector), in :attr:`unit`."""
     description: str
+    unit: str
+    """SI unit of the value (``-``: dimensionless)."""
+    frame: str
+    """The frame the value is expressed in (``-``: none)."""
 
 
 OBSERVATION: tuple[ObservationField, ...] = (
-    ObservationField("target_x", 12.0, "target x, world frame [m]"),
-    ObservationField("target_y", 12.0, "target y, world frame [m]"),
-    ObservationField("rover_x", 30.0, "chassis x, world frame [m]"),
-    ObservationField("rover_y", 30.0, "chassis y, world frame [m]"),
-    ObservationField("rover_vx", 6.0, "chassis-origin velocity x, world frame [m/s]"),
-    ObservationField("rover_vy", 6.0, "chassis-origin velocity y, world frame [m/s]"),
-    ObservationField("roll", 0.25, "chassis roll [rad]"),
-    ObservationField("yaw_rate", 6.0, "chassis yaw rate [rad/s]"),
-    ObservationField("sin_heading_error", 1.0, "sine of the angle from the heading to the target direction"),
-    ObservationField("cos_heading_error", 1.0, "its cosine"),
+    ObservationField("target_x", 12.0, "target x", "m", "world (the arena's centre, z up)"),
+    ObservationField("target_y", 12.0, "target y", "m", "world (the arena's centre, z up)"),
+    ObservationField("rover_x", 30.0, "chassis origin x", "m", "world (the arena's centre, z up)"),
+    ObservationField("rover_y", 30.0, "chassis origin y", "m", "world (the arena's centre, z up)"),
+    ObservationField("rover_vx", 6.0, "chassis-origin velocity x", "m/s", "world (the arena's centre, z up)"),
+    ObservationField("rover_vy", 6.0, "chassis-origin velocity y", "m/s", "world (the arena's centre, z up)"),
+    ObservationField("roll", 0.25, "chassis roll (intrinsic Z-Y-X)", "rad", "chassis"),
+    ObservationField("yaw_rate", 6.0, "chassis angular velocity about z", "rad/s", "world z"),
+    ObservationField("sin_heading_error", 1.0, "sine of the angle from the heading to the target direction "
+                     "(counter-clockwise positive)", "-", "chassis heading"),
+    ObservationField("cos_heading_error", 1.0, "its cosine", "-", "chassis heading"),
 )
 """The observation, in order (the reference task's fields and bounds)."""
 
@@ -68,10 +77,11 @@ def observation_fields(task=None) -> tuple[ObservationField, ...]:
     (the actions chosen 1 … K steps before, newest first, in [-1, 1])."""
     sectors = getattr(task, "scan_sectors", 0)
     history = getattr(task, "action_history", 0)
-    scan = tuple(ObservationField(f"scan_{i}", 1.0, f"nearest return in scan sector {i} of {sectors} (right to left), "
-                                  "min(range, scan_clip) / scan_clip") for i in range(sectors))
+    scan = tuple(ObservationField(f"scan_{i}", 1.0, f"nearest return in scan sector {i} of {sectors} (right to left, "
+                                  "edges: scan_sectors(task)), min(range, scan_clip) / scan_clip; no return 1, too "
+                                  "close 0", "-", "scanner (the URDF's lrf_frame)") for i in range(sectors))
     actions = tuple(ObservationField(f"last_action_{k}_{side}", 1.0, f"the {side} action chosen {k} step(s) before "
-                                     "(what a delayed rover has yet to apply), in [-1, 1]")
+                                     "(what a delayed rover has yet to apply), in [-1, 1]", "-", "-")
                     for k in range(1, history + 1) for side in ("left", "right"))
     return OBSERVATION + scan + actions
 
@@ -122,6 +132,15 @@ def observation_bounds(dtype: torch.dtype = torch.float32, task=None) -> tuple[t
     high = torch.tensor([f.bound for f in fields], dtype=dtype)
     low = torch.tensor([0.0 if f.name.startswith("scan_") else -f.bound for f in fields], dtype=dtype)
     return low, high
+
+
+def scan_sectors(task) -> ScanSectors | None:
+    """The sectors a task observes of its scan (``None`` without them): ``scan_sectors`` equal sectors over the
+    scanner's ``scan_fov`` plus one beam spacing, so that each holds ``scan_beams / scan_sectors`` of the
+    simulated beams; any other scan (a real scanner's ``LaserScan``) reduces through the same edges."""
+    if not getattr(task, "scan_sectors", 0):
+        return None
+    return ScanSectors.for_beams(task.scan_beams, task.scan_fov, task.scan_sectors, task.scan_clip)
 
 
 def action_to_torque(action: torch.Tensor, action_scale: float, out: torch.Tensor | None = None) -> torch.Tensor:

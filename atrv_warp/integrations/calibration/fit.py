@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from atrv_warp.core.geometry import quat_to_yaw, wrap_angle
+from atrv_warp.core.kinematics import track_width
 from atrv_warp.integrations.calibration.log import DriveLog
 from atrv_warp.integrations.ros.base import BaseParams, VelocityController
 from atrv_warp.sim.config import ContactConfig, RoverConfig, get_variant
@@ -274,11 +276,6 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, base: BaseParams, dt: f
                     command=command)
 
 
-def _yaw(q: torch.Tensor) -> torch.Tensor:
-    x, y, z, w = q.unbind(-1)
-    return torch.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
 class _Replay:
     """Segments replayed in chunks of a :class:`~atrv_warp.sim.diff.DiffRollout`'s worlds."""
 
@@ -317,8 +314,8 @@ class _Replay:
         ref = torch.as_tensor(seg.ref_pose[pad], dtype=torch.float32).transpose(0, 1)  # (L + 1, W, 3)
         ref_wheel = torch.as_tensor(seg.ref_wheel[pad], dtype=torch.float32).transpose(0, 1)
         xy = sim_poses[..., :2] - sim_poses[:1, :, :2]
-        yaw = _yaw(sim_poses[..., 3:7])
-        dyaw = torch.atan2(torch.sin(yaw - ref[..., 2]), torch.cos(yaw - ref[..., 2]))
+        yaw = quat_to_yaw(sim_poses[..., 3:7])
+        dyaw = wrap_angle(yaw - ref[..., 2])
         dpos = (xy - ref[..., :2]).square().sum(-1)
         loss = (dpos / _POSITION_SCALE**2 + (_HEADING_ARM * dyaw / _POSITION_SCALE).square()
                 + (speeds - ref_wheel).square().sum(-1) / _WHEEL_SCALE**2).mean(0)
@@ -420,7 +417,7 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
     say = progress or (lambda _text: None)
     rover = rover or get_variant("realistic")
     contact = contact or ContactConfig()
-    base = BaseParams(wheel_radius=rover.wheel_radius, track_width=BaseParams.track_of(load_rover(rover), rover),
+    base = BaseParams(wheel_radius=rover.wheel_radius, track_width=track_width(load_rover(rover), rover),
                       effective_track_factor=cfg.effective_track_factor, kp=cfg.kp, ki=cfg.ki,
                       torque_limit=cfg.torque_limit, timeout=cfg.cmd_vel_timeout)
     seg = make_segments(log, cfg, base)

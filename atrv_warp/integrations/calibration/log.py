@@ -15,12 +15,14 @@ Every problem is a :class:`BagError` whose one line names the file.
 
 from __future__ import annotations
 
-import math
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import torch
+
+from atrv_warp.core.geometry import quat_to_yaw
 
 __all__ = ["POSE_TYPES", "BagError", "DriveLog", "Topics", "read_drive_log"]
 
@@ -84,10 +86,6 @@ def _stamp(decoded, log_time_ns: int) -> int:
     if header is None:
         return log_time_ns
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
-
-
-def _yaw(q) -> float:
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
 def read_drive_log(path, wheels: dict[str, tuple[int, float]], topics: Topics = Topics()) -> DriveLog:
@@ -178,11 +176,13 @@ def _arrays(path: Path, rows: dict, wheels: dict[str, tuple[int, float]], topics
     pose, twist = [], []
     for _, m in poses:
         p = m.pose.pose if hasattr(m.pose, "pose") else m.pose
-        pose.append((p.position.x, p.position.y, _yaw(p.orientation)))
+        o = p.orientation
+        pose.append((p.position.x, p.position.y, o.x, o.y, o.z, o.w))
         if hasattr(m, "twist"):
             tw = m.twist.twist
             twist.append((tw.linear.x, tw.linear.y, tw.angular.z))
     pose = np.array(pose, dtype=np.float64)
+    pose = np.concatenate([pose[:, :2], quat_to_yaw(torch.from_numpy(pose[:, 2:])).numpy()[:, None]], 1)
     pose[:, 2] = np.unwrap(pose[:, 2])
     if twist:
         body_velocity = np.array(twist, dtype=np.float64)

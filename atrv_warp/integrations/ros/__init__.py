@@ -1,23 +1,22 @@
-"""ROS 2 bridge: the node behind ``python -m atrv_warp.ros`` (topics and parameters there).
+"""ROS 2 bridge: the simulator node behind ``python -m atrv_warp.ros`` (topics and parameters there).
 
-- this package: the node's parameters and :func:`run`;
+- this package: :func:`run`, which starts the node, and :data:`MISSING_ROS_MESSAGE`;
+- :mod:`.parameters`: the node's parameters and driving commands;
 - :mod:`.node`: the rclpy node; :mod:`.base`: the base driver (velocity control, odometry, IMU);
-- :mod:`.bag`: the MCAP bag writer; :mod:`.frames`: the frame tree its bags record as /tf;
-- :mod:`.markers`: the world as ``visualization_msgs/MarkerArray``.
+- :mod:`.bag`: the MCAP bag writer; :mod:`.drive`: the calibration's scripted excitation driver;
+- :mod:`.frames`: the frame tree the node publishes and records as /tf (:mod:`.tf2_build`: tf2_msgs's
+  type support where no ROS install has it); :mod:`.markers`: the world as ``visualization_msgs/MarkerArray``.
 
-rclpy is optional: this package imports without it, :func:`run` says how to install it, and
-:mod:`.node` (the rclpy node) is imported only when it is there.
+rclpy is optional: this package imports without it (and without the simulator: importing
+:mod:`.base` loads torch alone), :func:`run` says how to install it, and :mod:`.node` (the rclpy node)
+is imported only when it is there.
 """
 
 from __future__ import annotations
 
 import sys
 
-from atrv_warp.integrations.ros.base import BaseParams
-from atrv_warp.sim.config import SENSOR_NOISE
-from atrv_warp.sim.simulator import DriveMode
-
-__all__ = ["COMMANDS", "GOAL", "MAX_ROVERS", "MISSING_ROS_MESSAGE", "PARAMETERS", "VELOCITY", "parameter_help", "run"]
+__all__ = ["MISSING_ROS_MESSAGE", "run"]
 
 MISSING_ROS_MESSAGE = (
     "ROS 2 Python packages are not installed (needed: rclpy, geometry_msgs, std_msgs, rosgraph_msgs, "
@@ -25,55 +24,6 @@ MISSING_ROS_MESSAGE = (
     "Install the extra:  pip install -e '.[ros]'   (ros-rclpy[fastrtps], ros-geometry-msgs, ros-std-msgs, "
     "ros-visualization-msgs, mcap-ros2-support from PyPI), or source a ROS 2 installation."
 )
-
-GOAL = "goal"
-COMMANDS = tuple(m.value for m in DriveMode) + (GOAL,)
-
-VELOCITY = "velocity"
-"""The mode /cmd_vel switches to."""
-MAX_ROVERS = 64
-
-PARAMETERS = (
-    ("real_time_factor", 1.0, "simulated seconds per wall second; 0 = as fast as possible"),
-    ("publish_rate", 10.0, "rate of /pose, /odom, /ground_truth/odom, /joint_states, /imu and /scan [Hz of sim time]"),
-    ("duration", 0.0, "stop after this much sim time [s]; 0 = until Ctrl-C"),
-    ("mode", "coast", "initial driving mode: coast | forward | backward | rotate_left | rotate_right"),
-    ("variant", "realistic", "rover variant: realistic | reference"),
-    ("task", "reach", "world: reach (the flat arena) | nav (terrain and obstacles, drawn once at start)"),
-    ("scan_beams", 181, "/scan beams over 180 deg (181: 1 deg, as a SICK LMS); 0 = no /scan"),
-    ("scan_noise", SENSOR_NOISE.scan_range, "/scan range noise, standard deviation [m]"),
-    ("scan_dropout", SENSOR_NOISE.scan_dropout, "/scan: probability that a beam returns nothing [-]"),
-    ("x", 0.0, "start x of rover 0 [m]"), ("y", 0.0, "start y of rover 0 [m]"), ("yaw", 0.0, "start yaw [rad]"),
-    ("spacing", 2.0, "rover k starts at y + k * spacing [m]"),
-    ("num_rovers", 1, f"rovers simulated (1 … {MAX_ROVERS}); more than one puts each under /rover_<k>"),
-    ("frame_id", "", "frame_id of /pose (default: the URDF's chassis link)"),
-    ("odom_frame", "odom", "frame of /odom (REP 105)"), ("base_frame", "base_link", "child frame of /odom"),
-    ("policy", "", "policy file for goal mode (default: the shipped one)"),
-    ("bag", "", ("write an MCAP ROS 2 bag here: /cmd_vel, /joint_states, /odom, /ground_truth/odom, /pose, "
-                 "/command, /goal, /goal_status (what atrv-calibrate reads), /tf, /tf_static and "
-                 "/robot_description (what a 3D view draws the rover from); not /imu or /scan")),
-    ("tf", True, ("publish live /tf and /tf_static (tf2_msgs: a ROS install's, or built from its definition "
-                  "with gcc/g++ on first use, cached; without, one line says why)")),
-    ("sim_config", "", "simulator-config TOML ([rover], [contact]; e.g. atrv-calibrate's output) applied to every rover"),
-    ("wait_for_subscribers", 0, "wait for this many /pose subscribers before starting"),
-    ("reach_radius", 1.0, "goal mode: reached within this distance [m]"),
-    ("effective_track_factor", BaseParams.effective_track_factor, "skid: effective track / wheel track"),
-    ("wheel_kp", BaseParams.kp, "wheel-speed PI proportional gain [N·m per rad/s]"),
-    ("wheel_ki", BaseParams.ki, "wheel-speed PI integral gain [N·m per rad]"),
-    ("cmd_vel_timeout", BaseParams.timeout, "watchdog: stop when no /cmd_vel arrives for this long [s]"),
-    ("imu_accel_noise", SENSOR_NOISE.accel, "IMU accelerometer noise, standard deviation [m/s²]"),
-    ("imu_gyro_noise", SENSOR_NOISE.gyro, "IMU gyroscope noise, standard deviation [rad/s]"),
-    ("wheel_speed_noise", SENSOR_NOISE.wheel_speed, "/joint_states velocity noise, standard deviation [rad/s]"),
-    ("truth_noise", 0.0, "/ground_truth/odom position noise, standard deviation [m] (as motion capture or RTK GPS)"),
-    ("truth_yaw_noise", 0.0, "/ground_truth/odom heading noise, standard deviation [rad]"),
-    ("seed", 0, "seed of the sensor noise"),
-)
-"""(name, default, description) of every parameter the node declares. The sensor noise defaults are
-:data:`~atrv_warp.sim.config.SENSOR_NOISE`, the noise the randomization presets train with."""
-
-def parameter_help() -> str:
-    """The node's parameters as ``name (default): description`` lines."""
-    return "\n".join(f"    {name} ({default!r}): {text}" for name, default, text in PARAMETERS)
 
 
 def run(args: list[str] | None = None) -> int:

@@ -1,5 +1,6 @@
-"""What a real mobile-base driver does, without ROS types: skid-steer kinematics, a wheel-speed PI
-controller, a command watchdog, wheel odometry and an IMU reading. :mod:`.node` publishes these.
+"""What a real mobile-base driver does, without ROS types: a wheel-speed PI controller over the light
+core's skid-steer kinematics (:mod:`atrv_warp.core.kinematics`), a command watchdog, wheel odometry and an
+IMU reading. :mod:`.node` publishes these.
 
 All of it is per rover and plain torch/math, so it is tested without a ROS graph too.
 """
@@ -11,24 +12,17 @@ from dataclasses import dataclass, field
 
 import torch
 
-__all__ = ["BaseParams", "VelocityController", "WheelOdometry", "imu_reading", "side_speeds", "turning_response",
-           "yaw_quaternion"]
+from atrv_warp.core.geometry import matrix_to_quat, wrap_angle
+from atrv_warp.core.kinematics import SkidSteer, side_speeds
+
+__all__ = ["BaseParams", "VelocityController", "WheelOdometry", "imu_reading", "turning_response"]
 
 
 @dataclass(frozen=True)
-class BaseParams:
-    """Skid-steer base figures (ROS parameters of the node)."""
+class BaseParams(SkidSteer):
+    """Skid-steer base figures (ROS parameters of the node): the kinematics (:class:`~atrv_warp.core.kinematics.SkidSteer`:
+    wheel radius, track, effective track factor) and the driver's wheel-speed loop."""
 
-    wheel_radius: float
-    """[m]"""
-    track_width: float
-    """Distance between the left and right wheel centres [m] (from the URDF)."""
-    effective_track_factor: float = 1.56
-    """Skid-steer wheels slide sideways when turning, so the rover turns slower than a
-    differential drive with the same track: ``yaw rate = r (w_right - w_left) / (factor x track)``.
-    The median over turning commands measured on our physics by ``benchmarks/skid_calibration.py``
-    (``benchmarks/results/skid_calibration.json``); Coulomb friction predicts 1.58 for this
-    geometry, and Mandow et al. (IROS 2007) measured about 1.5 on a Pioneer 3-AT."""
     kp: float = 0.6
     """PI proportional gain [N·m per rad/s]. The controller runs once per 0.05 s step, and a
     slipping wheel's own inertia (0.02 kg·m²) bounds it: above ~0.8 it oscillates."""
@@ -38,17 +32,6 @@ class BaseParams:
     """Motor limit [N·m] (the task's action scale)."""
     timeout: float = 0.5
     """Watchdog: with no /cmd_vel for this long [s of sim time], the targets drop to zero."""
-
-    @property
-    def effective_track(self) -> float:
-        return self.effective_track_factor * self.track_width
-
-    @staticmethod
-    def track_of(description, rover) -> float:
-        """Wheel track [m] of a rover: the distance between its outermost wheels' contact centres
-        (a :class:`~atrv_warp.sim.urdf.RoverDescription` and its :class:`~atrv_warp.sim.config.RoverConfig`)."""
-        wheels = description.wheels
-        return abs(float(wheels[0].origin[1, 3]) - float(wheels[-1].origin[1, 3])) + 2 * rover.wheel_offset
 
 
 @dataclass
@@ -71,9 +54,7 @@ class VelocityController:
         if now - self.last_command > self.params.timeout:
             self.stopped_by_watchdog = True
             return torch.zeros(2)
-        v, w = self.target
-        half = 0.5 * w * self.params.effective_track
-        return torch.tensor([v - half, v + half]) / self.params.wheel_radius
+        return self.params.wheel_speeds(*self.target).float()
 
     def torques(self, side_speeds: torch.Tensor, now: float, dt: float) -> torch.Tensor:
         """(left, right) torques [N·m] toward the targets, within the motor limit (anti-windup:
@@ -103,19 +84,12 @@ class WheelOdometry:
 
     def update(self, side_speeds: torch.Tensor, dt: float) -> None:
         """Advance by ``dt`` [s] with the mean (left, right) wheel speeds [rad/s] (midpoint rule)."""
-        r = self.params.wheel_radius
-        left, right = float(side_speeds[0]), float(side_speeds[1])
-        self.linear = r * (left + right) / 2
-        self.angular = r * (right - left) / self.params.effective_track
+        linear, angular = self.params.twist(side_speeds.to(torch.float64))
+        self.linear, self.angular = float(linear), float(angular)
         mid = self.yaw + 0.5 * self.angular * dt
         self.x += self.linear * math.cos(mid) * dt
         self.y += self.linear * math.sin(mid) * dt
-        self.yaw = math.atan2(math.sin(self.yaw + self.angular * dt), math.cos(self.yaw + self.angular * dt))
-
-
-def yaw_quaternion(yaw: float) -> tuple[float, float, float, float]:
-    """(x, y, z, w) of a rotation by ``yaw`` about z."""
-    return 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)
+        self.yaw = float(wrap_angle(self.yaw + self.angular * dt))
 
 
 def imu_reading(frame_pose: torch.Tensor, ang_vel: torch.Tensor, accel: torch.Tensor, gravity: float,
@@ -130,17 +104,8 @@ def imu_reading(frame_pose: torch.Tensor, ang_vel: torch.Tensor, accel: torch.Te
     specific = accel.to(torch.float64) - torch.tensor([0.0, 0.0, gravity], dtype=torch.float64)
     a = rot.T @ specific + noise[0] * torch.randn(3, generator=gen, dtype=torch.float64)
     w = rot.T @ ang_vel.to(torch.float64) + noise[1] * torch.randn(3, generator=gen, dtype=torch.float64)
-    m, t = rot, rot.trace()
-    qw = math.sqrt(max(0.0, 1.0 + float(t))) / 2
-    qx = math.copysign(math.sqrt(max(0.0, 1 + float(m[0, 0] - m[1, 1] - m[2, 2]))) / 2, float(m[2, 1] - m[1, 2]))
-    qy = math.copysign(math.sqrt(max(0.0, 1 - float(m[0, 0] - m[1, 1] + m[2, 2]))) / 2, float(m[0, 2] - m[2, 0]))
-    qz = math.copysign(math.sqrt(max(0.0, 1 - float(m[0, 0] + m[1, 1] - m[2, 2]))) / 2, float(m[1, 0] - m[0, 1]))
-    return {"orientation": (qx, qy, qz, qw), "angular_velocity": w.tolist(), "linear_acceleration": a.tolist()}
-
-
-def side_speeds(wheel_speed: torch.Tensor, side: torch.Tensor) -> torch.Tensor:
-    """(N, 2) mean (left, right) wheel speeds [rad/s] from (N, W) ``wheel_speed`` and each wheel's side (W,)."""
-    return torch.stack([wheel_speed[:, side == 0].mean(-1), wheel_speed[:, side == 1].mean(-1)], -1)
+    return {"orientation": tuple(matrix_to_quat(rot).tolist()), "angular_velocity": w.tolist(),
+            "linear_acceleration": a.tolist()}
 
 
 def turning_response(sim, commands: list[tuple[float, float]], params: BaseParams, *, seconds: float = 8.0,

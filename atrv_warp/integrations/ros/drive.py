@@ -16,6 +16,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
+from atrv_warp.core.geometry import quat_to_yaw, wrap_angle
+
 __all__ = ["ExcitationDriver", "record_drive_bag"]
 
 
@@ -37,13 +39,12 @@ class ExcitationDriver(Node):
 
     def on_pose(self, msg: Odometry) -> None:
         p, q = msg.pose.pose.position, msg.pose.pose.orientation
-        self.pose = (p.x, p.y, math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z)))
+        self.pose = (p.x, p.y, float(quat_to_yaw((q.x, q.y, q.z, q.w))))
 
     def draw(self) -> tuple[float, float]:
         x, y, yaw = self.pose
         if math.hypot(x, y) > self.radius:  # head home: turn toward the start while rolling
-            error = math.atan2(-y, -x) - yaw
-            error = math.atan2(math.sin(error), math.cos(error))
+            error = float(wrap_angle(math.atan2(-y, -x) - yaw))
             return (0.3 if abs(error) > 1.0 else 0.8), max(-1.0, min(1.0, 1.5 * error))
         kind = self.rng.random()
         if kind < 0.12:

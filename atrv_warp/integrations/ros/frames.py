@@ -1,4 +1,5 @@
-"""The rover's frame tree as ``tf2_msgs/TFMessage`` dicts, for the node's bags (no rclpy, no tf2_msgs).
+"""The rover's frame tree as ``tf2_msgs/TFMessage`` dicts, for the node's /tf and bags (no rclpy, no
+tf2_msgs); the quaternion maths is the light core's (:mod:`atrv_warp.core.geometry`).
 
 REP 105, with the simulator as the localisation::
 
@@ -18,7 +19,9 @@ import math
 
 import numpy as np
 
-__all__ = ["WORLD_FRAME", "matrix_quaternion", "planar_matrix", "pose_matrix", "transform_dict", "turn_matrix"]
+from atrv_warp.core.geometry import matrix_to_quat, quat_to_matrix, yaw_to_quat
+
+__all__ = ["WORLD_FRAME", "planar_matrix", "pose_matrix", "transform_dict", "turn_matrix"]
 
 WORLD_FRAME = "world"
 """The fixed frame of /ground_truth/odom, the markers and the top of the tree."""
@@ -26,18 +29,15 @@ WORLD_FRAME = "world"
 
 def pose_matrix(xyz, quat_xyzw) -> np.ndarray:
     """4x4 transform of a position [m] and a unit quaternion (x, y, z, w)."""
-    x, y, z, w = (float(v) for v in quat_xyzw)
     m = np.eye(4)
-    m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                 [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                 [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    m[:3, :3] = quat_to_matrix([float(v) for v in quat_xyzw]).numpy()
     m[:3, 3] = [float(v) for v in xyz]
     return m
 
 
 def planar_matrix(x: float, y: float, yaw: float) -> np.ndarray:
     """4x4 transform of a planar pose: (x, y) [m] and a heading [rad] about z."""
-    return pose_matrix((x, y, 0.0), (0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)))
+    return pose_matrix((x, y, 0.0), yaw_to_quat(float(yaw)).tolist())
 
 
 def turn_matrix(axis, angle: float) -> np.ndarray:
@@ -48,28 +48,10 @@ def turn_matrix(axis, angle: float) -> np.ndarray:
     return pose_matrix((0.0, 0.0, 0.0), (a[0] * s, a[1] * s, a[2] * s, math.cos(0.5 * angle)))
 
 
-def matrix_quaternion(m: np.ndarray) -> tuple[float, float, float, float]:
-    """Unit quaternion (x, y, z, w), w >= 0, of the rotation part of a 4x4 (or 3x3) transform."""
-    r = np.asarray(m, dtype=float)[:3, :3]
-    t = np.trace(r)
-    if t > 0:
-        s = 2 * math.sqrt(1 + t)
-        q = ((r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s)
-    else:
-        i = int(np.argmax(np.diag(r)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2 * math.sqrt(max(1e-12, 1 + r[i, i] - r[j, j] - r[k, k]))
-        v = [0.0, 0.0, 0.0]
-        v[i], v[j], v[k] = 0.25 * s, (r[j, i] + r[i, j]) / s, (r[k, i] + r[i, k]) / s
-        q = (*v, (r[k, j] - r[j, k]) / s)
-    q = np.asarray(q) / np.linalg.norm(q)
-    return tuple(float(v) for v in (q if q[3] >= 0 else -q))
-
-
 def transform_dict(parent: str, child: str, stamp_ns: int, m: np.ndarray) -> dict:
     """A ``geometry_msgs/TransformStamped`` as the nested dict :class:`~.bag.BagWriter` writes: ``child``'s
     pose ``m`` (4x4) in ``parent``."""
-    x, y, z, w = matrix_quaternion(m)
+    x, y, z, w = matrix_to_quat(np.asarray(m, dtype=float)[:3, :3]).tolist()
     t = m[:3, 3]
     return {"header": {"stamp": {"sec": stamp_ns // 1_000_000_000, "nanosec": stamp_ns % 1_000_000_000},
                        "frame_id": parent},

@@ -25,11 +25,13 @@ from sensor_msgs.msg import Imu, JointState, LaserScan
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from atrv_warp.integrations.ros import COMMANDS, GOAL, MAX_ROVERS, PARAMETERS, VELOCITY
+from atrv_warp.core.geometry import quat_to_matrix, yaw_to_quat
+from atrv_warp.core.kinematics import track_width
 from atrv_warp.integrations.ros.bag import BagWriter, joint_state_dict, odometry_dict, pose_dict, twist_dict
-from atrv_warp.integrations.ros.base import BaseParams, VelocityController, WheelOdometry, imu_reading, yaw_quaternion
+from atrv_warp.integrations.ros.base import BaseParams, VelocityController, WheelOdometry, imu_reading
 from atrv_warp.integrations.ros.frames import WORLD_FRAME, planar_matrix, pose_matrix, transform_dict, turn_matrix
 from atrv_warp.integrations.ros.markers import scene_of, world_markers
+from atrv_warp.integrations.ros.parameters import COMMANDS, GOAL, MAX_ROVERS, PARAMETERS, VELOCITY
 from atrv_warp.sim.simulator import DRIVE_MODE_TORQUES, DriveMode
 from atrv_warp.task.env import ATRVjrEnv
 from atrv_warp.task.spec import action_to_torque
@@ -188,7 +190,7 @@ class RoverIO:
         msg.header.stamp, msg.header.frame_id, msg.child_frame_id = _stamp(ns), node.odom_frame, node.base_frame
         msg.pose.pose.position.x, msg.pose.pose.position.y = odo.x, odo.y
         o = msg.pose.pose.orientation
-        o.x, o.y, o.z, o.w = yaw_quaternion(odo.yaw)
+        o.x, o.y, o.z, o.w = yaw_to_quat(odo.yaw).tolist()
         msg.pose.covariance = [v if i == j else 0.0 for i in range(6) for j, v in enumerate(_ODOM_POSE_VAR)]
         msg.twist.twist.linear.x, msg.twist.twist.angular.z = odo.linear, odo.angular
         msg.twist.covariance = [v if i == j else 0.0 for i in range(6) for j, v in enumerate(_ODOM_TWIST_VAR)]
@@ -203,7 +205,7 @@ class RoverIO:
             e = torch.randn(3, generator=node.noise, dtype=torch.float64).tolist()
             t.position.x += node.params["truth_noise"] * e[0]
             t.position.y += node.params["truth_noise"] * e[1]
-            dq = yaw_quaternion(node.params["truth_yaw_noise"] * e[2])  # q <- rotation about world z, times q
+            dq = yaw_to_quat(node.params["truth_yaw_noise"] * e[2]).tolist()  # q <- rotation about world z, times q
             x, y, z, w = pose[3], pose[4], pose[5], pose[6]
             t.orientation.x = dq[3] * x - dq[2] * y
             t.orientation.y = dq[3] * y + dq[2] * x
@@ -364,7 +366,7 @@ class RoverSimNode(Node):
         self.wheel_sign = [float(w.drive_sign) for w in desc.wheels]
         self.noise = torch.Generator().manual_seed(int(p["seed"]))
         base = BaseParams(wheel_radius=self.sim.rover_cfg.wheel_radius,
-                          track_width=BaseParams.track_of(desc, self.sim.rover_cfg),
+                          track_width=track_width(desc, self.sim.rover_cfg),
                           effective_track_factor=p["effective_track_factor"], kp=p["wheel_kp"], ki=p["wheel_ki"],
                           torque_limit=self.env.task_cfg.action_scale, timeout=p["cmd_vel_timeout"])
         qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
@@ -485,10 +487,7 @@ class RoverSimNode(Node):
 
     def chassis_rotation(self, k: int) -> torch.Tensor:
         """Rover ``k``'s chassis rotation matrix (world from body), float64."""
-        x, y, z, w = self.sim.root_pose[k, 3:7].to(torch.float64).tolist()
-        return torch.tensor([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                             [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]], dtype=torch.float64)
+        return quat_to_matrix(self.sim.root_pose[k, 3:7].to(torch.float64))
 
     # ------------------------------------------------------------------ driving
     def goal_action(self, k: int) -> tuple[torch.Tensor, float]:

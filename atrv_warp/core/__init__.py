@@ -1,0 +1,37 @@
+"""The light core: the rover's geometry and kinematics in plain torch, for code that runs without the simulator.
+
+Nothing here imports Warp, Newton or TorchRL, so a program on a robot's computer (a policy node, an
+observation builder) can use it with torch alone. The simulator's Warp kernels keep one ``@wp.func`` of
+each conversion, and the tests hold each to its torch twin here.
+
+- :mod:`.geometry`: quaternions (x, y, z, w), rotation matrices, yaw, angle wrapping;
+- :mod:`.kinematics`: skid-steer kinematics (:class:`~.kinematics.SkidSteer`), the wheel track, side speeds;
+- :mod:`.scan`: a laser scan's sectors (:class:`~.scan.ScanSectors`), declared by their angular edges,
+  and REP 117's reading of a ``LaserScan``'s ranges.
+"""
+
+from atrv_warp.core.geometry import (
+    matrix_to_quat,
+    quat_to_matrix,
+    quat_to_rpy,
+    quat_to_yaw,
+    wrap_angle,
+    yaw_to_quat,
+)
+from atrv_warp.core.kinematics import EFFECTIVE_TRACK_FACTOR, SkidSteer, side_speeds, track_width
+from atrv_warp.core.scan import ScanSectors, sector_readings
+
+__all__ = [
+    "EFFECTIVE_TRACK_FACTOR",
+    "ScanSectors",
+    "SkidSteer",
+    "matrix_to_quat",
+    "quat_to_matrix",
+    "quat_to_rpy",
+    "quat_to_yaw",
+    "sector_readings",
+    "side_speeds",
+    "track_width",
+    "wrap_angle",
+    "yaw_to_quat",
+]
