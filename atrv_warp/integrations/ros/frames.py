@@ -28,9 +28,11 @@ WORLD_FRAME = "world"
 
 
 def pose_matrix(xyz, quat_xyzw) -> np.ndarray:
-    """4x4 transform of a position [m] and a unit quaternion (x, y, z, w)."""
+    """4x4 transform of a position [m] and a unit quaternion (x, y, z, w), normalised first (a float32 pose's
+    is unit to 1e-7 only; its matrix would then not be a rotation, and the quaternion read back off by 1e-3)."""
+    q = np.asarray([float(v) for v in quat_xyzw])
     m = np.eye(4)
-    m[:3, :3] = quat_to_matrix([float(v) for v in quat_xyzw]).numpy()
+    m[:3, :3] = quat_to_matrix((q / np.linalg.norm(q)).tolist()).numpy()
     m[:3, 3] = [float(v) for v in xyz]
     return m
 
