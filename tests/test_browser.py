@@ -13,6 +13,7 @@ DOM): its largest view is the 3D view, and the screenshot's region of that view 
 
 from __future__ import annotations
 
+import io
 import os
 
 import numpy as np
@@ -40,7 +41,7 @@ def test_viewer_loads_in_chromium_and_reads_the_recording(tmp_path, port_free):
     from PIL import Image
 
     from atrv_warp import ATRVjrEnv
-    from atrv_warp.integrations.blueprint import PLOTS_SHARE, view_shares
+    from atrv_warp.integrations.blueprint import view_shares
     from atrv_warp.integrations.browser import capture_viewer
     from atrv_warp.integrations.recorder import RerunRecorder
     from atrv_warp.task.baseline import scripted_policy
@@ -54,7 +55,7 @@ def test_viewer_loads_in_chromium_and_reads_the_recording(tmp_path, port_free):
     try:
         evaluate(scripted_policy(), num_episodes=2, env=env, on_step=recorder.env_hook())
         recorder.rec.flush()
-        report = capture_viewer(viewer, shot)
+        report = capture_viewer(viewer, shot, ready=lambda png: _scene_drawn(Image.open(io.BytesIO(png)))[0])
     finally:
         recorder.close()
     assert report.status == 200
@@ -69,14 +70,22 @@ def test_viewer_loads_in_chromium_and_reads_the_recording(tmp_path, port_free):
     # the layout: the 3D view is the largest, on the left (1 - PLOTS_SHARE of the width)
     views = view_shares(recording)
     assert views[0].kind == "3D" and all(v.share < views[0].share for v in views[1:]), views
-    # its region of the page, below the top bar and above the time panel, is drawn: terrain, walls and
-    # obstacles in many colours cover a good part of it (an empty view is one background colour)
-    width, height = image.size
-    region = image.crop((10, 80, int(width * (1 - PLOTS_SHARE)) - 10, height - 80))
-    pixels = np.asarray(region).reshape(-1, 3)
-    background = np.bincount(np.ravel_multi_index(pixels.T, (256, 256, 256))).max() / len(pixels)
-    assert background < 0.85, f"the 3D view is {background:.0%} one colour"
-    assert len(region.getcolors(maxcolors=1 << 20) or []) > 1000
+    drawn, why = _scene_drawn(image)
+    assert drawn, why
     for port in (viewer.grpc_port, viewer.web_port):
         assert port_free(port), f"port {port} still bound after the viewer stopped"
     assert viewer.process is None
+
+
+def _scene_drawn(image) -> tuple[bool, str]:
+    """The screenshot's 3D region (the left 1 - PLOTS_SHARE below the top bar, above the time panel) is
+    drawn: terrain, walls and obstacles in over a thousand colours cover a good part of it (an empty
+    view, or one with the static walls only, is mostly one background colour)."""
+    from atrv_warp.integrations.blueprint import PLOTS_SHARE
+
+    width, height = image.size
+    region = image.convert("RGB").crop((10, 80, int(width * (1 - PLOTS_SHARE)) - 10, height - 80))
+    pixels = np.asarray(region).reshape(-1, 3)
+    background = np.bincount(np.ravel_multi_index(pixels.T, (256, 256, 256))).max() / len(pixels)
+    colours = len(region.getcolors(maxcolors=1 << 20) or [])
+    return background < 0.85 and colours > 1000, f"the 3D view is {background:.0%} one colour, {colours} colours"
