@@ -83,7 +83,7 @@ class RoverIO:
         self.controller = VelocityController(base)
         self.odometry = WheelOdometry(base)
         self.prev_vel = torch.zeros(3)
-        tf_prefix = f"rover_{index}/" if prefix else ""  # frame names of the bag's /tf (frames.py)
+        tf_prefix = f"rover_{index}/" if prefix else ""  # its /tf frame names (frames.py)
         self.tf_odom, self.tf_base = tf_prefix + node.odom_frame, tf_prefix + node.base_frame
         self.tf_chassis = tf_prefix + node.sim.description.chassis
         self.tf_prefix = tf_prefix
