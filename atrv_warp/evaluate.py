@@ -15,6 +15,7 @@ Examples::
     python -m atrv_warp.evaluate --episodes 8 --rerun eval.rrd      # record 4 worlds; view: rerun eval.rrd
     python -m atrv_warp.evaluate --episodes 4 --serve --real-time   # live web viewer on 127.0.0.1
     python -m atrv_warp.evaluate --task nav --episodes 64 --video nav.mp4   # the first 4 episodes, top down
+    python -m atrv_warp.evaluate --task nav --episodes 4 --video nav.mp4 --video-follow 10   # a camera on each rover
 """
 
 from __future__ import annotations
@@ -51,6 +52,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="worlds (episodes) to record (default: the first 4)")
     parser.add_argument("--video", metavar="FILE.mp4", help="draw the first episodes top down into an MP4")
     parser.add_argument("--video-episodes", type=int, default=4, help="episodes in the video (default: 4)")
+    parser.add_argument("--video-follow", type=float, default=None, metavar="METRES",
+                        help="each panel follows its rover over this much ground (default: the whole arena)")
     add_verbose_argument(parser)
     return parser
 
@@ -62,6 +65,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--episodes must be >= 1")
     if args.video_episodes < 1:
         parser.error("--video-episodes must be >= 1")
+    if args.video_follow is not None and not args.video_follow > 0:
+        parser.error("--video-follow must be > 0 metres")
     if args.video:
         from atrv_warp.integrations.video import check_video_path
 
@@ -69,6 +74,13 @@ def main(argv: list[str] | None = None) -> int:
             check_video_path(args.video)
         except ValueError as err:
             return error_line(parser.prog, f"--{err}")
+    if args.rerun:
+        from atrv_warp.integrations.recorder import check_recording_path
+
+        try:  # as --video: a recording that cannot be written stops here, before the simulator is built
+            check_recording_path(args.rerun)
+        except ValueError as err:
+            return error_line(parser.prog, f"--rerun: {err}")
     if args.verbose:
         set_verbose()
     from atrv_warp.task.config import TASK_VARIANTS
@@ -135,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.video:
         from atrv_warp.integrations.video import EvalVideo
 
-        video = EvalVideo(env, episodes=args.video_episodes)
+        video = EvalVideo(env, episodes=args.video_episodes, follow=args.video_follow)
         draw, rerun_step = video.env_hook(), on_step
         on_step = draw if rerun_step is None else (lambda e, td: (rerun_step(e, td), draw(e, td)))
     try:

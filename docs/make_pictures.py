@@ -11,10 +11,13 @@ draws, with matplotlib, from the chassis poses the simulator produced:
   their terrain (shaded by height) and obstacles, driven by the scripted driver (dashed) and by
   the shipped navigation policy (solid); ``docs/nav.json`` beside it holds how each episode ended,
   the caption written from those outcomes (the docs page reads it at build time) and the
-  picture's provenance (the policy's sha256, the dynamics fingerprint);
-- with ``--viewer``: ``docs/viewer.png``, the Rerun web viewer showing a recorded evaluation,
-  served on localhost and photographed in headless Chromium (needs Debian's ``chromium`` and
-  the ``browser`` extra).
+  picture's provenance (the policy's sha256, the dynamics and task fingerprints);
+- ``docs/eval_video_frame.png`` (with ``--nav`` too): a frame of ``evaluate --video --video-follow 10``
+  on four nav episodes of the shipped navigation policy, each panel following its rover;
+- with ``--viewer``: ``docs/viewer.png``, the Rerun web viewer showing four recorded nav episodes of
+  the shipped navigation policy in its default layout, served on localhost and photographed in
+  headless Chromium through the code path of ``tests/test_browser.py`` (needs Debian's
+  ``chromium`` and the ``browser`` extra).
 """
 
 from __future__ import annotations
@@ -239,23 +242,44 @@ def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
     return [f"{name}: {', '.join(run['reason'])}" for name, run in runs.items()]
 
 
-def viewer_screenshot(out: Path, episodes: int = 4) -> None:
-    """Record the shipped policy's evaluation into a served viewer and photograph the page."""
+def viewer_screenshot(out: Path, seed: int, episodes: int = 4) -> None:
+    """Record the shipped nav policy's evaluation into a served viewer and photograph the page."""
     from atrv_warp import ATRVjrEnv, load_policy
     from atrv_warp.integrations.browser import capture_viewer
     from atrv_warp.integrations.recorder import RerunRecorder
+    from atrv_warp.policy import pretrained_nav_policy_path
     from atrv_warp.task.evaluation import evaluate
 
-    env = ATRVjrEnv(episodes)
+    env = ATRVjrEnv(episodes, task="nav")
     recorder = RerunRecorder(env.sim, serve=True, worlds=range(episodes))
     try:
-        evaluate(load_policy(), num_episodes=episodes, env=env, on_step=recorder.env_hook())
+        evaluate(load_policy(pretrained_nav_policy_path()), num_episodes=episodes, seed=seed, env=env,
+                 on_step=recorder.env_hook())
         recorder.rec.flush()
-        report = capture_viewer(recorder.viewer, out, size=(1400, 860), settle_s=8.0)
+        report = capture_viewer(recorder.viewer, out, size=(1400, 860), settle_s=90.0)
     finally:
         recorder.close()
     if not report.grpc_responses or report.errors:
         raise RuntimeError(f"the viewer did not load the recording: {report.errors or report.console[-5:]}")
+
+
+def video_frame(out: Path, seed: int, episodes: int = 4, follow: float = 10.0, at: float = 0.3) -> str:
+    """A frame of the evaluation video of four nav episodes of the shipped nav policy, each panel following
+    its rover over ``follow`` metres, ``at`` of the way through the longest episode."""
+    from PIL import Image
+
+    from atrv_warp import ATRVjrEnv, load_policy
+    from atrv_warp.integrations.video import EvalVideo
+    from atrv_warp.policy import pretrained_nav_policy_path
+    from atrv_warp.task.evaluation import evaluate
+
+    env = ATRVjrEnv(episodes, task="nav")
+    video = EvalVideo(env, episodes=episodes, panel=320, follow=follow)
+    evaluate(load_policy(pretrained_nav_policy_path()), num_episodes=episodes, seed=seed, env=env,
+             on_step=video.env_hook())
+    frames = list(video.frames())
+    Image.fromarray(frames[int(at * (len(frames) - 1))]).save(out)
+    return ", ".join(video.reason)
 
 
 def main() -> int:
@@ -265,7 +289,9 @@ def main() -> int:
     parser.add_argument("--world", type=int, default=0, help="the episode to animate")
     parser.add_argument("--out-dir", default=str(DOCS))
     parser.add_argument("--viewer", action="store_true", help="also photograph the Rerun web viewer (Chromium)")
-    parser.add_argument("--nav", action="store_true", help="only draw docs/nav.png (the navigation task)")
+    parser.add_argument("--nav", action="store_true",
+                        help="only the navigation task's pictures: docs/nav.png, docs/eval_video_frame.png "
+                             "(and with --viewer, docs/viewer.png)")
     args = parser.parse_args()
     import matplotlib
 
@@ -273,13 +299,17 @@ def main() -> int:
     out = Path(args.out_dir)
     if args.nav:
         print("\n".join(draw_nav(out / "nav.png", args.seed)) + f"\nwrote {out / 'nav.png'} and {out / 'nav.json'}")
+        print(f"{video_frame(out / 'eval_video_frame.png', args.seed)}\nwrote {out / 'eval_video_frame.png'}")
+        if args.viewer:
+            viewer_screenshot(out / "viewer.png", args.seed)
+            print(f"wrote {out / 'viewer.png'}")
         return 0
     run = rollout(args.episodes, args.seed)
     draw_trajectories(run, out / "trajectories.png")
     draw_episode(run, args.world, out / "episode.gif")
     print(f"{', '.join(run['reason'])}\nwrote {out / 'trajectories.png'} and {out / 'episode.gif'}")
     if args.viewer:
-        viewer_screenshot(out / "viewer.png")
+        viewer_screenshot(out / "viewer.png", args.seed)
         print(f"wrote {out / 'viewer.png'}")
     return 0
 

@@ -160,8 +160,124 @@ def test_fast_run_matches_simulator_and_records_bag(ros_env, tmp_path):
 
     from mcap_ros2.reader import read_ros2_messages
 
-    topics = [m.channel.topic for m in read_ros2_messages(str(bag))]
+    messages = list(read_ros2_messages(str(bag)))
+    topics = [m.channel.topic for m in messages]
     assert topics.count("/pose") == 31
+    check_bag_frames(messages)
+
+
+def _matrix(t):
+    from atrv_warp.integrations.ros.frames import pose_matrix
+
+    r, p = t.transform.rotation, t.transform.translation
+    return pose_matrix((p.x, p.y, p.z), (r.x, r.y, r.z, r.w))
+
+
+def check_bag_frames(messages):
+    """The bag's /tf and /tf_static (tf2_msgs/TFMessage, written from its definition) against the node's
+    own /odom, /ground_truth/odom and /joint_states of the same stamps."""
+    import numpy as np
+
+    from atrv_warp.integrations.ros.frames import pose_matrix, turn_matrix
+    from atrv_warp.sim.urdf import load_rover
+
+    by_topic = {}
+    for m in messages:
+        by_topic.setdefault(m.channel.topic, []).append(m)
+    assert by_topic["/tf"][0].schema.name == "tf2_msgs/msg/TFMessage"
+    assert "<robot" in by_topic["/robot_description"][0].ros_msg.data
+    static = {t.child_frame_id: t for t in by_topic["/tf_static"][0].ros_msg.transforms}
+    assert static["center_link"].header.frame_id == "base_link"
+    lrf = static["lrf_frame"].transform.translation  # the URDF's lrf_frame joint: 0.3 0 0.19
+    assert (lrf.x, lrf.y, lrf.z) == pytest.approx((0.3, 0.0, 0.19))
+
+    def stamped(topic):
+        return {_stamp(m.ros_msg): m.ros_msg for m in by_topic[topic]}
+
+    odom, truth, joints = stamped("/odom"), stamped("/ground_truth/odom"), stamped("/joint_states")
+    desc = load_rover()
+    assert len(by_topic["/tf"]) == len(odom) > 10
+    for m in by_topic["/tf"]:
+        tf = {t.child_frame_id: t for t in m.ros_msg.transforms}
+        stamp = _stamp(tf["odom"])
+        assert tf["odom"].header.frame_id == "world" and tf["base_link"].header.frame_id == "odom"
+        o, g = odom[stamp].pose.pose, truth[stamp].pose.pose
+        # odom -> base_link is the wheel odometry; world -> odom -> base_link is the true pose
+        np.testing.assert_allclose(_matrix(tf["base_link"]), pose_matrix(
+            (o.position.x, o.position.y, o.position.z),
+            (o.orientation.x, o.orientation.y, o.orientation.z, o.orientation.w)), atol=1e-9)
+        np.testing.assert_allclose(_matrix(tf["odom"]) @ _matrix(tf["base_link"]), pose_matrix(
+            (g.position.x, g.position.y, g.position.z),
+            (g.orientation.x, g.orientation.y, g.orientation.z, g.orientation.w)), atol=1e-6)
+        # each wheel sits at its joint origin, turned by its /joint_states position about its axis
+        position = dict(zip(joints[stamp].name, joints[stamp].position))
+        for wheel in desc.wheels:
+            expected = np.asarray(wheel.origin) @ turn_matrix(wheel.axis, position[wheel.joint])
+            np.testing.assert_allclose(_matrix(tf[wheel.link]), expected, atol=1e-9)
+    spin = [dict(zip(joints[s].name, joints[s].position))[desc.wheels[0].joint] for s in sorted(joints)]
+    assert abs(spin[-1] - spin[0]) > 1.0  # driving forward, the wheels turned
+
+
+def test_frames_round_trip_quaternions():
+    import numpy as np
+
+    from atrv_warp.integrations.ros.frames import pose_matrix, transform_dict, turn_matrix
+
+    rng = np.random.default_rng(0)
+    for q in rng.normal(size=(200, 4)):
+        q = q / np.linalg.norm(q)
+        q = q if q[3] >= 0 else -q
+        rotation = transform_dict("a", "b", 0, pose_matrix((0, 0, 0), q))["transform"]["rotation"]
+        assert [rotation[k] for k in "xyzw"] == pytest.approx(q.tolist(), abs=1e-6)
+    m = turn_matrix((0, 0, 1), np.pi / 2)
+    np.testing.assert_allclose(m[:3, :3] @ [1, 0, 0], [0, 1, 0], atol=1e-12)
+    t = transform_dict("a", "b", 1_500_000_000, pose_matrix((1, 2, 3), (0, 0, 0, 1)))
+    assert t["header"] == {"stamp": {"sec": 1, "nanosec": 500_000_000}, "frame_id": "a"}
+    assert t["transform"]["translation"] == {"x": 1.0, "y": 2.0, "z": 3.0}
+
+
+def test_world_markers_of_a_nav_world_and_a_non_finite_one_left_out():
+    """Real visualization_msgs messages from a nav world: four walls, each obstacle where the simulator
+    has it, the goal on the ground, a height-coloured terrain mesh; a world with a NaN is left out, named."""
+    import dataclasses
+    import math
+
+    import numpy as np
+    from visualization_msgs.msg import Marker
+
+    from atrv_warp import ATRVjrEnv
+    from atrv_warp.integrations.ros.markers import scene_of, world_markers
+
+    env = ATRVjrEnv(2, task="nav", seed=3)
+    env.reset()
+    good = scene_of(env.sim, 0, ns="rover_0/", goal=(4.0, -2.0), goal_radius=1.0)
+    bad = scene_of(env.sim, 1, ns="rover_1/", goal=None, goal_radius=1.0)
+    pose = bad.pose.copy()
+    pose[0, 0] = np.nan
+    msg, skipped = world_markers(env.sim.arena_cfg, [good, dataclasses.replace(bad, pose=pose)], "world", None)
+    assert skipped == ["rover_1/"]
+    assert msg.markers[0].action == Marker.DELETEALL
+    by_ns = {}
+    for m in msg.markers[1:]:
+        by_ns.setdefault(m.ns, []).append(m)
+        assert m.header.frame_id == "world"
+        p, q = m.pose.position, m.pose.orientation
+        assert all(math.isfinite(v) for v in (p.x, p.y, p.z, q.x, q.y, q.z, q.w))
+    assert set(by_ns) == {"arena", "rover_0/obstacles", "rover_0/goal", "rover_0/terrain"}
+    assert len(by_ns["arena"]) == 4 and max(m.pose.position.x for m in by_ns["arena"]) > env.sim.arena_cfg.half_size
+    kind, xy = env.sim.obstacles.kind[0].numpy(), env.sim.obstacles.pose[0, :, :2].numpy()
+    placed = sorted((m.pose.position.x, m.pose.position.y) for m in by_ns["rover_0/obstacles"])
+    assert placed and np.allclose(placed, sorted(map(tuple, xy[kind > 0].tolist())), atol=1e-6)
+    goal = by_ns["rover_0/goal"][0]
+    assert (goal.pose.position.x, goal.pose.position.y, goal.scale.x) == pytest.approx((4.0, -2.0, 2.0))
+    assert goal.pose.position.z == pytest.approx(good.ground_at(4.0, -2.0) + 0.02)
+    terrain = by_ns["rover_0/terrain"][0]
+    assert terrain.type == Marker.TRIANGLE_LIST and len(terrain.points) == len(terrain.colors)
+    assert len(terrain.points) % 3 == 0 and len(terrain.points) >= 3 * 2 * 30 ** 2
+    z = np.array([pt.z for pt in terrain.points])
+    heights = good.heights
+    assert z.min() == pytest.approx(good.terrain_base + heights.min(), abs=0.05)
+    assert len({(c.r, c.g, c.b) for c in terrain.colors}) > 50  # coloured by height
 
 
 @pytest.mark.slow  # a live ROS 2 node
@@ -373,3 +489,92 @@ def test_bad_parameters_are_refused_at_start(ros_env, tmp_path):
         out, _ = proc.communicate(timeout=120)
         assert proc.returncode == 2, out[-2000:]
         assert message in out, out[-2000:]
+
+
+@pytest.mark.slow  # a live ROS 2 node
+def test_latched_markers_show_the_nav_world_and_the_goal(ros_env):
+    """A late subscriber gets the world (transient local): the nav world's obstacles where the node's
+    simulator put them, its terrain; after a /goal, the goal disc. Live /tf places base_link at the
+    true pose; /tf_static holds the URDF's sensor frames."""
+    import numpy as np
+    from nav_msgs.msg import Odometry
+    from visualization_msgs.msg import MarkerArray
+
+    from atrv_warp.integrations.ros.tf2_build import load_tf_message
+
+    TFMessage, where = load_tf_message()
+    assert TFMessage is not None, where
+    proc = start_node(ros_env, "task:=nav", "seed:=4", "wait_for_subscribers:=1", "duration:=30.0")
+    client = Client("atrv_marker_client")
+    arrays, tf, tf_static, truth = [], [], [], []
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
+    client.node.create_subscription(TFMessage, "/tf", tf.append, 100)
+    client.node.create_subscription(Odometry, "/ground_truth/odom", truth.append, 100)
+    try:
+        assert client.wait_for(lambda: len(client.poses) > 0, timeout=120), "no /pose received"
+        client.node.create_subscription(MarkerArray, "/visualization_marker_array", arrays.append, latched)
+        client.node.create_subscription(TFMessage, "/tf_static", tf_static.append, latched)
+        assert client.wait_for(lambda: bool(arrays) and bool(tf_static), timeout=30), "no latched markers or /tf_static"
+        # live /tf (tf2_msgs built from its definition where no ROS install has it): the true pose, composed
+        assert client.wait_for(lambda: len(tf) > 5, timeout=30), "no live /tf"
+        static = {t.child_frame_id: t for t in tf_static[-1].transforms}
+        assert static["lrf_frame"].header.frame_id == "center_link"
+        stamps = {_stamp(m): m for m in truth}
+        live = [{t.child_frame_id: t for t in m.transforms} for m in tf]
+        both = [f for f in live if _stamp(f["odom"]) in stamps]
+        assert both, "no /tf with the stamp of a /ground_truth/odom"
+        for f in both:
+            g = stamps[_stamp(f["odom"])].pose.pose
+            world_base = _matrix(f["odom"]) @ _matrix(f["base_link"])
+            assert world_base[:3, 3] == pytest.approx([g.position.x, g.position.y, g.position.z], abs=1e-5)
+        first = {m.ns for m in arrays[-1].markers[1:]}
+        assert first == {"arena", "obstacles", "terrain"}, first
+        obstacles = sorted((m.pose.position.x, m.pose.position.y) for m in arrays[-1].markers if m.ns == "obstacles")
+        goal = PoseStamped()
+        goal.pose.position.x, goal.pose.position.y = 3.0, 1.0
+        assert client.wait_for(lambda: client.goal.publish(goal) or any(
+            m.ns == "goal" for m in arrays[-1].markers), timeout=30), "no goal marker"
+        disc = next(m for m in arrays[-1].markers if m.ns == "goal")
+        assert (disc.pose.position.x, disc.pose.position.y) == pytest.approx((3.0, 1.0))
+    finally:
+        client.close()
+        out = stop(proc)
+    assert proc.returncode == 0, out[-2000:]
+    from atrv_warp import ATRVjrEnv
+
+    env = ATRVjrEnv(1, task="nav", seed=4)  # the node's own world: its first episode
+    env.reset()
+    kind, xy = env.sim.obstacles.kind[0].numpy(), env.sim.obstacles.pose[0, :, :2].numpy()
+    assert obstacles and np.allclose(obstacles, sorted(map(tuple, xy[kind > 0].tolist())), atol=1e-5)
+
+
+def test_foxglove_layout_shows_what_the_node_publishes():
+    """docs/foxglove_layout.json: a 3D panel with the URDF from /robot_description, the markers, the scan and
+    the odometry, following base_link; every topic it names is one the node publishes."""
+    import json
+    from pathlib import Path
+
+    layout = json.loads((Path(__file__).resolve().parent.parent / "docs" / "foxglove_layout.json").read_text())
+    panels = layout["configById"]
+    scene = next(v for k, v in panels.items() if k.startswith("3D!"))
+    assert scene["followTf"] == "base_link"
+    assert {"/visualization_marker_array", "/scan", "/odom", "/ground_truth/odom"} <= set(scene["topics"])
+    urdf = [layer for layer in scene["layers"].values() if layer["layerId"] == "foxglove.Urdf"]
+    assert urdf and urdf[0]["topic"] == "/robot_description"
+    named = set(scene["topics"]) | {p["value"].split(".")[0] for k, v in panels.items() if k.startswith("Plot!")
+                                    for p in v["paths"]} | {v["topicPath"] for v in panels.values() if "topicPath" in v}
+    published = {"/visualization_marker_array", "/scan", "/odom", "/ground_truth/odom", "/pose", "/goal_status",
+                 "/joint_states", "/imu", "/robot_description"}
+    assert named <= published, named - published
+    ids = json.dumps(layout["layout"])
+    assert all(k in ids for k in panels)  # every configured panel is placed
+
+
+def test_tf2_build_without_a_compiler_says_so(tmp_path, monkeypatch):
+    from atrv_warp.integrations.ros.tf2_build import build_tf2_msgs
+
+    monkeypatch.setenv("PATH", str(tmp_path))  # no gcc, no g++
+    with pytest.raises(RuntimeError, match=r"no gcc on PATH \(a C and C\+\+ compiler builds tf2_msgs's type support\)"):
+        build_tf2_msgs(tmp_path / "tf2")
+    assert not (tmp_path / "tf2").exists()

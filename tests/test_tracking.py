@@ -25,16 +25,42 @@ needs = {name: pytest.mark.skipif(importlib.util.find_spec(name) is None, reason
 
 
 @pytest.fixture(scope="module")
-def nav_video(tmp_path_factory):
-    """Four episodes of the shipped nav policy (terrain, obstacles, scan), recorded and written."""
+def nav_videos(tmp_path_factory):
+    """Four episodes of the shipped nav policy (terrain, obstacles, scan), recorded twice in one evaluation:
+    the whole arena (written), and following each rover over 8 m of ground."""
     from atrv_warp import ATRVjrEnv, load_policy
     from atrv_warp.policy import pretrained_nav_policy_path
     from atrv_warp.task.evaluation import evaluate
 
     env = ATRVjrEnv(8, task="nav", seed=0)
-    video = EvalVideo(env, episodes=4, panel=128)
-    evaluate(load_policy(pretrained_nav_policy_path()), num_episodes=8, env=env, on_step=video.env_hook())
-    return video, video.write(tmp_path_factory.mktemp("video") / "nav.mp4", gif=True)
+    video, followed = EvalVideo(env, episodes=4, panel=128), EvalVideo(env, episodes=4, panel=128, follow=8.0)
+    hooks = video.env_hook(), followed.env_hook()
+    evaluate(load_policy(pretrained_nav_policy_path()), num_episodes=8, env=env,
+             on_step=lambda e, td: [hook(e, td) for hook in hooks])
+    return video, video.write(tmp_path_factory.mktemp("video") / "nav.mp4", gif=True), followed
+
+
+@pytest.fixture(scope="module")
+def nav_video(nav_videos):
+    return nav_videos[:2]
+
+
+def test_following_video_keeps_the_rover_large_and_centred(nav_videos):
+    import numpy as np
+
+    from atrv_warp.integrations.video import _ROVER
+
+    video, _, followed = nav_videos
+    whole, close = next(iter(video.frames())), next(iter(followed.frames()))
+    assert close.shape == whole.shape == (256, 256, 3)
+
+    def rover_pixels(frame):  # world 0's panel: the top-left 128 px
+        return np.argwhere((frame[:128, :128] == _ROVER).all(-1))
+
+    far, near = rover_pixels(whole), rover_pixels(close)
+    # 128 px over 8 m instead of 31 m: the footprint (0.64 x 0.39 m) covers ~15x the pixels
+    assert len(far) > 0 and len(near) > 10 * len(far), (len(far), len(near))
+    assert np.abs(near.mean(0) - 64).max() < 4  # centred in its panel
 
 
 def test_video_decodes_to_the_frames_drawn(nav_video):

@@ -10,6 +10,7 @@ import torch
 from rerun.chunk import RrdReader
 
 from atrv_warp import ATRVjrEnv
+from atrv_warp.integrations.blueprint import PLOTS_SHARE, view_shares
 from atrv_warp.integrations.recorder import RerunRecorder
 from atrv_warp.integrations.rerun_logger import RerunLogger
 from atrv_warp.task.baseline import scripted_policy
@@ -25,9 +26,11 @@ def read_rrd(path):
 
 
 def column(batches, name):
+    """Every row of component ``name`` in an entity's batches (those that log it)."""
     rows = []
     for b in batches:
-        rows.extend(b.column(name).to_pylist())
+        if name in b.schema.names:
+            rows.extend(b.column(name).to_pylist())
     return rows
 
 
@@ -47,13 +50,20 @@ def test_recorded_evaluation_matches_simulator(tmp_path):
     steps = recorder.step
     assert steps == len(truth[1]) >= result.mean_steps  # one logged row per env step
     data = read_rrd(path)
-    # static scene and every logged world's rover, drawn from the model's shapes
-    for ent in ("/arena/ground", "/arena/grid", "/arena/walls"):
-        assert ent in data
+    # static scene and every logged world's rover, drawn from the URDF's visuals; each world's arena on a grid
+    offsets = {}
     for w in (1, 4):
+        for ent in ("ground", "grid", "walls"):
+            assert f"/world_{w}/arena/{ent}" in data
+        offsets[w] = np.ravel(column(data[f"/world_{w}"], "Transform3D:translation")[0])
         for link in ("center_link", "left_front_wheel_link", "right_rear_wheel_link"):
             assert f"/world_{w}/rover/{link}" in data
-        assert any(e.startswith(f"/world_{w}/rover/center_link/shape_") for e in data)
+        # the chassis box: the URDF's 0.64 x 0.39 x 0.22 m, 0.05 m above the link frame
+        visual = f"/world_{w}/rover/center_link/visual_0"
+        assert column(data[visual], "Boxes3D:half_sizes")[0][0] == pytest.approx([0.32, 0.195, 0.11])
+        assert np.ravel(column(data[visual], "Transform3D:translation")[0]) == pytest.approx([0.0, 0.0, 0.05])
+        wheel = [e for e in data if e.startswith(f"/world_{w}/rover/left_front_wheel_link/visual_")]
+        assert f"{min(wheel, key=len)}/mark" in data  # the cross that shows the wheel turning
         for ent in ("target", "trajectory"):
             assert f"/world_{w}/{ent}" in data
         for plot in ("reward", "distance", "torque_left", "torque_right"):
@@ -63,6 +73,7 @@ def test_recorded_evaluation_matches_simulator(tmp_path):
         order = np.argsort(column(batches, "step"))
         logged = np.array(column(batches, "Transform3D:translation"), dtype=np.float64).reshape(-1, 3)[order]
         np.testing.assert_allclose(logged, torch.stack(truth[w]).numpy(), atol=1e-6)
+    assert np.linalg.norm(offsets[4] - offsets[1]) >= 2 * env.sim.arena_cfg.half_size  # side by side, not overlaid
     assert "/world_0/rover/center_link" not in data  # only the chosen worlds are logged
     assert {"step", "sim_time"} <= set(data["/world_1/rover/center_link"][0].schema.names)
 
@@ -163,7 +174,7 @@ def test_nav_recording_draws_terrain_obstacles_and_scan(tmp_path):
              on_step=lambda e, td: (recorder.env_hook()(e, td), tiles.append(e.sim.terrain.tile.clone())))
     recorder.close()
     data = read_rrd(path)
-    assert "/arena/ground" not in data and "/arena/walls" in data  # terrain replaces the flat ground
+    assert "/world_0/arena/ground" not in data and "/world_0/arena/walls" in data  # terrain replaces flat ground
     grid = env.sim.terrain.grid
     for w in (0, 2):
         mesh = data[f"/world_{w}/terrain"]
@@ -175,3 +186,44 @@ def test_nav_recording_draws_terrain_obstacles_and_scan(tmp_path):
         assert f"/world_{w}/obstacles/boxes" in data and f"/world_{w}/obstacles/cylinders" in data
         assert sum(b.num_rows for b in data[f"/world_{w}/scan/rays"]) == recorder.step
         assert f"/world_{w}/scan/hits" in data
+
+
+def test_recording_opens_with_the_3d_view_leading(tmp_path):
+    """The layout stored in the file: the 3D view is the largest, framing every recorded world; the
+    per-world plots are tabs beside it; a training recording gets a tab for its scalars."""
+    path = tmp_path / "layout.rrd"
+    env = ATRVjrEnv(3)
+    recorder = RerunRecorder(env.sim, path=path, worlds=[0, 2])
+    evaluate(scripted_policy(), num_episodes=3, seed=1, env=env, on_step=recorder.env_hook())
+    recorder.close()
+    views = view_shares(path)
+    assert views[0].kind == "3D" and views[0].share == pytest.approx(1 - PLOTS_SHARE)
+    assert all(v.share < views[0].share for v in views[1:])
+    assert [(v.kind, v.origin) for v in views[1:]] == [("TimeSeries", "/plots/world_0"), ("TimeSeries", "/plots/world_2")]
+    # the eye looks at the middle of the two arenas, from farther back than their extent
+    reader = RrdReader(str(path))
+    eye = next(c.to_record_batch() for c in reader.stream(store=reader.blueprints()[-1]).to_chunks()
+               if str(c.entity_path).endswith("/EyeControls3D"))
+    target = np.array(eye.column("EyeControls3D:look_target").to_pylist()[0][0])
+    position = np.array(eye.column("EyeControls3D:position").to_pylist()[0][0])
+    np.testing.assert_allclose(target, 0.5 * (recorder.offsets[0] + recorder.offsets[2]), atol=1e-6)
+    extent = np.abs(recorder.offsets[2] - recorder.offsets[0]).max() + 2 * env.sim.arena_cfg.half_size
+    assert np.linalg.norm(position - target) > extent and position[2] > 0
+    rec = rr.RecordingStream("atrv_warp")
+    train = tmp_path / "train.rrd"
+    rec.save(str(train))
+    RerunRecorder(env.sim, recording=rec, worlds=[1], training=True).close()
+    rec.flush()
+    rec.disconnect()
+    assert [(v.name, v.origin) for v in view_shares(train)[1:]] == [("training", "/train"), ("world 1", "/plots/world_1")]
+
+
+@pytest.mark.parametrize(("name", "message"), [("eval.txt", "must end in .rrd"), ("folder.rrd", "is a folder")])
+def test_unwritable_recording_fails_before_any_simulation(tmp_path, name, message):
+    (tmp_path / "folder.rrd").mkdir()
+    proc = subprocess.run([sys.executable, "-m", "atrv_warp.evaluate", "--baseline", "--episodes", "2",
+                           "--rerun", str(tmp_path / name)], check=False, capture_output=True, text=True)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert lines == [f"python -m atrv_warp.evaluate: error: --rerun: recording {tmp_path / name}: {message}"], lines
+    assert "device" not in proc.stdout  # stopped before the simulator was built (its device line)

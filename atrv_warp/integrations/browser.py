@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -47,9 +48,14 @@ class PageReport:
 
 
 def capture_viewer(viewer: ServedViewer, screenshot: str | Path, *, chromium: str | None = None,
-                   size: tuple[int, int] = (1280, 800), settle_s: float = 5.0, timeout_s: float = 60.0) -> PageReport:
+                   size: tuple[int, int] = (1280, 800), settle_s: float = 5.0, timeout_s: float = 60.0,
+                   ready: Callable[[bytes], bool] | None = None) -> PageReport:
     """Open ``viewer.url`` in headless Chromium, wait until the viewer has called its gRPC proxy and
-    drawn for ``settle_s``, save a PNG screenshot, and report what the page did."""
+    drawn for ``settle_s``, save a PNG screenshot, and report what the page did.
+
+    ``ready``: a test of a screenshot (PNG bytes); the page is photographed every second until it
+    passes or ``timeout_s`` more have gone by (a loaded machine streams the recording in slowly), and
+    the last one is saved."""
     from playwright.sync_api import sync_playwright
 
     chromium = chromium or find_chromium()
@@ -71,7 +77,12 @@ def capture_viewer(viewer: ServedViewer, screenshot: str | Path, *, chromium: st
             while not report.grpc_responses and time.monotonic() < deadline:
                 page.wait_for_timeout(500)
             page.wait_for_timeout(settle_s * 1000)
-            page.screenshot(path=str(screenshot))
+            shot = page.screenshot()
+            deadline = time.monotonic() + timeout_s
+            while ready is not None and not ready(shot) and time.monotonic() < deadline:
+                page.wait_for_timeout(1000)
+                shot = page.screenshot()
+            Path(screenshot).write_bytes(shot)
         finally:
             browser.close()
     return report

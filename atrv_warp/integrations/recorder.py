@@ -3,8 +3,9 @@ trajectories and per-world scalars, to an ``.rrd`` file or a live web viewer on 
 
 Entities (``W`` = world index)::
 
-    arena/ground, arena/grid, arena/walls          static (no ground box or grid on terrain)
-    world_W/rover/<link>                           Transform3D per step; shapes static below it
+    world_W                                        static Transform3D: where the world is drawn (a grid)
+    world_W/arena/{ground,grid,walls}              static (no ground box or grid on terrain)
+    world_W/rover/<link>                           Transform3D per step; the URDF's visuals static below it
     world_W/terrain                                the world's terrain tile (mesh), when it changes
     world_W/obstacles/{boxes,cylinders}            the world's obstacles, when they change
     world_W/scan/{hits,rays}                       the laser scan's returns and beams, per step
@@ -15,6 +16,11 @@ Entities (``W`` = world index)::
 
 Timelines: ``step`` (env steps since the recorder started), ``sim_time`` (seconds), and
 ``frames`` (training frames, for training scalars and the evaluations recorded during training).
+
+Every recording opens with :func:`~.blueprint.viewer_blueprint`'s layout: the worlds side by side in a
+3D view that fills most of the window, their plots in tabs beside it. The rovers are drawn from the
+URDF's visual geometry (boxes, cylinders, spheres, mesh files), each wheel with a light cross on its
+faces so that it is seen turning.
 
 Nothing here runs unless a recorder is created and called: the simulator's step path has no
 logging hook, so disabled logging costs nothing.
@@ -27,27 +33,131 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import rerun as rr
 
+from atrv_warp.integrations.blueprint import viewer_blueprint, world_offsets
 from atrv_warp.integrations.topdown import terrain_colors
 from atrv_warp.integrations.viewer import ServedViewer
 
-__all__ = ["DEFAULT_WORLDS", "RerunRecorder"]
+__all__ = ["DEFAULT_WORLDS", "RECORDING_SUFFIX", "RerunRecorder", "check_recording_path", "rover_visuals"]
 
 DEFAULT_WORLDS = 4
 """Worlds logged when none are named."""
+RECORDING_SUFFIX = ".rrd"
 
-_CHASSIS_COLOR = (190, 30, 30)
-_WHEEL_COLOR = (25, 25, 25)
+_WHEEL_MARK_COLOR = (200, 200, 200)
 _TARGET_COLOR = (40, 90, 230)
 _GROUND_COLOR = (150, 150, 140)
 _WALL_COLOR = (120, 120, 130)
 _OBSTACLE_COLOR = (200, 140, 40)
 _SCAN_COLOR = (230, 30, 200)
+_SCAN_RAY_COLOR = (250, 200, 245)
 _TERRAIN_MAX_SIDE = 121
 """Terrain meshes are drawn from at most this many samples per side."""
+
+
+def check_recording_path(path: str | os.PathLike) -> Path:
+    """``path`` as a Rerun recording to write: it must end in ``.rrd``; its folder is created and the
+    file opened for writing. A ``ValueError`` in one line naming the path otherwise, before any work."""
+    path = Path(path)
+    if path.suffix.lower() != RECORDING_SUFFIX:
+        raise ValueError(f"recording {path}: must end in {RECORDING_SUFFIX}")
+    if path.is_dir():
+        raise ValueError(f"recording {path}: is a folder")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "ab"):
+            pass
+    except OSError as err:
+        raise ValueError(f"recording {path}: cannot be written ({err.strerror or err})") from None
+    return path
+
+
+@dataclass(frozen=True)
+class Visual:
+    """One ``<visual>`` of a URDF link, in the frame of the simulated body it is drawn with."""
+
+    body: str
+    """The link whose simulated body carries it (a fixed link's visuals ride on the chassis)."""
+    pose: np.ndarray
+    """4x4 pose in the body frame."""
+    kind: str
+    """``box``, ``cylinder``, ``sphere`` or ``mesh``."""
+    size: tuple[float, ...]
+    """Box: full extents (x, y, z) [m]; cylinder: (radius, length) [m]; sphere: (radius,) [m]; mesh: scale."""
+    color: tuple[int, int, int]
+    mesh: str = ""
+    """A mesh visual's file."""
+
+
+def rover_visuals(description) -> list[Visual]:
+    """The ``<visual>`` geometry of a :class:`~atrv_warp.sim.urdf.RoverDescription`'s URDF, on the bodies
+    the simulator moves: the chassis (with the fixed links' visuals, through their frames) and the wheels.
+    A mesh file that does not exist is left out, with one line saying so."""
+    import yourdfpy
+
+    urdf = yourdfpy.URDF.load(description.path, load_meshes=False, build_scene_graph=False)
+    materials = {m.name: m for m in urdf.robot.materials}
+    fixed = {f.name: f.transform for f in description.frames}
+    wheels = {w.link for w in description.wheels}
+    out = []
+    for link in urdf.robot.links:
+        if link.name == description.chassis or link.name in wheels:
+            body, frame = link.name, np.eye(4)
+        elif link.name in fixed:
+            body, frame = description.chassis, np.asarray(fixed[link.name], dtype=float)
+        else:
+            continue
+        for visual in link.visuals:
+            material = visual.material
+            if material is not None and material.color is None and material.name in materials:
+                material = materials[material.name]
+            rgba = material.color.rgba if material is not None and material.color is not None else (0.5, 0.5, 0.5, 1)
+            color = tuple(round(255 * float(c)) for c in rgba[:3])
+            pose = frame @ (np.eye(4) if visual.origin is None else np.asarray(visual.origin, dtype=float))
+            g = visual.geometry
+            if g.box is not None:
+                out.append(Visual(body, pose, "box", tuple(float(v) for v in g.box.size), color))
+            elif g.cylinder is not None:
+                out.append(Visual(body, pose, "cylinder", (float(g.cylinder.radius), float(g.cylinder.length)), color))
+            elif g.sphere is not None:
+                out.append(Visual(body, pose, "sphere", (float(g.sphere.radius),), color))
+            elif g.mesh is not None:
+                file = Path(description.path).parent / g.mesh.filename.removeprefix("file://")
+                if not file.is_file():
+                    print(f"rover_visuals: mesh {g.mesh.filename} of link {link.name} not found; not drawn")
+                    continue
+                scale = tuple(float(v) for v in np.broadcast_to(g.mesh.scale if g.mesh.scale is not None else 1.0, 3))
+                out.append(Visual(body, pose, "mesh", scale, color, str(file)))
+    return out
+
+
+def _log_visual(rec: rr.RecordingStream, entity: str, visual: Visual, *, wheel: bool) -> None:
+    """A visual as a static shape under ``entity`` (its pose as a static transform); a wheel's cylinder
+    gets a light cross through both faces, so that its turning shows."""
+    scale = visual.size if visual.kind == "mesh" else None
+    rec.log(entity, rr.Transform3D(translation=visual.pose[:3, 3], mat3x3=visual.pose[:3, :3], scale=scale),
+            static=True)
+    if visual.kind == "box":
+        rec.log(entity, rr.Boxes3D(half_sizes=[[0.5 * v for v in visual.size]], colors=[visual.color],
+                                   fill_mode="solid"), static=True)
+    elif visual.kind == "cylinder":
+        r, length = visual.size
+        rec.log(entity, rr.Cylinders3D(lengths=[length], radii=[r], colors=[visual.color], fill_mode="solid"),
+                static=True)
+        if wheel:  # the cylinder's axis is its z: the cross lies across its faces
+            t, half = 0.1 * r, 0.5 * length + 0.002
+            rec.log(f"{entity}/mark", rr.Boxes3D(half_sizes=[(0.85 * r, t, half), (t, 0.85 * r, half)],
+                                                 colors=[_WHEEL_MARK_COLOR], fill_mode="solid"), static=True)
+    elif visual.kind == "sphere":
+        rec.log(entity, rr.Ellipsoids3D(half_sizes=[[visual.size[0]] * 3], colors=[visual.color],
+                                        fill_mode="solid"), static=True)
+    else:
+        rec.log(entity, rr.Asset3D(path=visual.mesh, albedo_factor=visual.color), static=True)
 
 
 def _terrain_mesh(heights: np.ndarray, half: float, base: float) -> rr.Mesh3D:
@@ -76,25 +186,36 @@ class RerunRecorder:
         real_time: Sleep so that logged ``sim_time`` advances no faster than wall time.
         recording: Log into an existing ``RecordingStream`` instead of creating one.
         application_id: Rerun application id of a new recording.
+        training: The recording also holds training scalars (``/train``): the layout gets a tab for them.
+
+    Raises:
+        ValueError: ``path`` does not end in ``.rrd`` or cannot be written (one line naming it), before
+            anything is logged.
     """
 
     def __init__(self, sim, *, path: str | os.PathLike | None = None, serve: bool = False,
                  worlds: Sequence[int] | None = None, real_time: bool = False,
-                 recording: rr.RecordingStream | None = None, application_id: str = "atrv_warp"):
+                 recording: rr.RecordingStream | None = None, application_id: str = "atrv_warp",
+                 training: bool = False):
         self.sim = sim
         n = sim.num_worlds
         self.worlds = list(range(min(DEFAULT_WORLDS, n))) if worlds is None else [int(w) for w in worlds]
         bad = [w for w in self.worlds if not 0 <= w < n]
         if bad:
             raise ValueError(f"worlds {bad} out of range for {n} worlds")
+        self.path = None if path is None else os.fspath(check_recording_path(path))
         self.rec = recording or rr.RecordingStream(application_id)
-        self.path = None if path is None else os.fspath(path)
-        if self.path is not None:
-            self.rec.save(self.path)
         self.viewer = ServedViewer().start() if serve else None
         """The served web viewer, if ``serve``; stopped by :meth:`close`."""
-        if self.viewer is not None:
-            self.viewer.connect(self.rec)
+        sinks = ([rr.FileSink(self.path)] if self.path is not None else []) + \
+            ([rr.GrpcSink(self.viewer.grpc_url)] if self.viewer is not None else [])
+        if sinks:  # a file and a served viewer both get every row
+            self.rec.set_sinks(*sinks)
+        self.blueprint = viewer_blueprint(self.worlds, sim.arena_cfg.half_size, training=training)
+        """The layout the recording opens with (:func:`~.blueprint.viewer_blueprint`)."""
+        self.rec.send_blueprint(self.blueprint)
+        self.offsets = world_offsets(self.worlds, sim.arena_cfg.half_size)
+        """Where each recorded world is drawn [m] (:func:`~.blueprint.world_offsets`)."""
         self.url = self.viewer.url if self.viewer is not None else None
         if self.url:
             print(f"Rerun web viewer (localhost only): {self.url}", flush=True)
@@ -118,37 +239,23 @@ class RerunRecorder:
         rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         h = arena.half_size
         (_, ground_centre, ground_half), *walls = arena.boxes()
-        if not self.sim.terrain.enabled:  # on terrain, each world's tile is drawn instead
-            rec.log("arena/ground", rr.Boxes3D(centers=[ground_centre], half_sizes=[ground_half],
-                                               colors=[_GROUND_COLOR], fill_mode="solid"), static=True)
-            ticks = np.arange(-h, h + 0.5, 1.0)
-            z = arena.ground_top + 0.002
-            lines = [[(x, -h, z), (x, h, z)] for x in ticks] + [[(-h, y, z), (h, y, z)] for y in ticks]
-            rec.log("arena/grid", rr.LineStrips3D(lines, colors=[(90, 90, 90)], radii=0.005), static=True)
-        rec.log("arena/walls", rr.Boxes3D(centers=[c for _, c, _ in walls], half_sizes=[e for _, _, e in walls],
-                                          colors=[_WALL_COLOR],
-                                          fill_mode="solid"), static=True)
-        # Rover shapes from the model (a different URDF draws right): world 0's shapes, in the local
-        # frame of their body; every world's rover is the same.
-        import newton
-
-        model = self.sim.model
-        shape_body, shape_type = model.shape_body.numpy(), model.shape_type.numpy()
-        shape_xf, shape_scale = model.shape_transform.numpy(), model.shape_scale.numpy()
+        ticks = np.arange(-h, h + 0.5, 1.0)
+        z = arena.ground_top + 0.002
+        grid = [[(x, -h, z), (x, h, z)] for x in ticks] + [[(-h, y, z), (h, y, z)] for y in ticks]
+        visuals = rover_visuals(self.sim.description)
+        wheels = {w.link for w in self.sim.description.wheels}
         for w in self.worlds:
-            for body, name in zip(self._bodies, self._body_names):
-                for s in np.flatnonzero(shape_body == body):
-                    pos, quat = shape_xf[s, :3].tolist(), shape_xf[s, 3:].tolist()
-                    scale = shape_scale[s].tolist()
-                    ent = f"world_{w}/rover/{name}/shape_{s}"
-                    if shape_type[s] == newton.GeoType.BOX:
-                        rec.log(ent, rr.Boxes3D(centers=[pos], half_sizes=[tuple(scale)],
-                                                quaternions=[rr.Quaternion(xyzw=quat)], colors=[_CHASSIS_COLOR],
-                                                fill_mode="solid"), static=True)
-                    elif shape_type[s] == newton.GeoType.CYLINDER:
-                        rec.log(ent, rr.Cylinders3D(lengths=[2 * scale[1]], radii=[scale[0]], centers=[pos],
-                                                    quaternions=[rr.Quaternion(xyzw=quat)], colors=[_WHEEL_COLOR],
-                                                    fill_mode="solid"), static=True)
+            rec.log(f"world_{w}", rr.Transform3D(translation=self.offsets[w]), static=True)
+            if not self.sim.terrain.enabled:  # on terrain, each world's tile is drawn instead
+                rec.log(f"world_{w}/arena/ground", rr.Boxes3D(centers=[ground_centre], half_sizes=[ground_half],
+                                                              colors=[_GROUND_COLOR], fill_mode="solid"), static=True)
+                rec.log(f"world_{w}/arena/grid", rr.LineStrips3D(grid, colors=[(90, 90, 90)], radii=0.005), static=True)
+            rec.log(f"world_{w}/arena/walls", rr.Boxes3D(centers=[c for _, c, _ in walls],
+                                                         half_sizes=[e for _, _, e in walls], colors=[_WALL_COLOR],
+                                                         fill_mode="solid"), static=True)
+            # every world's rover is the same: the URDF's visuals in the frame of their body
+            for i, visual in enumerate(visuals):
+                _log_visual(rec, f"world_{w}/rover/{visual.body}/visual_{i}", visual, wheel=visual.body in wheels)
 
     # ------------------------------------------------------------------ per step
     def _log_scene(self, w: int) -> None:
@@ -186,7 +293,7 @@ class RerunRecorder:
         hit = scanner.ranges[w].detach().cpu().numpy() < scanner.cfg.max_range
         self.rec.log(f"world_{w}/scan/hits", rr.Points3D(points[hit], colors=[_SCAN_COLOR], radii=0.04))
         self.rec.log(f"world_{w}/scan/rays", rr.LineStrips3D([[origin, p] for p in points],
-                                                             colors=[(*_SCAN_COLOR, 60)], radii=0.004))
+                                                             colors=[(*_SCAN_RAY_COLOR, 50)], radii=0.003))
 
     def log_step(self, *, targets=None, rewards=None, distances=None, reset_mask=None, scanner=None) -> None:
         """Log the current state of the selected worlds at the next ``step``.

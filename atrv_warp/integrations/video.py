@@ -36,7 +36,9 @@ _TARGET = (120, 160, 240)
 _PATH = (230, 140, 20)
 _ROVER = (200, 30, 30)
 _SCAN = (215, 40, 190)
-_RAY = (236, 196, 228)
+_RAY = (250, 215, 245)
+_RAY_ALPHA = 90
+"""Opacity of a drawn beam [0-255]."""
 _TEXT = (20, 20, 20)
 
 
@@ -79,16 +81,28 @@ class EvalVideo:
         episodes: Worlds recorded: the first ones, drawn in a grid of two columns.
         panel: Side of one world's panel [px] (even).
         every: Draw every ``every``-th step (the video still plays in real time).
+        follow: Side of the square of ground each panel shows, centred on its rover [m] (a camera that
+            follows it, so that the rover is tens of pixels long); ``None``: the whole arena.
     """
 
-    def __init__(self, env, *, episodes: int = 4, panel: int = 256, every: int = 2):
+    def __init__(self, env, *, episodes: int = 4, panel: int = 256, every: int = 2, follow: float | None = None):
         self.env = getattr(env, "base_env", env)
         n = self.env.sim.num_worlds
         if episodes < 1 or panel < 16 or every < 1:
             raise ValueError(f"EvalVideo needs episodes >= 1, panel >= 16 and every >= 1; got {episodes}, {panel}, {every}")
+        if follow is not None and not follow > 0:
+            raise ValueError(f"EvalVideo follow must be a positive side in metres, got {follow}")
         self.worlds = list(range(min(episodes, n)))
         self.panel = panel + panel % 2
         self.every = every
+        self.follow = follow
+        arena = self.env.sim.arena_cfg.half_size + 0.5
+        self.scale = self.panel / (follow if follow is not None else 2 * arena)
+        """Pixels per metre [px/m]."""
+        self.view = arena + (0.5 * follow if follow is not None else 0.0)
+        """Half side of the drawn background [m]: the arena, and with ``follow`` half a panel of margin."""
+        self.size = self.panel if follow is None else 2 * int(np.ceil(self.view * self.scale))
+        """Side of each world's background image [px] (a panel's crop of it, when following)."""
         self.step_dt = self.env.sim.sim_cfg.step_dt
         chassis = self.env.sim.description.chassis_box
         self.footprint = tuple(chassis[1][:2]) if chassis is not None else (0.3, 0.2)
@@ -156,16 +170,15 @@ class EvalVideo:
         return len(self.poses)
 
     def _to_px(self, xy: np.ndarray) -> np.ndarray:
-        """World x, y [m] (..., 2) to panel pixels (y down)."""
-        view = self.env.sim.arena_cfg.half_size + 0.5
-        s = self.panel / (2 * view)
+        """World x, y [m] (..., 2) to background pixels (y down)."""
+        view, s = self.view, self.scale
         return np.stack([(xy[..., 0] + view) * s, (view - xy[..., 1]) * s], axis=-1)
 
     def _background(self, i: int):
         """World ``i``'s panel without the rover: ground or terrain, grid, walls, obstacles, target."""
         from PIL import Image, ImageDraw
 
-        p, arena = self.panel, self.env.sim.arena_cfg
+        p, arena = self.size, self.env.sim.arena_cfg
         heights = self.scene["heights"][i]
         rgb = np.empty((p, p, 3), dtype=np.uint8)
         rgb[:] = _GROUND
@@ -192,17 +205,16 @@ class EvalVideo:
             if kind == "box":
                 draw.polygon([tuple(c) for c in self._to_px(shape)], fill=_OBSTACLE)
             else:
-                (cx, cy), r = self._to_px(shape[:2]), shape[2] * self.panel / (2 * (h + 0.5))
+                (cx, cy), r = self._to_px(shape[:2]), shape[2] * self.scale
                 draw.ellipse([cx - r, cy - r, cx + r, cy + r], fill=_OBSTACLE)
-        (tx, ty), r = self._to_px(self.scene["target"][i]), self.env.task_cfg.reach_radius * p / (2 * (h + 0.5))
+        (tx, ty), r = self._to_px(self.scene["target"][i]), self.env.task_cfg.reach_radius * self.scale
         draw.ellipse([tx - r, ty - r, tx + r, ty + r], outline=_TARGET, width=2)
         draw.ellipse([tx - 3, ty - 3, tx + 3, ty + 3], fill=_TARGET)
         return image
 
     def _from_px(self, px: np.ndarray) -> np.ndarray:
-        """Pixel centres along an axis to world (x, y) [m] pairs (n, 2): x of the column, y of the row."""
-        view = self.env.sim.arena_cfg.half_size + 0.5
-        s = 2 * view / self.panel
+        """Background pixel centres along an axis to world (x, y) [m] pairs (n, 2): x of the column, y of the row."""
+        view, s = self.view, 1.0 / self.scale
         return np.stack([px * s - view, view - px * s], axis=-1)
 
     def frames(self) -> Iterator[np.ndarray]:
@@ -224,21 +236,30 @@ class EvalVideo:
             steps.append(len(poses) - 1)
         for t in steps:
             for i in range(k):
-                panel = backgrounds[i].copy()
-                draw = ImageDraw.Draw(panel)
                 x, y, yaw = poses[t, i]
+                # the panel's corner in its background: the origin, or (following) half a panel up-left of the rover
+                corner = np.zeros(2) if self.follow is None else np.round(path_px[t, i] - p / 2)
+                panel = backgrounds[i].crop((*corner.astype(int), *(corner + p).astype(int)))
+                draw = ImageDraw.Draw(panel)
+
+                def px(xy, corner=corner):
+                    return [tuple(c) for c in np.reshape(xy - corner, (-1, 2))]
+
                 if self.scans and not (self.ended[i] and t > self.end_step[i]):
                     points, hits = self.scans[t]
-                    origin = tuple(path_px[t, i])
+                    (origin,) = px(path_px[t, i])
                     ends = self._to_px(points[i])
-                    for end in ends:
-                        draw.line([origin, tuple(end)], fill=_RAY)
-                    draw.point([tuple(e) for e in ends[hits[i]]], fill=_SCAN)
+                    rays = Image.new("L", panel.size, 0)  # the beams, faint: the ground stays readable
+                    ray_draw = ImageDraw.Draw(rays)
+                    for end in px(ends):
+                        ray_draw.line([origin, end], fill=_RAY_ALPHA)
+                    panel.paste(_RAY, mask=rays)
+                    draw.point(px(ends[hits[i]]), fill=_SCAN)
                 if t > 0:
-                    draw.line([tuple(q) for q in path_px[: t + 1, i]], fill=_PATH, width=2)
-                draw.polygon([tuple(c) for c in self._to_px(box_corners(x, y, yaw, hx, hy))], fill=_ROVER)
+                    draw.line(px(path_px[: t + 1, i]), fill=_PATH, width=2)
+                draw.polygon(px(self._to_px(box_corners(x, y, yaw, hx, hy))), fill=_ROVER)
                 nose = self._to_px(np.array([[x, y], [x + 1.2 * hx * np.cos(yaw), y + 1.2 * hx * np.sin(yaw)]]))
-                draw.line([tuple(nose[0]), tuple(nose[1])], fill=(255, 255, 255), width=2)
+                draw.line(px(nose), fill=(255, 255, 255), width=2)
                 ended = self.ended[i] and t >= self.end_step[i]
                 shown = (self.end_step[i] if ended else t) + 1  # steps driven
                 caption = f"world {self.worlds[i]}  {shown * self.step_dt:5.2f} s" + (f"  {self.reason[i]}" if ended else "")

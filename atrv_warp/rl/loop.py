@@ -103,7 +103,7 @@ class Evaluator:
         if recording is not None:
             from atrv_warp.integrations.recorder import RerunRecorder
 
-            self.recorder = RerunRecorder(self.env.sim, recording=recording, worlds=range(2))
+            self.recorder = RerunRecorder(self.env.sim, recording=recording, worlds=range(2), training=True)
         self.video, self.video_dir, self.gif = None, video_dir, gif
         if video_dir is not None:
             from atrv_warp.integrations.video import EvalVideo

@@ -3,7 +3,9 @@
 - this package: :func:`run`, which starts the node, and :data:`MISSING_ROS_MESSAGE`;
 - :mod:`.parameters`: the node's parameters and driving commands;
 - :mod:`.node`: the rclpy node; :mod:`.base`: the base driver (velocity control, odometry, IMU);
-- :mod:`.bag`: the MCAP bag writer; :mod:`.drive`: the calibration's scripted excitation driver.
+- :mod:`.bag`: the MCAP bag writer; :mod:`.drive`: the calibration's scripted excitation driver;
+- :mod:`.frames`: the frame tree the node publishes and records as /tf (:mod:`.tf2_build`: tf2_msgs's
+  type support where no ROS install has it); :mod:`.markers`: the world as ``visualization_msgs/MarkerArray``.
 
 rclpy is optional: this package imports without it (and without the simulator: importing
 :mod:`.base` loads torch alone), :func:`run` says how to install it, and :mod:`.node` (the rclpy node)
@@ -17,9 +19,10 @@ import sys
 __all__ = ["MISSING_ROS_MESSAGE", "run"]
 
 MISSING_ROS_MESSAGE = (
-    "ROS 2 Python packages are not installed (needed: rclpy, geometry_msgs, std_msgs, rosgraph_msgs).\n"
+    "ROS 2 Python packages are not installed (needed: rclpy, geometry_msgs, std_msgs, rosgraph_msgs, "
+    "visualization_msgs).\n"
     "Install the extra:  pip install -e '.[ros]'   (ros-rclpy[fastrtps], ros-geometry-msgs, ros-std-msgs, "
-    "mcap-ros2-support from PyPI), or source a ROS 2 installation."
+    "ros-visualization-msgs, mcap-ros2-support from PyPI), or source a ROS 2 installation."
 )
 
 

@@ -1,5 +1,7 @@
 """ROS 2 bags in MCAP format (``ros2 bag info/play`` read them), written with mcap-ros2-support:
-:class:`BagWriter` and the message definitions it registers, without rclpy. Reading them back is
+:class:`BagWriter` and the message definitions it registers, without rclpy. ``tf2_msgs/msg/TFMessage``
+(/tf, /tf_static) is written from its definition text too, so a bag carries the frame tree although
+no tf2_msgs type support is installed. Reading them back is
 :mod:`atrv_warp.integrations.calibration.log`'s job."""
 
 from __future__ import annotations
@@ -27,9 +29,15 @@ _DEFINITIONS = {  # ROS 2 message definitions (ros2msg), each with the types it 
                           ("std_msgs/Header", "geometry_msgs/PoseWithCovariance", "geometry_msgs/TwistWithCovariance")),
     "sensor_msgs/JointState": (("std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\n"
                                 "float64[] effort"), ("std_msgs/Header",)),
+    "geometry_msgs/Transform": ("geometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation",
+                                ("geometry_msgs/Vector3", "geometry_msgs/Quaternion")),
+    "geometry_msgs/TransformStamped": ("std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform",
+                                       ("std_msgs/Header", "geometry_msgs/Transform")),
+    # tf2_msgs is not on the package index: its one message, written from its definition
+    "tf2_msgs/TFMessage": ("geometry_msgs/TransformStamped[] transforms", ("geometry_msgs/TransformStamped",)),
 }
 RECORDED_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/Twist", "nav_msgs/msg/Odometry",
-                  "sensor_msgs/msg/JointState", "std_msgs/msg/String")
+                  "sensor_msgs/msg/JointState", "std_msgs/msg/String", "tf2_msgs/msg/TFMessage")
 """Message types :class:`BagWriter` writes."""
 
 

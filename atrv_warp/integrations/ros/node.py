@@ -10,10 +10,11 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import rclpy
 import torch
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PoseStamped, Twist
+from geometry_msgs.msg import PoseStamped, TransformStamped, Twist
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
@@ -22,11 +23,14 @@ from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState, LaserScan
 from std_msgs.msg import String
+from visualization_msgs.msg import MarkerArray
 
 from atrv_warp.core.geometry import quat_to_matrix, yaw_to_quat
 from atrv_warp.core.kinematics import track_width
 from atrv_warp.integrations.ros.bag import BagWriter, joint_state_dict, odometry_dict, pose_dict, twist_dict
 from atrv_warp.integrations.ros.base import BaseParams, VelocityController, WheelOdometry, imu_reading
+from atrv_warp.integrations.ros.frames import WORLD_FRAME, planar_matrix, pose_matrix, transform_dict, turn_matrix
+from atrv_warp.integrations.ros.markers import scene_of, world_markers
 from atrv_warp.integrations.ros.parameters import COMMANDS, GOAL, MAX_ROVERS, PARAMETERS, VELOCITY
 from atrv_warp.sim.simulator import DRIVE_MODE_TORQUES, DriveMode
 from atrv_warp.task.env import ATRVjrEnv
@@ -46,6 +50,17 @@ class NodeConfigError(ValueError):
 
 def _stamp(ns: int) -> Time:
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def _transform_msg(t: dict) -> TransformStamped:
+    """A :func:`~.frames.transform_dict` as a ``geometry_msgs/TransformStamped``."""
+    msg = TransformStamped()
+    msg.header.stamp = Time(**t["header"]["stamp"])
+    msg.header.frame_id, msg.child_frame_id = t["header"]["frame_id"], t["child_frame_id"]
+    tr, rot = msg.transform.translation, msg.transform.rotation
+    tr.x, tr.y, tr.z = (t["transform"]["translation"][k] for k in "xyz")
+    rot.x, rot.y, rot.z, rot.w = (t["transform"]["rotation"][k] for k in "xyzw")
+    return msg
 
 
 def unknown_parameters(args: list[str] | None) -> list[str]:
@@ -68,6 +83,12 @@ class RoverIO:
         self.controller = VelocityController(base)
         self.odometry = WheelOdometry(base)
         self.prev_vel = torch.zeros(3)
+        tf_prefix = f"rover_{index}/" if prefix else ""  # its /tf frame names (frames.py)
+        self.tf_odom, self.tf_base = tf_prefix + node.odom_frame, tf_prefix + node.base_frame
+        self.tf_chassis = tf_prefix + node.sim.description.chassis
+        self.tf_prefix = tf_prefix
+        self.tf_skipped = False
+        """The last state publication's /tf was left out (a non-finite pose); logged once until it is finite."""
         self.pose_pub = node.create_publisher(PoseStamped, f"{prefix}/pose", qos)
         self.status_pub = node.create_publisher(String, f"{prefix}/goal_status", 10)
         self.odom_pub = node.create_publisher(Odometry, f"{prefix}/odom", 10)
@@ -100,6 +121,7 @@ class RoverIO:
         self.node.record(f"{self.prefix}/goal", "geometry_msgs/msg/PoseStamped", pose_dict(msg))
         self.goal = g
         self.pending = GOAL
+        self.node.publish_markers()  # the goal disc
         self.node.log.info(f"goal ({g[0]:.2f}, {g[1]:.2f}) received: driving there")
 
     def on_cmd_vel(self, msg: Twist) -> None:
@@ -153,6 +175,7 @@ class RoverIO:
         self.pose_pub.publish(msg)
         node.record(f"{self.prefix}/pose", "geometry_msgs/msg/PoseStamped", pose_dict(msg), ns)
         self.publish_odometry(ns, p)
+        self.publish_frames(ns, p)
         self.publish_joints(ns)
         self.publish_imu(ns, frame_pose, accel)
         if self.scan_pub is not None:
@@ -196,6 +219,39 @@ class RoverIO:
         tw.angular.x, tw.angular.y, tw.angular.z = w_body.tolist()
         self.truth_pub.publish(truth)
         node.record(f"{self.prefix}/ground_truth/odom", "nav_msgs/msg/Odometry", odometry_dict(truth), ns)
+
+    def static_frames(self, ns: int) -> list[dict]:
+        """This rover's /tf_static: ``base_link`` on the chassis link (when named apart), and the chassis's
+        fixed frames (sensors) from the URDF."""
+        desc = self.node.sim.description
+        out = [] if self.tf_base == self.tf_chassis else [transform_dict(self.tf_base, self.tf_chassis, ns, np.eye(4))]
+        return out + [transform_dict(self.tf_chassis, self.tf_prefix + f.name, ns, np.asarray(f.transform, dtype=float))
+                      for f in desc.frames]
+
+    def publish_frames(self, ns: int, pose: list[float]) -> None:
+        """This rover's /tf, live (where tf2_msgs loads) and to the bag: world -> odom -> base_link (odometry,
+        corrected to the true pose) and the turning wheels (:mod:`.frames`). A non-finite pose is never
+        published: the rover's /tf is left out for the step, with one line logged."""
+        node = self.node
+        if node.bag is None and node.tf_pub is None:
+            return
+        odo, wheels = self.odometry, node.wheel_positions(self.index)
+        if not all(math.isfinite(v) for v in (*pose, odo.x, odo.y, odo.yaw, *wheels)):
+            if not self.tf_skipped:
+                node.log.warning(f"{self.prefix or 'rover'}: non-finite pose, its /tf is not published until it "
+                                 "is finite again")
+            self.tf_skipped = True
+            return
+        self.tf_skipped = False
+        world_base, odom_base = pose_matrix(pose[:3], pose[3:7]), planar_matrix(odo.x, odo.y, odo.yaw)
+        transforms = [transform_dict(WORLD_FRAME, self.tf_odom, ns, world_base @ np.linalg.inv(odom_base)),
+                      transform_dict(self.tf_odom, self.tf_base, ns, odom_base)]
+        transforms += [transform_dict(self.tf_chassis, self.tf_prefix + w.link, ns,
+                                      np.asarray(w.origin, dtype=float) @ turn_matrix(w.axis, q))
+                       for w, q in zip(node.sim.description.wheels, wheels)]
+        node.record("/tf", "tf2_msgs/msg/TFMessage", {"transforms": transforms}, ns)
+        if node.tf_pub is not None:
+            node.tf_pub.publish(node.tf_message(transforms))
 
     def publish_joints(self, ns: int) -> None:
         node, k = self.node, self.index
@@ -263,6 +319,8 @@ class RoverSimNode(Node):
         self.log = self.get_logger()
         self.args = args
         self.bag: BagWriter | None = None
+        self.tf_pub = None
+        """Live /tf's publisher, where tf2_msgs loads (parameter ``tf``)."""
         self.sim = None
         self.scanner = None
         self.rovers: list[RoverIO] = []
@@ -315,11 +373,21 @@ class RoverSimNode(Node):
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.create_publisher(String, "/robot_description", latched).publish(String(data=Path(desc.path).read_text()))
+        urdf = Path(desc.path).read_text()
+        self.create_publisher(String, "/robot_description", latched).publish(String(data=urdf))
+        self.marker_pub = self.create_publisher(MarkerArray, "/visualization_marker_array", latched)
         self.rovers = [RoverIO(self, i, f"/rover_{i}" if k > 1 else "", qos, base) for i in range(k)]
         for rover, (x, y, yaw) in zip(self.rovers, starts):  # the odom frame starts at the start pose
             rover.odometry.x, rover.odometry.y, rover.odometry.yaw = x, y, yaw
+        self.publish_markers()
+        self.tf_pub = self.tf_message = None
+        if p["tf"]:
+            self._start_tf(latched)
         self.bag = BagWriter(p["bag"]) if p["bag"] else None
+        if self.bag is not None:  # what a 3D panel needs to draw the rover from the bag alone
+            self.record("/robot_description", "std_msgs/msg/String", {"data": urdf})
+            self.record("/tf_static", "tf2_msgs/msg/TFMessage",
+                        {"transforms": [t for r in self.rovers for t in r.static_frames(self.stamp_ns())]})
 
     def _fail(self, message: str):
         self.log.error(message)
@@ -360,6 +428,33 @@ class RoverSimNode(Node):
                 self.policy = (load_policy(p["policy"], task=p["task"]), TensorDict)
             except (FileNotFoundError, FileFormatError) as err:
                 self._fail(f"parameter policy: {err}")
+
+    def _start_tf(self, latched: QoSProfile) -> None:
+        """Live /tf and /tf_static, where tf2_msgs loads (a ROS install's, or built from its definition on
+        first use: :mod:`.tf2_build`); otherwise one line says why and the node goes on without."""
+        from atrv_warp.integrations.ros.tf2_build import load_tf_message
+
+        cls, where = load_tf_message()
+        if cls is None:
+            self.log.warning(f"no live /tf: {where}")
+            return
+        self.log.info(f"/tf and /tf_static from {where}")
+        self.tf_message = lambda transforms: cls(transforms=[_transform_msg(t) for t in transforms])
+        self.tf_pub = self.create_publisher(cls, "/tf", 100)
+        ns = self.stamp_ns()
+        self.create_publisher(cls, "/tf_static", latched).publish(
+            self.tf_message([t for r in self.rovers for t in r.static_frames(ns)]))
+
+    def publish_markers(self) -> None:
+        """The latched /visualization_marker_array (world frame): walls, each rover's obstacles, goal and
+        terrain (:mod:`.markers`); a rover whose world holds a non-finite pose is left out, with one line."""
+        several = len(self.rovers) > 1
+        scenes = [scene_of(self.sim, r.index, ns=f"rover_{r.index}/" if several else "", goal=r.goal,
+                           goal_radius=self.params["reach_radius"]) for r in self.rovers]
+        msg, skipped = world_markers(self.sim.arena_cfg, scenes, WORLD_FRAME, _stamp(self.stamp_ns()))
+        for name in skipped:
+            self.log.warning(f"markers of {name} not published: its world holds a non-finite pose")
+        self.marker_pub.publish(msg)
 
     # ------------------------------------------------------------------ simulator reads
     def stamp_ns(self) -> int:

@@ -32,7 +32,10 @@ PARAMETERS = (
     ("odom_frame", "odom", "frame of /odom (REP 105)"), ("base_frame", "base_link", "child frame of /odom"),
     ("policy", "", "policy file for goal mode (default: the shipped one)"),
     ("bag", "", ("write an MCAP ROS 2 bag here: /cmd_vel, /joint_states, /odom, /ground_truth/odom, /pose, "
-                 "/command, /goal, /goal_status (what atrv-calibrate reads; not /imu or /scan)")),
+                 "/command, /goal, /goal_status (what atrv-calibrate reads), /tf, /tf_static and "
+                 "/robot_description (what a 3D view draws the rover from); not /imu or /scan")),
+    ("tf", True, ("publish live /tf and /tf_static (tf2_msgs: a ROS install's, or built from its definition "
+                  "with gcc/g++ on first use, cached; without, one line says why)")),
     ("sim_config", "", "simulator-config TOML ([rover], [contact]; e.g. atrv-calibrate's output) applied to every rover"),
     ("wait_for_subscribers", 0, "wait for this many /pose subscribers before starting"),
     ("reach_radius", 1.0, "goal mode: reached within this distance [m]"),
