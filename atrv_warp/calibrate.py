@@ -27,10 +27,11 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 
-def _parser():
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser (the docs' command table reads it too)."""
     from atrv_warp.integrations.calibration.fit import COMMAND_SOURCES, DEFAULT_FIT, FIT_PARAMETERS, CalibrationConfig
     from atrv_warp.integrations.calibration.log import Topics
 
@@ -102,11 +103,11 @@ def _record(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     if args.record_example:
         return _record(args)
     if not args.bag:
-        _parser().error("give a BAG to fit to (or --record-example OUT.mcap)")
+        build_parser().error("give a BAG to fit to (or --record-example OUT.mcap)")
     from atrv_warp.integrations.calibration import (
         BagError,
         CalibrationConfig,

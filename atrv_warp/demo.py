@@ -10,14 +10,20 @@ import math
 import sys
 import time
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser (the docs' command table reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.demo", description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=3.0, help="driving time after 1 s of settling [s]")
     parser.add_argument("--variant", default="realistic", help="rover variant: realistic | reference")
     parser.add_argument("--device", default="cpu", help="Warp device, e.g. cpu or cuda:0")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     from atrv_warp.sim.simulator import DriveMode, RoverSim
 

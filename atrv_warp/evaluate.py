@@ -25,10 +25,11 @@ import sys
 
 from atrv_warp.runtime import add_verbose_argument, device_summary, error_line, set_verbose
 
-__all__ = ["baseline_main", "main"]
+__all__ = ["baseline_main", "build_parser", "main"]
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser (the docs' command table reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.evaluate", description=__doc__.splitlines()[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     parser.add_argument("checkpoint", nargs="?", default=None, help="policy or checkpoint file (default: shipped)")
@@ -54,6 +55,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--video-follow", type=float, default=None, metavar="METRES",
                         help="each panel follows its rover over this much ground (default: the whole arena)")
     add_verbose_argument(parser)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error("--episodes must be >= 1")

@@ -20,14 +20,20 @@ import sys
 from atrv_warp.runtime import error_line
 from atrv_warp.storage import FileFormatError
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser (the docs' command table reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.export", description=__doc__.splitlines()[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     parser.add_argument("paths", nargs="+", metavar="[POLICY] OUT", help="policy file (default: shipped), output .pt2")
     parser.add_argument("--onnx", action="store_true", help="also write OUT.onnx, checked with onnxruntime")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     if len(args.paths) > 2:
         parser.error("expected [POLICY] OUT")

@@ -12,13 +12,19 @@ from .sim.config import get_variant, replace_checked
 from .sim.model import format_table, format_tree
 from .sim.urdf import load_rover
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser (the docs' command table reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.model", description=__doc__.splitlines()[0])
     parser.add_argument("--urdf", help="URDF file (default: the packaged ATRV-Jr)")
     parser.add_argument("--variant", default="realistic", help="rover variant: realistic | reference")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     rover = get_variant(args.variant)
     if args.urdf:

@@ -1,4 +1,4 @@
-"""Train a driver with TorchRL SAC: ``python -m atrv_warp.train``.
+"""Train a driver with TorchRL SAC or PPO: ``python -m atrv_warp.train``.
 
 Usage::
 

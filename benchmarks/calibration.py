@@ -33,6 +33,9 @@ from pathlib import Path
 
 from _common import write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 TRUTH_FILE = ROOT / "examples" / "calibration_truth.toml"
@@ -100,7 +103,7 @@ def main() -> int:
     result = {"benchmark": "calibration", "minutes": args.minutes, "seed": args.seed, "pose_noise_m": args.noise,
               "truth": truth, "truth_file": str(TRUTH_FILE.relative_to(ROOT)), "runs": runs,
               "cores": os.cpu_count(), "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    path = write_results(RESULTS / "calibration.json", result)
+    path = write_results(RESULTS / "calibration.json", result, version=VERSION)
     print(f"\nwrote {path}")
     shutil.rmtree(work, ignore_errors=True)
     return 0

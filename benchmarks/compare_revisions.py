@@ -28,6 +28,9 @@ from pathlib import Path
 
 from _common import write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 
@@ -126,7 +129,7 @@ def main() -> int:
             subprocess.run(["git", "worktree", "remove", "--force", str(old_tree)], cwd=ROOT, check=False)
     result = {"old": old_rev, "new": new_rev, "new_substeps": args.new_substeps, "rounds": args.rounds,
               "seconds": args.seconds, "rows": rows}
-    write_results(args.out, result)
+    write_results(args.out, result, version=VERSION)
     print(f"wrote {args.out}")
     return 0
 

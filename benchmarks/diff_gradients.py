@@ -32,6 +32,9 @@ from pathlib import Path
 
 from _common import pin_to_one_core, write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 SCENARIOS = {"straight": (0.1, 0.1), "slip": (1.0, 1.0), "curve": (0.2, 0.4), "spin": (-0.3, 0.3)}
 
@@ -170,7 +173,7 @@ def main() -> int:
     results = {"benchmark": "diff_gradients", "wrench_fix": not args.without_wrench_fix, "agreement": agreement,
                "cost": cost, "time": time.strftime("%Y-%m-%d %H:%M:%S")}
     report(results)
-    out = write_results(args.out, results)
+    out = write_results(args.out, results, version=VERSION)
     print(f"\nwritten to {out}")
     return 0
 

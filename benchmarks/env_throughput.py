@@ -21,6 +21,9 @@ from pathlib import Path
 
 from _common import write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
@@ -117,7 +120,7 @@ def main() -> int:
               "scaling": {k: {"1_worker_fps": v[1], "2_workers_fps": v[2], "speedup": v[2] / v[1]}
                           for k, v in scaling.items()},
               "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    out = write_results(args.out, result)
+    out = write_results(args.out, result, version=VERSION, task=True)
     print("\n| N | raw sim frames/s | env.rollout | overhead | Collector | overhead |\n|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         print(f"| {r['num_envs']} | {r['raw_sim_fps']:,.0f} | {r['rollout_fps']:,.0f} | "

@@ -26,6 +26,9 @@ from pathlib import Path
 
 from _common import write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 
@@ -94,7 +97,7 @@ def main() -> int:
     print(f"\ninstall: {t_install:.0f} s ({result['pip_download_cache']} pip cache), venv {site_size / 2**30:.2f} GiB")
     print(f"kernel compile on first run: {result['cold_compile_s']:.0f} s "
           f"(smoke run {runs[0]:.0f} s cold vs {runs[1]:.0f} s warm; cache {result['kernel_cache_mib']:.0f} MiB)")
-    write_results(args.out, result)
+    write_results(args.out, result, version=VERSION, dynamics=False)
     print(f"wrote {args.out}")
     return 0
 

@@ -21,6 +21,9 @@ from pathlib import Path
 
 from _common import pin_to_one_core, write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
@@ -110,7 +113,7 @@ def main() -> int:
               f"{layouts['world_reset_5pct_ms']:.2f}", flush=True)
     result = {"benchmark": "nav_throughput", "target": "nav >= 0.5 x reach at N = 1024", "compile_s": compile_s,
               "rows": rows, "time": time.strftime("%Y-%m-%d %H:%M:%S"), "python": sys.version.split()[0]}
-    out = write_results(args.out, result)
+    out = write_results(args.out, result, version=VERSION, task=True)
     print(f"written to {out}")
     return 0
 

@@ -14,6 +14,9 @@ from pathlib import Path
 import numpy as np
 from _common import write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
@@ -31,6 +34,9 @@ def main() -> int:
     ref_accel = (vs[97] - vs[19]) / (0.05 * 78)  # from 1 s to 4.9 s of driving
     ref_analytic = rolling_acceleration(sim, 4.0)
     ref_depth = sim.arena_cfg.ground_top + sim.rover_cfg.wheel_radius - sim.rest_height
+    # the reference tutorial's distances after 1, 3 and 4.9 s of driving, and how far ahead of them we are
+    drive = {"t_s": [1.0, 3.0, 4.9], "x_m": [float(xs[i]) for i in (19, 59, 97)], "reference_x_m": [0.17, 1.72, 4.70]}
+    drive["ahead"] = [x / r - 1.0 for x, r in zip(drive["x_m"], drive["reference_x_m"])]
     rows += [
         ("reference: z range while settling [m]", f"{min(z):.3f} .. {max(z):.3f}", "0.125 .. 0.150"),
         ("reference: x after 1 s of driving [m]", f"{xs[19]:.3f}", "0.17"),
@@ -91,7 +97,10 @@ def main() -> int:
         print(f"{name:{width}s}  {ours:>16s}  {ref}")
     out = write_results(RESULTS / "physics_report.json",
                         {"rows": [dict(zip(("quantity", "atrv_warp", "reference"), r)) for r in rows],
-                         "time": time.strftime("%Y-%m-%d %H:%M:%S")})
+                         "reference_drive": drive,
+                         "static_depth_mm": {"reference": 1e3 * ref_depth, "realistic": 1e3 * depth},
+                         "damping_ceiling": {"sim_dt_s": [0.01, FAST_SIM_DT], "onset_mm": onset},
+                         "time": time.strftime("%Y-%m-%d %H:%M:%S")}, version=VERSION)
     print(f"\nwritten to {out}")
     return 0
 

@@ -20,6 +20,9 @@ from pathlib import Path
 
 from _common import pin_to_one_core, write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 PRESETS = ("none", "wide")
 
@@ -88,7 +91,7 @@ def main() -> int:
     result = {"benchmark": "randomization_cost", "target": "wide no more than 10 % slower than none at N = 1024",
               "compile_s": compile_s, "seconds": args.seconds, "rounds": args.rounds, "rows": rows,
               "time": time.strftime("%Y-%m-%d %H:%M:%S"), "python": sys.version.split()[0]}
-    out = write_results(args.out, result)
+    out = write_results(args.out, result, version=VERSION, task=True)
     print(f"written to {out}")
     return 0
 

@@ -23,6 +23,9 @@ from pathlib import Path
 
 from _common import write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
@@ -98,7 +101,7 @@ def main() -> int:
     print(f"randomized - plain: {result['wide_gain_points']:+.1f} points on 'wide', "
           f"{result['nominal_gap_points']:+.1f} points on the nominal rover")
     result["time"] = time.strftime("%Y-%m-%d %H:%M:%S")
-    out = write_results(args.out, result)
+    out = write_results(args.out, result, version=VERSION, task=True, policies=tuple(paths.values()))
     print(f"written to {out}")
     if args.figure:
         draw(result, Path(args.figure))

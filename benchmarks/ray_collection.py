@@ -30,6 +30,9 @@ from pathlib import Path
 
 from _common import write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
@@ -117,7 +120,7 @@ def main() -> int:
               "target": "Ray >= 0.8 x local multi-process (overhead within 20 %)",
               "met": all(v >= 0.8 for v in ratios.values()),
               "load_avg_1min_at_end": os.getloadavg()[0], "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    out = write_results(args.out, result)
+    out = write_results(args.out, result, version=VERSION, task=True)
     print(f"\n| workers x {args.worlds} worlds, {args.steps} steps/batch | MultiSyncCollector frames/s | "
           "RayCollector frames/s | Ray / local |\n|---:|---:|---:|---:|")
     for k in (1, 2):

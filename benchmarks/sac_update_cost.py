@@ -22,6 +22,9 @@ from pathlib import Path
 
 from _common import write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
@@ -154,7 +157,7 @@ def main() -> int:
     cands = variants(args.skip_compile)
     out = write_results(RESULTS / "sac_update_cost.json", {"benchmark": "sac_update_cost", "rows": rows,
                                                            "variants": cands,
-                                                           "time": time.strftime("%Y-%m-%d %H:%M:%S")})
+                                                           "time": time.strftime("%Y-%m-%d %H:%M:%S")}, version=VERSION, dynamics=False)
     print("\n| threads | width | batch | ms/update |\n|---:|---:|---:|---:|")
     for r in rows:
         print(f"| {r['threads']} | {r['width']} | {r['batch']} | {r['ms_per_update']:.1f} |")

@@ -20,6 +20,9 @@ from pathlib import Path
 
 from _common import pin_to_one_core, write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
@@ -135,7 +138,7 @@ def main() -> int:
         "choices": choices,
         "time": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
-    out = write_results(args.out, result)
+    out = write_results(args.out, result, version=VERSION)
     print("\n| worlds | env-steps/s | ms/step |\n|---:|---:|---:|")
     for r in rows:
         print(f"| {r['num_worlds']} | {r['env_steps_per_s']:,.0f} | {r['ms_per_step']:.3f} |")

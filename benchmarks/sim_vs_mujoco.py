@@ -33,6 +33,9 @@ from pathlib import Path
 import numpy as np
 from _common import pin_to_one_core, write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 HERE = Path(__file__).resolve().parent
 TWIN_DIR = HERE / "mujoco_twin"
 RESULTS = HERE / "results"
@@ -284,7 +287,7 @@ def main() -> int:
         "rows": rows,
         "time": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
-    out_path = write_results(args.out, result)
+    out_path = write_results(args.out, result, version=VERSION)
     print("\n| worlds | ours env-steps/s | MuJoCo env-steps/s | ours / MuJoCo |\n|---:|---:|---:|---:|")
     for r in rows:
         print(f"| {r['num_worlds']} | {r['ours_env_steps_per_s']:,.0f} | {r['mujoco_env_steps_per_s']:,.0f} | "

@@ -30,6 +30,9 @@ from pathlib import Path
 
 from _common import write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 COMMANDS = [(0.0, 0.25), (0.0, 0.5), (0.0, 1.0), (0.3, 0.3), (0.5, 0.5), (0.5, -0.25), (1.0, 0.2)]
 FRICTIONS = (0.3, 0.5, 0.8, 1.0)
@@ -162,7 +165,7 @@ def main() -> int:
     out = {"track_width": track_width(RoverSim(1)), "effective_track_factor": factor, "band": BAND,
            "chi_inside_band": inside, "turning": rows, "slip_ratio_2Nm": slip, "odometry": odo, "traction": trac,
            "slopes": slopes}
-    write_results(RESULTS / "skid_calibration.json", out)
+    write_results(RESULTS / "skid_calibration.json", out, version=VERSION)
     print(f"\nwrote {RESULTS / 'skid_calibration.json'}")
     return 0
 

@@ -36,6 +36,9 @@ from pathlib import Path
 
 from _common import write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 
@@ -138,7 +141,7 @@ def main() -> int:
                 "ratio_to_default": ratio, "bit_identical_to_default": same}
             cells.append(f"{median:,.0f}, {ratio:.3f}")
         print(f"| {v} | {compile_s[v]:.1f} | " + " | ".join(cells) + f" | {'yes' if identical else 'no'} |")
-    out = write_results(args.out, result)
+    out = write_results(args.out, result, version=VERSION)
     print(f"written to {out}")
     return 0
 

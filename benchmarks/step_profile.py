@@ -22,6 +22,9 @@ from pathlib import Path
 
 from _common import pin_to_one_core, write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
@@ -124,7 +127,7 @@ def main() -> int:
         "benchmark": "step_profile", "worlds": args.worlds, "substeps": sim.substeps, "steps": args.steps,
         "ms_per_step_eager": total * 1e3, "kernel_ms_per_step": timed_ms, "launch_overhead_us": overhead * 1e6,
         "by_owner": by_owner, "ms_by_owner": ms_by_owner, "ours_free_ceiling": ours_free_ceiling,
-        "rows": rows, "time": time.strftime("%Y-%m-%d %H:%M:%S")})
+        "rows": rows, "time": time.strftime("%Y-%m-%d %H:%M:%S")}, version=VERSION)
     print(f"written to {out}")
     return 0
 

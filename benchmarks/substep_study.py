@@ -27,6 +27,9 @@ from pathlib import Path
 
 from _common import pin_to_one_core, write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
@@ -168,7 +171,7 @@ def main() -> int:
               f"wall impacts: fastest {row['impact_max_speed']:.2f} m/s (top {row['impact_top_speed']:.2f}), "
               f"over 1.2x {row['impact_overspeed_worlds']}, non-finite {row['impact_nonfinite_worlds']}", flush=True)
     out = write_results(args.out, {"benchmark": "substep_study", "worlds": args.worlds, "rows": rows,
-                                   "time": time.strftime("%Y-%m-%d %H:%M:%S")})
+                                   "time": time.strftime("%Y-%m-%d %H:%M:%S")}, version=VERSION)
     print(f"written to {out}")
     return 0
 

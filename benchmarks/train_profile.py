@@ -21,6 +21,9 @@ from pathlib import Path
 
 from _common import write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
@@ -142,7 +145,7 @@ def main() -> int:
               "threads_after_collector_shutdown": threads_after, "update_ms_after_shutdown": after_shutdown,
               "update_ms_threads_restored": restored, "evaluation_s": eval_s, "evaluation_share": eval_share,
               "config": "default preset", "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    write_results(args.out, result)
+    write_results(args.out, result, version=VERSION, task=True)
     print(f"wrote {args.out}")
     return 0
 

@@ -29,6 +29,9 @@ from pathlib import Path
 
 from _common import write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -192,7 +195,7 @@ def main() -> int:
               "minutes_per_seed": minutes, "overrides": extra, "compile_s": compile_s,
               "summarized_from_kept_runs": args.summarize, "seeds": runs,
               "median": median, "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    write_results(out, result)
+    write_results(out, result, version=VERSION, task=True)
     print(f"\n| seed | {100 * args.threshold:.0f} % after [s] | frames then | final success of the best policy | updates/s | frames/s |"
           "\n|---:|---:|---:|---:|---:|---:|")
     for r in runs:

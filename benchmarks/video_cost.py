@@ -20,6 +20,9 @@ from pathlib import Path
 
 from _common import pin_to_one_core, write_results
 
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
 RESULTS = Path(__file__).resolve().parent / "results"
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -78,7 +81,7 @@ def main() -> int:
         print(f"| {r['task']} | {m['evaluation_s']:.2f} | {r['recording_s']:.2f} | {m['mp4_s']:.2f} | "
               f"{m['mp4_and_gif_s'] - m['mp4_s']:.2f} | {100 * r['video_share_of_evaluation']:.0f} % | "
               f"{r['frames']} ({r['width']}x{r['height']}) | {r['mp4_bytes'] / 1e6:.2f} MB |")
-    out = write_results(args.out, {"benchmark": "video_cost", "rows": rows, "time": time.strftime("%Y-%m-%d %H:%M:%S")})
+    out = write_results(args.out, {"benchmark": "video_cost", "rows": rows, "time": time.strftime("%Y-%m-%d %H:%M:%S")}, version=VERSION, task=True)
     print(f"written to {out}")
     return 0
 

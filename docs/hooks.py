@@ -1,26 +1,193 @@
-"""mkdocs hook: tables drawn from ``benchmarks/results/*.json`` at build time, so a measured figure
-lives in its results file alone.
+"""mkdocs hook: figures drawn from the results files at build time, and checked against the code.
 
-A page writes ``{{ results_table NAME }}`` on a line of its own; :data:`TABLES` maps ``NAME`` to the
-function that reads the file and returns the Markdown table. An unknown name or a missing file
-fails the build (mkdocs.yml: ``hooks: [docs/hooks.py]``).
+A measured figure lives in its results file alone (``benchmarks/results/*.json``, written by
+``benchmarks/_common.write_results`` with its provenance). A page cites it in one of two ways:
+
+- ``{{ results_table NAME }}`` on a line of its own: :data:`TABLES` maps ``NAME`` to the function
+  that reads the file(s) and returns the Markdown table;
+- ``{{ result FILE:KEY.PATH | FORMAT }}`` inline: one value. ``FILE`` is relative to
+  ``benchmarks/results/`` (or to the repository when it starts with ``docs/`` or ``benchmarks/``);
+  ``KEY.PATH`` is dict keys and list indices joined by dots, and ``[field=value,other=value]`` picks the first
+  list element with those fields; ``FORMAT`` is a Python format spec (``.1f``, ``,.0f``),
+  optional; ``.1%`` gives a percentage as the pages write it (``91.3 %``).
+
+Every file a page cites is checked against the code as it is now (:func:`status`): the benchmark
+script's ``VERSION``, the dynamics fingerprint (``atrv_warp.sim.checks.dynamics_fingerprint``) and, for
+figures that ran an environment, the task fingerprint (``atrv_warp.task.evaluation.task_fingerprint``),
+each recomputed once per build, and the sha256 of each policy file it ran. A file that no longer matches,
+or that records no provenance (written before it was recorded), fails the build unless the page marks
+it historical with a line ``{{ historical FILE }}``, which renders as a note with the file's date and
+the command that redraws it. A missing file or key, an unknown table, or a historical mark for a file
+the page does not cite or whose figures are current fails the build too, naming the page, the file and
+the key.
+
+A line ``{{ command_table }}`` (or ``{{ command_table TOOL }}``) renders the command-line tools' table
+(or one tool's arguments) from their own parsers (:func:`command_table`).
+
+``python docs/hooks.py --stale`` lists every stale or unknown figure of every page, and the
+benchmark that redraws it; it exits 1 if one is not marked historical.
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import itertools
 import json
 import math
 import re
+import subprocess
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
 DOCS = Path(__file__).resolve().parent
-RESULTS = DOCS.parent / "benchmarks" / "results"
+ROOT = DOCS.parent
+RESULTS = ROOT / "benchmarks" / "results"
+BENCHMARKS = ROOT / "benchmarks"
 PLACEHOLDER = re.compile(r"^\{\{ results_table (\w+) \}\}$", re.MULTILINE)
+RESULT = re.compile(r"\{\{ result (?P<file>[\w./-]+\.json):(?P<key>[^|}]+?)(?: \| (?P<fmt>[^}]*?))? \}\}")
+HISTORICAL = re.compile(r"^\{\{ historical (?P<file>[\w./-]+\.json) \}\}$", re.MULTILINE)
+VERSION_LINE = re.compile(r"^VERSION = (\d+)$", re.MULTILINE)
+
+
+class FigureError(Exception):
+    """A page cites a figure that cannot be drawn (a missing file or key) or is stale."""
+
+
+def results_path(name: str) -> Path:
+    """A cited file's path: under ``benchmarks/results/``, or the repository's for ``docs/...``, ``benchmarks/...``."""
+    return ROOT / name if name.startswith(("docs/", "benchmarks/")) else RESULTS / name
+
+
+_cited: list[str] | None = None
+"""While a page renders, the files its tables and values read (:func:`render`)."""
 
 
 def _load(name: str) -> dict:
-    return json.loads((RESULTS / name).read_text())
+    if _cited is not None and name not in _cited:
+        _cited.append(name)
+    path = results_path(name)
+    if not path.is_file():
+        raise FigureError(f"results file {name} not found ({path})")
+    return json.loads(path.read_text())
+
+
+# --- provenance ---------------------------------------------------------------------------------
+
+@functools.cache
+def current_dynamics() -> str:
+    """The dynamics fingerprint of the code as it is now (computed once per process: a 2-s rollout)."""
+    from atrv_warp.sim.checks import dynamics_fingerprint
+
+    return dynamics_fingerprint()
+
+
+@functools.cache
+def current_task() -> str:
+    """The task fingerprint of the code as it is now (computed once per process: short rollouts of both tasks)."""
+    from atrv_warp.task.evaluation import task_fingerprint
+
+    return task_fingerprint()
+
+
+def script_version(script: str) -> int | None:
+    """``VERSION`` of a benchmark script as it is now, read from its text (no import)."""
+    path = ROOT / script
+    m = VERSION_LINE.search(path.read_text()) if path.is_file() else None
+    return int(m.group(1)) if m else None
+
+
+def redraw_command(name: str) -> str:
+    """The command that writes results file ``name``: the one it recorded, else its recorded script, else
+    the benchmark whose name is the longest prefix of the file's."""
+    d = json.loads(results_path(name).read_text()) if results_path(name).is_file() else {}
+    if "command" in d.get("provenance", {}):
+        return d["provenance"]["command"]
+    script = d.get("provenance", {}).get("script")
+    if script is None and name.startswith("docs/"):
+        return "python -m atrv_warp.evaluate --json " + name
+    if script is None:
+        stem = Path(name).parent.name if "/" in name else Path(name).stem
+        scripts = sorted((p for p in BENCHMARKS.glob("*.py") if stem.startswith(p.stem)), key=lambda p: -len(p.stem))
+        script = str(scripts[0].relative_to(ROOT)) if scripts else "?"
+    return f"python {script}"
+
+
+class Status:
+    """Whether a results file's figures match the code as it is now: ``state`` is ``"current"``,
+    ``"stale"`` (with ``reasons``) or ``"unknown"`` (no provenance recorded); ``date`` is when it was measured."""
+
+    def __init__(self, file: str, state: str, reasons: list[str], date: str):
+        self.file, self.state, self.reasons, self.date = file, state, reasons, date
+
+    @property
+    def current(self) -> bool:
+        return self.state == "current"
+
+
+def _git_date(path: Path) -> str:
+    out = subprocess.run(["git", "log", "-1", "--format=%cs", "--", str(path)], cwd=ROOT, capture_output=True,
+                         text=True, check=False).stdout.strip()
+    return out or "unknown date"
+
+
+@functools.cache
+def status(name: str) -> Status:
+    """Check results file ``name``'s provenance against the script's ``VERSION``, the dynamics and the policies now."""
+    d = _load(name)
+    p = d.get("provenance") if isinstance(d, dict) else None
+    if p is None:
+        when = d.get("time", "") if isinstance(d, dict) else ""
+        return Status(name, "unknown", ["no provenance recorded"],
+                      (when[:10] if when else f"{_git_date(results_path(name))} or earlier"))
+    reasons = []
+    version = script_version(p["script"])
+    if version != p["script_version"]:
+        reasons.append(f"{p['script']} VERSION is {version}, the file was written by VERSION {p['script_version']}")
+    if "dynamics" in p and p["dynamics"] != current_dynamics():
+        reasons.append(f"dynamics fingerprint {p['dynamics']} != {current_dynamics()} now")
+    if "task" in p and p["task"] != current_task():
+        reasons.append(f"task fingerprint {p['task']} != {current_task()} now")
+    for policy, digest in p.get("policies", {}).items():
+        path = ROOT / policy
+        if not path.is_file():
+            reasons.append(f"policy {policy} is gone")
+        elif hashlib.sha256(path.read_bytes()).hexdigest() != digest:
+            reasons.append(f"policy {policy} has changed")
+    return Status(name, "stale" if reasons else "current", reasons, p["date"][:10])
+
+
+def lookup(d: object, key: str, *, name: str = "") -> object:
+    """``d``'s value at ``key`` (dots between keys and indices, ``[field=value]`` selectors)."""
+    value = d
+    for i, (select, part) in enumerate(re.findall(r"\[([^\]]*)\]|([^.\[\]]+)", key)):
+        where = f"{name}:{key}"
+        if select:
+            wants = [c.partition("=")[::2] for c in select.split(",")]
+            found = [e for e in value if isinstance(e, dict) and all(str(e.get(f)) == w for f, w in wants)] \
+                if isinstance(value, list) else []
+            if not found:
+                raise FigureError(f"results file {name} has no key {key!r}: no element with {select} ({where})")
+            value = found[0]
+        elif isinstance(value, dict) and part in value:
+            value = value[part]
+        elif isinstance(value, list) and part.lstrip("-").isdigit() and -len(value) <= int(part) < len(value):
+            value = value[int(part)]
+        else:
+            raise FigureError(f"results file {name} has no key {key!r} (missing {part!r}, part {i + 1})")
+    return value
+
+
+def result(name: str, key: str, fmt: str = "") -> str:
+    """The value at ``key`` in results file ``name``, formatted with ``fmt``."""
+    value = lookup(_load(name), key, name=name)
+    try:
+        if fmt.endswith("%"):  # the house style: "91.3 %", a space before the sign
+            return format(100 * value, fmt[:-1] + "f") + " %"
+        return format(value, fmt)
+    except (TypeError, ValueError) as err:
+        raise FigureError(f"results file {name}, key {key!r}: cannot format {value!r} as {fmt!r}") from err
 
 
 def _table(header: list[str], align: list[str], rows: list[list[str]]) -> str:
@@ -29,11 +196,16 @@ def _table(header: list[str], align: list[str], rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
-def sim_throughput() -> str:
+def sim_throughput(name: str = "sim_throughput.json") -> str:
     """``sim_throughput.json``: env-steps/s and ms per step against the number of worlds."""
-    rows = _load("sim_throughput.json")["rows"]
+    rows = _load(name)["rows"]
     return _table(["worlds", "env-steps/s", "ms/step"], ["---:"] * 3,
-                  [[str(r["num_worlds"]), f"{r['env_steps_per_s']:,.0f}", f"{r['ms_per_step']:.3f}"] for r in rows])
+                  [[f"{r['num_worlds']:,}", f"{r['env_steps_per_s']:,.0f}", f"{r['ms_per_step']:.3f}"] for r in rows])
+
+
+def sim_throughput_cuda() -> str:
+    """``sim_throughput_cuda.json``: the same on one GPU."""
+    return sim_throughput("sim_throughput_cuda.json")
 
 
 def sim_choices() -> str:
@@ -202,24 +374,20 @@ def randomization_cost() -> str:
 
 
 def evaluations() -> str:
-    """``docs/*_eval.json``: the shipped policies and the scripted baselines on 1,000 seeded episodes."""
-    names = [("pretrained_policy_eval.json", "shipped reach policy, SAC"), ("baseline_eval.json", "scripted driver, reach"),
-             ("nav_policy_eval.json", "shipped nav policy, SAC trained under `wide`"), ("nav_baseline_eval.json", "scripted driver, nav")]
+    """``evaluations.json``: the shipped policies and the scripted drivers on the 1,000 test episodes."""
     rows = []
-    for file, label in names:
-        e = json.loads((DOCS / file).read_text())
-        rows.append([label, f"**{100 * e['success_rate']:.1f} %**", f"{100 * e['wall_rate']:.1f} %",
+    for e in _load("evaluations.json")["rows"]:
+        rows.append([e["label"], f"**{100 * e['success_rate']:.1f} %**", f"{100 * e['wall_rate']:.1f} %",
                      f"{100 * e.get('obstacle_rate', 0.0):.1f} %", f"{100 * e['flip_rate']:.1f} %",
-                     f"{100 * e['timeout_rate']:.1f} %", f"{e['mean_return']:.2f}", f"{e['mean_steps']:.1f}",
-                     f"`docs/{file}`"])
-    return _table(["policy", "success", "wall", "obstacle", "flip", "timeout", "mean return", "mean steps", "file"],
-                  ["---"] + ["---:"] * 7 + ["---"], rows)
+                     f"{100 * e['timeout_rate']:.1f} %", f"{e['mean_return']:.2f}", f"{e['mean_steps']:.1f}"])
+    return _table(["policy", "success", "wall", "obstacle", "flip", "timeout", "mean return", "mean steps"],
+                  ["---"] + ["---:"] * 7, rows)
 
 
 def coulomb_cost() -> str:
     """``compare_revisions_coulomb.json``: this tree's step against 0.1.x's (viscous friction), interleaved."""
     d = _load("compare_revisions_coulomb.json")
-    return _table(["N", f"0.1.x ({d['old']}) env-steps/s", f"Coulomb ({d['new']}) env-steps/s", "new / old"],
+    return _table(["N", "0.1.x (viscous) env-steps/s", "Coulomb env-steps/s", "Coulomb / 0.1.x"],
                   ["---:"] * 4,
                   [[str(r["num_worlds"]), f"{r['old_median']:,.0f}", f"{r['new_median']:,.0f}", f"{r['ratio']:.3f}"]
                    for r in d["rows"] if r["kind"] == "sim"])
@@ -254,7 +422,158 @@ def calibration() -> str:
     return _table(header, ["---", "---:"] + ["---"] * len(runs), rows)
 
 
+def _diff_gradients(kind: str) -> str:
+    d = _load("diff_gradients.json")
+    rows = d["agreement"]
+    horizons = sorted({r["horizon_s"] for r in rows})
+    scenarios = list(dict.fromkeys(r["scenario"] for r in rows))
+    cell = {(r["scenario"], r["horizon_s"]): r for r in rows}
+
+    def fmt(r: dict) -> str:
+        if r[f"{kind}_negligible"]:
+            return "~0"
+        return f"{100 * r[f'{kind}_rel_err']:.1f} %" + ("†" if r[f"{kind}_fd_rough"] else "")
+
+    return _table(["scenario", *(f"{h:.2f} s" for h in horizons)], ["---"] + ["---:"] * len(horizons),
+                  [[sc, *(fmt(cell[(sc, h)]) for h in horizons)] for sc in scenarios])
+
+
+def diff_gradients_common() -> str:
+    """``diff_gradients.json``: both wheels together, tape against central differences."""
+    return _diff_gradients("common")
+
+
+def diff_gradients_differential() -> str:
+    """``diff_gradients.json``: left against right (steering)."""
+    return _diff_gradients("differential")
+
+
+def diff_gradients_friction() -> str:
+    """``diff_gradients.json``: the friction coefficient."""
+    return _diff_gradients("friction")
+
+
+def diff_gradients_mass() -> str:
+    """``diff_gradients.json``: the chassis mass."""
+    return _diff_gradients("mass")
+
+
+def diff_cost() -> str:
+    """``diff_gradients.json``: forward and backward cost of the taped rollout per world-step."""
+    return _table(["worlds", "forward [µs / world-step]", "backward [µs / world-step]", "backward / forward"],
+                  ["---:"] * 4,
+                  [[str(r["num_worlds"]), f"{r['forward_us_per_world_step']:.0f}", f"{r['backward_us_per_world_step']:.0f}",
+                    f"{r['backward_over_forward']:.2f}"] for r in _load("diff_gradients.json")["cost"]])
+
+
+def env_throughput() -> str:
+    """``env_throughput.json``: raw simulator, ``env.rollout`` and ``Collector`` frames/s."""
+    return _table(["N", "raw sim frames/s", "env.rollout", "overhead", "Collector", "overhead"], ["---:"] * 6,
+                  [[str(r["num_envs"]), f"{r['raw_sim_fps']:,.0f}", f"{r['rollout_fps']:,.0f}",
+                    f"{100 * r['rollout_overhead']:.1f} %", f"{r['collector_fps']:,.0f}",
+                    f"{100 * r['collector_overhead']:.1f} %"] for r in _load("env_throughput.json")["rows"]])
+
+
+def env_scaling() -> str:
+    """``env_throughput.json``: one and two collector workers."""
+    d = _load("env_throughput.json")
+    return _table([f"collector ({d['worker_envs']} worlds per worker, {d['steps_per_worker_batch']} steps per worker batch)",
+                   "1 worker frames/s", "2 workers frames/s", "speed-up"], ["---", "---:", "---:", "---:"],
+                  [[f"`{name}`", f"{r['1_worker_fps']:,.0f}", f"{r['2_workers_fps']:,.0f}", f"{r['speedup']:.2f}×"]
+                   for name, r in d["scaling"].items()])
+
+
+def nav_throughput() -> str:
+    """``nav_throughput.json``: the nav task's env-steps/s against the reach task's."""
+    rows = []
+    for r in _load("nav_throughput.json")["rows"]:
+        us = r["us_per_world_step"]
+        rows.append([str(r["num_envs"]), f"{r['reach_env_steps_per_s']:,.0f}", f"{r['nav_env_steps_per_s']:,.0f}",
+                     f"{r['nav_over_reach']:.2f}", f"{us['sim_flat']:.1f} / {us['sim_nav']:.1f} / {us['scan']:.1f} µs"])
+    return _table(["N", "reach env-steps/s", "nav env-steps/s", "nav / reach",
+                   "per world-step: sim flat / sim terrain + obstacles / scan"], ["---:"] * 4 + ["---"], rows)
+
+
+def ray_collection() -> str:
+    """``ray_collection.json``: TorchRL's ``RayCollector`` against ``MultiSyncCollector``."""
+    d = _load("ray_collection.json")
+    fps, ratio = d["best_fps"], d["ray_over_local"]
+    return _table([f"workers x {d['worlds_per_worker']} worlds", "MultiSyncCollector frames/s", "RayCollector frames/s",
+                   "Ray / local"], ["---:"] * 4,
+                  [[k, f"{fps[f'MultiSyncCollector x{k}']:,.0f}", f"{fps[f'RayCollector x{k}']:,.0f}", f"{ratio[k]:.2f}"]
+                   for k in sorted(ratio)])
+
+
+def step_profile() -> str:
+    """``step_profile.json``: where one step's kernel time goes, by kernel, at its number of worlds."""
+    d = _load("step_profile.json")
+    owner = {"newton": "Newton", "atrv_warp": "ours"}
+    rows = [[owner.get(r["owner"], r["owner"]), f"`{r['name']}`", f"{r['ms_per_step']:.2f}", f"{100 * r['share']:.1f} %",
+             f"{r['calls_per_step']:g}"] for r in d["rows"][:10]]
+    ms = d["ms_by_owner"]
+    rows.append(["", "all of Newton / all of ours", f"{ms['newton']:.2f} / {ms['atrv_warp']:.2f}",
+                 f"{100 * d['by_owner']['newton']:.1f} % / {100 * d['by_owner']['atrv_warp']:.1f} %", ""])
+    return _table(["owner", "kernel", "ms per step", "share", "launches per step"], ["---", "---", "---:", "---:", "---:"],
+                  rows)
+
+
+def substep_speed() -> str:
+    """``substep_study_coulomb_1e7.json``: today's step (Coulomb friction) at five and three substeps."""
+    d = _load("substep_study_coulomb_1e7.json")
+    rows = [[f"{r['substeps']} ({r['sim_dt']:.3g} s)" + (", the default" if r["substeps"] == 5 else ""),
+             f"**{r['env_steps_per_s']:,.0f}**", f"{r['speedup_vs_5']:.2f}", f"{r['world_steps']:,}", str(r["nonfinite_worlds"]),
+             f"{r['impact_max_speed']:.2f}"] for r in d["rows"]]
+    return _table([f"substeps (sim_dt), {d['worlds']:,} worlds", "env-steps/s, one core", "vs 5",
+                   "random-torque world-steps", "non-finite worlds", "wall impacts: fastest [m/s]"],
+                  ["---", "---:", "---:", "---:", "---:", "---:"], rows)
+
+
+def substep_study() -> str:
+    """``substep_study.json``: speed, accuracy and stability per substep count (viscous friction law)."""
+    rows = []
+    for r in _load("substep_study.json")["rows"]:
+        name = f"{r['substeps']} ({r['sim_dt']:.3g} s)" + (", plain law" if r["damping_limit"] is None else "")
+        rows.append([name, f"{r['env_steps_per_s']:,.0f}", f"{r['speedup_vs_5']:.2f}",
+                     f"{r['x_after_1.0_s']:.3f} / {r['x_after_3.0_s']:.3f} / {r['x_after_4.9_s']:.3f}",
+                     f"{r['accel_2Nm']:.4f}", str(r["nonfinite_worlds"]),
+                     f"{r['held_nonfinite_worlds']} / {r['held_overspeed_worlds']}",
+                     f"{r['impact_max_speed']:.2f} / {r['impact_overspeed_worlds']}"])
+    return _table(["substeps (sim_dt)", "env-steps/s", "vs 5", "reference drive x after 1 / 3 / 4.9 s [m]",
+                   "accel at +2 N·m [m/s²]", "fresh torques: non-finite",
+                   "held torques: non-finite / over 1.2× top speed", "wall impacts: fastest [m/s] / over 1.2×"],
+                  ["---"] + ["---:"] * 7, rows)
+
+
+def sac_update_cost() -> str:
+    """``sac_update_cost.json``: one gradient step of the trainer's ``Learner`` per loss and batch, one thread."""
+    names = {"loss=sac": "SAC", "sac, critics in a loop": "SAC, critics in a Python loop instead of TorchRL's vmap",
+             "sac, torch.compile": "SAC, loss and backward under `torch.compile`", "loss=crossq": "CrossQ",
+             "loss=redq": "REDQ (10 critics)"}
+    cells: dict[str, dict[int, str]] = {}
+    for v in _load("sac_update_cost.json")["variants"]:
+        text = f"{v['ms_per_update']:.1f} ms"
+        if v["warmup_s"] > 5:
+            text += f", after {v['warmup_s']:.0f} s of compilation"
+        cells.setdefault(names.get(v["variant"], v["variant"]), {})[v["batch"]] = text
+    order = [n for n in names.values() if n in cells]
+    return _table(["variant", "batch 256", "batch 512"], ["---", "---:", "---:"],
+                  [[n, cells[n].get(256, ""), cells[n].get(512, "")] for n in order])
+
+
 TABLES: dict[str, Callable[[], str]] = {
+    "diff_gradients_common": diff_gradients_common,
+    "diff_gradients_differential": diff_gradients_differential,
+    "diff_gradients_friction": diff_gradients_friction,
+    "diff_gradients_mass": diff_gradients_mass,
+    "diff_cost": diff_cost,
+    "env_throughput": env_throughput,
+    "env_scaling": env_scaling,
+    "nav_throughput": nav_throughput,
+    "ray_collection": ray_collection,
+    "step_profile": step_profile,
+    "substep_speed": substep_speed,
+    "substep_study": substep_study,
+    "sac_update_cost": sac_update_cost,
     "calibration": calibration,
     "coulomb_cost": coulomb_cost,
     "physics_report": physics_report,
@@ -270,22 +589,216 @@ TABLES: dict[str, Callable[[], str]] = {
     "randomization_cost": randomization_cost,
     "evaluations": evaluations,
     "sim_throughput": sim_throughput,
+    "sim_throughput_cuda": sim_throughput_cuda,
     "sim_choices": sim_choices,
     "sim_vs_mujoco": sim_vs_mujoco,
 }
 
 
-def render(markdown: str) -> str:
-    """``markdown`` with every placeholder replaced by its table."""
+# --- the command table, from the command-line tools' own parsers ------------------------------
 
-    def table(match: re.Match) -> str:
-        name = match.group(1)
-        if name not in TABLES:
-            raise KeyError(f"unknown results table {name!r}; known: {sorted(TABLES)}")
-        return TABLES[name]()
-
-    return PLACEHOLDER.sub(table, markdown)
+COMMANDS = (("train", "atrv-train"), ("evaluate", "atrv-evaluate"), ("demo", "atrv-demo"), ("model", "atrv-model"),
+            ("export", "atrv-export"), ("calibrate", "atrv-calibrate"), ("ros", "atrv-ros"))
+"""(``atrv_warp.<module>``, the command ``pyproject.toml`` installs) of every command-line tool."""
+COMMANDS_LINE = re.compile(r"^\{\{ command_table( \w+)? \}\}$", re.MULTILINE)
 
 
-def on_page_markdown(markdown: str, **kwargs) -> str:
-    return render(markdown)
+def _cell(text: str) -> str:
+    return " ".join(str(text).split()).replace("``", "`").replace("|", "\\|")
+
+
+def _argparse_rows(parser) -> list[list[str]]:
+    import argparse
+
+    rows = []
+    for action in parser._actions:  # noqa: SLF001 - argparse keeps its arguments here and nowhere public
+        if isinstance(action, argparse._HelpAction):  # noqa: SLF001
+            continue
+        value = "" if action.nargs == 0 else " " + (action.metavar or action.dest.upper())
+        name = ", ".join(f"`{o}{value}`" for o in action.option_strings) or f"`{action.metavar or action.dest}`"
+        default = "" if action.default in (None, False, argparse.SUPPRESS) else f"`{action.default}`"
+        text = (action.help or "").replace("%(default)s", str(action.default))
+        rows.append([name, default, _cell(text)])
+    return rows
+
+
+def _train_rows() -> list[list[str]]:
+    import dataclasses
+    import typing
+
+    from atrv_warp.rl.config import TrainCommand, TrainConfig
+
+    rows = []
+    docs = _attribute_docs(TrainCommand)
+    for f in dataclasses.fields(TrainCommand):
+        if f.name == "train":
+            continue
+        default = f.default if f.default is not dataclasses.MISSING else ""
+        rows.append([f"`--{f.name}`", f"`{default}`" if default not in (None, False, "") else "", _cell(docs.get(f.name, ""))])
+    groups = [f.name for f in dataclasses.fields(TrainConfig)]
+    hints = typing.get_type_hints(TrainConfig)
+    rows.append(["`FIELD=VALUE`, `--GROUP.FIELD VALUE`", "",
+                 (f"any field of the configuration's groups ({', '.join(f'`{g}`' for g in groups if g in hints)}); "
+                  "`--help` lists every field with its documentation")])
+    return rows
+
+
+def _attribute_docs(cls) -> dict[str, str]:
+    """The docstrings written under a dataclass's fields."""
+    import ast
+    import inspect
+    import textwrap
+
+    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
+    body, docs = tree.body[0].body, {}
+    for a, b in itertools.pairwise(body):
+        if isinstance(a, ast.AnnAssign) and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant):
+            docs[a.target.id] = str(b.value.value)
+    return docs
+
+
+def _ros_rows() -> list[list[str]]:
+    from atrv_warp.integrations.ros.parameters import PARAMETERS
+
+    return [[f"`-p {name}:=…`", f"`{default!r}`", _cell(text)] for name, default, text in PARAMETERS]
+
+
+def _command(module: str):
+    import importlib
+
+    return importlib.import_module(f"atrv_warp.{module}")
+
+
+def command_summary(module: str) -> str:
+    """A command's one-line description, from its parser (or, for train and ros, its module docstring)."""
+    if module in ("train", "ros"):  # their docstrings, read without importing torchrl or ROS
+        import ast
+
+        text = ast.get_docstring(ast.parse((ROOT / "atrv_warp" / f"{module}.py").read_text()))
+    else:
+        text = _command(module).build_parser().description
+    return _cell(text.split("\n")[0].split(": ``")[0].rstrip(".") + ".")
+
+
+def command_options(module: str) -> list[list[str]]:
+    """A command's arguments: name, default, help."""
+    if module == "train":
+        return _train_rows()
+    if module == "ros":
+        return _ros_rows()
+    return _argparse_rows(_command(module).build_parser())
+
+
+def command_table(which: str | None = None) -> str:
+    """The overview of every command, or one command's options (``which``), from the parsers themselves."""
+    if which is None:
+        return _table(["command", "installed as", "what it does"], ["---", "---", "---"],
+                      [[f"[`python -m atrv_warp.{m}`](#{m})", f"`{script}`", command_summary(m)] for m, script in COMMANDS]
+                      + [["`python -m atrv_warp.evaluate --baseline`", "`atrv-baseline`", "the scripted driver's evaluation"]])
+    return _table(["argument", "default", "meaning"], ["---", "---", "---"], command_options(which))
+
+
+def historical_note(name: str) -> str:
+    """The visible note a ``{{ historical FILE }}`` line renders as."""
+    st = status(name)
+    why = ("written before results files recorded their provenance" if st.state == "unknown"
+           else "measured on code that has changed since: " + "; ".join(st.reasons))
+    return (f'!!! note "Historical figures: `{name}`"\n    Measured {st.date}, {why}. '
+            f"`{redraw_command(name)}` redraws them.")
+
+
+def render(markdown: str, page: str = "<page>") -> str:
+    """``markdown`` with every table and value placeholder replaced, every historical mark turned into its
+    note, and every cited file checked (:func:`status`).
+
+    Raises:
+        FigureError: naming ``page``, the file and the key, for a missing file or key, an unknown table, a
+            historical mark for a file the page does not cite, or a cited file that is stale or of unknown
+            provenance and not marked historical.
+    """
+    global _cited
+    _cited = []
+    try:
+        def table(match: re.Match) -> str:
+            name = match.group(1)
+            if name not in TABLES:
+                raise FigureError(f"unknown results table {name!r}; known: {sorted(TABLES)}")
+            return TABLES[name]()
+
+        def value(match: re.Match) -> str:
+            return result(match["file"], match["key"].strip(), (match["fmt"] or "").strip())
+
+        try:
+            out = RESULT.sub(value, PLACEHOLDER.sub(table, markdown))
+            out = COMMANDS_LINE.sub(lambda m: command_table(m.group(1).strip() if m.group(1) else None), out)
+        except FigureError as err:
+            raise FigureError(f"{page}: {err}") from err
+        cited = list(_cited)
+    finally:
+        _cited = None
+    marked = set(HISTORICAL.findall(markdown))
+    problems = [f"{page}: marks {name} historical but cites nothing from it" for name in sorted(marked - set(cited))]
+    for name in cited:
+        st = status(name)
+        if st.current and name in marked:
+            problems.append(f"{page}: marks {name} historical, but its figures match the code: remove the mark")
+        if not st.current and name not in marked:
+            problems.append(f"{page}: cites {name}, whose figures are {st.state} ({'; '.join(st.reasons)}); "
+                            f"redraw them (`{redraw_command(name)}`) or mark them with a line "
+                            f"{{{{ historical {name} }}}}")
+    if problems:
+        raise FigureError("\n".join(problems))
+    return HISTORICAL.sub(lambda m: historical_note(m["file"]), out)
+
+
+def citations(markdown: str) -> list[str]:
+    """The results files a page cites, in order (rendering it without the checks)."""
+    global _cited
+    _cited = []
+    try:
+        for name in PLACEHOLDER.findall(markdown):
+            if name in TABLES:
+                TABLES[name]()
+        for m in RESULT.finditer(markdown):
+            _load(m["file"])
+        return list(_cited)
+    finally:
+        _cited = None
+
+
+def stale_report(pages: list[Path]) -> tuple[list[str], int]:
+    """Lines naming every page's stale or unknown figures and the command that redraws them, and how many are
+    not marked historical."""
+    lines, unmarked = [], 0
+    for page in pages:
+        text = page.read_text()
+        marked = set(HISTORICAL.findall(text))
+        for name in citations(text):
+            st = status(name)
+            if st.current:
+                continue
+            unmarked += name not in marked
+            label = "historical" if name in marked else "NOT MARKED"
+            where = page.relative_to(ROOT) if page.is_relative_to(ROOT) else page
+            lines.append(f"{where}: {name} is {st.state} ({'; '.join(st.reasons)}; {st.date}) "
+                         f"[{label}] -> {redraw_command(name)}")
+    return lines, unmarked
+
+
+def on_pre_build(**kwargs) -> None:
+    """A new build (``mkdocs serve`` rebuilds in one process) checks the files and the code afresh."""
+    status.cache_clear()
+    current_dynamics.cache_clear()
+    current_task.cache_clear()
+
+
+def on_page_markdown(markdown: str, page=None, **kwargs) -> str:
+    return render(markdown, page.file.src_uri if page is not None else "<page>")
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] != ["--stale"]:
+        sys.exit("usage: python docs/hooks.py --stale")
+    report, unmarked = stale_report(sorted(DOCS.glob("*.md")))
+    print("\n".join(report) or "every cited figure is current")
+    sys.exit(1 if unmarked else 0)

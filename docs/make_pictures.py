@@ -9,7 +9,9 @@ draws, with matplotlib, from the chassis poses the simulator produced:
   box) turning toward its target and driving there;
 - ``docs/nav.png``: four episodes of the navigation task (``--task nav``'s first worlds) over
   their terrain (shaded by height) and obstacles, driven by the scripted driver (dashed) and by
-  the shipped navigation policy (solid);
+  the shipped navigation policy (solid); ``docs/nav.json`` beside it holds how each episode ended,
+  the caption written from those outcomes (the docs page reads it at build time) and the
+  picture's provenance (the policy's sha256, the dynamics and task fingerprints);
 - ``docs/eval_video_frame.png`` (with ``--nav`` too): a frame of ``evaluate --video --video-follow 10``
   on four nav episodes of the shipped navigation policy, each panel following its rover;
 - with ``--viewer``: ``docs/viewer.png``, the Rerun web viewer showing four recorded nav episodes of
@@ -28,6 +30,8 @@ import numpy as np
 import torch
 
 DOCS = Path(__file__).resolve().parent
+VERSION = 1
+"""This script's method (which episodes, which drivers), bumped by hand when it changes; recorded with the caption."""
 
 
 def rollout(num_episodes: int, seed: int) -> dict:
@@ -158,8 +162,41 @@ def nav_paths(policy, episodes: int, seed: int) -> dict:
             "heights": grid.heights, "half": grid.half_size, "reach": env.task_cfg.reach_radius}
 
 
+def _count(reasons: list[str], what: str) -> str:
+    n = sum(r == what for r in reasons)
+    return {0: f"none of the {len(reasons)}", len(reasons): f"all {n}"}.get(n, f"{n} of the {len(reasons)}")
+
+
+def nav_caption(outcomes: dict[str, list[str]], seed: int) -> str:
+    """The nav picture's caption, from how each driver's episodes ended."""
+    scripted, policy = outcomes["scripted driver"], outcomes["nav policy (SAC)"]
+    return (f"The first {len(policy)} episodes of the nav task's test set (seed {seed}), the same for both drivers. "
+            f"The scripted driver (dashed) reaches the target in {_count(scripted, 'success')} and runs into an "
+            f"obstacle in {_count(scripted, 'obstacle')}; the shipped nav policy (solid) reaches it in "
+            f"{_count(policy, 'success')} and touches an obstacle in {_count(policy, 'obstacle')}.")
+
+
+def provenance(policy: Path) -> dict:
+    """The picture's provenance, as ``benchmarks/_common`` records a results file's (taken before anything is written)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("benchmarks_common", DOCS.parent / "benchmarks" / "_common.py")
+    common = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(common)
+    return common.provenance(VERSION, script=__file__, task=True, policies=(policy,))
+
+
+def write_caption(out: Path, outcomes: dict[str, list[str]], seed: int, record: dict) -> None:
+    """``out`` (JSON): the outcomes, the caption written from them, and the provenance ``record``."""
+    import json
+
+    out.write_text(json.dumps({"rule": f"the first {len(outcomes['nav policy (SAC)'])} episodes of the test set",
+                               "seed": seed, "outcomes": outcomes, "caption": nav_caption(outcomes, seed),
+                               "provenance": record}, indent=2) + "\n")
+
+
 def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
-    """Scripted driver against the shipped navigation policy on the same four episodes."""
+    """Scripted driver against the shipped navigation policy on the same four episodes; the caption beside it."""
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle, Polygon
 
@@ -168,6 +205,7 @@ def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
     from atrv_warp.policy import pretrained_nav_policy_path
     from atrv_warp.task.baseline import scripted_policy
 
+    record = provenance(pretrained_nav_policy_path())
     runs = {"scripted driver": nav_paths(scripted_policy(), episodes, seed),
             "nav policy (SAC)": nav_paths(load_policy(pretrained_nav_policy_path()), episodes, seed)}
     fig, axes = plt.subplots(1, episodes, figsize=(4.0 * episodes, 4.3), dpi=90)
@@ -200,6 +238,7 @@ def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
     fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)
+    write_caption(out.with_suffix(".json"), {name: run["reason"] for name, run in runs.items()}, seed, record)
     return [f"{name}: {', '.join(run['reason'])}" for name, run in runs.items()]
 
 
@@ -259,7 +298,7 @@ def main() -> int:
     matplotlib.use("Agg")
     out = Path(args.out_dir)
     if args.nav:
-        print("\n".join(draw_nav(out / "nav.png", args.seed)) + f"\nwrote {out / 'nav.png'}")
+        print("\n".join(draw_nav(out / "nav.png", args.seed)) + f"\nwrote {out / 'nav.png'} and {out / 'nav.json'}")
         print(f"{video_frame(out / 'eval_video_frame.png', args.seed)}\nwrote {out / 'eval_video_frame.png'}")
         if args.viewer:
             viewer_screenshot(out / "viewer.png", args.seed)

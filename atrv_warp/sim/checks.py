@@ -5,6 +5,7 @@ walls at top speed."""
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 
@@ -18,6 +19,7 @@ __all__ = [
     "ReferenceDrive",
     "WallImpacts",
     "coulomb_twist",
+    "dynamics_fingerprint",
     "full_torque_acceleration",
     "parked_on_slope",
     "reference_drive",
@@ -199,3 +201,31 @@ def full_torque_acceleration(contact: ContactConfig | None = None) -> float:
         if sim.lin_vel[0, 0].item() > 4.0:
             break
     return (sim.lin_vel[0, 0].item() - v0) / (sim.sim_time - t0)
+
+
+FINGERPRINT_STEPS = 40
+"""Env-steps of :func:`dynamics_fingerprint`'s rollout (2 s)."""
+
+
+def dynamics_fingerprint(*, contact: ContactConfig | None = None, sim: SimConfig | None = None) -> str:
+    """A short hash of what the simulator does, not of its source: two rovers of the default model
+    from fixed poses under fixed wheel torques for :data:`FINGERPRINT_STEPS` env-steps, their final
+    chassis poses rounded to 1e-4 (m, quaternion) and hashed.
+
+    A refactor leaves it unchanged; a change to the dynamics (contact, friction, solver, model,
+    substeps) changes it. Benchmarks record it in their results files
+    (``benchmarks/_common.write_results``) and the docs build recomputes it once to flag figures
+    measured on other dynamics (``docs/hooks.py``).
+
+    Returns:
+        16 hex digits.
+    """
+    rovers = RoverSim(2, contact=contact, sim=sim)
+    rovers.reset(poses=torch.tensor([[0.0, 0.0, 0.0], [2.0, -3.0, 0.7]]))
+    # [left, right] wheel torque [N·m]: a straight drive, and a skid turn with a slipping side
+    rovers.commands[:] = torch.tensor([[4.0, 4.0], [-3.0, 9.0]])
+    for _ in range(FINGERPRINT_STEPS):
+        rovers.step()
+    pose = rovers.root_pose.detach().cpu().double().numpy()
+    text = " ".join(f"{v:.4f}" for v in (np.round(pose, 4) + 0.0).ravel())  # + 0.0: no "-0.0000"
+    return hashlib.sha256(text.encode()).hexdigest()[:16]

@@ -1,0 +1,56 @@
+"""The shipped policies and the scripted drivers on the test set: the evaluations table of the docs' tasks page.
+
+Run: ``python benchmarks/evaluations.py`` (about a minute once the kernels are compiled). Each driver runs one
+deterministic episode in each of 1,000 worlds of its task, seeded with the test set's seed (``EVAL_SEED``),
+exactly as ``python -m atrv_warp.evaluate [--task nav] [--baseline]`` does, and the figures go to
+``benchmarks/results/evaluations.json`` with the sha256 of each policy file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from _common import write_results
+
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
+RESULTS = Path(__file__).resolve().parent / "results"
+DRIVERS = (("reach", "policy", "shipped reach policy, SAC"), ("reach", "baseline", "scripted driver, reach"),
+           ("nav", "policy", "shipped nav policy, SAC trained under `wide`"), ("nav", "baseline", "scripted driver, nav"))
+"""(task, driver, label) of each row, in the table's order."""
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=1000)
+    parser.add_argument("--out", default=str(RESULTS / "evaluations.json"))
+    args = parser.parse_args()
+    from atrv_warp.policy import load_policy, pretrained_nav_policy_path, pretrained_policy_path
+    from atrv_warp.task.baseline import scripted_policy
+    from atrv_warp.task.env import ATRVjrEnv
+    from atrv_warp.task.evaluation import EVAL_SEED, format_result, run_episodes
+
+    rows, policies = [], []
+    for task, driver, label in DRIVERS:
+        if driver == "policy":
+            path = pretrained_nav_policy_path() if task == "nav" else pretrained_policy_path()
+            policy, name = load_policy(path, task=task), str(Path(path).relative_to(Path(__file__).resolve().parents[1]))
+            policies.append(path)
+        else:
+            policy, name = scripted_policy(), f"scripted baseline ({task})"
+        t0 = time.perf_counter()
+        result = run_episodes(policy, ATRVjrEnv(args.episodes, task=task), seed=EVAL_SEED).summary()
+        print(format_result(name, result), f"({time.perf_counter() - t0:.1f} s)", flush=True)
+        rows.append({"task": task, "driver": driver, "label": label, "policy": name, **result.as_dict()})
+    out = write_results(args.out, {"benchmark": "evaluations", "seed": EVAL_SEED, "episodes": args.episodes,
+                                   "rows": rows}, version=VERSION, task=True, policies=tuple(policies))
+    print(f"written to {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

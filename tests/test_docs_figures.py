@@ -1,0 +1,192 @@
+"""The docs' figures are traceable: a page's cited values come from the results files, and a results
+file whose provenance no longer matches the code fails the build unless the page marks it historical
+(``docs/hooks.py``; the provenance is written by ``benchmarks/_common.write_results``)."""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture
+def hooks(tmp_path, monkeypatch):
+    """docs/hooks.py with its results folder in ``tmp_path`` and the dynamics fingerprint pinned to ``"now"``."""
+    spec = importlib.util.spec_from_file_location("docs_hooks_under_test", ROOT / "docs" / "hooks.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    monkeypatch.setattr(module, "RESULTS", tmp_path)
+    monkeypatch.setattr(module, "current_dynamics", lambda: "now")
+    monkeypatch.setattr(module, "current_task", lambda: "now")
+    return module
+
+
+def _write(folder: Path, name: str, figures: dict, **provenance) -> None:
+    record = {"date": "2026-11-20T10:00:00Z", "commit": "0" * 40, "dirty": False,
+              "script": "benchmarks/physics_report.py", "script_version": 1, "dynamics": "now", **provenance}
+    (folder / name).write_text(json.dumps({**figures, "provenance": record}))
+
+
+def test_a_current_figure_renders_from_its_file(hooks, tmp_path):
+    _write(tmp_path, "r.json", {"rows": [{"n": 64, "rate": 1234.5}, {"n": 1024, "rate": 0.9132}]})
+    page = ("A {{ result r.json:rows.0.rate | ,.0f }}, B {{ result r.json:rows[n=1024].rate | .1% }}, "
+            "C {{ result r.json:rows.1.n }}, D {{ result r.json:rows[n=64,rate=1234.5].n }}.")
+    assert hooks.render(page, "p.md") == "A 1,234, B 91.3 %, C 1024, D 64."
+
+
+def test_a_missing_file_or_key_names_the_page_file_and_key(hooks, tmp_path):
+    _write(tmp_path, "r.json", {"rows": [{"n": 64}]})
+    with pytest.raises(hooks.FigureError, match=r"p\.md: .*results file gone\.json not found"):
+        hooks.render("{{ result gone.json:x }}", "p.md")
+    with pytest.raises(hooks.FigureError, match=r"p\.md: results file r\.json has no key 'rows\.0\.rate'"):
+        hooks.render("{{ result r.json:rows.0.rate }}", "p.md")
+    with pytest.raises(hooks.FigureError, match=r"p\.md: results file r\.json has no key 'rows\[n=5\]\.n': no element with n=5"):
+        hooks.render("{{ result r.json:rows[n=5].n }}", "p.md")
+
+
+def test_a_stale_fingerprint_fails_unless_the_page_marks_it_historical(hooks, tmp_path):
+    _write(tmp_path, "old.json", {"x": 0.5}, dynamics="before")
+    with pytest.raises(hooks.FigureError, match=r"p\.md: cites old\.json, whose figures are stale "
+                                                r"\(dynamics fingerprint before != now now\)"):
+        hooks.render("x = {{ result old.json:x }}", "p.md")
+    out = hooks.render("x = {{ result old.json:x }}\n\n{{ historical old.json }}\n", "p.md")
+    assert out.startswith("x = 0.5\n")
+    assert '!!! note "Historical figures: `old.json`"' in out
+    assert "Measured 2026-11-20" in out and "`python benchmarks/physics_report.py` redraws them" in out
+    _write(tmp_path, "new.json", {"x": 0.5})
+    with pytest.raises(hooks.FigureError, match="p.md: marks new.json historical, but its figures match the code"):
+        hooks.render("{{ result new.json:x }}\n{{ historical new.json }}\n", "p.md")
+
+
+def test_a_changed_task_is_stale(hooks, tmp_path):
+    _write(tmp_path, "t.json", {"x": 1}, task="before")
+    assert hooks.status("t.json").reasons == ["task fingerprint before != now now"]
+    _write(tmp_path, "u.json", {"x": 1}, task="now")
+    assert hooks.status("u.json").current
+
+
+def test_a_changed_script_version_or_policy_is_stale(hooks, tmp_path, monkeypatch):
+    _write(tmp_path, "v.json", {"x": 1}, script_version=0)
+    assert hooks.status("v.json").state == "stale"
+    assert "VERSION is 1, the file was written by VERSION 0" in hooks.status("v.json").reasons[0]
+    policy = tmp_path / "p.pt"
+    policy.write_bytes(b"weights")
+    monkeypatch.setattr(hooks, "ROOT", tmp_path.parent)
+    rel = f"{tmp_path.name}/p.pt"
+    _write(tmp_path, "p.json", {"x": 1}, script="benchmarks/nope.py", script_version=None,
+           policies={rel: hashlib.sha256(b"weights").hexdigest()})
+    assert hooks.status("p.json").current
+    hooks.status.cache_clear()
+    policy.write_bytes(b"retrained")
+    assert hooks.status("p.json").reasons == [f"policy {rel} has changed"]
+
+
+def test_a_file_without_provenance_is_unknown_and_a_mark_must_cite(hooks, tmp_path):
+    (tmp_path / "legacy.json").write_text(json.dumps({"x": 2, "time": "2026-11-01 09:00:00"}))
+    with pytest.raises(hooks.FigureError, match="legacy.json, whose figures are unknown"):
+        hooks.render("{{ result legacy.json:x }}", "p.md")
+    assert "Measured 2026-11-01, written before" in hooks.render("{{ result legacy.json:x }}\n{{ historical legacy.json }}")
+    with pytest.raises(hooks.FigureError, match="p.md: marks legacy.json historical but cites nothing from it"):
+        hooks.render("{{ historical legacy.json }}", "p.md")
+
+
+def test_the_stale_command_lists_each_figure_and_its_benchmark(hooks, tmp_path):
+    _write(tmp_path, "sim_throughput_x.json", {"x": 1}, dynamics="before", script="benchmarks/sim_throughput.py")
+    (tmp_path / "page.md").write_text("{{ result sim_throughput_x.json:x }}\n")
+    lines, unmarked = hooks.stale_report([tmp_path / "page.md"])
+    assert unmarked == 1
+    assert "sim_throughput_x.json is stale" in lines[0] and "[NOT MARKED] -> python benchmarks/sim_throughput.py" in lines[0]
+
+
+def test_every_shipped_page_renders_and_a_current_file_matches_the_code():
+    """The real pages against the real results files, with the dynamics fingerprint recomputed."""
+    spec = importlib.util.spec_from_file_location("docs_hooks_real", ROOT / "docs" / "hooks.py")
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    for page in sorted((ROOT / "docs").glob("*.md")):
+        hooks.render(page.read_text(), page.name)
+    assert hooks.status("physics_report.json").current, hooks.status("physics_report.json").reasons
+
+
+def test_write_results_records_provenance(tmp_path):
+    spec = importlib.util.spec_from_file_location("benchmarks_common", ROOT / "benchmarks" / "_common.py")
+    _common = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(_common)
+    out = _common.write_results(tmp_path / "r.json", {"x": 1}, version=3, dynamics=False,
+                                policies=(ROOT / "atrv_warp" / "assets" / "pretrained_policy.pt",))
+    p = json.loads(out.read_text())["provenance"]
+    assert p["script_version"] == 3 and len(p["commit"]) == 40 and isinstance(p["dirty"], bool)
+    assert "dynamics" not in p and "task" not in p and p["command"].startswith("python ")  # pytest is the script being run here
+    digest = hashlib.sha256((ROOT / "atrv_warp/assets/pretrained_policy.pt").read_bytes()).hexdigest()
+    assert p["policies"] == {"atrv_warp/assets/pretrained_policy.pt": digest}
+
+
+def test_the_dynamics_fingerprint_is_behaviour():
+    from atrv_warp.sim import ContactConfig
+    from atrv_warp.sim.checks import dynamics_fingerprint
+
+    now = dynamics_fingerprint()
+    assert now == dynamics_fingerprint() and len(now) == 16
+    assert dynamics_fingerprint(contact=ContactConfig(friction_law="viscous")) != now
+
+
+def test_the_command_table_comes_from_the_parsers():
+    """Every installed command is in the table, and every argument of every argparse tool is listed."""
+    import tomllib
+
+    spec = importlib.util.spec_from_file_location("docs_hooks_commands", ROOT / "docs" / "hooks.py")
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    overview = hooks.command_table()
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    for script in scripts:
+        assert f"`{script}`" in overview, script
+    for module, _ in hooks.COMMANDS:
+        if module in ("train", "ros"):
+            continue
+        table = hooks.command_table(module)
+        parser = importlib.import_module(f"atrv_warp.{module}").build_parser()
+        for action in parser._actions:  # noqa: SLF001
+            for option in action.option_strings:
+                assert option in table or option in ("-h", "--help"), (module, option)
+    assert "`--resume`" in hooks.command_table("train") and "`-p num_rovers:=…`" in hooks.command_table("ros")
+    assert "{{ command_table }}" in (ROOT / "docs" / "commands.md").read_text()
+
+
+def test_the_nav_caption_is_written_from_the_outcomes():
+    """docs/make_pictures.py writes the picture's caption from how its episodes ended; the shipped one matches
+    its outcomes and the policy it ran."""
+    spec = importlib.util.spec_from_file_location("docs_make_pictures", ROOT / "docs" / "make_pictures.py")
+    pictures = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(pictures)
+    caption = pictures.nav_caption({"scripted driver": ["obstacle", "wall", "obstacle"],
+                                    "nav policy (SAC)": ["success", "success", "success"]}, 7)
+    assert "first 3 episodes" in caption and "(seed 7)" in caption
+    assert "reaches the target in none of the 3 and runs into an obstacle in 2 of the 3" in caption
+    assert "reaches it in all 3 and touches an obstacle in none of the 3" in caption
+    shipped = json.loads((ROOT / "docs" / "nav.json").read_text())
+    assert shipped["caption"] == pictures.nav_caption(shipped["outcomes"], shipped["seed"])
+    policy = ROOT / "atrv_warp" / "assets" / "nav_policy.pt"
+    assert shipped["provenance"]["policies"] == {"atrv_warp/assets/nav_policy.pt":
+                                                 hashlib.sha256(policy.read_bytes()).hexdigest()}
+
+
+def test_mkdocs_build_fails_naming_the_page_file_and_key(tmp_path):
+    """End to end: a site built with docs/hooks.py fails on a page that cites a key its results file lacks."""
+    import shutil
+    import subprocess
+
+    mkdocs = shutil.which("mkdocs")
+    if mkdocs is None:
+        pytest.skip("mkdocs is not installed (the docs extra)")
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "index.md").write_text("# Site\n\nx = {{ result physics_report.json:rows.0.no_such_key }}\n")
+    (tmp_path / "mkdocs.yml").write_text(f"site_name: t\nstrict: true\nhooks:\n  - {ROOT / 'docs' / 'hooks.py'}\n")
+    run = subprocess.run([mkdocs, "build", "--strict", "-q"], cwd=tmp_path, capture_output=True, text=True, check=False)
+    assert run.returncode != 0
+    assert "index.md: results file physics_report.json has no key 'rows.0.no_such_key'" in run.stderr, run.stderr[-2000:]
