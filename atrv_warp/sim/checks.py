@@ -16,6 +16,8 @@ from atrv_warp.sim.config import ContactConfig, SimConfig
 from atrv_warp.sim.simulator import DriveMode, RoverSim
 
 __all__ = [
+    "STEP_COMMANDS",
+    "STEP_FRICTIONS",
     "ReferenceDrive",
     "WallImpacts",
     "coulomb_twist",
@@ -25,6 +27,7 @@ __all__ = [
     "reference_drive",
     "rolling_acceleration",
     "slip_ratio",
+    "step_response",
     "wall_impacts",
     "wheel_contact_xy",
 ]
@@ -229,3 +232,50 @@ def dynamics_fingerprint(*, contact: ContactConfig | None = None, sim: SimConfig
     pose = rovers.root_pose.detach().cpu().double().numpy()
     text = " ".join(f"{v:.4f}" for v in (np.round(pose, 4) + 0.0).ravel())  # + 0.0: no "-0.0000"
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+STEP_COMMANDS: tuple[tuple[float, float], ...] = ((0.0, 0.5), (0.5, 0.5), (1.0, 0.2))
+"""(linear [m/s], angular [rad/s]) ``/cmd_vel`` steps of the driver's step response: in place and on two arcs."""
+STEP_FRICTIONS: tuple[float, ...] = (0.2, 0.3, 0.8, 1.0)
+"""Coulomb µ of the step response: ice-like to dry asphalt."""
+
+
+def step_response(commands=STEP_COMMANDS, frictions=STEP_FRICTIONS, *, seconds: float = 5.0, band: float = 0.1,
+                  driver=None, sim: SimConfig | None = None) -> list[dict]:
+    """The motor driver's answer to ``/cmd_vel`` steps: one world per (command, µ), from rest, the command
+    re-sent every step (a 20 Hz controller), for ``seconds``.
+
+    Per world: ``settle`` the time [s] after which the yaw rate stays within ``band`` of the commanded one,
+    ``overshoot`` the yaw rate's peak over the command minus 1, ``steady`` the mean yaw rate over the last second
+    over the command, ``ripple`` its standard deviation over the last second over the command (a sustained
+    oscillation shows there), ``speed`` the mean forward speed over the last second over the command (arcs), and
+    the traces ``time``, ``yaw_rate`` and ``speed_trace``."""
+    cases = [(v, w, mu) for mu in frictions for v, w in commands]
+    rovers = RoverSim(len(cases), sim=sim, driver=driver)
+    rovers.set_params(friction=[mu for _, _, mu in cases])
+    # each rover starts on the circle it will drive, centred on the arena's centre (effective track ratio ~1.6)
+    rovers.reset(poses=[[0.0, -v / w if w else 0.0, 0.0] for v, w, _ in cases])
+    twist = torch.tensor([[v, w] for v, w, _ in cases])
+    dt = rovers.sim_cfg.step_dt
+    steps = round(seconds / dt)
+    rates, speeds = [], []
+    for _ in range(steps):
+        rovers.set_twist(twist)
+        rovers.step()
+        yaw = rovers.rpy[:, 2]
+        rates.append(rovers.ang_vel[:, 2].clone())
+        speeds.append(rovers.lin_vel[:, 0] * torch.cos(yaw) + rovers.lin_vel[:, 1] * torch.sin(yaw))
+    rate, speed = torch.stack(rates).double(), torch.stack(speeds).double()  # (T, worlds)
+    time = dt * torch.arange(1, steps + 1, dtype=torch.float64)
+    last = round(1.0 / dt)
+    out = []
+    for i, (v, w, mu) in enumerate(cases):
+        r = rate[:, i] / w
+        outside = ((r - 1.0).abs() > band).nonzero().flatten()
+        settle = 0.0 if not len(outside) else float(time[outside[-1]]) if int(outside[-1]) + 1 < steps else math.inf
+        out.append({"linear": v, "angular": w, "friction": mu, "settle": settle,
+                    "overshoot": float(r.max() - 1.0), "steady": float(r[-last:].mean()),
+                    "ripple": float(r[-last:].std()),
+                    "speed": float(speed[-last:, i].mean() / v) if v else math.nan,
+                    "time": time.tolist(), "yaw_rate": rate[:, i].tolist(), "speed_trace": speed[:, i].tolist()})
+    return out

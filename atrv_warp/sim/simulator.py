@@ -30,9 +30,11 @@ from atrv_warp.sim.config import (
     load_sim_config,
 )
 from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
+from atrv_warp.sim.driver import DRIVE_TORQUE, DRIVE_TWIST, Driver, DriverConfig
+from atrv_warp.sim.kernels.driver import DriverState, drive_wheels
 from atrv_warp.sim.kernels.contact import FLAG_BODY_GROUND, FLAG_OBSTACLE, FLAG_WALL
 from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics, apply_payload
-from atrv_warp.sim.kernels.rover import RoverLayout, apply_wheel_torques, compute_rover_state, reset_worlds
+from atrv_warp.sim.kernels.rover import RoverLayout, compute_rover_state, reset_worlds
 from atrv_warp.sim.kernels.terrain import place_on_terrain
 from atrv_warp.sim.model import BuiltModel, build_model
 from atrv_warp.sim.params import PARAMETERS, WorldParams, check_parameter
@@ -141,6 +143,8 @@ class RoverSim:
         sim_config: A TOML file whose ``[rover]`` and ``[contact]`` tables change ``rover`` and
             ``contact`` (:func:`~atrv_warp.sim.config.load_sim_config`), e.g. the calibration that
             ``atrv-calibrate`` wrote from a recorded bag.
+        driver: The base's motor driver (:class:`~atrv_warp.sim.driver.DriverConfig`; default: its defaults).
+            Its radius and track default to the nominal rover's: ``rover`` before ``sim_config`` changes it.
 
     State views (torch tensors on the sim device, updated in place by :meth:`step`; clone to keep):
         ``root_pose`` (N, 7): chassis position [m] and quaternion (x, y, z, w), world frame.
@@ -151,7 +155,12 @@ class RoverSim:
         ``wheel_torque`` (N, W): torques applied in the last substep [N·m].
         ``contact_flags`` (N,): bit 1 wall contact, bit 2 chassis–ground contact, since the last step began.
         ``nonfinite`` (N,): 1 where the world's state is no longer finite (stays until reset).
-        ``commands`` (N, 2): [left, right] wheel torque commands [N·m], read by :meth:`step`.
+        ``commands`` (N, 2): [left, right] wheel torque commands [N·m], read by :meth:`step` in worlds
+        driven by torque (:meth:`set_commands`).
+
+    Worlds driven by velocity (:meth:`set_twist`) go through :attr:`driver` instead
+    (:class:`~atrv_warp.sim.driver.Driver`: the motor driver's wheel-speed loop inside every substep, and the
+    wheel odometry every world reports).
 
     The contract for code that builds on the simulator (tasks, sensors, integrations):
         :attr:`buffers` the Warp arrays behind those views (:class:`SimBuffers`), for kernels;
@@ -179,8 +188,9 @@ class RoverSim:
         device: str | None = "cpu",
         requires_grad: bool = False,
         sim_config: str | Path | None = None,
+        driver: DriverConfig | None = None,
     ):
-        self.rover_cfg = rover or get_variant(variant)
+        self.rover_cfg = nominal_rover = rover or get_variant(variant)
         self.contact_cfg = contact or ContactConfig()
         if sim_config:
             self.rover_cfg, self.contact_cfg = load_sim_config(sim_config, self.rover_cfg, self.contact_cfg)
@@ -216,6 +226,10 @@ class RoverSim:
         self.params = WorldParams(num_worlds, rover=self.rover_cfg, contact=self.contact_cfg, device=self.device)
         """Each world's physical parameters (:class:`~atrv_warp.sim.params.WorldParams`): friction, stiffness,
         wheel radius, motor torque scale and speed limit, payload. Change them with :meth:`set_params`."""
+        self.driver_cfg = driver or DriverConfig()
+        self.driver = Driver(self.driver_cfg, self.driver_cfg.kinematics(self.description, nominal_rover), num_worlds,
+                             self.sim_cfg.sim_dt, self.device)
+        """Every world's motor driver and wheel odometry (:class:`~atrv_warp.sim.driver.Driver`)."""
         self._nominal_chassis = self._chassis_mass_properties()
         if self.rover_cfg.payload_mass:
             self.apply_payload(wp.full(num_worlds, True, dtype=bool, device=self.device))
@@ -387,20 +401,29 @@ class RoverSim:
     def substep(self, s_in: newton.State, s_out: newton.State, control: newton.Control, commands: wp.array, *,
                 physics: WorldPhysics | None = None, flags: wp.array | None = None, torque: wp.array | None = None,
                 solver_in: newton.State | None = None, warm_start: wp.array | None = None,
-                impulses: wp.array | None = None) -> None:
-        """One solver substep of ``sim_dt``: wheel torques, contact wrenches, one Featherstone step.
+                impulses: wp.array | None = None, twist: wp.array | None = None,
+                driver_in: DriverState | None = None, driver_out: DriverState | None = None,
+                mode: wp.array | None = None) -> None:
+        """One solver substep of ``sim_dt``: the wheels' drive (torque commands, or the motor driver's loop),
+        contact wrenches, one Featherstone step.
 
         The simulator's own step calls it on its two states; :class:`~atrv_warp.sim.diff.DiffRollout`
-        calls it on a tape with one state per substep, its own ``commands`` (N,) ``wp.vec2``,
-        ``physics`` (:class:`~atrv_warp.sim.kernels.params.WorldPhysics`, with a differentiable mu), ``flags`` (N,) and ``torque`` (N, W) outputs, ``solver_in``: a view
-        of ``s_in`` with its own ``body_q`` for the solver to write, and the wheels' friction impulses
-        of the previous substep (``warm_start``) and of this one (``impulses``), N x 4 ``wp.vec3`` each.
+        calls it on a tape with one state per substep, its own ``commands`` (N,) ``wp.vec2`` (torques) or
+        ``twist`` (N,) ``wp.vec2`` with ``mode`` (N,) and the driver's state before and after the substep
+        (``driver_in``, ``driver_out``), ``physics`` (:class:`~atrv_warp.sim.kernels.params.WorldPhysics`, with a
+        differentiable mu), ``flags`` (N,) and ``torque`` (N, W) outputs, ``solver_in``: a view of ``s_in`` with
+        its own ``body_q`` for the solver to write, and the wheels' friction impulses of the previous substep
+        (``warm_start``) and of this one (``impulses``), N x 4 ``wp.vec3`` each.
         """
         physics = self.params.physics if physics is None else physics
+        d = self.driver
         s_in.clear_forces()
-        wp.launch(apply_wheel_torques, dim=self.num_worlds,
-                  inputs=[self._layout, commands, physics, s_in.joint_qd],
-                  outputs=[control.joint_f, self._wheel_torque if torque is None else torque], device=self.device)
+        wp.launch(drive_wheels, dim=self.num_worlds,
+                  inputs=[self._layout, d.params, d.mode_array if mode is None else mode, commands,
+                          d.twist_array if twist is None else twist, d.lag_array, physics, s_in.joint_qd,
+                          d.state if driver_in is None else driver_in],
+                  outputs=[d.state if driver_out is None else driver_out, control.joint_f,
+                           self._wheel_torque if torque is None else torque], device=self.device)
         self.contact.apply(s_in, self.model.body_com, control.joint_f, self._contact_flags if flags is None else flags,
                            physics, warm_start, impulses)
         self.solver.step(s_in if solver_in is None else solver_in, s_out, control, None, self.sim_cfg.sim_dt)
@@ -442,17 +465,36 @@ class RoverSim:
             self._simulate()
         self.sim_time += self.sim_cfg.step_dt
 
-    def set_commands(self, commands) -> None:
-        """Copy (N, 2) or (2,) [left, right] wheel torques [N·m] into :attr:`commands`."""
-        c = torch.as_tensor(commands, dtype=torch.float32)
+    def set_commands(self, commands, worlds=None) -> None:
+        """Drive by torque: copy (N, 2), (M, 2) for the M selected ``worlds``, or (2,) [left, right] wheel torques
+        [N·m] into :attr:`commands`, and switch those worlds to torque (all worlds when ``worlds`` is ``None``)."""
+        mask = torch.as_tensor(_as_world_mask(worlds, self.num_worlds), device=self.commands.device)
+        self.commands[mask] = self._checked_pairs(commands, mask, "commands")
+        self.driver.mode[mask] = int(DRIVE_TORQUE)
+
+    def set_twist(self, twist, worlds=None) -> None:
+        """Drive by velocity, as ``/cmd_vel`` does: copy (N, 2), (M, 2) for the M selected ``worlds``, or (2,)
+        (linear [m/s], angular [rad/s]) into the driver's command, restart its timeout, and switch those worlds to
+        the driver (all worlds when ``worlds`` is ``None``)."""
+        mask = torch.as_tensor(_as_world_mask(worlds, self.num_worlds), device=self.commands.device)
+        d = self.driver
+        d.twist[mask] = self._checked_pairs(twist, mask, "twist")
+        d.age[mask] = 0.0
+        d.mode[mask] = int(DRIVE_TWIST)
+
+    def _checked_pairs(self, values, mask: torch.Tensor, what: str) -> torch.Tensor:
+        """``values`` as (M, 2) rows for the M worlds of ``mask``, checked (a bad one is named by its world)."""
+        count = int(mask.sum())
+        c = torch.as_tensor(values, dtype=torch.float32).to(self.commands.device)
         if c.shape == (2,):
-            c = c.expand(self.num_worlds, 2)
-        if c.shape != (self.num_worlds, 2):
-            raise ValueError(f"commands must have shape ({self.num_worlds}, 2) or (2,), got {tuple(c.shape)}")
+            c = c.expand(count, 2)
+        if c.shape != (count, 2):
+            raise ValueError(f"{what} must have shape ({count}, 2) or (2,), got {tuple(c.shape)}")
         if not torch.isfinite(c).all():
-            bad = (~torch.isfinite(c)).any(-1).nonzero().flatten().tolist()
-            raise ValueError(f"commands contain NaN/inf in world(s) {bad}")
-        self.commands.copy_(c)
+            worlds = mask.nonzero().flatten()
+            bad = worlds[(~torch.isfinite(c)).any(-1)].tolist()
+            raise ValueError(f"{what} contain NaN/inf in world(s) {bad}")
+        return c
 
     def set_mode(self, mode: DriveMode | str, worlds=None) -> None:
         """Apply a fixed-torque driving mode to all worlds, or to the masked/indexed ``worlds``."""
@@ -460,9 +502,7 @@ class RoverSim:
             mode = DriveMode(mode)
         except ValueError:
             raise ValueError(f"unknown driving mode {mode!r}; known: {[m.value for m in DriveMode]}") from None
-        mask = torch.as_tensor(_as_world_mask(worlds, self.num_worlds), device=self.commands.device)
-        self.commands[mask] = torch.tensor(DRIVE_MODE_TORQUES[mode], dtype=torch.float32,
-                                           device=self.commands.device)
+        self.set_commands(DRIVE_MODE_TORQUES[mode], worlds)
 
     def reset(self, mask=None, poses=None, *, height: float | None = None) -> None:
         """Re-pose the selected worlds at rest, level, wheels still; others are untouched.
@@ -515,6 +555,7 @@ class RoverSim:
                       inputs=[self._layout.chassis_coord, self._layout.coords_per_world, self.terrain.kernel, mask,
                               poses, h, self._footprint], outputs=[s.joint_q], device=self.device)
         self.contact.reset(mask)
+        self.driver.reset(mask)
         newton.eval_fk(self.model, s.joint_q, s.joint_qd, s, mask=mask)
         self._update_views()
 
@@ -528,6 +569,7 @@ class RoverSim:
                  "body_mass": m.body_mass, "body_inv_mass": m.body_inv_mass, "body_inertia": m.body_inertia,
                  "body_inv_inertia": m.body_inv_inertia, "body_com": m.body_com,
                  "rover_inv_mass": inertia.inv_mass, "rover_com": inertia.com, "rover_inv_inertia": inertia.inv_inertia}
+        views.update(self.driver.snapshot_arrays())
         views = {k: wp.to_torch(v, requires_grad=False) for k, v in views.items()}
         views.update({f"params.{name}": self.params.view(name) for name in PARAMETERS})
         return views

@@ -1,0 +1,173 @@
+"""The base's motor driver, as a real mobile base runs it: ``/cmd_vel`` (linear [m/s], angular [rad/s]) through
+optional speed and acceleration limits and the skid-steer kinematics to each side's wheel-speed target, then a PI
+loop on the wheel encoders every solver substep (100 Hz at the default 0.01 s), within the motor's torque
+limit, with anti-windup and a command timeout; and wheel odometry from the same encoders.
+
+The driver knows what a real one knows: its wheel radius and track are its configured values (the nominal
+rover's unless set), not the physical rover's. Under randomization, a payload or a worn tyre, its targets and
+its odometry carry the scale error that a real base's do.
+
+The kernels are in :mod:`atrv_warp.sim.kernels.driver`; :class:`~atrv_warp.sim.RoverSim` runs them inside its
+step, :class:`~atrv_warp.sim.diff.DiffRollout` on its tape, and the ROS node, the velocity actions of the task
+and the calibration's replay all go through them.
+
+References for the limits (all off by default, as ``diff_drive_controller``'s are):
+
+=====================================  ==========  =============  ===========  ==============
+base                                   v [m/s]     a [m/s²]       ω [rad/s]    α [rad/s²]
+=====================================  ==========  =============  ===========  ==============
+ATRV-Jr's own driver (rFLEX, 10 Hz)    -           0.7            -            -
+ATRV-Jr under Nav2 (its config)        0.5         -              1.0          -
+Clearpath Husky A200                   1.0         1.0            1.0          1.0
+Clearpath Jackal J100                  2.0         20.0           4.0          25.0
+=====================================  ==========  =============  ===========  ==============
+
+(Clearpath's ``clearpath_control`` configs run ``diff_drive_controller`` at 50 Hz.)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+import warp as wp
+
+from atrv_warp.core.kinematics import EFFECTIVE_TRACK_FACTOR, SkidSteer, track_width
+from atrv_warp.sim.kernels.driver import DRIVE_TORQUE, DRIVE_TWIST, DriverParams, DriverState, reset_driver
+
+__all__ = ["DRIVE_TORQUE", "DRIVE_TWIST", "DRIVER_LIMITS", "Driver", "DriverConfig"]
+
+DRIVER_LIMITS = ("linear_max_velocity", "linear_max_acceleration", "angular_max_velocity", "angular_max_acceleration")
+"""The limits, each ``diff_drive_controller``'s ``linear.x.max_velocity``, ``linear.x.max_acceleration``,
+``angular.z.max_velocity`` and ``angular.z.max_acceleration``."""
+
+
+@dataclass(frozen=True)
+class DriverConfig:
+    """A skid-steer base's motor driver (the ROS node's parameters of the same names)."""
+
+    wheel_radius: float | None = None
+    """The wheel radius the driver is configured with [m]; ``None``: the nominal rover's (its
+    :class:`~atrv_warp.sim.config.RoverConfig` before a calibration's ``sim_config`` is applied)."""
+    track_width: float | None = None
+    """The configured wheel track [m]; ``None``: the nominal rover's (:func:`~atrv_warp.core.kinematics.track_width`)."""
+    effective_track_factor: float = EFFECTIVE_TRACK_FACTOR
+    """Effective track / wheel track [-] the driver's kinematics assume (skid steering turns slower)."""
+    kp: float = 3.0
+    """PI proportional gain [N·m per rad/s]. The loop runs every substep; a slipping wheel (0.02 kg·m²) bounds
+    it: ``kp x sim_dt / J`` must stay below 2 (1.5 here). Chosen with ``ki`` by ``benchmarks/driver_response.py``:
+    the fastest pair whose yaw rate overshoots by at most 10 % at µ 0.2-1.0."""
+    ki: float = 30.0
+    """PI integral gain [N·m per rad]."""
+    torque_limit: float = 20.0
+    """The motor's torque limit [N·m] (the torque task's action scale)."""
+    linear_max_velocity: float | None = None
+    """``linear.x.max_velocity`` [m/s] (``None``: no limit)."""
+    linear_max_acceleration: float | None = None
+    """``linear.x.max_acceleration`` [m/s²] (``None``: no limit)."""
+    angular_max_velocity: float | None = None
+    """``angular.z.max_velocity`` [rad/s] (``None``: no limit)."""
+    angular_max_acceleration: float | None = None
+    """``angular.z.max_acceleration`` [rad/s²] (``None``: no limit)."""
+    cmd_vel_timeout: float = 0.5
+    """Without a command for this long [s], the target drops to zero (``diff_drive_controller``'s default)."""
+
+    def __post_init__(self):
+        positive = ["effective_track_factor", "torque_limit", "cmd_vel_timeout", *DRIVER_LIMITS]
+        positive += [n for n in ("wheel_radius", "track_width") if getattr(self, n) is not None]
+        for name in positive:
+            value = getattr(self, name)
+            if value is None and name in DRIVER_LIMITS:
+                continue
+            if not _finite_positive(value):
+                raise ValueError(f"DriverConfig.{name} must be a finite number > 0, got {value!r}")
+        for name in ("kp", "ki"):
+            value = getattr(self, name)
+            if not (_finite_positive(value) or value == 0):
+                raise ValueError(f"DriverConfig.{name} must be a finite number >= 0, got {value!r}")
+
+    def kinematics(self, description, nominal_rover) -> SkidSteer:
+        """The driver's kinematics: its configured radius and track, else the nominal rover's."""
+        radius = self.wheel_radius if self.wheel_radius is not None else nominal_rover.wheel_radius
+        track = self.track_width if self.track_width is not None else track_width(description, nominal_rover)
+        return SkidSteer(radius, track, self.effective_track_factor)
+
+    def kernel_params(self, kinematics: SkidSteer, dt: float) -> DriverParams:
+        """The kernels' :class:`~atrv_warp.sim.kernels.driver.DriverParams` at substep ``dt`` [s]."""
+        p = DriverParams()
+        p.wheel_radius, p.effective_track = kinematics.wheel_radius, kinematics.effective_track
+        p.kp, p.ki, p.torque_limit = self.kp, self.ki, self.torque_limit
+        limit = {name: math.inf if getattr(self, name) is None else float(getattr(self, name)) for name in DRIVER_LIMITS}
+        p.max_linear, p.max_linear_accel = limit["linear_max_velocity"], limit["linear_max_acceleration"]
+        p.max_angular, p.max_angular_accel = limit["angular_max_velocity"], limit["angular_max_acceleration"]
+        p.timeout, p.dt = self.cmd_vel_timeout, dt
+        return p
+
+
+def _finite_positive(value) -> bool:
+    try:
+        return math.isfinite(float(value)) and float(value) > 0
+    except (TypeError, ValueError):
+        return False
+
+
+class Driver:
+    """Every world's motor driver: its configuration, state and commands as Warp arrays and torch views.
+
+    Views (N rows, updated in place by the simulator's step):
+        ``mode`` (N,) int32: ``DRIVE_TORQUE`` (0) or ``DRIVE_TWIST`` (1).
+        ``twist`` (N, 2): the commanded (linear [m/s], angular [rad/s]); write with :meth:`~atrv_warp.sim.RoverSim.set_twist`.
+        ``odometry`` (N, 3): wheel odometry x [m], y [m], yaw [rad] in the odometry frame (the pose at reset).
+        ``odom_twist`` (N, 2): the encoders' (linear [m/s], angular [rad/s]).
+        ``reference`` (N, 2): the limited twist being tracked.
+        ``age`` (N,): time since the last command [s]; past ``cmd_vel_timeout`` the driver stops the rover.
+        ``lag`` (N,): the motor's torque lag time constant [s] (0: none), e.g. a randomization's draw.
+    """
+
+    def __init__(self, cfg: DriverConfig, kinematics: SkidSteer, num_worlds: int, dt: float, device):
+        self.cfg = cfg
+        self.kinematics = kinematics
+        """The driver's :class:`~atrv_warp.core.kinematics.SkidSteer` (configured radius and track)."""
+        self.params = cfg.kernel_params(kinematics, dt)
+        n = num_worlds
+        self.mode_array = wp.full(n, DRIVE_TORQUE, dtype=wp.int32, device=device)
+        self.twist_array = wp.zeros(n, dtype=wp.vec2, device=device)
+        self.lag_array = wp.zeros(n, dtype=float, device=device)
+        self.state = make_state(n, device)
+        self.mode = wp.to_torch(self.mode_array)
+        self.twist = wp.to_torch(self.twist_array).view(n, 2)
+        self.lag = wp.to_torch(self.lag_array)
+        s = self.state
+        self.odometry = wp.to_torch(s.odometry).view(n, 3)
+        self.odom_twist = wp.to_torch(s.odom_twist).view(n, 2)
+        self.reference = wp.to_torch(s.reference).view(n, 2)
+        self.age = wp.to_torch(s.age)
+
+    @property
+    def timed_out(self) -> torch.Tensor:
+        """(N,) bool: a twist-driven world that has had no command for longer than ``cmd_vel_timeout``."""
+        return (self.mode == int(DRIVE_TWIST)) & (self.age > self.cfg.cmd_vel_timeout)
+
+    def snapshot_arrays(self) -> dict[str, wp.array]:
+        """Everything of the driver that the next step reads, by snapshot key."""
+        s = self.state
+        return {"driver.mode": self.mode_array, "driver.twist": self.twist_array, "driver.lag": self.lag_array,
+                "driver.reference": s.reference, "driver.integral": s.integral, "driver.applied": s.applied,
+                "driver.age": s.age, "driver.odometry": s.odometry, "driver.odom_twist": s.odom_twist}
+
+    def reset(self, mask: wp.array) -> None:
+        wp.launch(reset_driver, dim=len(mask), inputs=[mask], outputs=[self.twist_array, self.state],
+                  device=mask.device)
+
+
+def make_state(num_worlds: int, device, requires_grad: bool = False) -> DriverState:
+    """A zeroed :class:`~atrv_warp.sim.kernels.driver.DriverState` of ``num_worlds`` rows."""
+    s = DriverState()
+    s.reference = wp.zeros(num_worlds, dtype=wp.vec2, device=device, requires_grad=requires_grad)
+    s.integral = wp.zeros(num_worlds, dtype=wp.vec2, device=device, requires_grad=requires_grad)
+    s.applied = wp.zeros(num_worlds, dtype=wp.vec2, device=device, requires_grad=requires_grad)
+    s.age = wp.zeros(num_worlds, dtype=float, device=device, requires_grad=requires_grad)
+    s.odometry = wp.zeros(num_worlds, dtype=wp.vec3, device=device, requires_grad=requires_grad)
+    s.odom_twist = wp.zeros(num_worlds, dtype=wp.vec2, device=device, requires_grad=requires_grad)
+    return s

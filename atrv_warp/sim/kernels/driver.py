@@ -1,0 +1,222 @@
+"""The base's motor driver, per world, inside every solver substep: a (v, ω) command through speed and
+acceleration limits and the skid-steer kinematics to each side's wheel-speed target, a PI loop on the side's
+encoders within the torque limit (anti-windup), a first-order motor lag, and wheel odometry.
+
+One thread per world. :func:`drive_wheels` replaces the torque kernel: a world in ``DRIVE_TORQUE`` mode applies
+its torque commands as before (bit for bit), a world in ``DRIVE_TWIST`` mode runs the driver. Both integrate
+wheel odometry, as a real base always reports it. :class:`atrv_warp.sim.driver.DriverConfig` documents the
+figures; :mod:`atrv_warp.core.kinematics` is the kinematics' torch twin.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from atrv_warp.sim.kernels.params import WorldPhysics
+from atrv_warp.sim.kernels.rover import RoverLayout, motor_torque
+
+DRIVE_TORQUE = wp.constant(0)
+"""A world whose ``commands`` are wheel torques [N·m]."""
+DRIVE_TWIST = wp.constant(1)
+"""A world whose ``twist`` (linear [m/s], angular [rad/s]) goes through the driver."""
+
+
+@wp.struct
+class DriverParams:
+    """The driver's configuration (every world's the same: one base model). ``inf`` switches a limit off."""
+
+    wheel_radius: float  # configured, not the physical (per-world) radius [m]
+    effective_track: float  # configured track x effective track factor [m]
+    kp: float  # [N·m per rad/s]
+    ki: float  # [N·m per rad]
+    torque_limit: float  # [N·m]
+    max_linear: float  # [m/s]
+    max_linear_accel: float  # [m/s²]
+    max_angular: float  # [rad/s]
+    max_angular_accel: float  # [rad/s²]
+    timeout: float  # [s] without a command, the target drops to zero
+    dt: float  # the substep [s]
+
+
+@wp.struct
+class DriverState:
+    """Each world's driver state, (N,) arrays: what the next substep reads (and a snapshot keeps)."""
+
+    reference: wp.array(dtype=wp.vec2)  # the limited (linear, angular) being tracked
+    integral: wp.array(dtype=wp.vec2)  # each side's PI integral [rad]
+    applied: wp.array(dtype=wp.vec2)  # each side's torque after the motor lag [N·m]
+    age: wp.array(dtype=float)  # time since the last command [s]
+    odometry: wp.array(dtype=wp.vec3)  # x [m], y [m], yaw [rad] in the odometry frame (the pose at reset)
+    odom_twist: wp.array(dtype=wp.vec2)  # linear [m/s], angular [rad/s] from the encoders
+
+
+@wp.func
+def limit_twist(params: DriverParams, command: wp.vec2, reference: wp.vec2) -> wp.vec2:
+    """``reference`` moved toward ``command`` clipped to the speed limits, by at most one substep of the
+    acceleration limits (``diff_drive_controller``'s speed limiter, without jerk limits)."""
+    v = wp.clamp(command[0], -params.max_linear, params.max_linear)
+    w = wp.clamp(command[1], -params.max_angular, params.max_angular)
+    dv = params.max_linear_accel * params.dt
+    dw = params.max_angular_accel * params.dt
+    return wp.vec2(reference[0] + wp.clamp(v - reference[0], -dv, dv),
+                   reference[1] + wp.clamp(w - reference[1], -dw, dw))
+
+
+@wp.func
+def pi_side(target: float, speed: float, integral: float, kp: float, ki: float, limit: float, dt: float):
+    """One side's wheel-speed PI: torque [N·m] within ``limit``, and the new integral [rad], held while the
+    output saturates (anti-windup)."""
+    error = target - speed
+    candidate = integral + error * dt
+    new = candidate
+    if wp.abs(kp * error + ki * candidate) > limit:
+        new = integral
+    return wp.clamp(kp * error + ki * new, -limit, limit), new
+
+
+@wp.func
+def lag_factor(tau: float, dt: float) -> float:
+    """First-order lag over ``dt`` with time constant ``tau`` [s] (0: none)."""
+    if tau > 0.0:
+        return 1.0 - wp.exp(-dt / tau)
+    return 1.0
+
+
+@wp.func
+def driver_torques(params: DriverParams, command: wp.vec2, fresh: bool, speeds: wp.vec2, reference: wp.vec2,
+                   integral: wp.vec2, applied: wp.vec2, lag: float):
+    """One substep of the driver for one world: the new reference twist, integral and lagged side torques.
+    ``fresh``: a command arrived within the timeout (else the target is zero)."""
+    target = wp.vec2(0.0, 0.0)
+    if fresh:
+        target = command
+    ref = limit_twist(params, target, reference)
+    half = 0.5 * ref[1] * params.effective_track
+    left, i_left = pi_side((ref[0] - half) / params.wheel_radius, speeds[0], integral[0], params.kp, params.ki,
+                           params.torque_limit, params.dt)
+    right, i_right = pi_side((ref[0] + half) / params.wheel_radius, speeds[1], integral[1], params.kp, params.ki,
+                             params.torque_limit, params.dt)
+    out = wp.vec2(left, right)
+    new_applied = applied + lag_factor(lag, params.dt) * (out - applied)
+    return ref, wp.vec2(i_left, i_right), new_applied
+
+
+@wp.func
+def side_speeds(layout: RoverLayout, joint_qd: wp.array(dtype=float), world: int) -> wp.vec2:
+    """Mean forward speed of each side's wheels [rad/s] (the encoders)."""
+    total = wp.vec2(0.0, 0.0)
+    count = wp.vec2(0.0, 0.0)
+    for k in range(layout.wheel_count):
+        s = layout.wheel_side[k]
+        total[s] = total[s] + layout.wheel_sign[k] * joint_qd[world * layout.dofs_per_world + layout.wheel_dof[k]]
+        count[s] = count[s] + 1.0
+    return wp.vec2(total[0] / wp.max(count[0], 1.0), total[1] / wp.max(count[1], 1.0))
+
+
+@wp.func
+def integrate_odometry(params: DriverParams, pose: wp.vec3, speeds: wp.vec2):
+    """Wheel odometry over one substep (midpoint rule) from side speeds [rad/s], with the configured radius and
+    effective track: the new pose and the twist (linear, angular)."""
+    r = params.wheel_radius
+    v = r * (speeds[0] + speeds[1]) * 0.5
+    w = r * (speeds[1] - speeds[0]) / params.effective_track
+    mid = pose[2] + 0.5 * w * params.dt
+    yaw = pose[2] + w * params.dt
+    yaw = wp.atan2(wp.sin(yaw), wp.cos(yaw))
+    return wp.vec3(pose[0] + v * wp.cos(mid) * params.dt, pose[1] + v * wp.sin(mid) * params.dt, yaw), wp.vec2(v, w)
+
+
+@wp.kernel
+def drive_wheels(
+    layout: RoverLayout,
+    params: DriverParams,
+    mode: wp.array(dtype=wp.int32),
+    commands: wp.array(dtype=wp.vec2),
+    twist: wp.array(dtype=wp.vec2),
+    lag: wp.array(dtype=float),
+    physics: WorldPhysics,
+    joint_qd: wp.array(dtype=float),
+    state_in: DriverState,
+    state_out: DriverState,
+    joint_f: wp.array(dtype=float),
+    wheel_torque: wp.array2d(dtype=float),
+):
+    """Each wheel's joint torque for one substep: the world's torque ``commands`` (``DRIVE_TORQUE``), or the
+    driver's output for its ``twist`` (``DRIVE_TWIST``), through the world's motor (torque scale, no-load taper);
+    and the wheel odometry. ``state_in`` and ``state_out`` may be the same arrays (the simulator) or one per
+    substep (a differentiable rollout's tape)."""
+    world = wp.tid()
+    speeds = side_speeds(layout, joint_qd, world)
+    pose, odom_twist = integrate_odometry(params, state_in.odometry[world], speeds)
+    state_out.odometry[world] = pose
+    state_out.odom_twist[world] = odom_twist
+    side = commands[world]
+    reference = state_in.reference[world]
+    integral = state_in.integral[world]
+    applied = state_in.applied[world]
+    age = state_in.age[world]
+    if mode[world] == DRIVE_TWIST:
+        reference, integral, applied = driver_torques(params, twist[world], age <= params.timeout, speeds, reference,
+                                                      integral, applied, lag[world])
+        side = applied
+    state_out.reference[world] = reference
+    state_out.integral[world] = integral
+    state_out.applied[world] = applied
+    state_out.age[world] = age + params.dt
+    cmd = side * physics.torque_scale[world]
+    speed_limit = physics.speed_limit[world]
+    for k in range(layout.wheel_count):
+        dof = world * layout.dofs_per_world + layout.wheel_dof[k]
+        sign = layout.wheel_sign[k]
+        tau = motor_torque(cmd[layout.wheel_side[k]], sign * joint_qd[dof], speed_limit)
+        joint_f[dof] = sign * tau
+        wheel_torque[world, k] = tau
+
+
+@wp.kernel
+def reset_driver(mask: wp.array(dtype=bool), twist: wp.array(dtype=wp.vec2), state: DriverState):
+    """A masked world's driver at rest: no command, zero integral and torque, odometry at the origin of a new
+    odometry frame (the pose it was reset to)."""
+    world = wp.tid()
+    if not mask[world]:
+        return
+    twist[world] = wp.vec2(0.0, 0.0)
+    state.reference[world] = wp.vec2(0.0, 0.0)
+    state.integral[world] = wp.vec2(0.0, 0.0)
+    state.applied[world] = wp.vec2(0.0, 0.0)
+    state.age[world] = 0.0
+    state.odometry[world] = wp.vec3(0.0, 0.0, 0.0)
+    state.odom_twist[world] = wp.vec2(0.0, 0.0)
+
+
+@wp.kernel
+def replay_driver(
+    params: DriverParams,
+    commands: wp.array2d(dtype=wp.vec2),
+    fresh: wp.array2d(dtype=bool),
+    speeds: wp.array2d(dtype=wp.vec2),
+    substeps: int,
+    reference: wp.array2d(dtype=wp.vec2),
+    integral: wp.array2d(dtype=wp.vec2),
+    applied: wp.array2d(dtype=wp.vec2),
+):
+    """The driver replayed open loop along a recorded drive (one thread per log): ``commands`` (L, T) each
+    step's twist and whether it was ``fresh``, ``speeds`` (L, T + 1) each side's recorded wheel speed at the step
+    boundaries, linearly interpolated over the ``substeps``. Writes the driver's state at every step boundary
+    (L, T + 1): what a replay that starts at that step starts from (the calibration's segments)."""
+    log = wp.tid()
+    ref = wp.vec2(0.0, 0.0)
+    acc = wp.vec2(0.0, 0.0)
+    out = wp.vec2(0.0, 0.0)
+    steps = commands.shape[1]
+    for t in range(steps):
+        reference[log, t] = ref
+        integral[log, t] = acc
+        applied[log, t] = out
+        for s in range(substeps):
+            f = float(s) / float(substeps)
+            v = speeds[log, t] * (1.0 - f) + speeds[log, t + 1] * f
+            ref, acc, out = driver_torques(params, commands[log, t], fresh[log, t], v, ref, acc, out, 0.0)
+    reference[log, steps] = ref
+    integral[log, steps] = acc
+    applied[log, steps] = out
