@@ -36,7 +36,7 @@ import warp as wp
 from atrv_warp.core.kinematics import EFFECTIVE_TRACK_FACTOR, SkidSteer, track_width
 from atrv_warp.sim.kernels.driver import DRIVE_TORQUE, DRIVE_TWIST, DriverParams, DriverState, reset_driver
 
-__all__ = ["DRIVE_TORQUE", "DRIVE_TWIST", "DRIVER_LIMITS", "Driver", "DriverConfig"]
+__all__ = ["DRIVER_LIMITS", "DRIVE_TORQUE", "DRIVE_TWIST", "Driver", "DriverConfig"]
 
 DRIVER_LIMITS = ("linear_max_velocity", "linear_max_acceleration", "angular_max_velocity", "angular_max_acceleration")
 """The limits, each ``diff_drive_controller``'s ``linear.x.max_velocity``, ``linear.x.max_acceleration``,

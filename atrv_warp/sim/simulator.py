@@ -31,8 +31,8 @@ from atrv_warp.sim.config import (
 )
 from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
 from atrv_warp.sim.driver import DRIVE_TORQUE, DRIVE_TWIST, Driver, DriverConfig
-from atrv_warp.sim.kernels.driver import DriverState, drive_wheels
 from atrv_warp.sim.kernels.contact import FLAG_BODY_GROUND, FLAG_OBSTACLE, FLAG_WALL
+from atrv_warp.sim.kernels.driver import DriverState, drive_wheels
 from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics, apply_payload
 from atrv_warp.sim.kernels.rover import RoverLayout, compute_rover_state, reset_worlds
 from atrv_warp.sim.kernels.terrain import place_on_terrain
