@@ -4,6 +4,7 @@ obstacles, seen through the laser scanner)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -38,7 +39,19 @@ class TaskConfig:
     """Distance from the chassis origin [m] inside which an obstacle costs: the ATRV-Jr's footprint reaches 0.43 m
     from it at the wheels' outer corners, so 1 m keeps a margin of about 0.6 m."""
     action_scale: float = 20.0
-    """Wheel torque per unit action [N·m]."""
+    """Wheel torque per unit action [N·m] (``action="torque"``)."""
+    action: str = "torque"
+    """What the policy commands (:data:`atrv_warp.task.spec.ACTIONS`): ``"torque"``, each side's wheel torque (the
+    reference), or ``"twist"``, a ``/cmd_vel`` (forward speed, yaw rate) through the base's motor driver."""
+    max_linear: float = 1.0
+    """Forward speed at action 1 [m/s] (``action="twist"``): the Husky A200's ``diff_drive_controller`` limit, a base
+    of the ATRV-Jr's class (50 kg, four wheels, skid-steer); the ATRV-Jr's own Nav2 configuration caps at 0.5 m/s."""
+    max_angular: float = 1.0
+    """Yaw rate at action 1 [rad/s] (``action="twist"``): the Husky A200's limit, and the ATRV-Jr's Nav2 one."""
+    observation: str = "arena"
+    """What the policy observes (:data:`atrv_warp.task.spec.OBSERVATION_KINDS`): ``"arena"``, positions and
+    velocities in the arena's frame (the reference), or ``"robot"``, only what a robot's stack publishes (goal from
+    wheel odometry, odometry twist, IMU, scan)."""
 
     # ---- the scene: terrain, obstacles, scanner (the reference has none of them)
     terrain: str = "flat"
@@ -71,6 +84,17 @@ class TaskConfig:
     with action latency has commanded but not yet applied (Isaac Lab's ``last_action`` term)."""
 
     def __post_init__(self):
+        from atrv_warp.task.spec import ACTIONS, OBSERVATION_KINDS
+
+        if self.action not in ACTIONS:
+            raise ValueError(f"TaskConfig.action={self.action!r} is not an action kind; known: {sorted(ACTIONS)}")
+        if self.observation not in OBSERVATION_KINDS:
+            raise ValueError(f"TaskConfig.observation={self.observation!r} is not an observation kind; known: "
+                             f"{sorted(OBSERVATION_KINDS)}")
+        for name in ("max_linear", "max_angular", "action_scale"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"TaskConfig.{name} must be a finite number > 0, got {value!r}")
         if self.scan_sectors and (self.scan_beams % self.scan_sectors or self.scan_sectors < 0):
             raise ValueError(f"scan_beams={self.scan_beams} must be a multiple of scan_sectors={self.scan_sectors}")
         if self.obstacles_on_path > self.obstacles or self.obstacles < 0:
@@ -95,10 +119,12 @@ TASK_VARIANTS: dict[str, TaskConfig] = {
         flip_roll=0.5, scan_beams=64, scan_sectors=16, action_history=3, failure_reward=-10.0, heading_weight=1.0,
         clearance_weight=0.5),
 }
+TASK_VARIANTS["nav_deploy"] = dataclasses.replace(TASK_VARIANTS["nav"], action="twist", observation="robot")
 """Registered tasks. ``reach``: the reference task (flat, no obstacles, no scanner). ``nav``: rolling
 terrain, six obstacles (one across the straight line to the target), targets 5–10 m away, 15 s
 episodes, a 64-beam scan observed as 16 sectors, and the last three actions observed (a delayed rover's
-pending commands: docs/randomization.md)."""
+pending commands: docs/randomization.md). ``nav_deploy``: the nav world for a policy that runs on a robot: it
+commands ``/cmd_vel`` (``action="twist"``) and observes only what the robot publishes (``observation="robot"``)."""
 
 
 def get_task(task: str | TaskConfig | None) -> TaskConfig:

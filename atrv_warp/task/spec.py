@@ -4,8 +4,11 @@ Everything that reads or writes the task's tensors derives from here: the enviro
 specs, the Warp kernels (observation indices, bounds, end reasons, reward terms), the scripted
 baseline, the Gymnasium spaces, the ROS goal mode and :func:`atrv_warp.task.reward.progress_reward`.
 
-- :data:`OBSERVATION`: the observation's fields in order, each with its clip bound;
-  :func:`observation_fields` adds a task's scan sectors, then its last actions, after them.
+- :data:`OBSERVATION`: the arena observation's fields in order, each with its clip bound;
+  :data:`ROBOT_OBSERVATION`: the robot observation's (what a robot's own stack publishes);
+  :func:`observation_fields` picks the task's and adds its scan sectors, then its last actions, after them.
+- :data:`ACTIONS`: the action kinds (``torque``, ``twist``) and what each column means;
+  :func:`action_to_torque` and :func:`action_to_twist` map an action in [-1, 1]² to the rover's input.
 - :class:`EndReason`: why an episode ended (the ``end_reason`` entry).
 - :data:`REWARD_TERMS`: the reward's terms; their sum is ``reward``, and each is reported per
   step as ``("reward_terms", name)``.
@@ -23,16 +26,21 @@ import torch
 from atrv_warp.core.scan import ScanSectors
 
 __all__ = [
+    "ACTIONS",
     "ACTION_DIM",
     "END_REASONS",
     "OBSERVATION",
+    "OBSERVATION_KINDS",
     "OBSERVATION_NAMES",
     "OBS_DIM",
     "OBS_INDEX",
     "REWARD_TERMS",
+    "ROBOT_OBSERVATION",
+    "ActionKind",
     "EndReason",
     "ObservationField",
     "action_to_torque",
+    "action_to_twist",
     "observation_bounds",
     "observation_fields",
     "scan_sectors",
@@ -66,13 +74,56 @@ OBSERVATION: tuple[ObservationField, ...] = (
                      "(counter-clockwise positive)", "-", "chassis heading"),
     ObservationField("cos_heading_error", 1.0, "its cosine", "-", "chassis heading"),
 )
-"""The observation, in order (the reference task's fields and bounds)."""
+"""The arena observation, in order (the reference task's fields and bounds): positions and velocities in the
+arena's world frame, which only a simulator (or a motion-capture room) knows."""
+
+ROBOT_OBSERVATION: tuple[ObservationField, ...] = (
+    ObservationField("goal_distance", 30.0, "distance from the base to the goal, from wheel odometry and a goal in the "
+                     "odometry frame (/odom pose, /goal_pose)", "m", "base_link"),
+    ObservationField("sin_goal_bearing", 1.0, "sine of the goal's bearing from the base's +x (counter-clockwise "
+                     "positive), from wheel odometry", "-", "base_link"),
+    ObservationField("cos_goal_bearing", 1.0, "its cosine", "-", "base_link"),
+    ObservationField("odom_linear", 3.0, "forward speed from the wheel encoders (/odom twist.linear.x)", "m/s",
+                     "base_link"),
+    ObservationField("odom_angular", 6.0, "yaw rate from the wheel encoders (/odom twist.angular.z)", "rad/s",
+                     "base_link"),
+    ObservationField("imu_roll", 1.0, "roll from the IMU's orientation (/imu orientation, intrinsic Z-Y-X)", "rad",
+                     "imu (the URDF's cbimu_frame)"),
+    ObservationField("imu_pitch", 1.0, "pitch from the IMU's orientation (/imu orientation)", "rad",
+                     "imu (the URDF's cbimu_frame)"),
+    ObservationField("imu_yaw_rate", 6.0, "angular velocity about the IMU's z (/imu angular_velocity.z)", "rad/s",
+                     "imu (the URDF's cbimu_frame)"),
+)
+"""The robot observation, in order: only what a robot's own stack publishes (wheel odometry, an IMU, the goal in
+the odometry frame; then the task's scan sectors and last actions). No arena coordinates."""
+
+OBSERVATION_KINDS: dict[str, tuple[ObservationField, ...]] = {"arena": OBSERVATION, "robot": ROBOT_OBSERVATION}
+"""``TaskConfig.observation`` -> the observation's leading fields."""
+
+
+@dataclass(frozen=True)
+class ActionKind:
+    """What an action in [-1, 1]² commands."""
+
+    name: str
+    columns: tuple[str, str]
+    unit: str
+    description: str
+
+
+ACTIONS: dict[str, ActionKind] = {
+    "torque": ActionKind("torque", ("left", "right"), "N·m", "each side's wheel torque, x TaskConfig.action_scale"),
+    "twist": ActionKind("twist", ("linear", "angular"), "m/s, rad/s",
+                        "a /cmd_vel: forward speed x TaskConfig.max_linear and yaw rate x TaskConfig.max_angular, "
+                        "through the base's motor driver (atrv_warp.sim.driver)"),
+}
+"""``TaskConfig.action`` -> what the action means."""
 
 
 
 def observation_fields(task=None) -> tuple[ObservationField, ...]:
-    """The observation of ``task`` (a :class:`~atrv_warp.task.config.TaskConfig`): :data:`OBSERVATION`,
-    then ``scan_0 … scan_{S-1}`` for its ``scan_sectors`` (right to left), in [0, 1], then
+    """The observation of ``task`` (a :class:`~atrv_warp.task.config.TaskConfig`): :data:`OBSERVATION` (or
+    :data:`ROBOT_OBSERVATION` for ``observation="robot"``), then ``scan_0 … scan_{S-1}`` for its ``scan_sectors`` (right to left), in [0, 1], then
     ``last_action_1_left``, ``last_action_1_right`` … ``last_action_K_right`` for its ``action_history``
     (the actions chosen 1 … K steps before, newest first, in [-1, 1])."""
     sectors = getattr(task, "scan_sectors", 0)
@@ -80,17 +131,19 @@ def observation_fields(task=None) -> tuple[ObservationField, ...]:
     scan = tuple(ObservationField(f"scan_{i}", 1.0, f"nearest return in scan sector {i} of {sectors} (right to left, "
                                   "edges: scan_sectors(task)), min(range, scan_clip) / scan_clip; no return 1, too "
                                   "close 0", "-", "scanner (the URDF's lrf_frame)") for i in range(sectors))
+    columns = ACTIONS[getattr(task, "action", "torque")].columns
     actions = tuple(ObservationField(f"last_action_{k}_{side}", 1.0, f"the {side} action chosen {k} step(s) before "
                                      "(what a delayed rover has yet to apply), in [-1, 1]", "-", "-")
-                    for k in range(1, history + 1) for side in ("left", "right"))
-    return OBSERVATION + scan + actions
+                    for k in range(1, history + 1) for side in columns)
+    return OBSERVATION_KINDS[getattr(task, "observation", "arena")] + scan + actions
 
 
 OBSERVATION_NAMES: tuple[str, ...] = tuple(f.name for f in OBSERVATION)
 OBS_INDEX: dict[str, int] = {f.name: i for i, f in enumerate(OBSERVATION)}
 OBS_DIM = len(OBSERVATION)
 ACTION_DIM = 2
-"""[left, right] in [-1, 1], times ``TaskConfig.action_scale`` N·m per wheel."""
+"""Two columns in [-1, 1]: [left, right] x ``TaskConfig.action_scale`` N·m per wheel (``torque``), or
+[linear, angular] x (``max_linear``, ``max_angular``) (``twist``): :data:`ACTIONS`."""
 
 
 class EndReason(IntEnum):
@@ -146,3 +199,9 @@ def scan_sectors(task) -> ScanSectors | None:
 def action_to_torque(action: torch.Tensor, action_scale: float, out: torch.Tensor | None = None) -> torch.Tensor:
     """Wheel torques [N·m] for actions: clipped to [-1, 1], times ``action_scale``."""
     return torch.mul(action.clamp(-1.0, 1.0), action_scale, out=out)
+
+
+def action_to_twist(action: torch.Tensor, max_linear: float, max_angular: float) -> torch.Tensor:
+    """(linear [m/s], angular [rad/s]) for actions (..., 2): clipped to [-1, 1], times the limits."""
+    scale = torch.tensor([max_linear, max_angular], dtype=action.dtype, device=action.device)
+    return action.clamp(-1.0, 1.0) * scale
