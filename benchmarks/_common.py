@@ -46,7 +46,7 @@ def _relative(path: str | Path) -> str:
 
 
 def provenance(version: int, *, script: str | Path | None = None, dynamics: bool = True, task: bool = False,
-               policies: tuple[str | Path, ...] = ()) -> dict:
+               policies: tuple[str | Path, ...] = (), driver: bool = False) -> dict:
     """What a results file's figures depend on, recorded beside them (``docs/hooks.py`` checks it).
 
     Args:
@@ -57,11 +57,13 @@ def provenance(version: int, *, script: str | Path | None = None, dynamics: bool
         task: whether they depend on the tasks (observations, rewards, resets, randomization); if so, the
             current :func:`atrv_warp.task.evaluation.task_fingerprint` is recorded.
         policies: the policy files the script ran; each one's sha256 is recorded.
+        driver: whether they went through the base's motor driver (``/cmd_vel``, velocity actions); if so, the
+            current :func:`atrv_warp.sim.checks.driver_fingerprint` is recorded.
 
     Returns:
         ``date`` (UTC), ``commit`` and ``dirty`` (uncommitted changes to tracked files), ``script``,
         ``script_version``, ``command`` (the command line that ran, when the script is the one being run),
-        and ``dynamics``, ``task`` and ``policies`` where they apply.
+        and ``dynamics``, ``driver``, ``task`` and ``policies`` where they apply.
     """
     main = getattr(sys.modules["__main__"], "__file__", None) or sys.argv[0]
     script = script or main
@@ -75,6 +77,10 @@ def provenance(version: int, *, script: str | Path | None = None, dynamics: bool
         from atrv_warp.sim.checks import dynamics_fingerprint
 
         record["dynamics"] = dynamics_fingerprint()
+    if driver:
+        from atrv_warp.sim.checks import driver_fingerprint
+
+        record["driver"] = driver_fingerprint()
     if task:
         from atrv_warp.task.evaluation import task_fingerprint
 
@@ -85,7 +91,7 @@ def provenance(version: int, *, script: str | Path | None = None, dynamics: bool
 
 
 def write_results(path: str | Path, result: dict, *, version: int, dynamics: bool = True, task: bool = False,
-                  policies: tuple[str | Path, ...] = ()) -> Path:
+                  policies: tuple[str | Path, ...] = (), driver: bool = False) -> Path:
     """Write ``result`` as indented JSON to ``path``, creating its folder, with its
     :func:`provenance` under the key ``"provenance"``; returns the path.
 
@@ -96,8 +102,10 @@ def write_results(path: str | Path, result: dict, *, version: int, dynamics: boo
         dynamics: whether the figures depend on the simulator's dynamics.
         task: whether they depend on the tasks (an environment ran).
         policies: the policy files the script ran.
+        driver: whether they went through the base's motor driver.
     """
-    result = {**result, "provenance": provenance(version, dynamics=dynamics, task=task, policies=tuple(policies))}
+    result = {**result, "provenance": provenance(version, dynamics=dynamics, task=task, policies=tuple(policies),
+                                                 driver=driver)}
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")

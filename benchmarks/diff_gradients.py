@@ -1,7 +1,7 @@
 """Differentiable rollouts: gradient agreement with finite differences, and forward/backward cost.
 
 Run: ``python benchmarks/diff_gradients.py [--horizons 1 2 5 10 20 40 100] [--sizes 1 64 1024]
-[--without-wrench-fix]``
+[--without-wrench-fix] [--twist]``
 
 Agreement: for each driving scenario and horizon T (env steps of 0.05 s), the tape gradient of
 ``L = x_T + y_T + 2 qz_T`` (final position and heading) with respect to all actions is compared
@@ -15,6 +15,12 @@ not smooth at that scale (stick-slip, contact switching), the finite difference 
 and the entry is marked (``"fd_rough": true`` in the JSON, a dagger in the tables).
 Scenarios: ``straight`` (+2 N·m, rolling), ``slip`` (+20 N·m, wheels spinning),
 ``curve`` (left 4, right 8 N·m), ``spin`` (left -6, right +6 N·m, skidding in place).
+
+``--twist``: the actions are ``/cmd_vel`` commands through the base's motor driver
+(``DiffRollout(twist=True)``: the wheel-speed PI every substep on the tape), the directions vary the
+forward speed (``linear``) and the yaw rate (``angular``), in scenarios ``straight`` (0.5 m/s),
+``arc`` (0.5 m/s, 0.5 rad/s), ``spin`` (0.5 rad/s in place) and ``fast_arc`` (1 m/s, 0.2 rad/s); written
+to ``diff_gradients_twist.json``.
 
 Cost: wall time of the taped forward pass and of the backward pass per world-step at N worlds
 (T = 20), on one core, median of ``--repeats``; graph replay and tile GEMM are off on this path.
@@ -37,6 +43,14 @@ VERSION = 1
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SCENARIOS = {"straight": (0.1, 0.1), "slip": (1.0, 1.0), "curve": (0.2, 0.4), "spin": (-0.3, 0.3)}
+"""Torque actions (left, right) in [-1, 1] x 20 N·m."""
+KINDS = {"common": (1.0, 1.0), "differential": (1.0, -1.0)}
+"""Directions of the torque actions: both wheels together, left against right."""
+TWIST_SCENARIOS = {"straight": (0.5, 0.0), "arc": (0.5, 0.5), "spin": (0.0, 0.5), "fast_arc": (1.0, 0.2)}
+"""``--twist``: (linear [m/s], angular [rad/s]) commands."""
+TWIST_KINDS = {"linear": (1.0, 0.0), "angular": (0.0, 1.0)}
+LABELS = {"common": "both wheels together", "differential": "left vs right", "linear": "forward speed command",
+          "angular": "yaw rate command", "friction": "friction mu", "mass": "chassis mass"}
 
 
 def objective(poses):
@@ -76,6 +90,8 @@ def main() -> int:
     parser.add_argument("--without-wrench-fix", action="store_true",
                         help="diagnostic: leave out atrv_warp.sim.diff's fix for Newton's in-place wrench "
                              "conversion, to measure what it changes (default output: diff_gradients_without_fix.json)")
+    parser.add_argument("--twist", action="store_true",
+                        help="the actions are /cmd_vel through the motor driver (default output: diff_gradients_twist.json)")
     parser.add_argument("--out", default=None)
     parser.add_argument("--report", metavar="JSON", help="print the tables of an existing results file and exit")
     args = parser.parse_args()
@@ -88,15 +104,17 @@ def main() -> int:
     from atrv_warp.sim.diff import DiffRollout
 
     fix = not args.without_wrench_fix
-    default_name = "diff_gradients_without_fix.json" if args.without_wrench_fix else "diff_gradients.json"
+    default_name = ("diff_gradients_without_fix.json" if args.without_wrench_fix else
+                    "diff_gradients_twist.json" if args.twist else "diff_gradients.json")
+    scenarios, kinds = (TWIST_SCENARIOS, TWIST_KINDS) if args.twist else (SCENARIOS, KINDS)
     args.out = args.out or str(RESULTS / default_name)
 
     agreement = []
     gen = torch.Generator().manual_seed(0)
     for T in args.horizons:
-        roll = DiffRollout(1, steps=T, wrench_fix=fix)
+        roll = DiffRollout(1, steps=T, wrench_fix=fix, twist=args.twist)
         state = roll.initial_state()
-        for name, (left, right) in SCENARIOS.items():
+        for name, (left, right) in scenarios.items():
             a = torch.empty(T, 1, 2)
             a[..., 0], a[..., 1] = left, right
             mu = torch.tensor(0.3)
@@ -109,11 +127,11 @@ def main() -> int:
             # where the rover ends up (the arena's walls are 15 m from the start)
             row = {"scenario": name, "horizon_steps": T, "horizon_s": 0.05 * T,
                    "final_xy": poses[-1, 0, :2].tolist(), "path_max_x": poses[:, 0, 0].max().item()}
-            for kind in ("common", "differential"):
+            for kind, (c0, c1) in kinds.items():
                 worst, rough, tapes, fds = 0.0, False, [], []
                 for _ in range(args.directions):
                     w = torch.rand(T, 1, 1, generator=gen)  # random weights over time
-                    d = torch.cat([w, w if kind == "common" else -w], dim=-1)
+                    d = torch.cat([c0 * w, c1 * w], dim=-1)
                     d /= d.norm()
                     fd = central(roll, state, a, mu, d, 0.0, 3e-3)
                     fd_coarse = central(roll, state, a, mu, d, 0.0, 1e-2)
@@ -139,9 +157,10 @@ def main() -> int:
             row["mass_fd_rough"] = abs(fd_m_coarse - fd_m) > 0.05 * max(abs(fd_m), 1e-3)
             row["mass_tape"], row["mass_fd"] = tape_m, fd_m
             agreement.append(row)
-            print(f"T={T:3d} ({0.05 * T:4.2f} s) {name:8s} common {100 * row['common_rel_err']:7.2f}%"
-                  f"{'†' if row['common_fd_rough'] else ' '} differential {100 * row['differential_rel_err']:7.2f}%"
-                  f"{'†' if row['differential_fd_rough'] else ' '} friction {100 * row['friction_rel_err']:7.2f}%"
+            k0, k1 = kinds
+            print(f"T={T:3d} ({0.05 * T:4.2f} s) {name:8s} {k0} {100 * row[k0 + '_rel_err']:7.2f}%"
+                  f"{'†' if row[k0 + '_fd_rough'] else ' '} {k1} {100 * row[k1 + '_rel_err']:7.2f}%"
+                  f"{'†' if row[k1 + '_fd_rough'] else ' '} friction {100 * row['friction_rel_err']:7.2f}%"
                   f"{'†' if row['friction_fd_rough'] else ' '} (tape {mm.grad.item():+.4f}, fd {fd_mu:+.4f}) "
                   f"chassis mass {100 * row['mass_rel_err']:7.2f}%{'†' if row['mass_fd_rough'] else ' '}; "
                   f"max x {row['path_max_x']:.2f} m",
@@ -150,9 +169,9 @@ def main() -> int:
     cost = []
     for n in args.sizes:
         T = 20
-        roll = DiffRollout(n, steps=T, wrench_fix=fix)
+        roll = DiffRollout(n, steps=T, wrench_fix=fix, twist=args.twist)
         state = roll.initial_state()
-        a = (torch.rand(T, n, 2, generator=gen) * 2 - 1).requires_grad_(True)
+        a = (torch.rand(T, n, 2, generator=gen) * 2 - 1).requires_grad_(True)  # torques, or m/s and rad/s
         roll(a, state)  # warm-up
         t_fwd, t_bwd = [], []
         for _ in range(args.repeats):  # median of repeats: one short run on a shared core is noisy
@@ -170,10 +189,11 @@ def main() -> int:
               f"{row['backward_us_per_world_step']:9.1f} us per world-step; backward/forward "
               f"{row['backward_over_forward']:.2f}", flush=True)
 
-    results = {"benchmark": "diff_gradients", "wrench_fix": not args.without_wrench_fix, "agreement": agreement,
+    results = {"benchmark": "diff_gradients", "wrench_fix": not args.without_wrench_fix, "twist": args.twist,
+               "scenarios": list(scenarios), "kinds": list(kinds), "agreement": agreement,
                "cost": cost, "time": time.strftime("%Y-%m-%d %H:%M:%S")}
     report(results)
-    out = write_results(args.out, results, version=VERSION)
+    out = write_results(args.out, results, version=VERSION, driver=args.twist)
     print(f"\nwritten to {out}")
     return 0
 
@@ -182,23 +202,25 @@ def report(results) -> None:
     """Mark negligible entries and print the Markdown tables (also used by ``--report``)."""
     agreement = results["agreement"]
     horizons = sorted({r["horizon_steps"] for r in agreement})
+    kinds = results.get("kinds", list(KINDS))
+    scenarios = results.get("scenarios", list(SCENARIOS))
     # Full slip saturates friction: the actions then barely move the rover, and the relative error
     # of a ~0 derivative says nothing. Entries whose derivatives are all under 1 % of the median
     # scenario's at that horizon are marked negligible (shown as "~0").
     for T in horizons:
         rows = [r for r in agreement if r["horizon_steps"] == T]
-        for key in ("common", "differential", "friction", "mass"):
+        for key in (*kinds, "friction", "mass"):
             scale = statistics.median(max(magnitudes(r, key)) for r in rows)
             for r in rows:
                 r[key + "_negligible"] = max(magnitudes(r, key)) < 0.01 * scale
     print(f"\ngradient agreement ({'with' if results['wrench_fix'] else 'WITHOUT'} the wrench-adjoint fix)")
-    for key, label in (("common", "both wheels together"), ("differential", "left vs right"),
-                       ("friction", "friction mu"), ("mass", "chassis mass")):
+    for key in (*kinds, "friction", "mass"):
+        label = LABELS[key]
         print(f"\nworst relative error, {label} († = finite differences not smooth at this scale; "
               "~0 = derivative under 1 % of the median scenario's):")
         print("| scenario | " + " | ".join(f"{0.05 * T:.2f} s" for T in horizons) + " |")
         print("|---|" + "---:|" * len(horizons))
-        for name in SCENARIOS:
+        for name in scenarios:
             rows = sorted((r for r in agreement if r["scenario"] == name), key=lambda r: r["horizon_steps"])
             print(f"| {name} | " + " | ".join(cell(r, key) for r in rows) + " |")
     if results["cost"]:

@@ -2,15 +2,13 @@
 
     python benchmarks/skid_calibration.py
 
-1. **Turning.** One world per (linear, angular) command, driven for 15 s by the ROS base's own
-   wheel-speed PI controller (:func:`atrv_warp.integrations.ros.base.turning_response`, factor 1, so
-   the wheel targets are a differential drive's; at high mu its integral takes several seconds to build
-   the torque a turn needs). Over the last 4 s: the effective track ratio
+1. **Turning.** One world per (linear, angular) command, driven for 15 s by the base's motor driver
+   (:func:`atrv_warp.sim.checks.turning_response`, factor 1, so the wheel targets are a differential drive's). Over the last 4 s: the effective track ratio
    ``chi = r (w_right - w_left) / (yaw_rate x track)``, at mu = 0.3, 0.5, 0.8 and 1.0, against the
    pure-Coulomb prediction for the same wheel speeds (:func:`atrv_warp.sim.checks.coulomb_twist`)
    and against the 0.1.x viscous law (``ContactConfig(friction_law="viscous")``). The ROS node's
    default ``effective_track_factor`` is the median chi at the default mu. Target band 1.3–2.0.
-2. **Rolling.** The slip ratio at +2 N·m per wheel (target under 3 %), and the node's wheel
+2. **Rolling.** The slip ratio at +2 N·m per wheel (target under 3 %), and the driver's wheel
    odometry (with the new factor) from rest at 0.5 m/s and at 0.3 rad/s for 4 s against the truth
    (target within 2 %).
 3. **Traction limit.** Full torque (20 N·m) from rest: the mean acceleration while the tyres slide
@@ -30,7 +28,7 @@ from pathlib import Path
 
 from _common import write_results
 
-VERSION = 1
+VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -52,17 +50,18 @@ def turning(mu: float, law: str = "coulomb") -> list[dict]:
     import numpy as np
 
     from atrv_warp import RoverSim
-    from atrv_warp.integrations.ros.base import BaseParams, turning_response
     from atrv_warp.sim import ContactConfig
-    from atrv_warp.sim.checks import coulomb_twist, wheel_contact_xy
+    from atrv_warp.sim.checks import coulomb_twist, turning_response, wheel_contact_xy
+    from atrv_warp.sim.driver import DriverConfig
 
-    sim = RoverSim(len(COMMANDS), contact=ContactConfig(friction=mu, friction_law=law))
+    contact = ContactConfig(friction=mu, friction_law=law)
+    sim = RoverSim(1, contact=contact)
     r, track = sim.rover_cfg.wheel_radius, track_width(sim)
-    base = BaseParams(wheel_radius=r, track_width=track, effective_track_factor=1.0)
+    driver = DriverConfig(wheel_radius=r, track_width=track, effective_track_factor=1.0)
     contacts = wheel_contact_xy(sim)
     side = np.array([w.side for w in sim.description.wheels])
     rows = []
-    for row in turning_response(sim, COMMANDS, base, seconds=15.0, average=4.0):
+    for row in turning_response(COMMANDS, driver=driver, contact=contact, seconds=15.0, average=4.0):
         left, right = row["wheel_left"], row["wheel_right"]
         predicted = coulomb_twist(contacts, r * np.where(side == 0, left, right))[2]
         row.update(mu=mu, law=law, chi=r * (right - left) / (row["yaw_rate"] * track),
@@ -72,26 +71,22 @@ def turning(mu: float, law: str = "coulomb") -> list[dict]:
 
 
 def odometry(linear: float, angular: float, factor: float, seconds: float = 4.0) -> dict:
-    """The node's wheel odometry against the truth from a standstill, under its PI controller."""
-    import torch
-
+    """The base's wheel odometry (the motor driver's, in the simulator) against the truth from a standstill, the
+    command re-sent every step."""
     from atrv_warp import RoverSim
-    from atrv_warp.core.kinematics import side_speeds
-    from atrv_warp.integrations.ros.base import BaseParams, VelocityController, WheelOdometry
+    from atrv_warp.sim.driver import DriverConfig
 
-    sim = RoverSim(1)
-    side = torch.tensor([w.side for w in sim.description.wheels])
-    base = BaseParams(wheel_radius=sim.rover_cfg.wheel_radius, track_width=track_width(sim),
-                      effective_track_factor=factor)
-    control, odo = VelocityController(base), WheelOdometry(base)
-    control.command(linear, angular, now=0.0)
+    geometry = RoverSim(1)
+    sim = RoverSim(1, driver=DriverConfig(wheel_radius=geometry.rover_cfg.wheel_radius, track_width=track_width(geometry),
+                                          effective_track_factor=factor))
     dt = sim.sim_cfg.step_dt
     for _ in range(round(seconds / dt)):
-        sim.step(control.torques(side_speeds(sim.wheel_speed, side)[0], now=0.0, dt=dt).view(1, 2))
-        odo.update(side_speeds(sim.wheel_speed, side)[0], dt)
+        sim.set_twist([linear, angular])
+        sim.step()
     true_xy = sim.root_pose[0, :2].tolist()
+    x, y, yaw = sim.driver.odometry[0].tolist()
     return {"linear": linear, "angular": angular, "seconds": seconds, "true_distance": math.hypot(*true_xy),
-            "odometry_distance": math.hypot(odo.x, odo.y), "true_yaw": sim.rpy[0, 2].item(), "odometry_yaw": odo.yaw}
+            "odometry_distance": math.hypot(x, y), "true_yaw": sim.rpy[0, 2].item(), "odometry_yaw": yaw}
 
 
 def traction(mu: float) -> dict:
@@ -109,7 +104,7 @@ def main() -> int:
     from atrv_warp.sim import ContactConfig
     from atrv_warp.sim.checks import parked_on_slope, slip_ratio
 
-    print("1. Turning under the ROS base's PI controller (factor 1), 15 s per command, means over the last 4 s")
+    print("1. Turning under the base's motor driver (factor 1), 15 s per command, means over the last 4 s")
     print(f"{'law':>8} {'mu':>4} {'v [m/s]':>8} {'w [rad/s]':>9} {'wheels L, R [rad/s]':>20} {'yaw rate':>9} "
           f"{'chi':>6} {'Coulomb':>8}")
     rows = []

@@ -76,6 +76,14 @@ def _load(name: str) -> dict:
 # --- provenance ---------------------------------------------------------------------------------
 
 @functools.cache
+def current_driver() -> str:
+    """The motor driver's fingerprint of the code as it is now (computed once per process)."""
+    from atrv_warp.sim.checks import driver_fingerprint
+
+    return driver_fingerprint()
+
+
+@functools.cache
 def current_dynamics() -> str:
     """The dynamics fingerprint of the code as it is now (computed once per process: a 2-s rollout)."""
     from atrv_warp.sim.checks import dynamics_fingerprint
@@ -147,6 +155,8 @@ def status(name: str) -> Status:
         reasons.append(f"{p['script']} VERSION is {version}, the file was written by VERSION {p['script_version']}")
     if "dynamics" in p and p["dynamics"] != current_dynamics():
         reasons.append(f"dynamics fingerprint {p['dynamics']} != {current_dynamics()} now")
+    if "driver" in p and p["driver"] != current_driver():
+        reasons.append(f"motor driver fingerprint {p['driver']} != {current_driver()} now")
     if "task" in p and p["task"] != current_task():
         reasons.append(f"task fingerprint {p['task']} != {current_task()} now")
     for policy, digest in p.get("policies", {}).items():
@@ -789,6 +799,7 @@ def on_pre_build(**kwargs) -> None:
     """A new build (``mkdocs serve`` rebuilds in one process) checks the files and the code afresh."""
     status.cache_clear()
     current_dynamics.cache_clear()
+    current_driver.cache_clear()
     current_task.cache_clear()
 
 

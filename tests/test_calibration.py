@@ -12,12 +12,11 @@ import numpy as np
 import pytest
 import torch
 
-from atrv_warp.core.kinematics import side_speeds
 from atrv_warp.integrations.calibration import BagError, CalibrationConfig, CalibrationError, read_drive_log
 from atrv_warp.integrations.calibration.fit import make_segments
 from atrv_warp.integrations.ros.bag import BagWriter
-from atrv_warp.integrations.ros.base import BaseParams, VelocityController
 from atrv_warp.sim.config import SimConfig, load_sim_config
+from atrv_warp.sim.driver import DriverConfig
 from atrv_warp.sim.urdf import load_rover
 
 WHEELS = {w.joint: (w.side, w.drive_sign) for w in load_rover().wheels}
@@ -163,7 +162,7 @@ def test_bad_bags_are_one_line_errors_naming_the_file(tmp_path, case):
         _bag(path, seconds=3.0)
     with pytest.raises((BagError, CalibrationError)) as err:
         log = read_drive_log(path, WHEELS)
-        make_segments(log, CalibrationConfig(), BaseParams(wheel_radius=0.125, track_width=0.6))
+        make_segments(log, CalibrationConfig(), DriverConfig(wheel_radius=0.125, track_width=0.6))
     message = str(err.value)
     assert expect in message and str(path) in message and "\n" not in message, message
     if case == "no_joint_states":
@@ -185,28 +184,38 @@ def test_cli_bad_bag_writes_nothing(tmp_path, run_module):
 
 
 # ------------------------------------------------------------------ the rollout
-def test_rollout_controller_matches_the_base_driver():
-    """The PI inside the differentiable rollout drives as the ROS base's VelocityController does on RoverSim."""
+def test_rollout_driver_matches_the_simulator():
+    """/cmd_vel through the motor driver inside the differentiable rollout drives as the simulator's own step does
+    (one kernel, two users), and its gradients agree with central differences."""
     from atrv_warp import RoverSim
-    from atrv_warp.sim.diff import DiffRollout, WheelSpeedPI
+    from atrv_warp.sim.diff import DiffRollout
 
-    base = BaseParams(wheel_radius=0.125, track_width=0.6)
     steps = 30
     sim = RoverSim(1, sim=SimConfig(mass_matrix_interval=1, use_tile_gemm=False, use_graph=False))  # as the rollout
     side = torch.tensor([w.side for w in sim.description.wheels])
-    ctl = VelocityController(base)
-    ctl.command(0.8, 0.6, now=0.0)
-    targets = torch.zeros(steps, 1, 2)
     applied = torch.zeros(steps, 2)  # each side's mean motor torque in the step's last substep (the node's effort)
     for t in range(steps):
-        targets[t, 0] = ctl.wheel_targets(0.0)
-        sim.step(ctl.torques(side_speeds(sim.wheel_speed, side)[0], now=0.0, dt=0.05)[None])
+        sim.set_twist([0.8, 0.6])
+        sim.step()
         applied[t] = torch.stack([sim.wheel_torque[0, side == s].mean() for s in (0, 1)])
-    roll = DiffRollout(1, steps=steps, controller=WheelSpeedPI(base.kp, base.ki, base.torque_limit))
-    poses, torques = roll(targets, wheel_torques=True)
+    roll = DiffRollout(1, steps=steps, twist=True)
+    twist = torch.tensor([0.8, 0.6]).expand(steps, 1, 2)
+    poses, torques = roll(twist, wheel_torques=True)
     assert poses[-1, 0, :3].tolist() == pytest.approx(sim.root_pose[0, :3].tolist(), abs=2e-4)
     assert applied.abs().max() > 5.0  # the motors worked
     assert torques[:, 0].flatten().tolist() == pytest.approx(applied.flatten().tolist(), abs=0.05)
+    # through the loop: d(final x)/d(a mid-rollout forward command) against central differences
+    short = DiffRollout(1, steps=10, twist=True)
+    a = torch.tensor([0.5, 0.5]).repeat(10, 1).view(10, 1, 2).requires_grad_(True)
+    short(a)[-1, 0, 0].backward()
+    h = 1e-2
+    with torch.no_grad():
+        for t, c in ((5, 0), (5, 1), (8, 0)):
+            up, down = a.detach().clone(), a.detach().clone()
+            up[t, 0, c] += h
+            down[t, 0, c] -= h
+            fd = float(short(up)[-1, 0, 0] - short(down)[-1, 0, 0]) / (2 * h)
+            assert float(a.grad[t, 0, c]) == pytest.approx(fd, rel=0.05, abs=1e-4), (t, c)
 
 
 def test_rollout_gradients_of_motor_and_wheel_parameters():

@@ -246,20 +246,22 @@ def test_wall_impacts_at_top_speed_stay_under_1_2x_top_speed(sim_dt):
 
 @pytest.mark.parametrize("mu", [0.3, 0.8])
 def test_skid_steer_turns_as_coulomb_friction_predicts(mu):
-    """The effective track ratio chi = r (w_right - w_left) / (yaw rate x track) under the ROS base's
-    wheel-speed controller, in place and on an arc: inside 1.3-2.0 (a Pioneer 3-AT measured about
+    """The effective track ratio chi = r (w_right - w_left) / (yaw rate x track) under the base's motor driver,
+    in place and on an arc: inside 1.3-2.0 (a Pioneer 3-AT measured about
     1.5) and within 5 % of pure Coulomb friction on the same wheel speeds. The 0.1.x viscous law gave
     8.28 whatever mu."""
-    from atrv_warp.integrations.ros.base import BaseParams, turning_response
     from atrv_warp.sim import ContactConfig
+    from atrv_warp.sim.driver import DriverConfig
 
-    sim = RoverSim(2, contact=ContactConfig(friction=mu))
+    contact = ContactConfig(friction=mu)
+    sim = RoverSim(1, contact=contact)
     xy = checks.wheel_contact_xy(sim)
     track = float(xy[:, 1].max() - xy[:, 1].min())
     r = sim.rover_cfg.wheel_radius
     side = np.array([w.side for w in sim.description.wheels])
-    base = BaseParams(wheel_radius=r, track_width=track, effective_track_factor=1.0)
-    for row in turning_response(sim, [(0.0, 0.5), (0.5, 0.5)], base, seconds=10.0, average=3.0):
+    driver = DriverConfig(wheel_radius=r, track_width=track, effective_track_factor=1.0)
+    for row in checks.turning_response([(0.0, 0.5), (0.5, 0.5)], driver=driver, contact=contact, seconds=6.0,
+                                       average=2.0):
         left, right = row["wheel_left"], row["wheel_right"]
         chi = r * (right - left) / (row["yaw_rate"] * track)
         coulomb = r * (right - left) / (checks.coulomb_twist(xy, r * np.where(side == 0, left, right))[2] * track)

@@ -21,6 +21,7 @@ __all__ = [
     "ReferenceDrive",
     "WallImpacts",
     "coulomb_twist",
+    "driver_fingerprint",
     "dynamics_fingerprint",
     "full_torque_acceleration",
     "parked_on_slope",
@@ -28,6 +29,7 @@ __all__ = [
     "rolling_acceleration",
     "slip_ratio",
     "step_response",
+    "turning_response",
     "wall_impacts",
     "wheel_contact_xy",
 ]
@@ -229,7 +231,28 @@ def dynamics_fingerprint(*, contact: ContactConfig | None = None, sim: SimConfig
     rovers.commands[:] = torch.tensor([[4.0, 4.0], [-3.0, 9.0]])
     for _ in range(FINGERPRINT_STEPS):
         rovers.step()
-    pose = rovers.root_pose.detach().cpu().double().numpy()
+    return _hash_poses(rovers.root_pose)
+
+
+def driver_fingerprint(*, sim: SimConfig | None = None) -> str:
+    """A short hash of what the base's motor driver does (:mod:`atrv_warp.sim.driver`), as
+    :func:`dynamics_fingerprint` hashes the torque-driven dynamics: two rovers of the default model driven by
+    ``/cmd_vel`` (a straight line and an arc) for :data:`FINGERPRINT_STEPS` env-steps, their final chassis poses
+    and wheel odometry rounded to 1e-4 and hashed. Results whose figures went through the driver record it.
+
+    Returns:
+        16 hex digits.
+    """
+    rovers = RoverSim(2, sim=sim)
+    rovers.reset(poses=torch.tensor([[0.0, 0.0, 0.0], [2.0, -3.0, 0.7]]))
+    for _ in range(FINGERPRINT_STEPS):
+        rovers.set_twist(torch.tensor([[0.8, 0.0], [0.3, 0.6]]))
+        rovers.step()
+    return _hash_poses(torch.cat([rovers.root_pose, rovers.driver.odometry], -1))
+
+
+def _hash_poses(pose: torch.Tensor) -> str:
+    pose = pose.detach().cpu().double().numpy()
     text = " ".join(f"{v:.4f}" for v in (np.round(pose, 4) + 0.0).ravel())  # + 0.0: no "-0.0000"
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -279,3 +302,32 @@ def step_response(commands=STEP_COMMANDS, frictions=STEP_FRICTIONS, *, seconds: 
                     "speed": float(speed[-last:, i].mean() / v) if v else math.nan,
                     "time": time.tolist(), "yaw_rate": rate[:, i].tolist(), "speed_trace": speed[:, i].tolist()})
     return out
+
+
+def turning_response(commands, *, driver=None, contact: ContactConfig | None = None, seconds: float = 8.0,
+                     average: float = 3.0, sim: SimConfig | None = None) -> list[dict]:
+    """Drive one world per ``commands[i]`` = (linear [m/s], angular [rad/s]) through the motor driver
+    (``driver``: a :class:`~atrv_warp.sim.driver.DriverConfig`) for ``seconds``, the command re-sent every step, and
+    return per command the mean left and right wheel speeds [rad/s], yaw rate [rad/s] and speed [m/s] over the last
+    ``average`` seconds: what a skid-steer calibration measures.
+
+    Each rover starts facing +x where the circle it will drive (for an effective track ratio near 1.6) is centred
+    on the arena's centre, so that it meets no wall; worlds never interact."""
+    from atrv_warp.core.kinematics import side_speeds
+
+    rovers = RoverSim(len(commands), contact=contact, sim=sim, driver=driver)
+    rovers.reset(poses=[[0.0, -1.6 * v / w if w else 0.0, 0.0] for v, w in commands])
+    side = torch.tensor([w.side for w in rovers.description.wheels])
+    twist = torch.tensor(commands, dtype=torch.float32)
+    dt = rovers.sim_cfg.step_dt
+    steps, kept = round(seconds / dt), round(average / dt)
+    sums = torch.zeros(len(commands), 4, dtype=torch.float64)
+    for k in range(steps):
+        rovers.set_twist(twist)
+        rovers.step()
+        if k >= steps - kept:
+            speeds = side_speeds(rovers.wheel_speed, side)
+            sums += torch.cat([speeds, rovers.ang_vel[:, 2:3], rovers.lin_vel[:, :2].norm(dim=-1, keepdim=True)], -1)
+    mean = (sums / kept).tolist()
+    return [{"linear": v, "angular": w, "wheel_left": m[0], "wheel_right": m[1], "yaw_rate": m[2], "speed": m[3]}
+            for (v, w), m in zip(commands, mean)]

@@ -1,5 +1,5 @@
 """Differentiable rollouts: gradients of a chassis trajectory (and of the wheel speeds and motor torques) with
-respect to wheel-torque actions or wheel-speed targets, the initial state, and each world's friction coefficient,
+respect to wheel-torque actions or ``/cmd_vel`` twists through the base's motor driver, the initial state, and each world's friction coefficient,
 chassis mass, motor torque scale and speed limit and wheel radius, through Newton's Featherstone solver and our
 contact kernel, recorded on a ``wp.Tape`` and exposed as a ``torch.autograd.Function``.
 
@@ -28,18 +28,19 @@ Example::
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+import dataclasses
 
 import newton
 import torch
 import warp as wp
 
 from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig, SimConfig, get_variant
+from atrv_warp.sim.driver import DRIVE_TORQUE, DRIVE_TWIST, DriverConfig, make_state
 from atrv_warp.sim.kernels.params import WorldPhysics, apply_payload
 from atrv_warp.sim.kernels.rover import RoverLayout, motor_torque
 from atrv_warp.sim.simulator import RoverSim
 
-__all__ = ["DEFAULT_ACTION_SCALE", "DIFF_PARAMETERS", "DiffRollout", "NonFiniteGradientError", "WheelSpeedPI",
+__all__ = ["DEFAULT_ACTION_SCALE", "DIFF_PARAMETERS", "DiffRollout", "NonFiniteGradientError",
            "restore_external_wrench"]
 
 
@@ -56,20 +57,6 @@ mass [kg] (the URDF's plus a payload at its centre of mass), motor torque scale 
 [rad/s] and wheel rolling radius [m] (:data:`atrv_warp.sim.params.PARAMETERS`)."""
 
 
-@dataclass(frozen=True)
-class WheelSpeedPI:
-    """A base driver's wheel-speed PI controller, run inside the rollout: each step it turns each side's
-    speed target [rad/s] and the side's mean wheel speed into a torque within ``torque_limit``, with
-    anti-windup (``integrations.ros.base.VelocityController`` does the same on a live rover)."""
-
-    kp: float
-    """[N·m per rad/s]"""
-    ki: float
-    """[N·m per rad]"""
-    torque_limit: float
-    """[N·m]"""
-
-
 class NonFiniteGradientError(FloatingPointError):
     """The backward pass produced NaN or inf (the rollout was too long or too violent)."""
 
@@ -82,6 +69,13 @@ def scale_actions(actions: wp.array2d(dtype=float), scale: float, commands: wp.a
     left = wp.clamp(actions[world, 0], -1.0, 1.0)
     right = wp.clamp(actions[world, 1], -1.0, 1.0)
     commands[world] = wp.vec2(scale * left, scale * right)
+
+
+@wp.kernel
+def as_twist(actions: wp.array2d(dtype=float), twist: wp.array(dtype=wp.vec2)):
+    """Each world's (linear [m/s], angular [rad/s]) command, as given (the driver applies its own limits)."""
+    world = wp.tid()
+    twist[world] = wp.vec2(actions[world, 0], actions[world, 1])
 
 
 @wp.kernel
@@ -106,38 +100,14 @@ def gather_side_torques(layout: RoverLayout, commands: wp.array(dtype=wp.vec2), 
                         joint_qd: wp.array(dtype=float), side_weight: wp.array(dtype=float),
                         out: wp.array2d(dtype=float)):
     """(N, 2) mean torque each side's motors apply [N·m], forward-positive: the world's motor (torque scale,
-    no-load taper) at the wheel speeds of ``joint_qd``, as ``apply_wheel_torques`` computes it (``out`` zeroed
-    before; one thread per wheel)."""
+    no-load taper) for side ``commands`` (the torque commands, or the driver's output) at the wheel speeds of
+    ``joint_qd``, as ``drive_wheels`` computes it (``out`` zeroed before; one thread per wheel)."""
     world, k = wp.tid()
     side = layout.wheel_side[k]
     sign = layout.wheel_sign[k]
     v = joint_qd[world * layout.dofs_per_world + layout.wheel_dof[k]]
     tau = motor_torque(commands[world][side] * physics.torque_scale[world], sign * v, physics.speed_limit[world])
     wp.atomic_add(out, world, side, side_weight[k] * tau)
-
-
-@wp.func
-def pi_side(target: float, speed: float, integral: float, kp: float, ki: float, limit: float, dt: float):
-    """One side of the wheel-speed PI (as ``integrations.ros.base.VelocityController``): torque [N·m] within
-    ``limit``, and the new integral (held while the output saturates: anti-windup)."""
-    error = target - speed
-    candidate = integral + error * dt
-    new = candidate
-    if wp.abs(kp * error + ki * candidate) > limit:
-        new = integral
-    return wp.clamp(kp * error + ki * new, -limit, limit), new
-
-
-@wp.kernel
-def wheel_speed_pi(targets: wp.array2d(dtype=float), speeds: wp.array2d(dtype=float),
-                   integral_in: wp.array2d(dtype=float), kp: float, ki: float, limit: float, dt: float,
-                   commands: wp.array(dtype=wp.vec2), integral_out: wp.array2d(dtype=float)):
-    world = wp.tid()
-    left, i_left = pi_side(targets[world, 0], speeds[world, 0], integral_in[world, 0], kp, ki, limit, dt)
-    right, i_right = pi_side(targets[world, 1], speeds[world, 1], integral_in[world, 1], kp, ki, limit, dt)
-    commands[world] = wp.vec2(left, right)
-    integral_out[world, 0] = i_left
-    integral_out[world, 1] = i_right
 
 
 @wp.kernel
@@ -187,9 +157,12 @@ class DiffRollout:
             Newton 1.8's wrong steering gradient, for comparison).
         action_scale: Wheel torque per unit action [N·m]; a task passes its own
             (``TaskConfig.action_scale``).
-        controller: A :class:`WheelSpeedPI` run inside the rollout: the actions are then each side's
-            wheel-speed targets [rad/s], as a base driver receives them, and the controller's integral is
-            part of the initial state (a calibration from a ``/cmd_vel`` log does this).
+        twist: The actions are ``/cmd_vel`` commands (linear [m/s], angular [rad/s]) through the base's motor driver
+            (:mod:`atrv_warp.sim.driver`, the simulator's own kernel, every substep), whose PI integral is part of
+            the initial state (a calibration from a ``/cmd_vel`` log does this); else wheel torques.
+        driver: The motor driver's configuration (default: :class:`~atrv_warp.sim.driver.DriverConfig`'s, with the
+            nominal rover's radius and track). The rollout's commands are always fresh: its timeout is off (a
+            replayed log passes zero where the base's timeout stopped it).
 
     Calling the object runs the rollout; see :meth:`__call__`.
     """
@@ -198,22 +171,23 @@ class DiffRollout:
                  rover: RoverConfig | None = None, contact: ContactConfig | None = None,
                  arena: ArenaConfig | None = None, sim: SimConfig | None = None, device: str = "cpu",
                  wrench_fix: bool = True, action_scale: float = DEFAULT_ACTION_SCALE,
-                 controller: WheelSpeedPI | None = None):
+                 twist: bool = False, driver: DriverConfig | None = None):
         if steps < 1:
             raise ValueError(f"steps must be >= 1, got {steps}")
         sim_cfg = sim or SimConfig()
         sim_cfg = SimConfig(step_dt=sim_cfg.step_dt, sim_dt=sim_cfg.sim_dt, gravity=sim_cfg.gravity,
                             mass_matrix_interval=1, use_tile_gemm=False, use_graph=False)
+        driver = dataclasses.replace(driver or DriverConfig(), cmd_vel_timeout=1e30)
         self.sim = RoverSim(num_worlds, rover=rover or get_variant(variant), contact=contact, arena=arena,
-                            sim=sim_cfg, device=device, requires_grad=True)
+                            sim=sim_cfg, device=device, requires_grad=True, driver=driver)
         self.num_worlds, self.steps = num_worlds, steps
         self.wrench_fix = wrench_fix
         """Record :func:`restore_external_wrench` after each solver step (``False`` only to measure
         what the workaround fixes, as ``benchmarks/diff_gradients.py --without-wrench-fix`` does)."""
         self.action_scale = float(action_scale)
         """Wheel torque per unit action [N·m]."""
-        self.controller = controller
-        """The :class:`WheelSpeedPI` inside the rollout, or ``None`` (the actions are torques)."""
+        self.twist = twist
+        """The actions are twists through the motor driver (else wheel torques)."""
         model = self.sim.model
         n_sub = steps * self.sim.substeps
         self.states = [model.state(requires_grad=True) for _ in range(n_sub + 1)]
@@ -230,7 +204,9 @@ class DiffRollout:
         self._poses = [zeros((num_worlds, 7)) for _ in range(steps + 1)]
         self._speeds = [zeros((num_worlds, 2)) for _ in range(steps + 1)]
         self._side_torques = [zeros((num_worlds, 2)) for _ in range(steps)]
-        self._integral = [zeros((num_worlds, 2)) for _ in range(steps + 1)]
+        # the driver's state at every substep boundary (its odometry and integral chain through the tape)
+        self._driver = [make_state(num_worlds, dev, requires_grad=True) for _ in range(n_sub + 1)]
+        self._mode = wp.full(num_worlds, DRIVE_TWIST if twist else DRIVE_TORQUE, dtype=wp.int32, device=dev)
         self._params = {name: zeros(num_worlds) for name in DIFF_PARAMETERS}
         self._payload = zeros(num_worlds)
         self._payload_offset = zeros(num_worlds, wp.vec3, grad=False)
@@ -304,31 +280,27 @@ class DiffRollout:
         s0 = self.states[0]
         newton.eval_fk(sim.model, s0.joint_q, s0.joint_qd, s0)
         self._gather(0, 0)
-        pi = self.controller
         k = 0
         for t in range(self.steps):
-            if pi is None:
-                wp.launch(scale_actions, dim=n, inputs=[self._actions[t], self.action_scale],
-                          outputs=[self._commands[t]], device=sim.device)
-            else:
-                wp.launch(wheel_speed_pi, dim=n,
-                          inputs=[self._actions[t], self._speeds[t], self._integral[t], pi.kp, pi.ki,
-                                  pi.torque_limit, sim.sim_cfg.step_dt],
-                          outputs=[self._commands[t], self._integral[t + 1]], device=sim.device)
+            kernel, inputs = (as_twist, [self._actions[t]]) if self.twist else \
+                (scale_actions, [self._actions[t], self.action_scale])
+            wp.launch(kernel, dim=n, inputs=inputs, outputs=[self._commands[t]], device=sim.device)
             for _ in range(sim.substeps):
                 s_in, s_out = self.states[k], self.states[k + 1]
                 for name, arr in self._scratch[k].items():
                     setattr(sim.solver, name, arr)
                 sim.substep(s_in, s_out, self.controls[k], self._commands[t], physics=self._physics,
                             flags=self._flags, torque=self._torque, solver_in=self._solver_in[k],
-                            warm_start=self._impulses[k], impulses=self._impulses[k + 1])
+                            warm_start=self._impulses[k], impulses=self._impulses[k + 1], twist=self._commands[t],
+                            driver_in=self._driver[k], driver_out=self._driver[k + 1], mode=self._mode)
                 if self._tape is not None and self.wrench_fix:
                     self._tape.record_func(backward=restore_external_wrench(s_out, s_in), arrays=[])
                 k += 1
             # the torque of the step's last substep, as the simulator's wheel_torque (and a ROS node's effort);
             # recomputed from that substep's inputs, because the substeps' shared torque scratch is overwritten
+            side = self._driver[k].applied if self.twist else self._commands[t]
             wp.launch(gather_side_torques, dim=(n, len(sim.description.wheels)),
-                      inputs=[lay, self._commands[t], self._physics, self.states[k - 1].joint_qd, self._side_weight],
+                      inputs=[lay, side, self._physics, self.states[k - 1].joint_qd, self._side_weight],
                       outputs=[self._side_torques[t]], device=sim.device)
             self._gather(k, t + 1)
 
@@ -344,7 +316,12 @@ class DiffRollout:
         s0 = self.states[0]
         wp.to_torch(s0.joint_q).copy_(joint_q.reshape(-1))
         wp.to_torch(s0.joint_qd).copy_(joint_qd.reshape(-1))
-        wp.to_torch(self._integral[0]).copy_(integral)
+        for d in self._driver:
+            for a in (d.reference, d.integral, d.applied, d.age, d.odometry, d.odom_twist):
+                a.zero_()
+        wp.to_torch(self._driver[0].integral).copy_(integral)
+        if self.twist:  # the driver tracked the first command already (its limits, if any, start from there)
+            wp.to_torch(self._driver[0].reference).copy_(actions[0])
         for name in DIFF_PARAMETERS:
             wp.to_torch(self._params[name]).copy_(params[name].reshape(-1))
         for s in self.states:
@@ -384,7 +361,7 @@ class DiffRollout:
         out = {"actions": torch.stack([wp.to_torch(a.grad).clone() for a in self._actions]),
                "initial joint_q": wp.to_torch(s0.joint_q.grad).clone(),
                "initial joint_qd": wp.to_torch(s0.joint_qd.grad).clone(),
-               "controller integral": wp.to_torch(self._integral[0].grad).clone()}
+               "controller integral": wp.to_torch(self._driver[0].integral.grad).view(-1, 2).clone()}
         out.update({name: wp.to_torch(self._params[name].grad).clone() for name in DIFF_PARAMETERS})
         tape.zero()
         self._tape = None
@@ -440,8 +417,8 @@ class DiffRollout:
 
         Args:
             actions: (steps, N, 2) (x :attr:`action_scale` N·m), differentiable; clipped to [-1, 1] as the
-                environment clips them, so an action outside the range gets a zero gradient. With a
-                :attr:`controller`, each side's wheel-speed target [rad/s] instead (not clipped).
+                environment clips them, so an action outside the range gets a zero gradient. With :attr:`twist`,
+                each step's (linear [m/s], angular [rad/s]) command instead (not clipped; the driver's limits apply).
             initial_state: (joint_q, joint_qd) from :meth:`initial_state` or :meth:`moving_state` (default:
                 every rover at the origin, at rest); differentiable.
             friction: Coulomb coefficient, one for all worlds or (N,) one per world (default: the
@@ -453,7 +430,8 @@ class DiffRollout:
             torque_scale, speed_limit, wheel_radius: The motor's torque scale [-] and no-load speed [rad/s],
                 and the wheels' rolling radius [m]; one or (N,) each (default: the rover config's),
                 differentiable.
-            integral: (N, 2) the controller's integral at the start [rad] (default zero), differentiable.
+            integral: (N, 2) the motor driver's PI integral per side at the start [rad] (default zero),
+                differentiable.
             wheel_speeds: Also return each side's mean forward wheel speed (steps + 1, N, 2) [rad/s].
             wheel_torques: Also return each side's mean motor torque in each step's last substep (steps, N, 2)
                 [N·m], forward-positive (what the simulator's ``wheel_torque`` and the ROS node's joint

@@ -171,3 +171,25 @@ def make_state(num_worlds: int, device, requires_grad: bool = False) -> DriverSt
     s.odometry = wp.zeros(num_worlds, dtype=wp.vec3, device=device, requires_grad=requires_grad)
     s.odom_twist = wp.zeros(num_worlds, dtype=wp.vec2, device=device, requires_grad=requires_grad)
     return s
+
+
+def replay(cfg: DriverConfig, kinematics: SkidSteer, twist, fresh, speeds, *, step_dt: float, substeps: int
+           ) -> dict[str, torch.Tensor]:
+    """The driver replayed open loop along recorded drives, on the CPU: ``twist`` (L, T, 2) each step's command,
+    ``fresh`` (L, T) whether it was within the timeout, ``speeds`` (L, T + 1, 2) each side's recorded wheel speed
+    [rad/s] at the step boundaries (linear in between). Returns the driver's ``reference``, ``integral`` and
+    ``applied`` torque at every step boundary, (L, T + 1, 2) each: the state a replay starting there starts from
+    (the calibration's segments). The same functions as the simulator's kernel (no motor lag)."""
+    from atrv_warp.sim.kernels.driver import replay_driver
+
+    twist = torch.as_tensor(twist, dtype=torch.float32)
+    lengths, steps = twist.shape[:2]
+    params = cfg.kernel_params(kinematics, step_dt / substeps)
+    out = {name: wp.zeros((lengths, steps + 1), dtype=wp.vec2, device="cpu")
+           for name in ("reference", "integral", "applied")}
+    wp.launch(replay_driver, dim=lengths,
+              inputs=[params, wp.from_torch(twist.contiguous(), dtype=wp.vec2),
+                      wp.from_torch(torch.as_tensor(fresh, dtype=torch.bool).contiguous()),
+                      wp.from_torch(torch.as_tensor(speeds, dtype=torch.float32).contiguous(), dtype=wp.vec2),
+                      substeps], outputs=list(out.values()), device="cpu")
+    return {name: wp.to_torch(a).clone() for name, a in out.items()}

@@ -36,6 +36,7 @@ from atrv_warp.sim.config import (
     get_variant,
     replace_checked,
 )
+from atrv_warp.sim.driver import DriverConfig
 from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
 from atrv_warp.sim.simulator import RoverSim
 from atrv_warp.task.config import TaskConfig, get_task
@@ -110,6 +111,8 @@ class ATRVjrEnv(EnvBase):
             perfect sensors, no delay, bit for bit as without it).
         sim_config: A simulator-config TOML file (see :class:`RoverSim`), e.g. ``atrv-calibrate``'s
             calibration of a real rover.
+        driver: The base's motor driver (:class:`~atrv_warp.sim.driver.DriverConfig`), which velocity actions
+            go through (see :class:`RoverSim`).
         **task_overrides: Fields of :class:`TaskConfig` (e.g. ``max_steps=100``); an unknown
             name raises ``ValueError``.
     """
@@ -130,6 +133,7 @@ class ATRVjrEnv(EnvBase):
         sim: SimConfig | None = None,
         randomization: RandomizationConfig | str | None = None,
         sim_config: str | None = None,
+        driver: DriverConfig | None = None,
         **task_overrides,
     ):
         self.task_cfg = c = replace_checked(get_task(task), **task_overrides)
@@ -137,7 +141,7 @@ class ATRVjrEnv(EnvBase):
         """What each world randomizes (:class:`~atrv_warp.task.randomization.RandomizationConfig`)."""
         self.sim = RoverSim(num_envs, rover=rover or get_variant(variant), contact=contact, arena=arena, sim=sim,
                             terrain=c.terrain, obstacles=ObstacleConfig(slots=c.obstacles) if c.obstacles else None,
-                            device=device, sim_config=sim_config)
+                            device=device, sim_config=sim_config, driver=driver)
         self.scanner = None
         if c.scan_beams:
             noise = self.randomization.noise

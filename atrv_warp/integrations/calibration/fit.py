@@ -2,8 +2,9 @@
 
 The log is cut into segments of a few seconds. Every segment starts from its recorded state (pose, body
 velocity, wheel speeds, and the wheel-speed controller's integral) and is replayed in its own world with
-its recorded commands: the velocity commands through the base's own PI controller inside the rollout
-(:class:`~atrv_warp.sim.diff.WheelSpeedPI`), or the recorded wheel efforts. The loss is the error of the
+its recorded commands: the velocity commands through the base's own motor driver inside the rollout
+(:mod:`atrv_warp.sim.driver`, the simulator's kernel, with the driver's configured radius and track), or the
+recorded wheel efforts. The loss is the error of the
 simulated against the recorded path and wheel speeds. Several starting points run at once, each in its own
 worlds; every ``held_out_every``-th segment is kept out of the fit and only measured.
 """
@@ -21,8 +22,8 @@ import torch
 from atrv_warp.core.geometry import quat_to_yaw, wrap_angle
 from atrv_warp.core.kinematics import track_width
 from atrv_warp.integrations.calibration.log import DriveLog
-from atrv_warp.integrations.ros.base import BaseParams, VelocityController
 from atrv_warp.sim.config import ContactConfig, RoverConfig, get_variant
+from atrv_warp.sim.driver import DriverConfig
 
 __all__ = ["COMMAND_SOURCES", "DEFAULT_FIT", "FIT_PARAMETERS", "MOTOR_PARAMETERS", "CalibrationConfig",
            "CalibrationError", "CalibrationResult", "Segments", "calibrate", "make_segments"]
@@ -99,11 +100,21 @@ class CalibrationConfig:
     seed: int = 0
     min_segments: int = 5
     """A log with fewer moving segments is too short to fit."""
-    kp: float = BaseParams.kp
-    ki: float = BaseParams.ki
-    effective_track_factor: float = BaseParams.effective_track_factor
-    cmd_vel_timeout: float = BaseParams.timeout
-    torque_limit: float = BaseParams.torque_limit
+    kp: float = DriverConfig.kp
+    """The base's wheel-speed PI, as the robot's driver runs it (:class:`~atrv_warp.sim.driver.DriverConfig`)."""
+    ki: float = DriverConfig.ki
+    effective_track_factor: float = DriverConfig.effective_track_factor
+    cmd_vel_timeout: float = DriverConfig.cmd_vel_timeout
+    torque_limit: float = DriverConfig.torque_limit
+
+    def driver(self, rover: RoverConfig) -> DriverConfig:
+        """The base's motor driver as the replay runs it: these gains and limits, the nominal ``rover``'s radius and
+        track (a real driver knows its configured values, not the wheel's wear)."""
+        from atrv_warp.sim.urdf import load_rover
+
+        return DriverConfig(wheel_radius=rover.wheel_radius, track_width=track_width(load_rover(rover), rover),
+                            effective_track_factor=self.effective_track_factor, kp=self.kp, ki=self.ki,
+                            torque_limit=self.torque_limit, cmd_vel_timeout=self.cmd_vel_timeout)
 
     def __post_init__(self):
         unknown = sorted(set(self.params) - set(FIT_PARAMETERS))
@@ -137,8 +148,8 @@ class Segments:
     velocity: np.ndarray  # (S, 2) forward, leftward chassis speed at the start [m/s]
     yaw_rate: np.ndarray  # (S,)
     wheel: np.ndarray  # (S, 2) side wheel speeds at the start [rad/s]
-    integral: np.ndarray  # (S, 2) the controller's integral at the start [rad]
-    inputs: np.ndarray  # (S, L, 2) wheel-speed targets [rad/s] (cmd_vel) or torques [N·m] (effort)
+    integral: np.ndarray  # (S, 2) the driver's PI integral at the start [rad]
+    inputs: np.ndarray  # (S, L, 2) (linear [m/s], angular [rad/s]) commands (cmd_vel) or torques [N·m] (effort)
     ref_pose: np.ndarray  # (S, L + 1, 3) recorded x, y [m] from the start, yaw [rad]
     ref_wheel: np.ndarray  # (S, L + 1, 2) recorded side wheel speeds [rad/s]
     ref_effort: np.ndarray | None  # (S, L, 2) recorded side efforts at each step's end [N·m] (cmd_vel replay)
@@ -194,20 +205,20 @@ class CalibrationResult:
                 "fit_seconds": self.seconds, "compile_seconds": self.compile_seconds}
 
 
-def _controller(log: DriveLog, base: BaseParams, grid: np.ndarray, wheel: np.ndarray, dt: float):
-    """The base's own controller (:class:`~atrv_warp.integrations.ros.base.VelocityController`) replayed along the
-    log on the recorded wheel speeds: each step's wheel-speed targets, and its PI integral before the step."""
-    ctl = VelocityController(base)
-    targets, integral = np.zeros((len(grid), 2)), np.zeros((len(grid), 2))
+def _controller(log: DriveLog, driver: DriverConfig, grid: np.ndarray, wheel: np.ndarray, dt: float,
+                substeps: int):
+    """The base's motor driver replayed along the log on the recorded wheel speeds
+    (:func:`atrv_warp.sim.driver.replay`): each step's command (zero once the timeout has stopped the base), and
+    the driver's PI integral before the step."""
+    from atrv_warp.sim.driver import replay
+
     received = np.searchsorted(log.cmd_time, grid + 1e-6, side="right")  # commands received by each step
-    for k, now in enumerate(grid):
-        if received[k] and (k == 0 or received[k] != received[k - 1]):
-            i = received[k] - 1
-            ctl.command(float(log.cmd[i, 0]), float(log.cmd[i, 1]), float(log.cmd_time[i]))
-        integral[k] = ctl.integral.numpy()
-        targets[k] = ctl.wheel_targets(float(now)).numpy()
-        ctl.torques(torch.as_tensor(wheel[k], dtype=torch.float32), float(now), dt)
-    return targets, integral
+    last = np.maximum(received - 1, 0)
+    fresh = (received > 0) & (grid - log.cmd_time[last] <= driver.cmd_vel_timeout + 1e-9)
+    twist = np.where(fresh[:, None], log.cmd[last, :2], 0.0)
+    state = replay(driver, driver.kinematics(None, None), twist[None], fresh[None],
+                   np.concatenate([wheel, wheel[-1:]])[None], step_dt=dt, substeps=substeps)
+    return twist, state["integral"][0, :-1].double().numpy()
 
 
 def _smooth(x: np.ndarray, window: int) -> np.ndarray:
@@ -220,9 +231,12 @@ def _smooth(x: np.ndarray, window: int) -> np.ndarray:
     return np.stack([np.convolve(padded[:, i], kernel, mode="valid") for i in range(x.shape[1])], -1)
 
 
-def make_segments(log: DriveLog, cfg: CalibrationConfig, base: BaseParams, dt: float = 0.05) -> Segments:
+def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, dt: float = 0.05,
+                  substeps: int = 5) -> Segments:
     """Cut ``log`` into segments of ``cfg.segment_seconds`` on the controller's step grid, leaving out the
-    ones where the rover stands still; raises :class:`CalibrationError` if fewer than ``cfg.min_segments`` remain."""
+    ones where the rover stands still; raises :class:`CalibrationError` if fewer than ``cfg.min_segments`` remain.
+    ``driver``: the base's driver with its configured radius and track set (:meth:`CalibrationConfig.driver`);
+    ``substeps``: the driver's loop runs this many times per step, as in the simulator."""
     command = cfg.command
     if command == "auto":
         command = "cmd_vel" if len(log.cmd_time) else "effort"
@@ -250,7 +264,7 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, base: BaseParams, dt: f
     effort = (None if log.effort is None else
               np.stack([np.interp(grid + dt, log.joint_time, log.effort[:, s]) for s in (0, 1)], -1))
     if command == "cmd_vel":
-        inputs, integral = _controller(log, base, grid, wheel, dt)
+        inputs, integral = _controller(log, driver, grid, wheel, dt, substeps)
     else:
         inputs, integral = effort, np.zeros_like(effort)
     steps = round(cfg.segment_seconds / dt)
@@ -259,7 +273,8 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, base: BaseParams, dt: f
     for k in starts:
         window = slice(k, k + steps + 1)
         moved = np.hypot(*(pose[k + steps, :2] - pose[k, :2])) + _HEADING_ARM * abs(pose[k + steps, 2] - pose[k, 2])
-        if moved > 0.05 or np.abs(wheel[window]).max() > 0.5 or np.abs(inputs[k:k + steps]).max() > 0.5:
+        commanded = np.abs(inputs[k:k + steps]).max() > (0.05 if command == "cmd_vel" else 0.5)  # m/s, rad/s; N·m
+        if moved > 0.05 or np.abs(wheel[window]).max() > 0.5 or commanded:
             keep.append(k)
     if len(keep) < cfg.min_segments:
         raise CalibrationError(f"{log.path}: too short to fit: {len(keep)} moving segment(s) of "
@@ -281,11 +296,10 @@ class _Replay:
 
     def __init__(self, segments: Segments, worlds: int, rover: RoverConfig, contact: ContactConfig,
                  cfg: CalibrationConfig):
-        from atrv_warp.sim.diff import DiffRollout, WheelSpeedPI
+        from atrv_warp.sim.diff import DiffRollout
 
-        pi = WheelSpeedPI(cfg.kp, cfg.ki, cfg.torque_limit) if segments.command == "cmd_vel" else None
         self.roll = DiffRollout(worlds, steps=segments.inputs.shape[1], rover=rover, contact=contact,
-                                controller=pi, action_scale=1.0)
+                                twist=segments.command == "cmd_vel", driver=cfg.driver(rover), action_scale=1.0)
         self.segments, self.worlds = segments, worlds
         self.nominal = {"chassis_mass": self.roll.nominal_chassis_mass}
 
@@ -412,15 +426,11 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
               rover: RoverConfig | None = None, contact: ContactConfig | None = None,
               progress: Callable[[str], None] | None = None) -> CalibrationResult:
     """Fit ``cfg.params`` to ``log``, starting from ``rover`` and ``contact`` (default: the realistic rover)."""
-    from atrv_warp.sim.urdf import load_rover
 
     say = progress or (lambda _text: None)
     rover = rover or get_variant("realistic")
     contact = contact or ContactConfig()
-    base = BaseParams(wheel_radius=rover.wheel_radius, track_width=track_width(load_rover(rover), rover),
-                      effective_track_factor=cfg.effective_track_factor, kp=cfg.kp, ki=cfg.ki,
-                      torque_limit=cfg.torque_limit, timeout=cfg.cmd_vel_timeout)
-    seg = make_segments(log, cfg, base)
+    seg = make_segments(log, cfg, cfg.driver(rover))
     train, held = np.flatnonzero(~seg.held_out), np.flatnonzero(seg.held_out)
     batch = min(cfg.batch, len(train))
     nominal = _nominal(rover, contact)

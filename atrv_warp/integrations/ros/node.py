@@ -25,16 +25,15 @@ from sensor_msgs.msg import Imu, JointState, LaserScan
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from atrv_warp.core.geometry import quat_to_matrix, yaw_to_quat
-from atrv_warp.core.kinematics import track_width
+from atrv_warp.core.geometry import quat_to_matrix, wrap_angle, yaw_to_quat
 from atrv_warp.integrations.ros.bag import BagWriter, joint_state_dict, odometry_dict, pose_dict, twist_dict
-from atrv_warp.integrations.ros.base import BaseParams, VelocityController, WheelOdometry, imu_reading
+from atrv_warp.integrations.ros.base import imu_reading
 from atrv_warp.integrations.ros.frames import WORLD_FRAME, planar_matrix, pose_matrix, transform_dict, turn_matrix
 from atrv_warp.integrations.ros.markers import scene_of, world_markers
-from atrv_warp.integrations.ros.parameters import COMMANDS, GOAL, MAX_ROVERS, PARAMETERS, VELOCITY
+from atrv_warp.integrations.ros.parameters import COMMANDS, GOAL, MAX_ROVERS, PARAMETERS, VELOCITY, driver_config
 from atrv_warp.sim.simulator import DRIVE_MODE_TORQUES, DriveMode
 from atrv_warp.task.env import ATRVjrEnv
-from atrv_warp.task.spec import action_to_torque
+from atrv_warp.task.spec import action_to_torque, action_to_twist
 
 __all__ = ["NodeConfigError", "RoverIO", "RoverSimNode", "unknown_parameters"]
 
@@ -72,16 +71,19 @@ def unknown_parameters(args: list[str] | None) -> list[str]:
 
 
 class RoverIO:
-    """One rover's topics, driving mode, velocity controller and odometry."""
+    """One rover's topics and driving mode; its base's motor driver and wheel odometry run in the simulator
+    (:attr:`atrv_warp.sim.RoverSim.driver`)."""
 
-    def __init__(self, node: RoverSimNode, index: int, prefix: str, qos: QoSProfile, base: BaseParams):
+    def __init__(self, node: RoverSimNode, index: int, prefix: str, qos: QoSProfile):
         self.node, self.index, self.prefix = node, index, prefix
         self.mode = self.pending = node.params["mode"]
         self.goal: tuple[float, float] | None = None
         self.distance: float | None = None
         """Distance to the goal at the last goal-mode step [m]."""
-        self.controller = VelocityController(base)
-        self.odometry = WheelOdometry(base)
+        self.start = (0.0, 0.0, 0.0)
+        """The pose the odometry frame was put at [m, m, rad] (the world's start pose: odom = world until it drifts)."""
+        self.stopped = False
+        """The driver's timeout has stopped this rover (logged once)."""
         self.prev_vel = torch.zeros(3)
         tf_prefix = f"rover_{index}/" if prefix else ""  # its /tf frame names (frames.py)
         self.tf_odom, self.tf_base = tf_prefix + node.odom_frame, tf_prefix + node.base_frame
@@ -130,33 +132,44 @@ class RoverIO:
             self.node.log.warning(f"ignored non-finite {self.prefix}/cmd_vel (linear.x={v}, angular.z={w})")
             return
         self.node.record(f"{self.prefix}/cmd_vel", "geometry_msgs/msg/Twist", twist_dict(msg))
-        self.controller.command(v, w, self.node.sim.sim_time)
-        self.pending = VELOCITY
+        self.node.sim.set_twist([v, w], worlds=[self.index])  # the base's driver takes it (and restarts its timeout)
+        self.stopped = False
+        self.pending = self.mode = VELOCITY
 
     # ------------------------------------------------------------------ driving
-    def torques(self, side_speeds: torch.Tensor, goal_action) -> torch.Tensor:
-        """(left, right) torques [N·m] of this step for the current mode."""
-        node = self.node
+    def drive(self, goal_action) -> None:
+        """Set this rover's input for the next step: its torque mode's torques, the policy's action toward its goal,
+        or nothing in velocity mode (the driver holds the last ``/cmd_vel``, and stops the rover after its timeout)."""
+        node, k = self.node, self.index
         if self.pending != self.mode:
             self.mode = self.pending
             node.log.info(f"{self.prefix or 'rover'}: mode -> {self.mode}")
-            self.controller.reset()
         if self.mode == VELOCITY:
-            was_stopped = self.controller.stopped_by_watchdog
-            out = self.controller.torques(side_speeds, node.sim.sim_time, node.sim.sim_cfg.step_dt)
-            if self.controller.stopped_by_watchdog and not was_stopped:
-                node.log.warning(f"{self.prefix}/cmd_vel silent for {self.controller.params.timeout:g} s: stopping")
-            return out
+            if bool(node.sim.driver.timed_out[k]) and not self.stopped:
+                self.stopped = True
+                node.log.warning(f"{self.prefix}/cmd_vel silent for {node.sim.driver_cfg.cmd_vel_timeout:g} s: "
+                                 "stopping")
+            return
         if self.mode == GOAL:
-            torques, dist = goal_action(self.index)
+            dist = goal_action(k)
             self.distance = dist
             if dist < node.params["reach_radius"]:
                 self.publish_status("reached")
                 node.log.info("goal reached")
                 self.mode = self.pending = DriveMode.COAST.value
-                return torch.zeros(2)
-            return torques
-        return torch.tensor(DRIVE_MODE_TORQUES[DriveMode(self.mode)])
+                node.sim.set_commands([0.0, 0.0], worlds=[k])
+            return
+        node.sim.set_commands(DRIVE_MODE_TORQUES[DriveMode(self.mode)], worlds=[k])
+
+    def odometry(self) -> tuple[float, float, float, float, float]:
+        """The base's wheel odometry in the node's odometry frame (the start pose composed with the driver's):
+        x [m], y [m], yaw [rad], linear [m/s], angular [rad/s]."""
+        d = self.node.sim.driver
+        x, y, yaw = d.odometry[self.index].double().tolist()
+        x0, y0, yaw0 = self.start
+        c, s = math.cos(yaw0), math.sin(yaw0)
+        linear, angular = d.odom_twist[self.index].double().tolist()
+        return x0 + c * x - s * y, y0 + s * x + c * y, float(wrap_angle(torch.tensor(yaw0 + yaw))), linear, angular
 
     # ------------------------------------------------------------------ publishing
     def publish_status(self, text: str) -> None:
@@ -185,14 +198,14 @@ class RoverIO:
 
     def publish_odometry(self, ns: int, pose: list[float]) -> None:
         node, sim, k = self.node, self.node.sim, self.index
-        odo = self.odometry
+        x, y, yaw, linear, angular = self.odometry()
         msg = Odometry()
         msg.header.stamp, msg.header.frame_id, msg.child_frame_id = _stamp(ns), node.odom_frame, node.base_frame
-        msg.pose.pose.position.x, msg.pose.pose.position.y = odo.x, odo.y
+        msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
         o = msg.pose.pose.orientation
-        o.x, o.y, o.z, o.w = yaw_to_quat(odo.yaw).tolist()
+        o.x, o.y, o.z, o.w = yaw_to_quat(yaw).tolist()
         msg.pose.covariance = [v if i == j else 0.0 for i in range(6) for j, v in enumerate(_ODOM_POSE_VAR)]
-        msg.twist.twist.linear.x, msg.twist.twist.angular.z = odo.linear, odo.angular
+        msg.twist.twist.linear.x, msg.twist.twist.angular.z = linear, angular
         msg.twist.covariance = [v if i == j else 0.0 for i in range(6) for j, v in enumerate(_ODOM_TWIST_VAR)]
         self.odom_pub.publish(msg)
         node.record(f"{self.prefix}/odom", "nav_msgs/msg/Odometry", odometry_dict(msg), ns)
@@ -235,15 +248,15 @@ class RoverIO:
         node = self.node
         if node.bag is None and node.tf_pub is None:
             return
-        odo, wheels = self.odometry, node.wheel_positions(self.index)
-        if not all(math.isfinite(v) for v in (*pose, odo.x, odo.y, odo.yaw, *wheels)):
+        (x, y, yaw, _, _), wheels = self.odometry(), node.wheel_positions(self.index)
+        if not all(math.isfinite(v) for v in (*pose, x, y, yaw, *wheels)):
             if not self.tf_skipped:
                 node.log.warning(f"{self.prefix or 'rover'}: non-finite pose, its /tf is not published until it "
                                  "is finite again")
             self.tf_skipped = True
             return
         self.tf_skipped = False
-        world_base, odom_base = pose_matrix(pose[:3], pose[3:7]), planar_matrix(odo.x, odo.y, odo.yaw)
+        world_base, odom_base = pose_matrix(pose[:3], pose[3:7]), planar_matrix(x, y, yaw)
         transforms = [transform_dict(WORLD_FRAME, self.tf_odom, ns, world_base @ np.linalg.inv(odom_base)),
                       transform_dict(self.tf_odom, self.tf_base, ns, odom_base)]
         transforms += [transform_dict(self.tf_chassis, self.tf_prefix + w.link, ns,
@@ -333,7 +346,7 @@ class RoverSimNode(Node):
         # goal mode reads the policy's observation kernel
         try:
             self.env = ATRVjrEnv(k, variant=p["variant"], task=p["task"], seed=int(p["seed"]),
-                                 sim_config=p["sim_config"] or None)
+                                 sim_config=p["sim_config"] or None, driver=self.driver)
         except ValueError as err:
             self._fail(f"parameter sim_config: {err}" if p["sim_config"] else str(err))
         if p["sim_config"]:
@@ -365,10 +378,6 @@ class RoverSimNode(Node):
         self.side = torch.tensor([w.side for w in desc.wheels])
         self.wheel_sign = [float(w.drive_sign) for w in desc.wheels]
         self.noise = torch.Generator().manual_seed(int(p["seed"]))
-        base = BaseParams(wheel_radius=self.sim.rover_cfg.wheel_radius,
-                          track_width=track_width(desc, self.sim.rover_cfg),
-                          effective_track_factor=p["effective_track_factor"], kp=p["wheel_kp"], ki=p["wheel_ki"],
-                          torque_limit=self.env.task_cfg.action_scale, timeout=p["cmd_vel_timeout"])
         qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -376,9 +385,9 @@ class RoverSimNode(Node):
         urdf = Path(desc.path).read_text()
         self.create_publisher(String, "/robot_description", latched).publish(String(data=urdf))
         self.marker_pub = self.create_publisher(MarkerArray, "/visualization_marker_array", latched)
-        self.rovers = [RoverIO(self, i, f"/rover_{i}" if k > 1 else "", qos, base) for i in range(k)]
-        for rover, (x, y, yaw) in zip(self.rovers, starts):  # the odom frame starts at the start pose
-            rover.odometry.x, rover.odometry.y, rover.odometry.yaw = x, y, yaw
+        self.rovers = [RoverIO(self, i, f"/rover_{i}" if k > 1 else "", qos) for i in range(k)]
+        for rover, start in zip(self.rovers, starts):  # the odom frame starts at the start pose
+            rover.start = tuple(float(v) for v in start)
         self.publish_markers()
         self.tf_pub = self.tf_message = None
         if p["tf"]:
@@ -404,8 +413,10 @@ class RoverSimNode(Node):
             self._fail("real_time_factor must be >= 0 and publish_rate > 0")
         if not 1 <= p["num_rovers"] <= MAX_ROVERS:
             self._fail(f"num_rovers must be in 1 … {MAX_ROVERS}, got {p['num_rovers']}")
-        if p["cmd_vel_timeout"] <= 0 or p["effective_track_factor"] <= 0 or p["wheel_kp"] < 0 or p["wheel_ki"] < 0:
-            self._fail("cmd_vel_timeout and effective_track_factor must be > 0, wheel_kp and wheel_ki >= 0")
+        try:
+            self.driver = driver_config(p)
+        except ValueError as err:
+            self._fail(str(err))
         from atrv_warp.task.config import TASK_VARIANTS
 
         if p["task"] not in TASK_VARIANTS:
@@ -490,8 +501,9 @@ class RoverSimNode(Node):
         return quat_to_matrix(self.sim.root_pose[k, 3:7].to(torch.float64))
 
     # ------------------------------------------------------------------ driving
-    def goal_action(self, k: int) -> tuple[torch.Tensor, float]:
-        """Rover ``k``'s wheel torques from the policy toward its goal, and the distance to it [m]."""
+    def goal_action(self, k: int) -> float:
+        """Drive rover ``k`` by the policy toward its goal (its torques, or its ``/cmd_vel`` through the driver, as
+        the task's action says) for the next step; returns the distance to the goal [m]."""
         if self.policy is None:
             from tensordict import TensorDict
 
@@ -505,22 +517,27 @@ class RoverSimNode(Node):
             if rover.goal is not None:
                 targets[rover.index] = torch.tensor(rover.goal)
         obs = self.env.observe(targets)
-        action = policy(td_cls(observation=obs, batch_size=[self.sim.num_worlds]))["action"]
-        return action_to_torque(action[k], self.env.task_cfg.action_scale), float(self.env.target_distance[k])
+        action = policy(td_cls(observation=obs, batch_size=[self.sim.num_worlds]))["action"][k]
+        task = self.env.task_cfg
+        if task.action == "twist":
+            self.sim.set_twist(action_to_twist(action, task.max_linear, task.max_angular), worlds=[k])
+        else:
+            self.sim.set_commands(action_to_torque(action, task.action_scale), worlds=[k])
+        return float(self.env.target_distance[k])
 
     def step_once(self) -> None:
-        """Every rover's torques for its mode, one simulator step, odometry, /clock."""
-        speeds = self.side_speeds()
-        torques = torch.stack([rover.torques(speeds[rover.index], self.goal_action) for rover in self.rovers])
+        """Every rover's input for its mode, one simulator step, /clock."""
+        for rover in self.rovers:
+            rover.drive(self.goal_action)
         # what every rover commanded, as the policy's actions: a task that observes its last actions sees them
-        self.env.record_actions(torques / self.env.task_cfg.action_scale)
+        task = self.env.task_cfg
+        if task.action == "twist":
+            self.env.record_actions(self.sim.driver.twist / torch.tensor([task.max_linear, task.max_angular]))
+        else:
+            self.env.record_actions(self.sim.commands / task.action_scale)
         for rover in self.rovers:
             rover.prev_vel = self.sim.lin_vel[rover.index].clone()
-        self.sim.set_commands(torques)
         self.sim.step()
-        speeds = self.side_speeds()
-        for rover in self.rovers:
-            rover.odometry.update(speeds[rover.index], self.sim.sim_cfg.step_dt)
         self.clock_pub.publish(Clock(clock=_stamp(self.stamp_ns())))
 
     def publish_state(self) -> None:

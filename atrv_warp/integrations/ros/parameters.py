@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from atrv_warp.integrations.ros.base import BaseParams
 from atrv_warp.sim.config import SENSOR_NOISE
+from atrv_warp.sim.driver import DriverConfig
 from atrv_warp.sim.simulator import DriveMode
 
-__all__ = ["COMMANDS", "GOAL", "MAX_ROVERS", "PARAMETERS", "VELOCITY", "parameter_help"]
+__all__ = ["COMMANDS", "DRIVER_PARAMETERS", "GOAL", "MAX_ROVERS", "PARAMETERS", "VELOCITY", "driver_config",
+           "parameter_help"]
 
 GOAL = "goal"
 COMMANDS = tuple(m.value for m in DriveMode) + (GOAL,)
@@ -39,10 +40,16 @@ PARAMETERS = (
     ("sim_config", "", "simulator-config TOML ([rover], [contact]; e.g. atrv-calibrate's output) applied to every rover"),
     ("wait_for_subscribers", 0, "wait for this many /pose subscribers before starting"),
     ("reach_radius", 1.0, "goal mode: reached within this distance [m]"),
-    ("effective_track_factor", BaseParams.effective_track_factor, "skid: effective track / wheel track"),
-    ("wheel_kp", BaseParams.kp, "wheel-speed PI proportional gain [N·m per rad/s]"),
-    ("wheel_ki", BaseParams.ki, "wheel-speed PI integral gain [N·m per rad]"),
-    ("cmd_vel_timeout", BaseParams.timeout, "watchdog: stop when no /cmd_vel arrives for this long [s]"),
+    ("wheel_radius", 0.0, "the base driver's configured wheel radius [m]; 0 = the nominal rover's (not sim_config's)"),
+    ("track_width", 0.0, "the base driver's configured wheel track [m]; 0 = the nominal rover's"),
+    ("effective_track_factor", DriverConfig.effective_track_factor, "skid: effective track / wheel track"),
+    ("wheel_kp", DriverConfig.kp, "wheel-speed PI proportional gain [N·m per rad/s], run every substep"),
+    ("wheel_ki", DriverConfig.ki, "wheel-speed PI integral gain [N·m per rad]"),
+    ("cmd_vel_timeout", DriverConfig.cmd_vel_timeout, "watchdog: stop when no /cmd_vel arrives for this long [s]"),
+    ("linear_max_velocity", 0.0, "diff_drive_controller's linear.x.max_velocity [m/s]; 0 = no limit"),
+    ("linear_max_acceleration", 0.0, "linear.x.max_acceleration [m/s²]; 0 = no limit"),
+    ("angular_max_velocity", 0.0, "angular.z.max_velocity [rad/s]; 0 = no limit"),
+    ("angular_max_acceleration", 0.0, "angular.z.max_acceleration [rad/s²]; 0 = no limit"),
     ("imu_accel_noise", SENSOR_NOISE.accel, "IMU accelerometer noise, standard deviation [m/s²]"),
     ("imu_gyro_noise", SENSOR_NOISE.gyro, "IMU gyroscope noise, standard deviation [rad/s]"),
     ("wheel_speed_noise", SENSOR_NOISE.wheel_speed, "/joint_states velocity noise, standard deviation [rad/s]"),
@@ -52,6 +59,32 @@ PARAMETERS = (
 )
 """(name, default, description) of every parameter the node declares. The sensor noise defaults are
 :data:`~atrv_warp.sim.config.SENSOR_NOISE`, the noise the randomization presets train with."""
+
+DRIVER_PARAMETERS = {"wheel_radius": "wheel_radius", "track_width": "track_width",
+                     "effective_track_factor": "effective_track_factor", "wheel_kp": "kp", "wheel_ki": "ki",
+                     "cmd_vel_timeout": "cmd_vel_timeout", "linear_max_velocity": "linear_max_velocity",
+                     "linear_max_acceleration": "linear_max_acceleration",
+                     "angular_max_velocity": "angular_max_velocity",
+                     "angular_max_acceleration": "angular_max_acceleration"}
+"""Node parameter -> :class:`~atrv_warp.sim.driver.DriverConfig` field."""
+
+
+def driver_config(params: dict) -> DriverConfig:
+    """The base's motor driver from the node's parameters (0 for a radius, track or limit: unset); a bad value is a
+    ``ValueError`` naming it."""
+    optional = {"wheel_radius", "track_width", "linear_max_velocity", "linear_max_acceleration",
+                "angular_max_velocity", "angular_max_acceleration"}
+    values = {}
+    for name, field in DRIVER_PARAMETERS.items():
+        value = params[name]
+        values[field] = None if name in optional and value == 0 else value
+    try:
+        return DriverConfig(**values)
+    except ValueError as err:
+        field = str(err).split()[0].removeprefix("DriverConfig.")
+        node_name = next((n for n, f in DRIVER_PARAMETERS.items() if f == field), field)
+        raise ValueError(f"parameter {node_name}: {str(err).split(' ', 1)[1]}") from None
+
 
 def parameter_help() -> str:
     """The node's parameters as ``name (default): description`` lines."""

@@ -101,16 +101,27 @@ def driver_torques(params: DriverParams, command: wp.vec2, fresh: bool, speeds: 
     return ref, wp.vec2(i_left, i_right), new_applied
 
 
+MAX_WHEELS = wp.constant(8)
+"""Wheels a rover may have: the encoders' loop has this fixed length, so Warp unrolls it and differentiates it."""
+
+
 @wp.func
 def side_speeds(layout: RoverLayout, joint_qd: wp.array(dtype=float), world: int) -> wp.vec2:
     """Mean forward speed of each side's wheels [rad/s] (the encoders)."""
-    total = wp.vec2(0.0, 0.0)
-    count = wp.vec2(0.0, 0.0)
-    for k in range(layout.wheel_count):
-        s = layout.wheel_side[k]
-        total[s] = total[s] + layout.wheel_sign[k] * joint_qd[world * layout.dofs_per_world + layout.wheel_dof[k]]
-        count[s] = count[s] + 1.0
-    return wp.vec2(total[0] / wp.max(count[0], 1.0), total[1] / wp.max(count[1], 1.0))
+    left = float(0.0)
+    right = float(0.0)
+    n_left = float(0.0)
+    n_right = float(0.0)
+    for k in range(MAX_WHEELS):
+        if k < layout.wheel_count:
+            v = layout.wheel_sign[k] * joint_qd[world * layout.dofs_per_world + layout.wheel_dof[k]]
+            if layout.wheel_side[k] == 0:
+                left = left + v
+                n_left = n_left + 1.0
+            else:
+                right = right + v
+                n_right = n_right + 1.0
+    return wp.vec2(left / wp.max(n_left, 1.0), right / wp.max(n_right, 1.0))
 
 
 @wp.func
