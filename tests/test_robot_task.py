@@ -198,3 +198,14 @@ def test_bad_action_or_observation_kinds_are_refused(bad):
         TaskConfig(**bad)
     with pytest.raises(ValueError, match=next(iter(bad))):
         ATRVjrEnv(1, task="reach", **bad)
+
+
+def test_the_tasks_page_lists_every_robot_field_with_its_unit():
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parent.parent / "docs" / "tasks.md").read_text()
+    rows = {line.split("|")[1].strip(): line for line in page.splitlines() if line.startswith("| `")}
+    for f in ROBOT_OBSERVATION:
+        row = next((line for name, line in rows.items() if f"`{f.name}`" in name), None)
+        assert row is not None, f.name
+        assert f"| {f.unit} |" in row and f"| {f.bound:g} |" in row, f.name
