@@ -209,3 +209,14 @@ def test_the_tasks_page_lists_every_robot_field_with_its_unit():
         row = next((line for name, line in rows.items() if f"`{f.name}`" in name), None)
         assert row is not None, f.name
         assert f"| {f.unit} |" in row and f"| {f.bound:g} |" in row, f.name
+
+
+def test_the_twist_kernel_agrees_with_its_torch_twin():
+    from atrv_warp.task.spec import action_to_twist
+
+    env = ATRVjrEnv(4, seed=0, **FLAT)
+    td = env.reset()
+    action = torch.tensor([[0.3, -0.7], [1.5, -2.0], [-1.0, 0.25], [0.0, 0.9]])
+    env.step(td.set("action", action))
+    c = env.task_cfg
+    assert torch.equal(env.sim.driver.twist, action_to_twist(action, c.max_linear, c.max_angular))

@@ -5,10 +5,14 @@ one thread per world (``atrv_warp/task/kernels.py``); TensorDicts carry zero-cop
 of the Warp buffers, cloned only where TorchRL would otherwise keep a reference to a buffer
 the next step overwrites.
 
+Actions (N, 2) in [-1, 1]: wheel torques (``action="torque"``), or a /cmd_vel through each world's motor driver
+(``action="twist"``, :data:`~atrv_warp.task.spec.ACTIONS`).
+
 Keys produced (the contract is declared in :mod:`atrv_warp.task.spec`):
-    ``observation`` (N, 10) float32: target x, y; rover x, y; vx, vy (world); roll; yaw rate;
-    sin and cos of the heading error (``OBSERVATION``), then a task's scan sectors and last actions
-    (``observation_fields``). ``scan`` (N, beams) [m] with a scanner. ``reward`` (N, 1);
+    ``observation`` (N, obs_dim) float32: target x, y; rover x, y; vx, vy (world); roll; yaw rate;
+    sin and cos of the heading error (``OBSERVATION``), or with ``observation="robot"`` the goal's distance and
+    bearing from wheel odometry, the odometry's twist and the IMU's roll, pitch and yaw rate
+    (``ROBOT_OBSERVATION``); then a task's scan sectors and last actions (``observation_fields``). ``scan`` (N, beams) [m] with a scanner. ``reward`` (N, 1);
     ``("reward_terms", name)`` (N, 1) for each of ``REWARD_TERMS``, which sum to the reward;
     ``done`` / ``terminated`` / ``truncated`` (N, 1) bool; ``end_reason`` (N, 1) int64
     (``EndReason``, named by :data:`END_REASONS`); ``distance`` (N, 1) distance to the target [m].
