@@ -220,3 +220,15 @@ def test_the_twist_kernel_agrees_with_its_torch_twin():
     env.step(td.set("action", action))
     c = env.task_cfg
     assert torch.equal(env.sim.driver.twist, action_to_twist(action, c.max_linear, c.max_angular))
+
+
+def test_an_exported_twist_policy_says_it_commands_a_twist():
+    from pathlib import Path
+
+    from atrv_warp.rl.export import contract
+
+    spec = contract(Path("p.pt"), {"task": "nav_deploy"})
+    assert spec["action"]["kind"] == "twist" and spec["action"]["names"] == ["linear", "angular"]
+    assert spec["action"]["scale"] == [1.0, 1.0]
+    assert [f["name"] for f in spec["observation"][:8]] == [f.name for f in ROBOT_OBSERVATION]
+    assert contract(Path("p.pt"), {"task": "nav"})["action"]["kind"] == "wheel_torque"
