@@ -36,7 +36,7 @@ from atrv_warp.policy import load_policy, pretrained_policy_path
 from atrv_warp.sim.config import SimConfig
 from atrv_warp.sim.scanner import ScannerConfig
 from atrv_warp.task.config import get_task
-from atrv_warp.task.spec import ACTION_DIM, observation_bounds, observation_fields, scan_sectors
+from atrv_warp.task.spec import ACTION_DIM, ACTIONS, observation_bounds, observation_fields, scan_sectors
 
 __all__ = ["EXPORT_FORMAT", "PolicyNet", "contract", "export_onnx", "export_policy", "load_exported"]
 
@@ -88,12 +88,22 @@ def contract(source: Path, meta: dict, sim: SimConfig | None = None) -> dict:
                          "unit": f.unit, "frame": f.frame, "description": f.description}
                         for i, (f, lo, hi) in enumerate(zip(fields, low.tolist(), high.tolist()))],
         "observation_clipped": "each value is clipped to [low, high] before the policy sees it",
-        "action": {"kind": "wheel_torque", "names": ["left", "right"], "low": -1.0, "high": 1.0,
-                   "scale": task.action_scale, "unit_after_scale": "N·m", "meaning": "action x scale is the torque "
-                   "of every wheel on that side; actions are clipped to [-1, 1]"},
+        "action": _action_contract(task),
         "step_dt": sim.step_dt, "rate_hz": 1.0 / sim.step_dt,
         "scan": scan, "action_history": history,
     }
+
+
+def _action_contract(task) -> dict:
+    """What the action commands: each side's wheel torque, or a /cmd_vel (:data:`~atrv_warp.task.spec.ACTIONS`)."""
+    if task.action == "twist":
+        return {"kind": "twist", "names": list(ACTIONS["twist"].columns), "low": -1.0, "high": 1.0,
+                "scale": [task.max_linear, task.max_angular], "unit_after_scale": ["m/s", "rad/s"],
+                "meaning": "action x scale is a /cmd_vel (geometry_msgs/Twist linear.x, angular.z) to the base's "
+                "motor driver; actions are clipped to [-1, 1]"}
+    return {"kind": "wheel_torque", "names": ["left", "right"], "low": -1.0, "high": 1.0,
+            "scale": task.action_scale, "unit_after_scale": "N·m", "meaning": "action x scale is the torque "
+            "of every wheel on that side; actions are clipped to [-1, 1]"}
 
 
 def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = False) -> Path:
