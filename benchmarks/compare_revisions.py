@@ -12,7 +12,9 @@ env-steps/s of ``RoverSim.step`` (random torques) and of ``ATRVjrEnv.rollout`` (
 for both trees and their ratio. Prints the table and writes
 ``benchmarks/results/compare_revisions.json``. ``--new-substeps K`` runs this tree's simulator and
 environment on K solver substeps per step (``SimConfig(sim_dt=step_dt / K)``) and the old tree on its
-defaults.
+defaults. ``--kinds twist`` times this tree's simulator driven by ``/cmd_vel`` through its motor driver (random
+twists, the driver's command written in place each step as the env's kernel does) against the old tree's
+``sim`` (random torques): what velocity control costs.
 """
 
 from __future__ import annotations
@@ -47,7 +49,18 @@ if len(sys.argv) > 4:  # only this tree is given a substep count
     from atrv_warp import SimConfig
     kwargs["sim"] = SimConfig(sim_dt=SimConfig().step_dt / int(sys.argv[4]))
 gen = torch.Generator().manual_seed(0)
-if kind == "sim":
+if kind == "twist":
+    sim = RoverSim(n, **kwargs)
+    sim.reset(poses=(torch.rand(n, 3, generator=gen) * 2 - 1) * torch.tensor([12.0, 12.0, 3.14]))
+    cmds = [(torch.rand(n, 2, generator=gen) * 2 - 1) * torch.tensor([1.0, 1.0]) for _ in range(8)]
+    sim.set_twist(cmds[0])
+    def run():
+        for c in cmds:
+            sim.driver.twist.copy_(c)
+            sim.driver.age.zero_()
+            sim.step()
+    frames = 8 * n
+elif kind == "sim":
     sim = RoverSim(n, **kwargs)
     sim.reset(poses=(torch.rand(n, 3, generator=gen) * 2 - 1) * torch.tensor([12.0, 12.0, 3.14]))
     cmds = [(torch.rand(n, 2, generator=gen) * 2 - 1) * 20 for _ in range(8)]
@@ -91,7 +104,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--old", required=True, help="git revision to compare against")
     parser.add_argument("--sizes", type=int, nargs="+", default=[64, 1024])
-    parser.add_argument("--kinds", nargs="+", default=["sim", "env"], choices=["sim", "env"])
+    parser.add_argument("--kinds", nargs="+", default=["sim", "env"], choices=["sim", "env", "twist"])
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--seconds", type=float, default=3.0, help="timed wall time per measurement [s]")
     parser.add_argument("--new-substeps", type=int, default=None,
@@ -112,12 +125,13 @@ def main() -> int:
         try:
             for kind in args.kinds:
                 for n in args.sizes:
+                    old_kind = "sim" if kind == "twist" else kind  # the old tree drives by torque
                     # warm-up: compile both trees' kernels before timing
-                    _measure(old_tree, kind, n, 0.2)
+                    _measure(old_tree, old_kind, n, 0.2)
                     _measure(ROOT, kind, n, 0.2, args.new_substeps)
                     old, new = [], []
                     for _ in range(args.rounds):
-                        old.append(_measure(old_tree, kind, n, args.seconds))
+                        old.append(_measure(old_tree, old_kind, n, args.seconds))
                         new.append(_measure(ROOT, kind, n, args.seconds, args.new_substeps))
                     row = {"kind": kind, "num_worlds": n, "old_median": statistics.median(old),
                            "new_median": statistics.median(new), "old": old, "new": new}

@@ -83,6 +83,9 @@ class CalibrationConfig:
     """Window of the centred moving average over the reference poses [s] (0: none). It takes the reference's
     noise out of each segment's start and of the error (a 1 cm noise is about the error left after a fit),
     and changes a path that bends at 1 rad/s by well under a millimetre."""
+    warmup: float = 0.25
+    """Each segment's first seconds [s] left out of the wheel-speed and effort terms (a ``cmd_vel`` replay): the
+    driver's integral at a segment's start is reconstructed from 20 Hz wheel speeds, and its error decays there."""
     held_out_every: int = 5
     """Every k-th segment is held out of the fit, and only measured."""
     starts: int = 4
@@ -301,6 +304,7 @@ class _Replay:
         self.roll = DiffRollout(worlds, steps=segments.inputs.shape[1], rover=rover, contact=contact,
                                 twist=segments.command == "cmd_vel", driver=cfg.driver(rover), action_scale=1.0)
         self.segments, self.worlds = segments, worlds
+        self.warmup = round(cfg.warmup / 0.05) if segments.command == "cmd_vel" else 0
         self.nominal = {"chassis_mass": self.roll.nominal_chassis_mass}
 
     def run(self, index: np.ndarray, values: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -331,11 +335,14 @@ class _Replay:
         yaw = quat_to_yaw(sim_poses[..., 3:7])
         dyaw = wrap_angle(yaw - ref[..., 2])
         dpos = (xy - ref[..., :2]).square().sum(-1)
-        loss = (dpos / _POSITION_SCALE**2 + (_HEADING_ARM * dyaw / _POSITION_SCALE).square()
-                + (speeds - ref_wheel).square().sum(-1) / _WHEEL_SCALE**2).mean(0)
+        # the motor terms skip the first steps, while the driver's reconstructed integral settles (its error decays
+        # within a few of its 0.01 s loops); the path keeps them, it integrates what they do
+        settled = slice(self.warmup, None)
+        loss = (dpos / _POSITION_SCALE**2 + (_HEADING_ARM * dyaw / _POSITION_SCALE).square()).mean(0)
+        loss = loss + ((speeds - ref_wheel)[settled].square().sum(-1) / _WHEEL_SCALE**2).mean(0)
         if seg.ref_effort is not None:
             ref_effort = torch.as_tensor(seg.ref_effort[pad], dtype=torch.float32).transpose(0, 1)
-            loss = loss + ((torques - ref_effort).square().sum(-1) / _EFFORT_SCALE**2).mean(0)
+            loss = loss + ((torques - ref_effort)[settled].square().sum(-1) / _EFFORT_SCALE**2).mean(0)
         path = torch.cat([xy, yaw[..., None]], -1)
         return loss[:n], dpos.sqrt().mean(0)[:n].detach(), path[:, :n].detach()
 

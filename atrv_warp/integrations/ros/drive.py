@@ -23,7 +23,12 @@ __all__ = ["ExcitationDriver", "record_drive_bag"]
 
 class ExcitationDriver(Node):
     """Random velocity commands, each held 0.8-2.5 s of sim time and re-sent at 10 Hz (the base's watchdog
-    wants them), drawn from ``seed``; beyond ``radius`` [m] from the start it drives back."""
+    wants them), drawn from ``seed``; beyond ``radius`` [m] from the start it drives back.
+
+    Half the changes are steps, which saturate the motors (the motor's strength, and the friction where the tyres
+    slide); the other half are ramps at 0.5-2 m/s² (and as many rad/s² per m/s of the limits' ratio), as a
+    joystick or a base's acceleration limit gives: a driver that tracks its wheel speeds tightly then needs the
+    torque that the rover's mass takes, which the wheel efforts record."""
 
     def __init__(self, seed: int = 0, radius: float = 8.0, max_linear: float = 1.2, max_angular: float = 1.2):
         super().__init__("atrv_excitation_driver")
@@ -34,6 +39,10 @@ class ExcitationDriver(Node):
         self.create_subscription(Odometry, "/ground_truth/odom", self.on_pose, 10)
         self.pose = (0.0, 0.0, 0.0)
         self.command = (0.0, 0.0)
+        self.target = (0.0, 0.0)
+        self.rate = math.inf
+        """The ramp's rate toward ``target`` [m/s²] (``inf``: a step)."""
+        self.last = 0.0
         self.next_change = 0.0
         self.next_send = 0.0
 
@@ -57,9 +66,16 @@ class ExcitationDriver(Node):
     def on_clock(self, msg: Clock) -> None:
         now = msg.clock.sec + 1e-9 * msg.clock.nanosec
         if now >= self.next_change:
-            self.command = self.draw()
+            self.target = self.draw()
+            self.rate = math.inf if self.rng.random() < 0.5 else float(self.rng.uniform(0.5, 2.0))
             self.next_change = now + float(self.rng.uniform(0.8, 2.5))
             self.next_send = now
+        dt, self.last = max(now - self.last, 0.0), now
+        if math.isinf(self.rate):
+            self.command = self.target
+        else:
+            step = (self.rate * dt, self.rate * dt * self.max_angular / self.max_linear)
+            self.command = tuple(c + max(-d, min(d, t - c)) for c, t, d in zip(self.command, self.target, step))
         if now >= self.next_send - 1e-9:
             t = Twist()
             t.linear.x, t.angular.z = self.command
