@@ -47,8 +47,11 @@ def main(argv: list[str] | None = None) -> int:
     except ModuleNotFoundError as err:
         return error_line(parser.prog, f"--onnx needs the onnx extra ({err.name} is missing): pip install -e '.[onnx]'")
     _, spec = load_exported(path)
-    print(f"wrote {path}: observation ({len(spec['observation'])},) -> action (2,) in [-1, 1] "
-          f"x {spec['action']['scale']:g} N·m; runs with torch alone (torch.export.load)")
+    action = spec["action"]
+    columns = ", ".join(f"{n} x {k:g} {u}" for n, k, u in zip(action["names"], action["scale"], action["units"],
+                                                               strict=True))
+    print(f"wrote {path}: {spec['observation_kind']} observation ({len(spec['observation'])},) -> {action['kind']} "
+          f"action (2,) in [-1, 1] ({columns}); runs with torch alone (torch.export.load)")
     if args.onnx:
         print(f"wrote {path.with_suffix('.onnx')}: checked with onnxruntime against the torch policy (< 1e-5)")
     return 0
