@@ -305,7 +305,7 @@ def test_the_builder_gives_the_environments_observation_from_the_robots_signals(
     from atrv_warp.task.env import ATRVjrEnv
 
     env = ATRVjrEnv(8, seed=5, task="nav_deploy")
-    build = RobotObservation.from_contract(policy_contract(env.task))
+    build = RobotObservation.from_contract(policy_contract(env.task_cfg))
     sc = env.scanner.cfg
     gen = torch.Generator().manual_seed(0)
     td, actions = env.reset(), []
@@ -326,3 +326,4 @@ def test_the_builder_gives_the_environments_observation_from_the_robots_signals(
         bad = {n: round(e, 6) for n, e in zip(build.names, err.tolist(), strict=True) if e > 1e-4}
         assert not bad, bad
         td = step_mdp(td)
+    assert env.sim.driver.odometry[:, :2].abs().amax() > 1e-3  # the rovers moved: odometry and bearing changed
