@@ -27,9 +27,9 @@ from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
 from atrv_warp.storage import FileFormatError, atomic_save, load_weights
 from atrv_warp.task.spec import ACTION_DIM, OBS_DIM, observation_fields
 
-__all__ = ["OLD_KINDS", "POLICY_FORMAT", "SHIPPED_POLICIES", "Normalize", "PolicyTaskMismatch", "ShippedPolicy", "check_policy_task",
-           "load_policy", "make_actor", "policy_kinds", "policy_payload", "policy_task", "pretrained_nav_policy_path",
-           "pretrained_policy_path", "save_policy", "shipped_policy_path"]
+__all__ = ["OLD_KINDS", "POLICY_FORMAT", "SHIPPED_POLICIES", "Normalize", "PolicyTaskMismatch", "ShippedPolicy",
+           "check_policy_task", "load_policy", "make_actor", "policy_kinds", "policy_path", "policy_payload",
+           "policy_task", "pretrained_nav_policy_path", "pretrained_policy_path", "save_policy", "shipped_policy_path"]
 
 POLICY_FORMAT = "atrv_warp.policy/1"
 """Format tag of a saved policy (``save_policy``, and the ``policy`` entry of a training checkpoint)."""
@@ -130,13 +130,13 @@ def _read(path: Path) -> dict:
 def policy_task(path: str | Path) -> str:
     """The task a saved policy (a file or a shipped name) was trained on (``meta["task"]``; ``reach`` for older
     files)."""
-    return str(_read(_resolve(path)).get("meta", {}).get("task", "reach"))
+    return str(_read(policy_path(path)).get("meta", {}).get("task", "reach"))
 
 
 def policy_kinds(path: str | Path) -> tuple[str, str]:
     """(action, observation) kinds a saved policy (a file or a shipped name) commands and observes
     (:data:`OLD_KINDS` for files from before they were recorded)."""
-    return _kinds(_read(_resolve(path)))
+    return _kinds(_read(policy_path(path)))
 
 
 def _kinds(payload: dict) -> tuple[str, str]:
@@ -181,8 +181,9 @@ def shipped_policy_path(name: str) -> Path:
     return path
 
 
-def _resolve(path: str | Path | None) -> Path:
-    """A shipped policy's name (a ``str`` key of :data:`SHIPPED_POLICIES`; ``None``: ``reach``) or a file."""
+def policy_path(path: str | Path | None) -> Path:
+    """The file of ``path``: a shipped policy's name (a ``str`` key of :data:`SHIPPED_POLICIES`; ``None``:
+    ``reach``; see :func:`shipped_policy_path`), or a file's path as given."""
     if path is None or (isinstance(path, str) and path in SHIPPED_POLICIES):
         return shipped_policy_path(path or "reach")
     return Path(path)
@@ -219,7 +220,7 @@ def load_policy(path: str | Path | None = None, *, deterministic: bool = True, t
     (``env.device``) for an :class:`~atrv_warp.task.env.ATRVjrEnv` on a GPU.
     """
     label = path if isinstance(path, str) and path in SHIPPED_POLICIES else None
-    path = _resolve(path)
+    path = policy_path(path)
     payload = _read(path)  # a training checkpoint: its policy
     if payload.get("format") != POLICY_FORMAT:
         raise FileFormatError(f"{path}: not an atrv_warp policy (format {payload.get('format')!r}, "

@@ -146,6 +146,17 @@ def test_built_from_an_exported_policy_and_run(tmp_path):
     assert action.shape == (1, 2) and bool(action.abs().le(1).all())
 
 
+def test_a_shipped_torque_policy_exports_by_name_and_the_builder_refuses_it(tmp_path):
+    from atrv_warp.rl.export import export_policy, load_exported
+
+    _, spec = load_exported(export_policy("reach", tmp_path / "reach.pt2"))
+    assert (spec["observation_kind"], spec["action"]["kind"], spec["action"]["units"]) == ("arena", "torque",
+                                                                                           ["N·m", "N·m"])
+    assert spec["action"]["limits"] == {"action_scale": {"value": 20.0, "unit": "N·m"}}
+    with pytest.raises(ValueError, match="observes the 'arena' observation"):
+        RobotObservation.from_contract(spec)
+
+
 def test_the_example_drives_a_twist_policy_from_the_file(tmp_path):
     """examples/run_exported_policy.py on a twist policy made to turn left: it builds the robot observation from
     made-up messages with the builder and prints the /cmd_vel."""

@@ -35,7 +35,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from atrv_warp.policy import load_policy, pretrained_policy_path
+from atrv_warp.policy import load_policy, policy_path
 from atrv_warp.sim.config import SimConfig
 from atrv_warp.sim.scanner import ScannerConfig
 from atrv_warp.storage import FileFormatError
@@ -93,8 +93,9 @@ def contract(source: Path, meta: dict, sim: SimConfig | None = None) -> dict:
 
 
 def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = False) -> Path:
-    """Write the policy file ``policy`` (default: the shipped one) to ``out`` (``.pt2``), and with
-    ``onnx`` also to ``out`` with the suffix ``.onnx``."""
+    """Write the policy file ``policy`` (or a shipped policy's name, :data:`atrv_warp.policy.SHIPPED_POLICIES`;
+    default: the shipped ``reach`` one) to ``out`` (``.pt2``), and with ``onnx`` also to ``out`` with the suffix
+    ``.onnx``."""
     from atrv_warp.storage import load_weights
 
     if Path(out).suffix != ".pt2":
@@ -103,7 +104,7 @@ def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = Fa
         import onnx as _onnx  # noqa: F401
         import onnxruntime  # noqa: F401
         import onnxscript  # noqa: F401
-    source = Path(policy) if policy is not None else pretrained_policy_path()
+    source = policy_path(policy)
     payload = load_weights(source, "policy file")  # a file that is no policy is named
     payload = payload["policy"] if isinstance(payload.get("policy"), dict) else payload  # a training checkpoint's
     meta = payload.get("meta", {})
