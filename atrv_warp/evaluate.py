@@ -10,6 +10,7 @@ Examples::
     python -m atrv_warp.evaluate runs/default/best_policy.pt --episodes 200 --seed 7
     python -m atrv_warp.evaluate --baseline               # the scripted driver, for comparison (atrv-baseline)
     python -m atrv_warp.evaluate --task nav               # the shipped navigation policy
+    python -m atrv_warp.evaluate nav_plain                # a shipped policy by name (atrv_warp.policy.SHIPPED_POLICIES)
     python -m atrv_warp.evaluate --task nav --randomization wide   # under shift: per-world physics, noise, latency
     python -m atrv_warp.evaluate --task nav --baseline --episodes 8 --rerun nav.rrd
     python -m atrv_warp.evaluate --episodes 8 --rerun eval.rrd      # record 4 worlds; view: rerun eval.rrd
@@ -32,12 +33,13 @@ def build_parser() -> argparse.ArgumentParser:
     """The command line's parser (the docs' command table reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.evaluate", description=__doc__.splitlines()[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
-    parser.add_argument("checkpoint", nargs="?", default=None, help="policy or checkpoint file (default: shipped)")
+    parser.add_argument("checkpoint", nargs="?", default=None, help="policy or checkpoint file, or a shipped policy's name (reach, nav, nav_plain, nav_deploy; "
+                             "default: the task's shipped one)")
     parser.add_argument("--episodes", type=int, default=1000, help="number of seeded episodes (one world each)")
     parser.add_argument("--seed", type=int, default=None, help="evaluation-set seed (default: the standard set)")
     parser.add_argument("--baseline", action="store_true", help="evaluate the scripted baseline instead")
     parser.add_argument("--task", default=None,
-                        help="task: reach | nav (default: the policy's own; reach for the baseline)")
+                        help="task: reach | nav | nav_deploy (default: the policy's own; reach for the baseline)")
     parser.add_argument("--randomization", default="none", metavar="PRESET",
                         help="evaluate under domain randomization: none | mild | wide (each world draws its physics, "
                              "sensor noise and latency from the evaluation seed); prints success by parameter bin")
@@ -107,17 +109,18 @@ def main(argv: list[str] | None = None) -> int:
 
         policy, name = scripted_policy(), f"scripted baseline ({task})"
     else:
-        from atrv_warp.policy import load_policy, policy_task, pretrained_nav_policy_path, pretrained_policy_path
+        from atrv_warp.policy import SHIPPED_POLICIES, load_policy, policy_task
         from atrv_warp.storage import FileFormatError
 
-        shipped = pretrained_nav_policy_path() if args.task == "nav" else pretrained_policy_path()
-        path = args.checkpoint or str(shipped)
+        # no file: the policy shipped for the task (a registered name, resolved by load_policy)
+        path = args.checkpoint or (args.task if args.task in SHIPPED_POLICIES else "reach")
         try:
             trained_on = policy_task(path)
+            # a policy that commands or observes another kind than the task's is refused first, naming both
+            policy = load_policy(path, task=args.task or trained_on)
             if args.task is not None and args.task != trained_on:
                 return error_line(parser.prog, f"{path} was trained on task {trained_on!r}, not {args.task!r}")
-            policy = load_policy(path, task=trained_on)
-        except (FileNotFoundError, FileFormatError) as err:
+        except (FileNotFoundError, FileFormatError, ValueError) as err:
             return error_line(parser.prog, f"cannot load policy: {err}")
         task, name = trained_on, path
     try:

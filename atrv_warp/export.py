@@ -1,7 +1,7 @@
 """Export a trained policy to a file that runs with torch alone: ``python -m atrv_warp.export [--onnx] [POLICY] OUT``.
 
-POLICY is a ``best_policy.pt``, a training ``checkpoint.pt``, or omitted for the policy shipped
-with the package; OUT ends in ``.pt2`` (a ``torch.export`` archive). See
+POLICY is a ``best_policy.pt``, a training ``checkpoint.pt``, a shipped policy's name (``reach``, ``nav``,
+``nav_plain``, ``nav_deploy``), or omitted for the ``reach`` policy shipped with the package; OUT ends in ``.pt2`` (a ``torch.export`` archive). See
 :mod:`atrv_warp.rl.export` for what the file holds, and ``examples/run_exported_policy.py`` for a
 standalone inference loop.
 
@@ -10,6 +10,7 @@ Examples::
     python -m atrv_warp.export policy.pt2                               # the shipped policy
     python -m atrv_warp.export runs/default/best_policy.pt my_rover.pt2
     python -m atrv_warp.export --onnx policy.pt2                        # also policy.onnx (extra: onnx)
+    python -m atrv_warp.export nav nav.pt2                              # a shipped policy by name
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
     """The command line's parser (the docs' command table reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.export", description=__doc__.splitlines()[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
-    parser.add_argument("paths", nargs="+", metavar="[POLICY] OUT", help="policy file (default: shipped), output .pt2")
+    parser.add_argument("paths", nargs="+", metavar="[POLICY] OUT", help="policy file or a shipped policy's name (default: the shipped reach "
+                        "policy), output .pt2")
     parser.add_argument("--onnx", action="store_true", help="also write OUT.onnx, checked with onnxruntime")
     return parser
 
@@ -47,8 +49,11 @@ def main(argv: list[str] | None = None) -> int:
     except ModuleNotFoundError as err:
         return error_line(parser.prog, f"--onnx needs the onnx extra ({err.name} is missing): pip install -e '.[onnx]'")
     _, spec = load_exported(path)
-    print(f"wrote {path}: observation ({len(spec['observation'])},) -> action (2,) in [-1, 1] "
-          f"x {spec['action']['scale']:g} N·m; runs with torch alone (torch.export.load)")
+    action = spec["action"]
+    columns = ", ".join(f"{n} x {k:g} {u}" for n, k, u in zip(action["names"], action["scale"], action["units"],
+                                                               strict=True))
+    print(f"wrote {path}: {spec['observation_kind']} observation ({len(spec['observation'])},) -> {action['kind']} "
+          f"action (2,) in [-1, 1] ({columns}); runs with torch alone (torch.export.load)")
     if args.onnx:
         print(f"wrote {path.with_suffix('.onnx')}: checked with onnxruntime against the torch policy (< 1e-5)")
     return 0

@@ -6,10 +6,16 @@ and the exporter load a policy from here without importing the trainer (:mod:`at
 Observation normalisation lives *inside* the networks (:class:`Normalize`, statistics as
 buffers): it is saved with the policy, frozen for evaluation, and a saved policy runs on raw
 ``ATRVjrEnv`` observations with no transform to rebuild.
+
+A saved policy records what it commands and observes (``action``: ``torque`` | ``twist``; ``observation``:
+``arena`` | ``robot``; files from before mean ``torque`` and ``arena``), and :func:`load_policy` refuses, naming
+both, a policy whose kinds are not its task's. The shipped policies are loaded by name (:data:`SHIPPED_POLICIES`):
+``load_policy("nav")``.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
@@ -21,11 +27,43 @@ from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
 from atrv_warp.storage import FileFormatError, atomic_save, load_weights
 from atrv_warp.task.spec import ACTION_DIM, OBS_DIM, observation_fields
 
-__all__ = ["POLICY_FORMAT", "Normalize", "load_policy", "make_actor", "policy_payload", "policy_task",
-           "pretrained_nav_policy_path", "pretrained_policy_path", "save_policy"]
+__all__ = ["OLD_KINDS", "POLICY_FORMAT", "SHIPPED_POLICIES", "Normalize", "PolicyTaskMismatch", "ShippedPolicy",
+           "check_policy_task", "load_policy", "make_actor", "policy_kinds", "policy_path", "policy_payload",
+           "policy_task", "pretrained_nav_policy_path", "pretrained_policy_path", "save_policy", "shipped_policy_path"]
 
 POLICY_FORMAT = "atrv_warp.policy/1"
 """Format tag of a saved policy (``save_policy``, and the ``policy`` entry of a training checkpoint)."""
+
+OLD_KINDS = ("torque", "arena")
+"""(action, observation) of a saved policy that records neither: every policy saved before twist actions and robot
+observations existed."""
+
+
+@dataclass(frozen=True)
+class ShippedPolicy:
+    """A policy that ships inside the package (``atrv_warp/assets/``)."""
+
+    file: str
+    """Its file name in ``atrv_warp/assets/``."""
+    task: str
+    """The registered task it was trained on."""
+    train: str
+    """The command that trains it (its ``best_policy.pt`` is then copied to ``atrv_warp/assets/<file>``)."""
+
+
+SHIPPED_POLICIES: dict[str, ShippedPolicy] = {
+    "reach": ShippedPolicy("pretrained_policy.pt", "reach", "python -m atrv_warp.train"),
+    "nav": ShippedPolicy("nav_policy.pt", "nav", "python -m atrv_warp.train --config nav randomization=wide"),
+    "nav_plain": ShippedPolicy("nav_policy_plain.pt", "nav", "python -m atrv_warp.train --config nav"),
+    "nav_deploy": ShippedPolicy("nav_deploy_policy.pt", "nav_deploy", "python -m atrv_warp.train --config nav_deploy"),
+}
+"""The shipped policies by name: ``reach`` (the reference task), ``nav`` (navigation, trained under the ``wide``
+domain randomization), ``nav_plain`` (navigation on the nominal rover with perfect sensors), ``nav_deploy`` (the
+navigation policy for a robot: twist commands, robot observation; not trained yet)."""
+
+
+class PolicyTaskMismatch(FileFormatError):
+    """A saved policy commands or observes another kind than its task's (it cannot drive that task)."""
 
 
 class Normalize(nn.Module):
@@ -61,61 +99,134 @@ def make_actor(width: int = 128, depth: int = 2, normalize: Normalize | None = N
                               distribution_kwargs={"low": -1.0, "high": 1.0}, return_log_prob=return_log_prob)
 
 
-def save_policy(actor: ProbabilisticActor, path: str | Path, *, width: int, depth: int, meta: dict | None = None):
+def save_policy(actor: ProbabilisticActor, path: str | Path, *, width: int, depth: int, meta: dict | None = None,
+                task=None):
     """Write the actor's weights (normalisation included) atomically, loadable with weights_only.
-    ``meta["task"]`` names the task the policy observes (``reach`` if absent)."""
-    atomic_save(policy_payload(actor, width=width, depth=depth, meta=meta), path)
+    ``meta["task"]`` names the task the policy observes (``reach`` if absent); ``task`` (a name or
+    :class:`~atrv_warp.task.config.TaskConfig`, default ``meta["task"]``): whose action and observation kinds
+    the file records."""
+    atomic_save(policy_payload(actor, width=width, depth=depth, meta=meta, task=task), path)
 
 
-def policy_payload(actor: ProbabilisticActor, *, width: int, depth: int, meta: dict | None = None) -> dict:
-    """The saved form of a policy (``POLICY_FORMAT``), as :func:`load_policy` reads it."""
+def policy_payload(actor: ProbabilisticActor, *, width: int, depth: int, meta: dict | None = None,
+                   task=None) -> dict:
+    """The saved form of a policy (``POLICY_FORMAT``), as :func:`load_policy` reads it: weights, sizes, ``meta``,
+    and the ``action`` and ``observation`` kinds of ``task`` (default: ``meta["task"]``, ``reach`` if absent)."""
+    from atrv_warp.task.config import get_task
+
+    meta = meta or {}
+    config = get_task(task if task is not None else meta.get("task", "reach"))
     sd = {k: v.detach().cpu() for k, v in actor.state_dict().items()}
     obs_dim = next(v.numel() for k, v in sd.items() if k.endswith("loc") and v.ndim == 1)
     return {"format": POLICY_FORMAT, "width": width, "depth": depth, "obs_dim": obs_dim, "state_dict": sd,
-            "meta": meta or {}}
+            "meta": meta, "action": config.action, "observation": config.observation}
+
+
+def _read(path: Path) -> dict:
+    payload = load_weights(path, "policy file")
+    return payload["policy"] if isinstance(payload.get("policy"), dict) else payload  # a training checkpoint's
 
 
 def policy_task(path: str | Path) -> str:
-    """The task a saved policy was trained on (``meta["task"]``; ``reach`` for older files)."""
-    payload = load_weights(Path(path), "policy file")
-    payload = payload["policy"] if isinstance(payload.get("policy"), dict) else payload
-    return str(payload.get("meta", {}).get("task", "reach"))
+    """The task a saved policy (a file or a shipped name) was trained on (``meta["task"]``; ``reach`` for older
+    files)."""
+    return str(_read(policy_path(path)).get("meta", {}).get("task", "reach"))
+
+
+def policy_kinds(path: str | Path) -> tuple[str, str]:
+    """(action, observation) kinds a saved policy (a file or a shipped name) commands and observes
+    (:data:`OLD_KINDS` for files from before they were recorded)."""
+    return _kinds(_read(policy_path(path)))
+
+
+def _kinds(payload: dict) -> tuple[str, str]:
+    return str(payload.get("action", OLD_KINDS[0])), str(payload.get("observation", OLD_KINDS[1]))
+
+
+def check_policy_task(payload: dict, task, *, source: str | Path) -> None:
+    """Refuse a saved policy (``payload``, as :func:`policy_payload` writes it or a checkpoint's ``policy``
+    entry) that commands or observes another kind than ``task`` (a name or
+    :class:`~atrv_warp.task.config.TaskConfig`), in one line naming both.
+
+    Raises:
+        PolicyTaskMismatch: e.g. ``policy nav_deploy_policy.pt commands twist but task 'nav' takes torque``.
+    """
+    from atrv_warp.task.config import get_task
+
+    config = get_task(task)
+    action, observation = _kinds(payload)
+    name = f"task {task!r}" if isinstance(task, str) else "the task"
+    if action != config.action:
+        raise PolicyTaskMismatch(f"policy {source} commands {action} but {name} takes {config.action}")
+    if observation != config.observation:
+        raise PolicyTaskMismatch(f"policy {source} observes the {observation} observation but {name} gives the "
+                                 f"{config.observation} one")
+
+
+def shipped_policy_path(name: str) -> Path:
+    """The file of the shipped policy called ``name`` (:data:`SHIPPED_POLICIES`).
+
+    Raises:
+        ValueError: No shipped policy has that name (the known ones are listed).
+        FileNotFoundError: It is registered but not trained yet; the message names the command that trains it.
+    """
+    try:
+        shipped = SHIPPED_POLICIES[name]
+    except KeyError:
+        raise ValueError(f"no shipped policy is called {name!r}; known: {sorted(SHIPPED_POLICIES)}") from None
+    path = Path(str(resources.files("atrv_warp").joinpath(f"assets/{shipped.file}")))
+    if not path.is_file():
+        raise FileNotFoundError(f"the shipped policy {name!r} ({path}) is not trained yet: train it with "
+                                f"`{shipped.train}` and copy the run's best_policy.pt to atrv_warp/assets/{shipped.file}")
+    return path
+
+
+def policy_path(path: str | Path | None) -> Path:
+    """The file of ``path``: a shipped policy's name (a ``str`` key of :data:`SHIPPED_POLICIES`; ``None``:
+    ``reach``; see :func:`shipped_policy_path`), or a file's path as given."""
+    if path is None or (isinstance(path, str) and path in SHIPPED_POLICIES):
+        return shipped_policy_path(path or "reach")
+    return Path(path)
 
 
 def pretrained_nav_policy_path(randomized: bool = True) -> Path:
     """The navigation policy shipped inside the package, trained by ``python -m atrv_warp.train --config nav``
     under the ``wide`` domain randomization (the default); ``randomized=False``: the earlier one, trained on the
     nominal rover with perfect sensors (``nav_policy_plain.pt``)."""
-    name = "nav_policy.pt" if randomized else "nav_policy_plain.pt"
-    return Path(str(resources.files("atrv_warp").joinpath(f"assets/{name}")))
+    return shipped_policy_path("nav" if randomized else "nav_plain")
 
 
 def pretrained_policy_path() -> Path:
     """The policy shipped inside the package (trained by ``python -m atrv_warp.train``)."""
-    return Path(str(resources.files("atrv_warp").joinpath("assets/pretrained_policy.pt")))
+    return shipped_policy_path("reach")
 
 
 def load_policy(path: str | Path | None = None, *, deterministic: bool = True, task=None,
                 device: str | torch.device = "cpu") -> TensorDictSequential:
-    """Load a saved policy (default: the shipped one) as a TorchRL policy module.
+    """Load a saved policy as a TorchRL policy module: ``path`` is a file, or the name of a shipped policy
+    (:data:`SHIPPED_POLICIES`: ``"reach"``, ``"nav"``, ``"nav_plain"``, ``"nav_deploy"``; ``None``: ``reach``; a file
+    called like one is ``./nav``).
 
     The module reads raw ``observation`` from :class:`~atrv_warp.task.env.ATRVjrEnv` and writes
     ``action``; with ``deterministic=True`` it returns the distribution's mode. ``task`` (a task name or
-    :class:`~atrv_warp.task.config.TaskConfig`): the policy must observe that task's observation.
+    :class:`~atrv_warp.task.config.TaskConfig`): the policy must command that task's action kind and observe its
+    observation.
 
-    Raises ``FileNotFoundError``, or :class:`~atrv_warp.storage.FileFormatError` naming the file
+    Raises ``FileNotFoundError`` (for a shipped policy not trained yet, naming the command that trains it),
+    ``ValueError`` for an unknown shipped name, or :class:`~atrv_warp.storage.FileFormatError` naming the file
     and the problem for anything that is not a complete policy (nothing is unpickled), or for a policy
-    that observes another observation than ``task``'s. ``device``: where the weights go; the env's
+    that observes another observation than ``task``'s (:class:`PolicyTaskMismatch` when it commands or observes
+    another kind, naming both). ``device``: where the weights go; the env's
     (``env.device``) for an :class:`~atrv_warp.task.env.ATRVjrEnv` on a GPU.
     """
-    path = Path(path) if path is not None else pretrained_policy_path()
-    payload = load_weights(path, "policy file")
-    if isinstance(payload.get("policy"), dict):  # a training checkpoint: take its policy
-        payload = payload["policy"]
+    label = path if isinstance(path, str) and path in SHIPPED_POLICIES else None
+    path = policy_path(path)
+    payload = _read(path)  # a training checkpoint: its policy
     if payload.get("format") != POLICY_FORMAT:
         raise FileFormatError(f"{path}: not an atrv_warp policy (format {payload.get('format')!r}, "
                               f"expected {POLICY_FORMAT!r})")
     if task is not None:
+        check_policy_task(payload, task, source=label or path)
         _check_observes(path, int(payload.get("obs_dim", OBS_DIM)), task)
     try:
         actor = make_actor(int(payload["width"]), int(payload["depth"]), obs_dim=int(payload.get("obs_dim", OBS_DIM)))

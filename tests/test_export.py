@@ -51,7 +51,7 @@ def test_exported_policy_runs_with_torch_alone_and_matches(tmp_path):
     assert (actions - expected).abs().max().item() < 1e-5
     _, spec = load_exported(path)
     assert [f["name"] for f in spec["observation"]] == [f.name for f in OBSERVATION]
-    assert spec["action"]["scale"] == 20.0
+    assert spec["action"]["scale"] == [20.0, 20.0] and spec["action"]["kind"] == "torque"
 
 
 def test_export_cli_and_bad_input(tmp_path):
@@ -80,7 +80,7 @@ def test_onnx_export_checked_with_onnxruntime(tmp_path):
     model = tmp_path / "policy.onnx"
     assert model.is_file()
     props = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
-    assert json.loads(props["atrv_warp.json"])["action"]["scale"] == 20.0
+    assert json.loads(props["atrv_warp.json"])["action"]["scale"] == [20.0, 20.0]
     obs = torch.rand(1000, len(OBSERVATION), generator=torch.Generator().manual_seed(1)) * 4 - 2
     got = ort.InferenceSession(str(model), providers=["CPUExecutionProvider"]).run(None, {"observation": obs.numpy()})[0]
     expected = load_policy()(TensorDict(observation=obs, batch_size=[1000]))["action"].numpy()
@@ -109,7 +109,7 @@ def test_the_shipped_nav_policy_exports_its_whole_contract_and_runs_from_the_fil
     # a consumer that knows only the contract builds the env's scan sectors from the env's ranges
     _, spec = load_exported(path)
     assert len(spec["observation"]) == 32 and all(f["unit"] and f["frame"] for f in spec["observation"])
-    assert (spec["step_dt"], spec["rate_hz"], spec["action"]["scale"]) == (0.05, 20.0, 20.0)
+    assert (spec["step_dt"], spec["rate_hz"], spec["action"]["scale"]) == (0.05, 20.0, [20.0, 20.0])
     scan, names = spec["scan"], [f["name"] for f in spec["observation"]]
     angles = torch.linspace(-scan["fov_rad"] / 2, scan["fov_rad"] / 2, scan["beams"], dtype=torch.float64)
     sectors = ScanSectors(tuple(scan["sectors"]["edges_rad"]), scan["sectors"]["clip_m"])

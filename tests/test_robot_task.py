@@ -231,4 +231,4 @@ def test_an_exported_twist_policy_says_it_commands_a_twist():
     assert spec["action"]["kind"] == "twist" and spec["action"]["names"] == ["linear", "angular"]
     assert spec["action"]["scale"] == [1.0, 1.0]
     assert [f["name"] for f in spec["observation"][:8]] == [f.name for f in ROBOT_OBSERVATION]
-    assert contract(Path("p.pt"), {"task": "nav"})["action"]["kind"] == "wheel_torque"
+    assert contract(Path("p.pt"), {"task": "nav"})["action"]["kind"] == "torque"

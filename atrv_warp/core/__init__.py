@@ -7,7 +7,9 @@ each conversion, and the tests hold each to its torch twin here.
 - :mod:`.geometry`: quaternions (x, y, z, w), rotation matrices, yaw, angle wrapping;
 - :mod:`.kinematics`: skid-steer kinematics (:class:`~.kinematics.SkidSteer`), the wheel track, side speeds;
 - :mod:`.scan`: a laser scan's sectors (:class:`~.scan.ScanSectors`), declared by their angular edges,
-  and REP 117's reading of a ``LaserScan``'s ranges.
+  and REP 117's reading of a ``LaserScan``'s ranges;
+- :mod:`.observation`: the robot observation built from a robot's messages (:class:`~.observation.RobotObservation`,
+  from an exported policy's contract).
 """
 
 from atrv_warp.core.geometry import (
@@ -19,10 +21,13 @@ from atrv_warp.core.geometry import (
     yaw_to_quat,
 )
 from atrv_warp.core.kinematics import EFFECTIVE_TRACK_FACTOR, SkidSteer, side_speeds, track_width
+from atrv_warp.core.observation import RobotObservation, Scan
 from atrv_warp.core.scan import ScanSectors, sector_readings
 
 __all__ = [
     "EFFECTIVE_TRACK_FACTOR",
+    "RobotObservation",
+    "Scan",
     "ScanSectors",
     "SkidSteer",
     "matrix_to_quat",

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import torch
 
-from atrv_warp.policy import Normalize, policy_payload
+from atrv_warp.policy import Normalize, check_policy_task, policy_payload
 from atrv_warp.rl.config import TrainConfig
 from atrv_warp.rl.learner import make_learner
 from atrv_warp.storage import FileFormatError, atomic_save, load_weights
@@ -73,6 +73,7 @@ class Checkpoint:
         # keys added after a checkpoint was written take their defaults
         state = RunState(**{f.name: ck[f.name] for f in dataclasses.fields(RunState) if f.name in ck})
         learner = None
+        check_policy_task(ck["policy"], cfg.env.task, source=self.path)  # a policy that cannot drive the task
         try:
             actor.load_state_dict(ck["policy"]["state_dict"])
             if state.stats_ready:
@@ -93,8 +94,11 @@ class Checkpoint:
 
 def warm_start(path: str | Path, cfg: TrainConfig, actor, normalize: Normalize) -> object | None:
     """Load the actor (with its observation statistics) and the learner of the checkpoint at ``path`` into a
-    new run's networks (``run.init_from``); ``None`` when that run had not started learning."""
+    new run's networks (``run.init_from``); ``None`` when that run had not started learning. A checkpoint whose
+    policy commands or observes another kind than ``cfg.env.task``'s is refused
+    (:class:`~atrv_warp.policy.PolicyTaskMismatch`), before anything is loaded."""
     ck = load_checkpoint(Path(path))
+    check_policy_task(ck["policy"], cfg.env.task, source=path)
     try:
         actor.load_state_dict(ck["policy"]["state_dict"])
         if not ck["stats_ready"]:

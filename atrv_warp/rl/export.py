@@ -4,8 +4,8 @@
 ``torch.export`` program (``.pt2``): raw observation (B, D) in, action (B, 2) in [-1, 1] out,
 the action TorchRL's deterministic exploration gives (tanh of the Gaussian's mean). The file
 also carries ``atrv_warp.json``, the whole contract a robot stack needs to run it without this package
-(:func:`contract`): every observation field with its bound, unit and frame; the action's kind, units and
-scale; the control period (``step_dt``, the simulator's); the scan's geometry (beams, field of view, range
+(:func:`contract`): every observation field with its bound, unit and frame; the action's kind (wheel
+``torque`` or a ``twist`` for ``/cmd_vel``), units and scale; the observation's kind; the control period (``step_dt``, the simulator's); the scan's geometry (beams, field of view, range
 limits, the sectors' angular edges and clip) and how a missing or too-close return reads; and what the
 action history means. The exporter checks the policy against its task first, as ``load_policy`` does.
 
@@ -15,8 +15,11 @@ Load it anywhere torch runs, with no Warp, Newton or TorchRL::
     extra = {"atrv_warp.json": ""}
     program = torch.export.load("policy.pt2", extra_files=extra)
     spec = json.loads(extra["atrv_warp.json"])
-    action = program.module()(observation)          # (B, 10) float32 -> (B, 2)
-    torques = action * spec["action"]["scale"]      # [left, right] wheel torque [N·m]
+    action = program.module()(observation)          # (B, D) float32 -> (B, 2)
+    command = action * torch.tensor(spec["action"]["scale"])   # torque: [left, right] N·m; twist: [m/s, rad/s]
+
+A robot policy's observation (``observation_kind`` ``robot``) is built from the robot's messages by
+:class:`atrv_warp.core.observation.RobotObservation.from_contract(spec) <atrv_warp.core.observation.RobotObservation>`.
 
 With ``onnx=True`` (``--onnx``; the ``onnx`` extra) it also writes ``OUT.onnx`` with the same
 description in its metadata, and checks it with onnxruntime against the torch module.
@@ -32,16 +35,18 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from atrv_warp.policy import load_policy, pretrained_policy_path
+from atrv_warp.policy import load_policy, policy_path
 from atrv_warp.sim.config import SimConfig
 from atrv_warp.sim.scanner import ScannerConfig
+from atrv_warp.storage import FileFormatError
 from atrv_warp.task.config import get_task
-from atrv_warp.task.spec import ACTION_DIM, ACTIONS, observation_bounds, observation_fields, scan_sectors
+from atrv_warp.task.spec import ACTION_DIM, observation_fields, policy_contract
 
 __all__ = ["EXPORT_FORMAT", "PolicyNet", "contract", "export_onnx", "export_policy", "load_exported"]
 
-EXPORT_FORMAT = "atrv_warp.exported_policy/2"
-"""Format tag of an exported policy's ``atrv_warp.json`` (2: the whole contract, :func:`contract`)."""
+EXPORT_FORMAT = "atrv_warp.exported_policy/3"
+"""Format tag of an exported policy's ``atrv_warp.json`` (:func:`contract`; 3: the action's kind, ``twist`` or
+``torque``, with its scale and units per column, and the observation's kind; 2 had torque only)."""
 
 
 class PolicyNet(nn.Module):
@@ -58,7 +63,15 @@ class PolicyNet(nn.Module):
 
 
 def contract(source: Path, meta: dict, sim: SimConfig | None = None) -> dict:
-    """What the exported program expects and gives, as plain values (the file's ``atrv_warp.json``).
+    """What the exported program expects and gives, as plain values (the file's ``atrv_warp.json``, format 3).
+
+    The task's part (:func:`atrv_warp.task.spec.policy_contract`): ``observation_kind`` and every observation field
+    with low, high, unit and frame; the ``action``'s kind (``torque`` | ``twist``), its scale and units per column
+    and the task's limits they come from (``action_scale`` [N·m], or ``max_linear`` [m/s] and ``max_angular``
+    [rad/s]), and what a robot does with it; the scan's sectors; the action history. Added here: the format, the
+    source file, the policy's metadata, the control period (``step_dt`` [s], ``rate_hz``) and the scanner's
+    geometry (``beams``, ``fov_rad``, ``range_min_m``, ``range_max_m``, ``frame``).
+    :class:`atrv_warp.core.observation.RobotObservation` builds a robot policy's input from it.
 
     Args:
         source: The policy file it was exported from.
@@ -68,47 +81,21 @@ def contract(source: Path, meta: dict, sim: SimConfig | None = None) -> dict:
     """
     name = meta.get("task", "reach")
     task, sim = get_task(name), sim or SimConfig()
-    fields = observation_fields(task)
-    low, high = observation_bounds(task=task)
-    sectors = scan_sectors(task)
-    scan = None
+    spec = policy_contract(task)
     if task.scan_beams:
         sc = ScannerConfig(beams=task.scan_beams, fov=task.scan_fov)
-        scan = {"beams": sc.beams, "fov_rad": sc.fov, "angles": "evenly spaced over fov, centred on the scanner's +x, "
-                "counter-clockwise (right to left), as sensor_msgs/LaserScan orders them", "frame": sc.frame,
-                "range_min_m": sc.min_range, "range_max_m": sc.max_range,
-                "sectors": sectors.describe() if sectors is not None else None}
-    history = None
-    if task.action_history:
-        history = {"steps": task.action_history, "meaning": "last_action_k_left/right: the action (in [-1, 1], "
-                   "clipped) the policy chose k steps before this observation, newest first; zero after a reset"}
-    return {
-        "format": EXPORT_FORMAT, "source": str(source), "policy_meta": meta, "task": name,
-        "observation": [{"name": f.name, "index": i, "low": float(lo), "high": float(hi), "bound": f.bound,
-                         "unit": f.unit, "frame": f.frame, "description": f.description}
-                        for i, (f, lo, hi) in enumerate(zip(fields, low.tolist(), high.tolist()))],
-        "observation_clipped": "each value is clipped to [low, high] before the policy sees it",
-        "action": _action_contract(task),
-        "step_dt": sim.step_dt, "rate_hz": 1.0 / sim.step_dt,
-        "scan": scan, "action_history": history,
-    }
-
-
-def _action_contract(task) -> dict:
-    """What the action commands: each side's wheel torque, or a /cmd_vel (:data:`~atrv_warp.task.spec.ACTIONS`)."""
-    if task.action == "twist":
-        return {"kind": "twist", "names": list(ACTIONS["twist"].columns), "low": -1.0, "high": 1.0,
-                "scale": [task.max_linear, task.max_angular], "unit_after_scale": ["m/s", "rad/s"],
-                "meaning": "action x scale is a /cmd_vel (geometry_msgs/Twist linear.x, angular.z) to the base's "
-                "motor driver; actions are clipped to [-1, 1]"}
-    return {"kind": "wheel_torque", "names": ["left", "right"], "low": -1.0, "high": 1.0,
-            "scale": task.action_scale, "unit_after_scale": "N·m", "meaning": "action x scale is the torque "
-            "of every wheel on that side; actions are clipped to [-1, 1]"}
+        spec["scan"] = {"beams": sc.beams, "fov_rad": sc.fov, "angles": "evenly spaced over fov, centred on the "
+                        "scanner's +x, counter-clockwise (right to left), as sensor_msgs/LaserScan orders them",
+                        "frame": sc.frame, "range_min_m": sc.min_range, "range_max_m": sc.max_range,
+                        **(spec["scan"] or {"sectors": None})}
+    return {"format": EXPORT_FORMAT, "source": str(source), "policy_meta": meta, "task": name, **spec,
+            "step_dt": sim.step_dt, "rate_hz": 1.0 / sim.step_dt}
 
 
 def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = False) -> Path:
-    """Write the policy file ``policy`` (default: the shipped one) to ``out`` (``.pt2``), and with
-    ``onnx`` also to ``out`` with the suffix ``.onnx``."""
+    """Write the policy file ``policy`` (or a shipped policy's name, :data:`atrv_warp.policy.SHIPPED_POLICIES`;
+    default: the shipped ``reach`` one) to ``out`` (``.pt2``), and with ``onnx`` also to ``out`` with the suffix
+    ``.onnx``."""
     from atrv_warp.storage import load_weights
 
     if Path(out).suffix != ".pt2":
@@ -117,7 +104,7 @@ def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = Fa
         import onnx as _onnx  # noqa: F401
         import onnxruntime  # noqa: F401
         import onnxscript  # noqa: F401
-    source = Path(policy) if policy is not None else pretrained_policy_path()
+    source = policy_path(policy)
     payload = load_weights(source, "policy file")  # a file that is no policy is named
     payload = payload["policy"] if isinstance(payload.get("policy"), dict) else payload  # a training checkpoint's
     meta = payload.get("meta", {})
@@ -181,7 +168,19 @@ def export_onnx(net: PolicyNet, out: Path, spec: str, task=None, checks: int = 1
 
 
 def load_exported(path: str | Path) -> tuple[nn.Module, dict]:
-    """The exported program's module and its ``atrv_warp.json`` description."""
+    """The exported program's module and its ``atrv_warp.json`` description.
+
+    Raises:
+        FileFormatError: The file carries no contract, or one of a format this version does not read (named, with
+            the one expected: export the policy again).
+    """
     extra = {"atrv_warp.json": ""}
     program = torch.export.load(str(path), extra_files=extra)
-    return program.module(), json.loads(extra["atrv_warp.json"])
+    try:
+        spec = json.loads(extra["atrv_warp.json"])
+    except json.JSONDecodeError:
+        raise FileFormatError(f"{path}: no atrv_warp.json contract in the exported file") from None
+    if spec.get("format") != EXPORT_FORMAT:
+        raise FileFormatError(f"{path}: exported contract format {spec.get('format')!r}, this version reads "
+                              f"{EXPORT_FORMAT!r}: export the policy again (python -m atrv_warp.export POLICY OUT)")
+    return program.module(), spec

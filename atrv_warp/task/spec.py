@@ -14,6 +14,9 @@ baseline, the Gymnasium spaces, the ROS goal mode and :func:`atrv_warp.task.rewa
   step as ``("reward_terms", name)``.
 - :func:`action_to_torque`: action in [-1, 1]² to wheel torques.
 - :func:`scan_sectors`: the observed scan sectors' angular edges (:class:`~atrv_warp.core.scan.ScanSectors`).
+- :func:`policy_contract`: what a policy of a task observes and commands, as plain values (the task's part of an
+  exported policy's contract, :func:`atrv_warp.rl.export.contract`, which
+  :class:`~atrv_warp.core.observation.RobotObservation` reads).
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ __all__ = [
     "action_to_twist",
     "observation_bounds",
     "observation_fields",
+    "policy_contract",
     "scan_sectors",
 ]
 
@@ -109,16 +113,20 @@ class ActionKind:
     columns: tuple[str, str]
     unit: str
     description: str
+    scales: tuple[tuple[str, str], tuple[str, str]]
+    """Each column's scale: the :class:`~atrv_warp.task.config.TaskConfig` field that column 1.0 is worth, and its
+    unit."""
 
 
 ACTIONS: dict[str, ActionKind] = {
-    "torque": ActionKind("torque", ("left", "right"), "N·m", "each side's wheel torque, x TaskConfig.action_scale"),
+    "torque": ActionKind("torque", ("left", "right"), "N·m", "each side's wheel torque, x TaskConfig.action_scale",
+                         (("action_scale", "N·m"), ("action_scale", "N·m"))),
     "twist": ActionKind("twist", ("linear", "angular"), "m/s, rad/s",
                         "a /cmd_vel: forward speed x TaskConfig.max_linear and yaw rate x TaskConfig.max_angular, "
-                        "through the base's motor driver (atrv_warp.sim.driver)"),
+                        "through the base's motor driver (atrv_warp.sim.driver)",
+                        (("max_linear", "m/s"), ("max_angular", "rad/s"))),
 }
 """``TaskConfig.action`` -> what the action means."""
-
 
 
 def observation_fields(task=None) -> tuple[ObservationField, ...]:
@@ -205,3 +213,47 @@ def action_to_twist(action: torch.Tensor, max_linear: float, max_angular: float)
     """(linear [m/s], angular [rad/s]) for actions (..., 2): clipped to [-1, 1], times the limits."""
     scale = torch.tensor([max_linear, max_angular], dtype=action.dtype, device=action.device)
     return action.clamp(-1.0, 1.0) * scale
+
+
+_ACTION_COMMANDS = {
+    "torque": "action[0] x scale[0] is the torque of every left wheel, action[1] x scale[1] of every right wheel [N·m]",
+    "twist": "a geometry_msgs/Twist on /cmd_vel (base_link): linear.x = action[0] x scale[0] [m/s], angular.z = "
+             "action[1] x scale[1] [rad/s], the other components 0",
+}
+
+
+def policy_contract(task) -> dict:
+    """What a policy of ``task`` (a :class:`~atrv_warp.task.config.TaskConfig`) observes and commands, as plain
+    values (JSON-ready): the task's part of an exported policy's contract.
+
+    Keys: ``observation_kind`` (``arena`` | ``robot``); ``observation``, each field in order with ``name``,
+    ``index``, ``low``, ``high``, ``bound``, ``unit``, ``frame``, ``description``; ``action``: ``kind`` (``torque``
+    | ``twist``), ``names``, ``low``/``high`` (-1, 1), ``scale`` and ``units`` per column (what 1.0 is worth),
+    ``limits`` (the :class:`~atrv_warp.task.config.TaskConfig` fields the scale comes from, by name, with units),
+    ``command`` (what a robot does with it); ``scan``: ``{"sectors": ScanSectors.describe()}`` or ``None``;
+    ``action_history``: ``steps``, ``columns`` and ``meaning``, or ``None``.
+    """
+    fields = observation_fields(task)
+    low, high = observation_bounds(task=task)
+    kind = ACTIONS[task.action]
+    sectors = scan_sectors(task)
+    history = None
+    if task.action_history:
+        history = {"steps": task.action_history, "columns": list(kind.columns),
+                   "meaning": f"last_action_k_<column>: the action (in [-1, 1], clipped) the policy chose k steps "
+                              f"before this observation, newest first (k = 1 … {task.action_history}); zero after a "
+                              "reset"}
+    return {
+        "observation_kind": task.observation,
+        "observation": [{"name": f.name, "index": i, "low": float(lo), "high": float(hi), "bound": f.bound,
+                         "unit": f.unit, "frame": f.frame, "description": f.description}
+                        for i, (f, lo, hi) in enumerate(zip(fields, low.tolist(), high.tolist(), strict=True))],
+        "observation_clipped": "each value is clipped to [low, high] before the policy sees it",
+        "action": {"kind": kind.name, "names": list(kind.columns), "low": -1.0, "high": 1.0,
+                   "scale": [float(getattr(task, f)) for f, _ in kind.scales], "units": [u for _, u in kind.scales],
+                   "limits": {f: {"value": float(getattr(task, f)), "unit": u} for f, u in kind.scales},
+                   "command": _ACTION_COMMANDS[kind.name], "meaning": kind.description + "; actions are clipped to "
+                   "[-1, 1]"},
+        "scan": {"sectors": sectors.describe()} if sectors is not None else None,
+        "action_history": history,
+    }
