@@ -5,10 +5,14 @@ one thread per world (``atrv_warp/task/kernels.py``); TensorDicts carry zero-cop
 of the Warp buffers, cloned only where TorchRL would otherwise keep a reference to a buffer
 the next step overwrites.
 
+Actions (N, 2) in [-1, 1]: wheel torques (``action="torque"``), or a /cmd_vel through each world's motor driver
+(``action="twist"``, :data:`~atrv_warp.task.spec.ACTIONS`).
+
 Keys produced (the contract is declared in :mod:`atrv_warp.task.spec`):
-    ``observation`` (N, 10) float32: target x, y; rover x, y; vx, vy (world); roll; yaw rate;
-    sin and cos of the heading error (``OBSERVATION``), then a task's scan sectors and last actions
-    (``observation_fields``). ``scan`` (N, beams) [m] with a scanner. ``reward`` (N, 1);
+    ``observation`` (N, obs_dim) float32: target x, y; rover x, y; vx, vy (world); roll; yaw rate;
+    sin and cos of the heading error (``OBSERVATION``), or with ``observation="robot"`` the goal's distance and
+    bearing from wheel odometry, the odometry's twist and the IMU's roll, pitch and yaw rate
+    (``ROBOT_OBSERVATION``); then a task's scan sectors and last actions (``observation_fields``). ``scan`` (N, beams) [m] with a scanner. ``reward`` (N, 1);
     ``("reward_terms", name)`` (N, 1) for each of ``REWARD_TERMS``, which sum to the reward;
     ``done`` / ``terminated`` / ``truncated`` (N, 1) bool; ``end_reason`` (N, 1) int64
     (``EndReason``, named by :data:`END_REASONS`); ``distance`` (N, 1) distance to the target [m].
@@ -36,6 +40,7 @@ from atrv_warp.sim.config import (
     get_variant,
     replace_checked,
 )
+from atrv_warp.sim.driver import DRIVE_TWIST
 from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
 from atrv_warp.sim.simulator import RoverSim
 from atrv_warp.task.config import TaskConfig, get_task
@@ -47,7 +52,9 @@ from atrv_warp.task.kernels import (
     TaskBuffers,
     TaskParams,
     clear_actions,
+    command_twist,
     compute_step_outcome,
+    locate_goals,
     observe_reset,
     record_actions,
     sample_episodes,
@@ -66,13 +73,16 @@ from atrv_warp.task.randomization_kernels import (
     DrawSpec,
     ObservationNoise,
     add_observation_noise,
+    add_robot_observation_noise,
     delay_actions,
+    delay_twist,
     draw_physics,
 )
 from atrv_warp.task.spec import (
     ACTION_DIM,
+    ACTIONS,
     END_REASONS,
-    OBS_DIM,
+    OBSERVATION_KINDS,
     OBSERVATION_NAMES,
     REWARD_TERMS,
     action_to_torque,
@@ -148,6 +158,9 @@ class ATRVjrEnv(EnvBase):
         super().__init__(device=_torch_device(self.sim.device), batch_size=torch.Size([num_envs]))
         self.num_envs = num_envs
         self.obs_dim = len(observation_fields(c))
+        self._robot = c.observation == "robot"
+        self._twist = c.action == "twist"
+        self._lead_dim = len(OBSERVATION_KINDS[c.observation])  # the columns before the scan sectors
         self._nav = c.target_distance is not None or c.obstacles > 0 or self.sim.terrain.enabled
         self._wp_device = self.sim.device
         self._make_task_buffers()
@@ -172,6 +185,7 @@ class ATRVjrEnv(EnvBase):
         p.step_penalty = c.step_penalty
         p.clearance_weight = c.clearance_weight
         p.clearance_radius = c.clearance_radius
+        p.robot_observation = int(self._robot)
         self._params = p
         sp = SceneParams()
         sp.distance_min, sp.distance_max = c.target_distance or (c.reach_radius, 2.0 * c.spawn_bound)
@@ -186,6 +200,8 @@ class ATRVjrEnv(EnvBase):
         t.prev_heading_error = wp.zeros(n, dtype=float, device=dev)
         t.step_count = wp.zeros(n, dtype=wp.int32, device=dev)
         t.episode = wp.zeros(n, dtype=wp.int32, device=dev)
+        t.goal_odom = wp.zeros(n, dtype=wp.vec2, device=dev)
+        t.odom_drift = wp.zeros(n, dtype=wp.vec3, device=dev)
         self._task = t
         self._obs = wp.zeros((n, self.obs_dim), dtype=float, device=dev)
         self._reward = wp.zeros(n, dtype=float, device=dev)
@@ -202,6 +218,7 @@ class ATRVjrEnv(EnvBase):
         rover.body_q, rover.lin_vel, rover.ang_vel, rover.rpy = b.body_q, b.lin_vel, b.ang_vel, b.rpy
         rover.bodies_per_world, rover.chassis_body = b.layout.bodies_per_world, b.layout.chassis_body
         rover.contact_flags, rover.nonfinite = b.contact_flags, b.nonfinite
+        rover.odometry, rover.odom_twist = self.sim.driver.state.odometry, self.sim.driver.state.odom_twist
         out.obs, out.reward, out.reward_terms, out.distance = self._obs, self._reward, self._reward_terms, self._distance
         out.terminated, out.truncated, out.end_reason = self._terminated, self._truncated, self._end_reason
         self._rover, self._out = rover, out
@@ -229,6 +246,12 @@ class ATRVjrEnv(EnvBase):
         self._distance_t = wp.to_torch(self._distance).unsqueeze(-1)
         self._mask_t = wp.to_torch(self._mask)
         self._episode_t = wp.to_torch(t.episode)
+        self.goal_odom = wp.to_torch(t.goal_odom).view(n, 2)
+        """(N, 2) each world's target in its odometry frame (the episode's start pose: the driver's
+        ``odometry`` origin) [m], from which the robot observation's goal is seen (a view)."""
+        self.odom_drift = wp.to_torch(t.odom_drift).view(n, 3)
+        """(N, 3) the robot observation's odometry drift this episode (x [m], y [m], yaw [rad]; zero without
+        sensor noise): the goal is observed from ``sim.driver.odometry + odom_drift`` (a view)."""
         self._task_views = {
             "target": self.target, "prev_distance": wp.to_torch(t.prev_distance),
             "prev_heading_error": wp.to_torch(t.prev_heading_error), "step_count": self.step_count,
@@ -236,6 +259,10 @@ class ATRVjrEnv(EnvBase):
         }
         if self._actions is not None:
             self._task_views["action_history"] = wp.to_torch(self._actions)
+        if self._robot:
+            self._task_views.update({"goal_odom": self.goal_odom, "odom_drift": self.odom_drift})
+        if self._twist:  # every world drives by velocity, through the driver
+            self.sim.driver.mode.fill_(int(DRIVE_TWIST))
         if self._nav:  # the episode's layout is part of the task's state
             obstacles = self.sim.obstacles
             self._task_views.update({"tile": self.sim.terrain.tile, "obstacle_kind": obstacles.kind,
@@ -266,12 +293,17 @@ class ATRVjrEnv(EnvBase):
         d = ActionDelay()
         d.latency = wp.zeros(n, dtype=wp.int32, device=dev)
         d.alpha = wp.ones(n, dtype=float, device=dev)
+        # the drawn motor lag's time constant [s]: a twist action's goes to the driver, which lags per substep
+        d.tau = self.sim.driver.lag_array if self._twist else wp.zeros(n, dtype=float, device=dev)
         d.history = wp.zeros((n, HISTORY), dtype=wp.vec2, device=dev)
         d.applied = wp.zeros(n, dtype=wp.vec2, device=dev)
         self._delay = d
         on = ObservationNoise()
         if r.noise is not None:
             on.velocity, on.gyro, on.attitude = r.noise.velocity, r.noise.gyro, r.noise.attitude
+            # the encoders' yaw rate (r_R - r_L) / b_eff: each side's speed has sqrt(2) x the velocity noise of
+            # their mean, so its noise is 2 x velocity / effective track [rad/s] (and independent of the mean's)
+            on.odom_angular = 2.0 * r.noise.velocity / self.sim.driver.kinematics.effective_track
         self._obs_noise = on
         self._all = wp.full(n, True, dtype=bool, device=dev)
         self.latency = wp.to_torch(d.latency)
@@ -290,8 +322,17 @@ class ATRVjrEnv(EnvBase):
         if self._payload_draws and (phase == PHASE_EPISODE or self._payload_on_tick):
             self.sim.apply_payload(mask)
 
-    def _add_noise(self, mask: wp.array) -> None:
-        if self.randomization.noise is not None:
+    def _add_noise(self, mask: wp.array, *, advance: bool = False) -> None:
+        """The sensors' noise on the masked worlds' observation; ``advance``: a step went by (the robot
+        observation's odometry drifts)."""
+        if self.randomization.noise is None:
+            return
+        if self._robot:
+            wp.launch(add_robot_observation_noise, dim=self.num_envs,
+                      inputs=[self._seed, mask, int(advance), self.sim.sim_cfg.step_dt, self._task, self._obs_noise,
+                              self.sim.driver.state.odometry, self.sim.buffers.nonfinite],
+                      outputs=[self._obs], device=self._wp_device)
+        else:
             wp.launch(add_observation_noise, dim=self.num_envs,
                       inputs=[self._seed, mask, self._task, self._obs_noise, self.sim.buffers.nonfinite],
                       outputs=[self._obs], device=self._wp_device)
@@ -350,6 +391,8 @@ class ATRVjrEnv(EnvBase):
             wp.launch(sample_episodes, dim=self.num_envs, inputs=[self._seed, self._params, self._mask],
                       outputs=[self._task, self._reset_poses], device=self._wp_device)
         sim.reset_worlds(self._mask, self._reset_poses)
+        if self._robot:  # a new odometry frame: the start pose, without drift yet
+            self.odom_drift.masked_fill_(self._mask_t.unsqueeze(-1), 0.0)
         if self._actions is not None:
             wp.launch(clear_actions, dim=(self.num_envs, self.task_cfg.action_history), inputs=[self._mask],
                       outputs=[self._actions], device=self._wp_device)
@@ -369,8 +412,9 @@ class ATRVjrEnv(EnvBase):
                           batch_size=self.batch_size, device=self.device)
 
     def observe(self, targets: torch.Tensor) -> torch.Tensor:
-        """Set every world's target (N, 2) [m] and return the observation (N, 10) of the current
-        state, from the same kernel as a reset (the progress terms are re-primed from here).
+        """Set every world's target (N, 2) [m] and return the observation (N, obs_dim) of the current
+        state, from the same kernel as a reset (the progress terms are re-primed from here; a robot observation's
+        goal is the target in the odometry frame of the episode's start pose).
 
         For driving the simulator outside TorchRL's step loop, e.g. the ROS bridge's goal mode."""
         self.target.copy_(torch.as_tensor(targets, dtype=torch.float32, device=self.device).reshape(self.num_envs, 2))
@@ -381,6 +425,9 @@ class ATRVjrEnv(EnvBase):
     def _launch_observe(self) -> None:
         if self.scanner is not None:  # only the reset worlds moved
             self.scanner.scan(self._mask)
+        if self._robot:
+            wp.launch(locate_goals, dim=self.num_envs, inputs=[self._mask, self._reset_poses], outputs=[self._task],
+                      device=self._wp_device)
         wp.launch(observe_reset, dim=self.num_envs, inputs=[self._params, self._mask, self._task, self._rover],
                   outputs=[self._out], device=self._wp_device)
         self._launch_observation_tail()
@@ -396,20 +443,24 @@ class ATRVjrEnv(EnvBase):
                       outputs=[self._actions], device=self._wp_device)
 
     def _launch_observation_tail(self) -> None:
-        """The observation's columns after :data:`OBSERVATION`: the scan sectors, then the last actions."""
+        """The observation's columns after its leading fields (:data:`OBSERVATION` or :data:`ROBOT_OBSERVATION`):
+        the scan sectors, then the last actions."""
         c = self.task_cfg
         if c.scan_sectors:
             wp.launch(write_scan_observation, dim=(self.num_envs, c.scan_sectors),
-                      inputs=[self.scanner.buffer, self.sim.buffers.nonfinite, OBS_DIM, self._scan_reading],
+                      inputs=[self.scanner.buffer, self.sim.buffers.nonfinite, self._lead_dim, self._scan_reading],
                       outputs=[self._obs], device=self._wp_device)
         if self._actions is not None:
             wp.launch(write_action_observation, dim=(self.num_envs, c.action_history),
-                      inputs=[self._actions, OBS_DIM + c.scan_sectors], outputs=[self._obs], device=self._wp_device)
+                      inputs=[self._actions, self._lead_dim + c.scan_sectors], outputs=[self._obs],
+                      device=self._wp_device)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = self._check_action(tensordict.get("action"))
         sim = self.sim
-        if self.randomization.delays_actions:
+        if self._twist:
+            self._command_twist(action)
+        elif self.randomization.delays_actions:
             wp.launch(delay_actions, dim=self.num_envs,
                       inputs=[wp.from_torch(action.contiguous()), self.task_cfg.action_scale, self._task, self._delay],
                       outputs=[sim.buffers.commands], device=self._wp_device)
@@ -423,7 +474,7 @@ class ATRVjrEnv(EnvBase):
                   inputs=[self._params, self._task, self._rover, sim.obstacles.kernel], outputs=[self._out],
                   device=self._wp_device)
         self._launch_observation_tail()
-        self._add_noise(self._all)
+        self._add_noise(self._all, advance=True)
         if self._draws_on_tick:
             self._draw(PHASE_TICK, self._all)
         if bool(sim.nonfinite.any()):  # one flag read per step; blown-up worlds are rare
@@ -436,12 +487,26 @@ class ATRVjrEnv(EnvBase):
             out["scan"] = self.scanner.ranges.clone()
         return TensorDict(out, batch_size=self.batch_size, device=self.device)
 
+    def _command_twist(self, action: torch.Tensor) -> None:
+        """A twist action's /cmd_vel, (linear, angular) = clip(action) x (max_linear [m/s], max_angular [rad/s]),
+        to every world's driver (its timeout restarted), through the latency buffer when actions are delayed."""
+        c, d = self.task_cfg, self.sim.driver
+        limits = wp.vec2(c.max_linear, c.max_angular)
+        actions = wp.from_torch(action.contiguous())
+        if self.randomization.delays_actions:
+            wp.launch(delay_twist, dim=self.num_envs, inputs=[actions, limits, self._task, self._delay],
+                      outputs=[d.twist_array, d.state.age], device=self._wp_device)
+        else:
+            wp.launch(command_twist, dim=self.num_envs, inputs=[actions, limits],
+                      outputs=[d.twist_array, d.state.age], device=self._wp_device)
+
     def _check_action(self, action: torch.Tensor | None) -> torch.Tensor:
         expected = (self.num_envs, 2)
         if action is None:
             raise KeyError("the input tensordict has no 'action' entry")
         if tuple(action.shape) != expected:
-            raise ValueError(f"action must have shape {expected} (num_envs, [left, right]), got {tuple(action.shape)}")
+            columns = ", ".join(ACTIONS[self.task_cfg.action].columns)
+            raise ValueError(f"action must have shape {expected} (num_envs, [{columns}]), got {tuple(action.shape)}")
         if not action.is_floating_point():
             raise TypeError(f"action must be a floating-point tensor of shape {expected}, got dtype {action.dtype}")
         finite = torch.isfinite(action).all(-1)

@@ -19,7 +19,7 @@ from atrv_warp.sim.kernels.obstacles import (
     bounding_radius,
 )
 from atrv_warp.sim.kernels.terrain import TerrainGrid
-from atrv_warp.task.spec import OBS_DIM, OBS_INDEX, OBSERVATION, REWARD_TERMS, EndReason
+from atrv_warp.task.spec import OBS_DIM, OBS_INDEX, OBSERVATION, REWARD_TERMS, ROBOT_OBSERVATION, EndReason
 
 # Why an episode ended (``end_reason``), from task_spec.EndReason.
 END_NONE = wp.constant(int(EndReason.RUNNING))
@@ -50,6 +50,25 @@ YAW_RATE_BOUND = wp.constant(_BOUND["yaw_rate"])
 assert _BOUND["target_x"] == _BOUND["target_y"] and _BOUND["rover_x"] == _BOUND["rover_y"]
 assert _BOUND["rover_vx"] == _BOUND["rover_vy"]
 
+# The robot observation's indices and clip bounds, from task_spec.ROBOT_OBSERVATION.
+_ROBOT_INDEX = {f.name: i for i, f in enumerate(ROBOT_OBSERVATION)}
+_ROBOT_BOUND = {f.name: f.bound for f in ROBOT_OBSERVATION}
+ROBOT_DIM = wp.constant(len(ROBOT_OBSERVATION))
+ROBOT_GOAL_DISTANCE = wp.constant(_ROBOT_INDEX["goal_distance"])
+ROBOT_SIN_BEARING = wp.constant(_ROBOT_INDEX["sin_goal_bearing"])
+ROBOT_COS_BEARING = wp.constant(_ROBOT_INDEX["cos_goal_bearing"])
+ROBOT_ODOM_LINEAR = wp.constant(_ROBOT_INDEX["odom_linear"])
+ROBOT_ODOM_ANGULAR = wp.constant(_ROBOT_INDEX["odom_angular"])
+ROBOT_ROLL = wp.constant(_ROBOT_INDEX["imu_roll"])
+ROBOT_PITCH = wp.constant(_ROBOT_INDEX["imu_pitch"])
+ROBOT_YAW_RATE = wp.constant(_ROBOT_INDEX["imu_yaw_rate"])
+GOAL_DISTANCE_BOUND = wp.constant(_ROBOT_BOUND["goal_distance"])
+ODOM_LINEAR_BOUND = wp.constant(_ROBOT_BOUND["odom_linear"])
+ODOM_ANGULAR_BOUND = wp.constant(_ROBOT_BOUND["odom_angular"])
+IMU_ROLL_BOUND = wp.constant(_ROBOT_BOUND["imu_roll"])
+IMU_PITCH_BOUND = wp.constant(_ROBOT_BOUND["imu_pitch"])
+IMU_YAW_RATE_BOUND = wp.constant(_ROBOT_BOUND["imu_yaw_rate"])
+
 # Reward-term columns of ``reward_terms``, from task_spec.REWARD_TERMS.
 TERM_PROGRESS = wp.constant(REWARD_TERMS.index("progress"))
 TERM_HEADING = wp.constant(REWARD_TERMS.index("heading"))
@@ -72,6 +91,7 @@ class TaskParams:
     step_penalty: float  # subtracted every step
     clearance_weight: float  # cost per metre an obstacle reaches inside clearance_radius [1/m]
     clearance_radius: float  # [m] from the chassis origin
+    robot_observation: int  # 1: the observation's leading fields are ROBOT_OBSERVATION's, 0: OBSERVATION's
 
 
 @wp.struct
@@ -87,6 +107,8 @@ class RoverState:
     rpy: wp.array(dtype=wp.vec3)
     contact_flags: wp.array(dtype=wp.int32)
     nonfinite: wp.array(dtype=wp.int32)
+    odometry: wp.array(dtype=wp.vec3)  # the driver's wheel odometry x [m], y [m], yaw [rad] (odometry frame)
+    odom_twist: wp.array(dtype=wp.vec2)  # the encoders' linear [m/s], angular [rad/s]
 
 
 @wp.struct
@@ -111,6 +133,8 @@ class TaskBuffers:
     prev_heading_error: wp.array(dtype=float)  # |heading error| at the previous step [rad]
     step_count: wp.array(dtype=wp.int32)
     episode: wp.array(dtype=wp.int32)  # episodes started in this world since seeding
+    goal_odom: wp.array(dtype=wp.vec2)  # the target in the odometry frame (the episode's start pose) [m]
+    odom_drift: wp.array(dtype=wp.vec3)  # the odometry noise's random walk (x [m], y [m], yaw [rad]) this episode
 
 
 @wp.func
@@ -177,6 +201,116 @@ def write_observation(
     obs[world, OBS_COS_HEADING] = wp.cos(head_err)
 
 
+@wp.func
+def body_yaw_rate(pose: wp.transform, ang_vel: wp.vec3) -> float:
+    """Angular velocity about the chassis z [rad/s]: the world-frame ``ang_vel`` rotated into the chassis frame,
+    which is the IMU's (the URDF's cbimu_frame is aligned with the chassis; tests/test_robot_task.py checks)."""
+    return wp.quat_rotate_inv(wp.transform_get_rotation(pose), ang_vel)[2]
+
+
+@wp.func
+def write_goal_observation(obs: wp.array2d(dtype=float), world: int, goal: wp.vec2, odometry: wp.vec3):
+    """The goal's distance [m] and bearing (sine, cosine) from the base at ``odometry`` (x, y, yaw in the
+    odometry frame), for a ``goal`` in the odometry frame."""
+    dx = goal[0] - odometry[0]
+    dy = goal[1] - odometry[1]
+    bearing = wrap_angle(wp.atan2(dy, dx) - odometry[2])
+    obs[world, ROBOT_GOAL_DISTANCE] = wp.clamp(wp.length(wp.vec2(dx, dy)), -GOAL_DISTANCE_BOUND, GOAL_DISTANCE_BOUND)
+    obs[world, ROBOT_SIN_BEARING] = wp.sin(bearing)
+    obs[world, ROBOT_COS_BEARING] = wp.cos(bearing)
+
+
+@wp.func
+def write_robot_observation(
+    obs: wp.array2d(dtype=float),
+    world: int,
+    goal: wp.vec2,
+    odometry: wp.vec3,
+    odom_twist: wp.vec2,
+    rpy: wp.vec3,
+    yaw_rate: float,
+):
+    """:data:`ROBOT_OBSERVATION`'s fields, each clipped to its bound: the goal from wheel odometry, the encoders'
+    twist, the IMU's roll, pitch [rad] and yaw rate [rad/s]."""
+    write_goal_observation(obs, world, goal, odometry)
+    obs[world, ROBOT_ODOM_LINEAR] = wp.clamp(odom_twist[0], -ODOM_LINEAR_BOUND, ODOM_LINEAR_BOUND)
+    obs[world, ROBOT_ODOM_ANGULAR] = wp.clamp(odom_twist[1], -ODOM_ANGULAR_BOUND, ODOM_ANGULAR_BOUND)
+    obs[world, ROBOT_ROLL] = wp.clamp(rpy[0], -IMU_ROLL_BOUND, IMU_ROLL_BOUND)
+    obs[world, ROBOT_PITCH] = wp.clamp(rpy[1], -IMU_PITCH_BOUND, IMU_PITCH_BOUND)
+    obs[world, ROBOT_YAW_RATE] = wp.clamp(yaw_rate, -IMU_YAW_RATE_BOUND, IMU_YAW_RATE_BOUND)
+
+
+@wp.func
+def write_task_observation(
+    obs: wp.array2d(dtype=float),
+    world: int,
+    params: TaskParams,
+    task: TaskBuffers,
+    rover: RoverState,
+    pose: wp.transform,
+    head_err: float,
+):
+    """The observation's leading fields: the robot's (``params.robot_observation``) or the arena's."""
+    r = rover.rpy[world]
+    if params.robot_observation != 0:
+        write_robot_observation(obs, world, task.goal_odom[world], rover.odometry[world], rover.odom_twist[world], r,
+                                body_yaw_rate(pose, rover.ang_vel[world]))
+    else:
+        write_observation(obs, world, params, task.target[world], pose, rover.lin_vel[world], r[0],
+                          rover.ang_vel[world][2], head_err)
+
+
+@wp.func
+def write_neutral_observation(obs: wp.array2d(dtype=float), world: int, params: TaskParams, task: TaskBuffers):
+    """A blown-up world's finite, neutral leading fields: at rest, the goal straight ahead (where it was last
+    seen: the arena's target, or the robot's last distance)."""
+    dim = OBS_DIM
+    if params.robot_observation != 0:
+        dim = ROBOT_DIM
+    for i in range(dim):
+        obs[world, i] = 0.0
+    if params.robot_observation != 0:
+        obs[world, ROBOT_GOAL_DISTANCE] = wp.clamp(task.prev_distance[world], -GOAL_DISTANCE_BOUND,
+                                                   GOAL_DISTANCE_BOUND)
+        obs[world, ROBOT_COS_BEARING] = 1.0
+    else:
+        target = task.target[world]
+        obs[world, OBS_TARGET_X] = target[0]
+        obs[world, OBS_TARGET_Y] = target[1]
+        obs[world, OBS_COS_HEADING] = 1.0
+
+
+@wp.kernel
+def locate_goals(mask: wp.array(dtype=bool), starts: wp.array(dtype=wp.vec3), task: TaskBuffers):
+    """The masked worlds' targets in their odometry frame, whose origin is the episode's start pose (x [m],
+    y [m], yaw [rad]): ``R(-yaw) (target - start)`` [m]."""
+    world = wp.tid()
+    if not mask[world]:
+        return
+    s = starts[world]
+    d = task.target[world] - wp.vec2(s[0], s[1])
+    c = wp.cos(s[2])
+    n = wp.sin(s[2])
+    task.goal_odom[world] = wp.vec2(c * d[0] + n * d[1], -n * d[0] + c * d[1])
+
+
+@wp.func
+def twist_command(actions: wp.array2d(dtype=float), world: int, limits: wp.vec2) -> wp.vec2:
+    """The twist (linear [m/s], angular [rad/s]) of a world's action: clipped to [-1, 1], times ``limits``
+    (max_linear, max_angular); ``atrv_warp.task.spec.action_to_twist`` is its torch twin."""
+    return wp.vec2(wp.clamp(actions[world, 0], -1.0, 1.0) * limits[0], wp.clamp(actions[world, 1], -1.0, 1.0) * limits[1])
+
+
+@wp.kernel
+def command_twist(actions: wp.array2d(dtype=float), limits: wp.vec2, twist: wp.array(dtype=wp.vec2),
+                  age: wp.array(dtype=float)):
+    """Every world's /cmd_vel for this step (:func:`twist_command`) into the driver's ``twist``, with its command
+    ``age`` [s] restarted."""
+    world = wp.tid()
+    twist[world] = twist_command(actions, world, limits)
+    age[world] = 0.0
+
+
 @wp.kernel
 def observe_reset(
     params: TaskParams,
@@ -197,7 +331,7 @@ def observe_reset(
     task.prev_distance[world] = d
     task.prev_heading_error[world] = wp.abs(err)
     out.distance[world] = d
-    write_observation(out.obs, world, params, target, pose, rover.lin_vel[world], r[0], rover.ang_vel[world][2], err)
+    write_task_observation(out.obs, world, params, task, rover, pose, err)
 
 
 @wp.func
@@ -258,11 +392,7 @@ def compute_step_outcome(
     target = task.target[world]
     if rover.nonfinite[world] != 0:
         # Contain a blown-up world: a finite, neutral observation and reward, then a reset.
-        for i in range(OBS_DIM):
-            out.obs[world, i] = 0.0
-        out.obs[world, OBS_TARGET_X] = target[0]
-        out.obs[world, OBS_TARGET_Y] = target[1]
-        out.obs[world, OBS_COS_HEADING] = 1.0
+        write_neutral_observation(out.obs, world, params, task)
         clear_terms(out.reward_terms, world)
         out.reward[world] = 0.0
         out.terminated[world] = True
@@ -274,7 +404,7 @@ def compute_step_outcome(
     r = rover.rpy[world]
     err = heading_error(pose, target, r[2])
     d = planar_distance(pose, target)
-    write_observation(out.obs, world, params, target, pose, rover.lin_vel[world], r[0], rover.ang_vel[world][2], err)
+    write_task_observation(out.obs, world, params, task, rover, pose, err)
     reason = END_NONE
     clear_terms(out.reward_terms, world)
     if d < params.reach_radius:

@@ -13,14 +13,26 @@ import warp as wp
 
 from atrv_warp.sim.kernels.params import WorldPhysics
 from atrv_warp.task.kernels import (
+    IMU_PITCH_BOUND,
+    IMU_ROLL_BOUND,
+    IMU_YAW_RATE_BOUND,
     OBS_ROLL,
     OBS_ROVER_VX,
     OBS_ROVER_VY,
     OBS_YAW_RATE,
+    ODOM_ANGULAR_BOUND,
+    ODOM_LINEAR_BOUND,
+    ROBOT_ODOM_ANGULAR,
+    ROBOT_ODOM_LINEAR,
+    ROBOT_PITCH,
+    ROBOT_ROLL,
+    ROBOT_YAW_RATE,
     ROLL_BOUND,
     VELOCITY_BOUND,
     YAW_RATE_BOUND,
     TaskBuffers,
+    twist_command,
+    write_goal_observation,
 )
 from atrv_warp.task.randomization import MAX_LATENCY, PHYSICS_DRAWS
 
@@ -34,7 +46,9 @@ __all__ = [
     "DrawSpec",
     "ObservationNoise",
     "add_observation_noise",
+    "add_robot_observation_noise",
     "delay_actions",
+    "delay_twist",
     "draw_physics",
 ]
 
@@ -82,10 +96,11 @@ class DrawSpec:
 
 @wp.struct
 class ActionDelay:
-    """Each world's latency [steps], motor-lag factor per step, ring buffer and lagged torques."""
+    """Each world's latency [steps], motor lag, ring buffer and lagged torques."""
 
     latency: wp.array(dtype=wp.int32)
-    alpha: wp.array(dtype=float)  # 1 - exp(-step_dt / tau); 1 = no lag
+    alpha: wp.array(dtype=float)  # 1 - exp(-step_dt / tau); 1 = no lag (torque actions: the lag per step)
+    tau: wp.array(dtype=float)  # the drawn lag's time constant [s] (twist actions: the driver's lag per substep)
     history: wp.array2d(dtype=wp.vec2)  # (N, HISTORY) commanded torques [N·m]
     applied: wp.array(dtype=wp.vec2)  # the lag filter's state [N·m]
 
@@ -97,6 +112,7 @@ class ObservationNoise:
     velocity: float  # [m/s]
     gyro: float  # [rad/s]
     attitude: float  # [rad]
+    odom_angular: float  # the wheel odometry's yaw rate [rad/s]: the velocity noise through the kinematics
 
 
 @wp.func
@@ -178,6 +194,20 @@ def draw_physics(
         if tau > 0.0:
             alpha = 1.0 - wp.exp(-step_dt / tau)
         delay.alpha[world] = alpha
+        delay.tau[world] = tau
+
+
+@wp.func
+def delayed_command(world: int, cmd: wp.vec2, task: TaskBuffers, delay: ActionDelay) -> wp.vec2:
+    """Push this step's command into the world's ring buffer; the one chosen ``latency`` steps ago comes out (zero
+    before the episode's first)."""
+    t = int(task.step_count[world])
+    delay.history[world, t % HISTORY] = cmd
+    lat = int(delay.latency[world])
+    delayed = wp.vec2(0.0, 0.0)
+    if t >= lat:
+        delayed = delay.history[world, (t - lat) % HISTORY]
+    return delayed
 
 
 @wp.kernel
@@ -191,13 +221,8 @@ def delay_actions(
     """Wheel torques [N·m] for this step: the world's action (clipped, scaled) goes into its ring buffer, the one
     chosen ``latency`` steps ago comes out (zero torque before the episode's first), through the motor lag."""
     world = wp.tid()
-    t = int(task.step_count[world])
     cmd = wp.vec2(wp.clamp(actions[world, 0], -1.0, 1.0), wp.clamp(actions[world, 1], -1.0, 1.0)) * action_scale
-    delay.history[world, t % HISTORY] = cmd
-    lat = int(delay.latency[world])
-    delayed = wp.vec2(0.0, 0.0)
-    if t >= lat:
-        delayed = delay.history[world, (t - lat) % HISTORY]
+    delayed = delayed_command(world, cmd, task, delay)
     prev = delay.applied[world]
     out = prev + delay.alpha[world] * (delayed - prev)
     delay.applied[world] = out
@@ -228,3 +253,61 @@ def add_observation_noise(
     obs[world, OBS_ROVER_VY] = wp.clamp(vy, -VELOCITY_BOUND, VELOCITY_BOUND)
     obs[world, OBS_ROLL] = wp.clamp(roll, -ROLL_BOUND, ROLL_BOUND)
     obs[world, OBS_YAW_RATE] = wp.clamp(rate, -YAW_RATE_BOUND, YAW_RATE_BOUND)
+
+
+@wp.kernel
+def delay_twist(
+    actions: wp.array2d(dtype=float),
+    limits: wp.vec2,
+    task: TaskBuffers,
+    delay: ActionDelay,
+    twist: wp.array(dtype=wp.vec2),
+    age: wp.array(dtype=float),
+):
+    """A delayed /cmd_vel: the world's twist for its action (clipped, times ``limits`` = (max_linear [m/s],
+    max_angular [rad/s])) goes into its ring buffer, the one chosen ``latency`` steps ago reaches the driver
+    (``twist``, with its command ``age`` [s] restarted). The motor lag is the driver's, per substep."""
+    world = wp.tid()
+    twist[world] = delayed_command(world, twist_command(actions, world, limits), task, delay)
+    age[world] = 0.0
+
+
+@wp.kernel
+def add_robot_observation_noise(
+    seed: int,
+    mask: wp.array(dtype=bool),
+    advance: int,
+    step_dt: float,
+    task: TaskBuffers,
+    noise: ObservationNoise,
+    odometry: wp.array(dtype=wp.vec3),
+    nonfinite: wp.array(dtype=wp.int32),
+    obs: wp.array2d(dtype=float),
+):
+    """The robot observation's noise in the masked worlds, from the world's (episode, step) stream: zero-mean
+    Gaussian noise on the odometry's twist (``velocity``, ``odom_angular``), the IMU's roll and pitch
+    (``attitude``) and yaw rate (``gyro``), each clipped to its bound; and the odometry's drift, a random walk of
+    the same twist noise over ``step_dt`` [s] (``advance`` = 1: a step; 0: a reset or a re-observation), which
+    moves the odometry pose the goal is observed from."""
+    world = wp.tid()
+    if not mask[world] or nonfinite[world] != 0:
+        return
+    stream = world_stream(seed, world, task.episode[world])
+    state = wp.rand_init(wp.int32(stream) ^ 0x5F3759DF, int(task.step_count[world]))
+    dv = noise.velocity * wp.randn(state)
+    dw = noise.odom_angular * wp.randn(state)
+    roll = obs[world, ROBOT_ROLL] + noise.attitude * wp.randn(state)
+    pitch = obs[world, ROBOT_PITCH] + noise.attitude * wp.randn(state)
+    rate = obs[world, ROBOT_YAW_RATE] + noise.gyro * wp.randn(state)
+    obs[world, ROBOT_ODOM_LINEAR] = wp.clamp(obs[world, ROBOT_ODOM_LINEAR] + dv, -ODOM_LINEAR_BOUND, ODOM_LINEAR_BOUND)
+    obs[world, ROBOT_ODOM_ANGULAR] = wp.clamp(obs[world, ROBOT_ODOM_ANGULAR] + dw, -ODOM_ANGULAR_BOUND,
+                                              ODOM_ANGULAR_BOUND)
+    obs[world, ROBOT_ROLL] = wp.clamp(roll, -IMU_ROLL_BOUND, IMU_ROLL_BOUND)
+    obs[world, ROBOT_PITCH] = wp.clamp(pitch, -IMU_PITCH_BOUND, IMU_PITCH_BOUND)
+    obs[world, ROBOT_YAW_RATE] = wp.clamp(rate, -IMU_YAW_RATE_BOUND, IMU_YAW_RATE_BOUND)
+    drift = task.odom_drift[world]
+    if advance != 0:
+        yaw = odometry[world][2] + drift[2]
+        drift = drift + wp.vec3(dv * step_dt * wp.cos(yaw), dv * step_dt * wp.sin(yaw), dw * step_dt)
+        task.odom_drift[world] = drift
+    write_goal_observation(obs, world, task.goal_odom[world], odometry[world] + drift)
