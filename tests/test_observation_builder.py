@@ -302,11 +302,6 @@ def test_train_refuses_to_start_from_a_checkpoint_of_another_kind(tmp_path):
 
 # ---- the builder and the environment agree
 
-ENV_READY = "goal_odom" in (ROOT / "atrv_warp" / "task" / "env.py").read_text()
-
-
-@pytest.mark.skipif(not ENV_READY, reason="the env side of the robot observation (branch issue39-task: "
-                    "ATRVjrEnv(task='nav_deploy') with env.goal_odom) is not merged into this branch yet")
 def test_the_builder_gives_the_environments_observation_from_the_robots_signals():
     """Noise off: the builder, fed what the robot would publish in an env state (wheel odometry, the chassis as the
     IMU, the scan, the goal in the odometry frame, the actions stepped), gives the env's observation to 1e-4."""
