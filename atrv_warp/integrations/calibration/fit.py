@@ -96,8 +96,11 @@ class CalibrationConfig:
     """Adam steps on minibatches, every start at once."""
     lr: float = 0.2
     """Adam's step in the bounded parameters' logit space, decaying to a tenth."""
-    polish: int = 6
-    """Then L-BFGS iterations on every training segment (0: none) ..."""
+    polish: int = 20
+    """Then L-BFGS iterations on every training segment (0: none) ... Under a driver that holds its wheel speeds
+    tightly the loss is flat along friction x mass, and the polish walks that valley: 6 iterations stopped 8 kg short
+    of a 12 kg payload, 20 reached it within 2 kg (``atrv-calibrate`` on the bag of
+    ``tests/test_calibration.py``'s recovery test)."""
     polish_starts: int = 2
     """... from each of this many best starts; the one that ends lowest is the fit."""
     seed: int = 0
@@ -365,11 +368,13 @@ def _nominal(rover: RoverConfig, contact: ContactConfig) -> dict[str, float]:
 
 
 def _polish(replay: _Replay, train: np.ndarray, names: list[str], start: torch.Tensor, lo: torch.Tensor,
-            span: torch.Tensor, iterations: int, say: Callable[[str], None]) -> tuple[torch.Tensor, float]:
+            span: torch.Tensor, iterations: int, say: Callable[[str], None]) -> tuple[torch.Tensor, float, float]:
     """L-BFGS on the mean loss of every training segment (deterministic, unlike the minibatch steps), in the
-    same logit space, from ``start``; returns the values where the loss was lowest, and that loss."""
+    same logit space, from ``start``; returns the values where the loss was lowest, that loss, and how far its last
+    three evaluations lay apart (the largest parameter's spread, as a fraction of its range: small once it has
+    settled)."""
     if iterations == 0:
-        return start, math.inf
+        return start, math.inf, math.inf
     t0 = time.perf_counter()
     unit = ((start - lo) / span).clamp(1e-4, 1 - 1e-4)
     logits = torch.logit(unit).detach().requires_grad_(True)
@@ -391,9 +396,11 @@ def _polish(replay: _Replay, train: np.ndarray, names: list[str], start: torch.T
 
     opt.step(closure)
     loss, values = min(calls, key=lambda c: c[0])
+    last = torch.stack([v for _, v in calls[-3:]])
+    settled = float(((last.max(0).values - last.min(0).values) / span).max())
     say(f"  polish: {len(calls)} full-batch evaluations, loss {calls[0][0]:.3f} -> {loss:.3f}  "
         + "  ".join(f"{p} {float(values[j]):.4g}" for j, p in enumerate(names)) + f"  ({time.perf_counter() - t0:.0f} s)")
-    return values, loss
+    return values, loss, settled
 
 
 def _standard_error(replay: _Replay, train: np.ndarray, names: list[str], values: torch.Tensor, low: torch.Tensor,
@@ -497,8 +504,7 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
     polished = {k: _polish(replay, train, names, final[k], lo, span, cfg.polish, say)
                 for k in ranked[:cfg.polish_starts]}
     best = min(polished, key=lambda k: polished[k][1]) if cfg.polish else ranked[0]
-    polished = polished[best][0]
-    polish_moved = float(((polished - final[best]).abs() / span).max())
+    polished, settled = (polished[best][0], polished[best][2]) if cfg.polish else (final[best], math.inf)
     fitted = {**nominal, **{p: float(polished[j]) for j, p in enumerate(names)}}
     t_se = time.perf_counter()
     standard_error = _standard_error(replay, train, names, polished, low, high)
@@ -513,18 +519,22 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
         if split == "held_out":
             paths = {"recorded": seg.ref_pose[index], "nominal": path0.transpose(1, 0, 2),
                      "calibrated": path1.transpose(1, 0, 2), "t0": seg.t0[index]}
-    # converged: the best start stopped moving (over the last quarter of the steps, within 2 % of each
-    # parameter's range) and fits the training and the held-out segments better than the rover it started from
+    # converged: the fit settled, and fits the training and the held-out segments better than the rover it started
+    # from. Settled: the full-batch polish's last evaluations lie within 1 % of each parameter's range (a stationary
+    # point of the whole loss; where the loss is flat along a valley, as a payload's is under a driver that holds its
+    # wheel speeds tightly, the polish walks it after the minibatch steps), or without a polish, the best start
+    # stopped moving over the last quarter of the minibatch steps (within 2 %).
     tail = tail[:, best]
     drift = ((tail.max(0).values - tail.min(0).values) / span).max().item()
     improved = all(errors[split]["loss_after"] < errors[split]["loss_before"] for split in errors)
-    converged = drift < 0.02 and polish_moved < 0.05 and improved
+    converged = improved and (settled < 0.01 if cfg.polish else drift < 0.02)
     reason = ("converged" if converged else
               "did not converge: the fit is no better than the starting rover on the training or the held-out "
               "segments" if not improved else
+              f"did not converge: the last full-batch steps still moved a parameter {100 * settled:.1f} % of its range"
+              if cfg.polish else
               f"did not converge: the parameters still moved {100 * drift:.1f} % of their range over the last "
-              f"{len(tail)} steps" if drift >= 0.02 else
-              f"did not converge: the final full-batch steps moved a parameter {100 * polish_moved:.1f} % of its range")
+              f"{len(tail)} steps")
     return CalibrationResult(values={p: fitted[p] for p in names}, nominal={p: nominal[p] for p in names},
                              spread=spread, standard_error=standard_error, starts=starts, errors=errors, converged=converged, reason=reason,
                              segments=seg, seconds=time.perf_counter() - t_fit, compile_seconds=compile_s,
