@@ -324,7 +324,7 @@ def test_the_builder_gives_the_environments_observation_from_the_robots_signals(
         body_rate = (quat_to_matrix(q).transpose(-1, -2) @ env.sim.ang_vel.double().cpu().unsqueeze(-1)).squeeze(-1)
         history = torch.stack((actions + [torch.zeros_like(action)] * 3)[:3], 1)  # (N, 3, 2) newest first
         scan = Scan(td["next", "scan"].cpu(), -sc.fov / 2, sc.fov / (sc.beams - 1), sc.min_range, sc.max_range)
-        built = build(odom_pose=env.sim.driver.odometry.cpu(), odom_twist=env.sim.driver.odom_twist.cpu(),
+        built = build(odom_pose=env.sim.driver.fused.cpu(), odom_twist=env.sim.driver.odom_twist.cpu(),
                       imu_orientation=q, imu_angular_velocity=body_rate, goal=env.goal_odom.cpu(), scan=scan,
                       last_actions=history)
         want = td["next", "observation"].cpu()
@@ -332,4 +332,4 @@ def test_the_builder_gives_the_environments_observation_from_the_robots_signals(
         bad = {n: round(e, 6) for n, e in zip(build.names, err.tolist(), strict=True) if e > 1e-4}
         assert not bad, bad
         td = step_mdp(td)
-    assert env.sim.driver.odometry[:, :2].abs().amax() > 1e-3  # the rovers moved: odometry and bearing changed
+    assert env.sim.driver.fused[:, :2].abs().amax() > 1e-3  # the rovers moved: odometry and bearing changed

@@ -31,9 +31,9 @@ def _drive(env, td, action, steps):
 
 
 def _robot_observation(env) -> torch.Tensor:
-    """The robot observation's leading fields rebuilt from the robot's signals: the driver's wheel odometry
+    """The robot observation's leading fields rebuilt from the robot's signals: the base's fused odometry
     (plus the noise's drift) and encoder twist, the chassis attitude and its body-frame angular velocity."""
-    odom = env.sim.driver.odometry + env.odom_drift
+    odom = env.sim.driver.fused + env.odom_drift
     d = env.goal_odom - odom[:, :2]
     bearing = torch.atan2(d[:, 1], d[:, 0]) - odom[:, 2]
     rpy, twist = env.sim.rpy, env.sim.driver.odom_twist

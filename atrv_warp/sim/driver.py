@@ -1,7 +1,8 @@
 """The base's motor driver, as a real mobile base runs it: ``/cmd_vel`` (linear [m/s], angular [rad/s]) through
 optional speed and acceleration limits and the skid-steer kinematics to each side's wheel-speed target, then a PI
 loop on the wheel encoders every solver substep (100 Hz at the default 0.01 s), within the motor's torque
-limit, with anti-windup and a command timeout; and wheel odometry from the same encoders.
+limit, with anti-windup and a command timeout; wheel odometry from the same encoders, and the pose a base's filter
+fuses from them and the IMU's gyro.
 
 The driver knows what a real one knows: its wheel radius and track are its configured values (the nominal
 rover's unless set), not the physical rover's. Under randomization, a payload or a worn tyre, its targets and
@@ -120,6 +121,10 @@ class Driver:
         ``twist`` (N, 2): the commanded (linear [m/s], angular [rad/s]); write with :meth:`~atrv_warp.sim.RoverSim.set_twist`.
         ``odometry`` (N, 3): wheel odometry x [m], y [m], yaw [rad] in the odometry frame (the pose at reset).
         ``odom_twist`` (N, 2): the encoders' (linear [m/s], angular [rad/s]).
+        ``fused`` (N, 3): x [m], y [m], yaw [rad] in the odometry frame as a base's filter keeps it
+        (``robot_localization`` fusing wheel odometry and an IMU, Clearpath's ``odometry/filtered``): the encoders'
+        distance along the heading the gyro integrates. Skid-steer wheel odometry's heading drifts on every turn
+        (a rover's wheels turn before its chassis does); this one's does not, its distance still slips.
         ``reference`` (N, 2): the limited twist being tracked.
         ``age`` (N,): time since the last command [s]; past ``cmd_vel_timeout`` the driver stops the rover.
         ``lag`` (N,): the motor's torque lag time constant [s] (0: none), e.g. a randomization's draw.
@@ -141,6 +146,7 @@ class Driver:
         s = self.state
         self.odometry = wp.to_torch(s.odometry).view(n, 3)
         self.odom_twist = wp.to_torch(s.odom_twist).view(n, 2)
+        self.fused = wp.to_torch(s.fused).view(n, 3)
         self.reference = wp.to_torch(s.reference).view(n, 2)
         self.age = wp.to_torch(s.age)
 
@@ -154,7 +160,8 @@ class Driver:
         s = self.state
         return {"driver.mode": self.mode_array, "driver.twist": self.twist_array, "driver.lag": self.lag_array,
                 "driver.reference": s.reference, "driver.integral": s.integral, "driver.applied": s.applied,
-                "driver.age": s.age, "driver.odometry": s.odometry, "driver.odom_twist": s.odom_twist}
+                "driver.age": s.age, "driver.odometry": s.odometry, "driver.odom_twist": s.odom_twist,
+                "driver.fused": s.fused}
 
     def reset(self, mask: wp.array) -> None:
         wp.launch(reset_driver, dim=len(mask), inputs=[mask], outputs=[self.twist_array, self.state],
@@ -170,6 +177,7 @@ def make_state(num_worlds: int, device, requires_grad: bool = False) -> DriverSt
     s.age = wp.zeros(num_worlds, dtype=float, device=device, requires_grad=requires_grad)
     s.odometry = wp.zeros(num_worlds, dtype=wp.vec3, device=device, requires_grad=requires_grad)
     s.odom_twist = wp.zeros(num_worlds, dtype=wp.vec2, device=device, requires_grad=requires_grad)
+    s.fused = wp.zeros(num_worlds, dtype=wp.vec3, device=device, requires_grad=requires_grad)
     return s
 
 

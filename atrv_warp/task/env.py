@@ -221,7 +221,9 @@ class ATRVjrEnv(EnvBase):
         rover.body_q, rover.lin_vel, rover.ang_vel, rover.rpy = b.body_q, b.lin_vel, b.ang_vel, b.rpy
         rover.bodies_per_world, rover.chassis_body = b.layout.bodies_per_world, b.layout.chassis_body
         rover.contact_flags, rover.nonfinite = b.contact_flags, b.nonfinite
-        rover.odometry, rover.odom_twist = self.sim.driver.state.odometry, self.sim.driver.state.odom_twist
+        # the goal is seen from the base's fused odometry (encoders along the gyro's heading, as robot_localization
+        # gives it): skid-steer wheel odometry alone loses its heading on every turn
+        rover.odometry, rover.odom_twist = self.sim.driver.state.fused, self.sim.driver.state.odom_twist
         out.obs, out.reward, out.reward_terms, out.distance = self._obs, self._reward, self._reward_terms, self._distance
         out.terminated, out.truncated, out.end_reason = self._terminated, self._truncated, self._end_reason
         self._rover, self._out = rover, out
@@ -251,10 +253,10 @@ class ATRVjrEnv(EnvBase):
         self._episode_t = wp.to_torch(t.episode)
         self.goal_odom = wp.to_torch(t.goal_odom).view(n, 2)
         """(N, 2) each world's target in its odometry frame (the episode's start pose: the driver's
-        ``odometry`` origin) [m], from which the robot observation's goal is seen (a view)."""
+        ``odometry`` and ``fused`` origin) [m], from which the robot observation's goal is seen (a view)."""
         self.odom_drift = wp.to_torch(t.odom_drift).view(n, 3)
         """(N, 3) the robot observation's odometry drift this episode (x [m], y [m], yaw [rad]; zero without
-        sensor noise): the goal is observed from ``sim.driver.odometry + odom_drift`` (a view)."""
+        sensor noise): the goal is observed from ``sim.driver.fused + odom_drift`` (a view)."""
         self._task_views = {
             "target": self.target, "prev_distance": wp.to_torch(t.prev_distance),
             "prev_heading_error": wp.to_torch(t.prev_heading_error), "step_count": self.step_count,
@@ -333,7 +335,7 @@ class ATRVjrEnv(EnvBase):
         if self._robot:
             wp.launch(add_robot_observation_noise, dim=self.num_envs,
                       inputs=[self._seed, mask, int(advance), self.sim.sim_cfg.step_dt, self._task, self._obs_noise,
-                              self.sim.driver.state.odometry, self.sim.buffers.nonfinite],
+                              self.sim.driver.state.fused, self.sim.buffers.nonfinite],
                       outputs=[self._obs], device=self._wp_device)
         else:
             wp.launch(add_observation_noise, dim=self.num_envs,

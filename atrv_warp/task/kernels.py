@@ -107,7 +107,8 @@ class RoverState:
     rpy: wp.array(dtype=wp.vec3)
     contact_flags: wp.array(dtype=wp.int32)
     nonfinite: wp.array(dtype=wp.int32)
-    odometry: wp.array(dtype=wp.vec3)  # the driver's wheel odometry x [m], y [m], yaw [rad] (odometry frame)
+    odometry: wp.array(dtype=wp.vec3)  # the base's fused odometry x [m], y [m], yaw [rad] (odometry frame; encoders
+    # and gyro, the driver's ``fused``)
     odom_twist: wp.array(dtype=wp.vec2)  # the encoders' linear [m/s], angular [rad/s]
 
 

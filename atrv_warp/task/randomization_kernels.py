@@ -286,9 +286,9 @@ def add_robot_observation_noise(
 ):
     """The robot observation's noise in the masked worlds, from the world's (episode, step) stream: zero-mean
     Gaussian noise on the odometry's twist (``velocity``, ``odom_angular``), the IMU's roll and pitch
-    (``attitude``) and yaw rate (``gyro``), each clipped to its bound; and the odometry's drift, a random walk of
-    the same twist noise over ``step_dt`` [s] (``advance`` = 1: a step; 0: a reset or a re-observation), which
-    moves the odometry pose the goal is observed from."""
+    (``attitude``) and yaw rate (``gyro``), each clipped to its bound; and the fused odometry's drift, a random walk
+    over ``step_dt`` [s] of the encoders' speed noise along the heading and of the gyro's noise in the heading
+    (``advance`` = 1: a step; 0: a reset or a re-observation), which moves the pose the goal is observed from."""
     world = wp.tid()
     if not mask[world] or nonfinite[world] != 0:
         return
@@ -298,7 +298,8 @@ def add_robot_observation_noise(
     dw = noise.odom_angular * wp.randn(state)
     roll = obs[world, ROBOT_ROLL] + noise.attitude * wp.randn(state)
     pitch = obs[world, ROBOT_PITCH] + noise.attitude * wp.randn(state)
-    rate = obs[world, ROBOT_YAW_RATE] + noise.gyro * wp.randn(state)
+    dg = noise.gyro * wp.randn(state)
+    rate = obs[world, ROBOT_YAW_RATE] + dg
     obs[world, ROBOT_ODOM_LINEAR] = wp.clamp(obs[world, ROBOT_ODOM_LINEAR] + dv, -ODOM_LINEAR_BOUND, ODOM_LINEAR_BOUND)
     obs[world, ROBOT_ODOM_ANGULAR] = wp.clamp(obs[world, ROBOT_ODOM_ANGULAR] + dw, -ODOM_ANGULAR_BOUND,
                                               ODOM_ANGULAR_BOUND)
@@ -308,6 +309,6 @@ def add_robot_observation_noise(
     drift = task.odom_drift[world]
     if advance != 0:
         yaw = odometry[world][2] + drift[2]
-        drift = drift + wp.vec3(dv * step_dt * wp.cos(yaw), dv * step_dt * wp.sin(yaw), dw * step_dt)
+        drift = drift + wp.vec3(dv * step_dt * wp.cos(yaw), dv * step_dt * wp.sin(yaw), dg * step_dt)
         task.odom_drift[world] = drift
     write_goal_observation(obs, world, task.goal_odom[world], odometry[world] + drift)

@@ -507,10 +507,10 @@ class RoverSimNode(Node):
         if self.policy is None:
             from tensordict import TensorDict
 
-            from atrv_warp.policy import load_policy, pretrained_nav_policy_path
+            from atrv_warp.policy import SHIPPED_POLICIES, load_policy
 
-            shipped = pretrained_nav_policy_path() if self.params["task"] == "nav" else None
-            self.policy = (load_policy(shipped, task=self.params["task"]), TensorDict)
+            task = self.params["task"]  # the task's shipped policy (reach, nav, nav_deploy), else reach's
+            self.policy = (load_policy(task if task in SHIPPED_POLICIES else None, task=task), TensorDict)
         policy, td_cls = self.policy
         targets = self.sim.root_pose[:, :2].clone()  # rovers not in goal mode: their own position
         for rover in self.rovers:

@@ -22,7 +22,8 @@ PARAMETERS = (
     ("duration", 0.0, "stop after this much sim time [s]; 0 = until Ctrl-C"),
     ("mode", "coast", "initial driving mode: coast | forward | backward | rotate_left | rotate_right"),
     ("variant", "realistic", "rover variant: realistic | reference"),
-    ("task", "reach", "world: reach (the flat arena) | nav (terrain and obstacles, drawn once at start)"),
+    ("task", "reach", ("world: reach (the flat arena) | nav (terrain and obstacles, drawn once at start) | nav_deploy "
+                       "(nav's world; goal mode drives by /cmd_vel from the robot observation)")),
     ("scan_beams", 181, "/scan beams over 180 deg (181: 1 deg, as a SICK LMS); 0 = no /scan"),
     ("scan_noise", SENSOR_NOISE.scan_range, "/scan range noise, standard deviation [m]"),
     ("scan_dropout", SENSOR_NOISE.scan_dropout, "/scan: probability that a beam returns nothing [-]"),

@@ -48,6 +48,7 @@ class DriverState:
     age: wp.array(dtype=float)  # time since the last command [s]
     odometry: wp.array(dtype=wp.vec3)  # x [m], y [m], yaw [rad] in the odometry frame (the pose at reset)
     odom_twist: wp.array(dtype=wp.vec2)  # linear [m/s], angular [rad/s] from the encoders
+    fused: wp.array(dtype=wp.vec3)  # x [m], y [m], yaw [rad]: the encoders' distance along the gyro's heading
 
 
 @wp.func
@@ -137,6 +138,16 @@ def integrate_odometry(params: DriverParams, pose: wp.vec3, speeds: wp.vec2):
     return wp.vec3(pose[0] + v * wp.cos(mid) * params.dt, pose[1] + v * wp.sin(mid) * params.dt, yaw), wp.vec2(v, w)
 
 
+@wp.func
+def integrate_fused(pose: wp.vec3, linear: float, yaw_rate: float, dt: float) -> wp.vec3:
+    """The pose a base's filter keeps (``robot_localization`` fusing wheel odometry with an IMU): the encoders'
+    forward speed along the heading the gyro's yaw rate integrates, over one substep (midpoint rule)."""
+    mid = pose[2] + 0.5 * yaw_rate * dt
+    yaw = pose[2] + yaw_rate * dt
+    yaw = wp.atan2(wp.sin(yaw), wp.cos(yaw))
+    return wp.vec3(pose[0] + linear * wp.cos(mid) * dt, pose[1] + linear * wp.sin(mid) * dt, yaw)
+
+
 @wp.kernel
 def drive_wheels(
     layout: RoverLayout,
@@ -161,6 +172,8 @@ def drive_wheels(
     pose, odom_twist = integrate_odometry(params, state_in.odometry[world], speeds)
     state_out.odometry[world] = pose
     state_out.odom_twist[world] = odom_twist
+    gyro = joint_qd[world * layout.dofs_per_world + layout.chassis_dof + 5]  # the chassis' yaw rate (world z)
+    state_out.fused[world] = integrate_fused(state_in.fused[world], odom_twist[0], gyro, params.dt)
     side = commands[world]
     reference = state_in.reference[world]
     integral = state_in.integral[world]
@@ -198,6 +211,7 @@ def reset_driver(mask: wp.array(dtype=bool), twist: wp.array(dtype=wp.vec2), sta
     state.age[world] = 0.0
     state.odometry[world] = wp.vec3(0.0, 0.0, 0.0)
     state.odom_twist[world] = wp.vec2(0.0, 0.0)
+    state.fused[world] = wp.vec3(0.0, 0.0, 0.0)
 
 
 @wp.kernel
