@@ -229,6 +229,6 @@ def test_an_exported_twist_policy_says_it_commands_a_twist():
 
     spec = contract(Path("p.pt"), {"task": "nav_deploy"})
     assert spec["action"]["kind"] == "twist" and spec["action"]["names"] == ["linear", "angular"]
-    assert spec["action"]["scale"] == [1.0, 1.0]
+    assert spec["action"]["scale"] == [2.0, 2.0]
     assert [f["name"] for f in spec["observation"][:8]] == [f.name for f in ROBOT_OBSERVATION]
     assert contract(Path("p.pt"), {"task": "nav"})["action"]["kind"] == "torque"

@@ -43,11 +43,15 @@ class TaskConfig:
     action: str = "torque"
     """What the policy commands (:data:`atrv_warp.task.spec.ACTIONS`): ``"torque"``, each side's wheel torque (the
     reference), or ``"twist"``, a ``/cmd_vel`` (forward speed, yaw rate) through the base's motor driver."""
-    max_linear: float = 1.0
-    """Forward speed at action 1 [m/s] (``action="twist"``): the Husky A200's ``diff_drive_controller`` limit, a base
-    of the ATRV-Jr's class (50 kg, four wheels, skid-steer); the ATRV-Jr's own Nav2 configuration caps at 0.5 m/s."""
-    max_angular: float = 1.0
-    """Yaw rate at action 1 [rad/s] (``action="twist"``): the Husky A200's limit, and the ATRV-Jr's Nav2 one."""
+    max_linear: float = 2.0
+    """Forward speed at action 1 [m/s] (``action="twist"``): the Jackal J100's ``diff_drive_controller`` limit. The
+    model's motors give full torque up to 80 % of their 50 rad/s no-load speed (5 m/s at the rim), so traction
+    and the task bound the speed, not the motors; the torque nav policy peaks near 3 m/s. The Husky A200's 1 m/s
+    (and the ATRV-Jr's Nav2 0.5 m/s) leave a 15 s nav episode no time to drive around its obstacle: a policy
+    trained at 1 m/s had not reached a goal after 200,000 frames."""
+    max_angular: float = 2.0
+    """Yaw rate at action 1 [rad/s] (``action="twist"``): half the Jackal J100's 4 rad/s; the model turns in place at
+    up to about 4 rad/s under torque control (the torque nav policy's peaks)."""
     observation: str = "arena"
     """What the policy observes (:data:`atrv_warp.task.spec.OBSERVATION_KINDS`): ``"arena"``, positions and
     velocities in the arena's frame (the reference), or ``"robot"``, only what a robot's stack publishes (goal from
