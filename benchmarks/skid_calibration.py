@@ -157,10 +157,12 @@ def main() -> int:
 
     from atrv_warp import RoverSim
 
+    viscous = [r["chi"] for r in rows if r["law"] == "viscous"]
     out = {"track_width": track_width(RoverSim(1)), "effective_track_factor": factor, "band": BAND,
-           "chi_inside_band": inside, "turning": rows, "slip_ratio_2Nm": slip, "odometry": odo, "traction": trac,
+           "chi_inside_band": inside, "chi_min": min(chis), "chi_max": max(chis), "viscous_chi_min": min(viscous),
+           "viscous_chi_max": max(viscous), "turning": rows, "slip_ratio_2Nm": slip, "odometry": odo, "traction": trac,
            "slopes": slopes}
-    write_results(RESULTS / "skid_calibration.json", out, version=VERSION)
+    write_results(RESULTS / "skid_calibration.json", out, version=VERSION, driver=True)
     print(f"\nwrote {RESULTS / 'skid_calibration.json'}")
     return 0
 
