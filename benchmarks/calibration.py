@@ -103,7 +103,7 @@ def main() -> int:
     result = {"benchmark": "calibration", "minutes": args.minutes, "seed": args.seed, "pose_noise_m": args.noise,
               "truth": truth, "truth_file": str(TRUTH_FILE.relative_to(ROOT)), "runs": runs,
               "cores": os.cpu_count(), "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    path = write_results(RESULTS / "calibration.json", result, version=VERSION)
+    path = write_results(RESULTS / "calibration.json", result, version=VERSION, driver=True)
     print(f"\nwrote {path}")
     shutil.rmtree(work, ignore_errors=True)
     return 0

@@ -432,8 +432,8 @@ def calibration() -> str:
     return _table(header, ["---", "---:"] + ["---"] * len(runs), rows)
 
 
-def _diff_gradients(kind: str) -> str:
-    d = _load("diff_gradients.json")
+def _diff_gradients(kind: str, name: str = "diff_gradients.json") -> str:
+    d = _load(name)
     rows = d["agreement"]
     horizons = sorted({r["horizon_s"] for r in rows})
     scenarios = list(dict.fromkeys(r["scenario"] for r in rows))
@@ -466,6 +466,16 @@ def diff_gradients_friction() -> str:
 def diff_gradients_mass() -> str:
     """``diff_gradients.json``: the chassis mass."""
     return _diff_gradients("mass")
+
+
+def diff_gradients_twist_linear() -> str:
+    """``diff_gradients_twist.json``: the forward-speed command through the motor driver."""
+    return _diff_gradients("linear", "diff_gradients_twist.json")
+
+
+def diff_gradients_twist_angular() -> str:
+    """``diff_gradients_twist.json``: the yaw-rate command through the motor driver."""
+    return _diff_gradients("angular", "diff_gradients_twist.json")
 
 
 def diff_cost() -> str:
@@ -575,6 +585,8 @@ TABLES: dict[str, Callable[[], str]] = {
     "diff_gradients_differential": diff_gradients_differential,
     "diff_gradients_friction": diff_gradients_friction,
     "diff_gradients_mass": diff_gradients_mass,
+    "diff_gradients_twist_linear": diff_gradients_twist_linear,
+    "diff_gradients_twist_angular": diff_gradients_twist_angular,
     "diff_cost": diff_cost,
     "env_throughput": env_throughput,
     "env_scaling": env_scaling,
