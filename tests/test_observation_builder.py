@@ -134,8 +134,8 @@ def test_built_from_an_exported_policy_and_run(tmp_path):
     assert spec["format"] == EXPORT_FORMAT == "atrv_warp.exported_policy/3"
     assert spec["observation_kind"] == "robot" and spec["action"]["kind"] == "twist"
     assert spec["action"]["scale"] == [TASK.max_linear, TASK.max_angular] and spec["action"]["units"] == ["m/s", "rad/s"]
-    assert spec["action"]["limits"] == {"max_linear": {"value": 1.0, "unit": "m/s"},
-                                        "max_angular": {"value": 1.0, "unit": "rad/s"}}
+    assert spec["action"]["limits"] == {"max_linear": {"value": TASK.max_linear, "unit": "m/s"},
+                                        "max_angular": {"value": TASK.max_angular, "unit": "rad/s"}}
     assert spec["action_history"]["steps"] == 3 and spec["rate_hz"] == 20.0
     assert spec["scan"]["beams"] == 64 and spec["scan"]["sectors"]["count"] == 16
     built = RobotObservation.from_contract(spec)
@@ -177,7 +177,9 @@ def test_the_example_drives_a_twist_policy_from_the_file(tmp_path):
     proc = subprocess.run([sys.executable, str(ROOT / "examples" / "run_exported_policy.py"), str(out)],
                           capture_output=True, text=True, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert "cmd_vel: linear.x +0.00 m/s, angular.z +0.96 rad/s" in proc.stdout, proc.stdout
+    # tanh(2) = 0.964 of the task's yaw-rate limit
+    yaw_rate = math.tanh(2.0) * get_task("nav_deploy").max_angular
+    assert f"cmd_vel: linear.x +0.00 m/s, angular.z +{yaw_rate:.2f} rad/s" in proc.stdout, proc.stdout
 
 
 @pytest.mark.parametrize(("change", "message"), [

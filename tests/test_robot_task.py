@@ -104,9 +104,10 @@ def test_robot_observation_is_rebuilt_from_the_robots_signals():
     env = ATRVjrEnv(3, seed=1, **FLAT)
     td = _drive(env, env.reset(), torch.tensor([[1.0, 0.3], [0.6, -0.5], [-0.4, 0.0]]), 25)
     assert torch.allclose(td["observation"][:, :8], _robot_observation(env), atol=1e-4)
-    # the goal is seen from wheel odometry, not the true pose: after driving, the two differ (skid)
+    # the goal is seen from the base's odometry, not the true pose: after driving, the two differ (the wheels slip
+    # while the rover accelerates toward 2 m/s, and the encoders count it as distance)
     true = env.target_distance
-    assert torch.allclose(td["observation"][:, 0], true, atol=0.5)
+    assert torch.allclose(td["observation"][:, 0], true, atol=1.0)
     assert not torch.allclose(td["observation"][:, 0], true, atol=1e-5)
 
 
