@@ -504,6 +504,10 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
     polished = {k: _polish(replay, train, names, final[k], lo, span, cfg.polish, say)
                 for k in ranked[:cfg.polish_starts]}
     best = min(polished, key=lambda k: polished[k][1]) if cfg.polish else ranked[0]
+    # where the polished starts ended apart from each other (the largest parameter's distance, as a fraction of its
+    # range): 0 with one; two starts that walk to the same point have found the valley's floor, not a ledge of it
+    ends = torch.stack([v for v, _, _ in polished.values()]) if cfg.polish else final[best][None]
+    agree = float(((ends.max(0).values - ends.min(0).values) / span).max())
     polished, settled = (polished[best][0], polished[best][2]) if cfg.polish else (final[best], math.inf)
     fitted = {**nominal, **{p: float(polished[j]) for j, p in enumerate(names)}}
     t_se = time.perf_counter()
@@ -521,18 +525,22 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
                      "calibrated": path1.transpose(1, 0, 2), "t0": seg.t0[index]}
     # converged: the fit settled, and fits the training and the held-out segments better than the rover it started
     # from. Settled: the full-batch polish's last evaluations lie within 1 % of each parameter's range (a stationary
-    # point of the whole loss; where the loss is flat along a valley, as a payload's is under a driver that holds its
-    # wheel speeds tightly, the polish walks it after the minibatch steps), or without a polish, the best start
-    # stopped moving over the last quarter of the minibatch steps (within 2 %).
+    # point of the whole loss), and either the polished starts ended within 2 % of each other (where the loss is flat
+    # along a valley, as a payload's is under a driver that holds its wheel speeds tightly, the polish walks it after
+    # the minibatch steps, from each start to the same floor) or the best start had stopped moving over the last
+    # quarter of the minibatch steps (within 2 %). Without a polish, that last alone.
     tail = tail[:, best]
     drift = ((tail.max(0).values - tail.min(0).values) / span).max().item()
     improved = all(errors[split]["loss_after"] < errors[split]["loss_before"] for split in errors)
-    converged = improved and (settled < 0.01 if cfg.polish else drift < 0.02)
+    polish_ok = settled < 0.01 and (cfg.polish_starts > 1 and agree < 0.02 or drift < 0.02)
+    converged = improved and (polish_ok if cfg.polish else drift < 0.02)
     reason = ("converged" if converged else
               "did not converge: the fit is no better than the starting rover on the training or the held-out "
               "segments" if not improved else
               f"did not converge: the last full-batch steps still moved a parameter {100 * settled:.1f} % of its range"
-              if cfg.polish else
+              if cfg.polish and settled >= 0.01 else
+              f"did not converge: the polished starts ended {100 * agree:.1f} % of a parameter's range apart, and the "
+              f"minibatch steps still moved {100 * drift:.1f} % over their last {len(tail)}" if cfg.polish else
               f"did not converge: the parameters still moved {100 * drift:.1f} % of their range over the last "
               f"{len(tail)} steps")
     return CalibrationResult(values={p: fitted[p] for p in names}, nominal={p: nominal[p] for p in names},
