@@ -134,7 +134,7 @@ class RoverIO:
         self.node.record(f"{self.prefix}/cmd_vel", "geometry_msgs/msg/Twist", twist_dict(msg))
         self.node.sim.set_twist([v, w], worlds=[self.index])  # the base's driver takes it (and restarts its timeout)
         self.stopped = False
-        self.pending = self.mode = VELOCITY
+        self.pending = VELOCITY  # the next step logs the switch; the driver has the command already
 
     # ------------------------------------------------------------------ driving
     def drive(self, goal_action) -> None:
