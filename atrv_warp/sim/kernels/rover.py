@@ -1,4 +1,5 @@
-"""Per-world rover kernels: wheel drive, derived state, masked resets.
+"""Per-world rover kernels: the motor, derived state, masked resets (the wheels' drive is
+:func:`atrv_warp.sim.kernels.driver.drive_wheels`).
 
 One thread per world (``world = wp.tid()``); indices inside a world come from
 :class:`RoverLayout`, derived from the Newton model by name at build time.
@@ -7,8 +8,6 @@ One thread per world (``world = wp.tid()``); indices inside a world come from
 from __future__ import annotations
 
 import warp as wp
-
-from atrv_warp.sim.kernels.params import WorldPhysics
 
 MOTOR_TAPER_START = wp.constant(0.8)
 """Fraction of the no-load speed at which drive torque starts to taper to zero."""
@@ -43,28 +42,6 @@ def motor_torque(command: float, forward_speed: float, speed_limit: float) -> fl
     s = wp.abs(forward_speed) / speed_limit
     scale = wp.clamp((1.0 - s) / (1.0 - MOTOR_TAPER_START), 0.0, 1.0)
     return command * scale
-
-
-@wp.kernel
-def apply_wheel_torques(
-    layout: RoverLayout,
-    commands: wp.array(dtype=wp.vec2),
-    physics: WorldPhysics,
-    joint_qd: wp.array(dtype=float),
-    joint_f: wp.array(dtype=float),
-    wheel_torque: wp.array2d(dtype=float),
-):
-    """Set each wheel's joint torque from its side's command [N·m], forward-positive, through the world's
-    motor (torque scale, no-load speed)."""
-    world = wp.tid()
-    cmd = commands[world] * physics.torque_scale[world]
-    speed_limit = physics.speed_limit[world]
-    for k in range(layout.wheel_count):
-        dof = world * layout.dofs_per_world + layout.wheel_dof[k]
-        sign = layout.wheel_sign[k]
-        tau = motor_torque(cmd[layout.wheel_side[k]], sign * joint_qd[dof], speed_limit)
-        joint_f[dof] = sign * tau
-        wheel_torque[world, k] = tau
 
 
 @wp.func
