@@ -113,6 +113,10 @@ class CollectorConfig:
     init_random_frames: int = 20_000
     """Frames collected with uniform random actions before learning starts (also the data the
     observation statistics are computed from)."""
+    noise_correlation: float = 0.0
+    """SAC only: correlation in [0, 1) of the collectors' exploration noise from one step to the next (0: SAC's
+    own independent sampling; :mod:`atrv_warp.rl.exploration`). Velocity actions need it: a motor driver averages
+    independent commands away (the ``nav_deploy`` preset: 0.9, about 0.5 s)."""
     num_collectors: int = 2
     """``ray`` only: collector actors, one CPU each; each delivers its own batches, first ready
     first served, and gets the learner's weights after each."""
@@ -267,6 +271,11 @@ class TrainConfig:
             raise ValueError(f"train config: gamma must be in (0, 1], got {self.optim.gamma}")
         if self.run.max_minutes < 0 or self.collector.init_random_frames < 0 or self.collector.envs_per_collector < 0:
             raise ValueError("train config: max_minutes, init_random_frames and envs_per_collector must be >= 0")
+        if not 0.0 <= self.collector.noise_correlation < 1.0:
+            raise ValueError(f"train config: noise_correlation must be in [0, 1), got {self.collector.noise_correlation}")
+        if self.collector.noise_correlation and self.optim.algo == "ppo":
+            raise ValueError("train config: noise_correlation is for SAC; PPO learns from its own samples' "
+                             "log-probabilities (set noise_correlation=0)")
         if self.logging.video_episodes < 0:
             raise ValueError(f"train config: video_episodes must be >= 0, got {self.logging.video_episodes}")
         if not 0.0 <= self.ppo.gae_lambda <= 1.0:

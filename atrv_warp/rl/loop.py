@@ -16,6 +16,7 @@ from atrv_warp.policy import Normalize, load_policy, make_actor, save_policy
 from atrv_warp.rl.checkpoint import Checkpoint, RunState, load_checkpoint, warm_start
 from atrv_warp.rl.collectors import COLLECTORS, WORKER_KEY, make_collector, pin_to_core
 from atrv_warp.rl.config import TrainConfig, flat_config, to_toml
+from atrv_warp.rl.exploration import collection_policy
 from atrv_warp.rl.learner import ALGOS, annealed_lr, make_buffer, make_learner, set_lr
 from atrv_warp.rl.reporting import Loggers, LossMeans, Progress, Stats, make_loggers, pct, plot_curve
 from atrv_warp.runtime import device_summary
@@ -59,7 +60,9 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     loggers = make_loggers(cfg, run_dir, resume, state.tracking_id)
     state.tracking_id = loggers.tracking_id
     loggers.log_hparams(flat_config(cfg))
-    collector = make_collector(cfg, actor, state.frames)
+    # what the collectors step: the actor, or the actor with correlated exploration noise (SAC)
+    policy = collection_policy(actor, cfg.collector.noise_correlation, seed=cfg.run.seed + 104_729 * state.frames)
+    collector = make_collector(cfg, policy, state.frames)
     evaluator = Evaluator(cfg, actor, recording=loggers.recording,
                           video_dir=run_dir / "videos" if cfg.logging.video_episodes else None, gif=loggers.wants_gif)
     budget = (f"{cfg.run.total_frames:,} frames or {cfg.run.max_minutes:g} min, whichever ends first"
@@ -67,7 +70,8 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     print(f"run folder: {run_dir}  ({cfg.optim.algo}, {kind.describe(cfg)}, batch {cfg.frames_per_batch} frames, "
           f"{cfg.env.substeps} substeps per step; budget {budget})")
     print(device_summary("cpu"))
-    loop = TrainLoop(cfg, state, actor, normalize, buffer, learner, loggers, evaluator, checkpoint, run_dir)
+    loop = TrainLoop(cfg, state, actor, normalize, buffer, learner, loggers, evaluator, checkpoint, run_dir,
+                     policy=policy)
     try:
         if kind.placements is not None:
             print(f"{cfg.collector.kind} collectors on: {kind.placements(collector)}")
@@ -171,8 +175,11 @@ class TrainLoop:
     """Collect, learn, evaluate and checkpoint until a budget ends the run."""
 
     def __init__(self, cfg: TrainConfig, state: RunState, actor, normalize: Normalize, buffer, learner,
-                 loggers: Loggers, evaluator: Evaluator, checkpoint: Checkpoint, run_dir: Path):
+                 loggers: Loggers, evaluator: Evaluator, checkpoint: Checkpoint, run_dir: Path, *, policy=None):
         self.cfg, self.state, self.actor, self.normalize, self.buffer = cfg, state, actor, normalize, buffer
+        self.policy = actor if policy is None else policy
+        """What the collectors step (``actor``, or it inside :class:`~atrv_warp.rl.exploration.CorrelatedExploration`);
+        its weights are the actor's."""
         self.learner, self.loggers, self.evaluator, self.checkpoint = learner, loggers, evaluator, checkpoint
         self.run_dir = run_dir
         self.algo = ALGOS[cfg.optim.algo]
@@ -206,7 +213,7 @@ class TrainLoop:
             if st.frames >= cfg.collector.init_random_frames:
                 credit = self.learn(data, credit + n * cfg.optim.utd_ratio)
                 if self.push_weights:  # the worker holds a copy; the sync collector shares `actor`
-                    collector.update_policy_weights_(TensorDict.from_module(self.actor))
+                    collector.update_policy_weights_(TensorDict.from_module(self.policy))
                 # ray: the next request to the collector that delivered `data` carries the weights, once
                 # this body is done
             st.elapsed_s = self.elapsed()
