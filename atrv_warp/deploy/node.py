@@ -120,6 +120,6 @@ class DeployNode(Node):
             self.status_pub.publish(String(data=json.dumps(tick.status)))
 
     def stop(self, reason: str) -> None:
-        """Publish a zero command (and the goal's aborted status), and wait up to 1 s for subscribers to have it."""
+        """Publish a zero command (and the goal's aborted status), and wait up to 0.5 s for subscribers to have it."""
         self.publish(self.controller.stop(reason))
-        self.cmd_pub.wait_for_all_acked(Duration(seconds=1.0))
+        self.cmd_pub.wait_for_all_acked(Duration(seconds=0.5))
