@@ -19,6 +19,13 @@ Topics (per rover; under ``/rover_<k>`` when ``num_rovers`` > 1):
     by default); ``goal_status`` (std_msgs/String, out): ``distance=<m>``, then ``reached``.
     ``odom`` (nav_msgs/Odometry, out): wheel odometry (frame ``odom``, child ``base_link``), skid
     error included, with pose and twist covariances; the odom frame starts at the start pose.
+    ``odometry/filtered`` (nav_msgs/Odometry, out): the encoders' distance along the gyro's heading (what
+    ``robot_localization`` gives; the robot observation's odometry), same frames as ``odom``.
+    ``reset_episode`` (std_msgs/Int32, in): replay evaluation episode k of ``episode_seed`` (its world,
+    start and goal; one rover, task nav_deploy), stepping the task's environment with the last
+    ``cmd_vel`` until it ends; ``episode`` (std_msgs/String, out, JSON): ``{"event": "start", "episode",
+    "seed", "start", "goal"}`` (world = odometry frame at the start), then ``{"event": "end",
+    "episode", "end_reason", "steps"}`` (benchmarks/deploy_closed_loop.py).
     ``ground_truth/odom`` (nav_msgs/Odometry, out): the simulator's pose (frame ``world``) and
     body-frame twist.
     ``joint_states`` (sensor_msgs/JointState, out): wheel joint positions [rad] and velocities.
@@ -28,7 +35,7 @@ Topics (per rover; under ``/rover_<k>`` when ``num_rovers`` > 1):
     beams over 180 deg (-90 to +90 deg, counter-clockwise), 0.1 … 20 m, ``scan_noise`` Gaussian
     noise; a beam without a return reads +inf (REP 117).
     ``pose`` (geometry_msgs/PoseStamped, out): the reference's chassis pose topic.
-Shared: ``/clock`` (rosgraph_msgs/Clock, every step: use ``use_sim_time``) and
+Shared: ``/clock`` (rosgraph_msgs/Clock, every step, after its state topics: use ``use_sim_time``) and
 ``/robot_description`` (std_msgs/String, the URDF, transient local).
 State topics come at ``publish_rate`` Hz of sim time; stamps are sim time. No ``/tf``: tf2_msgs
 is not on the package index here.

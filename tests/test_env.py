@@ -370,3 +370,20 @@ def test_reward_terms_sum_to_the_reward_and_follow_the_spec():
     running = ~(success | failure)
     assert (nxt["reward_terms", "step_penalty"][running] == -0.03).all()
     assert (nxt["reward_terms", "progress"][~running] == 0.0).all()
+
+
+def test_reset_to_episodes_replays_the_evaluation_sets_episodes_in_fewer_worlds():
+    """World 0 of a one-world env, reset to episode k of seed 2024, draws what world k of evaluate's env draws: the
+    start, the target and the obstacles (the ROS node's ``reset_episode``)."""
+    big = ATRVjrEnv(6, task="nav_deploy")
+    big.set_seed(2024)
+    big.reset()
+    one = ATRVjrEnv(1, task="nav_deploy", seed=3)
+    one.reset()
+    for k in (5, 2):
+        one.reset_to_episodes([0], [k], seed=2024)
+        assert torch.equal(one.target[0], big.target[k])
+        assert torch.equal(one.sim.root_pose[0], big.sim.root_pose[k])
+        assert torch.equal(one.sim.obstacles.pose[0], big.sim.obstacles.pose[k])
+    with pytest.raises(ValueError, match="world indices in"):
+        one.reset_to_episodes([1], [0], seed=2024)

@@ -143,3 +143,20 @@ def test_the_package_and_its_light_core_load_without_the_simulator():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.splitlines() == ["[]", "['newton', 'warp'] True"], out.stdout + out.stderr
     assert out.stderr == "", out.stderr  # quiet: no Warp banner, no CUDA-driver notice
+
+
+ROS_RUNTIME = {"rclpy", "geometry_msgs", "nav_msgs", "sensor_msgs", "std_msgs", "rcl_interfaces"}
+"""What the deploy node may import besides torch: rclpy and the message packages a robot's ROS 2 has."""
+
+
+def test_the_deploy_node_imports_only_torch_ros_and_the_light_core():
+    """``atrv_warp.deploy`` runs on a robot's computer: torch, rclpy and messages, and of this package only the light
+    core, itself and the console setup (``runtime``, which ``atrv_warp/__init__`` imports)."""
+    deploy = {m: p for m, (p, _) in MODULES.items() if m.startswith("atrv_warp.deploy")}
+    assert {"atrv_warp.deploy.controller", "atrv_warp.deploy.node", "atrv_warp.deploy.cli"} <= deploy.keys()
+    third = {m: third_party_imports(p.read_text()) - {"torch"} - ROS_RUNTIME for m, p in deploy.items()}
+    assert not any(third.values()), third
+    ours = {m: {t for t in imports(m, p.read_text(), p.name == "__init__.py")
+                if not t.startswith(("atrv_warp.core", "atrv_warp.deploy"))} for m, p in deploy.items()}
+    assert not any(ours.values()), ours
+    assert imports("atrv_warp.runtime", (PACKAGE / "runtime.py").read_text(), False) == set()

@@ -22,7 +22,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 # Files that may import what an optional extra brings (they check for it and say how to install it).
 EXTRA_USERS = {
-    "ros": ("atrv_warp/integrations/ros/", "tests/test_ros.py"),
+    "ros": ("atrv_warp/integrations/ros/", "atrv_warp/deploy/", "tests/test_ros.py", "tests/test_deploy.py", "tests/test_deploy_ros.py",
+            "benchmarks/deploy_closed_loop.py"),
     "test": ("tests/",),
     "browser": ("atrv_warp/integrations/browser.py", "docs/make_pictures.py"),
     "onnx": ("atrv_warp/rl/export.py",),

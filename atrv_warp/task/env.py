@@ -23,7 +23,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import torch
 import warp as wp
@@ -203,6 +203,7 @@ class ATRVjrEnv(EnvBase):
         t.prev_heading_error = wp.zeros(n, dtype=float, device=dev)
         t.step_count = wp.zeros(n, dtype=wp.int32, device=dev)
         t.episode = wp.zeros(n, dtype=wp.int32, device=dev)
+        t.stream = wp.array(list(range(n)), dtype=wp.int32, device=dev)
         t.goal_odom = wp.zeros(n, dtype=wp.vec2, device=dev)
         t.odom_drift = wp.zeros(n, dtype=wp.vec3, device=dev)
         self._task = t
@@ -251,6 +252,7 @@ class ATRVjrEnv(EnvBase):
         self._distance_t = wp.to_torch(self._distance).unsqueeze(-1)
         self._mask_t = wp.to_torch(self._mask)
         self._episode_t = wp.to_torch(t.episode)
+        self._stream_t = wp.to_torch(t.stream)
         self.goal_odom = wp.to_torch(t.goal_odom).view(n, 2)
         """(N, 2) each world's target in its odometry frame (the episode's start pose: the driver's
         ``odometry`` and ``fused`` origin) [m], from which the robot observation's goal is seen (a view)."""
@@ -375,6 +377,37 @@ class ATRVjrEnv(EnvBase):
         self._episode_t.zero_()
         if self.scanner is not None:
             self.scanner.reseed(self._seed)
+
+    def reset_to_episodes(self, worlds: Sequence[int], episodes: Sequence[int], *, seed: int) -> TensorDictBase:
+        """Reset ``worlds`` to episodes of a seeded evaluation set: world ``worlds[i]`` draws what world
+        ``episodes[i]`` of an environment seeded ``seed`` draws in its first episode (start, target, terrain tile,
+        obstacles), as :func:`atrv_warp.task.evaluation.run_episodes` (``evaluate --seed seed``) runs it; e.g. the
+        ROS node's ``reset_episode``, which replays evaluation episode k in a one-world simulator.
+
+        The other worlds keep their state. The seed becomes the environment's (its scanner's noise is reseeded); the
+        replayed worlds keep drawing from their episodes' streams on later resets. Domain randomization's
+        per-world draws (physics, noise, latency) are not remapped: replay episodes without randomization.
+
+        Returns:
+            The reset tensordict (every world's observation; the others' as they are).
+        """
+        worlds = torch.as_tensor(list(worlds), dtype=torch.long, device=self.device)
+        episodes = torch.as_tensor(list(episodes), dtype=torch.int32, device=self.device)
+        if worlds.shape != episodes.shape or bool(((worlds < 0) | (worlds >= self.num_envs)).any()):
+            raise ValueError(f"reset_to_episodes: {len(worlds)} world indices in [0, {self.num_envs}) and as many "
+                             f"episodes expected, got worlds {worlds.tolist()}, episodes {episodes.tolist()}")
+        if bool((episodes < 0).any()):
+            raise ValueError(f"reset_to_episodes: episode indices must be >= 0, got {episodes.tolist()}")
+        seed = int(seed) % (2**31)
+        if seed != self._seed:
+            self._seed = seed
+            if self.scanner is not None:
+                self.scanner.reseed(seed)
+        self._stream_t[worlds] = episodes
+        self._episode_t[worlds] = 0
+        mask = torch.zeros(self.num_envs, 1, dtype=torch.bool, device=self.device)
+        mask[worlds] = True
+        return self.reset(TensorDict({"_reset": mask}, batch_size=self.batch_size, device=self.device))
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         mask = None

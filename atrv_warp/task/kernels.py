@@ -134,6 +134,7 @@ class TaskBuffers:
     prev_heading_error: wp.array(dtype=float)  # |heading error| at the previous step [rad]
     step_count: wp.array(dtype=wp.int32)
     episode: wp.array(dtype=wp.int32)  # episodes started in this world since seeding
+    stream: wp.array(dtype=wp.int32)  # the reset stream this world draws from: its index, unless replaying another's
     goal_odom: wp.array(dtype=wp.vec2)  # the target in the odometry frame (the episode's start pose) [m]
     odom_drift: wp.array(dtype=wp.vec3)  # the odometry noise's random walk (x [m], y [m], yaw [rad]) this episode
 
@@ -168,7 +169,7 @@ def sample_episodes(
     world = wp.tid()
     if not mask[world]:
         return
-    h = wp.rand_init(seed, world)
+    h = wp.rand_init(seed, task.stream[world])
     state = wp.rand_init(wp.int32(h), task.episode[world])
     b = params.spawn_bound
     task.target[world] = wp.vec2(wp.randf(state, -b, b), wp.randf(state, -b, b))
@@ -480,7 +481,7 @@ def sample_nav_episodes(
     world = wp.tid()
     if not mask[world]:
         return
-    h = wp.rand_init(seed, world)
+    h = wp.rand_init(seed, task.stream[world])
     state = wp.rand_init(wp.int32(h), task.episode[world])
     b = params.spawn_bound
     start = wp.vec2(wp.randf(state, -b, b), wp.randf(state, -b, b))

@@ -7,7 +7,9 @@ real time; the executor serves the subscriptions between steps. Topics and param
 
 from __future__ import annotations
 
+import json
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +24,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState, LaserScan
-from std_msgs.msg import String
+from std_msgs.msg import Int32, String
 from visualization_msgs.msg import MarkerArray
 
 from atrv_warp.core.geometry import quat_to_matrix, wrap_angle, yaw_to_quat
@@ -33,7 +35,7 @@ from atrv_warp.integrations.ros.markers import scene_of, world_markers
 from atrv_warp.integrations.ros.parameters import COMMANDS, GOAL, MAX_ROVERS, PARAMETERS, VELOCITY, driver_config
 from atrv_warp.sim.simulator import DRIVE_MODE_TORQUES, DriveMode
 from atrv_warp.task.env import ATRVjrEnv
-from atrv_warp.task.spec import action_to_torque, action_to_twist
+from atrv_warp.task.spec import END_REASONS, action_to_torque, action_to_twist
 
 __all__ = ["NodeConfigError", "RoverIO", "RoverSimNode", "unknown_parameters"]
 
@@ -85,6 +87,9 @@ class RoverIO:
         self.stopped = False
         """The driver's timeout has stopped this rover (logged once)."""
         self.prev_vel = torch.zeros(3)
+        self.episode: int | None = None
+        """The evaluation episode this rover replays (``reset_episode``), until it ends."""
+        self.pending_episode: int | None = None
         tf_prefix = f"rover_{index}/" if prefix else ""  # its /tf frame names (frames.py)
         self.tf_odom, self.tf_base = tf_prefix + node.odom_frame, tf_prefix + node.base_frame
         self.tf_chassis = tf_prefix + node.sim.description.chassis
@@ -94,6 +99,8 @@ class RoverIO:
         self.pose_pub = node.create_publisher(PoseStamped, f"{prefix}/pose", qos)
         self.status_pub = node.create_publisher(String, f"{prefix}/goal_status", 10)
         self.odom_pub = node.create_publisher(Odometry, f"{prefix}/odom", 10)
+        self.fused_pub = node.create_publisher(Odometry, f"{prefix}/odometry/filtered", 10)
+        self.episode_pub = node.create_publisher(String, f"{prefix}/episode", qos)
         self.truth_pub = node.create_publisher(Odometry, f"{prefix}/ground_truth/odom", 10)
         self.joint_pub = node.create_publisher(JointState, f"{prefix}/joint_states", 10)
         self.imu_pub = node.create_publisher(Imu, f"{prefix}/imu", 10)
@@ -101,6 +108,7 @@ class RoverIO:
         node.create_subscription(String, f"{prefix}/command", self.on_command, qos)
         node.create_subscription(PoseStamped, f"{prefix}/goal", self.on_goal, qos)
         node.create_subscription(Twist, f"{prefix}/cmd_vel", self.on_cmd_vel, qos)
+        node.create_subscription(Int32, f"{prefix}/reset_episode", self.on_reset_episode, qos)
 
     # ------------------------------------------------------------------ subscriptions
     def on_command(self, msg: String) -> None:
@@ -133,8 +141,22 @@ class RoverIO:
             return
         self.node.record(f"{self.prefix}/cmd_vel", "geometry_msgs/msg/Twist", twist_dict(msg))
         self.node.sim.set_twist([v, w], worlds=[self.index])  # the base's driver takes it (and restarts its timeout)
+        self.node.commanded = True  # lockstep: the next step may go
         self.stopped = False
         self.pending = VELOCITY  # the next step logs the switch; the driver has the command already
+
+    def on_reset_episode(self, msg: Int32) -> None:
+        """Replay evaluation episode ``msg.data`` at the next step (:meth:`RoverSimNode.start_episode`)."""
+        task = self.node.env.task_cfg
+        if task.action != "twist" or len(self.node.rovers) > 1 or msg.data < 0:
+            self.node.log.warning(f"ignored reset_episode {msg.data}: episodes replay with one rover, a twist task "
+                                  f"(nav_deploy) and an episode index >= 0 (here {len(self.node.rovers)} rover(s), "
+                                  f"task action {task.action!r})")
+            return
+        self.pending_episode = msg.data
+
+    def publish_episode(self, event: dict) -> None:
+        self.episode_pub.publish(String(data=json.dumps(event)))
 
     # ------------------------------------------------------------------ driving
     def drive(self, goal_action) -> None:
@@ -161,11 +183,12 @@ class RoverIO:
             return
         node.sim.set_commands(DRIVE_MODE_TORQUES[DriveMode(self.mode)], worlds=[k])
 
-    def odometry(self) -> tuple[float, float, float, float, float]:
+    def odometry(self, fused: bool = False) -> tuple[float, float, float, float, float]:
         """The base's wheel odometry in the node's odometry frame (the start pose composed with the driver's):
-        x [m], y [m], yaw [rad], linear [m/s], angular [rad/s]."""
+        x [m], y [m], yaw [rad], linear [m/s], angular [rad/s]; ``fused``: the driver's encoder-and-gyro odometry
+        (``odometry/filtered``, what the robot observation is trained on) instead of the wheels' alone."""
         d = self.node.sim.driver
-        x, y, yaw = d.odometry[self.index].double().tolist()
+        x, y, yaw = (d.fused if fused else d.odometry)[self.index].double().tolist()
         x0, y0, yaw0 = self.start
         c, s = math.cos(yaw0), math.sin(yaw0)
         linear, angular = d.odom_twist[self.index].double().tolist()
@@ -209,6 +232,10 @@ class RoverIO:
         msg.twist.covariance = [v if i == j else 0.0 for i in range(6) for j, v in enumerate(_ODOM_TWIST_VAR)]
         self.odom_pub.publish(msg)
         node.record(f"{self.prefix}/odom", "nav_msgs/msg/Odometry", odometry_dict(msg), ns)
+        fx, fy, fyaw = self.odometry(fused=True)[:3]  # the encoders' distance along the gyro's heading
+        msg.pose.pose.position.x, msg.pose.pose.position.y = fx, fy
+        o.x, o.y, o.z, o.w = yaw_to_quat(fyaw).tolist()
+        self.fused_pub.publish(msg)
         truth = Odometry()
         truth.header.stamp, truth.header.frame_id, truth.child_frame_id = _stamp(ns), "world", node.base_frame
         t = truth.pose.pose
@@ -338,6 +365,9 @@ class RoverSimNode(Node):
         self.scanner = None
         self.rovers: list[RoverIO] = []
         self.policy = None  # goal mode's (policy, TensorDict): a -p policy file once checked, else loaded on first use
+        self.commanded = False
+        """A /cmd_vel came since the last state publication (``lockstep``)."""
+        self.published_at = 0.0
 
     def setup(self) -> None:
         self._check_parameters()
@@ -537,10 +567,48 @@ class RoverSimNode(Node):
             self.env.record_actions(self.sim.commands / task.action_scale)
         for rover in self.rovers:
             rover.prev_vel = self.sim.lin_vel[rover.index].clone()
-        self.sim.step()
-        self.clock_pub.publish(Clock(clock=_stamp(self.stamp_ns())))
+        if any(r.episode is not None for r in self.rovers):
+            self.step_episode()
+        else:
+            self.sim.step()
+
+    def start_episode(self, rover: RoverIO) -> None:
+        """Put ``rover`` in evaluation episode ``rover.pending_episode`` of ``episode_seed`` (the world, start and
+        goal ``python -m atrv_warp.evaluate`` gives that episode: :meth:`ATRVjrEnv.reset_to_episodes`), its odometry
+        frame at the new start, still; publish ``episode`` ``{"event": "start", "episode", "seed", "start": [x, y,
+        yaw], "goal": [x, y]}`` (world frame = the odometry frame at the start) and the state."""
+        k, seed = rover.pending_episode, int(self.params["episode_seed"])
+        rover.pending_episode = None
+        self.env.reset_to_episodes([rover.index], [k], seed=seed)
+        self.sim.set_twist([0.0, 0.0], worlds=[rover.index])
+        x, y = self.sim.root_pose[rover.index, :2].tolist()
+        rover.start = (x, y, float(self.sim.rpy[rover.index, 2]))
+        rover.goal = tuple(self.env.target[rover.index].tolist())
+        rover.episode, rover.mode, rover.pending = k, VELOCITY, VELOCITY
+        rover.publish_episode({"event": "start", "episode": k, "seed": seed, "start": list(rover.start),
+                               "goal": list(rover.goal)})
+        self.publish_markers()
+
+    def step_episode(self) -> None:
+        """One environment step of the replayed episode, the rover's last /cmd_vel as its action (so the episode
+        ends as ``evaluate``'s do: reached, wall, flip, obstacle, timeout); at its end ``episode`` ``{"event": "end",
+        "episode", "end_reason", "steps"}`` and the rover stops."""
+        from tensordict import TensorDict
+
+        task = self.env.task_cfg
+        action = (self.sim.driver.twist / torch.tensor([task.max_linear, task.max_angular])).clamp(-1.0, 1.0)
+        out = self.env.step(TensorDict(action=action, batch_size=[self.sim.num_worlds]))["next"]
+        for rover in self.rovers:
+            if rover.episode is not None and bool(out["done"][rover.index]):
+                reason = END_REASONS[int(out["end_reason"][rover.index])]
+                rover.publish_episode({"event": "end", "episode": rover.episode, "end_reason": reason,
+                                       "steps": int(self.env.step_count[rover.index])})
+                self.log.info(f"episode {rover.episode}: {reason}")
+                rover.episode = None
+                self.sim.set_twist([0.0, 0.0], worlds=[rover.index])
 
     def publish_state(self) -> None:
+        self.commanded, self.published_at = False, time.monotonic()
         ns = self.stamp_ns()
         if self.scanner is not None:
             self.scanner.scan()
@@ -572,12 +640,24 @@ class RoverSimNode(Node):
             executor.spin_until_future_complete(self.finished)
 
     def on_step_timer(self) -> None:
-        """One simulator step; state topics every ``publish_rate``; finish at the deadline."""
+        """One simulator step; state topics every ``publish_rate``, then ``/clock`` (so that a node timed on the
+        clock reads this step's sensors); finish at the deadline. ``reset_episode`` requests start first, and
+        ``lockstep`` holds the step until a ``/cmd_vel`` has come."""
+        for rover in self.rovers:
+            if rover.pending_episode is not None:
+                self.start_episode(rover)
+                self.publish_state()
+                self.clock_pub.publish(Clock(clock=_stamp(self.stamp_ns())))
+                return
+        if (self.params["lockstep"] and not self.commanded
+                and time.monotonic() - self.published_at < self.params["lockstep_timeout"]):
+            return
         if self.sim.sim_time < self.deadline - 1e-9:
             self.step_once()
             self.steps += 1
             if self.steps % self.every == 0:
                 self.publish_state()
+            self.clock_pub.publish(Clock(clock=_stamp(self.stamp_ns())))
         if self.sim.sim_time >= self.deadline - 1e-9 and not self.finished.done():
             self.step_timer.cancel()
             self.finished.set_result(True)

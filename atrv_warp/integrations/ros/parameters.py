@@ -58,6 +58,11 @@ PARAMETERS = (
     ("truth_noise", 0.0, "/ground_truth/odom position noise, standard deviation [m] (as motion capture or RTK GPS)"),
     ("truth_yaw_noise", 0.0, "/ground_truth/odom heading noise, standard deviation [rad]"),
     ("seed", 0, "seed of the sensor noise"),
+    ("episode_seed", 2024, ("the evaluation set /reset_episode replays (python -m atrv_warp.evaluate --seed; 2024: "
+                            "the standard set)")),
+    ("lockstep", False, ("after each state publication, step only once a /cmd_vel has come (or lockstep_timeout "
+                         "passed): a controller in another process acts on every step, at any real_time_factor")),
+    ("lockstep_timeout", 1.0, "lockstep: step anyway after this long without a /cmd_vel [s of wall time]"),
 )
 """(name, default, description) of every parameter the node declares. The sensor noise defaults are
 :data:`~atrv_warp.sim.config.SENSOR_NOISE`, the noise the randomization presets train with."""

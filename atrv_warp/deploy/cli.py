@@ -1,0 +1,88 @@
+"""The command line of ``python -m atrv_warp.deploy POLICY.pt2 [--ros-args -p name:=value …]`` (``atrv-deploy``)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from atrv_warp.deploy.parameters import parameter_help
+
+__all__ = ["MISSING_ROS_MESSAGE", "build_parser", "main"]
+
+MISSING_ROS_MESSAGE = (
+    "ROS 2 Python packages are not installed (needed: rclpy, geometry_msgs, nav_msgs, sensor_msgs, std_msgs, "
+    "rcl_interfaces): source the robot's ROS 2 installation (Humble or later), or pip install 'atrv-deploy[ros]'")
+
+EPILOG = """\
+Topics (relative: --ros-args -r __ns:=/rover_1 runs it for one rover of several):
+  in:  scan (sensor_msgs/LaserScan), odom (nav_msgs/Odometry), imu (sensor_msgs/Imu),
+       goal_pose (geometry_msgs/PoseStamped in the odometry frame)
+  out: cmd_vel (geometry_msgs/Twist, or TwistStamped), goal_status (std_msgs/String, JSON)
+
+Examples:
+  python -m atrv_warp.export nav_deploy nav_deploy.pt2        # on the workstation
+  atrv-deploy nav_deploy.pt2                                   # on the rover
+  atrv-deploy nav_deploy.pt2 --ros-args -p use_sim_time:=true -p max_linear:=0.5
+  ros2 topic pub --once /goal_pose geometry_msgs/msg/PoseStamped \\
+      "{header: {frame_id: odom}, pose: {position: {x: 4.0, y: 2.0}}}"
+
+Parameters (--ros-args -p name:=value):
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser (its ROS parameters follow ``--ros-args``; ``--help`` lists them)."""
+    parser = argparse.ArgumentParser(prog="python -m atrv_warp.deploy",
+                                     description="Run an exported policy as a ROS 2 node: /scan, /odom, /imu and a "
+                                                 "goal in, /cmd_vel out.",
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog=EPILOG + parameter_help())
+    parser.add_argument("policy", metavar="POLICY.pt2", help="an exported twist policy (python -m atrv_warp.export)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Load and check the policy (exit 2, one line, on a file or contract it cannot serve), then run the node until
+    Ctrl-C or shutdown, which publishes a zero /cmd_vel first."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    ros_at = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv[:ros_at])
+    from atrv_warp.deploy.controller import PolicyRefused, load_deployable
+
+    try:
+        policy = load_deployable(args.policy)
+    except PolicyRefused as err:
+        print(f"{parser.prog}: error: {' '.join(str(err).split())}", file=sys.stderr)
+        return 2
+    try:
+        import rclpy
+        from rclpy.executors import ExternalShutdownException
+        from rclpy.signals import SignalHandlerOptions
+
+        from atrv_warp.deploy.node import DeployNode, NodeConfigError
+    except ImportError as err:
+        print(f"{parser.prog}: error: {MISSING_ROS_MESSAGE} ({err.name} is missing)", file=sys.stderr)
+        return 2
+    import signal
+
+    # Ctrl-C and SIGTERM end the spin here, with the context alive, so that the zero /cmd_vel still goes out
+    rclpy.init(args=["atrv-deploy", *argv[ros_at:]], signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    node = None
+    try:
+        node = DeployNode(policy, argv[ros_at:])
+        while rclpy.ok():
+            rclpy.spin_once(node, timeout_sec=0.1)  # returns often, so a signal is taken within 0.1 s
+    except NodeConfigError:
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            if rclpy.ok():
+                node.stop("shutdown")
+                node.log.info("stopped: zero /cmd_vel published")
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0

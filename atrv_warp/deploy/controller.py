@@ -1,0 +1,438 @@
+"""The deploy node's logic, without ROS: load an exported policy, read a robot's messages, decide each command.
+
+:func:`load_deployable` opens a ``.pt2`` (``python -m atrv_warp.export``) and refuses, in one line, a file or a
+contract the node cannot serve: a missing or garbage file, no contract, another contract format, a ``torque``
+policy (it commands wheel torques, not ``/cmd_vel``) or an ``arena`` observation (it observes what only the
+simulator knows). :class:`Controller` holds the latest ``/odom``, ``/imu``, ``/scan`` and goal, and
+:meth:`Controller.tick` decides, once per control period, what the rover does: drive by the policy, hold still
+(a stale, non-finite or unusable sensor; it resumes when they are valid again), or end the goal (reached, time
+limit). Messages are read by their fields alone (``msg.pose.pose.position.x``, ``msg.ranges``), so the tests and
+a robot without this package's simulator use the same code; :mod:`atrv_warp.deploy.node` is the rclpy shell.
+
+Only torch and :mod:`atrv_warp.core` are imported here (``tests/test_layers.py`` holds it).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from atrv_warp.core.observation import RobotObservation, Scan
+
+__all__ = ["EXPORT_FORMAT", "STATES", "Controller", "Deployable", "PolicyRefused", "Settings", "Tick",
+           "load_deployable", "read_imu", "read_odometry", "read_scan", "scan_geometry"]
+
+EXPORT_FORMAT = "atrv_warp.exported_policy/3"
+"""The contract format this node reads (``atrv_warp.rl.export.EXPORT_FORMAT``; ``tests/test_deploy.py`` holds the
+two equal without importing the exporter here)."""
+
+STATES = ("active", "holding", "reached", "aborted")
+"""The goal status's ``state``: driving by the policy; held still for a ``reason`` (resumes by itself); the goal
+reached (within ``goal_tolerance``); given up for a ``reason`` (time limit, shutdown, a new goal)."""
+
+
+class PolicyRefused(ValueError):
+    """A policy file or contract the node cannot serve; the message is one line naming the file and the problem."""
+
+
+@dataclass(frozen=True)
+class Deployable:
+    """An exported policy the node can run: a ``twist`` action from the ``robot`` observation."""
+
+    path: str
+    """The ``.pt2`` file."""
+    module: torch.nn.Module
+    """The exported program's module: observation (B, D) float32 -> action (B, 2) in [-1, 1]."""
+    contract: dict
+    """Its ``atrv_warp.json`` (:func:`atrv_warp.rl.export.contract`)."""
+    observation: RobotObservation
+    """Builds its input from the robot's messages (the contract's fields, sectors and action history)."""
+    scale: tuple[float, float]
+    """What an action of 1.0 commands: linear.x [m/s], angular.z [rad/s] (the trained limits)."""
+    rate_hz: float
+    """The control rate it was trained at [Hz] (1 / the simulator's ``step_dt``)."""
+
+    @property
+    def period(self) -> float:
+        """The control period [s]."""
+        return 1.0 / self.rate_hz
+
+    def describe(self) -> str:
+        """One line: what the policy observes and commands, at what rate."""
+        s = self.observation.sectors
+        scan = f", {s.count} scan sectors over [{s.edges[0]:.3f}, {s.edges[-1]:.3f}] rad" if s else ""
+        return (f"{self.path}: task {self.contract.get('task', '?')}, robot observation "
+                f"({len(self.observation.fields)},){scan}, twist action x ({self.scale[0]:g} m/s, {self.scale[1]:g} "
+                f"rad/s) at {self.rate_hz:g} Hz")
+
+
+def load_deployable(path: str | Path) -> Deployable:
+    """Open an exported policy and check that the node can serve its contract.
+
+    Raises:
+        PolicyRefused: One line naming the file and the problem: missing, not a ``torch.export`` archive, no or
+            another contract format, a ``torque`` action, an ``arena`` observation (its fields named), or a
+            contract the observation builder cannot read.
+    """
+    path = str(path)
+    if not Path(path).is_file():
+        raise PolicyRefused(f"{path}: no such policy file (export one: python -m atrv_warp.export POLICY OUT.pt2)")
+    extra = {"atrv_warp.json": ""}
+    quiet = logging.getLogger("torch.export")  # it logs a traceback of its own before raising
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL)
+    try:
+        program = torch.export.load(path, extra_files=extra)
+    except Exception as err:  # noqa: BLE001 - torch raises many kinds (zip, pickle, schema) on a file that is no archive
+        raise PolicyRefused(f"{path}: not an exported policy (torch.export.load: {type(err).__name__}: "
+                            f"{' '.join(str(err).split())[:160]})") from None
+    finally:
+        quiet.setLevel(level)
+    try:
+        contract = json.loads(extra["atrv_warp.json"])
+    except json.JSONDecodeError:
+        raise PolicyRefused(f"{path}: no atrv_warp.json contract in the file (export it with "
+                            "python -m atrv_warp.export)") from None
+    if not isinstance(contract, dict) or contract.get("format") != EXPORT_FORMAT:
+        got = contract.get("format") if isinstance(contract, dict) else None
+        raise PolicyRefused(f"{path}: contract format {got!r}, this node reads {EXPORT_FORMAT!r}: export the policy "
+                            "again (python -m atrv_warp.export POLICY OUT.pt2)")
+    action = contract.get("action") or {}
+    if action.get("kind") != "twist":
+        raise PolicyRefused(f"{path}: a {action.get('kind')!r} policy ({', '.join(action.get('names', []))} "
+                            f"[{', '.join(action.get('units', []))}]); the node commands /cmd_vel and serves 'twist' "
+                            "policies only (task nav_deploy)")
+    kind = contract.get("observation_kind", "arena")
+    if kind != "robot":
+        names = [f.get("name") for f in contract.get("observation", [])]
+        raise PolicyRefused(f"{path}: the policy observes the {kind!r} observation ({', '.join(map(str, names[:8]))}"
+                            f"{', …' if len(names) > 8 else ''}), which a robot does not publish; the node serves "
+                            "'robot' observations (task nav_deploy)")
+    try:
+        observation = RobotObservation.from_contract(contract)
+        scale = tuple(float(v) for v in action["scale"])
+        rate = float(contract["rate_hz"])
+    except (ValueError, KeyError, TypeError) as err:
+        raise PolicyRefused(f"{path}: {err}") from None
+    if len(scale) != 2 or not all(math.isfinite(v) and v > 0 for v in scale) or not (math.isfinite(rate) and rate > 0):
+        raise PolicyRefused(f"{path}: action scale {list(scale)} and rate {rate} Hz must be finite and > 0")
+    return Deployable(path, program.module(), contract, observation, scale, rate)
+
+
+# ------------------------------------------------------------------ reading messages
+
+def read_odometry(msg) -> tuple[list[float], list[float]]:
+    """A ``nav_msgs/Odometry``'s pose (x, y, z, qx, qy, qz, qw) and twist (linear x, y, z, angular x, y, z).
+
+    Raises:
+        ValueError: A non-finite value or a zero orientation quaternion (named).
+    """
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    t = msg.twist.twist
+    pose = [p.x, p.y, p.z, q.x, q.y, q.z, q.w]
+    twist = [t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z]
+    if not all(math.isfinite(v) for v in pose + twist):
+        raise ValueError(f"non-finite odometry (pose {_short(pose)}, twist {_short(twist)})")
+    if math.hypot(*pose[3:]) < 1e-6:
+        raise ValueError("odometry orientation is a zero quaternion")
+    return pose, twist
+
+
+def read_imu(msg) -> tuple[list[float], list[float]]:
+    """A ``sensor_msgs/Imu``'s orientation (x, y, z, w) and angular velocity (x, y, z) [rad/s].
+
+    Raises:
+        ValueError: A non-finite value or a zero orientation quaternion (named).
+    """
+    q, w = msg.orientation, msg.angular_velocity
+    orientation, omega = [q.x, q.y, q.z, q.w], [w.x, w.y, w.z]
+    if not all(math.isfinite(v) for v in orientation + omega):
+        raise ValueError(f"non-finite IMU (orientation {_short(orientation)}, angular velocity {_short(omega)})")
+    if math.hypot(*orientation) < 1e-6:
+        raise ValueError("IMU orientation is a zero quaternion (an IMU without orientation cannot serve the policy)")
+    return orientation, omega
+
+
+def scan_geometry(msg) -> str:
+    """A ``LaserScan``'s geometry in words: beams, angles [rad] and field of view [deg]."""
+    beams = len(msg.ranges)
+    last = msg.angle_min + msg.angle_increment * max(beams - 1, 0)
+    return (f"{beams} beams from {msg.angle_min:.3f} to {last:.3f} rad "
+            f"({math.degrees(last - msg.angle_min):.0f} deg)")
+
+
+def read_scan(msg, observation: RobotObservation) -> Scan:
+    """A ``sensor_msgs/LaserScan`` as the observation builder reads it (REP 117: ``+inf`` no return, ``-inf`` too
+    close, ``NaN`` invalid).
+
+    Raises:
+        ValueError: A geometry the policy's sectors cannot use (no beams, a non-finite or non-positive
+            ``angle_increment``, a field of view that does not reach every sector: both geometries named), or no
+            valid beam.
+    """
+    geometry = [msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max]
+    if not msg.ranges or not all(math.isfinite(v) for v in geometry) or not msg.angle_increment > 0:
+        raise ValueError(f"unusable scan geometry: {len(msg.ranges)} beams, angle_min {msg.angle_min}, "
+                         f"angle_increment {msg.angle_increment} (need > 0: counter-clockwise beams), range "
+                         f"[{msg.range_min}, {msg.range_max}] m")
+    sectors = observation.sectors
+    last = msg.angle_min + msg.angle_increment * (len(msg.ranges) - 1)
+    if sectors is not None and not sectors.covered_by(msg.angle_min, last):
+        raise ValueError(f"scan refused: its field of view ({scan_geometry(msg)}) does not cover the policy's "
+                         f"{sectors.count} sectors from {sectors.edges[0]:.3f} to {sectors.edges[-1]:.3f} rad "
+                         f"({math.degrees(sectors.edges[-1] - sectors.edges[0]):.0f} deg)")
+    ranges = torch.as_tensor(list(msg.ranges), dtype=torch.float64)
+    if bool(torch.isnan(ranges).all()):
+        raise ValueError(f"scan with no valid beam (all {len(msg.ranges)} ranges NaN)")
+    return Scan(ranges, float(msg.angle_min), float(msg.angle_increment), float(msg.range_min), float(msg.range_max))
+
+
+def _short(values: Sequence[float]) -> str:
+    return "[" + ", ".join(f"{v:.3g}" for v in values) + "]"
+
+
+# ------------------------------------------------------------------ deciding
+
+@dataclass(frozen=True)
+class Settings:
+    """What the node's parameters set (``python -m atrv_warp.deploy --help`` lists them)."""
+
+    odom_frame: str = "odom"
+    """The odometry frame: ``/odom``'s ``header.frame_id``, and the frame goals must come in."""
+    goal_tolerance: float = 1.0
+    """The goal is reached within this distance of the odometry's position [m] (the nav tasks' reach radius)."""
+    max_linear: float = 0.0
+    """Speed clamp on ``linear.x`` [m/s]; 0 = the policy's trained limit."""
+    max_angular: float = 0.0
+    """Speed clamp on ``angular.z`` [rad/s]; 0 = the policy's trained limit."""
+    stale_timeout: float = 0.5
+    """A sensor older than this (ROS time since its last message) stops the rover [s]."""
+    time_limit: float = 60.0
+    """A goal not reached in this long (ROS time) is aborted [s]; 0 = no limit."""
+
+    def __post_init__(self):
+        for name in ("goal_tolerance", "max_linear", "max_angular", "stale_timeout", "time_limit"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"parameter {name} must be a finite number >= 0, got {value!r}")
+        if not self.goal_tolerance > 0 or not self.stale_timeout > 0:
+            raise ValueError("parameters goal_tolerance and stale_timeout must be > 0")
+        if not self.odom_frame:
+            raise ValueError("parameter odom_frame must name the odometry frame (e.g. odom)")
+
+
+@dataclass
+class _Sensor:
+    topic: str
+    value: object = None
+    received: float | None = None
+    """ROS time [s] of the last message, valid or not."""
+    problem: str | None = None
+    """Why the last message cannot be used (None: it can)."""
+
+
+@dataclass(frozen=True)
+class Tick:
+    """What one control period decided."""
+
+    command: tuple[float, float] | None
+    """(linear.x [m/s], angular.z [rad/s]) to publish on ``/cmd_vel`` (zeros to stop); None: publish nothing (no
+    goal)."""
+    status: dict | None
+    """The goal status to publish (:meth:`Controller.status`), or None."""
+    log: tuple[str, ...] = ()
+    """Lines to log (each said once: at a change, not every period)."""
+
+
+class Controller:
+    """One rover's control loop: the latest messages in, one command per control period out.
+
+    Feed it the messages as they come (:meth:`on_odom`, :meth:`on_imu`, :meth:`on_scan`, :meth:`on_goal`, each with
+    the ROS time it arrived [s]; each returns a line to log or None) and call :meth:`tick` once per control period.
+    A goal drives the rover until it is reached (``goal_tolerance``, on the odometry), the ``time_limit`` passes,
+    :meth:`stop` is called or a new goal replaces it. While a sensor the policy needs is missing, older than
+    ``stale_timeout``, non-finite, or a scan unusable (no valid beam, a field of view short of the policy's
+    sectors), the rover is held still with zero commands and resumes by itself when they are valid again.
+    """
+
+    def __init__(self, policy: Deployable, settings: Settings | None = None):
+        self.policy, self.settings = policy, settings or Settings()
+        self.sensors = {"odom": _Sensor("/odom"), "imu": _Sensor("/imu")}
+        if policy.observation.sectors is not None:
+            self.sensors["scan"] = _Sensor("/scan")
+        self.limits = (self.settings.max_linear or policy.scale[0], self.settings.max_angular or policy.scale[1])
+        self.goal: tuple[float, float] | None = None
+        self.goal_time = 0.0
+        self.steps = self.clipped_steps = 0
+        self.compute_ms = float("nan")
+        self.hold_reason: str | None = None
+        k, c = policy.observation.action_history, len(policy.observation.action_columns)
+        self.history = torch.zeros(k, c, dtype=torch.float64)
+        self.last_time: float | None = None
+
+    # ---------------------------------------------------------------- messages
+    def on_odom(self, msg, now: float) -> str | None:
+        """A ``nav_msgs/Odometry``; one line to log when it becomes unusable (or another frame than the goals')."""
+        frame = msg.header.frame_id
+        if frame != self.settings.odom_frame:
+            return self._store("odom", None, now, f"/odom is in frame {frame!r}, not the odom_frame "
+                               f"{self.settings.odom_frame!r}: set -p odom_frame:={frame or '<frame>'}")
+        try:
+            return self._store("odom", read_odometry(msg), now, None)
+        except ValueError as err:
+            return self._store("odom", None, now, str(err))
+
+    def on_imu(self, msg, now: float) -> str | None:
+        """A ``sensor_msgs/Imu``; one line to log when it becomes unusable."""
+        try:
+            return self._store("imu", read_imu(msg), now, None)
+        except ValueError as err:
+            return self._store("imu", None, now, str(err))
+
+    def on_scan(self, msg, now: float) -> str | None:
+        """A ``sensor_msgs/LaserScan``; one line to log when it becomes unusable (a refused geometry names both)."""
+        if "scan" not in self.sensors:
+            return None
+        try:
+            return self._store("scan", read_scan(msg, self.policy.observation), now, None)
+        except ValueError as err:
+            return self._store("scan", None, now, str(err))
+
+    def _store(self, name: str, value, now: float, problem: str | None) -> str | None:
+        s = self.sensors[name]
+        changed = problem != s.problem
+        s.value, s.received, s.problem = value, now, problem
+        if changed and problem is not None:
+            return f"{s.topic}: {problem}; the rover holds still until it is valid"
+        if changed:
+            return f"{s.topic} valid again"
+        return None
+
+    def on_goal(self, msg, now: float) -> str:
+        """A ``geometry_msgs/PoseStamped`` goal; returns the line to log (taken, or why it is ignored)."""
+        frame, p = msg.header.frame_id, msg.pose.position
+        if frame != self.settings.odom_frame:
+            return (f"goal ignored: it is in frame {frame!r}; send it in the odometry frame "
+                    f"{self.settings.odom_frame!r} (in RViz, set the Fixed Frame to {self.settings.odom_frame!r} "
+                    "before using 2D Goal Pose)")
+        if not (math.isfinite(p.x) and math.isfinite(p.y)):
+            return f"goal ignored: non-finite position ({p.x}, {p.y})"
+        self.goal, self.goal_time = (float(p.x), float(p.y)), now
+        self.steps = self.clipped_steps = 0
+        self.hold_reason = None
+        self.history.zero_()
+        return f"goal ({p.x:.2f}, {p.y:.2f}) in {frame}: driving"
+
+    # ---------------------------------------------------------------- the control period
+    def status(self, state: str, reason: str = "") -> dict:
+        """The goal status: ``state`` (:data:`STATES`), ``reason``, ``goal`` [m], ``distance`` to it on the
+        odometry [m], ``steps`` driven by the policy, ``clipped_steps`` (steps a speed clamp clipped),
+        ``compute_ms`` (the last step's observation and policy [ms])."""
+        odom = self.sensors["odom"].value
+        distance = math.hypot(self.goal[0] - odom[0][0], self.goal[1] - odom[0][1]) if odom and self.goal else None
+        return {"state": state, "reason": reason, "goal": list(self.goal) if self.goal else None,
+                "distance": None if distance is None else round(distance, 4), "steps": self.steps,
+                "clipped_steps": self.clipped_steps, "compute_ms": None if math.isnan(self.compute_ms)
+                else round(self.compute_ms, 4)}
+
+    def tick(self, now: float) -> Tick:
+        """Decide this control period's command at ROS time ``now`` [s]."""
+        if self.last_time is not None and now < self.last_time:  # time went back (a simulator restarted)
+            for s in self.sensors.values():
+                s.value = s.received = s.problem = None
+        self.last_time = now
+        if self.goal is None:
+            return Tick(None, None)
+        limit = self.settings.time_limit
+        if limit and now - self.goal_time > limit:
+            return self._end("aborted", f"time limit: not reached in {limit:g} s")
+        reasons, keys, quiet = [], [], True  # quiet: every reason was logged when its message came
+        for s in self.sensors.values():
+            if s.received is None:
+                reasons.append(f"no {s.topic} yet")
+                keys.append(reasons[-1])
+                quiet = False
+            elif now - s.received > self.settings.stale_timeout:
+                reasons.append(f"{s.topic} stale ({now - s.received:.2f} s > {self.settings.stale_timeout:g} s)")
+                keys.append(f"{s.topic} stale")
+                quiet = False
+            elif s.problem is not None:
+                reasons.append(f"{s.topic}: {s.problem}")
+                keys.append(reasons[-1])
+        if reasons:
+            return self._hold("; ".join(reasons), "; ".join(keys), quiet)
+        status = self.status("active")
+        if status["distance"] < self.settings.goal_tolerance:
+            return self._end("reached", f"within {self.settings.goal_tolerance:g} m")
+        start = time.perf_counter()
+        try:
+            action = self._act()
+        except ValueError as err:
+            return self._hold(f"observation: {err}", "observation")
+        self.compute_ms = 1e3 * (time.perf_counter() - start)
+        if not all(math.isfinite(a) for a in action):
+            return self._hold(f"the policy gave a non-finite action {action}", "non-finite action")
+        command = [a * k for a, k in zip(action, self.policy.scale)]
+        clipped = [max(-m, min(m, c)) for c, m in zip(command, self.limits)]
+        self.steps += 1
+        self.clipped_steps += clipped != command
+        self._remember(clipped)
+        log = ("resumed: driving by the policy",) if self.hold_reason else ()
+        self.hold_reason = None
+        return Tick((clipped[0], clipped[1]), self.status("active"), log)
+
+    def stop(self, reason: str) -> Tick:
+        """End the goal now (e.g. ``"shutdown"``): zero command and an aborted status, or nothing without a goal."""
+        if self.goal is None:
+            return Tick((0.0, 0.0), None)
+        return self._end("aborted", reason)
+
+    def observation(self) -> torch.Tensor:
+        """The policy's input (D,) from the latest messages, the goal and the commands sent (the contract's fields,
+        in order: ``policy.observation.names``).
+
+        Raises:
+            ValueError: No goal, a sensor with no usable message yet, or an input the builder refuses (named).
+        """
+        if self.goal is None:
+            raise ValueError("no goal")
+        missing = [s.topic for s in self.sensors.values() if s.value is None]
+        if missing:
+            raise ValueError(f"no usable message on {', '.join(missing)}")
+        (pose, twist), (q, omega) = self.sensors["odom"].value, self.sensors["imu"].value
+        scan = self.sensors["scan"].value if "scan" in self.sensors else None
+        return self.policy.observation(odom_pose=pose, odom_twist=twist, imu_orientation=q, imu_angular_velocity=omega,
+                                       goal=list(self.goal), scan=scan,
+                                       last_actions=self.history if self.history.numel() else None)
+
+    def _act(self) -> list[float]:
+        obs = self.observation()
+        with torch.no_grad():
+            return [float(a) for a in self.policy.module(obs[None])[0]]
+
+    def _remember(self, command: Sequence[float]) -> None:
+        """The command sent, as the action the policy observes next (in [-1, 1], newest first)."""
+        if self.history.numel():
+            action = torch.tensor([c / k for c, k in zip(command, self.policy.scale)], dtype=torch.float64)
+            self.history = torch.cat([action.clamp(-1.0, 1.0)[None], self.history[:-1]])
+
+    def _hold(self, reason: str, key: str, quiet: bool = False) -> Tick:
+        """Zero command, status ``holding``; one line when the reason (``key``: it without its figures) changes,
+        unless ``quiet`` (the sensor's own line said it)."""
+        log = () if key == self.hold_reason or quiet else (f"holding still: {reason}",)
+        self.hold_reason = key
+        self._remember((0.0, 0.0))
+        return Tick((0.0, 0.0), self.status("holding", reason), log)
+
+    def _end(self, state: str, reason: str) -> Tick:
+        status = self.status(state, reason)
+        self.goal, self.hold_reason = None, None
+        line = f"goal {state}: {reason} ({status['steps']} steps, {status['clipped_steps']} clipped)"
+        return Tick((0.0, 0.0), status, (line,))

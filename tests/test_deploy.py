@@ -1,0 +1,294 @@
+"""The deploy node's message handling and decisions, without ROS: messages are read by their fields alone, so plain
+namespaces stand for them here.
+
+This file also runs in the slim install's fresh virtualenv (``tests/test_deploy_install.py``), where only torch and
+``atrv_warp.core`` / ``atrv_warp.deploy`` exist: its imports are those, and the tests that need the simulator's
+packages skip there. The policy file comes from ``ATRV_DEPLOY_TEST_POLICY`` when set (written by the install test),
+else it is made here from the ``nav_deploy`` task's contract.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace as NS
+
+import pytest
+import torch
+
+from atrv_warp.deploy.controller import (
+    EXPORT_FORMAT,
+    Controller,
+    PolicyRefused,
+    Settings,
+    load_deployable,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+HEAVY = ("warp", "newton", "torchrl", "tensordict", "rerun")
+
+
+class _Tiny(torch.nn.Module):
+    def __init__(self, dim: int):
+        super().__init__()
+        self.linear = torch.nn.Linear(dim, 2)
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        return torch.tanh(self.linear(observation))
+
+
+def write_policy(path: Path, contract: dict) -> Path:
+    """A tiny exported policy with ``contract`` (random weights, seeded)."""
+    torch.manual_seed(0)
+    net = _Tiny(len(contract["observation"])).eval()
+    program = torch.export.export(net, (torch.zeros(2, net.linear.in_features),),
+                                  dynamic_shapes=({0: torch.export.Dim("batch")},))
+    torch.export.save(program, str(path), extra_files={"atrv_warp.json": json.dumps(contract)})
+    return path
+
+
+def task_contract(task: str = "nav_deploy") -> dict:
+    """An exported contract of ``task`` without exporting a trained policy (needs the package's task spec)."""
+    spec = pytest.importorskip("atrv_warp.task.spec")
+    config = pytest.importorskip("atrv_warp.task.config")
+    contract = spec.policy_contract(config.get_task(task))
+    return {"format": EXPORT_FORMAT, "task": task, **contract, "step_dt": 0.05, "rate_hz": 20.0}
+
+
+@pytest.fixture(scope="module")
+def policy_file(tmp_path_factory) -> Path:
+    given = os.environ.get("ATRV_DEPLOY_TEST_POLICY")
+    if given:
+        return Path(given)
+    return write_policy(tmp_path_factory.mktemp("deploy") / "tiny.pt2", task_contract())
+
+
+@pytest.fixture
+def policy(policy_file):
+    return load_deployable(policy_file)
+
+
+# ------------------------------------------------------------------ messages as plain namespaces
+
+def v3(x=0.0, y=0.0, z=0.0):
+    return NS(x=x, y=y, z=z)
+
+
+def odom_msg(x=0.0, y=0.0, yaw=0.0, v=0.0, w=0.0, frame="odom"):
+    q = NS(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
+    return NS(header=NS(frame_id=frame), pose=NS(pose=NS(position=v3(x, y), orientation=q)),
+              twist=NS(twist=NS(linear=v3(v), angular=v3(0.0, 0.0, w))))
+
+
+def imu_msg(yaw_rate=0.0, q=(0.0, 0.0, 0.0, 1.0)):
+    return NS(orientation=NS(x=q[0], y=q[1], z=q[2], w=q[3]), angular_velocity=v3(0.0, 0.0, yaw_rate))
+
+
+def scan_msg(ranges, angle_min, angle_increment, range_min=0.1, range_max=20.0):
+    return NS(ranges=list(ranges), angle_min=angle_min, angle_increment=angle_increment, range_min=range_min,
+              range_max=range_max)
+
+
+def goal_msg(x, y, frame="odom"):
+    return NS(header=NS(frame_id=frame), pose=NS(position=v3(x, y)))
+
+
+def fov_scan(beams, fov, seed=0):
+    """``beams`` ranges over ``fov`` [rad] centred on +x, with +inf, -inf and NaN beams among them."""
+    g = torch.Generator().manual_seed(seed)
+    r = (0.05 + 8.0 * torch.rand(beams, generator=g, dtype=torch.float64)).tolist()
+    for i in range(0, beams, 7):
+        r[i] = math.inf
+    for i in range(3, beams, 11):
+        r[i] = -math.inf
+    for i in range(5, beams, 13):
+        r[i] = math.nan
+    step = fov / beams if fov >= 2 * math.pi - 1e-9 else fov / (beams - 1)
+    return scan_msg(r, -fov / 2 if fov < 2 * math.pi - 1e-9 else -math.pi, step)
+
+
+def direct_sectors(msg, edges, clip):
+    """Each sector's reading from its definition, beam by beam in plain Python (REP 117)."""
+    out = []
+    for lo, hi in itertools.pairwise(edges):
+        best = None
+        for i, r in enumerate(msg.ranges):
+            a = msg.angle_min + i * msg.angle_increment
+            if not lo <= a < hi or math.isnan(r):
+                continue
+            reading = 1.0 if r > msg.range_max else 0.0 if r < msg.range_min else min(r, clip) / clip
+            best = reading if best is None else min(best, reading)
+        out.append(0.0 if best is None else best)
+    return out
+
+
+def drive_ready(c: Controller, now=0.0, scan=None):
+    assert c.on_odom(odom_msg(), now) is None
+    assert c.on_imu(imu_msg(), now) is None
+    if scan is not None:
+        c.on_scan(scan, now)
+    assert c.on_goal(goal_msg(6.0, 2.0), now).startswith("goal (6.00, 2.00) in odom")
+
+
+# ------------------------------------------------------------------ tests
+
+@pytest.mark.parametrize(("beams", "fov_deg"), [(1081, 270.0), (720, 360.0), (64, 180.0)])
+def test_a_scan_of_another_geometry_reads_as_its_sectors(policy, beams, fov_deg):
+    c = Controller(policy)
+    msg = fov_scan(beams, math.radians(fov_deg))
+    drive_ready(c, scan=msg)
+    assert c.sensors["scan"].problem is None
+    obs = c.observation()
+    names = policy.observation.names
+    got = [float(obs[names.index(f"scan_{k}")]) for k in range(policy.observation.sectors.count)]
+    sectors = policy.observation.sectors
+    want = direct_sectors(msg, sectors.edges, sectors.clip)
+    assert got == pytest.approx(want, abs=1e-6)
+    assert 0.0 in got or min(got) < 1.0  # the ranges reach into the clip: the check compares real readings
+    tick = c.tick(0.05)
+    assert tick.status["state"] == "active" and tick.command is not None
+    assert abs(tick.command[0]) <= policy.scale[0] and abs(tick.command[1]) <= policy.scale[1]
+
+
+def test_a_scan_short_of_the_sectors_is_refused_naming_both_and_the_rover_holds(policy):
+    c = Controller(policy)
+    narrow = fov_scan(91, math.radians(90.0))
+    drive_ready(c)
+    line = c.on_scan(narrow, 0.0)
+    assert "91 beams" in line and "90 deg" in line and "16 sectors" in line and "183 deg" in line, line
+    assert c.on_scan(narrow, 0.02) is None  # one line, at the first message
+    tick = c.tick(0.05)
+    assert tick.command == (0.0, 0.0) and tick.status["state"] == "holding"
+    assert tick.log == ()  # the scan's own line said it
+    assert c.on_scan(fov_scan(181, math.pi), 0.06) == "/scan valid again"
+    tick = c.tick(0.1)
+    assert tick.status["state"] == "active" and tick.log == ("resumed: driving by the policy",)
+
+
+def test_non_finite_odometry_or_imu_and_a_scan_without_valid_beam_stop_until_valid(policy):
+    c = Controller(policy)
+    drive_ready(c, scan=fov_scan(181, math.pi))
+    assert c.tick(0.05).status["state"] == "active"
+    assert "non-finite odometry" in c.on_odom(odom_msg(x=math.nan), 0.06)
+    t = c.tick(0.1)
+    assert t.command == (0.0, 0.0) and "non-finite odometry" in t.status["reason"]
+    assert c.on_odom(odom_msg(), 0.11) == "/odom valid again"
+    assert c.tick(0.15).status["state"] == "active"
+    assert "non-finite IMU" in c.on_imu(imu_msg(yaw_rate=math.inf), 0.16)
+    assert c.tick(0.2).command == (0.0, 0.0)
+    c.on_imu(imu_msg(), 0.21)
+    assert "no valid beam" in c.on_scan(scan_msg([math.nan] * 181, -math.pi / 2, math.pi / 180), 0.21)
+    assert c.tick(0.25).status["state"] == "holding"
+    c.on_scan(fov_scan(181, math.pi), 0.26)
+    assert c.tick(0.3).status["state"] == "active"
+
+
+def test_a_stale_sensor_stops_the_rover_on_ros_time(policy):
+    c = Controller(policy, Settings(stale_timeout=0.5))
+    drive_ready(c, scan=fov_scan(181, math.pi))
+    assert c.tick(0.4).status["state"] == "active"
+    c.on_odom(odom_msg(), 0.6)
+    c.on_scan(fov_scan(181, math.pi), 0.6)
+    t = c.tick(0.6)  # the IMU's last message came at 0.0
+    assert t.command == (0.0, 0.0) and t.status["reason"].startswith("/imu stale (0.60 s > 0.5 s)")
+    assert t.log == ("holding still: /imu stale (0.60 s > 0.5 s)",)
+    assert c.tick(0.65).log == ()  # said once
+    c.on_imu(imu_msg(), 0.66)
+    assert c.tick(0.7).status["state"] == "active"
+
+
+def test_goals_in_another_frame_are_ignored_and_the_goal_ends_reached_or_at_the_time_limit(policy):
+    c = Controller(policy, Settings(goal_tolerance=1.0, time_limit=2.0))
+    c.on_odom(odom_msg(), 0.0)
+    c.on_imu(imu_msg(), 0.0)
+    c.on_scan(fov_scan(181, math.pi), 0.0)
+    line = c.on_goal(goal_msg(3.0, 0.0, frame="map"), 0.0)
+    assert "frame 'map'" in line and "'odom'" in line and "Fixed Frame" in line
+    assert c.tick(0.05) == c.tick(0.1) and c.tick(0.15).command is None  # no goal: nothing published
+    c.on_goal(goal_msg(3.0, 0.0), 0.2)
+    assert c.tick(0.25).status["state"] == "active"
+    c.on_odom(odom_msg(x=2.5), 0.3)
+    t = c.tick(0.3)
+    assert t.command == (0.0, 0.0) and t.status["state"] == "reached" and c.goal is None
+    assert c.tick(0.35).command is None
+    c.on_goal(goal_msg(30.0, 0.0), 0.4)
+    for k in range(1, 40):
+        now = 0.4 + 0.05 * k
+        c.on_odom(odom_msg(x=2.5), now)
+        c.on_imu(imu_msg(), now)
+        c.on_scan(fov_scan(181, math.pi), now)
+        c.tick(now)
+    t = c.tick(2.45)
+    assert t.status["state"] == "aborted" and t.status["reason"].startswith("time limit") and t.command == (0.0, 0.0)
+    stop = Controller(policy).stop("shutdown")
+    assert stop.command == (0.0, 0.0) and stop.status is None
+
+
+def test_a_speed_clamp_clips_the_command_and_counts_the_clipped_steps(policy):
+    c = Controller(policy, Settings(max_linear=1e-3, max_angular=1e-3))
+    drive_ready(c, scan=fov_scan(181, math.pi))
+    for k in range(1, 6):
+        t = c.tick(0.05 * k)
+        assert all(abs(v) <= 1e-3 + 1e-12 for v in t.command)
+    assert t.status["clipped_steps"] == 5 and t.status["steps"] == 5
+    # the commands sent are what the policy observes next, newest first
+    history = c.observation()[-6:].view(3, 2)
+    assert torch.allclose(history, torch.tensor([t.command] * 3, dtype=torch.float32) / torch.tensor(policy.scale),
+                          atol=1e-7)
+
+
+def test_bad_policy_files_are_refused_in_one_line(tmp_path, policy_file):
+    garbage = tmp_path / "garbage.pt2"
+    garbage.write_bytes(b"not a policy")
+    with pytest.raises(PolicyRefused, match="no such policy file"):
+        load_deployable(tmp_path / "missing.pt2")
+    with pytest.raises(PolicyRefused, match="not an exported policy"):
+        load_deployable(garbage)
+    contract = json.loads(json.dumps(load_deployable(policy_file).contract))
+    torque = dict(contract, action=dict(contract["action"], kind="torque", names=["left", "right"],
+                                        units=["N·m", "N·m"]))
+    with pytest.raises(PolicyRefused, match=r"a 'torque' policy \(left, right \[N·m, N·m\]\)"):
+        load_deployable(write_policy(tmp_path / "torque.pt2", torque))
+    arena = dict(contract, observation_kind="arena",
+                 observation=[{"name": "target_x", "low": -1.0, "high": 1.0}] + contract["observation"][1:])
+    with pytest.raises(PolicyRefused, match=r"observes the 'arena' observation \(target_x, sin_goal_bearing"):
+        load_deployable(write_policy(tmp_path / "arena.pt2", arena))
+    with pytest.raises(PolicyRefused, match="contract format 'atrv_warp.exported_policy/2'"):
+        load_deployable(write_policy(tmp_path / "old.pt2", dict(contract, format="atrv_warp.exported_policy/2")))
+
+
+def test_the_command_line_refuses_a_bad_policy_before_ros_starts(tmp_path):
+    garbage = tmp_path / "garbage.pt2"
+    garbage.write_bytes(b"\x00" * 64)
+    proc = subprocess.run([sys.executable, "-m", "atrv_warp.deploy", str(garbage)], capture_output=True, text=True,
+                          timeout=120, check=False)
+    assert proc.returncode == 2, proc.stderr
+    line = (f"python -m atrv_warp.deploy: error: {garbage}: not an exported policy (torch.export.load: BadZipFile: "
+            "File is not a zip file)")
+    assert proc.stderr.strip().splitlines() == [line], proc.stderr
+    assert proc.stdout == ""
+
+
+def test_the_deploy_node_loads_nothing_of_the_simulator():
+    """In a fresh interpreter: the command line, the controller and (where rclpy is) the node import none of
+    Warp, Newton, TorchRL, TensorDict or Rerun."""
+    modules = ["atrv_warp.deploy", "atrv_warp.deploy.cli", "atrv_warp.deploy.controller"]
+    try:
+        import rclpy  # noqa: F401
+
+        modules.append("atrv_warp.deploy.node")
+    except ImportError:
+        pass
+    code = f"import sys\nimport {', '.join(modules)}\nprint(sorted(m for m in {HEAVY!r} if m in sys.modules))\n"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def test_the_contract_format_is_the_exporters():
+    export = pytest.importorskip("atrv_warp.rl.export")
+    assert export.EXPORT_FORMAT == EXPORT_FORMAT

@@ -1,0 +1,160 @@
+"""The deploy node live over ROS 2, in its own process: a stale sensor and shutdown stop the rover, and closed-loop
+episodes with the simulator node playing the robot (``benchmarks/deploy_closed_loop.py``)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import random
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="ROS 2 extra not installed: pip install -e '.[ros]'")
+from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import Imu, LaserScan
+from std_msgs.msg import String
+from test_deploy import task_contract, write_policy
+
+ROOT = Path(__file__).resolve().parent.parent
+NS = "/rover_1"
+
+
+@pytest.fixture(scope="module")
+def ros_env():
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(random.randint(1, 100)),
+               PYTHONUNBUFFERED="1")
+    old = {k: os.environ.get(k) for k in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID")}
+    os.environ.update({k: env[k] for k in old})
+    rclpy.init()
+    yield env
+    rclpy.try_shutdown()
+    for k, v in old.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v
+
+
+class Robot:
+    """A stand-in robot under :data:`NS`: publishes odometry, IMU and a 181-beam scan; records what the node says."""
+
+    def __init__(self):
+        self.node = rclpy.create_node("fake_rover")
+        self.cmds, self.status = [], []
+        self.odom = self.node.create_publisher(Odometry, f"{NS}/odom", 10)
+        self.imu = self.node.create_publisher(Imu, f"{NS}/imu", 10)
+        self.scan = self.node.create_publisher(LaserScan, f"{NS}/scan", 10)
+        self.goal = self.node.create_publisher(PoseStamped, f"{NS}/goal_pose", 10)
+        self.node.create_subscription(Twist, f"{NS}/cmd_vel", lambda m: self.cmds.append(
+            (time.monotonic(), m.linear.x, m.angular.z)), 100)
+        self.node.create_subscription(String, f"{NS}/goal_status", lambda m: self.status.append(json.loads(m.data)), 100)
+        self.imu_on = True
+
+    def publish(self):
+        odom = Odometry()
+        odom.header.frame_id = "odom"
+        odom.pose.pose.orientation.w = 1.0
+        self.odom.publish(odom)
+        if self.imu_on:
+            imu = Imu()
+            imu.orientation.w = 1.0
+            self.imu.publish(imu)
+        scan = LaserScan()
+        scan.angle_min, scan.angle_increment = -math.pi / 2, math.pi / 180
+        scan.range_min, scan.range_max = 0.1, 20.0
+        scan.ranges = [3.0] * 181
+        self.scan.publish(scan)
+
+    def run(self, seconds, until=None):
+        """Publish at 20 Hz for ``seconds`` (or until ``until()``); returns whether ``until`` came true."""
+        end, due = time.monotonic() + seconds, 0.0
+        while time.monotonic() < end:
+            if time.monotonic() >= due:
+                self.publish()
+                due = time.monotonic() + 0.05
+            rclpy.spin_once(self.node, timeout_sec=0.01)
+            if until is not None and until():
+                return True
+        return until is None
+
+
+@pytest.mark.slow  # a live ROS 2 node
+def test_a_stale_sensor_and_shutdown_stop_the_rover_in_a_namespace(ros_env, tmp_path):
+    policy = write_policy(tmp_path / "tiny.pt2", task_contract())
+    proc = subprocess.Popen([sys.executable, "-m", "atrv_warp.deploy", str(policy), "--ros-args", "-r",
+                             f"__ns:={NS}", "-p", "stale_timeout:=0.5"], env=ros_env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    robot = Robot()
+    try:
+        assert robot.run(120, lambda: robot.goal.get_subscription_count() > 0), "the node did not subscribe"
+        goal = PoseStamped()
+        goal.header.frame_id = "odom"
+        goal.pose.position.x, goal.pose.position.y = 20.0, 5.0
+        robot.goal.publish(goal)
+        assert robot.run(20, lambda: any(s["state"] == "active" for s in robot.status)), robot.status[-3:]
+        robot.run(0.5)
+        assert any(abs(v) + abs(w) > 0 for _, v, w in robot.cmds[-5:])  # the random policy drives
+        rate = sum(1 for t, _, _ in robot.cmds if t > time.monotonic() - 0.5) / 0.5
+        assert 15 <= rate <= 25, rate  # the policy's 20 Hz
+        robot.imu_on = False
+        silenced = time.monotonic()
+        assert robot.run(5, lambda: robot.status[-1]["state"] == "holding"), robot.status[-3:]
+        assert robot.status[-1]["reason"].startswith("/imu stale"), robot.status[-1]
+        stopped = next(t for t, v, w in robot.cmds if t > silenced and v == 0.0 and w == 0.0)
+        assert stopped - silenced < 0.5 + 0.3, stopped - silenced  # the timeout, a period and delivery
+        robot.run(0.5)
+        assert all(v == 0.0 and w == 0.0 for t, v, w in robot.cmds if t > stopped)
+        robot.imu_on = True
+        assert robot.run(5, lambda: robot.status[-1]["state"] == "active")
+        robot.run(0.3)
+        assert abs(robot.cmds[-1][1]) + abs(robot.cmds[-1][2]) > 0
+        proc.send_signal(2)  # Ctrl-C while it drives
+        interrupted = time.monotonic()
+        robot.run(15, lambda: proc.poll() is not None)
+        exit_s = time.monotonic() - interrupted
+        robot.run(0.3)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        out = proc.communicate(timeout=30)[0]
+        robot.node.destroy_node()
+    assert proc.returncode == 0, out[-2000:]
+    print(f"exited {exit_s:.2f} s after Ctrl-C")
+    assert robot.cmds[-1][1:] == (0.0, 0.0), robot.cmds[-3:]
+    assert robot.status[-1]["state"] == "aborted" and robot.status[-1]["reason"] == "shutdown", robot.status[-1]
+    assert out.count("holding still: /imu stale") == 1 and "resumed: driving by the policy" in out, out[-2000:]
+    assert f"on {NS}/cmd_vel" in out and f"{NS}/goal_pose" in out
+
+
+@pytest.mark.slow  # two live ROS 2 nodes and the simulator
+def test_closed_loop_episodes_over_ros_end_as_evaluate_judges_them(tmp_path):
+    """Ten seeded nav_deploy episodes through ROS 2 (an untrained policy: how they end is not the point; that they
+    run, end by the environment's rules, and the node reports its compute time, is)."""
+    from atrv_warp.policy import make_actor, save_policy
+    from atrv_warp.task.config import get_task
+    from atrv_warp.task.spec import END_REASONS, observation_fields
+
+    task = get_task("nav_deploy")
+    actor = make_actor(width=32, depth=1, obs_dim=len(observation_fields(task)))
+    save_policy(actor, tmp_path / "random.pt", width=32, depth=1, meta={"task": "nav_deploy"})
+    out = tmp_path / "closed_loop.json"
+    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(101, 200)))
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "deploy_closed_loop.py"), str(tmp_path /
+                          "random.pt"), "--episodes", "10", "--out", str(out)], capture_output=True, text=True,
+                          timeout=900, env=env, check=False)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    result = json.loads(out.read_text())
+    rows = result["episodes_detail"]
+    assert [r["episode"] for r in rows] == list(range(10))
+    assert all(r["end_reason"] in END_REASONS and r["end_reason"] != "running" for r in rows), rows
+    assert all(0 < r["steps"] <= task.max_steps for r in rows), rows
+    assert all(r["node_state"] in ("active", "holding", "reached", "aborted") for r in rows), rows
+    assert result["compute_ms"]["steps"] >= sum(r["steps"] for r in rows) // 2
+    assert 0 < result["compute_ms"]["p50"] <= result["compute_ms"]["p99"] < 1000
+    assert result["ci95"][0] <= result["difference"] <= result["ci95"][1]
