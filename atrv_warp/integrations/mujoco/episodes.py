@@ -202,5 +202,5 @@ def run_twin_episodes(policy: DeployablePolicy, episodes: TwinEpisodes, *, frict
         reasons[i], returns[i], steps[i] = run_twin_episode(policy, twin, episode, task)
         if on_episode is not None:
             on_episode(i, int(reasons[i]))
-    return EpisodeRecord(reasons, returns, steps, {"friction": torch.full((n,), float(mu or 0.0))})
+    return EpisodeRecord(reasons, returns, steps, {"friction": torch.full((n,), float(mu or 0.0), dtype=torch.float64)})
 
