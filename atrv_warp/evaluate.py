@@ -2,7 +2,7 @@
 
 CHECKPOINT is a ``best_policy.pt``, a training ``checkpoint.pt``, or omitted for the policy
 shipped with the package. Reports success rate, mean return, mean steps and the failure
-breakdown (wall, flip, timeout), optionally as JSON.
+breakdown (wall, flip, timeout, obstacle), optionally as JSON.
 
 Examples::
 
@@ -17,16 +17,162 @@ Examples::
     python -m atrv_warp.evaluate --episodes 4 --serve --real-time   # live web viewer on 127.0.0.1
     python -m atrv_warp.evaluate --task nav --episodes 64 --video nav.mp4   # the first 4 episodes, top down
     python -m atrv_warp.evaluate --task nav --episodes 4 --video nav.mp4 --video-follow 10   # a camera on each rover
+    python -m atrv_warp.evaluate nav_deploy --engine mujoco --episodes 20   # the same episodes in the MuJoCo twin
+    python -m atrv_warp.evaluate run.pt2 --engine mujoco --friction 0.8     # an exported policy, the twin at µ 0.8
+
+``--engine mujoco`` (the ``mujoco`` extra) drives a deployable policy (``/cmd_vel`` actions from the robot
+observation) through ``atrv_warp.integrations.mujoco``'s twin of each episode's world: the same worlds, starts and
+goals, the observation built by the light core's ``RobotObservation`` as on a robot. The library function is
+:func:`evaluate_policy`.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 from atrv_warp.runtime import add_verbose_argument, device_summary, error_line, set_verbose
 
-__all__ = ["baseline_main", "build_parser", "main"]
+__all__ = ["ENGINES", "Evaluation", "baseline_main", "build_parser", "evaluate_policy", "main"]
+
+ENGINES = ("ours", "mujoco")
+"""Engines an evaluation runs on: ``ours`` (the simulator that trains the policies) and ``mujoco`` (the MuJoCo
+twin of the nav world, ``atrv_warp.integrations.mujoco``; the ``mujoco`` extra)."""
+MUJOCO_EXTRA = "pip install 'atrv_warp[mujoco]'"
+"""How to install what ``--engine mujoco`` needs."""
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """What :func:`evaluate_policy` measured."""
+
+    name: str
+    """The policy's file or shipped name (or the scripted baseline's label)."""
+    task: str
+    seed: int
+    engine: str
+    record: object
+    """Each episode's end (:class:`~atrv_warp.task.evaluation.EpisodeRecord`)."""
+    extra: dict = field(default_factory=dict)
+    """Figures beside the summary, as the JSON gets them (the randomization and its success-by-bin table; the
+    twin's engine and friction)."""
+
+    @property
+    def result(self):
+        """The summary (:class:`~atrv_warp.task.evaluation.EvalResult`)."""
+        return self.record.summary()
+
+
+def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: str | None = None,
+                    episodes: int = 1000, seed: int | None = None, baseline: bool = False,
+                    randomization: str = "none", friction: float | None = None, sim_config: str | None = None,
+                    device: str = "cpu", attach: Callable | None = None) -> Evaluation:
+    """Run a policy once on each of the first ``episodes`` episodes of evaluation set ``seed``.
+
+    Args:
+        policy: A policy file (``.pt``, a training ``checkpoint.pt``; ``.pt2`` on ``mujoco``) or a shipped policy's
+            name; ``None``: the task's shipped policy (``reach``; ``nav_deploy`` on ``mujoco``).
+        engine: One of :data:`ENGINES`.
+        task: The task (default: the policy's own; ``reach`` for the baseline).
+        episodes: How many episodes (one world each on ``ours``).
+        seed: The evaluation set (default :data:`~atrv_warp.task.evaluation.EVAL_SEED`, the test set).
+        baseline: Evaluate the scripted baseline instead (``ours`` only).
+        randomization: A randomization preset (``ours`` only).
+        friction: The twin's Coulomb µ (``mujoco`` only; default the nominal µ).
+        sim_config: A simulator-config TOML (``ours`` only).
+        device: The simulation device (``ours``).
+        attach: ``attach(env)`` returns an ``on_step(env, tensordict)`` callback or ``None`` (recorders; ``ours``).
+
+    Raises:
+        ValueError: One line naming the problem: an unknown engine, task or preset; a policy that cannot be loaded
+            (a missing file, or a shipped policy not trained yet: naming the command that trains it) or does not fit
+            the task; an option the engine does not take; a policy the twin cannot drive (not deployable); MuJoCo
+            not installed for ``mujoco``.
+    """
+    from atrv_warp.task.config import TASK_VARIANTS
+    from atrv_warp.task.evaluation import EVAL_SEED
+
+    if engine not in ENGINES:
+        raise ValueError(f"unknown engine {engine!r}; known: {', '.join(ENGINES)}")
+    if task is not None and task not in TASK_VARIANTS:
+        raise ValueError(f"unknown task {task!r}; known: {sorted(TASK_VARIANTS)}")
+    if episodes < 1:
+        raise ValueError(f"need at least 1 episode, got {episodes}")
+    seed = EVAL_SEED if seed is None else seed
+    if engine == "mujoco":
+        return _evaluate_twin(policy, task=task, episodes=episodes, seed=seed, friction=friction,
+                              baseline=baseline, randomization=randomization, sim_config=sim_config)
+    if friction is not None:
+        raise ValueError("friction sets the MuJoCo twin's µ (engine mujoco); our simulator's comes from the rover "
+                         "config or the randomization")
+    return _evaluate_ours(policy, task=task, episodes=episodes, seed=seed, baseline=baseline,
+                          randomization=randomization, sim_config=sim_config, device=device, attach=attach)
+
+
+def _load(path: str, task: str | None):
+    """(policy module, trained-on task) of a saved policy, refused when it does not fit ``task``."""
+    from atrv_warp.policy import load_policy, policy_task
+
+    try:
+        trained_on = policy_task(path)
+        # a policy that commands or observes another kind than the task's is refused first, naming both
+        module = load_policy(path, task=task or trained_on)
+    except (FileNotFoundError, ValueError) as err:  # FileFormatError is a ValueError
+        raise ValueError(f"cannot load policy: {err}") from None
+    if task is not None and task != trained_on:
+        raise ValueError(f"{path} was trained on task {trained_on!r}, not {task!r}")
+    return module, trained_on
+
+
+def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim_config, device, attach) -> Evaluation:
+    from atrv_warp.policy import SHIPPED_POLICIES
+    from atrv_warp.task.evaluation import run_episodes, success_by_bin
+    from atrv_warp.task.randomization import get_randomization
+
+    shift = get_randomization(randomization)
+    if baseline:
+        from atrv_warp.task.baseline import scripted_policy
+
+        task = task or "reach"
+        module, name = scripted_policy(), f"scripted baseline ({task})"
+    else:
+        name = policy or (task if task in SHIPPED_POLICIES else "reach")  # the task's shipped policy
+        module, task = _load(name, task)
+    if sim_config:
+        from atrv_warp.sim.config import load_sim_config
+
+        load_sim_config(sim_config)  # a bad file stops here, before the simulator is built
+    from atrv_warp.task.env import ATRVjrEnv
+
+    env = ATRVjrEnv(episodes, device=device, task=task, randomization=shift, sim_config=sim_config)
+    module = module.to(env.device)  # loaded on the CPU; the env's observations live on its device
+    record = run_episodes(module, env, seed=seed, on_step=attach(env) if attach is not None else None)
+    extra = {"randomization": randomization, "success_by_bin": success_by_bin(record)} if shift.enabled else {}
+    return Evaluation(str(name), task, seed, "ours", record, extra)
+
+
+def _evaluate_twin(policy, *, task, episodes, seed, friction, baseline, randomization, sim_config) -> Evaluation:
+    for option, given in (("baseline", baseline), ("randomization", randomization != "none"),
+                          ("sim_config", sim_config)):
+        if given:
+            raise ValueError(f"engine mujoco drives a deployable policy on the nominal twin; {option} is for engine "
+                             "ours")
+    try:
+        from atrv_warp.integrations.mujoco import DeployablePolicy, draw_episodes, run_twin_episodes
+    except ImportError as err:
+        raise ValueError(f"engine mujoco needs MuJoCo ({err.name} is not installed): {MUJOCO_EXTRA}") from None
+    name = policy or (task or "nav_deploy")
+    try:
+        deployable = DeployablePolicy.load(name)
+    except FileNotFoundError as err:
+        raise ValueError(f"cannot load policy: {err}") from None
+    if task is not None and task != deployable.task:
+        raise ValueError(f"{name} was trained on task {deployable.task!r}, not {task!r}")
+    record = run_twin_episodes(deployable, draw_episodes(deployable.task, episodes, seed=seed), friction=friction)
+    mu = float(record.params["friction"][0])
+    return Evaluation(str(name), deployable.task, seed, "mujoco", record, {"engine": "mujoco", "friction": mu})
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -35,6 +181,10 @@ def build_parser() -> argparse.ArgumentParser:
                                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     parser.add_argument("checkpoint", nargs="?", default=None, help="policy or checkpoint file, or a shipped policy's name (reach, nav, nav_plain, nav_deploy; "
                              "default: the task's shipped one)")
+    parser.add_argument("--engine", default="ours", help=f"simulator: {' | '.join(ENGINES)} (mujoco: the MuJoCo twin "
+                        "of the nav world, for a deployable policy; the mujoco extra)")
+    parser.add_argument("--friction", type=float, default=None, metavar="MU",
+                        help="the MuJoCo twin's Coulomb µ (--engine mujoco; default: the nominal µ)")
     parser.add_argument("--episodes", type=int, default=1000, help="number of seeded episodes (one world each)")
     parser.add_argument("--seed", type=int, default=None, help="evaluation-set seed (default: the standard set)")
     parser.add_argument("--baseline", action="store_true", help="evaluate the scripted baseline instead")
@@ -60,6 +210,55 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _check_outputs(args) -> str | None:
+    """Why the recording, video or engine options cannot be served (``None``: they can); files' folders are
+    created now, before any work."""
+    if args.engine == "mujoco" and (args.rerun or args.serve or args.real_time or args.video):
+        return "--rerun, --serve, --real-time and --video record our simulator; drop them with --engine mujoco"
+    if args.video:
+        from atrv_warp.integrations.video import check_video_path
+
+        try:  # its folder is created now, before any work; a path that cannot be written stops here
+            check_video_path(args.video)
+        except ValueError as err:
+            return f"--{err}"
+    if args.rerun:
+        from atrv_warp.integrations.recorder import check_recording_path
+
+        try:  # as --video: a recording that cannot be written stops here, before the simulator is built
+            check_recording_path(args.rerun)
+        except ValueError as err:
+            return f"--rerun: {err}"
+    return None
+
+
+class _Viewers:
+    """The recorder and the video the command line attaches to our env (``attach``), closed after the run."""
+
+    def __init__(self, args):
+        self.args, self.recorder, self.video = args, None, None
+
+    def __call__(self, env):
+        args, on_step = self.args, None
+        if args.rerun or args.serve or args.real_time:
+            from atrv_warp.integrations.recorder import RerunRecorder
+
+            self.recorder = RerunRecorder(env.sim, path=args.rerun, serve=args.serve, worlds=args.worlds,
+                                          real_time=args.real_time)
+            on_step = self.recorder.env_hook()
+        if args.video:
+            from atrv_warp.integrations.video import EvalVideo
+
+            self.video = EvalVideo(env, episodes=args.video_episodes, follow=args.video_follow)
+            draw, rerun_step = self.video.env_hook(), on_step
+            on_step = draw if rerun_step is None else (lambda e, td: (rerun_step(e, td), draw(e, td)))
+        return on_step
+
+    def close(self) -> None:
+        if self.recorder is not None:
+            self.recorder.close()
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -69,113 +268,57 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--video-episodes must be >= 1")
     if args.video_follow is not None and not args.video_follow > 0:
         parser.error("--video-follow must be > 0 metres")
-    if args.video:
-        from atrv_warp.integrations.video import check_video_path
-
-        try:  # its folder is created now, before any work; a path that cannot be written stops here
-            check_video_path(args.video)
-        except ValueError as err:
-            return error_line(parser.prog, f"--{err}")
-    if args.rerun:
-        from atrv_warp.integrations.recorder import check_recording_path
-
-        try:  # as --video: a recording that cannot be written stops here, before the simulator is built
-            check_recording_path(args.rerun)
-        except ValueError as err:
-            return error_line(parser.prog, f"--rerun: {err}")
+    if args.engine not in ENGINES:
+        return error_line(parser.prog, f"unknown --engine {args.engine!r}; known: {', '.join(ENGINES)}")
+    if (problem := _check_outputs(args)) is not None:
+        return error_line(parser.prog, problem)
     if args.verbose:
         set_verbose()
-    from atrv_warp.task.config import TASK_VARIANTS
-    from atrv_warp.task.evaluation import (
-        EVAL_SEED,
-        format_bins,
-        format_result,
-        run_episodes,
-        success_by_bin,
-        write_result,
-    )
+    from atrv_warp.task.evaluation import format_bins, format_result, write_result
 
-    if args.task is not None and args.task not in TASK_VARIANTS:
-        return error_line(parser.prog, f"unknown --task {args.task!r}; known: {sorted(TASK_VARIANTS)}")
-    from atrv_warp.task.randomization import get_randomization
-
+    if args.engine == "ours":
+        try:
+            print(device_summary(args.device))
+        except (RuntimeError, ValueError) as err:
+            return error_line(parser.prog, f"--device {args.device!r}: {err}")
+    viewers = _Viewers(args)
     try:
-        randomization = get_randomization(args.randomization)
+        run = evaluate_policy(args.checkpoint, engine=args.engine, task=args.task, episodes=args.episodes,
+                              seed=args.seed, baseline=args.baseline, randomization=args.randomization,
+                              friction=args.friction, sim_config=args.sim_config, device=args.device, attach=viewers)
     except ValueError as err:
-        return error_line(parser.prog, f"--randomization: {err}")
-    task = args.task or "reach"
-    if args.baseline:
-        from atrv_warp.task.baseline import scripted_policy
-
-        policy, name = scripted_policy(), f"scripted baseline ({task})"
-    else:
-        from atrv_warp.policy import SHIPPED_POLICIES, load_policy, policy_task
-        from atrv_warp.storage import FileFormatError
-
-        # no file: the policy shipped for the task (a registered name, resolved by load_policy)
-        path = args.checkpoint or (args.task if args.task in SHIPPED_POLICIES else "reach")
-        try:
-            trained_on = policy_task(path)
-            # a policy that commands or observes another kind than the task's is refused first, naming both
-            policy = load_policy(path, task=args.task or trained_on)
-            if args.task is not None and args.task != trained_on:
-                return error_line(parser.prog, f"{path} was trained on task {trained_on!r}, not {args.task!r}")
-        except (FileNotFoundError, FileFormatError, ValueError) as err:
-            return error_line(parser.prog, f"cannot load policy: {err}")
-        task, name = trained_on, path
-    try:
-        print(device_summary(args.device))
-    except (RuntimeError, ValueError) as err:
-        return error_line(parser.prog, f"--device {args.device!r}: {err}")
-    seed = EVAL_SEED if args.seed is None else args.seed
-    if args.sim_config:
-        from atrv_warp.sim.config import load_sim_config
-
-        try:
-            load_sim_config(args.sim_config)
-        except ValueError as err:
-            return error_line(parser.prog, f"--sim-config: {err}")
-    from atrv_warp.task.env import ATRVjrEnv
-
-    recorder, on_step, video = None, None, None
-    env = ATRVjrEnv(args.episodes, device=args.device, task=task, randomization=randomization,
-                    sim_config=args.sim_config)
-    policy = policy.to(env.device)  # loaded on the CPU; the env's observations live on its device
-    if args.rerun or args.serve or args.real_time:
-        from atrv_warp.integrations.recorder import RerunRecorder
-
-        recorder = RerunRecorder(env.sim, path=args.rerun, serve=args.serve, worlds=args.worlds,
-                                 real_time=args.real_time)
-        on_step = recorder.env_hook()
-    if args.video:
-        from atrv_warp.integrations.video import EvalVideo
-
-        video = EvalVideo(env, episodes=args.video_episodes, follow=args.video_follow)
-        draw, rerun_step = video.env_hook(), on_step
-        on_step = draw if rerun_step is None else (lambda e, td: (rerun_step(e, td), draw(e, td)))
-    try:
-        record = run_episodes(policy, env, seed=seed, on_step=on_step)
+        return error_line(parser.prog, _option_named(err))
     finally:
-        if recorder is not None:
-            recorder.close()
-    result = record.summary()
-    extra = {}
-    print(format_result(name, result) + (f" | randomization {args.randomization}" if randomization.enabled else ""))
-    if randomization.enabled:
-        table = success_by_bin(record)
-        print(format_bins(table))
-        extra = {"randomization": args.randomization, "success_by_bin": table}
+        viewers.close()
+    result, extra = run.result, run.extra
+    tail = f" | randomization {extra['randomization']}" if "randomization" in extra else ""
+    tail += f" | MuJoCo twin, µ {extra['friction']:g}" if run.engine == "mujoco" else ""
+    print(format_result(run.name, result) + tail)
+    if "success_by_bin" in extra:
+        print(format_bins(extra["success_by_bin"]))
     if args.rerun:
         print(f"recording: {args.rerun}  (view with: rerun {args.rerun})")
-    if video is not None:
-        written = video.write(args.video)
+    if viewers.video is not None:
+        written = viewers.video.write(args.video)
         print(f"video: {written.path} ({written.frames} frames, {written.width}x{written.height}, "
-              f"{len(video.worlds)} episodes; drawn and encoded in {written.render_s:.2f} s)")
+              f"{len(viewers.video.worlds)} episodes; drawn and encoded in {written.render_s:.2f} s)")
     if args.serve and sys.stdin.isatty():
         input("viewer running; press Enter to stop ...")
     if args.json:
-        write_result(args.json, name, task, seed, result, **extra)
+        write_result(args.json, run.name, run.task, run.seed, result, **extra)
     return 0
+
+
+def _option_named(err: Exception) -> str:
+    """The library's message as the command line words it (its options by their flags)."""
+    text = str(err)
+    for word, flag in (("unknown engine", "unknown --engine"), ("unknown task", "unknown --task"),
+                       ("unknown randomization preset", "--randomization: unknown randomization preset")):
+        if text.startswith(word):
+            return flag + text[len(word):]
+    if text.startswith("sim config"):
+        return f"--sim-config: {text}"
+    return text
 
 
 def baseline_main(argv: list[str] | None = None) -> int:

@@ -580,6 +580,19 @@ def sac_update_cost() -> str:
                   [[n, cells[n].get(256, ""), cells[n].get(512, "")] for n in order])
 
 
+def mujoco_agreement() -> str:
+    """``mujoco_agreement.json``: each figure in our simulator and in the MuJoCo twin, the gap, its tolerance and
+    its reason."""
+    rows = []
+    for r in _load("mujoco_agreement.json")["rows"]:
+        tolerance = "reported" if r["tolerance"] is None else f"±{r['tolerance']:.3g}"
+        within = {None: "-", True: "yes", False: "**no**"}[r["within"]]
+        rows.append([r["figure"], f"{r['ours']:.4g}", f"{r['mujoco']:.4g}", f"{r['gap']:+.3g} {r['unit']}", tolerance,
+                     within, r["reason"]])
+    return _table(["figure", "ours", "MuJoCo", "gap", "tolerance", "within", "why a gap"],
+                  ["---", "---:", "---:", "---:", "---:", "---", "---"], rows)
+
+
 TABLES: dict[str, Callable[[], str]] = {
     "diff_gradients_common": diff_gradients_common,
     "diff_gradients_differential": diff_gradients_differential,
@@ -601,6 +614,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "physics_report": physics_report,
     "skid_turning": skid_turning,
     "skid_checks": skid_checks,
+    "mujoco_agreement": mujoco_agreement,
     "train_to_success": train_to_success,
     "train_to_success_nav": train_to_success_nav,
     "ppo_vs_sac": ppo_vs_sac,

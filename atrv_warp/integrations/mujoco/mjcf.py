@@ -1,0 +1,195 @@
+"""MJCF text of the nav world, written from our own descriptions so that the twin cannot drift from them.
+
+- the rover from the URDF's :class:`~atrv_warp.sim.urdf.RoverDescription` (chassis mass, centre of mass and
+  inertia with the sensor frames lumped in, the chassis box, each wheel's joint frame, axis and inertial) and
+  :class:`~atrv_warp.sim.config.RoverConfig` (the wheel cylinder, its offset along the axle);
+- the arena's walls from :meth:`~atrv_warp.sim.config.ArenaConfig.boxes`; the ground as a plane at
+  ``ArenaConfig.ground_top``, or one tile of a :class:`~atrv_warp.sim.terrain.HeightGrid` as a height field;
+- each episode's obstacles (:class:`Obstacle`) from below the ground up to ``ObstacleSet.top``;
+- :class:`~atrv_warp.sim.config.SimConfig`'s substep and gravity, and the Coulomb µ.
+
+What MuJoCo does its own way, on purpose: the contact (soft constraints, default ``solref``/``solimp``, an
+elliptic friction cone) in place of our Hunt–Crossley law and velocity-level Coulomb solve, and the height
+field's triangles in place of our bilinear patches.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from atrv_warp.sim.config import ArenaConfig, RoverConfig, SimConfig
+from atrv_warp.sim.terrain import HeightGrid
+from atrv_warp.sim.urdf import Inertial, RoverDescription
+
+__all__ = ["ROVER_GROUP", "SCENE_GROUP", "Obstacle", "inertial_xml", "number", "pose_xml", "quat_wxyz", "rover_xml",
+           "vector", "world_xml"]
+
+SCENE_GROUP = 0
+"""Geom group of the scene (ground, walls, obstacles): what the scanner's rays see."""
+ROVER_GROUP = 1
+"""Geom group of the rover's own shapes, which the scanner's rays skip."""
+BURY = 0.5
+"""How far the height field's base and the obstacles reach below the lowest ground [m]."""
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """One upright obstacle of an episode, as :class:`~atrv_warp.sim.contact.Obstacles` holds it."""
+
+    kind: str
+    """``"box"`` or ``"cylinder"``."""
+    x: float
+    """Centre x [m] (world)."""
+    y: float
+    """Centre y [m] (world)."""
+    yaw: float
+    """Heading of a box's x axis [rad] (0 for a cylinder)."""
+    size: tuple[float, float]
+    """A box's half extents (x, y) [m]; a cylinder's (radius [m], 0)."""
+
+
+def number(x: float) -> str:
+    """A number as MJCF text: up to 9 significant digits, no trailing zeros, no '-0'."""
+    s = f"{float(x):.9g}"
+    return "0" if s in ("-0", "0") else s
+
+
+def vector(xs) -> str:
+    """Numbers as one MJCF attribute value."""
+    return " ".join(number(x) for x in xs)
+
+
+def quat_wxyz(rot: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z), MuJoCo's order, of a 3x3 rotation matrix (w >= 0)."""
+    m = np.asarray(rot, dtype=float)
+    tr = np.trace(m)
+    if tr > 0.0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    else:
+        i = int(np.argmax(np.diag(m)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(1.0 + m[i, i] - m[j, j] - m[k, k])
+        q = [0.0] * 4
+        q[0] = (m[k, j] - m[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (m[j, i] + m[i, j]) / s
+        q[1 + k] = (m[k, i] + m[i, k]) / s
+    q = np.asarray(q)
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0.0 else -q
+
+
+def pose_xml(tf: np.ndarray) -> str:
+    """``pos``/``quat`` attributes of a 4x4 transform (``quat`` left out when it is the identity)."""
+    q = quat_wxyz(tf[:3, :3])
+    out = f'pos="{vector(tf[:3, 3])}"'
+    if not np.allclose(q, (1.0, 0.0, 0.0, 0.0), atol=1e-12):
+        out += f' quat="{vector(q)}"'
+    return out
+
+
+def inertial_xml(inertial: Inertial) -> str:
+    """An ``<inertial>`` element: mass [kg], centre of mass [m] and the full inertia tensor [kg·m²]."""
+    i = inertial.inertia
+    full = (i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[0, 2], i[1, 2])
+    return f'<inertial pos="{vector(inertial.com)}" mass="{number(inertial.mass)}" fullinertia="{vector(full)}"/>'
+
+
+def rover_xml(desc: RoverDescription, rover: RoverConfig, *, pos=(0.0, 0.0, 0.0), indent: str = "    ",
+              shape_attributes: str = "") -> list[str]:
+    """The rover's body tree as MJCF lines: the chassis on a free joint named ``root_joint`` (its box collision),
+    and each wheel on a hinge (its cylinder, ``wheel_offset`` outward of the joint). ``shape_attributes`` is added
+    to every collision geom (contact bits, group)."""
+    extra = f" {shape_attributes}" if shape_attributes else ""
+    lines = [f'{indent}<body name="{desc.chassis}" pos="{vector(pos)}">',
+             f'{indent}  <freejoint name="root_joint"/>',
+             f"{indent}  {inertial_xml(desc.chassis_inertial)}"]
+    if desc.chassis_box is not None:
+        pose, half = desc.chassis_box
+        lines.append(f'{indent}  <geom name="{desc.chassis}/box" type="box" {pose_xml(pose)} size="{vector(half)}"'
+                     f"{extra}/>")
+    for w in desc.wheels:
+        centre = w.outward * rover.wheel_offset
+        lines += [
+            f'{indent}  <body name="{w.link}" {pose_xml(w.origin)}>',
+            f'{indent}    <joint name="{w.joint}" type="hinge" axis="{vector(w.axis)}"/>',
+            f"{indent}    {inertial_xml(w.inertial)}",
+            (f'{indent}    <geom name="{w.link}/cylinder" type="cylinder" pos="{vector(centre)}" '
+             f'zaxis="{vector(w.outward)}" size="{number(rover.wheel_radius)} {number(0.5 * rover.wheel_length)}"'
+             f"{extra}/>"),
+            f"{indent}  </body>",
+        ]
+    lines.append(f"{indent}</body>")
+    return lines
+
+
+def world_xml(desc: RoverDescription, rover: RoverConfig, *, arena: ArenaConfig, sim: SimConfig, friction: float,
+              torque_limit: float, obstacle_top: float, terrain: HeightGrid | None = None, tile: int = 0,
+              obstacles: tuple[Obstacle, ...] = ()) -> str:
+    """The MJCF text of one episode's world: the rover (at the origin; its free joint places it), the arena, the
+    ground (a plane, or ``terrain``'s ``tile`` as a height field), the ``obstacles`` (standing to ``obstacle_top``
+    [m], absolute), one torque motor per wheel (``gear`` its drive sign, so that a positive control drives forward;
+    within ``torque_limit`` [N·m]), contact at Coulomb ``friction`` [-].
+
+    The scene's geoms are in :data:`SCENE_GROUP` and collide with the rover's only; the rover's are in
+    :data:`ROVER_GROUP` and collide with the scene's only (the wheels never touch the chassis or each other, as in
+    our simulator)."""
+    h = arena.half_size
+    scene = f'contype="0" conaffinity="1" group="{SCENE_GROUP}"'
+    lines = [
+        "<!-- Generated by atrv_warp.integrations.mujoco from atrv_warp's URDF description and configs;",
+        "     SI units: m, kg, s, rad, N·m. -->",
+        f'<mujoco model="{desc.name}_nav_twin">',
+        '  <compiler angle="radian" autolimits="true"/>',
+        f'  <option timestep="{number(sim.sim_dt)}" gravity="0 0 {number(sim.gravity)}" cone="elliptic"/>',
+        "  <default>",
+        # condim 3: sliding friction only, Coulomb coefficient mu (torsional and rolling friction unused)
+        f'    <geom condim="3" friction="{number(friction)} 0 0"/>',
+        "  </default>",
+    ]
+    bottom = arena.ground_top - BURY
+    if terrain is not None:
+        heights = np.asarray(terrain.heights[tile], dtype=np.float64)
+        low, high = float(heights.min()), float(heights.max())
+        span = max(high - low, 1e-6)
+        n = heights.shape[0]
+        # MuJoCo's rows run along y and its columns along x (ours index x first: the transpose), and it stores the
+        # rows of ``elevation`` last first (its first row is the +y edge): normalised to [0, 1]
+        elevation = vector(((heights.T[::-1] - low) / span).ravel())
+        lines += ["  <asset>",
+                  (f'    <hfield name="terrain" nrow="{n}" ncol="{n}" size="{number(terrain.half_size)} '
+                   f'{number(terrain.half_size)} {number(span)} {number(BURY)}" elevation="{elevation}"/>'),
+                  "  </asset>"]
+        bottom = arena.ground_top + low - BURY
+    lines.append("  <worldbody>")
+    if terrain is not None:
+        lines.append(f'    <geom name="ground" type="hfield" hfield="terrain" pos="0 0 {number(arena.ground_top + low)}" '
+                     f"{scene}/>")
+    else:
+        lines.append(f'    <geom name="ground" type="plane" pos="0 0 {number(arena.ground_top)}" '
+                     f'size="{number(h)} {number(h)} 0.1" {scene}/>')
+    for label, centre, half in arena.boxes():
+        if label != "ground":  # the ground is the plane or height field above
+            lines.append(f'    <geom name="{label}" type="box" pos="{vector(centre)}" size="{vector(half)}" {scene}/>')
+    zc, hz = 0.5 * (obstacle_top + bottom), 0.5 * (obstacle_top - bottom)
+    for i, o in enumerate(obstacles):
+        if o.kind == "box":
+            quat = vector((math.cos(0.5 * o.yaw), 0.0, 0.0, math.sin(0.5 * o.yaw)))
+            lines.append(f'    <geom name="obstacle_{i}" type="box" pos="{vector((o.x, o.y, zc))}" quat="{quat}" '
+                         f'size="{vector((*o.size, hz))}" {scene}/>')
+        elif o.kind == "cylinder":
+            lines.append(f'    <geom name="obstacle_{i}" type="cylinder" pos="{vector((o.x, o.y, zc))}" '
+                         f'size="{number(o.size[0])} {number(hz)}" {scene}/>')
+        else:
+            raise ValueError(f"obstacle {i}: kind {o.kind!r} is neither 'box' nor 'cylinder'")
+    lines += rover_xml(desc, rover, shape_attributes=f'contype="1" conaffinity="0" group="{ROVER_GROUP}"')
+    lines += ["  </worldbody>", "  <actuator>"]
+    for w in desc.wheels:
+        lines.append(f'    <motor name="{w.joint}/motor" joint="{w.joint}" gear="{number(w.drive_sign)}" '
+                     f'ctrlrange="{number(-torque_limit)} {number(torque_limit)}"/>')
+    lines += ["  </actuator>", "</mujoco>", ""]
+    return "\n".join(lines)

@@ -1,0 +1,104 @@
+"""The MuJoCo twin of the nav world (``atrv_warp.integrations.mujoco``): its world is ours, and a deployable policy
+drives it through the robot's observation builder.
+
+Skipped where the ``mujoco`` extra is not installed."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+mujoco = pytest.importorskip("mujoco")
+
+
+@pytest.fixture(scope="module")
+def episodes():
+    from atrv_warp.integrations.mujoco import draw_episodes
+
+    return draw_episodes("nav_deploy", 3, seed=5)
+
+
+def test_the_twins_obstacles_are_the_episodes(episodes):
+    """Every obstacle our reset drew stands in the twin where ours stands, with its size and heading."""
+    from atrv_warp.integrations.mujoco import MujocoTwin
+
+    for ep in episodes.episodes:
+        assert len(ep.obstacles) == episodes.task.obstacles
+        twin = MujocoTwin(terrain=episodes.terrain, tile=ep.tile, obstacles=ep.obstacles,
+                          obstacle_height=episodes.obstacle_height)
+        m = twin.model
+        for i, o in enumerate(ep.obstacles):
+            g = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"obstacle_{i}")
+            assert np.allclose(m.geom_pos[g][:2], (o.x, o.y), atol=1e-6)
+            top = m.geom_pos[g][2] + m.geom_size[g][2 if o.kind == "box" else 1]
+            assert top == pytest.approx(twin.arena_cfg.ground_top + episodes.obstacle_height, abs=1e-6)
+            if o.kind == "box":
+                assert np.allclose(m.geom_size[g][:2], o.size, atol=1e-6)
+                w, _, _, z = m.geom_quat[g]
+                assert math.remainder(2 * math.atan2(z, w) - o.yaw, 2 * math.pi) == pytest.approx(0.0, abs=1e-6)
+            else:
+                assert m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CYLINDER and m.geom_size[g][0] == pytest.approx(o.size[0])
+
+
+def test_the_twins_terrain_has_our_heights_at_the_grids_nodes(episodes):
+    """A vertical MuJoCo ray onto the height field meets our HeightGrid's height at every node it is cast at."""
+    from atrv_warp.integrations.mujoco import MujocoTwin
+
+    grid, tile = episodes.terrain, episodes.episodes[0].tile
+    twin = MujocoTwin(terrain=grid, tile=tile)
+    n, group, geom = grid.heights.shape[1], np.array([1, 0, 0, 0, 0, 0], dtype=np.uint8), np.zeros(1, np.int32)
+    errors = []
+    for i in range(1, n - 1, 5):  # the edge nodes lie on the walls' faces
+        for j in range(1, n - 1, 5):
+            x, y = -grid.half_size + i * grid.resolution, -grid.half_size + j * grid.resolution
+            d = mujoco.mj_ray(twin.model, twin.data, np.array([x, y, 3.0]), np.array([0.0, 0.0, -1.0]), group, 1, -1,
+                              geom)
+            errors.append(3.0 - d - (twin.arena_cfg.ground_top + grid.heights[tile, i, j]))
+    assert len(errors) > 500 and np.abs(errors).max() < 1e-5
+
+
+def test_flat_ground_scan_agrees_within_2_cm():
+    """On flat ground, from the same pose, MuJoCo's rays and our scanner read the walls and obstacles within 2 cm."""
+    from atrv_warp.integrations.mujoco import MujocoTwin, Obstacle
+    from atrv_warp.sim import RoverSim
+    from atrv_warp.sim.config import ObstacleConfig
+    from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
+
+    layout = (("box", 3.0, 0.5, 0.4, 0.5, 0.3), ("cylinder", 1.5, -2.0, 0.4), ("box", -0.5, 4.0, -1.0, 0.6, 0.6))
+    sim = RoverSim(1, obstacles=ObstacleConfig(slots=len(layout)))
+    sim.obstacles.set(0, layout)
+    sim.reset(poses=[[-6.0, 1.0, 0.3]])
+    config = ScannerConfig(beams=181)
+    ours = LaserScanner(sim, config).scan()[0].numpy()
+    obstacles = tuple(Obstacle("box", x, y, rest[0], tuple(rest[1:])) if kind == "box"
+                      else Obstacle("cylinder", x, y, 0.0, (rest[0], 0.0)) for kind, x, y, *rest in layout)
+    twin = MujocoTwin(obstacles=obstacles, scanner=config)
+    pose = sim.root_pose[0].double().numpy()
+    twin.reset(pose[:3], pose[3:])
+    theirs = twin.scan()
+    assert (ours < 10.0).sum() > 20  # the obstacles are in view, not just the walls
+    assert np.abs(theirs - ours).max() < 0.02
+
+
+@pytest.mark.slow
+def test_a_deployable_policy_drives_twin_episodes(tmp_path):
+    """A few episodes of an (untrained) deployable policy in the twin end for the task's reasons, through
+    ``evaluate --engine mujoco``; a torque policy is refused in one line."""
+    import json
+
+    from atrv_warp.evaluate import main
+    from atrv_warp.policy import make_actor, save_policy
+    from atrv_warp.task.config import get_task
+    from atrv_warp.task.spec import observation_fields
+
+    path = tmp_path / "deploy.pt"
+    save_policy(make_actor(16, 1, obs_dim=len(observation_fields(get_task("nav_deploy")))), path, width=16, depth=1,
+                meta={"task": "nav_deploy"})
+    out = tmp_path / "twin.json"
+    assert main([str(path), "--engine", "mujoco", "--episodes", "3", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["engine"] == "mujoco" and result["episodes"] == 3 and result["friction"] == pytest.approx(0.3)
+    ends = ("success_rate", "wall_rate", "flip_rate", "timeout_rate", "obstacle_rate", "nonfinite_rate")
+    assert sum(result[k] for k in ends) == pytest.approx(1.0) and result["nonfinite_rate"] == 0.0
