@@ -634,7 +634,7 @@ TABLES: dict[str, Callable[[], str]] = {
 # --- the command table, from the command-line tools' own parsers ------------------------------
 
 COMMANDS = (("train", "atrv-train"), ("evaluate", "atrv-evaluate"), ("demo", "atrv-demo"), ("model", "atrv-model"),
-            ("export", "atrv-export"), ("calibrate", "atrv-calibrate"), ("ros", "atrv-ros"))
+            ("export", "atrv-export"), ("calibrate", "atrv-calibrate"), ("ros", "atrv-ros"), ("deploy", "atrv-deploy"))
 """(``atrv_warp.<module>``, the command ``pyproject.toml`` installs) of every command-line tool."""
 COMMANDS_LINE = re.compile(r"^\{\{ command_table( \w+)? \}\}$", re.MULTILINE)
 
@@ -699,6 +699,13 @@ def _ros_rows() -> list[list[str]]:
     return [[f"`-p {name}:=…`", f"`{default!r}`", _cell(text)] for name, default, text in PARAMETERS]
 
 
+def _deploy_rows() -> list[list[str]]:
+    from atrv_warp.deploy.parameters import PARAMETERS
+
+    return (_argparse_rows(_command("deploy").build_parser())
+            + [[f"`-p {name}:=…`", f"`{default!r}`", _cell(text)] for name, default, text in PARAMETERS])
+
+
 def _command(module: str):
     import importlib
 
@@ -722,6 +729,8 @@ def command_options(module: str) -> list[list[str]]:
         return _train_rows()
     if module == "ros":
         return _ros_rows()
+    if module == "deploy":
+        return _deploy_rows()
     return _argparse_rows(_command(module).build_parser())
 
 
