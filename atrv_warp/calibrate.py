@@ -3,7 +3,9 @@
 The bag (MCAP; ``ros2 bag record -s mcap /cmd_vel /joint_states /ground_truth/odom``) needs the wheel joint
 states and a reference pose, and the velocity commands or the wheel efforts. The fit replays segments of it
 in many worlds at once and adjusts friction, motor torque scale, payload and wheel radius (``--params``)
-through the simulator's gradients. It writes:
+through the simulator's gradients. The velocity commands go through a driver configured as the robot's is
+(``--driver-wheel-radius``, ``--driver-track-width``; default the nominal rover's): a worn tyre is then a
+physical radius the fit finds. It writes:
 
 - ``--out`` (``calibrated.toml``): the fitted values, for ``--sim-config`` of ``python -m atrv_warp.train``,
   ``RoverSim(sim_config=...)``, ``ATRVjrEnv(sim_config=...)`` and the ROS node (``-p sim_config:=...``);
@@ -36,6 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
     from atrv_warp.integrations.calibration.log import Topics
 
     d = CalibrationConfig()
+    nominal = d.driver()  # the nominal rover's radius and track
     p = argparse.ArgumentParser(prog="python -m atrv_warp.calibrate", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="docs/calibration.md: how to record a bag on a real rover, and a worked example.")
@@ -67,6 +70,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--wheel-kp", type=float, default=d.kp, help="the base's wheel-speed PI gains (the node's)")
     p.add_argument("--wheel-ki", type=float, default=d.ki)
     p.add_argument("--effective-track-factor", type=float, default=d.effective_track_factor)
+    p.add_argument("--driver-wheel-radius", type=float, metavar="M",
+                   help="the wheel radius the robot's driver is configured with [m]; /cmd_vel is replayed through it "
+                        f"(default: the nominal rover's, {nominal.wheel_radius:g}; the physical radius is fitted)")
+    p.add_argument("--driver-track-width", type=float, metavar="M",
+                   help=f"the wheel track the robot's driver is configured with [m] (default: the nominal rover's, "
+                        f"{nominal.track_width:g})")
     p.add_argument("--record-example", metavar="OUT.mcap",
                    help="record a bag to try this on: the simulator node, driven over ROS 2 (needs the ros extra)")
     p.add_argument("--minutes", type=float, default=5.0, help="--record-example: sim minutes (%(default)s)")
@@ -84,7 +93,10 @@ def _record(args) -> int:
 
         print(MISSING_ROS_MESSAGE, file=sys.stderr)
         return 2
-    params = {"truth_noise": args.noise, "truth_yaw_noise": args.noise / 0.5}
+    # the node's driver is configured as the nominal rover unless told otherwise, whatever --truth's wheel: a base
+    # whose tyre wore still runs the radius it was set up with
+    params = {"truth_noise": args.noise, "truth_yaw_noise": args.noise / 0.5,
+              "wheel_radius": args.driver_wheel_radius or 0.0, "track_width": args.driver_track_width or 0.0}
     if args.truth:
         from atrv_warp.sim.config import load_sim_config
 
@@ -102,8 +114,21 @@ def _record(args) -> int:
     return 0
 
 
+def _bad_driver(args) -> str | None:
+    """The first ``--driver-*`` value that no driver can be configured with, as an error line."""
+    for option, value in (("--driver-wheel-radius", args.driver_wheel_radius),
+                          ("--driver-track-width", args.driver_track_width)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            return f"error: {option} must be a finite number > 0 [m], got {value:g}"
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    bad = _bad_driver(args)
+    if bad:
+        print(bad, file=sys.stderr)
+        return 2
     if args.record_example:
         return _record(args)
     if not args.bag:
@@ -134,7 +159,9 @@ def main(argv: list[str] | None = None) -> int:
                                 iterations=args.iterations, polish=args.polish, polish_starts=args.polish_starts,
                                 pose_smoothing=args.pose_smoothing,
                                 batch=args.batch, seed=args.seed, kp=args.wheel_kp,
-                                ki=args.wheel_ki, effective_track_factor=args.effective_track_factor)
+                                ki=args.wheel_ki, effective_track_factor=args.effective_track_factor,
+                                driver_wheel_radius=args.driver_wheel_radius,
+                                driver_track_width=args.driver_track_width)
         wheels = {w.joint: (w.side, w.drive_sign) for w in load_rover(rover).wheels}
         t0 = time.perf_counter()
         log = read_drive_log(args.bag, wheels, Topics(cmd_vel=args.cmd_vel_topic,

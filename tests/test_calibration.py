@@ -7,6 +7,7 @@ import json
 import os
 import random
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -256,6 +257,104 @@ def test_moving_state_sets_the_recorded_motion():
     assert sim.ang_vel[0, 2].item() == pytest.approx(0.4, abs=1e-6)
     expected = [3.0 if w.side == 0 else 5.0 for w in sim.description.wheels]
     assert sim.wheel_speed[0].tolist() == pytest.approx(expected, abs=1e-5)
+
+
+# ------------------------------------------------------------------ the driver the replay runs (#42)
+@pytest.mark.parametrize("args", [["--driver-wheel-radius", "0"], ["--driver-wheel-radius", "nan"],
+                                  ["--driver-track-width", "-0.5"], ["--driver-track-width", "inf", "--record-example"]])
+def test_cli_refuses_a_bad_driver_radius_or_track_in_one_line_before_any_work(tmp_path, capsys, args):
+    from atrv_warp.calibrate import main
+
+    option, value, *rest = args
+    bag = tmp_path / "never_read.mcap"  # no such file: the bag is not read (that would be an error naming it)
+    first = [str(tmp_path / "example.mcap")] if rest else [str(bag), "--out", str(tmp_path / "cal.toml")]
+    assert main([*rest, *first, option, value]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and option in err and "finite number > 0" in err and str(bag) not in err, err
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(CalibrationError, match="driver_wheel_radius must be a finite number > 0"):
+        CalibrationConfig(driver_wheel_radius=float("nan"))
+    with pytest.raises(ValueError, match="DriverConfig.track_width must be a finite number > 0"):
+        DriverConfig(track_width=0.0)
+
+
+def test_the_replay_runs_the_configured_driver_and_fits_the_physical_radius():
+    """The fit's driver has the radius and track the user configured (default: the nominal rover's, as an unconfigured
+    driver), and the replay's wheel-speed targets follow it while the physical radius stays the rover's: a driver
+    configured at 0.121 m on a 0.125 m wheel spins it at 0.5 / 0.121 rad/s for 0.5 m/s, and the rover drives 3 %
+    fast (the odometry's scale error a wrong configured radius leaves)."""
+    from atrv_warp.sim.config import get_variant
+    from atrv_warp.sim.diff import DiffRollout
+
+    nominal = get_variant("realistic")
+    default = DriverConfig().kinematics(load_rover(nominal), nominal)
+    driver = CalibrationConfig().driver()
+    assert (driver.wheel_radius, driver.track_width) == (default.wheel_radius, default.track_width) == (0.125, 0.5)
+    driver = CalibrationConfig(driver_wheel_radius=0.121, driver_track_width=0.55, kp=2.0).driver()
+    assert (driver.wheel_radius, driver.track_width, driver.kp) == (0.121, 0.55, 2.0)
+    roll = DiffRollout(1, steps=30, twist=True, driver=CalibrationConfig(driver_wheel_radius=0.121).driver())
+    assert roll.sim.rover_cfg.wheel_radius == 0.125  # the physical radius: the rollout's fitted parameter
+    with torch.no_grad():
+        poses, speeds = roll(torch.tensor([0.5, 0.0]).expand(30, 1, 2), wheel_speeds=True)
+    assert speeds[-1, 0].tolist() == pytest.approx([0.5 / 0.121] * 2, rel=2e-3)
+    assert float(poses[-1, 0, 0] - poses[-11, 0, 0]) / 0.5 == pytest.approx(0.5 * 0.125 / 0.121, rel=5e-3)
+
+
+def test_segments_replay_the_configured_driver_and_the_outputs_record_it(tmp_path):
+    """The driver's integral at each segment's start is the configured driver's: a drive at 4 rad/s for 0.5 m/s is on
+    target at 0.125 m, behind it at 0.121 m. The report and the written config record the driver; the loader still
+    reads the config."""
+    from atrv_warp.integrations.calibration import CalibrationResult
+    from atrv_warp.integrations.calibration.output import write_report, write_sim_config
+
+    log = read_drive_log(_bag(tmp_path / "drive.mcap"), WHEELS)
+    on = make_segments(log, CalibrationConfig(), CalibrationConfig().driver())
+    worn = CalibrationConfig(driver_wheel_radius=0.121)
+    behind = make_segments(log, worn, worn.driver())
+    assert np.abs(on.integral[1:]).max() < 1e-3
+    assert (behind.integral[1:] > 0.01).all()  # the PI integrates the 0.13 rad/s its wheels fall short
+    record = {"wheel_radius": 0.121, "track_width": 0.5, "effective_track_factor": 1.56, "kp": 3.0, "ki": 30.0}
+    n = len(behind)
+    errors = {split: {"before": [0.1] * n, "after": [0.01] * n, "loss_before": 1.0, "loss_after": 0.1}
+              for split in ("train", "held_out")}
+    result = CalibrationResult(values={"wheel_radius": 0.121}, nominal={"wheel_radius": 0.125},
+                               spread={"wheel_radius": 0.0}, standard_error={"wheel_radius": 1e-4}, starts=[],
+                               errors=errors, converged=True, reason="converged", segments=behind, seconds=1.0,
+                               compile_seconds=1.0, driver=record)
+    write_report(tmp_path / "cal.report.json", result, "drive.mcap")
+    assert json.loads((tmp_path / "cal.report.json").read_text())["driver"] == record
+    write_sim_config(tmp_path / "cal.toml", result, "drive.mcap")
+    written = tomllib.loads((tmp_path / "cal.toml").read_text())
+    assert written["calibration"]["driver"] == record and written["rover"] == {"wheel_radius": 0.121}
+    rover, _ = load_sim_config(tmp_path / "cal.toml")
+    assert rover.wheel_radius == 0.121
+
+
+def test_record_example_drives_a_worn_truth_with_the_nominal_driver(tmp_path, monkeypatch):
+    """``--record-example --truth`` records a base whose driver is configured as the nominal rover (a real base whose
+    tyre wore), unless ``--driver-wheel-radius`` says otherwise: the node's parameters it passes, built as the node
+    builds its driver and simulator."""
+    pytest.importorskip("rclpy", reason="ROS 2 extra not installed: pip install -e '.[ros]'")
+    from atrv_warp import RoverSim
+    from atrv_warp.calibrate import main
+    from atrv_warp.integrations.ros import drive
+    from atrv_warp.integrations.ros.parameters import PARAMETERS, driver_config
+
+    truth = tmp_path / "worn.toml"
+    truth.write_text("[rover]\nwheel_radius = 0.121\n")
+    seen = []
+
+    def record(path, minutes, *, seed, parameters):  # the node's parameters, instead of a live node
+        seen.append(parameters)
+        Path(path).write_bytes(b"bag")
+
+    monkeypatch.setattr(drive, "record_drive_bag", record)
+    defaults = {name: default for name, default, _ in PARAMETERS}
+    for extra, configured in (([], 0.125), (["--driver-wheel-radius", "0.13"], 0.13)):
+        assert main(["--record-example", str(tmp_path / "x.mcap"), "--truth", str(truth), *extra]) == 0
+        params = {**defaults, **seen[-1]}
+        sim = RoverSim(1, variant=params["variant"], sim_config=params["sim_config"], driver=driver_config(params))
+        assert sim.rover_cfg.wheel_radius == 0.121 and sim.driver.kinematics.wheel_radius == configured
 
 
 # ------------------------------------------------------------------ the whole thing, hidden truth

@@ -3,8 +3,10 @@
 The log is cut into segments of a few seconds. Every segment starts from its recorded state (pose, body
 velocity, wheel speeds, and the wheel-speed controller's integral) and is replayed in its own world with
 its recorded commands: the velocity commands through the base's own motor driver inside the rollout
-(:mod:`atrv_warp.sim.driver`, the simulator's kernel, with the driver's configured radius and track), or the
-recorded wheel efforts. The loss is the error of the
+(:mod:`atrv_warp.sim.driver`, the simulator's kernel, with the radius and track the robot's driver is configured
+with: :attr:`CalibrationConfig.driver_wheel_radius`, by default the nominal rover's), or the recorded wheel efforts.
+The physical wheel radius is fitted apart from the configured one: a worn tyre is a smaller physical radius under
+the same driver. The loss is the error of the
 simulated against the recorded path and wheel speeds. Several starting points run at once, each in its own
 worlds; every ``held_out_every``-th segment is kept out of the fit and only measured.
 """
@@ -112,13 +114,23 @@ class CalibrationConfig:
     effective_track_factor: float = DriverConfig.effective_track_factor
     cmd_vel_timeout: float = DriverConfig.cmd_vel_timeout
     torque_limit: float = DriverConfig.torque_limit
+    driver_wheel_radius: float | None = None
+    """The wheel radius the robot's driver is configured with [m]: it turns ``/cmd_vel`` into wheel-speed targets
+    and wheel speeds into odometry. ``None``: the nominal rover's (the realistic variant's 0.125 m, as an unconfigured
+    :class:`~atrv_warp.sim.driver.DriverConfig` has; not a ``sim_config``'s). The physical radius, worn or not, is a
+    fitted parameter (``wheel_radius``)."""
+    driver_track_width: float | None = None
+    """The wheel track the robot's driver is configured with [m]. ``None``: the nominal rover's (its URDF's, 0.5 m)."""
 
-    def driver(self, rover: RoverConfig) -> DriverConfig:
-        """The base's motor driver as the replay runs it: these gains and limits, the nominal ``rover``'s radius and
-        track (a real driver knows its configured values, not the wheel's wear)."""
+    def driver(self) -> DriverConfig:
+        """The base's motor driver as the replay runs it: these gains and limits, and the configured radius and track
+        (a real driver knows its configured values, not the wheel's wear), ``None`` resolved to the nominal rover's."""
         from atrv_warp.sim.urdf import load_rover
 
-        return DriverConfig(wheel_radius=rover.wheel_radius, track_width=track_width(load_rover(rover), rover),
+        nominal = get_variant("realistic")
+        radius = nominal.wheel_radius if self.driver_wheel_radius is None else self.driver_wheel_radius
+        track = track_width(load_rover(nominal), nominal) if self.driver_track_width is None else self.driver_track_width
+        return DriverConfig(wheel_radius=radius, track_width=track,
                             effective_track_factor=self.effective_track_factor, kp=self.kp, ki=self.ki,
                             torque_limit=self.torque_limit, cmd_vel_timeout=self.cmd_vel_timeout)
 
@@ -134,6 +146,10 @@ class CalibrationConfig:
         for name in ("segment_seconds", "lr", "kp", "effective_track_factor", "cmd_vel_timeout", "torque_limit"):
             if not getattr(self, name) > 0:
                 raise CalibrationError(f"{name} must be > 0, got {getattr(self, name)}")
+        for name in ("driver_wheel_radius", "driver_track_width"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise CalibrationError(f"{name} must be a finite number > 0 [m], got {value!r}")
         if self.polish < 0:
             raise CalibrationError(f"polish must be >= 0, got {self.polish}")
         if not 1 <= self.polish_starts <= self.starts:
@@ -191,6 +207,9 @@ class CalibrationResult:
     compile_seconds: float
     paths: dict[str, np.ndarray] = field(default_factory=dict)
     """Held-out segments' recorded, nominal and calibrated paths (for the plot)."""
+    driver: dict[str, float] | None = None
+    """The driver a ``cmd_vel`` replay ran the commands through: its configured ``wheel_radius`` [m] and
+    ``track_width`` [m], ``effective_track_factor`` [-], ``kp`` and ``ki``; ``None`` for an effort replay."""
 
     def error_summary(self) -> dict[str, dict[str, float]]:
         """Median of the per-segment errors, and the ratio before / after."""
@@ -208,7 +227,7 @@ class CalibrationResult:
                                                     "held_out": int(self.segments.held_out.sum()),
                                                     "seconds": self.segments.inputs.shape[1] * 0.05,
                                                     "command": self.segments.command},
-                "fit_seconds": self.seconds, "compile_seconds": self.compile_seconds}
+                "driver": self.driver, "fit_seconds": self.seconds, "compile_seconds": self.compile_seconds}
 
 
 def _controller(log: DriveLog, driver: DriverConfig, grid: np.ndarray, wheel: np.ndarray, dt: float,
@@ -301,11 +320,11 @@ class _Replay:
     """Segments replayed in chunks of a :class:`~atrv_warp.sim.diff.DiffRollout`'s worlds."""
 
     def __init__(self, segments: Segments, worlds: int, rover: RoverConfig, contact: ContactConfig,
-                 cfg: CalibrationConfig):
+                 cfg: CalibrationConfig, driver: DriverConfig):
         from atrv_warp.sim.diff import DiffRollout
 
         self.roll = DiffRollout(worlds, steps=segments.inputs.shape[1], rover=rover, contact=contact,
-                                twist=segments.command == "cmd_vel", driver=cfg.driver(rover), action_scale=1.0)
+                                twist=segments.command == "cmd_vel", driver=driver, action_scale=1.0)
         self.segments, self.worlds = segments, worlds
         self.warmup = round(cfg.warmup / 0.05) if segments.command == "cmd_vel" else 0
         self.nominal = {"chassis_mass": self.roll.nominal_chassis_mass}
@@ -360,6 +379,11 @@ class _Replay:
             errors.append(err.numpy())
             paths.append(path.numpy())
         return np.concatenate(losses), np.concatenate(errors), np.concatenate(paths, 1)
+
+
+def _driver_record(driver: DriverConfig) -> dict[str, float]:
+    """What the report and the written config record of the replayed driver."""
+    return {name: getattr(driver, name) for name in ("wheel_radius", "track_width", "effective_track_factor", "kp", "ki")}
 
 
 def _nominal(rover: RoverConfig, contact: ContactConfig) -> dict[str, float]:
@@ -444,7 +468,8 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
     say = progress or (lambda _text: None)
     rover = rover or get_variant("realistic")
     contact = contact or ContactConfig()
-    seg = make_segments(log, cfg, cfg.driver(rover))
+    driver = cfg.driver()
+    seg = make_segments(log, cfg, driver)
     train, held = np.flatnonzero(~seg.held_out), np.flatnonzero(seg.held_out)
     batch = min(cfg.batch, len(train))
     nominal = _nominal(rover, contact)
@@ -461,10 +486,12 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
                                                                                     generator=gen, dtype=torch.float64)])
     logits = torch.logit(unit).float().requires_grad_(True)  # (K, P)
     lo, span = low.float(), (high - low).float()
+    through = (f" through a driver configured with wheel radius {driver.wheel_radius:g} m, track "
+               f"{driver.track_width:g} m" if seg.command == "cmd_vel" else "")
     say(f"{len(train)} training and {len(held)} held-out segments of {cfg.segment_seconds:g} s "
-        f"({seg.command}); fitting {', '.join(names)} from {cfg.starts} starts")
+        f"({seg.command}{through}); fitting {', '.join(names)} from {cfg.starts} starts")
     t_compile = time.perf_counter()
-    replay = _Replay(seg, cfg.starts * batch, rover, contact, cfg)
+    replay = _Replay(seg, cfg.starts * batch, rover, contact, cfg, driver)
     replay.evaluate(train[:1], nominal)  # first use compiles the rollout's kernels (cached afterwards)
     compile_s = time.perf_counter() - t_compile
     t_fit = time.perf_counter()
@@ -546,4 +573,4 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
     return CalibrationResult(values={p: fitted[p] for p in names}, nominal={p: nominal[p] for p in names},
                              spread=spread, standard_error=standard_error, starts=starts, errors=errors, converged=converged, reason=reason,
                              segments=seg, seconds=time.perf_counter() - t_fit, compile_seconds=compile_s,
-                             paths=paths)
+                             paths=paths, driver=_driver_record(driver) if seg.command == "cmd_vel" else None)

@@ -24,8 +24,9 @@ def _toml_value(v) -> str:
 
 def write_sim_config(path, result: CalibrationResult, source: str) -> None:
     """The fitted values as a simulator-config TOML file (``[rover]``, ``[contact]``), with a
-    ``[calibration]`` record (the bag, the errors, each value's standard error and spread) that the loader
-    does not read."""
+    ``[calibration]`` record (the bag, the errors, each value's standard error and spread, the driver the commands
+    were replayed through) that the loader does not read. The driver's configuration is the robot's software, not its
+    physics: the simulator takes it from ``RoverSim(driver=...)`` and the ROS node's parameters, never from this file."""
     tables: dict[str, dict] = {"rover": {}, "contact": {}}
     for name, value in result.values.items():
         p = FIT_PARAMETERS[name]
@@ -49,6 +50,9 @@ def write_sim_config(path, result: CalibrationResult, source: str) -> None:
     lines += [f"{k} = {_toml_value(v)}" for k, v in result.standard_error.items()]
     lines += ["", "[calibration.spread]  # standard deviation over the converged starts (nan: one converged)"]
     lines += [f"{k} = {_toml_value(v)}" for k, v in result.spread.items()]
+    if result.driver is not None:
+        lines += ["", "[calibration.driver]  # the robot's driver the /cmd_vel were replayed through (its configuration)"]
+        lines += [f"{k} = {_toml_value(v)}" for k, v in result.driver.items()]
     Path(path).write_text("\n".join(lines) + "\n")
 
 
