@@ -59,7 +59,7 @@ SHIPPED_POLICIES: dict[str, ShippedPolicy] = {
 }
 """The shipped policies by name: ``reach`` (the reference task), ``nav`` (navigation, trained under the ``wide``
 domain randomization), ``nav_plain`` (navigation on the nominal rover with perfect sensors), ``nav_deploy`` (the
-navigation policy for a robot: ``/cmd_vel`` commands from the robot observation; not trained yet, see issue 39)."""
+navigation policy for a robot: ``/cmd_vel`` commands from the robot observation, trained under ``wide``)."""
 
 
 class PolicyTaskMismatch(FileFormatError):

@@ -23,8 +23,8 @@ PARAMETERS = (
     ("mode", "coast", "initial driving mode: coast | forward | backward | rotate_left | rotate_right"),
     ("variant", "realistic", "rover variant: realistic | reference"),
     ("task", "reach", ("world: reach (the flat arena) | nav (terrain and obstacles, drawn once at start) | nav_deploy "
-                       "(nav's world; goal mode drives by /cmd_vel from the robot observation, with -p policy:=FILE "
-                       "until the shipped nav_deploy policy is trained)")),
+                       "(nav's world; goal mode drives by /cmd_vel from the robot observation, the shipped nav_deploy "
+                       "policy unless -p policy:=FILE)")),
     ("scan_beams", 181, "/scan beams over 180 deg (181: 1 deg, as a SICK LMS); 0 = no /scan"),
     ("scan_noise", SENSOR_NOISE.scan_range, "/scan range noise, standard deviation [m]"),
     ("scan_dropout", SENSOR_NOISE.scan_dropout, "/scan: probability that a beam returns nothing [-]"),
