@@ -15,12 +15,14 @@ from pathlib import Path
 
 from _common import write_results
 
-VERSION = 1
+VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parent / "results"
 DRIVERS = (("reach", "policy", "shipped reach policy, SAC"), ("reach", "baseline", "scripted driver, reach"),
-           ("nav", "policy", "shipped nav policy, SAC trained under `wide`"), ("nav", "baseline", "scripted driver, nav"))
+           ("nav", "policy", "shipped nav policy, SAC trained under `wide`"), ("nav", "baseline", "scripted driver, nav"),
+           ("nav_deploy", "policy", ("shipped deployable nav policy (/cmd_vel from odometry, IMU and scan), SAC "
+                                     "trained under `wide`")))
 """(task, driver, label) of each row, in the table's order."""
 
 
@@ -29,7 +31,7 @@ def main() -> int:
     parser.add_argument("--episodes", type=int, default=1000)
     parser.add_argument("--out", default=str(RESULTS / "evaluations.json"))
     args = parser.parse_args()
-    from atrv_warp.policy import load_policy, pretrained_nav_policy_path, pretrained_policy_path
+    from atrv_warp.policy import load_policy, pretrained_policy_path, shipped_policy_path
     from atrv_warp.task.baseline import scripted_policy
     from atrv_warp.task.env import ATRVjrEnv
     from atrv_warp.task.evaluation import EVAL_SEED, format_result, run_episodes
@@ -37,7 +39,7 @@ def main() -> int:
     rows, policies = [], []
     for task, driver, label in DRIVERS:
         if driver == "policy":
-            path = pretrained_nav_policy_path() if task == "nav" else pretrained_policy_path()
+            path = shipped_policy_path(task) if task != "reach" else pretrained_policy_path()
             policy, name = load_policy(path, task=task), str(Path(path).relative_to(Path(__file__).resolve().parents[1]))
             policies.append(path)
         else:
