@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 DOCS = Path(__file__).resolve().parent
-VERSION = 1
+VERSION = 2
 """This script's method (which episodes, which drivers), bumped by hand when it changes; recorded with the caption."""
 
 
@@ -136,14 +136,15 @@ def draw_episode(run: dict, world: int, out: Path, every: int = 2) -> None:
     plt.close(fig)
 
 
-def nav_paths(policy, episodes: int, seed: int) -> dict:
-    """Chassis paths of the first episode of each world on the navigation task, and the scene."""
+def nav_paths(policy, episodes: int, seed: int, task: str = "nav") -> dict:
+    """Chassis paths of the first episode of each world on the navigation task ``task`` (``nav``, or ``nav_deploy``,
+    which draws the same worlds, starts and targets for a seed), and the scene."""
     from tensordict import TensorDict
 
     from atrv_warp import ATRVjrEnv
     from atrv_warp.task.spec import END_REASONS
 
-    env = ATRVjrEnv(episodes, task="nav", seed=seed)
+    env = ATRVjrEnv(episodes, task=task, seed=seed)
     td = env.reset()
     scene = {"target": env.target.clone().numpy(), "tile": env.sim.terrain.tile.clone().numpy(),
              "kind": env.sim.obstacles.kind.clone().numpy(), "pose": env.sim.obstacles.pose.clone().numpy(),
@@ -170,20 +171,27 @@ def _count(reasons: list[str], what: str) -> str:
 def nav_caption(outcomes: dict[str, list[str]], seed: int) -> str:
     """The nav picture's caption, from how each driver's episodes ended."""
     scripted, policy = outcomes["scripted driver"], outcomes["nav policy (SAC)"]
-    return (f"The first {len(policy)} episodes of the nav task's test set (seed {seed}), the same for both drivers. "
-            f"The scripted driver (dashed) reaches the target in {_count(scripted, 'success')} and runs into an "
-            f"obstacle in {_count(scripted, 'obstacle')}; the shipped nav policy (solid) reaches it in "
-            f"{_count(policy, 'success')} and touches an obstacle in {_count(policy, 'obstacle')}.")
+    deploy = outcomes[DEPLOY]
+    return (f"The first {len(policy)} episodes of the nav task's test set (seed {seed}), the same for the three "
+            f"drivers. The scripted driver (dashed) reaches the target in {_count(scripted, 'success')} and runs into "
+            f"an obstacle in {_count(scripted, 'obstacle')}; the shipped nav policy (wheel torques from arena "
+            f"coordinates, solid) reaches it in {_count(policy, 'success')} and touches an obstacle in "
+            f"{_count(policy, 'obstacle')}; the deployable one (/cmd_vel from odometry, IMU and scan, dotted) reaches it "
+            f"in {_count(deploy, 'success')} and touches an obstacle in {_count(deploy, 'obstacle')}.")
 
 
-def provenance(policy: Path) -> dict:
+DEPLOY = "deployable policy (SAC, /cmd_vel)"
+"""The nav picture's label of the shipped ``nav_deploy`` policy."""
+
+
+def provenance(*policies: Path) -> dict:
     """The picture's provenance, as ``benchmarks/_common`` records a results file's (taken before anything is written)."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("benchmarks_common", DOCS.parent / "benchmarks" / "_common.py")
     common = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(common)
-    return common.provenance(VERSION, script=__file__, task=True, policies=(policy,))
+    return common.provenance(VERSION, script=__file__, task=True, policies=policies)
 
 
 def write_caption(out: Path, outcomes: dict[str, list[str]], seed: int, record: dict) -> None:
@@ -196,18 +204,20 @@ def write_caption(out: Path, outcomes: dict[str, list[str]], seed: int, record: 
 
 
 def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
-    """Scripted driver against the shipped navigation policy on the same four episodes; the caption beside it."""
+    """Scripted driver against the shipped navigation policies (torque and deployable) on the same four episodes; the
+    caption beside it."""
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle, Polygon
 
     from atrv_warp import load_policy
     from atrv_warp.integrations.topdown import obstacle_shapes
-    from atrv_warp.policy import pretrained_nav_policy_path
+    from atrv_warp.policy import pretrained_nav_policy_path, shipped_policy_path
     from atrv_warp.task.baseline import scripted_policy
 
-    record = provenance(pretrained_nav_policy_path())
+    record = provenance(pretrained_nav_policy_path(), shipped_policy_path("nav_deploy"))
     runs = {"scripted driver": nav_paths(scripted_policy(), episodes, seed),
-            "nav policy (SAC)": nav_paths(load_policy(pretrained_nav_policy_path()), episodes, seed)}
+            "nav policy (SAC)": nav_paths(load_policy(pretrained_nav_policy_path()), episodes, seed),
+            DEPLOY: nav_paths(load_policy("nav_deploy"), episodes, seed, task="nav_deploy")}
     fig, axes = plt.subplots(1, episodes, figsize=(4.0 * episodes, 4.3), dpi=90)
     base = runs["nav policy (SAC)"]
     for w, ax in enumerate(np.atleast_1d(axes)):
@@ -223,10 +233,10 @@ def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
             else:
                 ax.add_patch(Polygon(shape, closed=True, color="0.2"))
         ax.add_patch(Circle(tuple(target), base["reach"], color="tab:blue", alpha=0.35))
-        for (name, run), style in zip(runs.items(), ("--", "-")):
+        for (name, run), (style, color) in zip(runs.items(), (("--", "tab:red"), ("-", "tab:orange"),
+                                                               (":", "tab:purple"))):
             xy = run["paths"][:, w]
-            ax.plot(xy[:, 0], xy[:, 1], style, lw=2, color="tab:red" if style == "--" else "tab:orange",
-                    label=f"{name}: {run['reason'][w]}")
+            ax.plot(xy[:, 0], xy[:, 1], style, lw=2, color=color, label=f"{name}: {run['reason'][w]}")
         ax.plot(*start, "o", color="k")
         ax.set_xlim(lo[0], lo[0] + span)
         ax.set_ylim(lo[1], lo[1] + span)

@@ -165,15 +165,17 @@ def test_the_nav_caption_is_written_from_the_outcomes():
     pictures = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(pictures)
     caption = pictures.nav_caption({"scripted driver": ["obstacle", "wall", "obstacle"],
-                                    "nav policy (SAC)": ["success", "success", "success"]}, 7)
+                                    "nav policy (SAC)": ["success", "success", "success"],
+                                    pictures.DEPLOY: ["success", "obstacle", "timeout"]}, 7)
     assert "first 3 episodes" in caption and "(seed 7)" in caption
     assert "reaches the target in none of the 3 and runs into an obstacle in 2 of the 3" in caption
     assert "reaches it in all 3 and touches an obstacle in none of the 3" in caption
+    assert "dotted) reaches it in 1 of the 3 and touches an obstacle in 1 of the 3" in caption
     shipped = json.loads((ROOT / "docs" / "nav.json").read_text())
     assert shipped["caption"] == pictures.nav_caption(shipped["outcomes"], shipped["seed"])
-    policy = ROOT / "atrv_warp" / "assets" / "nav_policy.pt"
-    assert shipped["provenance"]["policies"] == {"atrv_warp/assets/nav_policy.pt":
-                                                 hashlib.sha256(policy.read_bytes()).hexdigest()}
+    policies = [ROOT / "atrv_warp" / "assets" / name for name in ("nav_policy.pt", "nav_deploy_policy.pt")]
+    assert shipped["provenance"]["policies"] == {str(p.relative_to(ROOT)): hashlib.sha256(p.read_bytes()).hexdigest()
+                                                 for p in policies}
 
 
 def test_mkdocs_build_fails_naming_the_page_file_and_key(tmp_path):
