@@ -593,6 +593,18 @@ def mujoco_agreement() -> str:
                   ["---", "---:", "---:", "---:", "---:", "---", "---"], rows)
 
 
+def mujoco_transfer() -> str:
+    """``mujoco_transfer.json``: each deployable policy in the MuJoCo twin at each µ (and in our simulator on the
+    same episodes), success and how the others ended."""
+    rows = []
+    for policy, runs in _load("mujoco_transfer.json")["policies"].items():
+        for where, r in runs.items():
+            rows.append([policy, where, str(r["episodes"]), f"{r['success']:.1%}", f"{r['obstacle']:.1%}",
+                         f"{r['timeout']:.1%}", f"{r['flip']:.1%}", f"{r['mean_steps']:.0f}"])
+    return _table(["policy", "where", "episodes", "success", "obstacle", "timeout", "flip", "mean steps"],
+                  ["---", "---", "---:", "---:", "---:", "---:", "---:", "---:"], rows)
+
+
 TABLES: dict[str, Callable[[], str]] = {
     "diff_gradients_common": diff_gradients_common,
     "diff_gradients_differential": diff_gradients_differential,
@@ -615,6 +627,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "skid_turning": skid_turning,
     "skid_checks": skid_checks,
     "mujoco_agreement": mujoco_agreement,
+    "mujoco_transfer": mujoco_transfer,
     "train_to_success": train_to_success,
     "train_to_success_nav": train_to_success_nav,
     "ppo_vs_sac": ppo_vs_sac,
