@@ -1,7 +1,7 @@
 """The MuJoCo twin of the nav world (``atrv_warp.integrations.mujoco``): its world is ours, and a deployable policy
 drives it through the robot's observation builder.
 
-Skipped where the ``mujoco`` extra is not installed."""
+Skipped where MuJoCo is not installed; the ``test`` extra brings it, so the README's test command and CI run them."""
 
 from __future__ import annotations
 
