@@ -20,63 +20,17 @@ MuJoCo motor is a pure torque source).
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 import numpy as np
 
+from atrv_warp.integrations.mujoco.mjcf import number, rover_xml, vector
 from atrv_warp.sim import ArenaConfig, ContactConfig, RoverConfig, SimConfig, load_rover
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_OUT = HERE / "atrvjr.xml"
 CTRL_LIMIT = 20.0
 """Motor control range ±[N·m], the range the benchmark's random torques are drawn from."""
-
-
-def _f(x: float) -> str:
-    """A number as MJCF text: up to 9 significant digits, no trailing zeros, no '-0'."""
-    s = f"{float(x):.9g}"
-    return "0" if s in ("-0", "0") else s
-
-
-def _v(xs) -> str:
-    return " ".join(_f(x) for x in xs)
-
-
-def _quat(rot: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z), MuJoCo's order, of a 3x3 rotation matrix."""
-    m = np.asarray(rot, dtype=float)
-    tr = np.trace(m)
-    if tr > 0.0:
-        s = 2.0 * math.sqrt(tr + 1.0)
-        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-    else:
-        i = int(np.argmax(np.diag(m)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * math.sqrt(1.0 + m[i, i] - m[j, j] - m[k, k])
-        q = [0.0] * 4
-        q[0] = (m[k, j] - m[j, k]) / s
-        q[1 + i] = 0.25 * s
-        q[1 + j] = (m[j, i] + m[i, j]) / s
-        q[1 + k] = (m[k, i] + m[i, k]) / s
-    q = np.asarray(q)
-    q /= np.linalg.norm(q)
-    return q if q[0] >= 0.0 else -q
-
-
-def _pose(tf: np.ndarray) -> str:
-    """``pos``/``quat`` attributes of a 4x4 transform (``quat`` left out when it is the identity)."""
-    q = _quat(tf[:3, :3])
-    out = f'pos="{_v(tf[:3, 3])}"'
-    if not np.allclose(q, (1.0, 0.0, 0.0, 0.0), atol=1e-12):
-        out += f' quat="{_v(q)}"'
-    return out
-
-
-def _inertial(inertial) -> str:
-    i = inertial.inertia
-    full = (i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[0, 2], i[1, 2])
-    return f'<inertial pos="{_v(inertial.com)}" mass="{_f(inertial.mass)}" fullinertia="{_v(full)}"/>'
 
 
 def twin_xml(rover: RoverConfig | None = None, contact: ContactConfig | None = None,
@@ -96,44 +50,27 @@ def twin_xml(rover: RoverConfig | None = None, contact: ContactConfig | None = N
         "     do not edit by hand. SI units: m, kg, s, rad, N·m. -->",
         f'<mujoco model="{desc.name}_twin">',
         '  <compiler angle="radian" autolimits="true"/>',
-        f'  <option timestep="{_f(sim.sim_dt)}" gravity="0 0 {_f(sim.gravity)}"/>',
+        f'  <option timestep="{number(sim.sim_dt)}" gravity="0 0 {number(sim.gravity)}"/>',
         "  <default>",
         # condim 3: sliding friction only, Coulomb coefficient mu (torsional/rolling unused)
-        f'    <geom condim="3" friction="{_f(contact.friction)} 0 0"/>',
+        f'    <geom condim="3" friction="{number(contact.friction)} 0 0"/>',
         "  </default>",
         "  <worldbody>",
         # the arena collides with the rover only (contype 0), the rover with the arena only (conaffinity 0)
-        (f'    <geom name="ground" type="plane" pos="0 0 {_f(arena.ground_top)}" size="{_f(h)} {_f(h)} 0.1" '
+        (f'    <geom name="ground" type="plane" pos="0 0 {number(arena.ground_top)}" size="{number(h)} {number(h)} 0.1" '
         'contype="0" conaffinity="1"/>'),
     ]
     for label, centre, half in arena.boxes():
         if label == "ground":
             continue  # the plane above is its top face, the half-space our contact kernel tests
-        lines.append(f'    <geom name="{label}" type="box" pos="{_v(centre)}" size="{_v(half)}" '
+        lines.append(f'    <geom name="{label}" type="box" pos="{vector(centre)}" size="{vector(half)}" '
                      'contype="0" conaffinity="1"/>')
-    lines += [
-        f'    <body name="{desc.chassis}" pos="0 0 {_f(z0)}">',
-        '      <freejoint name="root_joint"/>',
-        f"      {_inertial(desc.chassis_inertial)}",
-    ]
-    if desc.chassis_box is not None:
-        pose, half = desc.chassis_box
-        lines.append(f'      <geom name="{desc.chassis}/box" type="box" {_pose(pose)} size="{_v(half)}" '
-                     'contype="1" conaffinity="0"/>')
+    # the rover collides with the arena only (the nav twin's rover_xml, without its scanner groups)
+    lines += rover_xml(desc, rover, pos=(0.0, 0.0, z0), shape_attributes='contype="1" conaffinity="0"')
+    lines += ["  </worldbody>", "  <actuator>"]
     for w in desc.wheels:
-        centre = w.outward * rover.wheel_offset
-        lines += [
-            f'      <body name="{w.link}" {_pose(w.origin)}>',
-            f'        <joint name="{w.joint}" type="hinge" axis="{_v(w.axis)}"/>',
-            f"        {_inertial(w.inertial)}",
-            (f'        <geom name="{w.link}/cylinder" type="cylinder" pos="{_v(centre)}" zaxis="{_v(w.outward)}" '
-            f'size="{_f(rover.wheel_radius)} {_f(0.5 * rover.wheel_length)}" contype="1" conaffinity="0"/>'),
-            "      </body>",
-        ]
-    lines += ["    </body>", "  </worldbody>", "  <actuator>"]
-    for w in desc.wheels:
-        lines.append(f'    <motor name="{w.joint}/motor" joint="{w.joint}" gear="{_f(w.drive_sign)}" '
-                     f'ctrlrange="{_f(-CTRL_LIMIT)} {_f(CTRL_LIMIT)}"/>')
+        lines.append(f'    <motor name="{w.joint}/motor" joint="{w.joint}" gear="{number(w.drive_sign)}" '
+                     f'ctrlrange="{number(-CTRL_LIMIT)} {number(CTRL_LIMIT)}"/>')
     lines += ["  </actuator>", "</mujoco>", ""]
     return "\n".join(lines)
 
