@@ -6,6 +6,8 @@ train, start Ray clusters or live ROS 2 nodes, or open the browser. ``python -m 
 
 from __future__ import annotations
 
+import os
+import random
 import subprocess
 import sys
 from collections.abc import Callable
@@ -64,3 +66,22 @@ def tiny_env():
     env = ATRVjrEnv(4, seed=0)
     env.reset()
     return env
+
+
+@pytest.fixture(scope="module")
+def ros_env():
+    """rclpy initialised for one test module on a ROS domain of its own, discovery kept to this machine; yields the
+    environment a child process (a node under test) should run with, and restores the variables afterwards."""
+    rclpy = pytest.importorskip("rclpy", reason="ROS 2 extra not installed: pip install -e '.[ros]'")
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(random.randint(1, 100)),
+               PYTHONUNBUFFERED="1")
+    old = {k: os.environ.get(k) for k in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID")}
+    os.environ.update({k: env[k] for k in old})
+    rclpy.init()
+    yield env
+    rclpy.try_shutdown()
+    for k, v in old.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v

@@ -25,22 +25,6 @@ ROOT = Path(__file__).resolve().parent.parent
 NS = "/rover_1"
 
 
-@pytest.fixture(scope="module")
-def ros_env():
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(random.randint(1, 100)),
-               PYTHONUNBUFFERED="1")
-    old = {k: os.environ.get(k) for k in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID")}
-    os.environ.update({k: env[k] for k in old})
-    rclpy.init()
-    yield env
-    rclpy.try_shutdown()
-    for k, v in old.items():
-        if v is None:
-            os.environ.pop(k, None)
-        else:
-            os.environ[k] = v
-
-
 class Robot:
     """A stand-in robot under :data:`NS`: publishes odometry, IMU and a 181-beam scan; records what the node says."""
 

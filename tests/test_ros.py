@@ -2,8 +2,6 @@
 
 import itertools
 import math
-import os
-import random
 import subprocess
 import sys
 import time
@@ -16,22 +14,6 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
 from atrv_warp.core.geometry import quat_to_yaw
-
-
-@pytest.fixture(scope="module")
-def ros_env():
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(random.randint(1, 100)),
-               PYTHONUNBUFFERED="1")
-    old = {k: os.environ.get(k) for k in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID")}
-    os.environ.update({k: env[k] for k in old})
-    rclpy.init()
-    yield env
-    rclpy.try_shutdown()
-    for k, v in old.items():
-        if v is None:
-            os.environ.pop(k, None)
-        else:
-            os.environ[k] = v
 
 
 class Client:
