@@ -308,6 +308,12 @@ def main(argv: list[str] | None = None) -> int:
         return error_line(parser.prog, f"unknown --engine {args.engine!r}; known: {', '.join(ENGINES)}")
     if (problem := _check_outputs(args)) is not None:
         return error_line(parser.prog, problem)
+    from atrv_warp.task.randomization import AROUND_PRESETS
+
+    around = args.randomization in AROUND_PRESETS and args.engine == "ours"
+    if around and not args.sim_config:
+        return error_line(parser.prog, f"--randomization {args.randomization} is centred on a simulator config: give "
+                          "it with --sim-config FILE")
     if args.verbose:
         set_verbose()
     from atrv_warp.task.evaluation import format_bins, format_result, write_result
@@ -317,17 +323,12 @@ def main(argv: list[str] | None = None) -> int:
             print(device_summary(args.device))
         except (RuntimeError, ValueError) as err:
             return error_line(parser.prog, f"--device {args.device!r}: {err}")
-    from atrv_warp.task.randomization import AROUND_PRESETS
-
     viewers = _Viewers(args)
     options = {"engine": args.engine, "task": args.task, "episodes": args.episodes, "seed": args.seed,
                "baseline": args.baseline, "friction": args.friction, "device": args.device, "attach": viewers}
     on = None
     try:
-        if args.randomization in AROUND_PRESETS and args.engine == "ours":
-            if not args.sim_config:
-                return error_line(parser.prog, f"--randomization {args.randomization} is centred on a simulator "
-                                  "config: give it with --sim-config FILE")
+        if around:  # the config's rover itself, then across the spread around it
             on, run = evaluate_around(args.checkpoint, sim_config=args.sim_config, randomization=args.randomization,
                                       **options)
         else:
@@ -340,7 +341,7 @@ def main(argv: list[str] | None = None) -> int:
     result, extra = run.result, run.extra
     tail = f" | randomization {extra['randomization']}" if "randomization" in extra else ""
     tail += f" | MuJoCo twin, µ {extra['friction']:g}" if run.engine == "mujoco" else ""
-    if on is not None:  # the config's rover itself, then the spread around it
+    if on is not None:
         print(format_result(f"{run.name} on {args.sim_config}", on.result))
         print(format_result(f"{run.name} around {args.sim_config}", result) + tail)
         extra = {**extra, "on_sim_config": on.result.as_dict()}

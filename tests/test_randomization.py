@@ -330,3 +330,8 @@ def test_evaluate_reports_the_calibrated_rover_and_the_spread_around_it(calibrat
     assert bins["payload_mass"][0]["low"] == pytest.approx(9.1) and math.isclose(bins["payload_mass"][-1]["high"], 11.5)
     assert main(["--baseline", "--episodes", "2", "--randomization", "around"]) == 2
     assert "give it with --sim-config FILE" in capsys.readouterr().err
+    lacking = tmp_path / "lacking.toml"
+    lacking.write_text("[contact]\nfriction = 0.5\n")
+    assert main(["--baseline", "--episodes", "2", "--sim-config", str(lacking), "--randomization", "around"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and str(lacking) in err and "payload_mass" in err

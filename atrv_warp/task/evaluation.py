@@ -116,7 +116,7 @@ def format_bins(table: dict[str, list[dict]]) -> str:
     for name, rows in table.items():
         cells = []
         for r in rows:
-            label = f"{r['low'] + 0.5:g}" if name == "latency" else f"{r['low']:g}-{r['high']:g}"
+            label = f"{r['low'] + 0.5:g}" if name == "latency" else f"{r['low']:.3g}-{r['high']:.3g}"
             rate = "-" if r["episodes"] == 0 else f"{100 * r['success']:.1f}%"
             cells.append(f"{label}: {rate} ({r['episodes']})")
         lines.append(f"  success by {name}: " + " | ".join(cells))
