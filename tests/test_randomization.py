@@ -224,6 +224,9 @@ def calibrated(tmp_path):
 
 
 def test_around_resolves_to_ranges_centred_on_the_file(calibrated, tmp_path):
+    from atrv_warp.integrations.calibration.fit import DEFAULT_FIT
+
+    assert set(AroundConfig().parameters) == set(DEFAULT_FIT)  # what atrv-calibrate fits by default, as documented
     r = get_randomization("around", sim_config=calibrated)
     assert r == resolve_around(AROUND_PRESETS["around"], calibrated)
     half = {"friction": 0.1 * 0.51,  # 2 standard errors (0.008) < 10 % of the value
