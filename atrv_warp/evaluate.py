@@ -12,6 +12,8 @@ Examples::
     python -m atrv_warp.evaluate --task nav               # the shipped navigation policy
     python -m atrv_warp.evaluate nav_plain                # a shipped policy by name (atrv_warp.policy.SHIPPED_POLICIES)
     python -m atrv_warp.evaluate --task nav --randomization wide   # under shift: per-world physics, noise, latency
+    python -m atrv_warp.evaluate run/best_policy.pt --sim-config calibrated.toml --randomization around
+                                                          # on the calibrated rover, then across the spread around it
     python -m atrv_warp.evaluate --task nav --baseline --episodes 8 --rerun nav.rrd
     python -m atrv_warp.evaluate --episodes 8 --rerun eval.rrd      # record 4 worlds; view: rerun eval.rrd
     python -m atrv_warp.evaluate --episodes 4 --serve --real-time   # live web viewer on 127.0.0.1
@@ -35,7 +37,7 @@ from dataclasses import dataclass, field
 
 from atrv_warp.runtime import add_verbose_argument, device_summary, error_line, set_verbose
 
-__all__ = ["ENGINES", "Evaluation", "baseline_main", "build_parser", "evaluate_policy", "main"]
+__all__ = ["ENGINES", "Evaluation", "baseline_main", "build_parser", "evaluate_around", "evaluate_policy", "main"]
 
 ENGINES = ("ours", "mujoco")
 """Engines an evaluation runs on: ``ours`` (the simulator that trains the policies) and ``mujoco`` (the MuJoCo
@@ -56,8 +58,8 @@ class Evaluation:
     record: object
     """Each episode's end (:class:`~atrv_warp.task.evaluation.EpisodeRecord`)."""
     extra: dict = field(default_factory=dict)
-    """Figures beside the summary, as the JSON gets them (the randomization and its success-by-bin table; the
-    twin's engine and friction)."""
+    """Figures beside the summary, as the JSON gets them (the randomization, the ranges it drew from and its
+    success-by-bin table; the twin's engine and friction)."""
 
     @property
     def result(self):
@@ -79,7 +81,7 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
         episodes: How many episodes (one world each on ``ours``).
         seed: The evaluation set (default :data:`~atrv_warp.task.evaluation.EVAL_SEED`, the test set).
         baseline: Evaluate the scripted baseline instead (``ours`` only).
-        randomization: A randomization preset (``ours`` only).
+        randomization: A randomization preset (``ours`` only); ``around`` is centred on ``sim_config``.
         friction: The twin's Coulomb µ (``mujoco`` only; default the nominal µ).
         sim_config: A simulator-config TOML (``ours`` only).
         device: The simulation device (``ours``).
@@ -89,7 +91,8 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
         ValueError: One line naming the problem: an unknown engine, task or preset; a policy that cannot be loaded
             (a missing file, or a shipped policy not trained yet: naming the command that trains it) or does not fit
             the task; an option the engine does not take; a policy the twin cannot drive (not deployable); MuJoCo
-            not installed for ``mujoco``.
+            not installed for ``mujoco``; a randomization centred on a ``sim_config`` that is missing or does not set
+            a parameter it draws.
     """
     from atrv_warp.task.config import TASK_VARIANTS
     from atrv_warp.task.evaluation import EVAL_SEED
@@ -111,6 +114,32 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
                           randomization=randomization, sim_config=sim_config, device=device, attach=attach)
 
 
+def evaluate_around(policy: str | None = None, *, sim_config: str, randomization: str = "around",
+                    **kwargs) -> tuple[Evaluation, Evaluation]:
+    """The policy on the rover ``sim_config`` describes (e.g. a calibrated one), then across the spread around it:
+    :func:`evaluate_policy` on the same episodes without randomization and under ``randomization`` (a randomization
+    centred on ``sim_config``, :data:`~atrv_warp.task.randomization.AROUND_PRESETS`).
+
+    Args:
+        policy: As :func:`evaluate_policy`'s.
+        sim_config: The simulator-config TOML file.
+        randomization: A name in :data:`~atrv_warp.task.randomization.AROUND_PRESETS`.
+        **kwargs: :func:`evaluate_policy`'s other keyword arguments (``attach`` goes to the second run only).
+
+    Raises:
+        ValueError: As :func:`evaluate_policy`, before either run; a ``randomization`` not centred on a config.
+    """
+    from atrv_warp.task.randomization import AROUND_PRESETS, get_randomization
+
+    if randomization not in AROUND_PRESETS:
+        raise ValueError(f"randomization {randomization!r} is not centred on a simulator config; known: "
+                         f"{sorted(AROUND_PRESETS)}")
+    get_randomization(randomization, sim_config=sim_config)  # a file that cannot centre it stops before any run
+    attach = kwargs.pop("attach", None)
+    on = evaluate_policy(policy, sim_config=sim_config, **kwargs)
+    return on, evaluate_policy(policy, sim_config=sim_config, randomization=randomization, attach=attach, **kwargs)
+
+
 def _load(path: str, task: str | None):
     """(policy module, trained-on task) of a saved policy, refused when it does not fit ``task``."""
     from atrv_warp.policy import load_policy, policy_task
@@ -128,10 +157,14 @@ def _load(path: str, task: str | None):
 
 def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim_config, device, attach) -> Evaluation:
     from atrv_warp.policy import SHIPPED_POLICIES
-    from atrv_warp.task.evaluation import run_episodes, success_by_bin
-    from atrv_warp.task.randomization import get_randomization
+    from atrv_warp.task.evaluation import range_bins, run_episodes, success_by_bin
+    from atrv_warp.task.randomization import AROUND_PRESETS, get_randomization
 
-    shift = get_randomization(randomization)
+    if sim_config:
+        from atrv_warp.sim.config import load_sim_config
+
+        load_sim_config(sim_config)  # a bad file stops here, before the simulator is built
+    shift = get_randomization(randomization, sim_config=sim_config)  # `around` resolved against sim_config
     if baseline:
         from atrv_warp.task.baseline import scripted_policy
 
@@ -140,16 +173,17 @@ def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim
     else:
         name = policy or (task if task in SHIPPED_POLICIES else "reach")  # the task's shipped policy
         module, task = _load(name, task)
-    if sim_config:
-        from atrv_warp.sim.config import load_sim_config
-
-        load_sim_config(sim_config)  # a bad file stops here, before the simulator is built
     from atrv_warp.task.env import ATRVjrEnv
 
     env = ATRVjrEnv(episodes, device=device, task=task, randomization=shift, sim_config=sim_config)
     module = module.to(env.device)  # loaded on the CPU; the env's observations live on its device
     record = run_episodes(module, env, seed=seed, on_step=attach(env) if attach is not None else None)
-    extra = {"randomization": randomization, "success_by_bin": success_by_bin(record)} if shift.enabled else {}
+    extra = {}
+    if shift.enabled:
+        around = randomization in AROUND_PRESETS  # its ranges are narrow: bins across them, not SHIFT_BINS
+        extra = {"randomization": randomization,
+                 "ranges": {k: [d.low, d.high] for k, d in shift.physics.items()} | {"latency": list(shift.latency)},
+                 "success_by_bin": success_by_bin(record, range_bins(shift)) if around else success_by_bin(record)}
     return Evaluation(str(name), task, seed, "ours", record, extra)
 
 
@@ -192,7 +226,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="task: reach | nav | nav_deploy (default: the policy's own; reach for the baseline)")
     parser.add_argument("--randomization", default="none", metavar="PRESET",
                         help="evaluate under domain randomization: none | mild | wide (each world draws its physics, "
-                             "sensor noise and latency from the evaluation seed); prints success by parameter bin")
+                             "sensor noise and latency from the evaluation seed); prints success by parameter bin. "
+                             "around (with --sim-config): on the config's rover, then across the spread around it, "
+                             "two rows")
     parser.add_argument("--sim-config", metavar="FILE",
                         help="simulator-config TOML, e.g. atrv-calibrate's fit of a real rover (docs/calibration.md)")
     parser.add_argument("--device", default="cpu", help="simulation device")
@@ -272,6 +308,12 @@ def main(argv: list[str] | None = None) -> int:
         return error_line(parser.prog, f"unknown --engine {args.engine!r}; known: {', '.join(ENGINES)}")
     if (problem := _check_outputs(args)) is not None:
         return error_line(parser.prog, problem)
+    from atrv_warp.task.randomization import AROUND_PRESETS
+
+    around = args.randomization in AROUND_PRESETS and args.engine == "ours"
+    if around and not args.sim_config:
+        return error_line(parser.prog, f"--randomization {args.randomization} is centred on a simulator config: give "
+                          "it with --sim-config FILE")
     if args.verbose:
         set_verbose()
     from atrv_warp.task.evaluation import format_bins, format_result, write_result
@@ -282,10 +324,16 @@ def main(argv: list[str] | None = None) -> int:
         except (RuntimeError, ValueError) as err:
             return error_line(parser.prog, f"--device {args.device!r}: {err}")
     viewers = _Viewers(args)
+    options = {"engine": args.engine, "task": args.task, "episodes": args.episodes, "seed": args.seed,
+               "baseline": args.baseline, "friction": args.friction, "device": args.device, "attach": viewers}
+    on = None
     try:
-        run = evaluate_policy(args.checkpoint, engine=args.engine, task=args.task, episodes=args.episodes,
-                              seed=args.seed, baseline=args.baseline, randomization=args.randomization,
-                              friction=args.friction, sim_config=args.sim_config, device=args.device, attach=viewers)
+        if around:  # the config's rover itself, then across the spread around it
+            on, run = evaluate_around(args.checkpoint, sim_config=args.sim_config, randomization=args.randomization,
+                                      **options)
+        else:
+            run = evaluate_policy(args.checkpoint, randomization=args.randomization, sim_config=args.sim_config,
+                                  **options)
     except ValueError as err:
         return error_line(parser.prog, _option_named(err))
     finally:
@@ -293,7 +341,12 @@ def main(argv: list[str] | None = None) -> int:
     result, extra = run.result, run.extra
     tail = f" | randomization {extra['randomization']}" if "randomization" in extra else ""
     tail += f" | MuJoCo twin, µ {extra['friction']:g}" if run.engine == "mujoco" else ""
-    print(format_result(run.name, result) + tail)
+    if on is not None:
+        print(format_result(f"{run.name} on {args.sim_config}", on.result))
+        print(format_result(f"{run.name} around {args.sim_config}", result) + tail)
+        extra = {**extra, "on_sim_config": on.result.as_dict()}
+    else:
+        print(format_result(run.name, result) + tail)
     if "success_by_bin" in extra:
         print(format_bins(extra["success_by_bin"]))
     if args.rerun:

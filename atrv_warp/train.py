@@ -8,8 +8,10 @@ Usage::
     python -m atrv_warp.train num_envs=128 max_minutes=5       # override any field by its name
     python -m atrv_warp.train --env.num-envs 128               # ... or by its group (--help lists them)
     python -m atrv_warp.train --resume runs/default            # continue a killed run
+    python -m atrv_warp.train --sim-config calibrated.toml randomization=around   # around a calibrated rover
 
-Outputs in ``<out_dir>/<name>/``: ``config.toml`` (resolved), ``checkpoint.pt`` (atomic,
+Outputs in ``<out_dir>/<name>/``: ``config.toml`` (resolved), ``randomization.json`` (the ranges the envs draw
+from, ``randomization=around`` resolved against ``--sim-config``), ``checkpoint.pt`` (atomic,
 at every evaluation), ``best_policy.pt`` (best periodic evaluation), ``final_eval.json``,
 ``logs/`` (CSV or TensorBoard scalars), ``learning_curve.png``.
 """

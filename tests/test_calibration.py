@@ -328,6 +328,13 @@ def test_segments_replay_the_configured_driver_and_the_outputs_record_it(tmp_pat
     assert written["calibration"]["driver"] == record and written["rover"] == {"wheel_radius": 0.121}
     rover, _ = load_sim_config(tmp_path / "cal.toml")
     assert rover.wheel_radius == 0.121
+    # a randomization centred on the file reads the standard errors the calibration wrote: 0.121 +- 2 x 1e-4
+    from atrv_warp.sim.config import read_sim_config
+    from atrv_warp.task.randomization import AroundConfig, resolve_around
+
+    assert read_sim_config(tmp_path / "cal.toml").standard_error == {"wheel_radius": 1e-4}
+    around = resolve_around(AroundConfig(parameters=("wheel_radius",), fraction=0.0), tmp_path / "cal.toml")
+    assert (around.wheel_radius.low, around.wheel_radius.high) == pytest.approx((0.1208, 0.1212))
 
 
 def test_record_example_drives_a_worn_truth_with_the_nominal_driver(tmp_path, monkeypatch):

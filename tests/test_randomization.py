@@ -1,6 +1,9 @@
 """Domain randomization in the training env: draws within their ranges, seeded and per world, on the schedule
 asked for; the latency buffer and the motor lag; noisy observations; bad settings refused before anything
-steps; and the trainer's key."""
+steps; the trainer's key; and a randomization centred on a (calibrated) simulator config."""
+
+import json
+import math
 
 import pytest
 import torch
@@ -8,7 +11,15 @@ import torch
 from atrv_warp.rl.config import load_train_config
 from atrv_warp.sim.config import SENSOR_NOISE
 from atrv_warp.task.env import ATRVjrEnv
-from atrv_warp.task.randomization import RANDOMIZATION_PRESETS, Draw, RandomizationConfig, get_randomization
+from atrv_warp.task.randomization import (
+    AROUND_PRESETS,
+    RANDOMIZATION_PRESETS,
+    AroundConfig,
+    Draw,
+    RandomizationConfig,
+    get_randomization,
+    resolve_around,
+)
 from atrv_warp.task.spec import OBS_INDEX
 
 
@@ -142,7 +153,7 @@ def test_observation_and_scan_noise():
 
 
 @pytest.mark.parametrize("make,message", [
-    (lambda: get_randomization("wild"), "unknown randomization preset 'wild'; known: \\['mild', 'none', 'wide'\\]"),
+    (lambda: get_randomization("wild"), "unknown randomization preset 'wild'; known: \\['around', 'mild', 'none', 'wide'\\]"),
     (lambda: RandomizationConfig(friction=Draw(0.8, 0.2)), "randomization.friction: low 0.8 > high 0.2"),
     (lambda: RandomizationConfig(friction=Draw(0.0, 0.5)), "randomization.friction: friction must be > 0"),
     (lambda: RandomizationConfig(payload_mass=Draw(-5.0, 5.0)), "randomization.payload_mass: payload_mass must be >= 0"),
@@ -184,3 +195,146 @@ def test_train_config_key():
     assert load_train_config("smoke", {"env.randomization": "wide"}).env.randomization == "wide"
     with pytest.raises(ValueError, match="randomization: unknown randomization preset 'wild'"):
         load_train_config("smoke", {"randomization": "wild"})
+
+
+# ------------------------------------------------------------------ around a simulator config
+CALIBRATED = """\
+[rover]
+torque_scale = 0.79
+payload_mass = 10.3
+wheel_radius = 0.126
+[contact]
+friction = 0.51
+[calibration]
+bag = "drive.mcap"
+[calibration.standard_error]
+friction = 0.004
+torque_scale = 0.05
+payload_mass = 0.6
+wheel_radius = nan
+"""
+"""What ``atrv-calibrate`` writes (``benchmarks/results/calibration_console.txt``'s fit, torque's error widened)."""
+
+
+@pytest.fixture
+def calibrated(tmp_path):
+    path = tmp_path / "calibrated.toml"
+    path.write_text(CALIBRATED)
+    return path
+
+
+def test_around_resolves_to_ranges_centred_on_the_file(calibrated, tmp_path):
+    from atrv_warp.integrations.calibration.fit import DEFAULT_FIT
+
+    assert set(AroundConfig().parameters) == set(DEFAULT_FIT)  # what atrv-calibrate fits by default, as documented
+    r = get_randomization("around", sim_config=calibrated)
+    assert r == resolve_around(AROUND_PRESETS["around"], calibrated)
+    half = {"friction": 0.1 * 0.51,  # 2 standard errors (0.008) < 10 % of the value
+            "torque_scale": 2 * 0.05,  # 2 standard errors > 10 %
+            "payload_mass": 2 * 0.6,
+            "wheel_radius": 0.1 * 0.126}  # no standard error (nan): 10 %
+    centre = {"friction": 0.51, "torque_scale": 0.79, "payload_mass": 10.3, "wheel_radius": 0.126}
+    assert set(r.physics) == set(half)
+    for name, draw in r.physics.items():
+        assert (draw.low + draw.high) / 2 == pytest.approx(centre[name]), name
+        assert (draw.high - draw.low) / 2 == pytest.approx(half[name]), name
+        assert draw.mode == "reset" and not draw.log
+    mild = RANDOMIZATION_PRESETS["mild"]
+    assert r.latency == mild.latency and r.noise == mild.noise  # what is not fitted: as mild
+    # a file written by hand, no standard errors: the stated fraction; clipped to each parameter's valid values
+    hand = tmp_path / "hand.toml"
+    hand.write_text("[rover]\npayload_mass = 0.0\n[contact]\nfriction = 0.05\n[calibration.standard_error]\n"
+                    "friction = 0.05\npayload_mass = 1.0\n")
+    wide = resolve_around(AroundConfig(parameters=("friction", "payload_mass"), fraction=0.2), hand)
+    assert (wide.friction.low, wide.friction.high) == pytest.approx((0.005, 0.15))  # > 0: a tenth of the centre
+    assert (wide.payload_mass.low, wide.payload_mass.high) == pytest.approx((0.0, 2.0))  # >= 0
+    # the fraction alone where the file records no standard error
+    hand.write_text("[contact]\nfriction = 0.6\n")
+    alone = resolve_around(AroundConfig(parameters=("friction",), fraction=0.25), hand)
+    assert (alone.friction.low, alone.friction.high) == pytest.approx((0.45, 0.75))
+
+
+def test_around_draws_stay_around_the_calibrated_rover(calibrated):
+    """A real env: every world's drawn physics lies in the resolved ranges around the file's values, spread within
+    them, not over ``wide``'s absolute ranges; what ``around`` does not draw keeps the file's (and the rover's)
+    value; the draws follow the seed."""
+    r = get_randomization("around", sim_config=calibrated)
+    env = ATRVjrEnv(16, seed=4, randomization="around", sim_config=calibrated)
+    assert env.randomization == r
+    env.reset()
+    p = env.sim.params
+    for name, draw in r.physics.items():
+        values = p.view(name)
+        assert float(values.min()) >= draw.low - 1e-6 and float(values.max()) <= draw.high + 1e-6, name
+        assert float(values.std()) > 0.15 * (draw.high - draw.low), name  # drawn, not one value
+    wide = RANDOMIZATION_PRESETS["wide"]
+    # the same 16 worlds under wide: mu over 0.2-1.0 and payload over 0-25 kg; around them, within 10 % and 1.2 kg
+    assert float((p.friction - 0.51).abs().max()) <= 0.051 + 1e-6
+    assert float((p.payload_mass - 10.3).abs().max()) <= 1.2 + 1e-5
+    under_wide = ATRVjrEnv(16, seed=4, randomization="wide", sim_config=calibrated)
+    under_wide.reset()
+    assert float((under_wide.sim.params.friction - 0.51).abs().max()) > 0.1
+    assert wide.friction.low < 0.4 and wide.payload_mass.low == 0.0
+    assert torch.equal(p.speed_limit, torch.full((16,), 50.0))  # not drawn: the rover's
+    assert torch.all(p.payload_offset == 0)
+    body = env.sim.model.body_mass.numpy().reshape(16, -1)[:, env.sim.layout.chassis_body]
+    assert body == pytest.approx(env.sim.nominal_chassis.mass + p.payload_mass.numpy(), rel=1e-6)
+    again = ATRVjrEnv(16, seed=4, randomization="around", sim_config=calibrated)
+    again.reset()
+    assert torch.equal(again.sim.params.payload_mass, p.payload_mass)
+
+
+def test_around_a_config_that_lacks_a_drawn_parameter_is_one_line(tmp_path, monkeypatch):
+    """Bad input: a file without a parameter ``around`` draws is named, with the parameter, before any simulator
+    is built; ``around`` without a file says it needs one."""
+    import atrv_warp.task.env as env_module
+
+    lacking = tmp_path / "no_payload.toml"
+    lacking.write_text("[rover]\ntorque_scale = 0.8\nwheel_radius = 0.125\n[contact]\nfriction = 0.5\n")
+
+    def no_simulator(*args, **kwargs):
+        raise AssertionError("a simulator was built")
+
+    monkeypatch.setattr(env_module, "RoverSim", no_simulator)
+    with pytest.raises(ValueError) as err:
+        ATRVjrEnv(2, randomization="around", sim_config=lacking)
+    line = str(err.value)
+    assert "\n" not in line and str(lacking) in line and "payload_mass ([rover] payload_mass)" in line
+    with pytest.raises(ValueError, match="randomization 'around' is centred on a simulator config: give one"):
+        ATRVjrEnv(2, randomization="around")
+    with pytest.raises(ValueError, match="train config: randomization: randomization around sim config .*"
+                                         "does not set payload_mass"):
+        load_train_config("smoke", {"randomization": "around", "sim_config": str(lacking)})
+    with pytest.raises(ValueError, match="train config: randomization: .* give one"):
+        load_train_config("smoke", {"randomization": "around"})
+    with pytest.raises(ValueError, match="payload_offset cannot be drawn around a value"):
+        AroundConfig(parameters=("payload_offset",))
+    with pytest.raises(ValueError, match="unknown physical parameter 'mu'"):
+        AroundConfig(parameters=("mu",))
+
+
+def test_evaluate_reports_the_calibrated_rover_and_the_spread_around_it(calibrated, tmp_path, capsys):
+    """``evaluate --sim-config F --randomization around``: two rows on the same episodes, the rover of the file and
+    across the spread, and the JSON holds both, the ranges and success by bins across them."""
+    from atrv_warp.evaluate import main
+
+    out = tmp_path / "around.json"
+    assert main(["--baseline", "--episodes", "8", "--sim-config", str(calibrated), "--randomization", "around",
+                 "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert f"on {calibrated}: success" in printed and f"around {calibrated}: success" in printed
+    assert "randomization around" in printed and "success by payload_mass" in printed
+    result = json.loads(out.read_text())
+    assert result["randomization"] == "around" and result["on_sim_config"]["episodes"] == 8
+    assert result["ranges"]["payload_mass"] == pytest.approx([9.1, 11.5])
+    bins = result["success_by_bin"]
+    assert set(bins) == {"friction", "payload_mass", "torque_scale", "wheel_radius", "latency"}
+    assert all(sum(row["episodes"] for row in rows) == 8 for rows in bins.values())
+    assert bins["payload_mass"][0]["low"] == pytest.approx(9.1) and math.isclose(bins["payload_mass"][-1]["high"], 11.5)
+    assert main(["--baseline", "--episodes", "2", "--randomization", "around"]) == 2
+    assert "give it with --sim-config FILE" in capsys.readouterr().err
+    lacking = tmp_path / "lacking.toml"
+    lacking.write_text("[contact]\nfriction = 0.5\n")
+    assert main(["--baseline", "--episodes", "2", "--sim-config", str(lacking), "--randomization", "around"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and str(lacking) in err and "payload_mass" in err

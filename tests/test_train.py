@@ -426,3 +426,29 @@ def test_ppo_trains_resumes_and_exports(tmp_path, run_module):
     run_module("atrv_warp.export", str(run_dir / "best_policy.pt"), str(out))
     module, spec = load_exported(out)
     assert module(torch.zeros(3, 10)).shape == (3, 2) and spec["policy_meta"]["task"] == "reach"
+
+
+@pytest.mark.slow  # trains
+def test_train_around_a_calibrated_rover_from_the_command_line(tmp_path, run_module):
+    """``train --sim-config F randomization=around``: the run trains on draws around the file's values and its
+    folder records the resolved ranges; a file that lacks a drawn parameter stops before any work, in one line."""
+    calibrated = tmp_path / "calibrated.toml"
+    calibrated.write_text("[rover]\ntorque_scale = 0.8\npayload_mass = 12.0\nwheel_radius = 0.125\n"
+                          "[contact]\nfriction = 0.5\n[calibration.standard_error]\npayload_mass = 1.5\n")
+    run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", "name=around", "--sim-config",
+               str(calibrated), "randomization=around", "total_frames=2048", "init_random_frames=1024",
+               "eval_every_frames=1024", "final_eval_episodes=16")
+    run_dir = tmp_path / "around"
+    assert (run_dir / "best_policy.pt").is_file()
+    saved = json.loads((run_dir / "randomization.json").read_text())
+    assert saved["randomization"] == "around" and saved["sim_config"] == str(calibrated)
+    resolved = saved["resolved"]
+    assert resolved["payload_mass"]["low"] == pytest.approx(9.0) and resolved["payload_mass"]["high"] == pytest.approx(15.0)
+    assert resolved["friction"]["low"] == pytest.approx(0.45) and resolved["friction"]["high"] == pytest.approx(0.55)
+    assert resolved["stiffness"] is None and resolved["latency"] == [0, 1]
+    lacking = tmp_path / "lacking.toml"
+    lacking.write_text("[contact]\nfriction = 0.5\n")
+    bad = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", "name=bad", "--sim-config",
+                     str(lacking), "randomization=around", check=False)
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+    assert str(lacking) in bad.stderr and "payload_mass" in bad.stderr and not (tmp_path / "bad").exists()

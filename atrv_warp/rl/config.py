@@ -85,7 +85,9 @@ class EnvConfig:
     less per frame; docs/performance.md has the figures)."""
     randomization: str = "none"
     """Domain randomization of the training envs and of the evaluations during training: a preset of
-    :data:`atrv_warp.task.randomization.RANDOMIZATION_PRESETS` (``none``, ``mild``, ``wide``; docs/randomization.md)."""
+    :data:`atrv_warp.task.randomization.RANDOMIZATION_PRESETS` (``none``, ``mild``, ``wide``), or ``around``: each
+    physical draw centred on ``sim_config``'s value (:data:`~atrv_warp.task.randomization.AROUND_PRESETS`;
+    docs/randomization.md). The run folder's ``randomization.json`` records the ranges it resolved to."""
     sim_config: str = ""
     """A simulator-config TOML file applied to every world (``[rover]`` and ``[contact]`` tables), e.g. the
     calibration ``atrv-calibrate`` fitted to a real rover's bag (docs/calibration.md); empty: the nominal rover."""
@@ -285,17 +287,27 @@ class TrainConfig:
         from atrv_warp.task.config import get_task
 
         get_task(self.env.task)  # names the known tasks if this one is not
-        from atrv_warp.task.randomization import get_randomization
-
-        try:
-            get_randomization(self.env.randomization)
-        except ValueError as err:
-            raise ValueError(f"train config: randomization: {err}") from None
         if self.env.sim_config:
             from atrv_warp.sim.config import load_sim_config
 
             load_sim_config(self.env.sim_config)  # names the file and the key that is wrong
+        self.randomization()
         return self
+
+    def randomization(self):
+        """The training envs' randomization in absolute ranges
+        (:class:`~atrv_warp.task.randomization.RandomizationConfig`; ``around`` resolved against ``sim_config``).
+
+        Raises:
+            ValueError: One line: an unknown preset, or one centred on a ``sim_config`` that is missing or does not
+                set a parameter it draws.
+        """
+        from atrv_warp.task.randomization import get_randomization
+
+        try:
+            return get_randomization(self.env.randomization, sim_config=self.env.sim_config or None)
+        except ValueError as err:
+            raise ValueError(f"train config: randomization: {err}") from None
 
 
 _GROUP_TYPES = typing.get_type_hints(TrainConfig)

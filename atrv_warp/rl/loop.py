@@ -57,6 +57,10 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
         return run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.toml").write_text(to_toml(cfg))
+    # what the envs draw, in absolute ranges: `around` resolved against the sim config, so a run says what it trained on
+    (run_dir / "randomization.json").write_text(json.dumps(
+        {"randomization": cfg.env.randomization, "sim_config": cfg.env.sim_config,
+         "resolved": cfg.randomization().describe()}, indent=1) + "\n")
     loggers = make_loggers(cfg, run_dir, resume, state.tracking_id)
     state.tracking_id = loggers.tracking_id
     loggers.log_hparams(flat_config(cfg))

@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
@@ -19,6 +19,7 @@ __all__ = [
     "FRICTION_LAWS",
     "REFERENCE_SIM_DT",
     "SENSOR_NOISE",
+    "STANDARD_ERROR_TABLE",
     "VARIANTS",
     "ArenaConfig",
     "ContactConfig",
@@ -27,9 +28,11 @@ __all__ = [
     "RoverConfig",
     "SensorNoise",
     "SimConfig",
+    "SimConfigFile",
     "default_urdf_path",
     "get_variant",
     "load_sim_config",
+    "read_sim_config",
     "replace_checked",
 ]
 
@@ -351,7 +354,35 @@ def replace_checked(cfg, **changes):
 SIM_CONFIG_TABLES = ("rover", "contact")
 """Tables of a simulator-config TOML file that change the simulation: ``[rover]`` holds
 :class:`RoverConfig` fields, ``[contact]`` :class:`ContactConfig` fields. Any other table
-(``[calibration]``, as ``atrv-calibrate`` writes) is a record for people and is not read."""
+(``[calibration]``, as ``atrv-calibrate`` writes) is a record that does not change the simulation; a randomization
+centred on the file reads its standard errors (:data:`STANDARD_ERROR_TABLE`)."""
+
+
+STANDARD_ERROR_TABLE = ("calibration", "standard_error")
+"""Where a simulator-config file records the fit's standard error of each fitted value (``atrv-calibrate`` writes
+``[calibration.standard_error]``, keyed by parameter name: ``friction = 0.0042``)."""
+
+
+@dataclass(frozen=True)
+class SimConfigFile:
+    """A simulator-config TOML file as :func:`read_sim_config` reads it."""
+
+    path: str
+    """The file."""
+    rover: RoverConfig
+    """The rover, with the file's ``[rover]`` table applied."""
+    contact: ContactConfig
+    """The contact law, with the file's ``[contact]`` table applied."""
+    keys: frozenset[tuple[str, str]]
+    """The ``(table, key)`` pairs the file sets, e.g. ``("contact", "friction")``."""
+    standard_error: dict[str, float] = field(default_factory=dict)
+    """The fit's standard error of each value it fitted, by parameter name (``[calibration.standard_error]``,
+    :data:`STANDARD_ERROR_TABLE`), in the parameter's unit; ``nan`` where the fit could not estimate one, empty
+    for a file written by hand. A record only: it does not change the simulation."""
+
+    def sets(self, table: str, key: str) -> bool:
+        """Whether the file sets ``[table] key``."""
+        return (table, key) in self.keys
 
 
 def load_sim_config(path, rover: RoverConfig | None = None,
@@ -370,6 +401,12 @@ def load_sim_config(path, rover: RoverConfig | None = None,
         [contact]
         friction = 0.55
     """
+    read = read_sim_config(path, rover, contact)
+    return read.rover, read.contact
+
+
+def read_sim_config(path, rover: RoverConfig | None = None, contact: ContactConfig | None = None) -> SimConfigFile:
+    """:func:`load_sim_config`, with what the file sets and its record of the fit's standard errors."""
     rover = rover or get_variant("realistic")
     contact = contact or ContactConfig()
     path = Path(path)
@@ -382,6 +419,7 @@ def load_sim_config(path, rover: RoverConfig | None = None,
     except tomllib.TOMLDecodeError as err:
         raise ValueError(f"sim config {path}: not valid TOML ({err})") from None
     configs = {"rover": rover, "contact": contact}
+    keys = set()
     for table in SIM_CONFIG_TABLES:
         values = tables.get(table, {})
         if not isinstance(values, dict):
@@ -396,4 +434,14 @@ def load_sim_config(path, rover: RoverConfig | None = None,
             configs[table] = replace_checked(configs[table], **values)
         except (TypeError, ValueError) as err:
             raise ValueError(f"sim config {path}: [{table}] {err}") from None
-    return configs["rover"], configs["contact"]
+        keys.update((table, key) for key in values)
+    record = tables
+    for name in STANDARD_ERROR_TABLE:
+        record = record.get(name, {}) if isinstance(record, dict) else {}
+    standard_error = {}
+    for name, value in (record.items() if isinstance(record, dict) else ()):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
+            raise ValueError(f"sim config {path}: [{'.'.join(STANDARD_ERROR_TABLE)}] {name} must be a number >= 0 "
+                             f"(or nan), got {value!r}")
+        standard_error[name] = float(value)
+    return SimConfigFile(str(path), configs["rover"], configs["contact"], frozenset(keys), standard_error)

@@ -16,7 +16,7 @@ import warp as wp
 from atrv_warp.sim.config import ContactConfig, RoverConfig
 from atrv_warp.sim.kernels.params import WorldPhysics
 
-__all__ = ["PARAMETERS", "WorldParams", "check_parameter"]
+__all__ = ["PARAMETERS", "PARAMETER_KEYS", "WorldParams", "check_parameter", "parameter_values"]
 
 PARAMETERS: dict[str, str] = {  # this order is also the randomization's draw streams' (PHYSICS_DRAWS): keep it
     "friction": "Coulomb coefficient mu of the wheels (and every other contact) [-]",
@@ -28,6 +28,26 @@ PARAMETERS: dict[str, str] = {  # this order is also the randomization's draw st
     "stiffness": "Hunt-Crossley contact stiffness kp [N/m^n]",
 }
 """Each per-world parameter, with its meaning and unit."""
+
+PARAMETER_KEYS: dict[str, tuple[str, str]] = {
+    "friction": ("contact", "friction"),
+    "payload_mass": ("rover", "payload_mass"),
+    "payload_offset": ("rover", "payload_offset"),
+    "torque_scale": ("rover", "torque_scale"),
+    "speed_limit": ("rover", "wheel_speed_limit"),
+    "wheel_radius": ("rover", "wheel_radius"),
+    "stiffness": ("contact", "stiffness"),
+}
+"""Where each parameter's configured value lives: the config (``rover``: :class:`RoverConfig`, ``contact``:
+:class:`ContactConfig`) and its field, which is also the table and key of a simulator-config TOML file."""
+
+
+def parameter_values(rover: RoverConfig, contact: ContactConfig) -> dict[str, float | tuple[float, float, float]]:
+    """Each parameter's value in ``rover`` and ``contact`` (:data:`PARAMETER_KEYS`), by name."""
+    configs = {"rover": rover, "contact": contact}
+    values = {name: getattr(configs[table], key) for name, (table, key) in PARAMETER_KEYS.items()}
+    values["payload_offset"] = tuple(values["payload_offset"])
+    return values
 
 
 def check_parameter(name: str, value) -> None:
@@ -62,10 +82,7 @@ class WorldParams:
 
     def __init__(self, num_worlds: int, *, rover: RoverConfig, contact: ContactConfig, device):
         self.num_worlds = num_worlds
-        self.nominal: dict[str, float | tuple[float, float, float]] = {
-            "friction": contact.friction, "stiffness": contact.stiffness, "wheel_radius": rover.wheel_radius,
-            "torque_scale": rover.torque_scale, "speed_limit": rover.wheel_speed_limit,
-            "payload_mass": rover.payload_mass, "payload_offset": tuple(rover.payload_offset)}
+        self.nominal = parameter_values(rover, contact)
         for name, value in self.nominal.items():
             check_parameter(name, value)
         p = WorldPhysics()

@@ -62,7 +62,7 @@ from atrv_warp.task.kernels import (
     write_action_observation,
     write_scan_observation,
 )
-from atrv_warp.task.randomization import PHYSICS_DRAWS, RandomizationConfig, get_randomization
+from atrv_warp.task.randomization import PHYSICS_DRAWS, AroundConfig, RandomizationConfig, get_randomization
 from atrv_warp.task.randomization_kernels import (
     DRAW_COUNT,
     HISTORY,
@@ -115,9 +115,11 @@ class ATRVjrEnv(EnvBase):
         contact: Contact law (see :class:`RoverSim`).
         arena: Arena geometry (see :class:`RoverSim`).
         sim: Integrator settings (see :class:`RoverSim`).
-        randomization: Domain randomization: a preset name (``"none"``, ``"mild"``, ``"wide"``) or a
-            :class:`~atrv_warp.task.randomization.RandomizationConfig`; ``None``: none (the nominal rover,
-            perfect sensors, no delay, bit for bit as without it).
+        randomization: Domain randomization: a preset name (``"none"``, ``"mild"``, ``"wide"``; ``"around"``,
+            centred on ``sim_config``) or a :class:`~atrv_warp.task.randomization.RandomizationConfig` (or
+            :class:`~atrv_warp.task.randomization.AroundConfig`); ``None``: none (the nominal rover, perfect
+            sensors, no delay, bit for bit as without it). One centred on ``sim_config`` is resolved against it
+            before the simulator is built (a parameter it draws that the file does not set stops here).
         sim_config: A simulator-config TOML file (see :class:`RoverSim`), e.g. ``atrv-calibrate``'s
             calibration of a real rover.
         driver: The base's motor driver (:class:`~atrv_warp.sim.driver.DriverConfig`), which velocity actions
@@ -140,15 +142,17 @@ class ATRVjrEnv(EnvBase):
         contact: ContactConfig | None = None,
         arena: ArenaConfig | None = None,
         sim: SimConfig | None = None,
-        randomization: RandomizationConfig | str | None = None,
+        randomization: RandomizationConfig | AroundConfig | str | None = None,
         sim_config: str | None = None,
         driver: DriverConfig | None = None,
         **task_overrides,
     ):
         self.task_cfg = c = replace_checked(get_task(task), **task_overrides)
-        self.randomization = get_randomization(randomization)
-        """What each world randomizes (:class:`~atrv_warp.task.randomization.RandomizationConfig`)."""
-        self.sim = RoverSim(num_envs, rover=rover or get_variant(variant), contact=contact, arena=arena, sim=sim,
+        rover = rover or get_variant(variant)
+        self.randomization = get_randomization(randomization, sim_config=sim_config, rover=rover, contact=contact)
+        """What each world randomizes (:class:`~atrv_warp.task.randomization.RandomizationConfig`), in absolute
+        ranges (one centred on ``sim_config``, resolved)."""
+        self.sim = RoverSim(num_envs, rover=rover, contact=contact, arena=arena, sim=sim,
                             terrain=c.terrain, obstacles=ObstacleConfig(slots=c.obstacles) if c.obstacles else None,
                             device=device, sim_config=sim_config, driver=driver)
         self.scanner = None

@@ -8,12 +8,13 @@ import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import numpy as np
 import torch
 from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 __all__ = ["EVAL_SEED", "SHIFT_BINS", "VALIDATION_SEED", "EpisodeRecord", "EvalResult", "evaluate", "format_bins",
-           "format_result", "run_episodes", "success_by_bin", "task_fingerprint", "write_result"]
+           "format_result", "range_bins", "run_episodes", "success_by_bin", "task_fingerprint", "write_result"]
 
 EVAL_SEED = 2024
 """Seed of the standard evaluation set, the test set (training never uses it, nor picks its best policy on it)."""
@@ -76,6 +77,24 @@ SHIFT_BINS: dict[str, tuple[float, ...]] = {
 [steps] (one bin per whole step)."""
 
 
+def range_bins(randomization, count: int = 4) -> dict[str, tuple[float, ...]]:
+    """Bin edges spanning what ``randomization`` (a :class:`~atrv_warp.task.randomization.RandomizationConfig`)
+    draws: ``count`` equal bins over each physical range that is not one value (``payload_offset`` aside), one bin
+    per whole step of latency. The success-by-bin table of a randomization centred on a simulator config, whose
+    ranges :data:`SHIFT_BINS` would put in one bin."""
+    bins = {}
+    for name, draw in randomization.physics.items():
+        if name != "payload_offset" and draw.high > draw.low:
+            edges = [draw.low + (draw.high - draw.low) * k / count for k in range(count + 1)]
+            # the ends as the kernels hold them (float32) too, so that the lowest and highest draws fall inside
+            edges[0], edges[-1] = min(draw.low, float(np.float32(draw.low))), max(draw.high, float(np.float32(draw.high)))
+            bins[name] = tuple(edges)
+    lo, hi = randomization.latency
+    if hi > 0:
+        bins["latency"] = tuple(k - 0.5 for k in range(lo, hi + 2))
+    return bins
+
+
 def success_by_bin(record: EpisodeRecord, bins: dict[str, tuple[float, ...]] = SHIFT_BINS) -> dict[str, list[dict]]:
     """Success rate of the episodes in each bin of each parameter: ``{name: [{low, high, episodes, success}]}``."""
     out = {}
@@ -97,7 +116,7 @@ def format_bins(table: dict[str, list[dict]]) -> str:
     for name, rows in table.items():
         cells = []
         for r in rows:
-            label = f"{r['low'] + 0.5:g}" if name == "latency" else f"{r['low']:g}-{r['high']:g}"
+            label = f"{r['low'] + 0.5:g}" if name == "latency" else f"{r['low']:.3g}-{r['high']:.3g}"
             rate = "-" if r["episodes"] == 0 else f"{100 * r['success']:.1f}%"
             cells.append(f"{label}: {rate} ({r['episodes']})")
         lines.append(f"  success by {name}: " + " | ".join(cells))

@@ -8,7 +8,10 @@ simulator's kernels read every substep.
 
 - :class:`Draw`: one parameter's range (uniform or log-uniform) and when it is drawn.
 - :class:`RandomizationConfig`: what is randomized, with :class:`~atrv_warp.sim.config.SensorNoise`.
-- :data:`RANDOMIZATION_PRESETS`: ``none``, ``mild`` and ``wide``; :func:`get_randomization`.
+- :data:`RANDOMIZATION_PRESETS`: ``none``, ``mild`` and ``wide``, absolute ranges; :func:`get_randomization`.
+- :class:`AroundConfig` and :data:`AROUND_PRESETS` (``around``): ranges centred on a simulator-config file (a
+  calibrated rover), resolved against it by :func:`resolve_around` into a :class:`RandomizationConfig` of absolute
+  ranges, so the kernels see no difference.
 """
 
 from __future__ import annotations
@@ -16,18 +19,23 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
-from atrv_warp.sim.config import SENSOR_NOISE, SensorNoise
-from atrv_warp.sim.params import PARAMETERS, check_parameter
+from atrv_warp.sim.config import SENSOR_NOISE, ContactConfig, RoverConfig, SensorNoise, read_sim_config
+from atrv_warp.sim.params import PARAMETER_KEYS, PARAMETERS, check_parameter, parameter_values
 
 __all__ = [
+    "AROUND_PRESETS",
     "DRAW_MODES",
     "MAX_LATENCY",
     "PHYSICS_DRAWS",
     "RANDOMIZATION_PRESETS",
+    "AroundConfig",
     "Draw",
     "RandomizationConfig",
     "get_randomization",
+    "randomization_names",
+    "resolve_around",
 ]
 
 DRAW_MODES = ("startup", "reset", "interval")
@@ -162,13 +170,130 @@ rover like ours on ordinary ground. ``wide``: the evaluation's test distribution
 0-25 kg, motors +-20 %, latency 0-2 steps, the ROS node's sensor noise). Every draw happens on reset."""
 
 
-def get_randomization(value: RandomizationConfig | str | None) -> RandomizationConfig:
-    """The preset called ``value`` (``None``: ``none``), or ``value`` itself."""
+@dataclass(frozen=True)
+class AroundConfig:
+    """A randomization centred on a simulator-config file, e.g. the rover ``atrv-calibrate`` fitted: each drawn
+    parameter is uniform in the file's value +- a spread, the larger of the fit's interval and a stated fraction.
+
+    :func:`resolve_around` turns it, against a file, into a :class:`RandomizationConfig` of absolute ranges; the
+    parameters it does not draw keep the file's values in every world.
+    """
+
+    parameters: tuple[str, ...] = ("friction", "payload_mass", "torque_scale", "wheel_radius")
+    """The physical parameters drawn around the file's values (:data:`PHYSICS_DRAWS` but ``payload_offset``, which
+    one range cannot centre in x and y at once). The file must set each. Default: those ``atrv-calibrate`` fits
+    by default (Coulomb mu, payload, motor torque scale, wheel radius)."""
+    standard_errors: float = 2.0
+    """Half-width of each range in the fit's standard errors, as the file records them
+    (``[calibration.standard_error]``): 2 is the fit's 95 % interval."""
+    fraction: float = 0.1
+    """... and at least this fraction of the value on each side; where the file records no standard error (a file
+    written by hand, a ``nan``), the half-width is this alone. A fit's standard error counts the recording's noise,
+    not the simulator's differences from the rover, nor one day's ground from the next (docs/calibration.md), and
+    can be under 1 % of the value."""
+    mode: str = "reset"
+    """When each parameter is drawn (:data:`DRAW_MODES`)."""
+    every: int = 0
+    """``interval`` mode: steps between draws within an episode."""
+    latency: tuple[int, int] = (0, 0)
+    """Action latency [steps] (:attr:`RandomizationConfig.latency`): not a fitted value, so an absolute range."""
+    noise: SensorNoise | None = None
+    """Sensor noise (:attr:`RandomizationConfig.noise`)."""
+
+    def __post_init__(self):
+        for name in self.parameters:
+            if name not in PHYSICS_DRAWS:
+                raise ValueError(f"randomization around: unknown physical parameter {name!r}; known: "
+                                 f"{list(PHYSICS_DRAWS)}")
+            if name == "payload_offset":
+                raise ValueError("randomization around: payload_offset cannot be drawn around a value (one range "
+                                 "draws both x and y); draw it with RandomizationConfig(payload_offset=Draw(...))")
+        for name in ("standard_errors", "fraction"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"randomization around: {name} must be a finite number >= 0, got {value!r}")
+        Draw(0.0, 0.0, mode=self.mode, every=self.every).check("randomization around")
+
+
+_POSITIVE_FLOOR = 0.1
+"""A parameter that must stay above zero (friction, stiffness, wheel radius, speed limit) is drawn no lower than this
+fraction of its centre, however wide the spread; one that may be zero (payload, torque scale) no lower than zero."""
+
+
+def resolve_around(around: AroundConfig, sim_config: str | Path, *, rover: RoverConfig | None = None,
+                   contact: ContactConfig | None = None) -> RandomizationConfig:
+    """``around`` centred on the simulator-config file ``sim_config``: a :class:`RandomizationConfig` of absolute
+    ranges, ``centre +- max(standard_errors x the fit's standard error, fraction x |centre|)``, clipped to each
+    parameter's valid values.
+
+    Args:
+        around: What to draw, and how wide.
+        sim_config: The simulator-config TOML file (``atrv-calibrate``'s output, or one written by hand).
+        rover: The rover the file applies to (default: the realistic variant), as
+            :class:`~atrv_warp.task.env.ATRVjrEnv` builds it.
+        contact: The contact law the file applies to (default: :class:`~atrv_warp.sim.config.ContactConfig`).
+
+    Raises:
+        ValueError: One line naming the file: one it cannot read (:func:`~atrv_warp.sim.config.read_sim_config`), or
+            a parameter ``around`` draws that the file does not set.
+    """
+    read = read_sim_config(sim_config, rover, contact)
+    centre = parameter_values(read.rover, read.contact)
+    draws = {}
+    for name in around.parameters:
+        table, key = PARAMETER_KEYS[name]
+        if not read.sets(table, key):
+            raise ValueError(f"randomization around sim config {read.path}: it does not set {name} ([{table}] {key}), "
+                             "which the randomization draws around the file's value")
+        c = float(centre[name])
+        se = read.standard_error.get(name, math.nan)
+        half = max(around.fraction * abs(c), around.standard_errors * se if math.isfinite(se) else 0.0)
+        try:
+            check_parameter(name, 0.0)
+            floor = 0.0
+        except ValueError:  # must stay above zero
+            floor = _POSITIVE_FLOOR * c
+        draws[name] = Draw(max(c - half, floor), c + half, mode=around.mode, every=around.every)
+    return RandomizationConfig(**draws, latency=around.latency, noise=around.noise)
+
+
+_MILD = RANDOMIZATION_PRESETS["mild"]
+
+AROUND_PRESETS: dict[str, AroundConfig] = {
+    "around": AroundConfig(latency=_MILD.latency, noise=_MILD.noise),
+}
+"""Named randomizations centred on a simulator config (``randomization=around`` with ``--sim-config FILE``).
+``around``: mu, payload, torque scale and wheel radius drawn on every reset within the larger of the fit's 95 %
+interval and +-10 % of each value; ``mild``'s latency (0-1 steps) and the ROS node's sensor noise."""
+
+
+def randomization_names() -> list[str]:
+    """Every randomization's name: the presets of absolute ranges, then those centred on a simulator config."""
+    return [*RANDOMIZATION_PRESETS, *AROUND_PRESETS]
+
+
+def get_randomization(value: RandomizationConfig | AroundConfig | str | None, *, sim_config: str | Path | None = None,
+                      rover: RoverConfig | None = None, contact: ContactConfig | None = None) -> RandomizationConfig:
+    """The randomization ``value`` names or is (``None``: ``none``), as absolute ranges: one centred on a simulator
+    config (:data:`AROUND_PRESETS`, an :class:`AroundConfig`) resolved against ``sim_config`` on ``rover`` and
+    ``contact`` (:func:`resolve_around`).
+
+    Raises:
+        ValueError: One line: an unknown name; one centred on a simulator config without ``sim_config``; what
+            :func:`resolve_around` raises.
+    """
     if value is None:
         return RANDOMIZATION_PRESETS["none"]
     if isinstance(value, RandomizationConfig):
         return value
+    around = AROUND_PRESETS.get(value) if isinstance(value, str) else value
+    if isinstance(around, AroundConfig):
+        if not sim_config:
+            label = f"randomization {value!r}" if isinstance(value, str) else "a randomization around a config"
+            raise ValueError(f"{label} is centred on a simulator config: give one (sim_config=FILE, "
+                             "--sim-config FILE)")
+        return resolve_around(around, sim_config, rover=rover, contact=contact)
     try:
         return RANDOMIZATION_PRESETS[value]
     except KeyError:
-        raise ValueError(f"unknown randomization preset {value!r}; known: {sorted(RANDOMIZATION_PRESETS)}") from None
+        raise ValueError(f"unknown randomization preset {value!r}; known: {sorted(randomization_names())}") from None
