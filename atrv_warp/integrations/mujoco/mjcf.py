@@ -8,9 +8,10 @@
 - each episode's obstacles (:class:`Obstacle`) from below the ground up to ``ObstacleSet.top``;
 - :class:`~atrv_warp.sim.config.SimConfig`'s substep and gravity, and the Coulomb µ.
 
-What MuJoCo does its own way, on purpose: the contact (soft constraints, default ``solref``/``solimp``, an
-elliptic friction cone) in place of our Hunt–Crossley law and velocity-level Coulomb solve, and the height
-field's triangles in place of our bilinear patches.
+What MuJoCo does its own way, on purpose: the contact (soft constraints, an elliptic friction cone) in place of our
+Hunt–Crossley law and velocity-level Coulomb solve, and the height field's triangles in place of our bilinear
+patches. The soft constraint's compliance (:class:`MujocoContact`) is the tyre's: a wheel sinks at rest as far as
+ours does (``benchmarks/mujoco_turning_study.py`` says why MuJoCo's stiff default makes a skid-steer rover hop).
 """
 
 from __future__ import annotations
@@ -24,8 +25,8 @@ from atrv_warp.sim.config import ArenaConfig, RoverConfig, SimConfig
 from atrv_warp.sim.terrain import HeightGrid
 from atrv_warp.sim.urdf import Inertial, RoverDescription
 
-__all__ = ["ROVER_GROUP", "SCENE_GROUP", "Obstacle", "inertial_xml", "number", "pose_xml", "quat_wxyz", "rover_xml",
-           "vector", "world_xml"]
+__all__ = ["MUJOCO_DEFAULT_CONTACT", "ROVER_GROUP", "SCENE_GROUP", "MujocoContact", "Obstacle", "inertial_xml", "number",
+           "pose_xml", "quat_wxyz", "rover_xml", "vector", "world_xml"]
 
 SCENE_GROUP = 0
 """Geom group of the scene (ground, walls, obstacles): what the scanner's rays see."""
@@ -33,6 +34,62 @@ ROVER_GROUP = 1
 """Geom group of the rover's own shapes, which the scanner's rays skip."""
 BURY = 0.5
 """How far the height field's base and the obstacles reach below the lowest ground [m]."""
+
+
+@dataclass(frozen=True)
+class MujocoContact:
+    """MuJoCo's own contact settings for every geom of the twin (MuJoCo's names and units).
+
+    The default gives MuJoCo's soft contact the tyre's compliance, matched to ours in a drop test (the rover let
+    down onto flat ground from where its wheels just touch): the same static sink under the rover's weight (12.7
+    mm against our Hunt–Crossley law's 12.6, ``(load / kp)^(1/n)`` with the nominal
+    :class:`~atrv_warp.sim.config.ContactConfig`) and the same decay of the bounce that follows (a lightly damped
+    tyre: about a third of the amplitude is left after each second in both). Neither is a turning figure.
+
+    MuJoCo's default (:data:`MUJOCO_DEFAULT_CONTACT`: a 0.15 mm sink, critically damped) makes a skid-steer rover
+    hop. Its soft constraint pushes a sliding contact's bodies apart by a distance that grows with µ, the slip
+    speed and the constraint's damping; once that exceeds the static sink the contact breaks. In a turn every wheel
+    slides, so with MuJoCo's default the wheels leave the ground in a cycle of five or six 0.01 s steps, spin up in
+    the air under the driver's torque, are slammed back on landing, and the rover turns at a fifth to two thirds of
+    the Coulomb rate. With the tyre's sink but MuJoCo's critical damping the wheels still hop in faster turns at
+    µ 0.8. With the tyre's sink and damping no wheel leaves the ground in any turn the task commands, and chi is
+    within 10 % of our Coulomb solve's at µ 0.3 and 0.8, whatever the impedance (0.3 to 0.7), the step, the cone
+    (``benchmarks/mujoco_turning_study.py``)."""
+
+    solref: tuple[float, float] = (1.45, 0.06)
+    """(time constant [s], damping ratio [-]). The damping ratio gives the drop test's decay; MuJoCo's stiffness is
+    ``1 / (dmax x time constant x damping ratio)²``, so the time constant is long because the ratio is small: 1.45
+    x 0.06 = 0.087 s is the product that gives, with :attr:`solimp`, the tyre's static sink."""
+    solimp: tuple[float, float, float] = (0.5, 0.5, 0.001)
+    """(dmin [-], dmax [-], width [m]): a constant impedance of 0.5, the middle of the range (0.3 to 0.7) over
+    which the study finds the turn independent of it (MuJoCo's default is 0.9 to 0.95)."""
+    cone: str = "elliptic"
+    """Friction cone: ``"elliptic"`` (Coulomb's circle) or ``"pyramidal"``."""
+    impratio: float = 1.0
+    """Ratio of the frictional to the normal constraint's impedance [-] (MuJoCo's default)."""
+    noslip_iterations: int = 0
+    """Iterations of MuJoCo's noslip post-solve of the friction forces (0: off, its default)."""
+    integrator: str = "Euler"
+    """MuJoCo's integrator: ``"Euler"`` (its default, semi-implicit) or ``"implicitfast"``."""
+    wheel: str = "cylinder"
+    """The wheel's collision shape: ``"cylinder"`` (the URDF's; two rim contacts on flat ground) or
+    ``"sphere"`` of the wheel's radius (one contact, as ours)."""
+    steps_per_substep: int = 1
+    """MuJoCo steps per driver substep (``SimConfig.sim_dt``): MuJoCo's timestep is ``sim_dt`` over this."""
+
+    def __post_init__(self):
+        if self.cone not in ("elliptic", "pyramidal"):
+            raise ValueError(f"MujocoContact.cone must be 'elliptic' or 'pyramidal', got {self.cone!r}")
+        if self.integrator not in ("Euler", "implicitfast"):
+            raise ValueError(f"MujocoContact.integrator must be 'Euler' or 'implicitfast', got {self.integrator!r}")
+        if self.wheel not in ("cylinder", "sphere"):
+            raise ValueError(f"MujocoContact.wheel must be 'cylinder' or 'sphere', got {self.wheel!r}")
+        if self.steps_per_substep < 1:
+            raise ValueError(f"MujocoContact.steps_per_substep must be >= 1, got {self.steps_per_substep!r}")
+
+
+MUJOCO_DEFAULT_CONTACT = MujocoContact(solref=(0.02, 1.0), solimp=(0.9, 0.95, 0.001))
+"""MuJoCo's own defaults (the twin's contact before the tyre's compliance; the study's baseline)."""
 
 
 @dataclass(frozen=True)
@@ -100,10 +157,10 @@ def inertial_xml(inertial: Inertial) -> str:
 
 
 def rover_xml(desc: RoverDescription, rover: RoverConfig, *, pos=(0.0, 0.0, 0.0), indent: str = "    ",
-              shape_attributes: str = "") -> list[str]:
+              shape_attributes: str = "", wheel: str = "cylinder") -> list[str]:
     """The rover's body tree as MJCF lines: the chassis on a free joint named ``root_joint`` (its box collision),
-    and each wheel on a hinge (its cylinder, ``wheel_offset`` outward of the joint). ``shape_attributes`` is added
-    to every collision geom (contact bits, group)."""
+    and each wheel on a hinge (its cylinder, ``wheel_offset`` outward of the joint; or a sphere of its radius
+    there, ``wheel="sphere"``). ``shape_attributes`` is added to every collision geom (contact bits, group)."""
     extra = f" {shape_attributes}" if shape_attributes else ""
     lines = [f'{indent}<body name="{desc.chassis}" pos="{vector(pos)}">',
              f'{indent}  <freejoint name="root_joint"/>',
@@ -114,13 +171,18 @@ def rover_xml(desc: RoverDescription, rover: RoverConfig, *, pos=(0.0, 0.0, 0.0)
                      f"{extra}/>")
     for w in desc.wheels:
         centre = w.outward * rover.wheel_offset
+        if wheel == "sphere":
+            shape = (f'<geom name="{w.link}/sphere" type="sphere" pos="{vector(centre)}" '
+                     f'size="{number(rover.wheel_radius)}"{extra}/>')
+        else:
+            shape = (f'<geom name="{w.link}/cylinder" type="cylinder" pos="{vector(centre)}" '
+                     f'zaxis="{vector(w.outward)}" size="{number(rover.wheel_radius)} {number(0.5 * rover.wheel_length)}"'
+                     f"{extra}/>")
         lines += [
             f'{indent}  <body name="{w.link}" {pose_xml(w.origin)}>',
             f'{indent}    <joint name="{w.joint}" type="hinge" axis="{vector(w.axis)}"/>',
             f"{indent}    {inertial_xml(w.inertial)}",
-            (f'{indent}    <geom name="{w.link}/cylinder" type="cylinder" pos="{vector(centre)}" '
-             f'zaxis="{vector(w.outward)}" size="{number(rover.wheel_radius)} {number(0.5 * rover.wheel_length)}"'
-             f"{extra}/>"),
+            f"{indent}    {shape}",
             f"{indent}  </body>",
         ]
     lines.append(f"{indent}</body>")
@@ -129,15 +191,17 @@ def rover_xml(desc: RoverDescription, rover: RoverConfig, *, pos=(0.0, 0.0, 0.0)
 
 def world_xml(desc: RoverDescription, rover: RoverConfig, *, arena: ArenaConfig, sim: SimConfig, friction: float,
               torque_limit: float, obstacle_top: float, terrain: HeightGrid | None = None, tile: int = 0,
-              obstacles: tuple[Obstacle, ...] = ()) -> str:
+              obstacles: tuple[Obstacle, ...] = (), contact: MujocoContact | None = None) -> str:
     """The MJCF text of one episode's world: the rover (at the origin; its free joint places it), the arena, the
     ground (a plane, or ``terrain``'s ``tile`` as a height field), the ``obstacles`` (standing to ``obstacle_top``
     [m], absolute), one torque motor per wheel (``gear`` its drive sign, so that a positive control drives forward;
-    within ``torque_limit`` [N·m]), contact at Coulomb ``friction`` [-].
+    within ``torque_limit`` [N·m]), contact at Coulomb ``friction`` [-] with MuJoCo's settings ``contact``
+    (default :class:`MujocoContact`: the tyre's compliance).
 
     The scene's geoms are in :data:`SCENE_GROUP` and collide with the rover's only; the rover's are in
     :data:`ROVER_GROUP` and collide with the scene's only (the wheels never touch the chassis or each other, as in
     our simulator)."""
+    c = contact or MujocoContact()
     h = arena.half_size
     scene = f'contype="0" conaffinity="1" group="{SCENE_GROUP}"'
     lines = [
@@ -145,10 +209,14 @@ def world_xml(desc: RoverDescription, rover: RoverConfig, *, arena: ArenaConfig,
         "     SI units: m, kg, s, rad, N·m. -->",
         f'<mujoco model="{desc.name}_nav_twin">',
         '  <compiler angle="radian" autolimits="true"/>',
-        f'  <option timestep="{number(sim.sim_dt)}" gravity="0 0 {number(sim.gravity)}" cone="elliptic"/>',
+        (f'  <option timestep="{number(sim.sim_dt / c.steps_per_substep)}" gravity="0 0 {number(sim.gravity)}" '
+         f'integrator="{c.integrator}" cone="{c.cone}" impratio="{number(c.impratio)}" '
+         f'noslip_iterations="{c.noslip_iterations}"/>'),
         "  <default>",
-        # condim 3: sliding friction only, Coulomb coefficient mu (torsional and rolling friction unused)
-        f'    <geom condim="3" friction="{number(friction)} 0 0"/>',
+        # condim 3: sliding friction only, Coulomb coefficient mu (torsional and rolling friction unused); solref and
+        # solimp: the tyre's compliance (MujocoContact says why)
+        (f'    <geom condim="3" friction="{number(friction)} 0 0" solref="{vector(c.solref)}" '
+         f'solimp="{vector(c.solimp)}"/>'),
         "  </default>",
     ]
     bottom = arena.ground_top - BURY
@@ -186,7 +254,8 @@ def world_xml(desc: RoverDescription, rover: RoverConfig, *, arena: ArenaConfig,
                          f'size="{number(o.size[0])} {number(hz)}" {scene}/>')
         else:
             raise ValueError(f"obstacle {i}: kind {o.kind!r} is neither 'box' nor 'cylinder'")
-    lines += rover_xml(desc, rover, shape_attributes=f'contype="1" conaffinity="0" group="{ROVER_GROUP}"')
+    lines += rover_xml(desc, rover, shape_attributes=f'contype="1" conaffinity="0" group="{ROVER_GROUP}"',
+                       wheel=c.wheel)
     lines += ["  </worldbody>", "  <actuator>"]
     for w in desc.wheels:
         lines.append(f'    <motor name="{w.joint}/motor" joint="{w.joint}" gear="{number(w.drive_sign)}" '
