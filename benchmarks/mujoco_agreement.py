@@ -93,8 +93,12 @@ def twin_turn(mu: float, command: tuple[float, float], *, contact=None, sim=None
     side wheel speeds [rad/s] and yaw rate [rad/s] sampled after each step, and chi from them. With the twin's
     MuJoCo settings ``contact`` (a ``MujocoContact``; default the twin's) and ``sim`` (a ``SimConfig``: a
     ``step_dt`` of one ``sim_dt`` samples every substep). Also the fraction of those substeps after which a wheel
-    was off the ground (``airborne``), the largest driver torque [N·m] sampled (``torque_max``; the limit is 20)
-    and the chassis origin's mean height [m] (``height``)."""
+    was off the ground (``airborne``), the largest driver torque [N·m] sampled (``torque_max``; the limit is 20),
+    the chassis origin's mean height [m] (``height``) and the contacts' friction over their normal force
+    (``friction_ratio``, summed over the contacts, the wheels' on flat ground: µ where they slide as Coulomb's law
+    has it)."""
+    import mujoco
+
     from atrv_warp.core.kinematics import track_width
     from atrv_warp.integrations.mujoco import MujocoTwin
     from atrv_warp.sim.config import RoverConfig
@@ -107,7 +111,7 @@ def twin_turn(mu: float, command: tuple[float, float], *, contact=None, sim=None
     twin.reset((0.0, -1.6 * command[0] / command[1], twin.root_pose[2]))
     dt = twin.sim_cfg.step_dt
     total, kept = steps(seconds, dt), steps(average, dt)
-    sums, airborne, torque, height = np.zeros(3), 0, 0.0, 0.0
+    sums, airborne, torque, height, forces, force = np.zeros(3), 0, 0.0, 0.0, np.zeros(2), np.zeros(6)
     for k in range(total):
         twin.command(*command)
         twin.step()
@@ -117,9 +121,13 @@ def twin_turn(mu: float, command: tuple[float, float], *, contact=None, sim=None
             airborne += twin.substeps - int(twin.wheel_ground_substeps.min())
             torque = max(torque, float(np.abs(twin.applied).max()))
             height += float(twin.root_pose[2]) / kept
+            for i in range(twin.data.ncon):
+                mujoco.mj_contactForce(twin.model, twin.data, i, force)
+                forces += (force[0], math.hypot(force[1], force[2]))
     left, right, rate = sums / kept
     return {"chi": r * (right - left) / (rate * track), "wheel_left": left, "wheel_right": right, "yaw_rate": rate,
-            "airborne": airborne / (kept * twin.substeps), "torque_max": torque, "height": height}
+            "airborne": airborne / (kept * twin.substeps), "torque_max": torque, "height": height,
+            "friction_ratio": float(forces[1] / forces[0]) if forces[0] > 0 else None}
 
 
 def ours_turn(mu: float, command: tuple[float, float], *, seconds: float = 8.0, average: float = 3.0) -> float:

@@ -14,13 +14,15 @@ noslip, integrator, the wheel's shape, MuJoCo steps per 0.01 s driver substep):
   targets for 8 s, the means over the last 3 s sampled after each 0.05 s control step); **chi sampled every
   substep** (the same turn stepped one 0.01 s substep per step: where the wheels hop in a cycle of five substeps,
   the control step samples one phase of it and the two differ); **airborne**, the fraction of substeps after
-  which a wheel was off the ground; the largest driver **torque** sampled [N·m] (its limit is 20); and the
-  chassis' **lift** in the turn over its rest height [m].
+  which a wheel was off the ground; the largest driver **torque** sampled [N·m] (its limit is 20); the
+  **friction ratio**, the contacts' friction over their normal force (µ where the wheels slide as Coulomb's law
+  has it, less where MuJoCo's friction is still in its viscous range); and the chassis' **lift** in the turn
+  over its rest height [m].
 
 Our simulator's sink, bounce and chi once, for comparison. Then the mechanism on its own: one wheel slid along
-the ground (:func:`sliding_wheel`) with MuJoCo's defaults and with the tyre's compliance, how far it rides above
-its rest height and how often it is on the ground. About five minutes on one core. Prints the table and writes
-``benchmarks/results/mujoco_turning_study.json`` (docs/physics.md reads it).
+the ground (:func:`sliding_wheel`) with MuJoCo's defaults, the tyre's sink, and the tyre damped as lightly as
+ours, how far it rides above its rest height and how often it is on the ground. About three minutes on one core.
+Prints the table and writes ``benchmarks/results/mujoco_turning_study.json`` (docs/physics.md reads it).
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 from _common import pin_to_one_core, write_results
-from mujoco_agreement import SETTLE_S, TURN_FRICTIONS, TURNS, ours_turn, steps, twin_turn
+from mujoco_agreement import TURN_FRICTIONS, TURNS, ours_turn, steps, twin_turn
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -44,14 +46,13 @@ DROP_WINDOWS = (0.5, 1.0, 2.0, 3.0)  # [s] starts of the 0.5 s windows of the dr
 
 def settings() -> list[tuple[str, str, object]]:
     """(name, what it is, ``MujocoContact``) for every setting studied: MuJoCo's defaults (the twin before this
-    study) and each knob the issue asked about, then the tyre's compliance (the twin's contact now), the same
-    sink with MuJoCo's critical damping, and knobs on the tyre."""
+    study) and each knob the issue asked about, then the tyre's static sink (the twin's contact now) and knobs on
+    it, and the tyre damped as lightly as ours."""
     from atrv_warp.integrations.mujoco.mjcf import MUJOCO_DEFAULT_CONTACT as d
     from atrv_warp.integrations.mujoco.mjcf import MujocoContact
 
     t = MujocoContact()
     r = dataclasses.replace
-    zeta = t.solref[1]
     return [
         ("mujoco_default", "MuJoCo's defaults (the twin before)", d),
         ("default_steps5", "defaults, 5 MuJoCo steps per substep", r(d, steps_per_substep=5)),
@@ -63,52 +64,59 @@ def settings() -> list[tuple[str, str, object]]:
         ("default_stiffer", "stiffer: solref 0.004 s, 5 MuJoCo steps per substep",
          r(d, solref=(0.004, 1.0), steps_per_substep=5)),
         ("default_sphere", "defaults, sphere wheels (one contact each)", r(d, wheel="sphere")),
-        ("default_softer", "default impedance, softer: solref 0.2 s", r(d, solref=(0.2, 1.0))),
-        ("tyre", "the tyre's sink and damping (the twin now)", t),
-        ("tyre_critical", "the tyre's sink, MuJoCo's critical damping", r(t, solref=(t.solref[0] * zeta, 1.0))),
-        ("tyre_impedance0.3", "the tyre's sink and damping at impedance 0.3",
-         r(t, solref=(0.0731 / zeta, zeta), solimp=(0.3, 0.3, 0.001))),
-        ("tyre_impedance0.7", "the tyre's sink and damping at impedance 0.7",
-         r(t, solref=(0.1117 / zeta, zeta), solimp=(0.7, 0.7, 0.001))),
+        ("default_impedance_tyre_sink", "the tyre's sink at MuJoCo's default impedance (solref 0.267 s)",
+         r(d, solref=(0.267, 1.0))),
+        ("tyre", "the tyre's sink: solref 0.087 s, impedance 0.5 (the twin now)", t),
+        ("tyre_impedance0.3", "the tyre's sink at impedance 0.3 (solref 0.0731 s)",
+         r(t, solref=(0.0731, 1.0), solimp=(0.3, 0.3, 0.001))),
+        ("tyre_impedance0.7", "the tyre's sink at impedance 0.7 (solref 0.1117 s)",
+         r(t, solref=(0.1117, 1.0), solimp=(0.7, 0.7, 0.001))),
         ("tyre_steps5", "tyre, 5 MuJoCo steps per substep", r(t, steps_per_substep=5)),
+        ("tyre_noslip", "tyre, noslip solver (10 iterations)", r(t, noslip_iterations=10)),
         ("tyre_pyramidal", "tyre, pyramidal cone", r(t, cone="pyramidal")),
         ("tyre_sphere", "tyre, sphere wheels (one contact each, twice the sink)", r(t, wheel="sphere")),
+        ("tyre_light_damping", "the tyre's sink, damped as lightly as ours (damping ratio 0.06, solref 1.45 s)",
+         r(t, solref=(1.45, 0.06))),
     ]
 
 
-def at_rest(contact) -> dict:
-    """The twin after ``SETTLE_S`` at rest: its wheel ``sink`` [m] (how far the chassis sits below where rigid
-    wheels would hold it), the chassis origin's ``height`` [m], and where the ground touches each wheel: the
-    contacts per wheel, their largest offset along the wheel's axle from its centre (``along_axle`` [m]; the
-    cylinder's rim edges are half its width out) and their mean depth below its centre (``below_centre`` [m], about
-    the radius): the wheels stand on their treads, axles level."""
+def at_rest(contact, seconds: float = 6.0) -> dict:
+    """The drop test: the twin let down onto flat ground from where its wheels just touch (its reset), brakes off,
+    stepped one 0.01 s substep per step for ``seconds``. Its wheel ``sink`` [m] at the end (how far the chassis sits
+    below where rigid wheels would hold it: the mean of the last second), the chassis origin's ``height`` [m] then,
+    its ``bounce`` on the way (:func:`bounce`), and where the ground touches each wheel at the end: the contacts per
+    wheel, their largest offset along the wheel's axle from its centre (``along_axle`` [m]; the cylinder's rim edges
+    are half its width out) and their mean depth below its centre (``below_centre`` [m], about the radius): the
+    wheels stand on their treads, axles level."""
     import mujoco
 
     from atrv_warp.integrations.mujoco import MujocoTwin
+    from atrv_warp.sim.config import SimConfig
 
-    twin = MujocoTwin(contact=contact)
-    for _ in range(steps(SETTLE_S, twin.sim_cfg.step_dt)):
+    twin = MujocoTwin(contact=contact, sim=SimConfig(step_dt=SimConfig().sim_dt))
+    dt, heights = twin.sim_cfg.step_dt, []
+    for _ in range(steps(seconds, dt)):
         twin.step(torques=(0.0, 0.0))
+        heights.append(float(twin.root_pose[2]))
     m, d = twin.model, twin.data
     axle_z = float(np.mean([w.origin[2, 3] for w in twin.description.wheels]))
-    height = float(twin.root_pose[2])
-    along, below, count = [], [], np.zeros(len(twin.description.wheels))
+    height = float(np.mean(heights[-steps(1.0, dt):]))
+    links = [w.link for w in twin.description.wheels]
+    along, below, count = [], [], np.zeros(len(links))
     for i in range(d.ncon):
-        geom = [g for g in d.contact.geom[i] if m.geom_bodyid[g] != 0]
-        if len(geom) != 1:
-            continue
-        g = geom[0]
-        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, m.geom_bodyid[g])
-        wheel = [w.link for w in twin.description.wheels].index(name) if name != twin.description.chassis else None
-        if wheel is None:
-            continue
-        count[wheel] += 1
-        offset = d.contact.pos[i] - d.geom_xpos[g]
-        axle = d.xmat[m.geom_bodyid[g]].reshape(3, 3) @ np.asarray(twin.description.wheels[wheel].axis, dtype=float)
-        along.append(abs(float(offset @ axle)))
-        below.append(-float(offset[2]))
+        for g in d.contact.geom[i]:
+            name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, m.geom_bodyid[g])
+            if name not in links:
+                continue
+            wheel = links.index(name)
+            count[wheel] += 1
+            offset = d.contact.pos[i] - d.geom_xpos[g]
+            axle = d.xmat[m.geom_bodyid[g]].reshape(3, 3) @ np.asarray(twin.description.wheels[wheel].axis, dtype=float)
+            along.append(abs(float(offset @ axle)))
+            below.append(-float(offset[2]))
     return {"sink": twin.arena_cfg.ground_top + twin.rover_cfg.wheel_radius - axle_z - height, "height": height,
-            "contacts_per_wheel": count.tolist(), "along_axle": max(along), "below_centre": float(np.mean(below))}
+            "bounce": bounce(heights, dt), "contacts_per_wheel": count.tolist(), "along_axle": max(along),
+            "below_centre": float(np.mean(below))}
 
 
 SLIPS = (0.1, 0.2, 0.4)  # [m/s] a lone wheel's sliding speeds
@@ -146,7 +154,7 @@ def sliding_wheel(contact, mu: float, slip: float, seconds: float = 2.0) -> dict
 </mujoco>"""
     m = mujoco.MjModel.from_xml_string(xml)
     d = mujoco.MjData(m)
-    for _ in range(steps(SETTLE_S, m.opt.timestep)):
+    for _ in range(steps(5.0, m.opt.timestep)):  # a lightly damped tyre bounces for seconds
         mujoco.mj_step(m, d)
     rest = float(d.qpos[1])
     total, kept = steps(seconds, m.opt.timestep), steps(1.0, m.opt.timestep)
@@ -166,20 +174,6 @@ def bounce(heights, dt: float) -> list[float]:
     z = np.asarray(heights)
     rest = z[-steps(1.0, dt):].mean()
     return [float(np.abs(z[steps(a, dt):steps(a + 0.5, dt)] - rest).max()) for a in DROP_WINDOWS]
-
-
-def drop(contact, seconds: float = 6.0) -> list[float]:
-    """The twin let down onto flat ground from where its wheels just touch (its reset), brakes off: its
-    :func:`bounce`, sampled every 0.01 s substep."""
-    from atrv_warp.integrations.mujoco import MujocoTwin
-    from atrv_warp.sim.config import SimConfig
-
-    twin = MujocoTwin(contact=contact, sim=SimConfig(step_dt=SimConfig().sim_dt))
-    heights = []
-    for _ in range(steps(seconds, twin.sim_cfg.step_dt)):
-        twin.step(torques=(0.0, 0.0))
-        heights.append(float(twin.root_pose[2]))
-    return bounce(heights, twin.sim_cfg.step_dt)
 
 
 def ours_drop(seconds: float = 6.0) -> tuple[float, list[float]]:
@@ -217,12 +211,11 @@ def main() -> int:
           f"{np.round(1000 * np.asarray(bounced), 2)} mm; chi " +
           ", ".join(f"{c['turn']} µ {c['mu']:g} {c['chi']:.2f}" for c in ours["chi"]), flush=True)
     print("per setting, per µ (0.3, 0.8) and turn (" + ", ".join(STUDY_TURNS) + "): chi sampled per control step / "
-          "per substep, the substeps with a wheel airborne, the largest driver torque [N·m]")
+          "per substep, the substeps with a wheel airborne, the largest driver torque [N·m], friction / normal force")
     table, rows = [], []
     for name, label, contact in settings():
         rest = at_rest(contact)
-        table.append({"setting": name, "label": label, "contact": dataclasses.asdict(contact), **rest,
-                      "bounce": drop(contact)})
+        table.append({"setting": name, "label": label, "contact": dataclasses.asdict(contact), **rest})
         cells = []
         for mu in TURN_FRICTIONS:
             for turn, command in STUDY_TURNS.items():
@@ -231,13 +224,15 @@ def main() -> int:
                 torque = max(step["torque_max"], sub["torque_max"])
                 rows.append({"setting": name, "turn": turn.replace(" ", "_"), "mu": mu, "chi": step["chi"],
                              "chi_substeps": sub["chi"], "airborne": sub["airborne"], "torque_max": torque,
-                             "yaw_rate": sub["yaw_rate"], "lift": sub["height"] - rest["height"]})
-                cells.append(f"{step['chi']:.2f}/{sub['chi']:.2f} {sub['airborne']:.0%} {torque:.0f}")
+                             "yaw_rate": sub["yaw_rate"], "lift": sub["height"] - rest["height"],
+                             "friction_ratio": sub["friction_ratio"]})
+                ratio = "-" if sub["friction_ratio"] is None else f"{sub['friction_ratio']:.2f}"
+                cells.append(f"{step['chi']:.2f}/{sub['chi']:.2f} {sub['airborne']:.0%} {torque:.0f} {ratio}")
         print(f"{label}: sink {1000 * rest['sink']:.2f} mm, {rest['contacts_per_wheel'][0]:.0f} contacts per wheel, "
               f"bounce {np.round(1000 * np.asarray(table[-1]['bounce']), 2)} mm\n    " + " | ".join(cells), flush=True)
     wheel = []
     for name, label, contact in settings():
-        if name not in ("mujoco_default", "tyre_critical", "tyre"):
+        if name not in ("mujoco_default", "tyre", "tyre_light_damping"):
             continue
         for mu in TURN_FRICTIONS:
             for slip in SLIPS:

@@ -40,29 +40,29 @@ BURY = 0.5
 class MujocoContact:
     """MuJoCo's own contact settings for every geom of the twin (MuJoCo's names and units).
 
-    The default gives MuJoCo's soft contact the tyre's compliance, matched to ours in a drop test (the rover let
-    down onto flat ground from where its wheels just touch): the same static sink under the rover's weight (12.7
-    mm against our Hunt–Crossley law's 12.6, ``(load / kp)^(1/n)`` with the nominal
-    :class:`~atrv_warp.sim.config.ContactConfig`) and the same decay of the bounce that follows (a lightly damped
-    tyre: about a third of the amplitude is left after each second in both). Neither is a turning figure.
+    The default gives MuJoCo's soft contact the tyre's static compliance: under the rover's weight a wheel sinks
+    12.7 mm, as our Hunt–Crossley law sinks it (12.6 mm, ``(load / kp)^(1/n)`` with the nominal
+    :class:`~atrv_warp.sim.config.ContactConfig`), critically damped as MuJoCo's default is. Not a turning figure.
 
-    MuJoCo's default (:data:`MUJOCO_DEFAULT_CONTACT`: a 0.15 mm sink, critically damped) makes a skid-steer rover
-    hop. Its soft constraint pushes a sliding contact's bodies apart by a distance that grows with µ, the slip
-    speed and the constraint's damping; once that exceeds the static sink the contact breaks. In a turn every wheel
-    slides, so with MuJoCo's default the wheels leave the ground in a cycle of five or six 0.01 s steps, spin up in
-    the air under the driver's torque, are slammed back on landing, and the rover turns at a fifth to two thirds of
-    the Coulomb rate. With the tyre's sink but MuJoCo's critical damping the wheels still hop in faster turns at
-    µ 0.8. With the tyre's sink and damping no wheel leaves the ground in any turn the task commands, and chi is
-    within 10 % of our Coulomb solve's at µ 0.3 and 0.8, whatever the impedance (0.3 to 0.7), the step, the cone
-    (``benchmarks/mujoco_turning_study.py``)."""
+    MuJoCo's default (:data:`MUJOCO_DEFAULT_CONTACT`, a 0.15 mm sink) makes a skid-steer rover hop. Its soft
+    constraint pushes a sliding contact's bodies apart by a distance that grows with µ and the slip speed; once
+    that exceeds the static sink the contact breaks. In a turn every wheel slides, so with MuJoCo's default the
+    wheels leave the ground in a cycle of five or six 0.01 s steps, spin up in the air under the driver's torque,
+    are slammed back on landing, and the rover turns at a fifth to two thirds of the Coulomb rate. With the tyre's
+    sink no wheel leaves the ground in the agreement benchmark's turns (0.5 rad/s), the sliding wheels' friction is
+    µ times their load as Coulomb's law has it, and chi is within 10 % of our Coulomb solve's at µ 0.3 and 0.8,
+    whatever the impedance (0.3 to 0.7) or the step. In the nav task's fastest turns (2 rad/s) at µ 0.8 the
+    wheels still hop: the lift grows with the slip speed. Damping the tyre as lightly as ours (its bounce after a
+    drop decays as ours does at a damping ratio of 0.06) stops that, but MuJoCo's friction shares the constraint's
+    reference and goes viscous: a tenth of µ N in a turn (``benchmarks/mujoco_turning_study.py``)."""
 
-    solref: tuple[float, float] = (1.45, 0.06)
-    """(time constant [s], damping ratio [-]). The damping ratio gives the drop test's decay; MuJoCo's stiffness is
-    ``1 / (dmax x time constant x damping ratio)²``, so the time constant is long because the ratio is small: 1.45
-    x 0.06 = 0.087 s is the product that gives, with :attr:`solimp`, the tyre's static sink."""
+    solref: tuple[float, float] = (0.087, 1.0)
+    """(time constant [s], damping ratio [-]): the time constant that gives, with :attr:`solimp`, the tyre's
+    static sink (the rest-height row of ``benchmarks/mujoco_agreement.py``); MuJoCo's default damping ratio."""
     solimp: tuple[float, float, float] = (0.5, 0.5, 0.001)
     """(dmin [-], dmax [-], width [m]): a constant impedance of 0.5, the middle of the range (0.3 to 0.7) over
-    which the study finds the turn independent of it (MuJoCo's default is 0.9 to 0.95)."""
+    which the study finds the turn independent of it. MuJoCo's default (0.9 to 0.95) needs a 0.27 s time constant
+    for the tyre's sink, and its turns at µ 0.8 still hop."""
     cone: str = "elliptic"
     """Friction cone: ``"elliptic"`` (Coulomb's circle) or ``"pyramidal"``."""
     impratio: float = 1.0
