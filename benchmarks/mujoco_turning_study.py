@@ -203,7 +203,7 @@ def main() -> int:
     pin_to_one_core()
     every_substep = SimConfig(step_dt=SimConfig().sim_dt)
     sink, bounced = ours_drop()
-    ours = {"sink": sink, "bounce": bounced, "chi": []}
+    ours = {"sink": sink, "sink_mm": 1000 * sink, "bounce": bounced, "chi": []}
     for mu in TURN_FRICTIONS:
         for label, command in STUDY_TURNS.items():
             ours["chi"].append({"turn": label.replace(" ", "_"), "mu": mu, "chi": ours_turn(mu, command)})
@@ -215,7 +215,8 @@ def main() -> int:
     table, rows = [], []
     for name, label, contact in settings():
         rest = at_rest(contact)
-        table.append({"setting": name, "label": label, "contact": dataclasses.asdict(contact), **rest})
+        table.append({"setting": name, "label": label, "contact": dataclasses.asdict(contact), **rest,
+                      "sink_mm": 1000 * rest["sink"]})
         cells = []
         for mu in TURN_FRICTIONS:
             for turn, command in STUDY_TURNS.items():
@@ -236,7 +237,8 @@ def main() -> int:
             continue
         for mu in TURN_FRICTIONS:
             for slip in SLIPS:
-                wheel.append({"setting": name, **sliding_wheel(contact, mu, slip)})
+                w = sliding_wheel(contact, mu, slip)
+                wheel.append({"setting": name, **w, "lift_mm": 1000 * w["lift"], "sink_mm": 1000 * w["sink"]})
                 w = wheel[-1]
                 print(f"a lone wheel, {label}: µ {mu:g}, sliding at {slip:g} m/s: rides {1000 * w['lift']:+.2f} mm "
                       f"above rest (sink {1000 * w['sink']:.2f} mm), on the ground {w['contact']:.0%} of steps")
