@@ -619,7 +619,7 @@ def mujoco_turning_study() -> str:
                     "-" if ratio is None else f"{ratio:.2f}", f"{cell(name, 'fast_in_place', 0.8):.2f}",
                     f"{cell(name, 'fast_in_place', 0.8, 'airborne'):.0%}"])
     return _table(["MuJoCo setting", "sink [mm]", "chi µ 0.3: in place / arc", "chi µ 0.8: in place / arc",
-                   "wheel airborne (these turns, most)", "friction / load, µ 0.8 in place",
+                   "wheel airborne (worst of these turns)", "friction / load, µ 0.8 in place",
                    "chi at 2 rad/s in place, µ 0.8", "airborne then"],
                   ["---", "---:", "---:", "---:", "---:", "---:", "---:", "---:"], out)
 

@@ -45,7 +45,7 @@ class MujocoContact:
     :class:`~atrv_warp.sim.config.ContactConfig`), critically damped as MuJoCo's default is. Not a turning figure.
 
     MuJoCo's default (:data:`MUJOCO_DEFAULT_CONTACT`, a 0.15 mm sink) makes a skid-steer rover hop. Its soft
-    constraint pushes a sliding contact's bodies apart by a distance that grows with µ and the slip speed; once
+    constraint pushes a sliding contact's bodies apart by a distance that grows with the slip speed; once
     that exceeds the static sink the contact breaks. In a turn every wheel slides, so with MuJoCo's default the
     wheels leave the ground in a cycle of five or six 0.01 s steps, spin up in the air under the driver's torque,
     are slammed back on landing, and the rover turns at a fifth to two thirds of the Coulomb rate. With the tyre's
