@@ -17,7 +17,9 @@ noslip, integrator, the wheel's shape, MuJoCo steps per 0.01 s driver substep):
   which a wheel was off the ground; the largest driver **torque** sampled [N·m] (its limit is 20); the
   **friction ratio**, the contacts' friction over their normal force (µ where the wheels slide as Coulomb's law
   has it, less where MuJoCo's friction is still in its viscous range); and the chassis' **lift** in the turn
-  over its rest height [m].
+  over its rest height [m];
+- **on the hills terrain** at the nominal µ, the driver as deployed: the yaw rate over the command in place
+  (1 rad/s) and on an arc (1 m/s, 1 rad/s) from one pose.
 
 Our simulator's sink, bounce and chi once, for comparison. Then the mechanism on its own: one wheel slid along
 the ground (:func:`sliding_wheel`) with MuJoCo's defaults, the tyre's sink, and the tyre damped as lightly as
@@ -77,6 +79,8 @@ def settings() -> list[tuple[str, str, object]]:
         ("tyre_sphere", "tyre, sphere wheels (one contact each, twice the sink)", r(t, wheel="sphere")),
         ("tyre_light_damping", "the tyre's sink, damped as lightly as ours (damping ratio 0.06, solref 1.45 s)",
          r(t, solref=(1.45, 0.06))),
+        ("tyre_friction_pair", "tyre, wheels' friction: solreffriction 0.87 s, impratio 10",
+         r(t, solreffriction=(0.87, 1.0), impratio=10.0)),
     ]
 
 
@@ -168,6 +172,46 @@ def sliding_wheel(contact, mu: float, slip: float, seconds: float = 2.0) -> dict
     return {"mu": mu, "slip": slip, "sink": -rest, "lift": float(np.mean(heights)) - rest, "contact": touching / kept}
 
 
+TERRAIN_POSE = (0.0, 0.0, 0.0)  # x [m], y [m], yaw [rad] on the hills preset's first tile
+TERRAIN_TURNS = {"in place": (0.0, 1.0), "arc": (1.0, 1.0)}  # /cmd_vel (linear [m/s], angular [rad/s])
+
+
+def terrain_turns(contact=None, *, ours: bool = False, seconds: float = 3.0, average: float = 2.0) -> dict:
+    """Turns on the ``hills`` terrain at the nominal µ, the driver as deployed (its effective track factor):
+    from :data:`TERRAIN_POSE` on the preset's first tile, each of :data:`TERRAIN_TURNS` for ``seconds``, the mean
+    yaw rate over the last ``average`` seconds over the command, in our simulator (``ours``) or the twin with
+    ``contact``."""
+    import torch
+
+    from atrv_warp.integrations.mujoco import MujocoTwin
+    from atrv_warp.sim import RoverSim
+
+    out = {}
+    for label, command in TERRAIN_TURNS.items():
+        sim = RoverSim(1, terrain="hills")
+        sim.terrain.tile.zero_()
+        sim.reset(poses=[TERRAIN_POSE])
+        pose = sim.root_pose[0].double().numpy()
+        twin = None if ours else MujocoTwin(terrain=sim.terrain.grid, tile=0, contact=contact)
+        if twin is not None:
+            twin.reset(pose[:3], pose[3:])
+        dt = sim.sim_cfg.step_dt
+        rates = []
+        for k in range(steps(seconds, dt)):
+            if ours:
+                sim.set_twist(torch.tensor([command]))
+                sim.step()
+                rate = float(sim.ang_vel[0, 2])
+            else:
+                twin.command(*command)
+                twin.step()
+                rate = float(twin.angular_velocity[2])
+            if k >= steps(seconds - average, dt):
+                rates.append(rate)
+        out[label.replace(" ", "_")] = float(np.mean(rates)) / command[1]
+    return out
+
+
 def bounce(heights, dt: float) -> list[float]:
     """The drop test's bounce: the largest distance [m] of the chassis height from its final rest (the mean of the
     last second) in 0.5 s windows starting at :data:`DROP_WINDOWS`."""
@@ -203,11 +247,12 @@ def main() -> int:
     pin_to_one_core()
     every_substep = SimConfig(step_dt=SimConfig().sim_dt)
     sink, bounced = ours_drop()
-    ours = {"sink": sink, "sink_mm": 1000 * sink, "bounce": bounced, "chi": []}
+    ours = {"sink": sink, "sink_mm": 1000 * sink, "bounce": bounced, "chi": [], "terrain": terrain_turns(ours=True)}
     for mu in TURN_FRICTIONS:
         for label, command in STUDY_TURNS.items():
             ours["chi"].append({"turn": label.replace(" ", "_"), "mu": mu, "chi": ours_turn(mu, command)})
-    print(f"ours: sink {1000 * sink:.2f} mm, bounce after {DROP_WINDOWS} s "
+    print(f"ours: sink {1000 * sink:.2f} mm, on the hills yaw rate / command {ours['terrain']}, bounce after "
+          f"{DROP_WINDOWS} s "
           f"{np.round(1000 * np.asarray(bounced), 2)} mm; chi " +
           ", ".join(f"{c['turn']} µ {c['mu']:g} {c['chi']:.2f}" for c in ours["chi"]), flush=True)
     print("per setting, per µ (0.3, 0.8) and turn (" + ", ".join(STUDY_TURNS) + "): chi sampled per control step / "
@@ -216,7 +261,7 @@ def main() -> int:
     for name, label, contact in settings():
         rest = at_rest(contact)
         table.append({"setting": name, "label": label, "contact": dataclasses.asdict(contact), **rest,
-                      "sink_mm": 1000 * rest["sink"]})
+                      "sink_mm": 1000 * rest["sink"], "terrain": terrain_turns(contact)})
         cells = []
         for mu in TURN_FRICTIONS:
             for turn, command in STUDY_TURNS.items():
@@ -230,6 +275,7 @@ def main() -> int:
                 ratio = "-" if sub["friction_ratio"] is None else f"{sub['friction_ratio']:.2f}"
                 cells.append(f"{step['chi']:.2f}/{sub['chi']:.2f} {sub['airborne']:.0%} {torque:.0f} {ratio}")
         print(f"{label}: sink {1000 * rest['sink']:.2f} mm, {rest['contacts_per_wheel'][0]:.0f} contacts per wheel, "
+              f"on the hills yaw rate / command {table[-1]['terrain']}, "
               f"bounce {np.round(1000 * np.asarray(table[-1]['bounce']), 2)} mm\n    " + " | ".join(cells), flush=True)
     wheel = []
     for name, label, contact in settings():
@@ -243,6 +289,7 @@ def main() -> int:
                 print(f"a lone wheel, {label}: µ {mu:g}, sliding at {slip:g} m/s: rides {1000 * w['lift']:+.2f} mm "
                       f"above rest (sink {1000 * w['sink']:.2f} mm), on the ground {w['contact']:.0%} of steps")
     result = {"turns": {t.replace(" ", "_"): c for t, c in STUDY_TURNS.items()}, "frictions": list(TURN_FRICTIONS),
+              "terrain_pose": list(TERRAIN_POSE), "terrain_turns": {t.replace(" ", "_"): c for t, c in TERRAIN_TURNS.items()},
               "drop_windows": list(DROP_WINDOWS), "ours": ours, "settings": table, "rows": rows,
               "sliding_wheel": wheel}
     path = write_results(RESULTS / "mujoco_turning_study.json", result, version=VERSION, driver=True)
