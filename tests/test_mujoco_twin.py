@@ -162,3 +162,20 @@ def test_the_twin_turns_in_place_on_all_four_wheels_as_coulomb_friction_does():
     assert hops == 0 and ratio == pytest.approx(0.8, rel=0.05) and chi == pytest.approx(coulomb, rel=0.10)
     chi, hops, _, _ = _turn_in_place(MUJOCO_DEFAULT_CONTACT)
     assert hops > 5 and chi > 2.5 * coulomb
+
+
+def test_the_wheels_friction_pairs_replace_the_wheels_ground_contacts():
+    """With ``MujocoContact.solreffriction`` each wheel meets the ground through its own ``<pair>`` only (two rim
+    contacts, not four), still stands on it, and still collides with the walls."""
+    from atrv_warp.integrations.mujoco import MujocoContact, MujocoTwin
+
+    twin = MujocoTwin(contact=MujocoContact(solreffriction=(0.87, 1.0), impratio=10.0))
+    for _ in range(20):
+        twin.step(torques=(0.0, 0.0))
+    m, d = twin.model, twin.data
+    assert m.npair == len(twin.description.wheels)
+    assert d.ncon == 2 * len(twin.description.wheels)
+    assert (twin.wheel_ground_substeps == twin.substeps).all()
+    wheel = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "left_front_wheel_link/cylinder")
+    wall = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "wall_+x")
+    assert (m.geom_contype[wheel] & m.geom_conaffinity[wall]) != 0
