@@ -593,6 +593,39 @@ def mujoco_agreement() -> str:
                   ["---", "---:", "---:", "---:", "---:", "---", "---"], rows)
 
 
+def mujoco_turning_study() -> str:
+    """``mujoco_turning_study.json``: per MuJoCo contact setting, the twin's sink at rest, chi in the agreement's
+    turns and how often a wheel was airborne in them, the sliding wheels' friction over their load at µ 0.8, the
+    fastest in-place turn at µ 0.8, and turns on the hills terrain; our simulator first."""
+    data = _load("mujoco_turning_study.json")
+    rows = data["rows"]
+
+    def cell(setting, turn, mu, field="chi_substeps"):
+        return next(r for r in rows if r["setting"] == setting and r["turn"] == turn and r["mu"] == mu)[field]
+
+    ours = {(c["turn"], c["mu"]): c["chi"] for c in data["ours"]["chi"]}
+    out = [["**ours** (Coulomb, one contact per wheel)", f"{data['ours']['sink_mm']:.1f}",
+            f"{ours['in_place', 0.3]:.2f} / {ours['arc', 0.3]:.2f}", f"{ours['in_place', 0.8]:.2f} / {ours['arc', 0.8]:.2f}",
+            "-", "-", f"{ours['fast_in_place', 0.8]:.2f}", "-",
+            f"{data['ours']['terrain']['in_place']:.2f} / {data['ours']['terrain']['arc']:.2f}"]]
+    for s in data["settings"]:
+        name = s["setting"]
+        nominal = [(t, mu) for mu in (0.3, 0.8) for t in ("in_place", "arc")]
+        airborne = max(cell(name, t, mu, "airborne") for t, mu in nominal)
+        ratio = cell(name, "in_place", 0.8, "friction_ratio")
+        label = f"**{s['label']}**" if name == "tyre" else s["label"]
+        out.append([label, f"{s['sink_mm']:.2f}",
+                    f"{cell(name, 'in_place', 0.3):.2f} / {cell(name, 'arc', 0.3):.2f}",
+                    f"{cell(name, 'in_place', 0.8):.2f} / {cell(name, 'arc', 0.8):.2f}", f"{airborne:.0%}",
+                    "-" if ratio is None else f"{ratio:.2f}", f"{cell(name, 'fast_in_place', 0.8):.2f}",
+                    f"{cell(name, 'fast_in_place', 0.8, 'airborne'):.0%}",
+                    f"{s['terrain']['in_place']:.2f} / {s['terrain']['arc']:.2f}"])
+    return _table(["MuJoCo setting", "sink [mm]", "chi µ 0.3: in place / arc", "chi µ 0.8: in place / arc",
+                   "wheel airborne (worst of these turns)", "friction / load, µ 0.8 in place",
+                   "chi at 2 rad/s in place, µ 0.8", "airborne then", "hills, µ 0.3: yaw rate / command, in place / arc"],
+                  ["---", "---:", "---:", "---:", "---:", "---:", "---:", "---:", "---:"], out)
+
+
 def mujoco_transfer() -> str:
     """``mujoco_transfer.json``: each deployable policy in the MuJoCo twin at each µ (and in our simulator on the
     same episodes), success and how the others ended."""
@@ -628,6 +661,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "skid_checks": skid_checks,
     "mujoco_agreement": mujoco_agreement,
     "mujoco_transfer": mujoco_transfer,
+    "mujoco_turning_study": mujoco_turning_study,
     "train_to_success": train_to_success,
     "train_to_success_nav": train_to_success_nav,
     "ppo_vs_sac": ppo_vs_sac,

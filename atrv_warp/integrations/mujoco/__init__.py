@@ -2,7 +2,8 @@
 ray casting, through the observation code a robot runs (the ``mujoco`` extra: ``pip install 'atrv_warp[mujoco]'``).
 
 - :mod:`.mjcf`: the world's MJCF, written from our descriptions (URDF, ``RoverDescription``, ``HeightGrid``,
-  each episode's obstacles, the arena, the substep);
+  each episode's obstacles, the arena, the substep), and MuJoCo's contact settings (:class:`~.mjcf.MujocoContact`,
+  the tyre's compliance);
 - :mod:`.twin`: :class:`~.twin.MujocoTwin`, one rover stepped at the control period with our motor driver's loop,
   MuJoCo's rays for the scanner, the IMU and the wheel odometry;
 - :mod:`.episodes`: our evaluation episodes in the twin (:func:`~.episodes.draw_episodes`,
@@ -15,8 +16,8 @@ with ours and ``benchmarks/mujoco_transfer.py`` measures the transfer (docs/phys
 from __future__ import annotations
 
 from .episodes import DeployablePolicy, TwinEpisode, TwinEpisodes, draw_episodes, run_twin_episode, run_twin_episodes
-from .mjcf import Obstacle, world_xml
+from .mjcf import MUJOCO_DEFAULT_CONTACT, MujocoContact, Obstacle, world_xml
 from .twin import MujocoTwin
 
-__all__ = ["DeployablePolicy", "MujocoTwin", "Obstacle", "TwinEpisode", "TwinEpisodes", "draw_episodes",
-           "run_twin_episode", "run_twin_episodes", "world_xml"]
+__all__ = ["MUJOCO_DEFAULT_CONTACT", "DeployablePolicy", "MujocoContact", "MujocoTwin", "Obstacle", "TwinEpisode",
+           "TwinEpisodes", "draw_episodes", "run_twin_episode", "run_twin_episodes", "world_xml"]

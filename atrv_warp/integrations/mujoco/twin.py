@@ -25,7 +25,7 @@ from atrv_warp.sim.scanner import ScannerConfig
 from atrv_warp.sim.terrain import HeightGrid
 from atrv_warp.sim.urdf import RoverDescription, load_rover
 
-from .mjcf import SCENE_GROUP, Obstacle, world_xml
+from .mjcf import SCENE_GROUP, MujocoContact, Obstacle, world_xml
 
 __all__ = ["FLAG_CHASSIS_GROUND", "FLAG_OBSTACLE", "FLAG_WALL", "IMU_FRAME", "MujocoTwin"]
 
@@ -50,21 +50,24 @@ class MujocoTwin:
         obstacle_height: Height of the obstacles above the flat ground's top [m] (``ObstacleConfig.height``).
         scanner: The scanner's geometry (its noise is not simulated: the twin's ranges are exact).
         rover, arena, sim, driver: As :class:`~atrv_warp.sim.RoverSim` takes them (defaults: the nominal rover).
+        contact: MuJoCo's contact settings (default :class:`~.mjcf.MujocoContact`: the tyre's compliance).
 
     State after :meth:`reset` and each :meth:`step` (numpy, float64): :attr:`odometry` and :attr:`fused` (x [m],
     y [m], yaw [rad] in the odometry frame), :attr:`odom_twist` (linear [m/s], angular [rad/s]),
-    :attr:`contact_flags` since the step began.
+    :attr:`contact_flags` since the step began, :attr:`wheel_ground_substeps` (per wheel, the substeps of the step
+    after which it touched the ground).
     """
 
     def __init__(self, *, terrain: HeightGrid | None = None, tile: int = 0, obstacles: tuple[Obstacle, ...] = (),
                  friction: float | None = None, obstacle_height: float = 1.0, scanner: ScannerConfig | None = None,
                  rover: RoverConfig | None = None, arena: ArenaConfig | None = None, sim: SimConfig | None = None,
-                 driver: DriverConfig | None = None):
+                 driver: DriverConfig | None = None, contact: MujocoContact | None = None):
         self.rover_cfg = rover or RoverConfig()
         self.arena_cfg = arena or ArenaConfig()
         self.sim_cfg = sim or SimConfig()
         self.driver_cfg = driver or DriverConfig()
         self.scanner_cfg = scanner or ScannerConfig()
+        self.contact_cfg = contact or MujocoContact()
         self.friction = ContactConfig().friction if friction is None else float(friction)
         self.description: RoverDescription = load_rover(self.rover_cfg)
         self.kinematics = self.driver_cfg.kinematics(self.description, self.rover_cfg)
@@ -72,7 +75,7 @@ class MujocoTwin:
         self.xml = world_xml(self.description, self.rover_cfg, arena=self.arena_cfg, sim=self.sim_cfg,
                              friction=self.friction, torque_limit=self.driver_cfg.torque_limit,
                              obstacle_top=self.arena_cfg.ground_top + obstacle_height, terrain=terrain, tile=tile,
-                             obstacles=tuple(obstacles))
+                             obstacles=tuple(obstacles), contact=self.contact_cfg)
         """The world's MJCF text."""
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         self.data = mujoco.MjData(self.model)
@@ -96,6 +99,10 @@ class MujocoTwin:
                                        if n.startswith("obstacle_") else 0 for n in names], dtype=np.int64)
         self._ground_geom = names.index("ground")
         self._chassis_geoms = {g for g in range(m.ngeom) if m.geom_bodyid[g] == self.chassis_body}
+        wheel_bodies = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, w.link) for w in self.description.wheels]
+        self._wheel_of_geom = np.full(m.ngeom, -1, dtype=np.int64)
+        for i, b in enumerate(wheel_bodies):
+            self._wheel_of_geom[m.geom_bodyid == b] = i
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -120,6 +127,7 @@ class MujocoTwin:
         self.odom_twist = np.zeros(2)
         self.fused = np.zeros(3)
         self.contact_flags = 0
+        self.wheel_ground_substeps = np.zeros(len(self.description.wheels), dtype=np.int64)
         self.time = 0.0
 
     def command(self, linear: float, angular: float) -> None:
@@ -168,9 +176,11 @@ class MujocoTwin:
         """Advance by ``SimConfig.step_dt``: each substep the driver's loop (or ``torques``, (2,) [left, right]
         wheel torques [N·m] through the motor's taper, as torque actions drive), then one MuJoCo step."""
         self.contact_flags = 0
+        self.wheel_ground_substeps[:] = 0
         for _ in range(self.substeps):
             self._drive(None if torques is None else np.asarray(torques, dtype=np.float64))
-            mujoco.mj_step(self.model, self.data)
+            for _ in range(self.contact_cfg.steps_per_substep):
+                mujoco.mj_step(self.model, self.data)
             self._note_contacts()
             if not self.finite:
                 break
@@ -224,6 +234,9 @@ class MujocoTwin:
             return
         pairs = d.contact.geom[: d.ncon]
         self.contact_flags |= int(np.bitwise_or.reduce(self._flag_of_geom[pairs].ravel()))
+        on_ground = pairs[(pairs == self._ground_geom).any(axis=1)].ravel()
+        wheels = self._wheel_of_geom[on_ground]
+        self.wheel_ground_substeps[np.unique(wheels[wheels >= 0])] += 1
         for a, b in pairs:
             if (a == self._ground_geom and b in self._chassis_geoms) or (b == self._ground_geom and a in self._chassis_geoms):
                 self.contact_flags |= FLAG_CHASSIS_GROUND
