@@ -25,7 +25,8 @@ Topics (per rover; under ``/rover_<k>`` when ``num_rovers`` > 1):
     start and goal; one rover, task nav_deploy), stepping the task's environment with the last
     ``cmd_vel`` until it ends; ``episode`` (std_msgs/String, out, JSON): ``{"event": "start", "episode",
     "seed", "start", "goal"}`` (world = odometry frame at the start), then ``{"event": "end",
-    "episode", "end_reason", "steps"}`` (benchmarks/deploy_closed_loop.py). A reset advances ``/clock`` by
+    "episode", "end_reason", "steps", "unanswered"}`` (``lockstep``: the steps taken on
+    ``lockstep_timeout``, without a new ``cmd_vel``) (benchmarks/deploy_closed_loop.py). A reset advances ``/clock`` by
     one step; in ``lockstep`` the episode's last state goes out without ``/clock`` and the simulator holds until
     the next ``reset_episode`` (send a controller its next goal meanwhile: it acts first on the reset state).
     ``ground_truth/odom`` (nav_msgs/Odometry, out): the simulator's pose (frame ``world``) and

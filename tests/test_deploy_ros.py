@@ -166,6 +166,7 @@ def test_over_ros_each_step_is_the_nodes_answer_to_the_state_evaluate_would_obse
                           env=env, check=False)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     rows = json.loads(out.read_text())["episodes_detail"]
+    assert [r["unanswered"] for r in rows] == [0, 0], rows  # every step waited for the node's answer
     records = [json.loads(line) for line in trace.read_text().splitlines()]
     sim = ATRVjrEnv(1, task="nav_deploy")
     for row in rows:

@@ -89,6 +89,8 @@ class RoverIO:
         self.prev_vel = torch.zeros(3)
         self.episode: int | None = None
         """The evaluation episode this rover replays (``reset_episode``), until it ends."""
+        self.unanswered = 0
+        """``lockstep``: the replayed episode's steps taken on ``lockstep_timeout``, without a new /cmd_vel."""
         self.pending_episode: int | None = None
         tf_prefix = f"rover_{index}/" if prefix else ""  # its /tf frame names (frames.py)
         self.tf_odom, self.tf_base = tf_prefix + node.odom_frame, tf_prefix + node.base_frame
@@ -592,7 +594,7 @@ class RoverSimNode(Node):
         # slope their yaws differ by a fraction of a degree), so the goal is seen as evaluate's policy sees it
         rover.start = tuple(float(v) for v in self.env.episode_start[rover.index].tolist())
         rover.goal = tuple(self.env.target[rover.index].tolist())
-        rover.episode, rover.mode, rover.pending = k, VELOCITY, VELOCITY
+        rover.episode, rover.mode, rover.pending, rover.unanswered = k, VELOCITY, VELOCITY, 0
         rover.publish_episode({"event": "start", "episode": k, "seed": seed, "start": list(rover.start),
                                "goal": list(rover.goal)})
         self.publish_markers()
@@ -610,7 +612,8 @@ class RoverSimNode(Node):
             if rover.episode is not None and bool(out["done"][rover.index]):
                 reason = END_REASONS[int(out["end_reason"][rover.index])]
                 rover.publish_episode({"event": "end", "episode": rover.episode, "end_reason": reason,
-                                       "steps": int(self.env.step_count[rover.index])})
+                                       "steps": int(self.env.step_count[rover.index]),
+                                       "unanswered": rover.unanswered})
                 self.log.info(f"episode {rover.episode}: {reason}")
                 rover.episode = None
                 self.sim.set_twist([0.0, 0.0], worlds=[rover.index])
@@ -672,6 +675,9 @@ class RoverSimNode(Node):
                 and time.monotonic() - self.published_at < self.params["lockstep_timeout"]):
             return
         if self.sim.sim_time < self.deadline - 1e-9:
+            if self.params["lockstep"] and not self.commanded:
+                for rover in self.rovers:
+                    rover.unanswered += rover.episode is not None
             ended = self.step_once()
             self.steps += 1
             if self.steps % self.every == 0:
