@@ -25,7 +25,10 @@ Topics (per rover; under ``/rover_<k>`` when ``num_rovers`` > 1):
     start and goal; one rover, task nav_deploy), stepping the task's environment with the last
     ``cmd_vel`` until it ends; ``episode`` (std_msgs/String, out, JSON): ``{"event": "start", "episode",
     "seed", "start", "goal"}`` (world = odometry frame at the start), then ``{"event": "end",
-    "episode", "end_reason", "steps"}`` (benchmarks/deploy_closed_loop.py).
+    "episode", "end_reason", "steps", "unanswered"}`` (``lockstep``: the steps taken on
+    ``lockstep_timeout``, without a new ``cmd_vel``) (benchmarks/deploy_closed_loop.py). A reset advances ``/clock`` by
+    one step; in ``lockstep`` the episode's last state goes out without ``/clock`` and the simulator holds until
+    the next ``reset_episode`` (send a controller its next goal meanwhile: it acts first on the reset state).
     ``ground_truth/odom`` (nav_msgs/Odometry, out): the simulator's pose (frame ``world``) and
     body-frame twist.
     ``joint_states`` (sensor_msgs/JointState, out): wheel joint positions [rad] and velocities.
@@ -37,7 +40,7 @@ Topics (per rover; under ``/rover_<k>`` when ``num_rovers`` > 1):
     ``pose`` (geometry_msgs/PoseStamped, out): the reference's chassis pose topic.
 Shared: ``/clock`` (rosgraph_msgs/Clock, every step, after its state topics: use ``use_sim_time``) and
 ``/robot_description`` (std_msgs/String, the URDF, transient local).
-State topics come at ``publish_rate`` Hz of sim time; stamps are sim time. No ``/tf``: tf2_msgs
+State topics come at ``publish_rate`` Hz of sim time; stamps are sim time (plus a step per episode reset). No ``/tf``: tf2_msgs
 is not on the package index here.
 
 Parameters: see :data:`atrv_warp.integrations.ros.node.PARAMETERS` (each declared with its

@@ -229,6 +229,34 @@ def test_goals_in_another_frame_are_ignored_and_the_goal_ends_reached_or_at_the_
     assert stop.command == (0.0, 0.0) and stop.status is None
 
 
+def test_a_goal_tolerance_of_zero_never_ends_the_goal_and_the_trace_holds_each_steps_input(policy):
+    """``goal_tolerance`` 0: the node drives on over the goal (as ``evaluate``'s policy does until the environment ends
+    the episode); a new goal ends it. Each period's trace record holds the stamps of the messages it read and, where
+    the policy drove, the observation and action it computed."""
+    c = Controller(policy, Settings(goal_tolerance=0.0))
+    odom = odom_msg()
+    odom.header.stamp = NS(sec=3, nanosec=250_000_000)
+    c.on_odom(odom, 0.0)
+    c.on_imu(imu_msg(), 0.0)
+    c.on_scan(fov_scan(181, math.pi), 0.0)
+    assert c.tick(0.0).command is None
+    record = c.trace(0.0, c.tick(0.0))
+    assert record["state"] is None and record["observation"] is None and record["command"] is None
+    c.on_goal(goal_msg(0.0, 0.0), 0.0)  # on the goal: distance 0
+    for now in (0.05, 0.1, 0.15):
+        t = c.tick(now)
+        assert t.status["state"] == "active" and t.status["distance"] == 0.0, t.status
+    record = json.loads(json.dumps(c.trace(now, t)))
+    assert record["stamps"] == {"odom": 3.25, "imu": None, "scan": None}  # a message without a header has no stamp
+    assert record["steps"] == 3 and record["goal"] == [0.0, 0.0] and record["state"] == "active"
+    now = c.observation().tolist()  # the messages are the tick's; its command has joined the action history since
+    assert record["observation"][:-6] == now[:-6] and record["observation"][-6:-2] == now[-4:]
+    assert torch.allclose(torch.tensor(record["command"]), torch.tensor(record["action"]) * torch.tensor(policy.scale))
+    assert c.trace(0.2, c.stop("shutdown"))["observation"] is None  # the policy did not drive this period
+    with pytest.raises(ValueError, match="stale_timeout must be > 0"):
+        Settings(stale_timeout=0.0)
+
+
 def test_a_speed_clamp_clips_the_command_and_counts_the_clipped_steps(policy):
     c = Controller(policy, Settings(max_linear=1e-3, max_angular=1e-3))
     drive_ready(c, scan=fov_scan(181, math.pi))

@@ -142,3 +142,46 @@ def test_closed_loop_episodes_over_ros_end_as_evaluate_judges_them(tmp_path):
     assert result["compute_ms"]["steps"] >= sum(r["steps"] for r in rows) // 2
     assert 0 < result["compute_ms"]["p50"] <= result["compute_ms"]["p99"] < 1000
     assert result["ci95"][0] <= result["difference"] <= result["ci95"][1]
+
+
+@pytest.mark.slow  # two live ROS 2 nodes and the simulator
+def test_over_ros_each_step_is_the_nodes_answer_to_the_state_evaluate_would_observe(tmp_path):
+    """Two consecutive episodes of the shipped ``nav_deploy`` policy over ROS 2, replayed in a one-world environment
+    from the node's trace: the node's first observation of each episode is the environment's reset observation
+    (the reset state, no action yet: evaluate's first), and after each step with the node's action, the node's next
+    observation is the environment's, to float32 rounding; the replay ends as the episode did over ROS. So the
+    transport changes nothing: the same state, observation and action at every step (nothing a step late, no stale
+    command from the previous episode, the goal seen from the environment's odometry frame)."""
+    import torch
+    from torchrl.envs.utils import step_mdp
+
+    from atrv_warp.task.env import ATRVjrEnv
+    from atrv_warp.task.spec import END_REASONS
+
+    out, trace = tmp_path / "closed_loop.json", tmp_path / "trace.jsonl"
+    env = dict(os.environ)
+    env.setdefault("ROS_DOMAIN_ID", str(random.randint(101, 200)))
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "deploy_closed_loop.py"), "--episodes", "2",
+                           "--out", str(out), "--trace", str(trace)], capture_output=True, text=True, timeout=900,
+                          env=env, check=False)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    rows = json.loads(out.read_text())["episodes_detail"]
+    assert [r["unanswered"] for r in rows] == [0, 0], rows  # every step waited for the node's answer
+    records = [json.loads(line) for line in trace.read_text().splitlines()]
+    sim = ATRVjrEnv(1, task="nav_deploy")
+    for row in rows:
+        td = sim.reset_to_episodes([0], [row["episode"]], seed=2024)
+        goal = sim.target[0].tolist()
+        mine = [r for r in records if r["goal"] and max(abs(a - b) for a, b in zip(r["goal"], goal)) < 1e-5]
+        mine = mine[max(i for i, r in enumerate(mine) if r["steps"] == 1):]  # its last run (the first is a warm-up)
+        assert [r["steps"] for r in mine[:row["steps"]]] == list(range(1, row["steps"] + 1))
+        for step, record in enumerate(mine[:row["steps"]]):
+            seen = torch.tensor(record["observation"])
+            err = (seen - td["observation"][0]).abs().max().item()
+            assert err < 5e-5, f"episode {row['episode']} step {step}: the node saw an observation {err:.2e} off"
+            assert record["stamps"] == dict.fromkeys(("odom", "imu", "scan"), pytest.approx(record["time"]))
+            td = sim.step(td.set("action", torch.tensor([record["action"]])))
+            if step + 1 < row["steps"]:
+                assert not td["next", "done"].any(), f"episode {row['episode']} ended early in the replay"
+                td = step_mdp(td)
+        assert td["next", "done"].all() and END_REASONS[int(td["next", "end_reason"])] == row["end_reason"]

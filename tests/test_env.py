@@ -385,5 +385,21 @@ def test_reset_to_episodes_replays_the_evaluation_sets_episodes_in_fewer_worlds(
         assert torch.equal(one.target[0], big.target[k])
         assert torch.equal(one.sim.root_pose[0], big.sim.root_pose[k])
         assert torch.equal(one.sim.obstacles.pose[0], big.sim.obstacles.pose[k])
+        assert torch.equal(one.episode_start[0], big.episode_start[k])
     with pytest.raises(ValueError, match="world indices in"):
         one.reset_to_episodes([1], [0], seed=2024)
+
+
+def test_the_odometry_frame_is_the_drawn_start_where_the_goal_is_seen():
+    """The robot observation sees the goal from the odometry frame at ``episode_start`` (the start as drawn): the
+    chassis rests at its x, y, and ``goal_odom`` is the target in that frame. On terrain the settled chassis's yaw
+    differs from the drawn one (a fraction of a degree), so a bridge (the ROS node's odometry) must take this frame,
+    not the chassis's pose, to show the policy the goal as the environment does."""
+    env = ATRVjrEnv(8, task="nav_deploy", seed=2024)
+    env.reset()
+    x, y, yaw = env.episode_start.double().unbind(-1)
+    assert torch.equal(env.episode_start[:, :2], env.sim.root_pose[:, :2])
+    d = env.target.double() - torch.stack([x, y], -1)
+    local = torch.stack([yaw.cos() * d[:, 0] + yaw.sin() * d[:, 1], -yaw.sin() * d[:, 0] + yaw.cos() * d[:, 1]], -1)
+    assert torch.allclose(env.goal_odom.double(), local, atol=1e-5)
+    assert (env.sim.rpy[:, 2].double() - yaw).abs().max() > 1e-5  # why the chassis's yaw would not do

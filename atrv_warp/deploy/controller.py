@@ -207,7 +207,9 @@ class Settings:
     odom_frame: str = "odom"
     """The odometry frame: ``/odom``'s ``header.frame_id``, and the frame goals must come in."""
     goal_tolerance: float = 1.0
-    """The goal is reached within this distance of the odometry's position [m] (the nav tasks' reach radius)."""
+    """The goal is reached within this distance of the odometry's position [m] (the nav tasks' reach radius); 0: the
+    node never ends a goal as reached (whoever sent it ends it with the next goal, as an evaluation's episodes end
+    on the true position)."""
     max_linear: float = 0.0
     """Speed clamp on ``linear.x`` [m/s]; 0 = the policy's trained limit."""
     max_angular: float = 0.0
@@ -222,8 +224,8 @@ class Settings:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"parameter {name} must be a finite number >= 0, got {value!r}")
-        if not self.goal_tolerance > 0 or not self.stale_timeout > 0:
-            raise ValueError("parameters goal_tolerance and stale_timeout must be > 0")
+        if not self.stale_timeout > 0:
+            raise ValueError("parameter stale_timeout must be > 0")
         if not self.odom_frame:
             raise ValueError("parameter odom_frame must name the odometry frame (e.g. odom)")
 
@@ -236,6 +238,8 @@ class _Sensor:
     """ROS time [s] of the last message, valid or not."""
     problem: str | None = None
     """Why the last message cannot be used (None: it can)."""
+    stamp: float | None = None
+    """The last message's ``header.stamp`` [s] (None: it has no header)."""
 
 
 @dataclass(frozen=True)
@@ -276,6 +280,12 @@ class Controller:
         k, c = policy.observation.action_history, len(policy.observation.action_columns)
         self.history = torch.zeros(k, c, dtype=torch.float64)
         self.last_time: float | None = None
+        self._drove_at: float | None = None
+        """ROS time [s] of the last step the policy drove."""
+        self.last_observation: torch.Tensor | None = None
+        """The policy's input (D,) at the last step it drove (float32)."""
+        self.last_action: list[float] | None = None
+        """The policy's action at the last step it drove, in [-1, 1] (before scaling and clamps)."""
 
     # ---------------------------------------------------------------- messages
     def on_odom(self, msg, now: float) -> str | None:
@@ -285,30 +295,32 @@ class Controller:
             return self._store("odom", None, now, f"/odom is in frame {frame!r}, not the odom_frame "
                                f"{self.settings.odom_frame!r}: set -p odom_frame:={frame or '<frame>'}")
         try:
-            return self._store("odom", read_odometry(msg), now, None)
+            return self._store("odom", read_odometry(msg), now, None, msg)
         except ValueError as err:
-            return self._store("odom", None, now, str(err))
+            return self._store("odom", None, now, str(err), msg)
 
     def on_imu(self, msg, now: float) -> str | None:
         """A ``sensor_msgs/Imu``; one line to log when it becomes unusable."""
         try:
-            return self._store("imu", read_imu(msg), now, None)
+            return self._store("imu", read_imu(msg), now, None, msg)
         except ValueError as err:
-            return self._store("imu", None, now, str(err))
+            return self._store("imu", None, now, str(err), msg)
 
     def on_scan(self, msg, now: float) -> str | None:
         """A ``sensor_msgs/LaserScan``; one line to log when it becomes unusable (a refused geometry names both)."""
         if "scan" not in self.sensors:
             return None
         try:
-            return self._store("scan", read_scan(msg, self.policy.observation), now, None)
+            return self._store("scan", read_scan(msg, self.policy.observation), now, None, msg)
         except ValueError as err:
-            return self._store("scan", None, now, str(err))
+            return self._store("scan", None, now, str(err), msg)
 
-    def _store(self, name: str, value, now: float, problem: str | None) -> str | None:
+    def _store(self, name: str, value, now: float, problem: str | None, msg=None) -> str | None:
         s = self.sensors[name]
         changed = problem != s.problem
         s.value, s.received, s.problem = value, now, problem
+        stamp = getattr(getattr(msg, "header", None), "stamp", None)
+        s.stamp = None if stamp is None else stamp.sec + 1e-9 * stamp.nanosec
         if changed and problem is not None:
             return f"{s.topic}: {problem}; the rover holds still until it is valid"
         if changed:
@@ -369,7 +381,7 @@ class Controller:
         if reasons:
             return self._hold("; ".join(reasons), "; ".join(keys), quiet)
         status = self.status("active")
-        if status["distance"] < self.settings.goal_tolerance:
+        if self.settings.goal_tolerance and status["distance"] < self.settings.goal_tolerance:
             return self._end("reached", f"within {self.settings.goal_tolerance:g} m")
         start = time.perf_counter()
         try:
@@ -412,10 +424,25 @@ class Controller:
                                        goal=list(self.goal), scan=scan,
                                        last_actions=self.history if self.history.numel() else None)
 
+    def trace(self, now: float, tick: Tick) -> dict:
+        """One control period as a JSON-able record (the node's ``trace`` file; compare it step by step with the
+        environment's observation and action): ROS ``time`` [s], the goal status's ``state``, ``goal`` and ``steps``, each sensor's last
+        ``stamps`` [s] (its ``header.stamp``: how old the input was), the ``observation`` and ``action`` of a step
+        the policy drove (else None) and the ``command`` published."""
+        drove = self._drove_at == now and tick.status is not None and tick.status["state"] == "active"
+        return {"time": now, "state": tick.status["state"] if tick.status else None,
+                "goal": tick.status["goal"] if tick.status else None, "steps": tick.status["steps"] if tick.status else None,
+                "stamps": {name: s.stamp for name, s in self.sensors.items()},
+                "observation": self.last_observation.tolist() if drove else None,
+                "action": self.last_action if drove else None,
+                "command": list(tick.command) if tick.command is not None else None}
+
     def _act(self) -> list[float]:
         obs = self.observation()
         with torch.no_grad():
-            return [float(a) for a in self.policy.module(obs[None])[0]]
+            action = [float(a) for a in self.policy.module(obs[None])[0]]
+        self.last_observation, self.last_action, self._drove_at = obs, action, self.last_time
+        return action
 
     def _remember(self, command: Sequence[float]) -> None:
         """The command sent, as the action the policy observes next (in [-1, 1], newest first)."""

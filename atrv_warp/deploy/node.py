@@ -63,6 +63,7 @@ class DeployNode(Node):
             self.create_subscription(LaserScan, p["scan_topic"], self.on_scan, sensors)
         self.create_subscription(PoseStamped, p["goal_topic"], self.on_goal,
                                  QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self.trace = open(p["trace"], "w", encoding="utf-8") if p["trace"] else None  # noqa: SIM115 - closed in stop
         self.timer = self.create_timer(policy.period, self.on_tick)
         clamp = ""
         if settings.max_linear or settings.max_angular:
@@ -99,7 +100,12 @@ class DeployNode(Node):
         self._say(line, "info" if line.startswith("goal (") else "warning")
 
     def on_tick(self) -> None:
-        self.publish(self.controller.tick(self.now()))
+        now = self.now()
+        tick = self.controller.tick(now)
+        self.publish(tick)
+        if self.trace is not None:
+            self.trace.write(json.dumps(self.controller.trace(now, tick)) + "\n")
+            self.trace.flush()
 
     def publish(self, tick: Tick) -> None:
         """Publish a tick's command and status, and log its lines."""
@@ -123,3 +129,6 @@ class DeployNode(Node):
         """Publish a zero command (and the goal's aborted status), and wait up to 0.5 s for subscribers to have it."""
         self.publish(self.controller.stop(reason))
         self.cmd_pub.wait_for_all_acked(Duration(seconds=0.5))
+        if self.trace is not None:
+            self.trace.close()
+            self.trace = None

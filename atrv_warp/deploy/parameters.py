@@ -15,11 +15,14 @@ PARAMETERS = (
     ("odom_frame", "odom", "the odometry frame: /odom's header.frame_id, and the frame goals must be in"),
     ("base_frame", "base_link", "frame_id of a stamped /cmd_vel"),
     ("enable_stamped_cmd_vel", False, "publish geometry_msgs/TwistStamped instead of Twist (as Nav2's parameter)"),
-    ("goal_tolerance", 1.0, "the goal is reached within this distance on the odometry [m] (the nav tasks' radius)"),
+    ("goal_tolerance", 1.0, ("the goal is reached within this distance on the odometry [m] (the nav tasks' radius); "
+                             "0 = never: the next goal ends it")),
     ("max_linear", 0.0, "clamp |linear.x| to this [m/s]; 0 = the policy's trained limit"),
     ("max_angular", 0.0, "clamp |angular.z| to this [rad/s]; 0 = the policy's trained limit"),
     ("stale_timeout", 0.5, "stop the rover when a sensor's last message is older than this, in ROS time [s]"),
     ("time_limit", 60.0, "abort a goal not reached in this long, in ROS time [s]; 0 = no limit"),
+    ("trace", "", ("write every control period here as a JSON line (time, state, sensor stamps, observation, action, "
+                   "command): to compare the node's inputs with the simulator's step by step; '' = off")),
 )
 """(name, default, description) of every parameter the node declares (plus ROS's own ``use_sim_time``)."""
 

@@ -260,6 +260,10 @@ class ATRVjrEnv(EnvBase):
         self.goal_odom = wp.to_torch(t.goal_odom).view(n, 2)
         """(N, 2) each world's target in its odometry frame (the episode's start pose: the driver's
         ``odometry`` and ``fused`` origin) [m], from which the robot observation's goal is seen (a view)."""
+        self.episode_start = wp.to_torch(self._reset_poses).view(n, 3)
+        """(N, 3) each world's episode start as its sampler drew it (x [m], y [m], yaw [rad]): the origin of the
+        odometry frame its robot observation sees the goal in (``goal_odom``), where the driver's odometry starts;
+        the chassis rests there, settled onto the terrain (a view)."""
         self.odom_drift = wp.to_torch(t.odom_drift).view(n, 3)
         """(N, 3) the robot observation's odometry drift this episode (x [m], y [m], yaw [rad]; zero without
         sensor noise): the goal is observed from ``sim.driver.fused + odom_drift`` (a view)."""

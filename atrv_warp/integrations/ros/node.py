@@ -89,6 +89,8 @@ class RoverIO:
         self.prev_vel = torch.zeros(3)
         self.episode: int | None = None
         """The evaluation episode this rover replays (``reset_episode``), until it ends."""
+        self.unanswered = 0
+        """``lockstep``: the replayed episode's steps taken on ``lockstep_timeout``, without a new /cmd_vel."""
         self.pending_episode: int | None = None
         tf_prefix = f"rover_{index}/" if prefix else ""  # its /tf frame names (frames.py)
         self.tf_odom, self.tf_base = tf_prefix + node.odom_frame, tf_prefix + node.base_frame
@@ -368,6 +370,10 @@ class RoverSimNode(Node):
         self.commanded = False
         """A /cmd_vel came since the last state publication (``lockstep``)."""
         self.published_at = 0.0
+        self.holding = False
+        """``lockstep``: a replayed episode has ended; nothing steps until the next ``reset_episode``."""
+        self.reset_ns = 0
+        """ROS time the episode resets added to the simulation time [ns]: one period each."""
 
     def setup(self) -> None:
         self._check_parameters()
@@ -499,8 +505,10 @@ class RoverSimNode(Node):
 
     # ------------------------------------------------------------------ simulator reads
     def stamp_ns(self) -> int:
-        """Simulation time [ns]: the stamp of everything the node publishes."""
-        return round(self.sim.sim_time * 1e9)
+        """ROS time [ns], the stamp of everything the node publishes and its ``/clock``: the simulation time, plus one
+        step per ``reset_episode`` (a reset takes a control period, so a controller timed on the clock acts on the
+        reset state)."""
+        return round(self.sim.sim_time * 1e9) + self.reset_ns
 
     def record(self, topic: str, type_name: str, message: dict, stamp_ns: int | None = None) -> None:
         if self.bag is not None:
@@ -555,8 +563,8 @@ class RoverSimNode(Node):
             self.sim.set_commands(action_to_torque(action, task.action_scale), worlds=[k])
         return float(self.env.target_distance[k])
 
-    def step_once(self) -> None:
-        """Every rover's input for its mode, one simulator step, /clock."""
+    def step_once(self) -> bool:
+        """Every rover's input for its mode and one simulator step; True when a replayed episode ended in it."""
         for rover in self.rovers:
             rover.drive(self.goal_action)
         # what every rover commanded, as the policy's actions: a task that observes its last actions sees them
@@ -568,9 +576,9 @@ class RoverSimNode(Node):
         for rover in self.rovers:
             rover.prev_vel = self.sim.lin_vel[rover.index].clone()
         if any(r.episode is not None for r in self.rovers):
-            self.step_episode()
-        else:
-            self.sim.step()
+            return self.step_episode()
+        self.sim.step()
+        return False
 
     def start_episode(self, rover: RoverIO) -> None:
         """Put ``rover`` in evaluation episode ``rover.pending_episode`` of ``episode_seed`` (the world, start and
@@ -579,20 +587,22 @@ class RoverSimNode(Node):
         yaw], "goal": [x, y]}`` (world frame = the odometry frame at the start) and the state."""
         k, seed = rover.pending_episode, int(self.params["episode_seed"])
         rover.pending_episode = None
+        self.reset_ns += round(self.sim.sim_cfg.step_dt * 1e9)
         self.env.reset_to_episodes([rover.index], [k], seed=seed)
         self.sim.set_twist([0.0, 0.0], worlds=[rover.index])
-        x, y = self.sim.root_pose[rover.index, :2].tolist()
-        rover.start = (x, y, float(self.sim.rpy[rover.index, 2]))
+        # the odometry frame where the environment puts it (the start as drawn, not the settled chassis's pose: on a
+        # slope their yaws differ by a fraction of a degree), so the goal is seen as evaluate's policy sees it
+        rover.start = tuple(float(v) for v in self.env.episode_start[rover.index].tolist())
         rover.goal = tuple(self.env.target[rover.index].tolist())
-        rover.episode, rover.mode, rover.pending = k, VELOCITY, VELOCITY
+        rover.episode, rover.mode, rover.pending, rover.unanswered = k, VELOCITY, VELOCITY, 0
         rover.publish_episode({"event": "start", "episode": k, "seed": seed, "start": list(rover.start),
                                "goal": list(rover.goal)})
         self.publish_markers()
 
-    def step_episode(self) -> None:
+    def step_episode(self) -> bool:
         """One environment step of the replayed episode, the rover's last /cmd_vel as its action (so the episode
         ends as ``evaluate``'s do: reached, wall, flip, obstacle, timeout); at its end ``episode`` ``{"event": "end",
-        "episode", "end_reason", "steps"}`` and the rover stops."""
+        "episode", "end_reason", "steps"}`` and the rover stops. True when the episode ended."""
         from tensordict import TensorDict
 
         task = self.env.task_cfg
@@ -602,10 +612,13 @@ class RoverSimNode(Node):
             if rover.episode is not None and bool(out["done"][rover.index]):
                 reason = END_REASONS[int(out["end_reason"][rover.index])]
                 rover.publish_episode({"event": "end", "episode": rover.episode, "end_reason": reason,
-                                       "steps": int(self.env.step_count[rover.index])})
+                                       "steps": int(self.env.step_count[rover.index]),
+                                       "unanswered": rover.unanswered})
                 self.log.info(f"episode {rover.episode}: {reason}")
                 rover.episode = None
                 self.sim.set_twist([0.0, 0.0], worlds=[rover.index])
+                return True
+        return False
 
     def publish_state(self) -> None:
         self.commanded, self.published_at = False, time.monotonic()
@@ -642,22 +655,36 @@ class RoverSimNode(Node):
     def on_step_timer(self) -> None:
         """One simulator step; state topics every ``publish_rate``, then ``/clock`` (so that a node timed on the
         clock reads this step's sensors); finish at the deadline. ``reset_episode`` requests start first, and
-        ``lockstep`` holds the step until a ``/cmd_vel`` has come."""
+        ``lockstep`` holds the step until a ``/cmd_vel`` has come.
+
+        In ``lockstep``, a replayed episode pairs each step with the controller's answer to the state before it, as
+        ``evaluate`` pairs each action with its observation: the reset state comes one period of ``/clock`` after
+        the last, so the controller acts on it (its command is the episode's first action); the episode's last
+        state goes out without ``/clock`` (nothing is left to act on), and nothing steps until the next
+        ``reset_episode``, so a controller given its next goal meanwhile acts first on that episode's reset state."""
         for rover in self.rovers:
             if rover.pending_episode is not None:
                 self.start_episode(rover)
+                self.holding = False
                 self.publish_state()
                 self.clock_pub.publish(Clock(clock=_stamp(self.stamp_ns())))
                 return
+        if self.holding:
+            return
         if (self.params["lockstep"] and not self.commanded
                 and time.monotonic() - self.published_at < self.params["lockstep_timeout"]):
             return
         if self.sim.sim_time < self.deadline - 1e-9:
-            self.step_once()
+            if self.params["lockstep"] and not self.commanded:
+                for rover in self.rovers:
+                    rover.unanswered += rover.episode is not None
+            ended = self.step_once()
             self.steps += 1
             if self.steps % self.every == 0:
                 self.publish_state()
-            self.clock_pub.publish(Clock(clock=_stamp(self.stamp_ns())))
+            self.holding = ended and self.params["lockstep"]
+            if not self.holding:
+                self.clock_pub.publish(Clock(clock=_stamp(self.stamp_ns())))
         if self.sim.sim_time >= self.deadline - 1e-9 and not self.finished.done():
             self.step_timer.cancel()
             self.finished.set_result(True)

@@ -61,7 +61,8 @@ PARAMETERS = (
     ("episode_seed", 2024, ("the evaluation set /reset_episode replays (python -m atrv_warp.evaluate --seed; 2024: "
                             "the standard set)")),
     ("lockstep", False, ("after each state publication, step only once a /cmd_vel has come (or lockstep_timeout "
-                         "passed): a controller in another process acts on every step, at any real_time_factor")),
+                         "passed): a controller in another process acts on every step, at any real_time_factor; a "
+                         "replayed episode (reset_episode) ends holding, without /clock, until the next one")),
     ("lockstep_timeout", 1.0, "lockstep: step anyway after this long without a /cmd_vel [s of wall time]"),
 )
 """(name, default, description) of every parameter the node declares. The sensor noise defaults are
