@@ -330,6 +330,27 @@ def test_segments_replay_the_configured_driver_and_the_outputs_record_it(tmp_pat
     assert rover.wheel_radius == 0.121
 
 
+def test_a_tiny_fit_runs_on_the_first_seconds_of_a_drive(tmp_path):
+    """A smoke run of the fit on a short kinematic drive: ``duration`` keeps the drive's first seconds, both starts
+    run, the report has every segment's errors, and the residuals' squares are the loss the fit reports."""
+    from atrv_warp.integrations.calibration import calibrate
+    from atrv_warp.integrations.calibration.fit import replay_errors
+
+    log = read_drive_log(_bag(tmp_path / "drive.mcap", seconds=30.0), WHEELS)
+    cfg = CalibrationConfig(params=("wheel_radius",), duration=16.0, iterations=2)
+    seg = make_segments(log, cfg, cfg.driver())
+    assert len(seg) == 8 and len(make_segments(log, CalibrationConfig(), cfg.driver())) == 15  # 2 s each
+    result = calibrate(log, cfg)
+    assert len(result.starts) == 2 and all(s["evaluations"] >= 1 for s in result.starts)
+    assert 0.10 <= result.values["wheel_radius"] <= 0.16
+    assert len(result.errors["train"]["after"]) + len(result.errors["held_out"]["after"]) == len(seg)
+    # the errors the report gives are replay_errors' with the fitted values
+    again = replay_errors(log, result.values, cfg)
+    assert again["held_out"].tolist() == pytest.approx(result.errors["held_out"]["after"], abs=1e-6)
+    with pytest.raises(CalibrationError, match="duration"):
+        CalibrationConfig(duration=0.0)
+
+
 def test_record_example_drives_a_worn_truth_with_the_nominal_driver(tmp_path, monkeypatch):
     """``--record-example --truth`` records a base whose driver is configured as the nominal rover (a real base whose
     tyre wore), unless ``--driver-wheel-radius`` says otherwise: the node's parameters it passes, built as the node
