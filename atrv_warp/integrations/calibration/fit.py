@@ -98,7 +98,7 @@ class CalibrationConfig:
     """Starting points, fitted at once: the rover's values, then random points within the bounds. Under a driver that
     holds its wheel speeds tightly the loss is flat along friction x mass; two starts that end at the same point have
     found the valley's floor, and the fit converges only where they do."""
-    iterations: int = 12
+    iterations: int = 15
     """Levenberg-Marquardt iterations at most, on every training segment."""
     tolerance: float = 0.005
     """A start has settled once its undamped Gauss-Newton step moves no parameter more than this share of its
@@ -107,6 +107,10 @@ class CalibrationConfig:
     """The forward differences' step, as a share of each parameter's range."""
     damping: float = 0.01
     """Levenberg-Marquardt's first damping (a share of the normal equations' diagonal)."""
+    robust: float | None = 1.0
+    """Each segment's loss counts through Cauchy's ``robust * log(1 + loss / robust)`` (``None``: as it is). A segment
+    the replay cannot follow (a wheel that spins up in a turn and runs away, a chaotic stretch in any model) can
+    cost hundreds where a followed one costs well under 1, and a few such would pull every parameter to them."""
     worlds: int = 512
     """Worlds per rollout at most: an iteration's segments run in chunks of about equal size up to this."""
     seed: int = 0
@@ -150,6 +154,8 @@ class CalibrationConfig:
         for name in ("segment_seconds", "kp", "effective_track_factor", "cmd_vel_timeout", "torque_limit"):
             if not getattr(self, name) > 0:
                 raise CalibrationError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.robust is not None and not self.robust > 0:
+            raise CalibrationError(f"robust must be > 0 or None, got {self.robust}")
         if self.duration is not None and not self.duration > 0:
             raise CalibrationError(f"duration must be > 0 [s] or None, got {self.duration}")
         for name in ("driver_wheel_radius", "driver_track_width"):
@@ -411,6 +417,8 @@ class _Start:
     residuals: np.ndarray  # (S, R) at it
     jacobian: np.ndarray  # (S, R, P) d residuals / d unit, by forward differences
     damping: float
+    robust: float | None
+    """:attr:`CalibrationConfig.robust`."""
     evaluations: int = 1
     settled: float = math.inf
     """The undamped Gauss–Newton step from the current point: its largest move as a fraction of a range."""
@@ -421,12 +429,23 @@ class _Start:
         """The mean of the segments' losses."""
         return float((self.residuals**2).sum() / len(self.residuals))
 
+    @property
+    def objective(self) -> float:
+        """What the fit lowers: the mean of the segments' losses, each through :func:`_cauchy`."""
+        return float(_cauchy((self.residuals**2).sum(-1), self.robust).mean())
+
+    def weights(self) -> np.ndarray:
+        """(S,) each segment's weight in the Gauss-Newton step (the derivative of :func:`_cauchy` at its loss)."""
+        loss = (self.residuals**2).sum(-1)
+        return np.ones_like(loss) if self.robust is None else 1.0 / (1.0 + loss / self.robust)
+
     def step(self, damping: float) -> np.ndarray:
         """The Levenberg-Marquardt step from :attr:`unit` with Marquardt's scaling (a ``damping`` share of the normal
-        equations' diagonal; 0: Gauss-Newton's), in the box: a parameter on a bound that the step would push out
-        stays there, and the others are solved for without it."""
-        jac = self.jacobian.reshape(-1, self.jacobian.shape[-1])
-        a, g = jac.T @ jac, jac.T @ self.residuals.reshape(-1)
+        equations' diagonal; 0: Gauss-Newton's), each segment weighted by :meth:`weights`, in the box: a parameter on
+        a bound that the step would push out stays there, and the others are solved for without it."""
+        w = self.weights()
+        a = np.einsum("s,srp,srq->pq", w, self.jacobian, self.jacobian)
+        g = np.einsum("s,srp,sr->p", w, self.jacobian, self.residuals)
         a = a + damping * np.diag(np.diag(a).clip(min=1e-12))
         free = np.ones(len(g), dtype=bool)
         for _ in range(len(g)):
@@ -437,6 +456,12 @@ class _Start:
                 break
             free &= ~out
         return (self.unit + delta).clip(0.0, 1.0)
+
+
+def _cauchy(loss: np.ndarray, scale: float | None) -> np.ndarray:
+    """Segment losses through Cauchy's ``scale * log(1 + loss / scale)``: as they are where small, growing only
+    logarithmically past ``scale`` (``None``: as they are)."""
+    return loss if scale is None else scale * np.log1p(loss / scale)
 
 
 def _levenberg_marquardt(replay: _Replay, train: np.ndarray, names: list[str], low: np.ndarray, span: np.ndarray,
@@ -460,9 +485,9 @@ def _levenberg_marquardt(replay: _Replay, train: np.ndarray, names: list[str], l
         res = replay.residuals(np.tile(train, len(grid)), per_world)[0].reshape(len(points), p + 1, count, -1)
         return [(r[0], ((r[1:] - r[:1]) / h[:, None, None]).transpose(1, 2, 0)) for r, h in zip(res, steps)]
 
-    starts = [_Start(u, r, jac, cfg.damping) for u, (r, jac) in zip(units, replay_points(list(units)))]
+    starts = [_Start(u, r, jac, cfg.damping, cfg.robust) for u, (r, jac) in zip(units, replay_points(list(units)))]
     for s in starts:
-        s.history.append(s.loss)
+        s.history.append(s.objective)
     for it in range(cfg.iterations):
         moving = [s for s in starts if s.settled > cfg.tolerance]
         for s in moving:  # the undamped step's size: settled once it is within the tolerance
@@ -473,14 +498,13 @@ def _levenberg_marquardt(replay: _Replay, train: np.ndarray, names: list[str], l
         trials = [s.step(s.damping) for s in moving]
         for s, u, (r, jac) in zip(moving, trials, replay_points(trials)):
             s.evaluations += 1
-            loss = float((r**2).sum() / count)
-            if loss < s.loss:
+            if float(_cauchy((r**2).sum(-1), cfg.robust).mean()) < s.objective:
                 s.unit, s.residuals, s.jacobian, s.damping = u, r, jac, max(s.damping / 3.0, 1e-6)
             else:
                 s.damping *= 4.0
-            s.history.append(s.loss)
+            s.history.append(s.objective)
         say(f"  iteration {it + 1:2d}: " + "; ".join(
-            f"loss {s.loss:.4f} " + " ".join(f"{n} {low[j] + span[j] * s.unit[j]:.4g}" for j, n in enumerate(names))
+            f"loss {s.objective:.4f} " + " ".join(f"{n} {low[j] + span[j] * s.unit[j]:.4g}" for j, n in enumerate(names))
             for s in starts) + f"  ({time.perf_counter() - t0:.0f} s)")
     for s in starts:  # where the loop ran out, each start's last undamped step
         s.settled = float(np.abs(s.step(0.0) - s.unit).max())
@@ -491,9 +515,9 @@ def _standard_error(start: _Start, names: list[str], span: np.ndarray) -> dict[s
     """Sandwich standard errors at the fit: ``H^-1 (sum_i g_i g_i^T) H^-1`` with ``g_i`` the gradient of training
     segment i's loss and ``H`` the Gauss–Newton Hessian of their sum, both from the fit's last Jacobian (segments
     taken as independent); nan where ``H`` is singular."""
-    jac, res = start.jacobian, start.residuals  # (S, R, P), (S, R)
-    g = 2.0 * np.einsum("srp,sr->sp", jac, res)
-    hessian = 2.0 * np.einsum("srp,srq->pq", jac, jac)
+    jac, res, w = start.jacobian, start.residuals, start.weights()  # (S, R, P), (S, R), (S,)
+    g = 2.0 * np.einsum("s,srp,sr->sp", w, jac, res)
+    hessian = 2.0 * np.einsum("s,srp,srq->pq", w, jac, jac)
     if not bool((np.linalg.eigvalsh(hessian) > 1e-12 * np.abs(hessian).max()).all()):
         return {p: math.nan for p in names}
     inverse = np.linalg.inv(hessian)
@@ -538,8 +562,9 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
     t_fit = time.perf_counter()
     ends = _levenberg_marquardt(replay, train, names, low, span, units, cfg, say)
     starts = [{"values": {p: float(low[j] + span[j] * s.unit[j]) for j, p in enumerate(names)}, "train_loss": s.loss,
+               "objective": s.objective,
                "evaluations": s.evaluations, "settled": s.settled, "losses": s.history} for s in ends]
-    best = min(range(len(ends)), key=lambda k: ends[k].loss)
+    best = min(range(len(ends)), key=lambda k: ends[k].objective)
     fitted = {**nominal, **starts[best]["values"]}
     units_end = np.stack([s.unit for s in ends])
     # how far apart the starts ended (the largest parameter's distance, as a fraction of its range): where the loss
