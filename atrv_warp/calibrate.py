@@ -64,6 +64,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tolerance", type=float, default=d.tolerance,
                    help="settled: a Gauss-Newton step moves no parameter more than this share of its range "
                         "(%(default)s)")
+    p.add_argument("--robust", type=float, default=d.robust,
+                   help="each segment's loss counts as robust*log(1 + loss/robust) (%(default)s; 0: as it is)")
     p.add_argument("--pose-smoothing", type=float, default=d.pose_smoothing,
                    help="centred moving average over the reference poses [s] (%(default)s; 0: none)")
     p.add_argument("--seed", type=int, default=d.seed)
@@ -157,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
         cfg = CalibrationConfig(params=tuple(p.strip() for p in args.params.split(",") if p.strip()),
                                 command=args.command, segment_seconds=args.segment, duration=args.duration,
                                 starts=args.starts,
-                                iterations=args.iterations, tolerance=args.tolerance,
+                                iterations=args.iterations, tolerance=args.tolerance, robust=args.robust or None,
                                 pose_smoothing=args.pose_smoothing, seed=args.seed, kp=args.wheel_kp,
                                 ki=args.wheel_ki, effective_track_factor=args.effective_track_factor,
                                 driver_wheel_radius=args.driver_wheel_radius,
