@@ -120,7 +120,8 @@ def _figure(rovers: dict, path: Path) -> None:
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
     for (name, r), color in zip(rovers.items(), ("C0", "C1", "C2")):
         s = [f["seconds"] for f in r["fits"]]
-        axes[0].plot(s, [100 * f["held_out_after_m"] for f in r["fits"]], "o-", color=color, label=f"{name.replace('_', ' ')}, fitted")
+        name = name.replace("_", " ")
+        axes[0].plot(s, [100 * f["held_out_after_m"] for f in r["fits"]], "o-", color=color, label=f"{name}, fitted")
         axes[0].axhline(100 * r["held_out_before_m"], color=color, ls=":", label=f"{name}, nominal")
         for p, style in (("friction", "o-"), ("torque_scale", "s--")):
             axes[1].plot(s, [100 * abs(f["relative_error"][p]) for f in r["fits"]], style, color=color,
