@@ -219,6 +219,27 @@ def test_rollout_driver_matches_the_simulator():
             assert float(a.grad[t, 0, c]) == pytest.approx(fd, rel=0.05, abs=1e-4), (t, c)
 
 
+def test_rollout_with_a_mass_matrix_per_step_drives_as_the_default_simulator():
+    """``mass_matrix_interval=None`` (the calibration's replay) refreshes the mass matrix once per step, as a default
+    RoverSim does: the same path, and gradients that agree with central differences."""
+    from atrv_warp import RoverSim
+    from atrv_warp.sim.diff import DiffRollout
+
+    steps = 20
+    sim = RoverSim(1)
+    for _ in range(steps):
+        sim.set_twist([0.8, 0.6])
+        sim.step()
+    roll = DiffRollout(1, steps=steps, twist=True, mass_matrix_interval=None)
+    twist = torch.tensor([0.8, 0.6]).expand(steps, 1, 2)
+    assert roll(twist)[-1, 0, :3].tolist() == pytest.approx(sim.root_pose[0, :3].tolist(), abs=2e-4)
+    mu = torch.tensor([0.3], requires_grad=True)
+    roll(twist, friction=mu)[-1, 0, 0].backward()
+    with torch.no_grad():
+        fd = float(roll(twist, friction=0.31)[-1, 0, 0] - roll(twist, friction=0.29)[-1, 0, 0]) / 0.02
+    assert float(mu.grad) == pytest.approx(fd, rel=0.05, abs=1e-4)
+
+
 def test_rollout_gradients_of_motor_and_wheel_parameters():
     """d(final x)/d(torque scale) and /d(wheel radius), per world, against central differences."""
     from atrv_warp.sim.diff import DiffRollout
@@ -386,7 +407,7 @@ def ros_env():
                 PYTHONUNBUFFERED="1")
 
 
-@pytest.mark.slow  # a live ROS 2 node records the bag; the fit takes about a minute
+@pytest.mark.slow  # a live ROS 2 node records the bag (about a minute); the fit takes about 20 s
 def test_fit_recovers_a_hidden_rover_from_a_recorded_bag(tmp_path, run_module, ros_env):
     bag, out = tmp_path / "drive.mcap", tmp_path / "calibrated.toml"
     run_module("atrv_warp.calibrate", "--record-example", str(bag), "--minutes", "4", "--truth",
