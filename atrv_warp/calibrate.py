@@ -3,7 +3,7 @@
 The bag (MCAP; ``ros2 bag record -s mcap /cmd_vel /joint_states /ground_truth/odom``) needs the wheel joint
 states and a reference pose, and the velocity commands or the wheel efforts. The fit replays segments of it
 in many worlds at once and adjusts friction, motor torque scale, payload and wheel radius (``--params``)
-through the simulator's gradients. The velocity commands go through a driver configured as the robot's is
+by Levenberg-Marquardt on the replays' errors. The velocity commands go through a driver configured as the robot's is
 (``--driver-wheel-radius``, ``--driver-track-width``; default the nominal rover's): a worn tyre is then a
 physical radius the fit finds. It writes:
 
@@ -56,16 +56,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="replay the velocity commands through the base's PI controller, or the wheel efforts")
     p.add_argument("--sim-config", help="the rover to start from (default: the nominal realistic rover)")
     p.add_argument("--segment", type=float, default=d.segment_seconds, help="segment length [s] (%(default)s)")
+    p.add_argument("--duration", type=float, metavar="S",
+                   help="fit only the drive's first S seconds (default: all of it)")
     p.add_argument("--starts", type=int, default=d.starts, help="starting points (%(default)s)")
     p.add_argument("--iterations", type=int, default=d.iterations,
-                   help="Adam steps on minibatches, every start at once (%(default)s)")
-    p.add_argument("--polish", type=int, default=d.polish,
-                   help="then L-BFGS iterations on every training segment (%(default)s) ...")
-    p.add_argument("--polish-starts", type=int, default=d.polish_starts,
-                   help="... from each of this many best starts (%(default)s)")
+                   help="Levenberg-Marquardt iterations at most, every start at once (%(default)s)")
+    p.add_argument("--tolerance", type=float, default=d.tolerance,
+                   help="settled: a Gauss-Newton step moves no parameter more than this share of its range "
+                        "(%(default)s)")
+    p.add_argument("--robust", type=float, default=d.robust,
+                   help="each segment's loss counts as robust*log(1 + loss/robust) (%(default)s; 0: as it is)")
     p.add_argument("--pose-smoothing", type=float, default=d.pose_smoothing,
                    help="centred moving average over the reference poses [s] (%(default)s; 0: none)")
-    p.add_argument("--batch", type=int, default=d.batch, help="training segments per start and step (%(default)s)")
     p.add_argument("--seed", type=int, default=d.seed)
     p.add_argument("--wheel-kp", type=float, default=d.kp, help="the base's wheel-speed PI gains (the node's)")
     p.add_argument("--wheel-ki", type=float, default=d.ki)
@@ -155,10 +157,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         rover, contact = load_sim_config(args.sim_config) if args.sim_config else (None, None)
         cfg = CalibrationConfig(params=tuple(p.strip() for p in args.params.split(",") if p.strip()),
-                                command=args.command, segment_seconds=args.segment, starts=args.starts,
-                                iterations=args.iterations, polish=args.polish, polish_starts=args.polish_starts,
-                                pose_smoothing=args.pose_smoothing,
-                                batch=args.batch, seed=args.seed, kp=args.wheel_kp,
+                                command=args.command, segment_seconds=args.segment, duration=args.duration,
+                                starts=args.starts,
+                                iterations=args.iterations, tolerance=args.tolerance, robust=args.robust or None,
+                                pose_smoothing=args.pose_smoothing, seed=args.seed, kp=args.wheel_kp,
                                 ki=args.wheel_ki, effective_track_factor=args.effective_track_factor,
                                 driver_wheel_radius=args.driver_wheel_radius,
                                 driver_track_width=args.driver_track_width)

@@ -1,6 +1,6 @@
 """Calibration from a recorded bag with a hidden truth: how close, how much better, how long.
 
-    python benchmarks/calibration.py [--minutes 5] [--seed 1] [--figure docs/calibration_paths.png]
+    python benchmarks/calibration.py [--minutes 3] [--seed 1] [--figure docs/calibration_paths.png] [--old REV]
 
 1. Records a bag as a user would on a real rover, with the simulator standing in for it:
    ``python -m atrv_warp.calibrate --record-example`` (the ROS 2 node driven over ROS 2 by a scripted
@@ -10,6 +10,8 @@
 2. Fits it, ``python -m atrv_warp.calibrate BAG``, in a fresh process with an empty Warp kernel cache, so
    the kernel compilation is measured apart from the fit: from the velocity commands (the default) and from
    the wheel efforts (``--command effort``, warm cache).
+3. With ``--old REV``: fits the same bag from the velocity commands with git revision ``REV``'s code (exported
+   into a temporary folder, its own kernel cache), right after, for the old fit's time and values beside the new.
 
 Prints the truth against the fitted values, the position error before and after on the held-out
 segments, the fit's wall time (compilation apart), and writes ``benchmarks/results/calibration.json`` (and
@@ -33,7 +35,7 @@ from pathlib import Path
 
 from _common import write_results
 
-VERSION = 1
+VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -41,19 +43,21 @@ RESULTS = ROOT / "benchmarks" / "results"
 TRUTH_FILE = ROOT / "examples" / "calibration_truth.toml"
 
 
-def _run(args: list[str], env: dict) -> tuple[float, subprocess.CompletedProcess]:
+def _run(args: list[str], env: dict, root: Path = ROOT) -> tuple[float, subprocess.CompletedProcess]:
+    """``python -m atrv_warp.calibrate ARGS`` with the code of the tree at ``root``."""
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "atrv_warp.calibrate", *args], check=False, cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=1800)
+    proc = subprocess.run([sys.executable, "-m", "atrv_warp.calibrate", *args], check=False, cwd=root,
+                          env=dict(env, PYTHONPATH=str(root)), capture_output=True, text=True, timeout=3600)
     return time.perf_counter() - t0, proc
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--minutes", type=float, default=5.0, help="sim minutes of recorded drive (%(default)s)")
+    parser.add_argument("--minutes", type=float, default=3.0, help="sim minutes of recorded drive (%(default)s)")
     parser.add_argument("--seed", type=int, default=1, help="the scripted driver's seed (%(default)s)")
     parser.add_argument("--noise", type=float, default=0.01, help="reference position noise [m] (%(default)s)")
     parser.add_argument("--figure", default=None, help="copy the default fit's held-out paths PNG here")
+    parser.add_argument("--old", metavar="REV", help="also fit the bag with this git revision's code")
     args = parser.parse_args()
 
     truth_toml = tomllib.loads(TRUTH_FILE.read_text())
@@ -100,8 +104,30 @@ def main() -> int:
             shutil.copy(out.with_suffix(".png"), ROOT / args.figure)
             print(f"figure: {args.figure}")
 
+    old = None
+    if args.old:
+        old_root = work / "old"
+        old_root.mkdir()
+        archive = subprocess.run(["git", "archive", args.old], cwd=ROOT, capture_output=True, check=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(old_root)], input=archive, check=True)
+        out = work / "calibrated_old.toml"
+        env["WARP_CACHE_PATH"] = str(work / "warp-cache-old")
+        wall, proc = _run([str(bag), "--out", str(out)], env, root=old_root)
+        report = json.loads(out.with_suffix(".report.json").read_text())
+        old = {"revision": subprocess.run(["git", "rev-parse", args.old], cwd=ROOT, capture_output=True, text=True,
+                                          check=True).stdout.strip(),
+               "converged": report["converged"], "fitted": report["values"],
+               "relative_error": {p: abs(v - truth[_key(p)]) / truth[_key(p)] for p, v in report["values"].items()},
+               "error_summary": report["error_summary"], "fit_s": report["fit_seconds"],
+               "compile_s": report["compile_seconds"], "process_wall_s": wall}
+        held = report["error_summary"]["held_out"]
+        print(f"\n== cmd_vel replay, {args.old}'s fit: " + "  ".join(
+            f"{p} {v:.4g} ({100 * old['relative_error'][p]:.1f} %)" for p, v in report["values"].items())
+            + f"; held-out {100 * held['before_m']:.1f} -> {100 * held['after_m']:.1f} cm; fit {old['fit_s']:.0f} s, "
+            f"{old['fit_s'] / runs['cmd_vel']['fit_s']:.0f}x this tree's", flush=True)
+
     result = {"benchmark": "calibration", "minutes": args.minutes, "seed": args.seed, "pose_noise_m": args.noise,
-              "truth": truth, "truth_file": str(TRUTH_FILE.relative_to(ROOT)), "runs": runs,
+              "truth": truth, "truth_file": str(TRUTH_FILE.relative_to(ROOT)), "runs": runs, "old": old,
               "cores": os.cpu_count(), "time": time.strftime("%Y-%m-%d %H:%M:%S")}
     path = write_results(RESULTS / "calibration.json", result, version=VERSION, driver=True)
     print(f"\nwrote {path}")

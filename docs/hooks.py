@@ -404,18 +404,24 @@ def coulomb_cost() -> str:
 
 
 def calibration() -> str:
-    """``calibration.json``: a hidden rover's parameters against the fitted ones, per command source."""
+    """``calibration.json``: a hidden rover's parameters against the fitted ones, per command source (and the old
+    fit's, where the file has one)."""
     d = _load("calibration.json")
-    runs = d["runs"]
+    runs = dict(d["runs"])
     header = ["", "truth"] + [f"fitted ({name} replay)" for name in runs]
+    if d.get("old"):
+        runs["old"] = d["old"]
+        header.append(f"fitted (cmd_vel, the fit of {d['old']['revision'][:7]})")
     rows = []
     for p in runs["cmd_vel"]["fitted"]:
         truth = d["truth"]["wheel_speed_limit" if p == "speed_limit" else p]
         cells = []
         for run in runs.values():
-            if p in run["fitted"]:
+            if p in run["fitted"] and "standard_error" in run:
                 se, spread = (("—" if math.isnan(v) else f"{v:.2g}") for v in (run["standard_error"][p], run["spread"][p]))
                 cells.append(f"{run['fitted'][p]:.4g} ± {se}, spread {spread} ({100 * run['relative_error'][p]:.1f} % off)")
+            elif p in run["fitted"]:
+                cells.append(f"{run['fitted'][p]:.4g} ({100 * run['relative_error'][p]:.1f} % off)")
             else:
                 cells.append("not fitted (applied as recorded)")
         rows.append([p, f"{truth:g}", *cells])
@@ -425,11 +431,29 @@ def calibration() -> str:
             e = run["error_summary"][split]
             cells.append(f"{100 * e['before_m']:.1f} → {100 * e['after_m']:.1f} cm ({e['reduction']:.1f}×)")
         rows.append([f"position error, {split.replace('_', '-')} (median)", "", *cells])
-    rows.append(["converged", "", *[("yes" if r["converged"] else "no: " + r["reason"].split(": ", 1)[-1])
+    rows.append(["converged", "", *[("yes" if r["converged"] else "no: " + r.get("reason", "").split(": ", 1)[-1])
                                      for r in runs.values()]])
     rows.append(["fit wall time (2 cores)", "", *[f"{r['fit_s']:.0f} s (+ {r['compile_s']:.0f} s compiling)"
                                                 for r in runs.values()]])
     return _table(header, ["---", "---:"] + ["---"] * len(runs), rows)
+
+
+def calibration_data() -> str:
+    """``calibration_data.json``: each recorded rover's fit against the seconds of driving it was given."""
+    d = _load("calibration_data.json")
+    rows = []
+    for name, r in d["rovers"].items():
+        t = r["truth"]
+        for f in r["fits"]:
+            e = f["relative_error"]
+            rows.append([name.replace("_", " ") if f is r["fits"][0] else "", f"{f['seconds']:.0f} s",
+                         f"{100 * e['friction']:+.1f} %", f"{100 * e['torque_scale']:+.1f} %",
+                         f"{e['payload_mass'] * t['payload_mass']:+.1f} kg",
+                         f"{1000 * e['wheel_radius'] * t['wheel_radius']:+.1f} mm",
+                         f"{100 * r['held_out_before_m']:.1f} → {100 * f['held_out_after_m']:.1f} cm",
+                         "yes" if f["converged"] else "no", f"{f['fit_s']:.0f} s"])
+    return _table(["rover", "driving fitted", "µ", "torque scale", "payload", "wheel radius",
+                   "held-out error (median)", "converged", "fit"], ["---"] + ["---:"] * 6 + ["---", "---:"], rows)
 
 
 def _diff_gradients(kind: str, name: str = "diff_gradients.json") -> str:
@@ -655,6 +679,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "substep_study": substep_study,
     "sac_update_cost": sac_update_cost,
     "calibration": calibration,
+    "calibration_data": calibration_data,
     "coulomb_cost": coulomb_cost,
     "physics_report": physics_report,
     "skid_turning": skid_turning,

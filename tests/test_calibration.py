@@ -219,6 +219,27 @@ def test_rollout_driver_matches_the_simulator():
             assert float(a.grad[t, 0, c]) == pytest.approx(fd, rel=0.05, abs=1e-4), (t, c)
 
 
+def test_rollout_with_a_mass_matrix_per_step_drives_as_the_default_simulator():
+    """``mass_matrix_interval=None`` (the calibration's replay) refreshes the mass matrix once per step, as a default
+    RoverSim does: the same path, and gradients that agree with central differences."""
+    from atrv_warp import RoverSim
+    from atrv_warp.sim.diff import DiffRollout
+
+    steps = 20
+    sim = RoverSim(1)
+    for _ in range(steps):
+        sim.set_twist([0.8, 0.6])
+        sim.step()
+    roll = DiffRollout(1, steps=steps, twist=True, mass_matrix_interval=None)
+    twist = torch.tensor([0.8, 0.6]).expand(steps, 1, 2)
+    assert roll(twist)[-1, 0, :3].tolist() == pytest.approx(sim.root_pose[0, :3].tolist(), abs=2e-4)
+    mu = torch.tensor([0.3], requires_grad=True)
+    roll(twist, friction=mu)[-1, 0, 0].backward()
+    with torch.no_grad():
+        fd = float(roll(twist, friction=0.31)[-1, 0, 0] - roll(twist, friction=0.29)[-1, 0, 0]) / 0.02
+    assert float(mu.grad) == pytest.approx(fd, rel=0.05, abs=1e-4)
+
+
 def test_rollout_gradients_of_motor_and_wheel_parameters():
     """d(final x)/d(torque scale) and /d(wheel radius), per world, against central differences."""
     from atrv_warp.sim.diff import DiffRollout
@@ -337,6 +358,27 @@ def test_segments_replay_the_configured_driver_and_the_outputs_record_it(tmp_pat
     assert (around.wheel_radius.low, around.wheel_radius.high) == pytest.approx((0.1208, 0.1212))
 
 
+def test_a_tiny_fit_runs_on_the_first_seconds_of_a_drive(tmp_path):
+    """A smoke run of the fit on a short kinematic drive: ``duration`` keeps the drive's first seconds, both starts
+    run, the report has every segment's errors, and the residuals' squares are the loss the fit reports."""
+    from atrv_warp.integrations.calibration import calibrate
+    from atrv_warp.integrations.calibration.fit import replay_errors
+
+    log = read_drive_log(_bag(tmp_path / "drive.mcap", seconds=30.0), WHEELS)
+    cfg = CalibrationConfig(params=("wheel_radius",), duration=16.0, iterations=2)
+    seg = make_segments(log, cfg, cfg.driver())
+    assert len(seg) == 8 and len(make_segments(log, CalibrationConfig(), cfg.driver())) == 15  # 2 s each
+    result = calibrate(log, cfg)
+    assert len(result.starts) == 2 and all(s["evaluations"] >= 1 for s in result.starts)
+    assert 0.10 <= result.values["wheel_radius"] <= 0.16
+    assert len(result.errors["train"]["after"]) + len(result.errors["held_out"]["after"]) == len(seg)
+    # the errors the report gives are replay_errors' with the fitted values
+    again = replay_errors(log, result.values, cfg)
+    assert again["held_out"].tolist() == pytest.approx(result.errors["held_out"]["after"], abs=1e-6)
+    with pytest.raises(CalibrationError, match="duration"):
+        CalibrationConfig(duration=0.0)
+
+
 def test_record_example_drives_a_worn_truth_with_the_nominal_driver(tmp_path, monkeypatch):
     """``--record-example --truth`` records a base whose driver is configured as the nominal rover (a real base whose
     tyre wore), unless ``--driver-wheel-radius`` says otherwise: the node's parameters it passes, built as the node
@@ -372,7 +414,7 @@ def ros_env():
                 PYTHONUNBUFFERED="1")
 
 
-@pytest.mark.slow  # a live ROS 2 node records the bag; the fit takes about a minute
+@pytest.mark.slow  # a live ROS 2 node records the bag (about a minute); the fit takes about 20 s
 def test_fit_recovers_a_hidden_rover_from_a_recorded_bag(tmp_path, run_module, ros_env):
     bag, out = tmp_path / "drive.mcap", tmp_path / "calibrated.toml"
     run_module("atrv_warp.calibrate", "--record-example", str(bag), "--minutes", "4", "--truth",

@@ -1,7 +1,7 @@
 """Calibration of the simulator from a drive recorded on a rover (``python -m atrv_warp.calibrate``).
 
 - :mod:`.log`: the drive read from a ROS 2 bag (MCAP): commands, wheel encoders, reference pose;
-- :mod:`.fit`: the fit of the physical parameters through the simulator's gradients, and its report;
+- :mod:`.fit`: the fit of the physical parameters to replays of the drive in the simulator, and its report;
 - :mod:`.output`: the simulator-config TOML, the JSON report and the plot of the paths.
 """
 

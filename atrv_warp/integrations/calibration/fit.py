@@ -1,4 +1,4 @@
-"""Fit the simulator's physical parameters to a recorded drive, through the simulator's own gradients.
+"""Fit the simulator's physical parameters to a recorded drive: Levenberg-Marquardt on the replays' residuals.
 
 The log is cut into segments of a few seconds. Every segment starts from its recorded state (pose, body
 velocity, wheel speeds, and the wheel-speed controller's integral) and is replayed in its own world with
@@ -6,9 +6,11 @@ its recorded commands: the velocity commands through the base's own motor driver
 (:mod:`atrv_warp.sim.driver`, the simulator's kernel, with the radius and track the robot's driver is configured
 with: :attr:`CalibrationConfig.driver_wheel_radius`, by default the nominal rover's), or the recorded wheel efforts.
 The physical wheel radius is fitted apart from the configured one: a worn tyre is a smaller physical radius under
-the same driver. The loss is the error of the
-simulated against the recorded path and wheel speeds. Several starting points run at once, each in its own
-worlds; every ``held_out_every``-th segment is kept out of the fit and only measured.
+the same driver. The residuals are the simulated against the recorded path, wheel speeds and efforts. The
+parameters are few, so the fit is Gauss-Newton's: each iteration replays every training segment at the current
+point and one step along each parameter, all in one batch of worlds (forward differences, no tape), and solves
+for a damped step. Two starting points run at once, each in its own worlds, and must end at the same point;
+every ``held_out_every``-th segment is kept out of the fit and only measured.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from atrv_warp.sim.config import ContactConfig, RoverConfig, get_variant
 from atrv_warp.sim.driver import DriverConfig
 
 __all__ = ["COMMAND_SOURCES", "DEFAULT_FIT", "FIT_PARAMETERS", "MOTOR_PARAMETERS", "CalibrationConfig",
-           "CalibrationError", "CalibrationResult", "Segments", "calibrate", "make_segments"]
+           "CalibrationError", "CalibrationResult", "Segments", "calibrate", "make_segments", "replay_errors"]
 
 
 @dataclass(frozen=True)
@@ -81,6 +83,8 @@ class CalibrationConfig:
     """Command source (:data:`COMMAND_SOURCES`)."""
     segment_seconds: float = 2.0
     """Length of each replayed segment [s]."""
+    duration: float | None = None
+    """Seconds of the drive to use, from its start [s] (``None``: all of it)."""
     pose_smoothing: float = 0.25
     """Window of the centred moving average over the reference poses [s] (0: none). It takes the reference's
     noise out of each segment's start and of the error (a 1 cm noise is about the error left after a fit),
@@ -90,21 +94,25 @@ class CalibrationConfig:
     driver's integral at a segment's start is reconstructed from 20 Hz wheel speeds, and its error decays there."""
     held_out_every: int = 5
     """Every k-th segment is held out of the fit, and only measured."""
-    starts: int = 4
-    """Starting points, fitted at once: the rover's values, then random points within the bounds."""
-    batch: int = 16
-    """Training segments per start in each gradient step."""
-    iterations: int = 30
-    """Adam steps on minibatches, every start at once."""
-    lr: float = 0.2
-    """Adam's step in the bounded parameters' logit space, decaying to a tenth."""
-    polish: int = 20
-    """Then L-BFGS iterations on every training segment (0: none) ... Under a driver that holds its wheel speeds
-    tightly the loss is flat along friction x mass, and the polish walks that valley: 6 iterations stopped 8 kg short
-    of a 12 kg payload, 20 reached it within 2 kg (``atrv-calibrate`` on the bag of
-    ``tests/test_calibration.py``'s recovery test)."""
-    polish_starts: int = 2
-    """... from each of this many best starts; the one that ends lowest is the fit."""
+    starts: int = 2
+    """Starting points, fitted at once: the rover's values, then random points within the bounds. Under a driver that
+    holds its wheel speeds tightly the loss is flat along friction x mass; two starts that end at the same point have
+    found the valley's floor, and the fit converges only where they do."""
+    iterations: int = 15
+    """Levenberg-Marquardt iterations at most, on every training segment."""
+    tolerance: float = 0.005
+    """A start has settled once its undamped Gauss-Newton step moves no parameter more than this share of its
+    range."""
+    difference_step: float = 0.005
+    """The forward differences' step, as a share of each parameter's range."""
+    damping: float = 0.01
+    """Levenberg-Marquardt's first damping (a share of the normal equations' diagonal)."""
+    robust: float | None = 1.0
+    """Each segment's loss counts through Cauchy's ``robust * log(1 + loss / robust)`` (``None``: as it is). A segment
+    the replay cannot follow (a wheel that spins up in a turn and runs away, a chaotic stretch in any model) can
+    cost hundreds where a followed one costs well under 1, and a few such would pull every parameter to them."""
+    worlds: int = 512
+    """Worlds per rollout at most: an iteration's segments run in chunks of about equal size up to this."""
     seed: int = 0
     min_segments: int = 5
     """A log with fewer moving segments is too short to fit."""
@@ -143,18 +151,21 @@ class CalibrationConfig:
             raise CalibrationError(f"command must be one of {COMMAND_SOURCES}, got {self.command!r}")
         if not 0.0 <= self.pose_smoothing <= 0.5 * self.segment_seconds:
             raise CalibrationError(f"pose_smoothing must be within [0, segment_seconds / 2], got {self.pose_smoothing}")
-        for name in ("segment_seconds", "lr", "kp", "effective_track_factor", "cmd_vel_timeout", "torque_limit"):
+        for name in ("segment_seconds", "kp", "effective_track_factor", "cmd_vel_timeout", "torque_limit"):
             if not getattr(self, name) > 0:
                 raise CalibrationError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.robust is not None and not self.robust > 0:
+            raise CalibrationError(f"robust must be > 0 or None, got {self.robust}")
+        if self.duration is not None and not self.duration > 0:
+            raise CalibrationError(f"duration must be > 0 [s] or None, got {self.duration}")
         for name in ("driver_wheel_radius", "driver_track_width"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise CalibrationError(f"{name} must be a finite number > 0 [m], got {value!r}")
-        if self.polish < 0:
-            raise CalibrationError(f"polish must be >= 0, got {self.polish}")
-        if not 1 <= self.polish_starts <= self.starts:
-            raise CalibrationError(f"polish_starts must be within [1, starts], got {self.polish_starts}")
-        for name in ("held_out_every", "starts", "batch", "iterations", "min_segments"):
+        for name in ("tolerance", "difference_step", "damping"):
+            if not 0 < getattr(self, name) < 1:
+                raise CalibrationError(f"{name} must be within (0, 1), got {getattr(self, name)}")
+        for name in ("held_out_every", "starts", "iterations", "min_segments", "worlds"):
             if getattr(self, name) < 1:
                 raise CalibrationError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.held_out_every < 2:
@@ -191,13 +202,14 @@ class CalibrationResult:
     nominal: dict[str, float]
     """The rover's value before the fit."""
     spread: dict[str, float]
-    """Standard deviation over the converged starts (each with its own start and draws of segments); nan with one."""
+    """Standard deviation over the starts' end points; nan with one start."""
     standard_error: dict[str, float]
-    """Each value's standard error: the sandwich estimate from every training segment's loss gradient and a
-    finite-difference Hessian of the total at the fitted values (segments taken as independent); nan where
-    the Hessian is not positive definite."""
+    """Each value's standard error: the sandwich estimate from every training segment's loss gradient and the
+    Gauss-Newton Hessian of the total, both from the fit's last Jacobian (segments taken as independent); nan where
+    the Hessian is singular."""
     starts: list[dict]
-    """Each start's values and loss, both the means over its last quarter of minibatch steps."""
+    """Each start's end: its values, mean training loss, replays (``evaluations``), the share of a range its last
+    undamped step would move (``settled``) and its loss after each iteration (``losses``)."""
     errors: dict[str, dict[str, list[float]]]
     """Mean position error [m] per segment: ``{"train"|"held_out": {"before": [...], "after": [...]}}``."""
     converged: bool
@@ -275,6 +287,8 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, d
                                "or leave them out of --params)")
     start = max(log.pose_time[0], log.joint_time[0])
     end = min(log.pose_time[-1], log.joint_time[-1])
+    if cfg.duration is not None:
+        end = min(end, start + cfg.duration)
     grid = start + dt * np.arange(math.floor((end - start) / dt + 1e-6) + 1)
     wheel = np.stack([np.interp(grid, log.joint_time, log.wheel_speed[:, s]) for s in (0, 1)], -1)
     pose = _smooth(np.stack([np.interp(grid, log.pose_time, log.pose[:, i]) for i in range(3)], -1),
@@ -317,21 +331,25 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, d
 
 
 class _Replay:
-    """Segments replayed in chunks of a :class:`~atrv_warp.sim.diff.DiffRollout`'s worlds."""
+    """Segments replayed forward in chunks of a :class:`~atrv_warp.sim.diff.DiffRollout`'s worlds, each world with
+    its own parameter values; no tape: the fit's derivatives are finite differences, each in worlds of its own."""
 
     def __init__(self, segments: Segments, worlds: int, rover: RoverConfig, contact: ContactConfig,
                  cfg: CalibrationConfig, driver: DriverConfig):
         from atrv_warp.sim.diff import DiffRollout
 
+        # the mass matrix refreshed once per step, as the simulator steps by default (its dense products are most of
+        # a CPU rollout's time)
         self.roll = DiffRollout(worlds, steps=segments.inputs.shape[1], rover=rover, contact=contact,
-                                twist=segments.command == "cmd_vel", driver=driver, action_scale=1.0)
+                                twist=segments.command == "cmd_vel", driver=driver, action_scale=1.0,
+                                mass_matrix_interval=None)
         self.segments, self.worlds = segments, worlds
         self.warmup = round(cfg.warmup / 0.05) if segments.command == "cmd_vel" else 0
-        self.nominal = {"chassis_mass": self.roll.nominal_chassis_mass}
+        self.nominal_chassis_mass = self.roll.nominal_chassis_mass
 
-    def run(self, index: np.ndarray, values: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Replay segments ``index`` (at most ``worlds``) with per-segment parameter ``values``; returns the
-        per-segment loss, the mean position error [m] and the simulated (L + 1, S, 3) path."""
+    @torch.no_grad()
+    def _chunk(self, index: np.ndarray, values: dict[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor,
+                                                                               torch.Tensor]:
         seg, n, w = self.segments, len(index), self.worlds
         pad = np.concatenate([index, np.full(w - n, index[0])])
         poses = torch.zeros(w, 3)
@@ -341,10 +359,9 @@ class _Replay:
                                        torch.as_tensor(seg.wheel[pad], dtype=torch.float32))
         kwargs = {} if seg.command == "cmd_vel" else {"torque_scale": 1.0, "speed_limit": _NO_TAPER}
         for name, v in values.items():
-            v = v.reshape(-1).expand(n) if v.numel() == 1 else v
-            v = torch.cat([v, v[:1].detach().expand(w - n)])
+            v = torch.as_tensor(np.concatenate([v, np.full(w - n, v[0])]), dtype=torch.float32)
             if name == "payload_mass":
-                kwargs["chassis_mass"] = self.nominal["chassis_mass"] + v
+                kwargs["chassis_mass"] = self.nominal_chassis_mass + v
             else:
                 kwargs[name] = v
         actions = torch.as_tensor(seg.inputs[pad], dtype=torch.float32).transpose(0, 1).contiguous()
@@ -355,30 +372,31 @@ class _Replay:
         ref_wheel = torch.as_tensor(seg.ref_wheel[pad], dtype=torch.float32).transpose(0, 1)
         xy = sim_poses[..., :2] - sim_poses[:1, :, :2]
         yaw = quat_to_yaw(sim_poses[..., 3:7])
+        dxy = xy - ref[..., :2]
         dyaw = wrap_angle(yaw - ref[..., 2])
-        dpos = (xy - ref[..., :2]).square().sum(-1)
-        # the motor terms skip the first steps, while the driver's reconstructed integral settles (its error decays
-        # within a few of its 0.01 s loops); the path keeps them, it integrates what they do
+        # residuals whose squares sum to the segment's loss: each term's mean over its steps. The motor terms skip
+        # the first steps, while the driver's reconstructed integral settles (its error decays within a few of its
+        # 0.01 s loops); the path keeps them, it integrates what they do
         settled = slice(self.warmup, None)
-        loss = (dpos / _POSITION_SCALE**2 + (_HEADING_ARM * dyaw / _POSITION_SCALE).square()).mean(0)
-        loss = loss + ((speeds - ref_wheel)[settled].square().sum(-1) / _WHEEL_SCALE**2).mean(0)
+        parts = [dxy / (_POSITION_SCALE * math.sqrt(len(dxy))),
+                 (_HEADING_ARM * dyaw / (_POSITION_SCALE * math.sqrt(len(dyaw))))[..., None]]
+        wheel = (speeds - ref_wheel)[settled]
+        parts.append(wheel / (_WHEEL_SCALE * math.sqrt(len(wheel))))
         if seg.ref_effort is not None:
             ref_effort = torch.as_tensor(seg.ref_effort[pad], dtype=torch.float32).transpose(0, 1)
-            loss = loss + ((torques - ref_effort)[settled].square().sum(-1) / _EFFORT_SCALE**2).mean(0)
+            effort = (torques - ref_effort)[settled]
+            parts.append(effort / (_EFFORT_SCALE * math.sqrt(len(effort))))
+        residuals = torch.cat([p.transpose(0, 1).reshape(w, -1) for p in parts], -1)  # (W, R)
         path = torch.cat([xy, yaw[..., None]], -1)
-        return loss[:n], dpos.sqrt().mean(0)[:n].detach(), path[:, :n].detach()
+        return residuals[:n], dxy.norm(dim=-1).mean(0)[:n], path[:, :n]
 
-    @torch.no_grad()
-    def evaluate(self, index: np.ndarray, values: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Loss, mean position error and path of every segment in ``index`` with one set of ``values``."""
-        losses, errors, paths = [], [], []
-        for i in range(0, len(index), self.worlds):
-            chunk = index[i:i + self.worlds]
-            loss, err, path = self.run(chunk, {k: torch.tensor(float(v)) for k, v in values.items()})
-            losses.append(loss.numpy())
-            errors.append(err.numpy())
-            paths.append(path.numpy())
-        return np.concatenate(losses), np.concatenate(errors), np.concatenate(paths, 1)
+    def residuals(self, index: np.ndarray, values: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Replay segments ``index`` (any number, in chunks of :attr:`worlds`), world i with ``values[p][i]``;
+        returns each segment's residuals (S, R) (their squares sum to its loss), its mean position error [m] (S,)
+        and the simulated path (L + 1, S, 3)."""
+        out = [self._chunk(index[i:i + self.worlds], {p: v[i:i + self.worlds] for p, v in values.items()})
+               for i in range(0, len(index), self.worlds)]
+        return tuple(np.concatenate([o[j].double().numpy() for o in out], 1 if j == 2 else 0) for j in range(3))
 
 
 def _driver_record(driver: DriverConfig) -> dict[str, float]:
@@ -391,73 +409,120 @@ def _nominal(rover: RoverConfig, contact: ContactConfig) -> dict[str, float]:
             "speed_limit": rover.wheel_speed_limit, "wheel_radius": rover.wheel_radius}
 
 
-def _polish(replay: _Replay, train: np.ndarray, names: list[str], start: torch.Tensor, lo: torch.Tensor,
-            span: torch.Tensor, iterations: int, say: Callable[[str], None]) -> tuple[torch.Tensor, float, float]:
-    """L-BFGS on the mean loss of every training segment (deterministic, unlike the minibatch steps), in the
-    same logit space, from ``start``; returns the values where the loss was lowest, that loss, and how far its last
-    three evaluations lay apart (the largest parameter's spread, as a fraction of its range: small once it has
-    settled)."""
-    if iterations == 0:
-        return start, math.inf, math.inf
-    t0 = time.perf_counter()
-    unit = ((start - lo) / span).clamp(1e-4, 1 - 1e-4)
-    logits = torch.logit(unit).detach().requires_grad_(True)
-    opt = torch.optim.LBFGS([logits], lr=1.0, max_iter=iterations, history_size=10, line_search_fn="strong_wolfe")
-    chunks = [train[i:i + replay.worlds] for i in range(0, len(train), replay.worlds)]
-    calls = []
+@dataclass
+class _Start:
+    """One start's Levenberg–Marquardt state, in the unit box of the parameters' bounds."""
 
-    def closure():
-        opt.zero_grad()
-        total = 0.0
-        for chunk in chunks:
-            values = lo + span * torch.sigmoid(logits)
-            loss, _, _ = replay.run(chunk, {p: values[j] for j, p in enumerate(names)})
-            part = loss.sum() / len(train)
-            part.backward()
-            total += part.item()
-        calls.append((total, (lo + span * torch.sigmoid(logits)).detach().clone()))
-        return torch.tensor(total)
+    unit: np.ndarray  # (P,) the current point, 0..1 of each parameter's range
+    residuals: np.ndarray  # (S, R) at it
+    jacobian: np.ndarray  # (S, R, P) d residuals / d unit, by forward differences
+    damping: float
+    robust: float | None
+    """:attr:`CalibrationConfig.robust`."""
+    evaluations: int = 1
+    settled: float = math.inf
+    """The undamped Gauss–Newton step from the current point: its largest move as a fraction of a range."""
+    history: list = field(default_factory=list)
 
-    opt.step(closure)
-    loss, values = min(calls, key=lambda c: c[0])
-    last = torch.stack([v for _, v in calls[-3:]])
-    settled = float(((last.max(0).values - last.min(0).values) / span).max())
-    say(f"  polish: {len(calls)} full-batch evaluations, loss {calls[0][0]:.3f} -> {loss:.3f}  "
-        + "  ".join(f"{p} {float(values[j]):.4g}" for j, p in enumerate(names)) + f"  ({time.perf_counter() - t0:.0f} s)")
-    return values, loss, settled
+    @property
+    def loss(self) -> float:
+        """The mean of the segments' losses."""
+        return float((self.residuals**2).sum() / len(self.residuals))
+
+    @property
+    def objective(self) -> float:
+        """What the fit lowers: the mean of the segments' losses, each through :func:`_cauchy`."""
+        return float(_cauchy((self.residuals**2).sum(-1), self.robust).mean())
+
+    def weights(self) -> np.ndarray:
+        """(S,) each segment's weight in the Gauss-Newton step (the derivative of :func:`_cauchy` at its loss)."""
+        loss = (self.residuals**2).sum(-1)
+        return np.ones_like(loss) if self.robust is None else 1.0 / (1.0 + loss / self.robust)
+
+    def step(self, damping: float) -> np.ndarray:
+        """The Levenberg-Marquardt step from :attr:`unit` with Marquardt's scaling (a ``damping`` share of the normal
+        equations' diagonal; 0: Gauss-Newton's), each segment weighted by :meth:`weights`, in the box: a parameter on
+        a bound that the step would push out stays there, and the others are solved for without it."""
+        w = self.weights()
+        a = np.einsum("s,srp,srq->pq", w, self.jacobian, self.jacobian)
+        g = np.einsum("s,srp,sr->p", w, self.jacobian, self.residuals)
+        a = a + damping * np.diag(np.diag(a).clip(min=1e-12))
+        free = np.ones(len(g), dtype=bool)
+        for _ in range(len(g)):
+            delta = np.zeros(len(g))
+            delta[free] = -np.linalg.lstsq(a[np.ix_(free, free)], g[free], rcond=None)[0]
+            out = free & (((self.unit <= 0.0) & (delta < 0)) | ((self.unit >= 1.0) & (delta > 0)))
+            if not out.any():
+                break
+            free &= ~out
+        return (self.unit + delta).clip(0.0, 1.0)
 
 
-def _standard_error(replay: _Replay, train: np.ndarray, names: list[str], values: torch.Tensor, low: torch.Tensor,
-                    high: torch.Tensor) -> dict[str, float]:
-    """Sandwich standard errors at ``values``: ``H^-1 (sum_i g_i g_i^T) H^-1`` with ``g_i`` the gradient of
-    training segment i's loss (each segment is its own world, so one backward pass gives them all) and ``H``
-    the Hessian of their sum by forward differences of 1 % of each parameter's range."""
+def _cauchy(loss: np.ndarray, scale: float | None) -> np.ndarray:
+    """Segment losses through Cauchy's ``scale * log(1 + loss / scale)``: as they are where small, growing only
+    logarithmically past ``scale`` (``None``: as they are)."""
+    return loss if scale is None else scale * np.log1p(loss / scale)
 
-    def gradients(v: torch.Tensor) -> torch.Tensor:  # (S, P)
-        rows = []
-        for i in range(0, len(train), replay.worlds):
-            chunk = train[i:i + replay.worlds]
-            leaves = {p: v[j].float().expand(len(chunk)).clone().requires_grad_(True) for j, p in enumerate(names)}
-            loss, _, _ = replay.run(chunk, leaves)
-            loss.sum().backward()
-            rows.append(torch.stack([leaves[p].grad for p in names], -1))
-        return torch.cat(rows).double()
 
-    g = gradients(values.double())
-    hessian = torch.zeros(len(names), len(names), dtype=torch.float64)
-    for j in range(len(names)):
-        h = 0.01 * float(high[j] - low[j])
-        if values[j] + h > high[j]:
-            h = -h
-        step = values.double().clone()
-        step[j] += h
-        hessian[:, j] = (gradients(step).sum(0) - g.sum(0)) / h
-    hessian = 0.5 * (hessian + hessian.T)
-    if not bool((torch.linalg.eigvalsh(hessian) > 0).all()):
+def _levenberg_marquardt(replay: _Replay, train: np.ndarray, names: list[str], low: np.ndarray, span: np.ndarray,
+                         units: np.ndarray, cfg: CalibrationConfig, say: Callable[[str], None]) -> list[_Start]:
+    """Fit every start in ``units`` (K, P) at once: each iteration replays, for every start still moving, its
+    trial point and a forward-difference step along each parameter from it, all in one batch of worlds. A trial that
+    lowers the loss is taken, with its Jacobian; one that does not raises the damping and the old Jacobian serves
+    again. A start stops once its undamped Gauss–Newton step moves no parameter more than ``cfg.tolerance`` of
+    its range: a stationary point of the whole loss, valley or not."""
+    count, p, t0 = len(train), len(names), time.perf_counter()
+
+    def replay_points(points: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Residuals and Jacobian at each point: it and its P forward-difference neighbours, every training segment."""
+        stencils, steps = [], []
+        for u in points:
+            h = np.where(u + cfg.difference_step <= 1.0, cfg.difference_step, -cfg.difference_step)  # inward
+            stencils.append(np.concatenate([u[None], u[None] + np.diag(h)]))
+            steps.append(h)
+        grid = low + span * np.concatenate(stencils)  # (K (P + 1), P) parameter values
+        per_world = {name: np.repeat(grid[:, j], count) for j, name in enumerate(names)}
+        res = replay.residuals(np.tile(train, len(grid)), per_world)[0].reshape(len(points), p + 1, count, -1)
+        return [(r[0], ((r[1:] - r[:1]) / h[:, None, None]).transpose(1, 2, 0)) for r, h in zip(res, steps)]
+
+    starts = [_Start(u, r, jac, cfg.damping, cfg.robust) for u, (r, jac) in zip(units, replay_points(list(units)))]
+    for s in starts:
+        s.history.append(s.objective)
+    for it in range(cfg.iterations):
+        moving = [s for s in starts if s.settled > cfg.tolerance]
+        for s in moving:  # the undamped step's size: settled once it is within the tolerance
+            s.settled = float(np.abs(s.step(0.0) - s.unit).max())
+        moving = [s for s in moving if s.settled > cfg.tolerance]
+        if not moving:
+            break
+        trials = [s.step(s.damping) for s in moving]
+        for s, u, (r, jac) in zip(moving, trials, replay_points(trials)):
+            s.evaluations += 1
+            if float(_cauchy((r**2).sum(-1), cfg.robust).mean()) < s.objective:
+                s.unit, s.residuals, s.jacobian, s.damping = u, r, jac, max(s.damping / 3.0, 1e-6)
+            else:
+                s.damping *= 4.0
+            s.history.append(s.objective)
+        say(f"  iteration {it + 1:2d}: " + "; ".join(
+            f"loss {s.objective:.4f} " + " ".join(f"{n} {low[j] + span[j] * s.unit[j]:.4g}" for j, n in enumerate(names))
+            for s in starts) + f"  ({time.perf_counter() - t0:.0f} s)")
+    for s in starts:  # where the loop ran out, each start's last undamped step
+        s.settled = float(np.abs(s.step(0.0) - s.unit).max())
+    return starts
+
+
+def _standard_error(start: _Start, names: list[str], span: np.ndarray) -> dict[str, float]:
+    """Sandwich standard errors at the fit: ``H^-1 (sum_i g_i g_i^T) H^-1`` with ``g_i`` the gradient of training
+    segment i's loss and ``H`` the Gauss–Newton Hessian of their sum, both from the fit's last Jacobian (segments
+    taken as independent); nan where ``H`` is singular."""
+    jac, res, w = start.jacobian, start.residuals, start.weights()  # (S, R, P), (S, R), (S,)
+    g = 2.0 * np.einsum("s,srp,sr->sp", w, jac, res)
+    hessian = 2.0 * np.einsum("s,srp,srq->pq", w, jac, jac)
+    if not bool((np.linalg.eigvalsh(hessian) > 1e-12 * np.abs(hessian).max()).all()):
         return {p: math.nan for p in names}
-    inverse = torch.linalg.inv(hessian)
+    inverse = np.linalg.inv(hessian)
     cov = inverse @ (g.T @ g) @ inverse
-    return {p: float(cov[j, j].clamp_min(0).sqrt()) for j, p in enumerate(names)}
+    return {p: float(span[j] * math.sqrt(max(cov[j, j], 0.0))) for j, p in enumerate(names)}
 
 
 def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
@@ -471,106 +536,86 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
     driver = cfg.driver()
     seg = make_segments(log, cfg, driver)
     train, held = np.flatnonzero(~seg.held_out), np.flatnonzero(seg.held_out)
-    batch = min(cfg.batch, len(train))
     nominal = _nominal(rover, contact)
     names = [p for p in cfg.params if seg.command == "cmd_vel" or p not in MOTOR_PARAMETERS]
-    low = torch.tensor([FIT_PARAMETERS[p].low for p in names], dtype=torch.float64)
-    high = torch.tensor([FIT_PARAMETERS[p].high for p in names], dtype=torch.float64)
+    low = np.array([FIT_PARAMETERS[p].low for p in names])
+    span = np.array([FIT_PARAMETERS[p].high for p in names]) - low
     for p in names:
         if not FIT_PARAMETERS[p].low <= nominal[p] <= FIT_PARAMETERS[p].high:
             raise CalibrationError(f"the rover's {p} {nominal[p]:g} is outside the fit's bounds "
                                    f"[{FIT_PARAMETERS[p].low:g}, {FIT_PARAMETERS[p].high:g}]")
-    gen = torch.Generator().manual_seed(cfg.seed)
-    start = torch.tensor([nominal[p] for p in names], dtype=torch.float64)
-    unit = torch.cat([((start - low) / (high - low)).clamp(0.02, 0.98)[None], 0.1 + 0.8 * torch.rand(cfg.starts - 1, len(names),
-                                                                                    generator=gen, dtype=torch.float64)])
-    logits = torch.logit(unit).float().requires_grad_(True)  # (K, P)
-    lo, span = low.float(), (high - low).float()
+    # the rover's values, then random points within the bounds
+    rng = np.random.default_rng(cfg.seed)
+    start = (np.array([nominal[p] for p in names]) - low) / span
+    units = np.concatenate([start[None], rng.uniform(0.1, 0.9, (cfg.starts - 1, len(names)))])
     through = (f" through a driver configured with wheel radius {driver.wheel_radius:g} m, track "
                f"{driver.track_width:g} m" if seg.command == "cmd_vel" else "")
     say(f"{len(train)} training and {len(held)} held-out segments of {cfg.segment_seconds:g} s "
         f"({seg.command}{through}); fitting {', '.join(names)} from {cfg.starts} starts")
     t_compile = time.perf_counter()
-    replay = _Replay(seg, cfg.starts * batch, rover, contact, cfg, driver)
-    replay.evaluate(train[:1], nominal)  # first use compiles the rollout's kernels (cached afterwards)
+    # one batch: every start's point and its forward differences on every training segment, in chunks of at most
+    # cfg.worlds of about equal size
+    total = cfg.starts * (len(names) + 1) * len(train)
+    replay = _Replay(seg, -(-total // -(-total // cfg.worlds)), rover, contact, cfg, driver)
+    replay.residuals(train[:1], {p: np.array([nominal[p]]) for p in names})  # the first use compiles the kernels
     compile_s = time.perf_counter() - t_compile
     t_fit = time.perf_counter()
-    opt = torch.optim.Adam([logits], lr=cfg.lr)
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.iterations, eta_min=0.1 * cfg.lr)
-    history, losses = [], []
-    for it in range(cfg.iterations):
-        picks = np.concatenate([train[torch.randperm(len(train), generator=gen)[:batch].numpy()]
-                                for _ in range(cfg.starts)])
-        values = lo + span * torch.sigmoid(logits)  # (K, P)
-        per_world = {p: values[:, j].repeat_interleave(batch) for j, p in enumerate(names)}
-        loss, _, _ = replay.run(picks, per_world)
-        total = loss.view(cfg.starts, batch).mean(1)
-        opt.zero_grad()
-        total.sum().backward()
-        opt.step()
-        sched.step()
-        history.append(values.detach().clone())
-        losses.append(total.detach().clone())
-        if it % 10 == 0 or it == cfg.iterations - 1:
-            best = int(total.argmin())
-            say(f"  step {it + 1:3d}/{cfg.iterations}: loss {total.detach().min().item():9.3f}  "
-                + "  ".join(f"{p} {float(values[best, j]):.4g}" for j, p in enumerate(names))
-                + f"  ({time.perf_counter() - t_fit:.0f} s)")
-    # each start's value and loss: the means over its last quarter of steps (they average out the draws of
-    # segments; the loss over that many draws is about the loss over every training segment)
-    quarter = max(2, cfg.iterations // 4)
-    tail = torch.stack(history[-quarter:])  # (T, K, P)
-    final = tail.mean(0)
-    tail_loss = torch.stack(losses[-quarter:]).mean(0)
-    starts = [{"values": {p: float(final[k, j]) for j, p in enumerate(names)}, "train_loss": float(tail_loss[k])}
-              for k in range(cfg.starts)]
-    ranked = sorted(range(cfg.starts), key=lambda k: starts[k]["train_loss"])
-    good = [s for s in starts if s["train_loss"] <= 1.5 * starts[ranked[0]]["train_loss"]]
-    spread = {p: float(np.std([s["values"][p] for s in good], ddof=1)) if len(good) > 1 else math.nan for p in names}
-    # the minibatch steps leave the best starts close in loss but not always in the same valley: polish a few
-    polished = {k: _polish(replay, train, names, final[k], lo, span, cfg.polish, say)
-                for k in ranked[:cfg.polish_starts]}
-    best = min(polished, key=lambda k: polished[k][1]) if cfg.polish else ranked[0]
-    # where the polished starts ended apart from each other (the largest parameter's distance, as a fraction of its
-    # range): 0 with one; two starts that walk to the same point have found the valley's floor, not a ledge of it
-    ends = torch.stack([v for v, _, _ in polished.values()]) if cfg.polish else final[best][None]
-    agree = float(((ends.max(0).values - ends.min(0).values) / span).max())
-    polished, settled = (polished[best][0], polished[best][2]) if cfg.polish else (final[best], math.inf)
-    fitted = {**nominal, **{p: float(polished[j]) for j, p in enumerate(names)}}
-    t_se = time.perf_counter()
-    standard_error = _standard_error(replay, train, names, polished, low, high)
-    say(f"  standard errors from {len(train)} segments' gradients and a finite-difference Hessian "
-        f"({time.perf_counter() - t_se:.0f} s)")
-    errors, paths = {}, {}
-    for split, index in (("train", train), ("held_out", held)):
-        loss0, err0, path0 = replay.evaluate(index, nominal)
-        loss1, err1, path1 = replay.evaluate(index, fitted)
-        errors[split] = {"before": err0.tolist(), "after": err1.tolist(),
-                         "loss_before": float(loss0.mean()), "loss_after": float(loss1.mean())}
-        if split == "held_out":
-            paths = {"recorded": seg.ref_pose[index], "nominal": path0.transpose(1, 0, 2),
-                     "calibrated": path1.transpose(1, 0, 2), "t0": seg.t0[index]}
-    # converged: the fit settled, and fits the training and the held-out segments better than the rover it started
-    # from. Settled: the full-batch polish's last evaluations lie within 1 % of each parameter's range (a stationary
-    # point of the whole loss), and either the polished starts ended within 2 % of each other (where the loss is flat
-    # along a valley, as a payload's is under a driver that holds its wheel speeds tightly, the polish walks it after
-    # the minibatch steps, from each start to the same floor) or the best start had stopped moving over the last
-    # quarter of the minibatch steps (within 2 %). Without a polish, that last alone.
-    tail = tail[:, best]
-    drift = ((tail.max(0).values - tail.min(0).values) / span).max().item()
+    ends = _levenberg_marquardt(replay, train, names, low, span, units, cfg, say)
+    starts = [{"values": {p: float(low[j] + span[j] * s.unit[j]) for j, p in enumerate(names)}, "train_loss": s.loss,
+               "objective": s.objective,
+               "evaluations": s.evaluations, "settled": s.settled, "losses": s.history} for s in ends]
+    best = min(range(len(ends)), key=lambda k: ends[k].objective)
+    fitted = {**nominal, **starts[best]["values"]}
+    units_end = np.stack([s.unit for s in ends])
+    # how far apart the starts ended (the largest parameter's distance, as a fraction of its range): where the loss
+    # is flat along a valley, as a payload's is under a driver that holds its wheel speeds tightly, two starts that
+    # end at the same point have found the valley's floor, not a ledge of it
+    agree = float((units_end.max(0) - units_end.min(0)).max())
+    spread = {p: float(np.std([s["values"][p] for s in starts], ddof=1)) if len(starts) > 1 else math.nan
+              for p in names}
+    standard_error = _standard_error(ends[best], names, span)
+    # every split before and after, in one batch
+    index = np.concatenate([train, held, train, held])
+    n = len(train) + len(held)
+    res, err, path = replay.residuals(index, {p: np.repeat([nominal[p], fitted[p]], n) for p in names})
+    loss = (res**2).sum(-1)
+    errors = {}
+    for split, a, b in (("train", 0, len(train)), ("held_out", len(train), n)):
+        errors[split] = {"before": err[a:b].tolist(), "after": err[n + a:n + b].tolist(),
+                         "loss_before": float(loss[a:b].mean()), "loss_after": float(loss[n + a:n + b].mean())}
+    paths = {"recorded": seg.ref_pose[held], "nominal": path[:, len(train):n].transpose(1, 0, 2),
+             "calibrated": path[:, n + len(train):].transpose(1, 0, 2), "t0": seg.t0[held]}
+    # converged: every start settled (its undamped Gauss-Newton step within cfg.tolerance of each range: a stationary
+    # point of the whole loss), the starts ended within 2 % of each parameter's range of each other, and the fit
+    # beats the rover it started from on the training and the held-out segments
+    settled = max(s.settled for s in ends)
     improved = all(errors[split]["loss_after"] < errors[split]["loss_before"] for split in errors)
-    polish_ok = settled < 0.01 and (cfg.polish_starts > 1 and agree < 0.02 or drift < 0.02)
-    converged = improved and (polish_ok if cfg.polish else drift < 0.02)
+    converged = improved and settled <= cfg.tolerance and agree < 0.02
     reason = ("converged" if converged else
               "did not converge: the fit is no better than the starting rover on the training or the held-out "
               "segments" if not improved else
-              f"did not converge: the last full-batch steps still moved a parameter {100 * settled:.1f} % of its range"
-              if cfg.polish and settled >= 0.01 else
-              f"did not converge: the polished starts ended {100 * agree:.1f} % of a parameter's range apart, and the "
-              f"minibatch steps still moved {100 * drift:.1f} % over their last {len(tail)}" if cfg.polish else
-              f"did not converge: the parameters still moved {100 * drift:.1f} % of their range over the last "
-              f"{len(tail)} steps")
+              f"did not converge: after {cfg.iterations} iterations a Gauss-Newton step still moved a parameter "
+              f"{100 * settled:.1f} % of its range" if settled > cfg.tolerance else
+              f"did not converge: the starts ended {100 * agree:.1f} % of a parameter's range apart")
     return CalibrationResult(values={p: fitted[p] for p in names}, nominal={p: nominal[p] for p in names},
-                             spread=spread, standard_error=standard_error, starts=starts, errors=errors, converged=converged, reason=reason,
-                             segments=seg, seconds=time.perf_counter() - t_fit, compile_seconds=compile_s,
-                             paths=paths, driver=_driver_record(driver) if seg.command == "cmd_vel" else None)
+                             spread=spread, standard_error=standard_error, starts=starts, errors=errors,
+                             converged=converged, reason=reason, segments=seg, seconds=time.perf_counter() - t_fit,
+                             compile_seconds=compile_s, paths=paths,
+                             driver=_driver_record(driver) if seg.command == "cmd_vel" else None)
+
+
+def replay_errors(log: DriveLog, values: dict[str, float], cfg: CalibrationConfig = CalibrationConfig(), *,
+                  rover: RoverConfig | None = None, contact: ContactConfig | None = None) -> dict[str, np.ndarray]:
+    """Each segment's mean position error [m] with the parameters ``values`` (the others ``rover``'s and
+    ``contact``'s), replayed as :func:`calibrate` replays ``log``: ``{"train": (S,), "held_out": (H,)}`` (a fit of a
+    shorter part of the drive, measured on a longer one's held-out segments)."""
+    rover = rover or get_variant("realistic")
+    contact = contact or ContactConfig()
+    driver = cfg.driver()
+    seg = make_segments(log, cfg, driver)
+    point = {**_nominal(rover, contact), **values}
+    names = [p for p in FIT_PARAMETERS if seg.command == "cmd_vel" or p not in MOTOR_PARAMETERS]
+    replay = _Replay(seg, min(len(seg), cfg.worlds), rover, contact, cfg, driver)
+    index = np.arange(len(seg))
+    err = replay.residuals(index, {p: np.full(len(seg), point[p]) for p in names})[1]
+    return {"train": err[~seg.held_out], "held_out": err[seg.held_out]}
