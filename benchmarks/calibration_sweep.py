@@ -18,8 +18,8 @@
 
 Each rover's bag, report and console output stay in ``--work`` (default: a folder per seed under the system's
 temporary folder), so an interrupted sweep resumes where it stopped; ``--only`` runs a subset. Writes
-``benchmarks/results/calibration_sweep.json`` (every rover run so far in ``--work``) and, with ``--figure``,
-fitted against true values per parameter.
+``benchmarks/results/calibration_sweep.json`` (``--out``; every rover run so far in ``--work``) and, with
+``--figure``, fitted against true values per parameter.
 """
 
 from __future__ import annotations
@@ -208,6 +208,7 @@ def main() -> int:
     parser.add_argument("--work", default=None, help="folder kept between runs (default: a folder per seed in /tmp)")
     parser.add_argument("--figure", default=None, help="write the fitted-against-true figure here")
     parser.add_argument("--record-only", action="store_true", help="only record the bags still missing in --work")
+    parser.add_argument("--out", default=str(RESULTS / "calibration_sweep.json"), help="results file (%(default)s)")
     args = parser.parse_args()
     if args.rovers < 1 or not (math.isfinite(args.minutes) and args.minutes > 0):
         parser.error("--rovers must be >= 1 and --minutes a finite number > 0")
@@ -263,7 +264,7 @@ def main() -> int:
     result = {"benchmark": "calibration_sweep", "seed": args.seed, "minutes": args.minutes, "pose_noise_m": args.noise,
               "ranges": {p: [lo, hi] for p, (lo, hi, _, _) in RANGES.items()}, "summary": summary, "rovers": rows,
               "cores": os.cpu_count(), "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    path = write_results(RESULTS / "calibration_sweep.json", result, version=VERSION, driver=True)
+    path = write_results(args.out, result, version=VERSION, driver=True)
     print(f"wrote {path}")
     if args.figure:
         plot(rows, ROOT / args.figure)

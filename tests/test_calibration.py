@@ -280,6 +280,32 @@ def test_moving_state_sets_the_recorded_motion():
     assert sim.wheel_speed[0].tolist() == pytest.approx(expected, abs=1e-5)
 
 
+def test_a_replayed_rover_starts_at_the_rest_height_of_its_own_wheel_and_payload():
+    """A worn wheel or a payload the fit tries starts where the recorded rover stood, not where the configured rover
+    would: rolled out parked, it stays put, where the configured rover's height drops it a centimetre (that drop at
+    every segment's start pulled the fitted radius and payload towards the nominal rover's)."""
+    from atrv_warp.sim.diff import DiffRollout
+
+    roll = DiffRollout(3, steps=6)
+    sim = roll.sim
+    assert sim.rest_height == pytest.approx(float(sim.rest_heights(sim.rover_cfg.wheel_radius, 0.0)), abs=1e-12)
+    radius, payload = torch.tensor([0.115, 0.135, 0.125]), torch.tensor([0.0, 0.0, 25.0])
+    rest = torch.zeros(3, 3)
+    q, qd = roll.moving_state(rest, torch.zeros(3, 2), torch.zeros(3), torch.zeros(3, 2), wheel_radius=radius,
+                              payload_mass=payload)
+    z0 = q.view(3, -1)[:, sim.layout.chassis_coord + 2]
+    assert z0.tolist() == pytest.approx(sim.rest_heights(radius, payload).tolist(), abs=1e-6)
+    assert z0[0].item() == pytest.approx(sim.rest_height - 0.010, abs=1e-6)  # a 1 cm smaller wheel
+    assert z0[2].item() < sim.rest_height - 1e-3  # a heavier rover sinks further
+    chassis = roll.nominal_chassis_mass + payload
+    own = roll(torch.zeros(6, 3, 2), (q, qd), chassis_mass=chassis, wheel_radius=radius)
+    assert (own[:, :, 2] - own[:1, :, 2]).abs().max().item() < 1e-3
+    configured = roll(torch.zeros(6, 3, 2), roll.moving_state(rest, torch.zeros(3, 2), torch.zeros(3),
+                                                              torch.zeros(3, 2)), chassis_mass=chassis,
+                      wheel_radius=radius)
+    assert (configured[-1, 0, 2] - configured[0, 0, 2]).item() < -5e-3  # the worn wheel's rover falls
+
+
 # ------------------------------------------------------------------ the driver the replay runs (#42)
 @pytest.mark.parametrize("args", [["--driver-wheel-radius", "0"], ["--driver-wheel-radius", "nan"],
                                   ["--driver-track-width", "-0.5"], ["--driver-track-width", "inf", "--record-example"]])

@@ -387,15 +387,25 @@ class DiffRollout:
         return (wp.to_torch(sim.state_0.joint_q).detach().clone(), wp.to_torch(sim.state_0.joint_qd).detach().clone())
 
     def moving_state(self, poses: torch.Tensor, velocity: torch.Tensor, yaw_rate: torch.Tensor,
-                     wheel_speed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+                     wheel_speed: torch.Tensor, *, wheel_radius: torch.Tensor | float | None = None,
+                     payload_mass: torch.Tensor | float | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """Generalised coordinates (joint_q, joint_qd) of level rovers on flat ground, in motion: at (x, y, yaw)
         ``poses`` (N, 3), with chassis-origin velocity ``velocity`` (N, 2) (forward, left) in the chassis
         frame [m/s], ``yaw_rate`` (N,) [rad/s], and each side's forward wheel speed ``wheel_speed`` (N, 2)
-        (left, right) [rad/s] (a state recorded on a real rover: its pose, twist and wheel encoders)."""
+        (left, right) [rad/s] (a state recorded on a real rover: its pose, twist and wheel encoders).
+
+        Each rover stands at its own rest height (:meth:`~atrv_warp.sim.RoverSim.rest_heights`) for the rolling
+        radius ``wheel_radius`` [m] and payload ``payload_mass`` [kg] it will be rolled out with (default: the
+        configured rover's): a rollout with another radius than the configured one would otherwise start with its
+        wheels in the air or in the ground."""
         q, qd = self.initial_state(poses)
         sim, lay = self.sim, self.sim.layout
         n = self.num_worlds
         q, qd = q.view(n, -1), qd.view(n, -1)
+        if wheel_radius is not None or payload_mass is not None:
+            radius = sim.rover_cfg.wheel_radius if wheel_radius is None else wheel_radius
+            height = sim.rest_heights(radius, 0.0 if payload_mass is None else payload_mass)
+            q[:, lay.chassis_coord + 2] = height.to(q.dtype).expand(n)
         yaw = torch.as_tensor(poses, dtype=torch.float32)[:, 2]
         cos, sin = torch.cos(yaw), torch.sin(yaw)
         v = torch.as_tensor(velocity, dtype=torch.float32)

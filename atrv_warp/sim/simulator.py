@@ -375,13 +375,22 @@ class RoverSim:
     @property
     def rest_height(self) -> float:
         """Chassis-origin height [m] at static equilibrium on the ground, from the contact law."""
+        return float(self.rest_heights(self.rover_cfg.wheel_radius, 0.0))
+
+    def rest_heights(self, wheel_radius, payload_mass) -> torch.Tensor:
+        """Chassis-origin heights [m] at static equilibrium on flat ground of rovers with rolling radius
+        ``wheel_radius`` [m] and a payload of ``payload_mass`` [kg] beyond the model's mass (each a number or one per
+        rover; broadcast), from the contact law at :attr:`contact_cfg`'s stiffness: a world drawn with another radius
+        or payload than the configured rover stands at its own height."""
         c = self.contact_cfg
-        load = self.description.total_mass * abs(self.sim_cfg.gravity) / len(self.description.wheels)
+        radius = torch.as_tensor(wheel_radius, dtype=torch.float64)
+        mass = self.description.total_mass + torch.as_tensor(payload_mass, dtype=torch.float64)
+        load = mass * abs(self.sim_cfg.gravity) / len(self.description.wheels)
         depth = (load / c.stiffness) ** (1.0 / c.exponent)
-        if depth < c.linear_region:
-            depth = load / (c.stiffness * c.linear_region ** (c.exponent - 1.0))
+        linear = load / (c.stiffness * c.linear_region ** (c.exponent - 1.0))
+        depth = torch.where(depth < c.linear_region, linear, depth)
         axle_z = float(np.mean([w.origin[2, 3] for w in self.description.wheels]))
-        return self.arena_cfg.ground_top + self.rover_cfg.wheel_radius - depth - axle_z
+        return self.arena_cfg.ground_top + radius - depth - axle_z
 
     @property
     def frame_names(self) -> tuple[str, ...]:

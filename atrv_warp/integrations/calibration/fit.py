@@ -354,9 +354,6 @@ class _Replay:
         pad = np.concatenate([index, np.full(w - n, index[0])])
         poses = torch.zeros(w, 3)
         poses[:, 2] = torch.as_tensor(seg.yaw0[pad], dtype=torch.float32)
-        state = self.roll.moving_state(poses, torch.as_tensor(seg.velocity[pad], dtype=torch.float32),
-                                       torch.as_tensor(seg.yaw_rate[pad], dtype=torch.float32),
-                                       torch.as_tensor(seg.wheel[pad], dtype=torch.float32))
         kwargs = {} if seg.command == "cmd_vel" else {"torque_scale": 1.0, "speed_limit": _NO_TAPER}
         for name, v in values.items():
             v = torch.as_tensor(np.concatenate([v, np.full(w - n, v[0])]), dtype=torch.float32)
@@ -364,6 +361,12 @@ class _Replay:
                 kwargs["chassis_mass"] = self.nominal_chassis_mass + v
             else:
                 kwargs[name] = v
+        # each world starts at the rest height of its own wheel radius and payload, as the recorded rover drove
+        payload = kwargs["chassis_mass"] - self.nominal_chassis_mass if "chassis_mass" in kwargs else None
+        state = self.roll.moving_state(poses, torch.as_tensor(seg.velocity[pad], dtype=torch.float32),
+                                       torch.as_tensor(seg.yaw_rate[pad], dtype=torch.float32),
+                                       torch.as_tensor(seg.wheel[pad], dtype=torch.float32),
+                                       wheel_radius=kwargs.get("wheel_radius"), payload_mass=payload)
         actions = torch.as_tensor(seg.inputs[pad], dtype=torch.float32).transpose(0, 1).contiguous()
         integral = torch.as_tensor(seg.integral[pad], dtype=torch.float32)
         sim_poses, speeds, torques = self.roll(actions, state, integral=integral, wheel_speeds=True,
