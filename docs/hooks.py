@@ -456,6 +456,27 @@ def calibration_data() -> str:
                    "held-out error (median)", "converged", "fit"], ["---"] + ["---:"] * 6 + ["---", "---:"], rows)
 
 
+def calibration_sweep(name: str = "calibration_sweep.json") -> str:
+    """``calibration_sweep.json``: each drawn rover's truth, the fit's errors (within tolerance or not, and whether
+    the 95 % interval covers the truth), the held-out error and whether the fit converged."""
+    d = _load(name)
+    def cell(v: dict, scale: float, unit: str) -> str:  # ✗ outside the tolerance, ° the interval misses the truth
+        return f"{scale * v['error']:+.1f} {unit}{'' if v['covered'] else '°'}{'' if v['within'] else ' ✗'}"
+
+    rows = []
+    for r in d["rovers"]:
+        p, t = r["params"], r["truth"]
+        rows.append([str(r["rover"]), f"{t['friction']:.2f}", f"{t['torque_scale']:.2f}", f"{t['payload_mass']:.1f}",
+                     f"{1000 * t['wheel_radius']:.1f}", cell(p["friction"], 100 / t["friction"], "%"),
+                     cell(p["torque_scale"], 100 / t["torque_scale"], "%"), cell(p["payload_mass"], 1.0, "kg"),
+                     cell(p["wheel_radius"], 1000.0, "mm"),
+                     f"{100 * r['held_out']['before_m']:.1f} → {100 * r['held_out']['after_m']:.1f} cm",
+                     "yes" if r["converged"] else "no", f"{r['fit_s']:.0f} s"])
+    return _table(["rover", "µ", "torque", "payload [kg]", "wheel [mm]", "µ error", "torque error", "payload error",
+                   "wheel error", "held-out error", "converged", "fit"],
+                  ["---:"] * 5 + ["---:"] * 4 + ["---", "---", "---:"], rows)
+
+
 def _diff_gradients(kind: str, name: str = "diff_gradients.json") -> str:
     d = _load(name)
     rows = d["agreement"]
@@ -680,6 +701,8 @@ TABLES: dict[str, Callable[[], str]] = {
     "sac_update_cost": sac_update_cost,
     "calibration": calibration,
     "calibration_data": calibration_data,
+    "calibration_sweep": calibration_sweep,
+    "calibration_sweep_before_rest_height": lambda: calibration_sweep("calibration_sweep_before_rest_height.json"),
     "coulomb_cost": coulomb_cost,
     "physics_report": physics_report,
     "skid_turning": skid_turning,
