@@ -169,10 +169,23 @@ def status(name: str) -> Status:
 
 
 def lookup(d: object, key: str, *, name: str = "") -> object:
-    """``d``'s value at ``key`` (dots between keys and indices, ``[field=value]`` selectors)."""
+    """``d``'s value at ``key`` (dots between keys and indices, ``[field=value]`` selectors; a key that itself holds
+    dots, ``mujoco µ 0.8``, is matched whole)."""
     value = d
-    for i, (select, part) in enumerate(re.findall(r"\[([^\]]*)\]|([^.\[\]]+)", key)):
+    tokens = re.findall(r"\[([^\]]*)\]|([^.\[\]]+)", key)
+    i = -1
+    while i + 1 < len(tokens):
+        i += 1
+        select, part = tokens[i]
         where = f"{name}:{key}"
+        if part and isinstance(value, dict) and part not in value:  # a key with dots in it ("mujoco µ 0.8")
+            for j in range(i + 1, len(tokens)):
+                if tokens[j][0]:
+                    break
+                joined = ".".join(t[1] for t in tokens[i:j + 1])
+                if joined in value:
+                    part, i = joined, j
+                    break
         if select:
             wants = [c.partition("=")[::2] for c in select.split(",")]
             found = [e for e in value if isinstance(e, dict) and all(str(e.get(f)) == w for f, w in wants)] \
