@@ -405,7 +405,7 @@ class DiffRollout:
         if wheel_radius is not None or payload_mass is not None:
             radius = sim.rover_cfg.wheel_radius if wheel_radius is None else wheel_radius
             height = sim.rest_heights(radius, 0.0 if payload_mass is None else payload_mass)
-            q[:, lay.chassis_coord + 2] = height.to(q.dtype).expand(n)
+            q[:, lay.chassis_coord + 2] = height.to(device=q.device, dtype=q.dtype).expand(n)
         yaw = torch.as_tensor(poses, dtype=torch.float32)[:, 2]
         cos, sin = torch.cos(yaw), torch.sin(yaw)
         v = torch.as_tensor(velocity, dtype=torch.float32)
