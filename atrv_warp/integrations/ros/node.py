@@ -608,7 +608,8 @@ class RoverSimNode(Node):
         task = self.env.task_cfg
         action = (self.sim.driver.twist / torch.tensor([task.max_linear, task.max_angular])).clamp(-1.0, 1.0)
         out = self.env.step(TensorDict(action=action, batch_size=[self.sim.num_worlds]))["next"]
-        for rover in self.rovers:
+        ended = False
+        for rover in self.rovers:  # every rover whose episode ended in this step says so, not only the first
             if rover.episode is not None and bool(out["done"][rover.index]):
                 reason = END_REASONS[int(out["end_reason"][rover.index])]
                 rover.publish_episode({"event": "end", "episode": rover.episode, "end_reason": reason,
@@ -617,8 +618,8 @@ class RoverSimNode(Node):
                 self.log.info(f"episode {rover.episode}: {reason}")
                 rover.episode = None
                 self.sim.set_twist([0.0, 0.0], worlds=[rover.index])
-                return True
-        return False
+                ended = True
+        return ended
 
     def publish_state(self) -> None:
         self.commanded, self.published_at = False, time.monotonic()
