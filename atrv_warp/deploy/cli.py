@@ -66,13 +66,17 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     import signal
 
-    # Ctrl-C and SIGTERM end the spin here, with the context alive, so that the zero /cmd_vel still goes out
+    # Ctrl-C and SIGTERM end the spin here, with the context alive, so that the zero /cmd_vel still goes out. The
+    # handler only asks the loop to stop: a KeyboardInterrupt raised inside rclpy's C++ take of a message surfaces as
+    # a RuntimeError and would end the node with exit 1 after the stop
     rclpy.init(args=["atrv-deploy", *argv[ros_at:]], signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    stop_requested: list[int] = []
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda received, _frame: stop_requested.append(received))
     node = None
     try:
         node = DeployNode(policy, argv[ros_at:])
-        while rclpy.ok():
+        while rclpy.ok() and not stop_requested:
             rclpy.spin_once(node, timeout_sec=0.1)  # returns often, so a signal is taken within 0.1 s
     except NodeConfigError:
         return 2
