@@ -1,8 +1,8 @@
 """Throughput of the navigation task against the flat reference task, measured in one run.
 
-Run: ``python benchmarks/nav_throughput.py [--sizes 64 1024] [--seconds 3] [--rounds 3]``
+Run: ``python benchmarks/nav_throughput.py [--sizes 64 1024] [--seconds 3] [--rounds 3] [--device cuda:0]``
 
-For each N, in this process pinned to one core with one torch thread: env-steps/s of
+For each N, in this process (pinned to one core on the CPU) with one torch thread: env-steps/s of
 ``ATRVjrEnv`` stepping random actions (with resets) for the ``reach`` task (flat, no obstacles,
 no scanner) and the ``nav`` task (terrain, six obstacles, 64-beam scan), measured alternately,
 best of ``--rounds`` each; then where nav's extra time goes: the simulator step on the flat arena
@@ -28,11 +28,14 @@ RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def _rate(fn, per_call: int, seconds: float) -> float:
+    import warp as wp
+
     fn()
     calls, t0 = 0, time.perf_counter()
     while True:
         fn()
         calls += 1
+        wp.synchronize()  # a GPU's queued work counts where it was asked for (a no-op on the CPU)
         elapsed = time.perf_counter() - t0
         if elapsed >= seconds:
             return calls * per_call / elapsed
@@ -44,7 +47,7 @@ def _stepper(env, tds: dict, task: str, gen):
 
     def step():
         td = tds[task]
-        td["action"] = torch.rand(env.num_envs, 2, generator=gen) * 2 - 1
+        td["action"] = (torch.rand(env.num_envs, 2, generator=gen) * 2 - 1).to(env.device)
         _, tds[task] = env.step_and_maybe_reset(td)
     return step
 
@@ -54,10 +57,12 @@ def main() -> int:
     parser.add_argument("--sizes", type=int, nargs="+", default=[64, 1024])
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--device", default="cpu", help="simulation device, e.g. cuda:0")
     parser.add_argument("--out", default=str(RESULTS / "nav_throughput.json"))
     args = parser.parse_args()
 
-    pin_to_one_core()
+    if args.device == "cpu":
+        pin_to_one_core()
     import torch
     import warp as wp
 
@@ -67,14 +72,14 @@ def main() -> int:
     compile_s = {}
     for task in ("reach", "nav"):  # first build + step compiles (or loads) every kernel the task uses
         t0 = time.perf_counter()
-        env = ATRVjrEnv(2, task=task)
+        env = ATRVjrEnv(2, task=task, device=args.device)
         env.rollout(2)
         compile_s[task] = time.perf_counter() - t0
     print(f"first build and step (kernel compilation or cache load): {compile_s}")
 
     rows = []
     for n in args.sizes:
-        envs = {task: ATRVjrEnv(n, task=task, seed=0) for task in ("reach", "nav")}
+        envs = {task: ATRVjrEnv(n, task=task, seed=0, device=args.device) for task in ("reach", "nav")}
         gen = torch.Generator().manual_seed(0)
         tds = {task: env.reset() for task, env in envs.items()}
 
@@ -88,7 +93,7 @@ def main() -> int:
         scan_rate = _rate(scanner.scan, n, args.seconds)
         # The scan's two kernel layouts (a thread per beam, the GPU's; a thread per world, the CPU's
         # default), for every world and for a reset's rescan of 5 % of them, alternately.
-        few = wp.array(torch.rand(n, generator=gen).numpy() < 0.05, dtype=bool)
+        few = wp.array(torch.rand(n, generator=gen).numpy() < 0.05, dtype=bool, device=args.device)
         layouts = {}
         for _ in range(args.rounds):
             for layout in ("beam", "world"):
@@ -111,7 +116,8 @@ def main() -> int:
         print(f"         scan per call [ms], thread per beam / per world: all worlds {layouts['beam_all_ms']:.2f} / "
               f"{layouts['world_all_ms']:.2f}; 5 % of them (a reset) {layouts['beam_reset_5pct_ms']:.2f} / "
               f"{layouts['world_reset_5pct_ms']:.2f}", flush=True)
-    result = {"benchmark": "nav_throughput", "target": "nav >= 0.5 x reach at N = 1024", "compile_s": compile_s,
+    result = {"benchmark": "nav_throughput", "target": "nav >= 0.5 x reach at N = 1024", "device": args.device,
+              "compile_s": compile_s,
               "rows": rows, "time": time.strftime("%Y-%m-%d %H:%M:%S"), "python": sys.version.split()[0]}
     out = write_results(args.out, result, version=VERSION, task=True)
     print(f"written to {out}")

@@ -561,15 +561,20 @@ def env_scaling() -> str:
                    for name, r in d["scaling"].items()])
 
 
-def nav_throughput() -> str:
+def nav_throughput(name: str = "nav_throughput.json") -> str:
     """``nav_throughput.json``: the nav task's env-steps/s against the reach task's."""
     rows = []
-    for r in _load("nav_throughput.json")["rows"]:
+    for r in _load(name)["rows"]:
         us = r["us_per_world_step"]
         rows.append([str(r["num_envs"]), f"{r['reach_env_steps_per_s']:,.0f}", f"{r['nav_env_steps_per_s']:,.0f}",
                      f"{r['nav_over_reach']:.2f}", f"{us['sim_flat']:.1f} / {us['sim_nav']:.1f} / {us['scan']:.1f} µs"])
     return _table(["N", "reach env-steps/s", "nav env-steps/s", "nav / reach",
                    "per world-step: sim flat / sim terrain + obstacles / scan"], ["---:"] * 4 + ["---"], rows)
+
+
+def nav_throughput_cuda() -> str:
+    """``nav_throughput_cuda.json``: the same on one GPU."""
+    return nav_throughput("nav_throughput_cuda.json")
 
 
 def ray_collection() -> str:
@@ -707,6 +712,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "env_throughput": env_throughput,
     "env_scaling": env_scaling,
     "nav_throughput": nav_throughput,
+    "nav_throughput_cuda": nav_throughput_cuda,
     "ray_collection": ray_collection,
     "step_profile": step_profile,
     "substep_speed": substep_speed,
