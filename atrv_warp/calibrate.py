@@ -78,13 +78,38 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--driver-track-width", type=float, metavar="M",
                    help=f"the wheel track the robot's driver is configured with [m] (default: the nominal rover's, "
                         f"{nominal.track_width:g})")
+    p.add_argument("--latency", type=float, metavar="S",
+                   help=("how long after its stamp a /cmd_vel reaches the driver [s] (default: fitted, in whole "
+                         "0.05 s steps up to 0.2 s; 0: none)"))
     p.add_argument("--record-example", metavar="OUT.mcap",
                    help="record a bag to try this on: the simulator node, driven over ROS 2 (needs the ros extra)")
     p.add_argument("--minutes", type=float, default=5.0, help="--record-example: sim minutes (%(default)s)")
     p.add_argument("--truth", help="--record-example: the recorded rover's simulator config (hidden from the fit)")
     p.add_argument("--noise", type=float, default=0.01,
                    help="--record-example: reference position noise [m] (yaw: noise / 0.5 m) (%(default)s)")
+    p.add_argument("-p", "--node-param", action="append", default=[], metavar="NAME:=VALUE",
+                   help=("--record-example: another simulator-node parameter (python -m atrv_warp.ros --help), e.g. "
+                         "-p cmd_vel_delay:=0.1 -p motor_lag:=0.1 -p terrain:=slope: what the fit does not model"))
     return p
+
+
+def _node_params(items: list[str]) -> dict[str, float | int | bool | str] | str:
+    """``-p NAME:=VALUE`` options as node parameters, each of its default's type, or an error line."""
+    from atrv_warp.integrations.ros.parameters import PARAMETERS
+
+    known = {name: default for name, default, _ in PARAMETERS}
+    out = {}
+    for item in items:
+        name, sep, value = item.partition(":=")
+        if not sep or name not in known:
+            return f"error: -p {item!r}: not NAME:=VALUE with a simulator-node parameter; known: {sorted(known)}"
+        default = known[name]
+        try:
+            out[name] = (value if isinstance(default, str) else value.lower() in ("true", "1")
+                         if isinstance(default, bool) else type(default)(float(value)))
+        except ValueError:
+            return f"error: -p {item!r}: {name} takes a number"
+    return out
 
 
 def _record(args) -> int:
@@ -99,6 +124,11 @@ def _record(args) -> int:
     # whose tyre wore still runs the radius it was set up with
     params = {"truth_noise": args.noise, "truth_yaw_noise": args.noise / 0.5,
               "wheel_radius": args.driver_wheel_radius or 0.0, "track_width": args.driver_track_width or 0.0}
+    extra = _node_params(args.node_param)
+    if isinstance(extra, str):
+        print(extra, file=sys.stderr)
+        return 2
+    params.update(extra)
     if args.truth:
         from atrv_warp.sim.config import load_sim_config
 
@@ -163,7 +193,7 @@ def main(argv: list[str] | None = None) -> int:
                                 pose_smoothing=args.pose_smoothing, seed=args.seed, kp=args.wheel_kp,
                                 ki=args.wheel_ki, effective_track_factor=args.effective_track_factor,
                                 driver_wheel_radius=args.driver_wheel_radius,
-                                driver_track_width=args.driver_track_width)
+                                driver_track_width=args.driver_track_width, latency=args.latency)
         wheels = {w.joint: (w.side, w.drive_sign) for w in load_rover(rover).wheels}
         t0 = time.perf_counter()
         log = read_drive_log(args.bag, wheels, Topics(cmd_vel=args.cmd_vel_topic,
@@ -181,10 +211,15 @@ def main(argv: list[str] | None = None) -> int:
     write_report(report, result, args.bag)
     plot_paths(plot, result, args.bag)
     if not result.converged:
-        print(f"{result.reason}; wrote no calibration (report {report}, plot {plot}). Try more --iterations "
-              "or --starts, or a longer drive with more turns and accelerations.", file=sys.stderr)
+        advice = ("The model check flags a misfit (above): more iterations will not fix what the model lacks"
+                  if result.misfit and result.misfit["flagged"] else
+                  "Try more --iterations or --starts, or a longer drive with more turns and accelerations")
+        print(f"{result.reason}; wrote no calibration (report {report}, plot {plot}). {advice}.", file=sys.stderr)
         return 1
     write_sim_config(out, result, args.bag)
+    if result.misfit and result.misfit["flagged"]:
+        print(f"wrote {out} all the same: it beats the nominal rover on the held-out segments, but see the misfit "
+              "above", file=sys.stderr)
     spread_note = "" if not any(math.isnan(v) for v in result.spread.values()) else " (one converged start: no spread)"
     print(f"wrote {out}{spread_note}, {report} and {plot}")
     return 0

@@ -120,7 +120,8 @@ def run_rover(k: int, truth: dict[str, float], *, seed: int, minutes: float, noi
         raise RuntimeError(f"rover {k}: the fit wrote no report (exit {code}); see {folder / 'fit.log'}")
     report = json.loads(report_file.read_text())
     row = judge(truth, report)
-    row.update(rover=k, seed=rover_seed, exit_code=code, process_wall_s=wall)
+    row.update(rover=k, seed=rover_seed, exit_code=code, process_wall_s=wall, latency=report.get("latency"),
+               misfit=report.get("misfit"))
     done.write_text(json.dumps(row, indent=1) + "\n")
     return row
 
@@ -162,6 +163,11 @@ def summarize(rows: list[dict], total: int) -> dict:
         "fit_s_median": fit_s[len(fit_s) // 2] if fit_s else math.nan,
         "fit_s_max": fit_s[-1] if fit_s else math.nan,
         "compile_s_first": rows[0]["compile_s"] if rows else math.nan,
+        # the model check on rovers the model has exactly (a flag here is a false alarm), and the latency found
+        "misfit_flagged": sum(bool((r.get("misfit") or {}).get("flagged")) for r in rows),
+        "misfit_largest_ratio": max((max(r["misfit"]["ratio"].values()) for r in rows if r.get("misfit")),
+                                    default=math.nan),
+        "latency_found": sum(bool((r.get("latency") or {}).get("seconds")) for r in rows),
         "targets": {"all_within": "every parameter within tolerance on >= 11 of 12 rovers",
                     "held_out": "cut >= 4x where the nominal model misses by > 5 cm, else <= 2 cm after, every rover",
                     "interval_coverage": ">= 85 % of the 95 % intervals cover the truth, none wider than the range",
@@ -243,7 +249,8 @@ def main() -> int:
         h = row["held_out"]
         print(f"  {'all within' if not misses else 'outside: ' + ', '.join(misses)}; held-out "
               f"{100 * h['before_m']:.1f} -> {100 * h['after_m']:.1f} cm ({'passes' if h['passes'] else 'FAILS'} "
-              f"{h['rule']}); {row['reason']}; fit {row['fit_s']:.0f} s", flush=True)
+              f"{h['rule']}); {row['reason']}; fit {row['fit_s']:.0f} s; "
+              f"{'MISFIT flagged' if (row.get('misfit') or {}).get('flagged') else 'model check passes'}", flush=True)
 
     if args.record_only:
         return 0
@@ -259,6 +266,8 @@ def main() -> int:
     print(f"held-out rule met on {summary['held_out_passes']} of {summary['rovers_run']}; 95 % intervals cover "
           f"{100 * summary['interval_coverage']:.0f} % of the truths (target >= 85 %); "
           f"{summary['intervals_narrower_than_range']} of {summary['intervals']} narrower than their range")
+    print(f"model check: a misfit flagged on {summary['misfit_flagged']} of {summary['rovers_run']} (each modelled "
+          f"exactly; largest ratio {summary['misfit_largest_ratio']:.1f}); a latency found on {summary['latency_found']}")
     print(f"fit median {summary['fit_s_median']:.0f} s, longest {summary['fit_s_max']:.0f} s "
           f"(+ {summary['compile_s_first']:.0f} s compile on the first rover)")
     result = {"benchmark": "calibration_sweep", "seed": args.seed, "minutes": args.minutes, "pose_noise_m": args.noise,

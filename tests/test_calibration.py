@@ -461,3 +461,85 @@ def test_fit_recovers_a_hidden_rover_from_a_recorded_bag(tmp_path, run_module, r
     assert held["reduction"] >= 4.0 if held["before_m"] > 0.05 else held["after_m"] <= 0.02, report["error_summary"]
     assert out.with_suffix(".png").stat().st_size > 10_000
     load_sim_config(out)  # what it wrote is a simulator config
+
+
+# ------------------------------------------------------------------ latency and the model check (issue 42, part 4)
+def _drive_log(seconds: float, *, pose_noise: float, wheel_noise: float, seed: int = 0, commands=None):
+    """A DriveLog of a smooth drive at 20 Hz with white noise on the reference position and the wheel speeds."""
+    from atrv_warp.integrations.calibration import DriveLog
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 0.05)
+    x, y = 2.0 * np.sin(0.3 * t), 1.5 * np.cos(0.2 * t)
+    pose = np.stack([x + rng.normal(0, pose_noise, len(t)), y + rng.normal(0, pose_noise, len(t)), 0.1 * t], -1)
+    wheel = np.stack([4.0 + np.sin(0.5 * t), 4.0 - np.sin(0.5 * t)], -1) + rng.normal(0, wheel_noise, (len(t), 2))
+    cmd = commands if commands is not None else np.stack([0.5 + 0.2 * np.sin(0.7 * t), 0.3 * np.cos(0.4 * t)], -1)
+    return DriveLog(path="synthetic.mcap", pose_time=t, pose=pose, body_velocity=np.zeros((len(t), 3)),
+                    joint_time=t, wheel_speed=wheel, effort=None, cmd_time=t, cmd=cmd, twist=False)
+
+
+def test_the_recordings_noise_is_read_from_its_samples():
+    """A 1 cm reference and 0.02 rad/s encoders on a smooth drive: each channel's noise within 10 %."""
+    from atrv_warp.integrations.calibration.fit import recording_noise
+
+    noise = recording_noise(_drive_log(180.0, pose_noise=0.01, wheel_noise=0.02))
+    assert noise["position"] == pytest.approx(0.01, rel=0.1)
+    assert noise["wheel_speed"] == pytest.approx(0.02, rel=0.1)
+    assert "effort" not in noise  # a bag without efforts has no effort channel
+
+
+def test_a_latency_delays_the_replayed_commands_by_whole_steps():
+    """Segments cut with a 0.1 s latency replay each command two steps later than at none, on the same segments."""
+    log = _drive_log(30.0, pose_noise=0.0, wheel_noise=0.0)
+    cfg = CalibrationConfig()
+    now = make_segments(log, cfg, cfg.driver())
+    late = make_segments(log, cfg, cfg.driver(), latency=0.1, like=now)
+    assert late.t0.tolist() == now.t0.tolist() and late.latency == 0.1
+    np.testing.assert_allclose(late.inputs[1:, 2:], now.inputs[1:, :-2], atol=1e-12)
+    assert np.abs(late.inputs[1:, :2] - now.inputs[1:, :2]).max() > 1e-3
+    with pytest.raises(CalibrationError, match="latency must be a finite number >= 0"):
+        CalibrationConfig(latency=-0.05)
+
+
+def test_the_model_check_flags_a_misfit_in_one_line():
+    """Held-out errors at the recording's noise pass; a channel over twice its noise (or its floor) is named in one
+    line, and so is a fit that made the held-out path worse."""
+    from atrv_warp.integrations.calibration.fit import MISFIT_FLOOR, _model_check
+
+    noise = {"position": 0.01, "wheel_speed": 0.04, "effort": 0.01}  # a fine effort sensor: its floor counts
+
+    def errors(rms, before=0.05, after=0.012):
+        return {"held_out": {"rms_after": rms, "before": [before] * 3, "after": [after] * 3}}
+
+    good = _model_check(errors({"position": 0.013, "wheel_speed": 0.05, "effort": 0.15}), noise, CalibrationConfig())
+    assert not good["flagged"] and good["line"].startswith("model check:") and "\n" not in good["line"]
+    assert good["ratio"]["effort"] == pytest.approx(0.15 / MISFIT_FLOOR["effort"])
+    lag = _model_check(errors({"position": 0.013, "wheel_speed": 0.6, "effort": 1.4}), noise, CalibrationConfig())
+    assert lag["flagged"] and lag["line"].startswith("MISFIT") and "\n" not in lag["line"]
+    # over the floor where the noise is finer: 0.6 / 0.05
+    assert "wheel speed 0.6 rad/s (12.0x its noise)" in lag["line"] and "held-out position" not in lag["line"]
+    worse = _model_check(errors({"position": 0.015}, before=0.10, after=0.11), noise, CalibrationConfig())
+    assert worse["flagged"] and "made the held-out path error worse" in worse["line"]
+
+
+@pytest.mark.slow  # two live ROS 2 recordings of 2 min (about 15 s each) and their fits (about 30 s each)
+def test_a_fit_finds_a_latency_and_flags_what_it_cannot_model(tmp_path, run_module, ros_env):
+    """A base whose /cmd_vel reach its driver 0.1 s late: the fit finds the latency and the rover, and sees no misfit.
+    Motors whose torque lags 0.1 s: the model check names the misfit in one line (issue 42, part 4)."""
+    truth = "examples/calibration_truth.toml"
+    for name, param in (("late", "cmd_vel_delay:=0.1"), ("lag", "motor_lag:=0.1")):
+        bag, out = tmp_path / f"{name}.mcap", tmp_path / f"{name}.toml"
+        run_module("atrv_warp.calibrate", "--record-example", str(bag), "--minutes", "2", "--truth", truth,
+                   "--seed", "3", "-p", param, env=ros_env, timeout=600)
+        proc = run_module("atrv_warp.calibrate", str(bag), "--out", str(out), check=False, timeout=900)
+        report = json.loads(out.with_suffix(".report.json").read_text())
+        lines = [line for line in proc.stdout.splitlines() if "MISFIT" in line or line.startswith("model check")]
+        assert len(lines) == 1, proc.stdout[-3000:]
+        if name == "late":
+            assert report["latency"]["seconds"] == pytest.approx(0.1) and report["latency"]["fitted"]
+            assert not report["misfit"]["flagged"] and report["converged"], proc.stdout[-3000:]
+            for param in ("friction", "torque_scale"):
+                assert report["values"][param] == pytest.approx(TRUTH[param], rel=0.05), report["values"]
+        else:
+            assert report["misfit"]["flagged"] and lines[0].startswith("MISFIT"), proc.stdout[-3000:]
+            assert max(report["misfit"]["ratio"].values()) > 2.0

@@ -465,6 +465,8 @@ def test_bad_parameters_are_refused_at_start(ros_env, tmp_path):
     for params, message in ((["bogus_param:=1"], "unknown parameter(s) ['bogus_param']"),
                             (["num_rovers:=0"], "num_rovers must be in 1"),
                             (["task:=maze"], "task='maze' is not a task"),
+                            (["cmd_vel_delay:=-0.1"], "['cmd_vel_delay'] must be finite and >= 0"),
+                            (["terrain:=moon"], "terrain='moon' is not a terrain"),
                             (["task:=nav", f"policy:={old}"], "observes 26 values, task 'nav' observes 32"),
                             ([f"policy:={tmp_path / 'none.pt'}"], "parameter policy: policy file not found")):
         proc = start_node(ros_env, *params)

@@ -29,8 +29,9 @@ from atrv_warp.integrations.calibration.log import DriveLog
 from atrv_warp.sim.config import ContactConfig, RoverConfig, get_variant
 from atrv_warp.sim.driver import DriverConfig
 
-__all__ = ["COMMAND_SOURCES", "DEFAULT_FIT", "FIT_PARAMETERS", "MOTOR_PARAMETERS", "CalibrationConfig",
-           "CalibrationError", "CalibrationResult", "Segments", "calibrate", "make_segments", "replay_errors"]
+__all__ = ["COMMAND_SOURCES", "DEFAULT_FIT", "FIT_PARAMETERS", "MISFIT_FLOOR", "MOTOR_PARAMETERS", "CalibrationConfig",
+           "CalibrationError", "CalibrationResult", "Segments", "calibrate", "make_segments", "recording_noise",
+           "replay_errors"]
 
 
 @dataclass(frozen=True)
@@ -67,6 +68,9 @@ _HEADING_ARM = 0.5  # [m]: a heading error costs as the position error at this d
 _WHEEL_SCALE = 0.5  # [rad/s]: wheel-speed error that costs 1
 _EFFORT_SCALE = 1.0  # [N·m]: wheel-effort error that costs 1
 _NO_TAPER = 1.0e4  # [rad/s]: an effort replay's motor no-load speed (the recorded torques already taper)
+MISFIT_FLOOR = {"position": 0.01, "wheel_speed": 0.05, "effort": 0.1}
+"""The least error [m, rad/s, N·m] the model check calls noise, whatever the recording's own (a reference or encoder
+far finer than this would otherwise flag what no training needs)."""
 
 
 class CalibrationError(ValueError):
@@ -129,6 +133,16 @@ class CalibrationConfig:
     fitted parameter (``wheel_radius``)."""
     driver_track_width: float | None = None
     """The wheel track the robot's driver is configured with [m]. ``None``: the nominal rover's (its URDF's, 0.5 m)."""
+    latency: float | None = None
+    """How long after its stamp a ``/cmd_vel`` reaches the driver [s] (a command path's delay, which the bag's
+    stamps do not show). ``None``: fitted, in whole steps of 0.05 s up to :attr:`max_latency`."""
+    max_latency: float = 0.2
+    """The longest latency a fit of it tries [s]."""
+    misfit_ratio: float = 2.0
+    """The model check (:attr:`CalibrationResult.misfit`): a misfit is flagged where, after the fit, a channel's
+    median held-out error is more than this many times the recording's own noise in it (or its
+    :data:`MISFIT_FLOOR`, where that is larger). A model that explains the drive leaves about the noise: 0.9-1.7x on
+    the calibration sweep's and the misfit benchmark's well-modelled rovers."""
 
     def driver(self) -> DriverConfig:
         """The base's motor driver as the replay runs it: these gains and limits, and the configured radius and track
@@ -158,6 +172,12 @@ class CalibrationConfig:
             raise CalibrationError(f"robust must be > 0 or None, got {self.robust}")
         if self.duration is not None and not self.duration > 0:
             raise CalibrationError(f"duration must be > 0 [s] or None, got {self.duration}")
+        if self.latency is not None and not (math.isfinite(self.latency) and self.latency >= 0):
+            raise CalibrationError(f"latency must be a finite number >= 0 [s] or None, got {self.latency!r}")
+        if not (math.isfinite(self.misfit_ratio) and self.misfit_ratio > 0):
+            raise CalibrationError(f"misfit_ratio must be a finite number > 0, got {self.misfit_ratio!r}")
+        if not (math.isfinite(self.max_latency) and self.max_latency >= 0):
+            raise CalibrationError(f"max_latency must be a finite number >= 0 [s], got {self.max_latency!r}")
         for name in ("driver_wheel_radius", "driver_track_width"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):
@@ -188,6 +208,8 @@ class Segments:
     ref_effort: np.ndarray | None  # (S, L, 2) recorded side efforts at each step's end [N·m] (cmd_vel replay)
     held_out: np.ndarray  # (S,) bool
     command: str
+    latency: float = 0.0
+    """The commands' latency [s] the inputs were cut with (a ``cmd_vel`` replay)."""
 
     def __len__(self) -> int:
         return len(self.t0)
@@ -222,6 +244,13 @@ class CalibrationResult:
     driver: dict[str, float] | None = None
     """The driver a ``cmd_vel`` replay ran the commands through: its configured ``wheel_radius`` [m] and
     ``track_width`` [m], ``effective_track_factor`` [-], ``kp`` and ``ki``; ``None`` for an effort replay."""
+    misfit: dict | None = None
+    """The model check: ``noise`` (each channel's noise in the recording, from its sample-to-sample second
+    differences), ``ratio`` (each channel's median held-out error after the fit over the larger of its noise and its
+    :data:`MISFIT_FLOOR`), ``threshold`` (:attr:`CalibrationConfig.misfit_ratio`), ``flagged`` and its one ``line``."""
+    latency: dict | None = None
+    """The commands' latency (a ``cmd_vel`` replay): ``seconds``, whether it was ``fitted`` and, if so, the training
+    loss at the first fit's values for each latency tried (``loss_by_latency``); ``None`` for an effort replay."""
 
     def error_summary(self) -> dict[str, dict[str, float]]:
         """Median of the per-segment errors, and the ratio before / after."""
@@ -239,19 +268,22 @@ class CalibrationResult:
                                                     "held_out": int(self.segments.held_out.sum()),
                                                     "seconds": self.segments.inputs.shape[1] * 0.05,
                                                     "command": self.segments.command},
-                "driver": self.driver, "fit_seconds": self.seconds, "compile_seconds": self.compile_seconds}
+                "driver": self.driver, "latency": self.latency, "misfit": self.misfit, "fit_seconds": self.seconds,
+                "compile_seconds": self.compile_seconds}
 
 
 def _controller(log: DriveLog, driver: DriverConfig, grid: np.ndarray, wheel: np.ndarray, dt: float,
-                substeps: int):
+                substeps: int, latency: float = 0.0):
     """The base's motor driver replayed along the log on the recorded wheel speeds
     (:func:`atrv_warp.sim.driver.replay`): each step's command (zero once the timeout has stopped the base), and
-    the driver's PI integral before the step."""
+    the driver's PI integral before the step. ``latency`` [s]: a command reaches the driver this long after its
+    stamp."""
     from atrv_warp.sim.driver import replay
 
-    received = np.searchsorted(log.cmd_time, grid + 1e-6, side="right")  # commands received by each step
+    arrived = grid - latency
+    received = np.searchsorted(log.cmd_time, arrived + 1e-6, side="right")  # commands received by each step
     last = np.maximum(received - 1, 0)
-    fresh = (received > 0) & (grid - log.cmd_time[last] <= driver.cmd_vel_timeout + 1e-9)
+    fresh = (received > 0) & (arrived - log.cmd_time[last] <= driver.cmd_vel_timeout + 1e-9)
     twist = np.where(fresh[:, None], log.cmd[last, :2], 0.0)
     state = replay(driver, driver.kinematics(None, None), twist[None], fresh[None],
                    np.concatenate([wheel, wheel[-1:]])[None], step_dt=dt, substeps=substeps)
@@ -269,11 +301,13 @@ def _smooth(x: np.ndarray, window: int) -> np.ndarray:
 
 
 def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, dt: float = 0.05,
-                  substeps: int = 5) -> Segments:
+                  substeps: int = 5, *, latency: float | None = None, like: Segments | None = None) -> Segments:
     """Cut ``log`` into segments of ``cfg.segment_seconds`` on the controller's step grid, leaving out the
     ones where the rover stands still; raises :class:`CalibrationError` if fewer than ``cfg.min_segments`` remain.
     ``driver``: the base's driver with its configured radius and track set (:meth:`CalibrationConfig.driver`);
-    ``substeps``: the driver's loop runs this many times per step, as in the simulator."""
+    ``substeps``: the driver's loop runs this many times per step, as in the simulator; ``latency``: the commands'
+    latency [s] (``None``: ``cfg.latency``, or 0 where it is fitted); ``like``: the same segments as these (their
+    start times), under another latency."""
     command = cfg.command
     if command == "auto":
         command = "cmd_vel" if len(log.cmd_time) else "effort"
@@ -302,8 +336,9 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, d
     # the effort stamped at a step's end is what the motors held over it
     effort = (None if log.effort is None else
               np.stack([np.interp(grid + dt, log.joint_time, log.effort[:, s]) for s in (0, 1)], -1))
+    latency = (cfg.latency or 0.0) if latency is None else latency
     if command == "cmd_vel":
-        inputs, integral = _controller(log, driver, grid, wheel, dt, substeps)
+        inputs, integral = _controller(log, driver, grid, wheel, dt, substeps, latency)
     else:
         inputs, integral = effort, np.zeros_like(effort)
     steps = round(cfg.segment_seconds / dt)
@@ -315,6 +350,8 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, d
         commanded = np.abs(inputs[k:k + steps]).max() > (0.05 if command == "cmd_vel" else 0.5)  # m/s, rad/s; N·m
         if moved > 0.05 or np.abs(wheel[window]).max() > 0.5 or commanded:
             keep.append(k)
+    if like is not None:
+        keep = list(np.searchsorted(grid, like.t0 - 1e-6))
     if len(keep) < cfg.min_segments:
         raise CalibrationError(f"{log.path}: too short to fit: {len(keep)} moving segment(s) of "
                                f"{cfg.segment_seconds:g} s in {end - start:.1f} s of log (need {cfg.min_segments})")
@@ -327,7 +364,7 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, d
                     ref_wheel=wheel[idx],
                     ref_effort=effort[idx[:, :-1]] if command == "cmd_vel" and effort is not None else None,
                     held_out=(np.arange(len(keep)) % cfg.held_out_every) == cfg.held_out_every - 1,
-                    command=command)
+                    command=command, latency=latency if command == "cmd_vel" else 0.0)
 
 
 class _Replay:
@@ -392,6 +429,22 @@ class _Replay:
         residuals = torch.cat([p.transpose(0, 1).reshape(w, -1) for p in parts], -1)  # (W, R)
         path = torch.cat([xy, yaw[..., None]], -1)
         return residuals[:n], dxy.norm(dim=-1).mean(0)[:n], path[:, :n]
+
+    def channels(self, residuals: np.ndarray) -> dict[str, np.ndarray]:
+        """Each segment's root-mean-square error per channel, in its unit, from its residuals (S, R) as
+        :meth:`residuals` returns them: ``position`` [m], ``heading`` [rad], ``wheel_speed`` [rad/s] (per side) and,
+        where the bag has efforts, ``effort`` [N·m] (per side)."""
+        steps = self.segments.inputs.shape[1]
+        sizes = {"position": 2 * (steps + 1), "heading": steps + 1, "wheel_speed": 2 * (steps + 1 - self.warmup)}
+        if self.segments.ref_effort is not None:
+            sizes["effort"] = 2 * (steps - self.warmup)
+        scale = {"position": _POSITION_SCALE, "heading": _POSITION_SCALE / _HEADING_ARM,
+                 "wheel_speed": _WHEEL_SCALE / math.sqrt(2.0), "effort": _EFFORT_SCALE / math.sqrt(2.0)}
+        out, at = {}, 0
+        for name, size in sizes.items():
+            out[name] = scale[name] * np.sqrt((residuals[:, at:at + size] ** 2).sum(-1))
+            at += size
+        return out
 
     def residuals(self, index: np.ndarray, values: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Replay segments ``index`` (any number, in chunks of :attr:`worlds`), world i with ``values[p][i]``;
@@ -531,28 +584,26 @@ def _standard_error(start: _Start, names: list[str], span: np.ndarray) -> dict[s
 def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
               rover: RoverConfig | None = None, contact: ContactConfig | None = None,
               progress: Callable[[str], None] | None = None) -> CalibrationResult:
-    """Fit ``cfg.params`` to ``log``, starting from ``rover`` and ``contact`` (default: the realistic rover)."""
+    """Fit ``cfg.params`` to ``log``, starting from ``rover`` and ``contact`` (default: the realistic rover).
+
+    Where ``cfg.latency`` is ``None`` (a ``cmd_vel`` replay), the commands' latency is fitted too: after a fit at
+    none, the training segments are replayed at the fitted values with each whole-step latency up to
+    ``cfg.max_latency``, and if one lowers the loss by more than 5 % the fit runs again with it."""
 
     say = progress or (lambda _text: None)
     rover = rover or get_variant("realistic")
     contact = contact or ContactConfig()
     driver = cfg.driver()
     seg = make_segments(log, cfg, driver)
-    train, held = np.flatnonzero(~seg.held_out), np.flatnonzero(seg.held_out)
-    nominal = _nominal(rover, contact)
     names = [p for p in cfg.params if seg.command == "cmd_vel" or p not in MOTOR_PARAMETERS]
-    low = np.array([FIT_PARAMETERS[p].low for p in names])
-    span = np.array([FIT_PARAMETERS[p].high for p in names]) - low
+    nominal = _nominal(rover, contact)
     for p in names:
         if not FIT_PARAMETERS[p].low <= nominal[p] <= FIT_PARAMETERS[p].high:
             raise CalibrationError(f"the rover's {p} {nominal[p]:g} is outside the fit's bounds "
                                    f"[{FIT_PARAMETERS[p].low:g}, {FIT_PARAMETERS[p].high:g}]")
-    # the rover's values, then random points within the bounds
-    rng = np.random.default_rng(cfg.seed)
-    start = (np.array([nominal[p] for p in names]) - low) / span
-    units = np.concatenate([start[None], rng.uniform(0.1, 0.9, (cfg.starts - 1, len(names)))])
     through = (f" through a driver configured with wheel radius {driver.wheel_radius:g} m, track "
                f"{driver.track_width:g} m" if seg.command == "cmd_vel" else "")
+    train, held = np.flatnonzero(~seg.held_out), np.flatnonzero(seg.held_out)
     say(f"{len(train)} training and {len(held)} held-out segments of {cfg.segment_seconds:g} s "
         f"({seg.command}{through}); fitting {', '.join(names)} from {cfg.starts} starts")
     t_compile = time.perf_counter()
@@ -563,7 +614,107 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
     replay.residuals(train[:1], {p: np.array([nominal[p]]) for p in names})  # the first use compiles the kernels
     compile_s = time.perf_counter() - t_compile
     t_fit = time.perf_counter()
-    ends = _levenberg_marquardt(replay, train, names, low, span, units, cfg, say)
+    ends = _fit(replay, train, names, nominal, cfg, say)
+    latency = None
+    if cfg.latency is None and seg.command == "cmd_vel":
+        # the latency and the values are fitted in turn: each fit's values replayed at every whole-step latency; a
+        # latency that lowers the loss by more than 5 % is taken and the values fitted again (a fit at a latency
+        # short of the truth absorbs part of it, so the next scan can see further)
+        candidates = [round(0.05 * k, 6) for k in range(round(cfg.max_latency / 0.05) + 1)]
+        current, tried = 0.0, {0.0}
+        for _ in range(len(candidates)):
+            fitted = {**nominal, **_values(ends, names)}
+            losses = {}
+            for value in candidates:
+                replay.segments = make_segments(log, cfg, driver, latency=value, like=seg)
+                res = replay.residuals(train, {p: np.full(len(train), fitted[p]) for p in names})[0]
+                losses[value] = float(_cauchy((res**2).sum(-1), cfg.robust).mean())
+            best = min(losses, key=losses.get)
+            latency = {"seconds": current, "fitted": True, "loss_by_latency": losses}
+            if best == current or best in tried or losses[best] >= 0.95 * losses[current]:
+                break
+            say(f"command latency {best:g} s lowers the loss {losses[current]:.4f} -> {losses[best]:.4f}: fitting "
+                "again with it")
+            current = best
+            tried.add(best)
+            replay.segments = make_segments(log, cfg, driver, latency=current, like=seg)
+            ends = _fit(replay, train, names, nominal, cfg, say)
+        latency["seconds"] = current
+        seg = replay.segments = make_segments(log, cfg, driver, latency=current, like=seg)
+    elif seg.command == "cmd_vel":
+        latency = {"seconds": seg.latency, "fitted": False}
+    return _result(replay, seg, ends, names, nominal, cfg, noise=recording_noise(log, cfg), latency=latency,
+                   seconds=time.perf_counter() - t_fit,
+                   compile_seconds=compile_s, driver=_driver_record(driver) if seg.command == "cmd_vel" else None)
+
+
+def _values(ends: list[_Start], names: list[str]) -> dict[str, float]:
+    """The best start's values."""
+    best = min(ends, key=lambda s: s.objective)
+    return {p: float(FIT_PARAMETERS[p].low + (FIT_PARAMETERS[p].high - FIT_PARAMETERS[p].low) * best.unit[j])
+            for j, p in enumerate(names)}
+
+
+def _fit(replay: _Replay, train: np.ndarray, names: list[str], nominal: dict[str, float], cfg: CalibrationConfig,
+         say: Callable[[str], None]) -> list[_Start]:
+    """Levenberg-Marquardt from the rover's values and ``cfg.starts - 1`` random points within the bounds."""
+    low = np.array([FIT_PARAMETERS[p].low for p in names])
+    span = np.array([FIT_PARAMETERS[p].high for p in names]) - low
+    rng = np.random.default_rng(cfg.seed)
+    start = (np.array([nominal[p] for p in names]) - low) / span
+    units = np.concatenate([start[None], rng.uniform(0.1, 0.9, (cfg.starts - 1, len(names)))])
+    return _levenberg_marquardt(replay, train, names, low, span, units, cfg, say)
+
+
+def recording_noise(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig()) -> dict[str, float]:
+    """Each channel's noise in the part of ``log`` the fit uses, as a standard deviation: from the second differences
+    of consecutive samples (a white noise's have sqrt(6) times its deviation; a smooth signal's are small at 20 Hz),
+    robustly (the median absolute deviation): ``position`` [m] (x and y), ``wheel_speed`` [rad/s] and, where the bag
+    has them, ``effort`` [N·m]."""
+    def deviation(t: np.ndarray, x: np.ndarray) -> float:
+        if cfg.duration is not None:
+            x = x[t <= t[0] + cfg.duration]
+        d2 = x[2:] - 2.0 * x[1:-1] + x[:-2]
+        return float(np.mean(1.4826 * np.median(np.abs(d2 - np.median(d2, 0)), 0)) / math.sqrt(6.0))
+
+    out = {"position": deviation(log.pose_time, log.pose[:, :2]),
+           "wheel_speed": deviation(log.joint_time, log.wheel_speed)}
+    if log.effort is not None:
+        out["effort"] = deviation(log.joint_time, log.effort)
+    return out
+
+
+def _model_check(errors: dict, noise: dict[str, float], cfg: CalibrationConfig) -> dict:
+    """:attr:`CalibrationResult.misfit` from the held-out errors after the fit and the recording's noise."""
+    after = errors["held_out"]["rms_after"]
+    ratio = {c: after[c] / max(noise[c], MISFIT_FLOOR[c]) for c in noise if c in after}
+    over = {c: r for c, r in ratio.items() if r > cfg.misfit_ratio}
+    before, after_m = float(np.median(errors["held_out"]["before"])), float(np.median(errors["held_out"]["after"]))
+    worse = after_m > 1.05 * before and after_m > MISFIT_FLOOR["position"]
+    names = {"position": "position", "wheel_speed": "wheel speed", "effort": "wheel effort"}
+    units = {"position": "m", "wheel_speed": "rad/s", "effort": "N·m"}
+    shown = ", ".join(f"{names[c]} {ratio[c]:.1f}x" for c in ratio)
+    if over or worse:
+        what = ", ".join(f"{names[c]} {after[c]:.3g} {units[c]} ({r:.1f}x its noise)" for c, r in over.items())
+        line = (f"MISFIT: the model does not explain this drive: after the fit the held-out {what}"
+                if over else "MISFIT: the model does not explain this drive")
+        line += ("; the fit made the held-out path error worse" if worse else "")
+        line += (". Something on this rover is not in the model (motor lag, a slope, an off-centre load, a latency "
+                 f"over {cfg.max_latency:g} s ...): the fitted values absorb it, so do not trust them as measurements")
+    else:
+        line = (f"model check: the held-out errors after the fit are {shown} the recording's noise (at most "
+                f"{cfg.misfit_ratio:g}x passes): no misfit seen")
+    return {"noise": noise, "ratio": ratio, "threshold": cfg.misfit_ratio, "flagged": bool(over or worse),
+            "line": line}
+
+
+def _result(replay: _Replay, seg: Segments, ends: list[_Start], names: list[str], nominal: dict[str, float],
+            cfg: CalibrationConfig, *, noise: dict[str, float], **fields) -> CalibrationResult:
+    """The fit's result: the best start, the starts' agreement, the standard errors, and every split's errors
+    before and after, replayed in one batch."""
+    train, held = np.flatnonzero(~seg.held_out), np.flatnonzero(seg.held_out)
+    low = np.array([FIT_PARAMETERS[p].low for p in names])
+    span = np.array([FIT_PARAMETERS[p].high for p in names]) - low
     starts = [{"values": {p: float(low[j] + span[j] * s.unit[j]) for j, p in enumerate(names)}, "train_loss": s.loss,
                "objective": s.objective,
                "evaluations": s.evaluations, "settled": s.settled, "losses": s.history} for s in ends]
@@ -582,10 +733,13 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
     n = len(train) + len(held)
     res, err, path = replay.residuals(index, {p: np.repeat([nominal[p], fitted[p]], n) for p in names})
     loss = (res**2).sum(-1)
+    rms = replay.channels(res)
     errors = {}
     for split, a, b in (("train", 0, len(train)), ("held_out", len(train), n)):
         errors[split] = {"before": err[a:b].tolist(), "after": err[n + a:n + b].tolist(),
-                         "loss_before": float(loss[a:b].mean()), "loss_after": float(loss[n + a:n + b].mean())}
+                         "loss_before": float(loss[a:b].mean()), "loss_after": float(loss[n + a:n + b].mean()),
+                         "rms_before": {c: float(np.median(v[a:b])) for c, v in rms.items()},
+                         "rms_after": {c: float(np.median(v[n + a:n + b])) for c, v in rms.items()}}
     paths = {"recorded": seg.ref_pose[held], "nominal": path[:, len(train):n].transpose(1, 0, 2),
              "calibrated": path[:, n + len(train):].transpose(1, 0, 2), "t0": seg.t0[held]}
     # converged: every start settled (its undamped Gauss-Newton step within cfg.tolerance of each range: a stationary
@@ -602,20 +756,21 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
               f"did not converge: the starts ended {100 * agree:.1f} % of a parameter's range apart")
     return CalibrationResult(values={p: fitted[p] for p in names}, nominal={p: nominal[p] for p in names},
                              spread=spread, standard_error=standard_error, starts=starts, errors=errors,
-                             converged=converged, reason=reason, segments=seg, seconds=time.perf_counter() - t_fit,
-                             compile_seconds=compile_s, paths=paths,
-                             driver=_driver_record(driver) if seg.command == "cmd_vel" else None)
+                             converged=converged, reason=reason, segments=seg, paths=paths,
+                             misfit=_model_check(errors, noise, cfg), **fields)
 
 
 def replay_errors(log: DriveLog, values: dict[str, float], cfg: CalibrationConfig = CalibrationConfig(), *,
-                  rover: RoverConfig | None = None, contact: ContactConfig | None = None) -> dict[str, np.ndarray]:
+                  rover: RoverConfig | None = None, contact: ContactConfig | None = None,
+                  latency: float | None = None) -> dict[str, np.ndarray]:
     """Each segment's mean position error [m] with the parameters ``values`` (the others ``rover``'s and
     ``contact``'s), replayed as :func:`calibrate` replays ``log``: ``{"train": (S,), "held_out": (H,)}`` (a fit of a
-    shorter part of the drive, measured on a longer one's held-out segments)."""
+    shorter part of the drive, measured on a longer one's held-out segments). ``latency``: the commands' [s] (a fit's
+    ``result.latency["seconds"]``; ``None``: ``cfg``'s)."""
     rover = rover or get_variant("realistic")
     contact = contact or ContactConfig()
     driver = cfg.driver()
-    seg = make_segments(log, cfg, driver)
+    seg = make_segments(log, cfg, driver, latency=latency)
     point = {**_nominal(rover, contact), **values}
     names = [p for p in FIT_PARAMETERS if seg.command == "cmd_vel" or p not in MOTOR_PARAMETERS]
     replay = _Replay(seg, min(len(seg), cfg.worlds), rover, contact, cfg, driver)

@@ -15,6 +15,8 @@ __all__ = ["format_report", "plot_paths", "write_report", "write_sim_config"]
 
 
 def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
     if isinstance(v, str):
         return json.dumps(v)
     if isinstance(v, float):
@@ -44,8 +46,12 @@ def write_sim_config(path, result: CalibrationResult, source: str) -> None:
               f"segments_train = {int((~result.segments.held_out).sum())}",
               f"segments_held_out = {int(result.segments.held_out.sum())}",
               f"command = {_toml_value(result.segments.command)}",
+              *([f"command_latency_s = {_toml_value(result.latency['seconds'])}  # /cmd_vel reached the driver so late"]
+                if result.latency else []),
               f"held_out_error_before_m = {_toml_value(summary['held_out']['before_m'])}",
-              f"held_out_error_after_m = {_toml_value(summary['held_out']['after_m'])}", "",
+              f"held_out_error_after_m = {_toml_value(summary['held_out']['after_m'])}",
+              *([f"misfit = {_toml_value(result.misfit['flagged'])}  # the model check (the report's misfit)"]
+                if result.misfit else []), "",
               "[calibration.standard_error]  # sandwich estimate over the training segments"]
     lines += [f"{k} = {_toml_value(v)}" for k, v in result.standard_error.items()]
     lines += ["", "[calibration.spread]  # standard deviation over the converged starts (nan: one converged)"]
@@ -71,6 +77,16 @@ def format_report(result: CalibrationResult) -> str:
         n = len(result.errors[split]["before"])
         rows.append(f"{split.replace('_', '-') + f' ({n} segments)':<38}{s['before_m']:>8.3f}m{s['after_m']:>8.3f}m"
                     f"{s['reduction']:>6.1f}x")
+    lat = result.latency
+    if lat is not None:
+        rows.append("")
+        if not lat["fitted"]:
+            rows.append(f"command latency {lat['seconds']:g} s (given)")
+        else:
+            losses = ", ".join(f"{k:g} s {v:.3g}" for k, v in lat["loss_by_latency"].items())
+            rows.append(f"command latency {lat['seconds']:g} s (fitted; training loss by latency: {losses})")
+    if result.misfit is not None:
+        rows.append(result.misfit["line"])
     return "\n".join(rows)
 
 

@@ -7,6 +7,7 @@ real time; the executor serves the subscriptions between steps. Topics and param
 
 from __future__ import annotations
 
+import collections
 import json
 import math
 import time
@@ -92,6 +93,8 @@ class RoverIO:
         self.unanswered = 0
         """``lockstep``: the replayed episode's steps taken on ``lockstep_timeout``, without a new /cmd_vel."""
         self.pending_episode: int | None = None
+        self.delayed: collections.deque[tuple[int, float, float]] = collections.deque()
+        """``cmd_vel_delay``: the /cmd_vel commands on their way to the driver, each with the step it arrives at."""
         tf_prefix = f"rover_{index}/" if prefix else ""  # its /tf frame names (frames.py)
         self.tf_odom, self.tf_base = tf_prefix + node.odom_frame, tf_prefix + node.base_frame
         self.tf_chassis = tf_prefix + node.sim.description.chassis
@@ -142,7 +145,10 @@ class RoverIO:
             self.node.log.warning(f"ignored non-finite {self.prefix}/cmd_vel (linear.x={v}, angular.z={w})")
             return
         self.node.record(f"{self.prefix}/cmd_vel", "geometry_msgs/msg/Twist", twist_dict(msg))
-        self.node.sim.set_twist([v, w], worlds=[self.index])  # the base's driver takes it (and restarts its timeout)
+        if self.node.delay_steps:  # a command path's latency: the driver takes it that many steps later
+            self.delayed.append((self.node.steps + self.node.delay_steps, v, w))
+        else:
+            self.node.sim.set_twist([v, w], worlds=[self.index])  # the base's driver takes it (and restarts its timeout)
         self.node.commanded = True  # lockstep: the next step may go
         self.stopped = False
         self.pending = VELOCITY  # the next step logs the switch; the driver has the command already
@@ -373,6 +379,10 @@ class RoverSimNode(Node):
         self.holding = False
         """``lockstep``: a replayed episode has ended; nothing steps until the next ``reset_episode``."""
         self.reset_ns = 0
+        self.steps = 0
+        """Simulator steps taken (:meth:`on_step_timer`; ``cmd_vel_delay`` counts in them)."""
+        self.delay_steps = 0
+        """``cmd_vel_delay`` in whole steps."""
         """ROS time the episode resets added to the simulation time [ns]: one period each."""
 
     def setup(self) -> None:
@@ -382,7 +392,8 @@ class RoverSimNode(Node):
         # goal mode reads the policy's observation kernel
         try:
             self.env = ATRVjrEnv(k, variant=p["variant"], task=p["task"], seed=int(p["seed"]),
-                                 sim_config=p["sim_config"] or None, driver=self.driver)
+                                 sim_config=p["sim_config"] or None, driver=self.driver,
+                                 **({"terrain": p["terrain"]} if p["terrain"] else {}))
         except ValueError as err:
             self._fail(f"parameter sim_config: {err}" if p["sim_config"] else str(err))
         if p["sim_config"]:
@@ -401,6 +412,11 @@ class RoverSimNode(Node):
             self.sim.reset(poses=starts)
         except ValueError as err:
             self._fail(f"parameters x, y, yaw, spacing: {err}")
+        self.sim.driver.lag.fill_(p["motor_lag"])
+        self.delay_steps = round(p["cmd_vel_delay"] / self.sim.sim_cfg.step_dt)
+        if p["motor_lag"] or self.delay_steps or p["terrain"]:
+            self.log.info(f"effects: /cmd_vel delayed {self.delay_steps} step(s), motor lag {p['motor_lag']:g} s, "
+                          f"terrain {p['terrain'] or self.env.task_cfg.terrain}")
         if p["scan_beams"] > 0:
             from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
 
@@ -463,6 +479,14 @@ class RoverSimNode(Node):
                                 "imu_gyro_noise") if not p[n] >= 0]
         if negative:
             self._fail(f"noise parameter(s) {negative} must be >= 0 (standard deviations)")
+        bad = [n for n in ("cmd_vel_delay", "motor_lag") if not (math.isfinite(p[n]) and p[n] >= 0)]
+        if bad:
+            self._fail(f"parameter(s) {bad} must be finite and >= 0 [s]")
+        if p["terrain"]:
+            from atrv_warp.sim.terrain import TERRAIN_PRESETS
+
+            if p["terrain"] not in TERRAIN_PRESETS:
+                self._fail(f"terrain={p['terrain']!r} is not a terrain; use one of {sorted(TERRAIN_PRESETS)}")
         if not 0.0 <= p["scan_dropout"] <= 1.0:
             self._fail(f"scan_dropout is a probability in [0, 1], got {p['scan_dropout']}")
         if p["policy"]:  # goal mode's policy: a file the task can run, checked before any rover starts
@@ -566,6 +590,9 @@ class RoverSimNode(Node):
     def step_once(self) -> bool:
         """Every rover's input for its mode and one simulator step; True when a replayed episode ended in it."""
         for rover in self.rovers:
+            while rover.delayed and rover.delayed[0][0] <= self.steps:  # delayed /cmd_vel due at this step
+                _, v, w = rover.delayed.popleft()
+                self.sim.set_twist([v, w], worlds=[rover.index])
             rover.drive(self.goal_action)
         # what every rover commanded, as the policy's actions: a task that observes its last actions sees them
         task = self.env.task_cfg

@@ -52,6 +52,10 @@ PARAMETERS = (
     ("linear_max_acceleration", 0.0, "linear.x.max_acceleration [m/s²]; 0 = no limit"),
     ("angular_max_velocity", 0.0, "angular.z.max_velocity [rad/s]; 0 = no limit"),
     ("angular_max_acceleration", 0.0, "angular.z.max_acceleration [rad/s²]; 0 = no limit"),
+    ("cmd_vel_delay", 0.0, ("/cmd_vel reaches the driver this long after it arrives [s of sim time, whole steps]: a "
+                            "command path's latency, which a bag's stamps do not show")),
+    ("motor_lag", 0.0, "the motors' torque lag, a first-order time constant [s]; 0 = none (the driver's PI sees it)"),
+    ("terrain", "", "the ground, a terrain preset (e.g. slope: a 10 deg incline uphill toward +x); '' = the task's"),
     ("imu_accel_noise", SENSOR_NOISE.accel, "IMU accelerometer noise, standard deviation [m/s²]"),
     ("imu_gyro_noise", SENSOR_NOISE.gyro, "IMU gyroscope noise, standard deviation [rad/s]"),
     ("wheel_speed_noise", SENSOR_NOISE.wheel_speed, "/joint_states velocity noise, standard deviation [rad/s]"),
