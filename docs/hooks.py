@@ -490,6 +490,29 @@ def calibration_sweep(name: str = "calibration_sweep.json") -> str:
                   ["---:"] * 5 + ["---:"] * 4 + ["---", "---", "---:"], rows)
 
 
+def calibration_misfit() -> str:
+    """``calibration_misfit.json``: what the fit does with each effect its model lacks."""
+    d = _load("calibration_misfit.json")
+    effects = {"none": "nothing", "latency_1": "/cmd_vel 0.05 s late", "latency_2": "/cmd_vel 0.1 s late",
+               "motor_lag": "0.1 s motor torque lag", "payload_off_centre": "payload 0.25 m ahead, 0.15 m left",
+               "slope": "a 10° slope", "stiffness_1.4x": "ground 1.4× stiffer"}
+    rows = []
+    for r in d["cases"]:
+        p, t, m = r["params"], r["truth"], r["misfit"]
+        errors = [f"{100 * p['friction']['error'] / t['friction']:+.1f} %", f"{100 * p['torque_scale']['error'] / t['torque_scale']:+.1f} %",
+                  f"{p['payload_mass']['error']:+.1f} kg", f"{1000 * p['wheel_radius']['error']:+.1f} mm"]
+        errors = [e + ("" if p[k]["within"] else " ✗")
+                  for e, k in zip(errors, ("friction", "torque_scale", "payload_mass", "wheel_radius"))]
+        ratios = " / ".join(f"{m['ratio'][c]:.1f}" for c in ("position", "wheel_speed", "effort") if c in m["ratio"])
+        rows.append([effects.get(r["case"], r["case"]), *errors,
+                     f"{100 * r['held_out']['before_m']:.1f} → {100 * r['held_out']['after_m']:.1f} cm",
+                     f"{r['latency']['seconds']:g} s", "yes" if r["converged"] else "no",
+                     f"{ratios}: {'**misfit**' if m['flagged'] else 'passes'}"])
+    return _table(["recorded with", "µ error", "torque error", "payload error", "wheel error", "held-out error",
+                   "latency found", "converged", "model check (position / wheel speed / effort ÷ noise)"],
+                  ["---"] + ["---:"] * 5 + ["---:", "---", "---"], rows)
+
+
 def _diff_gradients(kind: str, name: str = "diff_gradients.json") -> str:
     d = _load(name)
     rows = d["agreement"]
@@ -712,6 +735,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "env_throughput": env_throughput,
     "env_scaling": env_scaling,
     "nav_throughput": nav_throughput,
+    "calibration_misfit": calibration_misfit,
     "nav_throughput_cuda": nav_throughput_cuda,
     "ray_collection": ray_collection,
     "step_profile": step_profile,
