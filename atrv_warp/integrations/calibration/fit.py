@@ -68,8 +68,8 @@ _HEADING_ARM = 0.5  # [m]: a heading error costs as the position error at this d
 _WHEEL_SCALE = 0.5  # [rad/s]: wheel-speed error that costs 1
 _EFFORT_SCALE = 1.0  # [N·m]: wheel-effort error that costs 1
 _NO_TAPER = 1.0e4  # [rad/s]: an effort replay's motor no-load speed (the recorded torques already taper)
-FIT_FIDELITY = {"friction": 0.01, "torque_scale": 0.01, "payload_mass": 0.7, "speed_limit": 1.0,
-                "wheel_radius": 0.0006}
+FIT_FIDELITY = {"friction": 0.003, "torque_scale": 0.0065, "payload_mass": 0.6, "speed_limit": 1.0,
+                "wheel_radius": 0.0009}
 """How well the replay pins each parameter beyond the recording's noise [its unit]: the root-mean-square error of
 the calibration sweep's converged fits of rovers it modelled exactly (``benchmarks/calibration_sweep.py --seed 0``;
 the speed limit, never fitted there, an estimate), added in quadrature to the statistical standard error. It is the
