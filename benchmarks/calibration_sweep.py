@@ -14,7 +14,9 @@
 3. Judges each rover by issue 42's tolerances: µ and torque scale within 5 %, payload within 1 kg or 5 %
    (the larger), wheel radius within 1 mm; the held-out position error cut at least 4x where the nominal model
    misses by more than 5 cm, else at most 2 cm after the fit; and whether each reported 95 % interval (the fit's
-   standard error x 1.96) covers the truth and is narrower than the parameter's range.
+   standard error x 1.96: the recording's noise and the replay's fidelity) covers the truth and is narrower than the
+   parameter's range. It also counts the model check's flags and the latencies found (false alarms here: each rover
+   is modelled exactly) and the pairs reported as confounded.
 
 Each rover's bag, report and console output stay in ``--work`` (default: a folder per seed under the system's
 temporary folder), so an interrupted sweep resumes where it stopped; ``--only`` runs a subset. Writes
@@ -121,7 +123,8 @@ def run_rover(k: int, truth: dict[str, float], *, seed: int, minutes: float, noi
     report = json.loads(report_file.read_text())
     row = judge(truth, report)
     row.update(rover=k, seed=rover_seed, exit_code=code, process_wall_s=wall, latency=report.get("latency"),
-               misfit=report.get("misfit"))
+               misfit=report.get("misfit"), correlation=report.get("correlation"),
+               confounded=report.get("confounded"))
     done.write_text(json.dumps(row, indent=1) + "\n")
     return row
 
@@ -168,6 +171,10 @@ def summarize(rows: list[dict], total: int) -> dict:
         "misfit_largest_ratio": max((max(r["misfit"]["ratio"].values()) for r in rows if r.get("misfit")),
                                     default=math.nan),
         "latency_found": sum(bool((r.get("latency") or {}).get("seconds")) for r in rows),
+        # pairs of fitted values the drive does not tell apart (correlation beyond 0.95), and the largest correlation
+        "confounded": sum(bool(r.get("confounded")) for r in rows),
+        "largest_correlation": max((abs(c["correlation"]) for r in rows for c in r.get("correlation") or []
+                                    if math.isfinite(c["correlation"])), default=math.nan),
         "targets": {"all_within": "every parameter within tolerance on >= 11 of 12 rovers",
                     "held_out": "cut >= 4x where the nominal model misses by > 5 cm, else <= 2 cm after, every rover",
                     "interval_coverage": ">= 85 % of the 95 % intervals cover the truth, none wider than the range",

@@ -13,7 +13,13 @@ import numpy as np
 import pytest
 import torch
 
-from atrv_warp.integrations.calibration import BagError, CalibrationConfig, CalibrationError, read_drive_log
+from atrv_warp.integrations.calibration import (
+    DEFAULT_FIT,
+    BagError,
+    CalibrationConfig,
+    CalibrationError,
+    read_drive_log,
+)
 from atrv_warp.integrations.calibration.fit import make_segments
 from atrv_warp.integrations.ros.bag import BagWriter
 from atrv_warp.sim.config import SimConfig, load_sim_config
@@ -543,3 +549,20 @@ def test_a_fit_finds_a_latency_and_flags_what_it_cannot_model(tmp_path, run_modu
         else:
             assert report["misfit"]["flagged"] and lines[0].startswith("MISFIT"), proc.stdout[-3000:]
             assert max(report["misfit"]["ratio"].values()) > 2.0
+
+
+def test_the_standard_error_adds_the_replays_fidelity_and_names_confounded_pairs():
+    """Two parameters the residuals move almost alike are reported as confounded; each standard error is at least the
+    replay's fidelity (issue 42, part 3)."""
+    from atrv_warp.integrations.calibration.fit import CONFOUNDED, FIT_FIDELITY, _standard_error, _Start
+
+    rng = np.random.default_rng(0)
+    base = rng.normal(size=(40, 30))
+    jac = np.stack([base, base + 0.05 * rng.normal(size=(40, 30)), rng.normal(size=(40, 30))], -1)  # (S, R, P)
+    start = _Start(unit=np.full(3, 0.5), residuals=0.1 * rng.normal(size=(40, 30)), jacobian=jac, damping=0.0,
+                   robust=None)
+    names = ["torque_scale", "payload_mass", "friction"]
+    statistical, correlation = _standard_error(start, names, np.ones(3))
+    assert abs(correlation[0, 1]) > CONFOUNDED > abs(correlation[0, 2])
+    assert all(np.isfinite(v) and v > 0 for v in statistical.values())
+    assert set(FIT_FIDELITY) >= set(DEFAULT_FIT) and all(v > 0 for v in FIT_FIDELITY.values())

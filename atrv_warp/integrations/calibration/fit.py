@@ -29,7 +29,7 @@ from atrv_warp.integrations.calibration.log import DriveLog
 from atrv_warp.sim.config import ContactConfig, RoverConfig, get_variant
 from atrv_warp.sim.driver import DriverConfig
 
-__all__ = ["COMMAND_SOURCES", "DEFAULT_FIT", "FIT_PARAMETERS", "MISFIT_FLOOR", "MOTOR_PARAMETERS", "CalibrationConfig",
+__all__ = ["COMMAND_SOURCES", "CONFOUNDED", "DEFAULT_FIT", "FIT_FIDELITY", "FIT_PARAMETERS", "MISFIT_FLOOR", "MOTOR_PARAMETERS", "CalibrationConfig",
            "CalibrationError", "CalibrationResult", "Segments", "calibrate", "make_segments", "recording_noise",
            "replay_errors"]
 
@@ -68,6 +68,15 @@ _HEADING_ARM = 0.5  # [m]: a heading error costs as the position error at this d
 _WHEEL_SCALE = 0.5  # [rad/s]: wheel-speed error that costs 1
 _EFFORT_SCALE = 1.0  # [N·m]: wheel-effort error that costs 1
 _NO_TAPER = 1.0e4  # [rad/s]: an effort replay's motor no-load speed (the recorded torques already taper)
+FIT_FIDELITY = {"friction": 0.003, "torque_scale": 0.0065, "payload_mass": 0.6, "speed_limit": 1.0,
+                "wheel_radius": 0.0009}
+"""How well the replay pins each parameter beyond the recording's noise [its unit]: the root-mean-square error of
+the calibration sweep's converged fits of rovers it modelled exactly (``benchmarks/calibration_sweep.py --seed 0``;
+the speed limit, never fitted there, an estimate), added in quadrature to the statistical standard error. It is the
+replay's own limit: its start is rebuilt from 20 Hz samples, and a slipping wheel amplifies any difference."""
+CONFOUNDED = 0.95
+"""The correlation beyond which two fitted values are reported as confounded: the drive fixes a combination of them,
+not each."""
 MISFIT_FLOOR = {"position": 0.01, "wheel_speed": 0.05, "effort": 0.1}
 """The least error [m, rad/s, N·m] the model check calls noise, whatever the recording's own (a reference or encoder
 far finer than this would otherwise flag what no training needs)."""
@@ -226,9 +235,8 @@ class CalibrationResult:
     spread: dict[str, float]
     """Standard deviation over the starts' end points; nan with one start."""
     standard_error: dict[str, float]
-    """Each value's standard error: the sandwich estimate from every training segment's loss gradient and the
-    Gauss-Newton Hessian of the total, both from the fit's last Jacobian (segments taken as independent); nan where
-    the Hessian is singular."""
+    """Each value's standard error: :attr:`statistical_error` and the replay's fidelity (:data:`FIT_FIDELITY`) in
+    quadrature; 1.96 of them either side is the 95 % interval the console, the report and the written config give."""
     starts: list[dict]
     """Each start's end: its values, mean training loss, replays (``evaluations``), the share of a range its last
     undamped step would move (``settled``) and its loss after each iteration (``losses``)."""
@@ -251,6 +259,18 @@ class CalibrationResult:
     latency: dict | None = None
     """The commands' latency (a ``cmd_vel`` replay): ``seconds``, whether it was ``fitted`` and, if so, the training
     loss at the first fit's values for each latency tried (``loss_by_latency``); ``None`` for an effort replay."""
+    statistical_error: dict[str, float] = field(default_factory=dict)
+    """The part from the recording's noise: the sandwich estimate from every training segment's loss gradient and the
+    Gauss-Newton Hessian of the total, both from the fit's last Jacobian (segments taken as independent); nan where
+    the Hessian is singular."""
+    correlation: list[tuple[str, str, float]] = field(default_factory=list)
+    """Each pair of fitted parameters' correlation in the sandwich estimate (nan where the Hessian is singular)."""
+
+    @property
+    def confounded(self) -> list[tuple[str, str, float]]:
+        """The pairs the drive does not tell apart: correlation beyond :data:`CONFOUNDED` (it fixes a combination of
+        them, not each)."""
+        return [(a, b, r) for a, b, r in self.correlation if abs(r) > CONFOUNDED]
 
     def error_summary(self) -> dict[str, dict[str, float]]:
         """Median of the per-segment errors, and the ratio before / after."""
@@ -262,6 +282,9 @@ class CalibrationResult:
 
     def to_dict(self) -> dict:
         return {"values": self.values, "nominal": self.nominal, "standard_error": self.standard_error,
+                "statistical_error": self.statistical_error,
+                "correlation": [{"pair": [a, b], "correlation": r} for a, b, r in self.correlation],
+                "confounded": [[a, b] for a, b, _ in self.confounded],
                 "spread": self.spread, "starts": self.starts,
                 "errors": self.errors, "error_summary": self.error_summary(), "converged": self.converged,
                 "reason": self.reason, "segments": {"train": int((~self.segments.held_out).sum()),
@@ -567,18 +590,19 @@ def _levenberg_marquardt(replay: _Replay, train: np.ndarray, names: list[str], l
     return starts
 
 
-def _standard_error(start: _Start, names: list[str], span: np.ndarray) -> dict[str, float]:
+def _standard_error(start: _Start, names: list[str], span: np.ndarray) -> tuple[dict[str, float], np.ndarray]:
     """Sandwich standard errors at the fit: ``H^-1 (sum_i g_i g_i^T) H^-1`` with ``g_i`` the gradient of training
     segment i's loss and ``H`` the Gauss–Newton Hessian of their sum, both from the fit's last Jacobian (segments
-    taken as independent); nan where ``H`` is singular."""
+    taken as independent), and the parameters' correlation matrix; nan where ``H`` is singular."""
     jac, res, w = start.jacobian, start.residuals, start.weights()  # (S, R, P), (S, R), (S,)
     g = 2.0 * np.einsum("s,srp,sr->sp", w, jac, res)
     hessian = 2.0 * np.einsum("s,srp,srq->pq", w, jac, jac)
     if not bool((np.linalg.eigvalsh(hessian) > 1e-12 * np.abs(hessian).max()).all()):
-        return {p: math.nan for p in names}
+        return {p: math.nan for p in names}, np.full((len(names), len(names)), math.nan)
     inverse = np.linalg.inv(hessian)
     cov = inverse @ (g.T @ g) @ inverse
-    return {p: float(span[j] * math.sqrt(max(cov[j, j], 0.0))) for j, p in enumerate(names)}
+    sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    return {p: float(span[j] * sd[j]) for j, p in enumerate(names)}, cov / np.outer(sd, sd)
 
 
 def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
@@ -727,7 +751,11 @@ def _result(replay: _Replay, seg: Segments, ends: list[_Start], names: list[str]
     agree = float((units_end.max(0) - units_end.min(0)).max())
     spread = {p: float(np.std([s["values"][p] for s in starts], ddof=1)) if len(starts) > 1 else math.nan
               for p in names}
-    standard_error = _standard_error(ends[best], names, span)
+    statistical, correlation = _standard_error(ends[best], names, span)
+    # the replay's fidelity, in quadrature: the sandwich estimate describes the recording's noise, not what the replay
+    # cannot follow, which on the calibration sweep is most of the error
+    standard_error = {p: math.hypot(statistical[p], FIT_FIDELITY[p]) for p in names}
+    pairs = [(a, b, float(correlation[i, j])) for i, a in enumerate(names) for j, b in enumerate(names) if i < j]
     # every split before and after, in one batch
     index = np.concatenate([train, held, train, held])
     n = len(train) + len(held)
@@ -755,7 +783,8 @@ def _result(replay: _Replay, seg: Segments, ends: list[_Start], names: list[str]
               f"{100 * settled:.1f} % of its range" if settled > cfg.tolerance else
               f"did not converge: the starts ended {100 * agree:.1f} % of a parameter's range apart")
     return CalibrationResult(values={p: fitted[p] for p in names}, nominal={p: nominal[p] for p in names},
-                             spread=spread, standard_error=standard_error, starts=starts, errors=errors,
+                             spread=spread, standard_error=standard_error, statistical_error=statistical,
+                             correlation=pairs, starts=starts, errors=errors,
                              converged=converged, reason=reason, segments=seg, paths=paths,
                              misfit=_model_check(errors, noise, cfg), **fields)
 

@@ -52,7 +52,7 @@ def write_sim_config(path, result: CalibrationResult, source: str) -> None:
               f"held_out_error_after_m = {_toml_value(summary['held_out']['after_m'])}",
               *([f"misfit = {_toml_value(result.misfit['flagged'])}  # the model check (the report's misfit)"]
                 if result.misfit else []), "",
-              "[calibration.standard_error]  # sandwich estimate over the training segments"]
+              "[calibration.standard_error]  # the recording's noise (sandwich) and the replay's fidelity, in quadrature"]
     lines += [f"{k} = {_toml_value(v)}" for k, v in result.standard_error.items()]
     lines += ["", "[calibration.spread]  # standard deviation over the converged starts (nan: one converged)"]
     lines += [f"{k} = {_toml_value(v)}" for k, v in result.spread.items()]
@@ -71,6 +71,10 @@ def format_report(result: CalibrationResult) -> str:
     for name, value in result.values.items():
         rows.append(f"{name:<14}{result.nominal[name]:>10.4g}{value:>10.4g}{number(result.standard_error[name]):>11}"
                     f"{number(result.spread[name]):>9}  {FIT_PARAMETERS[name].unit}")
+    rows.append("± std err: the recording's noise and the replay's fidelity, in quadrature (1.96 of them: 95 %)")
+    for a, b, r in result.confounded:
+        rows.append(f"{a} and {b} are confounded (correlation {r:+.2f}): the drive fixes a combination of them, not "
+                    "each; fit one with the other known (--params)")
     rows.append("")
     rows.append(f"{'position error (median per segment)':<38}{'before':>9}{'after':>9}{'cut':>7}")
     for split, s in result.error_summary().items():

@@ -617,6 +617,7 @@ class RoverSimNode(Node):
         self.reset_ns += round(self.sim.sim_cfg.step_dt * 1e9)
         self.env.reset_to_episodes([rover.index], [k], seed=seed)
         self.sim.set_twist([0.0, 0.0], worlds=[rover.index])
+        rover.delayed.clear()  # a delayed /cmd_vel of the last episode is not this one's
         # the odometry frame where the environment puts it (the start as drawn, not the settled chassis's pose: on a
         # slope their yaws differ by a fraction of a degree), so the goal is seen as evaluate's policy sees it
         rover.start = tuple(float(v) for v in self.env.episode_start[rover.index].tolist())
