@@ -736,6 +736,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "env_scaling": env_scaling,
     "nav_throughput": nav_throughput,
     "calibration_misfit": calibration_misfit,
+    "calibration_sweep_seed1": lambda: calibration_sweep("calibration_sweep_seed1.json"),
     "nav_throughput_cuda": nav_throughput_cuda,
     "ray_collection": ray_collection,
     "step_profile": step_profile,
