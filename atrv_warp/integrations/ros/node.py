@@ -379,11 +379,11 @@ class RoverSimNode(Node):
         self.holding = False
         """``lockstep``: a replayed episode has ended; nothing steps until the next ``reset_episode``."""
         self.reset_ns = 0
+        """ROS time the episode resets added to the simulation time [ns]: one period each."""
         self.steps = 0
         """Simulator steps taken (:meth:`on_step_timer`; ``cmd_vel_delay`` counts in them)."""
         self.delay_steps = 0
         """``cmd_vel_delay`` in whole steps."""
-        """ROS time the episode resets added to the simulation time [ns]: one period each."""
 
     def setup(self) -> None:
         self._check_parameters()
@@ -618,6 +618,7 @@ class RoverSimNode(Node):
         self.env.reset_to_episodes([rover.index], [k], seed=seed)
         self.sim.set_twist([0.0, 0.0], worlds=[rover.index])
         rover.delayed.clear()  # a delayed /cmd_vel of the last episode is not this one's
+        self.sim.driver.lag[rover.index] = self.params["motor_lag"]  # the episode's reset drew the env's lag
         # the odometry frame where the environment puts it (the start as drawn, not the settled chassis's pose: on a
         # slope their yaws differ by a fraction of a degree), so the goal is seen as evaluate's policy sees it
         rover.start = tuple(float(v) for v in self.env.episode_start[rover.index].tolist())
