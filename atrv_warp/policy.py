@@ -56,10 +56,13 @@ SHIPPED_POLICIES: dict[str, ShippedPolicy] = {
     "nav": ShippedPolicy("nav_policy.pt", "nav", "python -m atrv_warp.train --config nav randomization=wide"),
     "nav_plain": ShippedPolicy("nav_policy_plain.pt", "nav", "python -m atrv_warp.train --config nav"),
     "nav_deploy": ShippedPolicy("nav_deploy_policy.pt", "nav_deploy", "python -m atrv_warp.train --config nav_deploy"),
+    "nav_deploy_plain": ShippedPolicy("nav_deploy_policy_plain.pt", "nav_deploy",
+                                      "python -m atrv_warp.train --config nav_deploy randomization=none"),
 }
 """The shipped policies by name: ``reach`` (the reference task), ``nav`` (navigation, trained under the ``wide``
 domain randomization), ``nav_plain`` (navigation on the nominal rover with perfect sensors), ``nav_deploy`` (the
-navigation policy for a robot: ``/cmd_vel`` commands from the robot observation, trained under ``wide``)."""
+navigation policy for a robot: ``/cmd_vel`` commands from the robot observation, trained under ``wide``),
+``nav_deploy_plain`` (the same trained on the nominal rover, without randomization: the MuJoCo twin's comparison)."""
 
 
 class PolicyTaskMismatch(FileFormatError):
