@@ -712,11 +712,11 @@ def mujoco_turning_study() -> str:
                   ["---", "---:", "---:", "---:", "---:", "---:", "---:", "---:", "---:"], out)
 
 
-def mujoco_transfer() -> str:
+def mujoco_transfer(name: str = "mujoco_transfer.json") -> str:
     """``mujoco_transfer.json``: each deployable policy in the MuJoCo twin at each µ (and in our simulator on the
     same episodes), success and how the others ended."""
     rows = []
-    for policy, runs in _load("mujoco_transfer.json")["policies"].items():
+    for policy, runs in _load(name)["policies"].items():
         for where, r in runs.items():
             rows.append([policy, where, str(r["episodes"]), f"{r['success']:.1%}", f"{r['obstacle']:.1%}",
                          f"{r['timeout']:.1%}", f"{r['flip']:.1%}", f"{r['mean_steps']:.0f}"])
@@ -736,6 +736,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "env_scaling": env_scaling,
     "nav_throughput": nav_throughput,
     "calibration_misfit": calibration_misfit,
+    "mujoco_transfer_plain": lambda: mujoco_transfer("mujoco_transfer_plain.json"),
     "calibration_sweep_seed1": lambda: calibration_sweep("calibration_sweep_seed1.json"),
     "nav_throughput_cuda": nav_throughput_cuda,
     "ray_collection": ray_collection,
