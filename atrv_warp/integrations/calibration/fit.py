@@ -612,7 +612,8 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
 
     Where ``cfg.latency`` is ``None`` (a ``cmd_vel`` replay), the commands' latency is fitted too: after a fit at
     none, the training segments are replayed at the fitted values with each whole-step latency up to
-    ``cfg.max_latency``, and if one lowers the loss by more than 5 % the fit runs again with it."""
+    ``cfg.max_latency``; one that lowers the loss by more than 5 % is taken and the values fitted again with it,
+    in turn until no latency does. The result ends with the model check (:attr:`CalibrationResult.misfit`)."""
 
     say = progress or (lambda _text: None)
     rover = rover or get_variant("realistic")
