@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 from _common import write_results
-from calibration_sweep import _calibrate, judge, truth_toml
+from calibration_sweep import fit_bag, judge, record_bag, truth_toml
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -75,19 +75,9 @@ def run_case(name: str, *, seed: int, minutes: float, noise: float, work: Path, 
     bag = folder / "drive.mcap"
     if not bag.is_file():
         params = [a for k, v in case.get("node", {}).items() for a in ("-p", f"{k}:={v}")]
-        _, code = _calibrate(["--record-example", str(bag), "--minutes", str(minutes), "--truth",
-                              str(folder / "truth.toml"), "--noise", str(noise), "--seed", str(seed), *params],
-                             dict(env, ROS_DOMAIN_ID=str(random.Random(f"{seed}{name}").randint(101, 200))),
-                             folder / "record.log")
-        if code != 0:
-            bag.unlink(missing_ok=True)
-            raise RuntimeError(f"{name}: recording failed (exit {code}); see {folder / 'record.log'}")
-    out = folder / "calibrated.toml"
-    wall, code = _calibrate([str(bag), "--out", str(out)], env, folder / "fit.log")
-    report_file = out.with_suffix(".report.json")
-    if not report_file.is_file():
-        raise RuntimeError(f"{name}: the fit wrote no report (exit {code}); see {folder / 'fit.log'}")
-    report = json.loads(report_file.read_text())
+        record_bag(folder, name, ["--minutes", str(minutes), "--noise", str(noise), "--seed", str(seed), *params],
+                   dict(env, ROS_DOMAIN_ID=str(random.Random(f"{seed}{name}").randint(101, 200))))
+    report, wall, code = fit_bag(folder, name, env)
     row = judge(TRUTH, report)
     row.update(case=name, case_spec=case, minutes=minutes, exit_code=code, process_wall_s=wall,
                latency=report.get("latency"), misfit=report.get("misfit"),

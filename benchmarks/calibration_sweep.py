@@ -91,6 +91,28 @@ def _calibrate(args: list[str], env: dict, log: Path) -> tuple[float, int]:
     return time.perf_counter() - t0, proc.returncode
 
 
+def record_bag(folder: Path, label: str, args: list[str], env: dict) -> None:
+    """Record ``folder/drive.mcap`` of the rover ``folder/truth.toml`` describes (``atrv-calibrate --record-example``
+    with ``args``), its output to ``folder/record.log``; a failure removes the bag and raises, naming ``label``."""
+    bag = folder / "drive.mcap"
+    _, code = _calibrate(["--record-example", str(bag), "--truth", str(folder / "truth.toml"), *args], env,
+                         folder / "record.log")
+    if code != 0:
+        bag.unlink(missing_ok=True)
+        raise RuntimeError(f"{label}: recording failed (exit {code}); see {folder / 'record.log'}")
+
+
+def fit_bag(folder: Path, label: str, env: dict) -> tuple[dict, float, int]:
+    """Fit ``folder/drive.mcap`` with the CLI's defaults in a fresh process, its output to ``folder/fit.log``: the
+    report, the process's wall seconds and its exit code; raises, naming ``label``, where it wrote no report."""
+    out = folder / "calibrated.toml"
+    wall, code = _calibrate([str(folder / "drive.mcap"), "--out", str(out)], env, folder / "fit.log")
+    report_file = out.with_suffix(".report.json")
+    if not report_file.is_file():
+        raise RuntimeError(f"{label}: the fit wrote no report (exit {code}); see {folder / 'fit.log'}")
+    return json.loads(report_file.read_text()), wall, code
+
+
 def run_rover(k: int, truth: dict[str, float], *, seed: int, minutes: float, noise: float, work: Path,
               env: dict, record_only: bool = False) -> dict | None:
     """Record and fit rover ``k`` (or read what an earlier run of the sweep left in ``work``): its row (``None``
@@ -106,21 +128,11 @@ def run_rover(k: int, truth: dict[str, float], *, seed: int, minutes: float, noi
     bag = folder / "drive.mcap"
     rover_seed = 1000 * seed + k + 1
     if not bag.is_file():
-        wall, code = _calibrate(["--record-example", str(bag), "--minutes", str(minutes), "--truth",
-                                 str(folder / "truth.toml"), "--noise", str(noise), "--seed", str(rover_seed)],
-                                dict(env, ROS_DOMAIN_ID=str(random.Random(rover_seed).randint(101, 200))),
-                                folder / "record.log")
-        if code != 0:
-            bag.unlink(missing_ok=True)
-            raise RuntimeError(f"rover {k}: recording failed (exit {code}); see {folder / 'record.log'}")
+        record_bag(folder, f"rover {k}", ["--minutes", str(minutes), "--noise", str(noise), "--seed", str(rover_seed)],
+                   dict(env, ROS_DOMAIN_ID=str(random.Random(rover_seed).randint(101, 200))))
     if record_only:
         return None
-    out = folder / "calibrated.toml"
-    wall, code = _calibrate([str(bag), "--out", str(out)], env, folder / "fit.log")
-    report_file = out.with_suffix(".report.json")
-    if not report_file.is_file():
-        raise RuntimeError(f"rover {k}: the fit wrote no report (exit {code}); see {folder / 'fit.log'}")
-    report = json.loads(report_file.read_text())
+    report, wall, code = fit_bag(folder, f"rover {k}", env)
     row = judge(truth, report)
     row.update(rover=k, seed=rover_seed, exit_code=code, process_wall_s=wall, latency=report.get("latency"),
                misfit=report.get("misfit"), correlation=report.get("correlation"),
