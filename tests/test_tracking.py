@@ -146,8 +146,12 @@ def test_wandb_offline_run_folder_holds_config_scalars_and_video(tmp_path, nav_v
     (folder,) = (run_dir / "logs" / "wandb").glob(f"offline-run-*-{run_id}")
     records = wandb_records(folder)
     key = lambda item: item.key or "/".join(item.nested_key)
-    config = {key(i): json.loads(i.value_json) for r in records if r.HasField("config") for i in r.config.update}
-    assert config["optim.lr"] == cfg.optim.lr and config["env.task"] == "reach" and config["logging.logger"] == "wandb"
+    # the configuration is a config record, or folded into the run record when it reaches W&B's writer first
+    updates = [r.run.config.update if r.HasField("run") else r.config.update for r in records
+               if r.HasField("run") or r.HasField("config")]
+    config = {key(i): json.loads(i.value_json) for update in updates for i in update}
+    assert (config.get("optim.lr"), config.get("env.task"), config.get("logging.logger")) == (
+        cfg.optim.lr, "reach", "wandb"), sorted(config)
     rows = [{key(i): json.loads(i.value_json) for i in r.history.item} for r in records if r.HasField("history")]
     success = [(row["step"], row["eval_success_rate"]) for row in rows if "eval_success_rate" in row]
     assert success == [(2048, 0.25), (4096, 0.5)], success
