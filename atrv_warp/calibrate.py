@@ -17,13 +17,15 @@ A bad bag is one line naming the file and the problem (exit 2), and nothing is w
 converge says so and writes no calibration file (exit 1).
 
 ``--record-example OUT.mcap`` records a bag to try it on: the simulator node driven over ROS 2 by a scripted
-driver (needs the ``ros`` extra); ``--truth FILE`` gives that rover a simulator config the fit is not told.
+driver (needs the ``ros`` extra), or with ``--engine mujoco`` the MuJoCo twin (the ``mujoco`` extra), a rover
+whose contact is not ours; ``--truth FILE`` gives that rover a simulator config the fit is not told.
 docs/calibration.md walks through both.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import time
@@ -83,6 +85,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "0.05 s steps up to 0.2 s; 0: none)"))
     p.add_argument("--record-example", metavar="OUT.mcap",
                    help="record a bag to try this on: the simulator node, driven over ROS 2 (needs the ros extra)")
+    p.add_argument("--engine", default="ours", choices=("ours", "mujoco"),
+                   help=("--record-example: the rover's simulator: ours (the simulator node over ROS 2) or mujoco "
+                         "(the MuJoCo twin on flat ground, another engine's contact; the mujoco extra) (%(default)s)"))
     p.add_argument("--minutes", type=float, default=5.0, help="--record-example: sim minutes (%(default)s)")
     p.add_argument("--truth", help="--record-example: the recorded rover's simulator config (hidden from the fit)")
     p.add_argument("--noise", type=float, default=0.01,
@@ -113,6 +118,8 @@ def _node_params(items: list[str]) -> dict[str, float | int | bool | str] | str:
 
 
 def _record(args) -> int:
+    if args.engine == "mujoco":
+        return _record_twin(args)
     try:
         from atrv_warp.integrations.ros.drive import record_drive_bag
     except ImportError:
@@ -141,6 +148,51 @@ def _record(args) -> int:
     t0 = time.perf_counter()
     print(f"recording {args.minutes:g} min of scripted driving to {args.record_example} …", flush=True)
     record_drive_bag(args.record_example, args.minutes, seed=args.seed, parameters=params)
+    print(f"wrote {args.record_example} ({Path(args.record_example).stat().st_size / 1e6:.1f} MB) in "
+          f"{time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+def _record_twin(args) -> int:
+    """``--record-example --engine mujoco``: the bag from the MuJoCo twin of ``--truth``'s rover."""
+    from atrv_warp.evaluate import MUJOCO_EXTRA
+
+    if args.node_param:
+        print(f"error: -p {args.node_param[0]}: simulator-node parameters are for --engine ours", file=sys.stderr)
+        return 2
+    try:
+        from atrv_warp.integrations.mujoco.record import record_twin_bag
+    except ImportError as err:
+        print(f"error: --engine mujoco needs MuJoCo ({err.name} is not installed): {MUJOCO_EXTRA}", file=sys.stderr)
+        return 2
+    from atrv_warp.sim.config import ContactConfig, load_sim_config
+    from atrv_warp.sim.driver import DriverConfig
+
+    rover, friction = None, None
+    if args.truth:
+        try:
+            rover, contact = load_sim_config(args.truth)
+        except ValueError as err:
+            print(f"error: --truth: {err}", file=sys.stderr)
+            return 2
+        other = [f.name for f in dataclasses.fields(contact) if f.name != "friction"
+                 and getattr(contact, f.name) != getattr(ContactConfig(), f.name)]
+        if other:
+            print(f"error: --truth: [contact] {', '.join(other)} is our contact model's; the MuJoCo twin takes its "
+                  "friction only", file=sys.stderr)
+            return 2
+        friction = contact.friction
+    driver = DriverConfig(wheel_radius=args.driver_wheel_radius, track_width=args.driver_track_width)
+    t0 = time.perf_counter()
+    print(f"recording {args.minutes:g} min of scripted driving in the MuJoCo twin to {args.record_example} …",
+          flush=True)
+    try:
+        record_twin_bag(args.record_example, args.minutes, seed=args.seed, rover=rover, friction=friction,
+                        driver=driver, truth_noise=args.noise, truth_yaw_noise=args.noise / 0.5,
+                        progress=lambda t: print(f"  {t:.0f} s", flush=True) if round(t) % 60 == 0 else None)
+    except (OSError, ValueError) as err:
+        print(f"error: {args.record_example}: {err}", file=sys.stderr)
+        return 2
     print(f"wrote {args.record_example} ({Path(args.record_example).stat().st_size / 1e6:.1f} MB) in "
           f"{time.perf_counter() - t0:.0f} s")
     return 0

@@ -2,6 +2,7 @@
 
 - :mod:`.log`: the drive read from a ROS 2 bag (MCAP): commands, wheel encoders, reference pose;
 - :mod:`.fit`: the fit of the physical parameters to replays of the drive in the simulator, and its report;
+- :mod:`.excitation`: the scripted drive a calibration bag records (seeded commands, no transport);
 - :mod:`.output`: the simulator-config TOML, the JSON report and the plot of the paths.
 """
 

@@ -26,7 +26,7 @@ from atrv_warp.sim.terrain import HeightGrid
 from atrv_warp.sim.urdf import Inertial, RoverDescription
 
 __all__ = ["MUJOCO_DEFAULT_CONTACT", "ROVER_GROUP", "SCENE_GROUP", "MujocoContact", "Obstacle", "inertial_xml", "number",
-           "pose_xml", "quat_wxyz", "rover_xml", "vector", "wheel_geom_name", "world_xml"]
+           "pose_xml", "quat_wxyz", "rover_xml", "vector", "wheel_geom_name", "with_payload", "world_xml"]
 
 SCENE_GROUP = 0
 """Geom group of the scene (ground, walls, obstacles): what the scanner's rays see."""
@@ -161,6 +161,22 @@ def inertial_xml(inertial: Inertial) -> str:
     return f'<inertial pos="{vector(inertial.com)}" mass="{number(inertial.mass)}" fullinertia="{vector(full)}"/>'
 
 
+def with_payload(inertial: Inertial, mass: float, offset) -> Inertial:
+    """``inertial`` with a point ``mass`` [kg] at ``offset`` [m] from its centre of mass (its frame's axes) added,
+    as the simulator puts a payload on the chassis (``add_point_mass`` in :mod:`atrv_warp.sim.kernels.params`)."""
+    if mass == 0.0:
+        return inertial
+    point = inertial.com + np.asarray(offset, dtype=np.float64)
+    total = inertial.mass + mass
+    com = inertial.com + (mass / total) * (point - inertial.com)
+
+    def parallel_axis(m: float, r: np.ndarray) -> np.ndarray:
+        return m * (float(r @ r) * np.eye(3) - np.outer(r, r))
+
+    inertia = inertial.inertia + parallel_axis(inertial.mass, inertial.com - com) + parallel_axis(mass, point - com)
+    return Inertial(total, com, inertia)
+
+
 def wheel_geom_name(link: str, wheel: str = "cylinder") -> str:
     """The name of a wheel link's collision geom (``wheel``: its shape) in :func:`rover_xml`."""
     return f"{link}/{wheel}"
@@ -168,15 +184,15 @@ def wheel_geom_name(link: str, wheel: str = "cylinder") -> str:
 
 def rover_xml(desc: RoverDescription, rover: RoverConfig, *, pos=(0.0, 0.0, 0.0), indent: str = "    ",
               shape_attributes: str = "", wheel: str = "cylinder", wheel_attributes: str | None = None) -> list[str]:
-    """The rover's body tree as MJCF lines: the chassis on a free joint named ``root_joint`` (its box collision),
-    and each wheel on a hinge (its cylinder, ``wheel_offset`` outward of the joint; or a sphere of its radius
+    """The rover's body tree as MJCF lines: the chassis on a free joint named ``root_joint`` (its box collision;
+    the rover's payload in its mass properties), and each wheel on a hinge (its cylinder, ``wheel_offset`` outward of the joint; or a sphere of its radius
     there, ``wheel="sphere"``). ``shape_attributes`` is added to every collision geom (contact bits, group);
     ``wheel_attributes``, if given, to the wheels' in its place."""
     extra = f" {shape_attributes}" if shape_attributes else ""
     wheel_extra = extra if wheel_attributes is None else f" {wheel_attributes}"
     lines = [f'{indent}<body name="{desc.chassis}" pos="{vector(pos)}">',
              f'{indent}  <freejoint name="root_joint"/>',
-             f"{indent}  {inertial_xml(desc.chassis_inertial)}"]
+             f"{indent}  {inertial_xml(with_payload(desc.chassis_inertial, rover.payload_mass, rover.payload_offset))}"]
     if desc.chassis_box is not None:
         pose, half = desc.chassis_box
         lines.append(f'{indent}  <geom name="{desc.chassis}/box" type="box" {pose_xml(pose)} size="{vector(half)}"'
@@ -208,7 +224,7 @@ def world_xml(desc: RoverDescription, rover: RoverConfig, *, arena: ArenaConfig,
     """The MJCF text of one episode's world: the rover (at the origin; its free joint places it), the arena, the
     ground (a plane, or ``terrain``'s ``tile`` as a height field), the ``obstacles`` (standing to ``obstacle_top``
     [m], absolute), one torque motor per wheel (``gear`` its drive sign, so that a positive control drives forward;
-    within ``torque_limit`` [N·m]), contact at Coulomb ``friction`` [-] with MuJoCo's settings ``contact``
+    within ``torque_limit`` [N·m], times the rover's ``torque_scale`` where that exceeds 1), contact at Coulomb ``friction`` [-] with MuJoCo's settings ``contact``
     (default :class:`MujocoContact`: the tyre's compliance).
 
     The scene's geoms are in :data:`SCENE_GROUP` and collide with the rover's only; the rover's are in
@@ -282,6 +298,7 @@ def world_xml(desc: RoverDescription, rover: RoverConfig, *, arena: ArenaConfig,
                          f'solimp="{vector(c.solimp)}" solreffriction="{vector(c.solreffriction)}"/>')
         lines.append("  </contact>")
     lines.append("  <actuator>")
+    torque_limit *= max(1.0, rover.torque_scale)  # the driver's torque times the motor's strength
     for w in desc.wheels:
         lines.append(f'    <motor name="{w.joint}/motor" joint="{w.joint}" gear="{number(w.drive_sign)}" '
                      f'ctrlrange="{number(-torque_limit)} {number(torque_limit)}"/>')
