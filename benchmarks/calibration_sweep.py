@@ -194,8 +194,10 @@ def summarize(rows: list[dict], total: int) -> dict:
     }
 
 
-def plot(rows: list[dict], path: Path) -> None:
-    """Fitted against true values, one panel per parameter, with the 95 % intervals and the tolerance band."""
+def plot(rows: list[dict], path: Path, *, title: str | None = None,
+         extra: dict[str, tuple[str, list[float], list[float]]] | None = None) -> None:
+    """Fitted against true values, one panel per parameter, with the 95 % intervals and the tolerance band;
+    ``extra``: more points for a parameter's panel, (label, truths, values), drawn as crosses."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -212,12 +214,16 @@ def plot(rows: list[dict], path: Path) -> None:
             half = v["interval"][1] - v["fitted"]  # nan where the fit reported no standard error
             ax.errorbar(v["truth"], v["fitted"], yerr=half if math.isfinite(half) else 0.0, fmt="o", ms=4,
                         color="C0" if v["within"] else "C3", capsize=2)
+        if extra and p in extra:
+            label, xs_extra, ys_extra = extra[p]
+            ax.plot(xs_extra, ys_extra, "kx", ms=6, label=label)
+            ax.legend(fontsize=7, loc="upper left")
         ax.set_title(p, fontsize=9)
         ax.set_xlabel("truth", fontsize=8)
         ax.tick_params(labelsize=7)
     axes[0].set_ylabel("fitted (95 % interval)", fontsize=8)
     axes[0].legend(fontsize=7, loc="upper left")
-    fig.suptitle(f"calibration on {len(rows)} drawn rovers: blue within tolerance, red outside", fontsize=9)
+    fig.suptitle(title or f"calibration on {len(rows)} drawn rovers: blue within tolerance, red outside", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

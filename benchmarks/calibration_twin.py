@@ -77,6 +77,29 @@ def run_rover(label: str, truth: dict[str, float], drive_seed: int, *, minutes: 
     return row
 
 
+def rolling_radius(truth: dict[str, float], speed: float = 0.5, seconds: float = 4.0) -> float:
+    """The twin's rolling radius [m] for rover ``truth``: forward speed over the wheels' mean speed, driving
+    straight at ``speed`` [m/s], averaged over the last second (its wheel sinks, and pushes on the ground at its
+    contact point, inside the geometric radius)."""
+    import numpy as np
+
+    from atrv_warp.integrations.mujoco import MujocoTwin
+    from atrv_warp.integrations.mujoco.record import twin_driver
+    from atrv_warp.sim.config import RoverConfig
+
+    rover = RoverConfig(torque_scale=truth["torque_scale"], payload_mass=truth["payload_mass"],
+                        wheel_radius=truth["wheel_radius"])
+    twin = MujocoTwin(rover=rover, friction=truth["friction"], driver=twin_driver())
+    ratios = []
+    for k in range(round(seconds / twin.sim_cfg.step_dt)):
+        twin.command(speed, 0.0)
+        twin.step()
+        if k >= round((seconds - 1.0) / twin.sim_cfg.step_dt):
+            forward = float(twin.chassis_rotation[:, 0] @ twin.linear_velocity)
+            ratios.append(forward / float(np.mean(twin.wheel_speed)))
+    return float(np.mean(ratios))
+
+
 def ours(sweep: dict | None, k: int) -> dict | None:
     """Rover ``k`` of the sweep on our own engine (its held-out errors and fitted values), if the sweep ran it."""
     for r in (sweep or {}).get("rovers", []):
@@ -117,11 +140,14 @@ def main() -> int:
             print(f"  {err}", file=sys.stderr, flush=True)
             continue
         row["ours"] = ours(sweep, k - 1) if k > 0 else None
+        row["twin_rolling_radius"] = rolling_radius(t)
+        row["wheel_radius_vs_rolling"] = row["params"]["wheel_radius"]["fitted"] - row["twin_rolling_radius"]
         rows.append(row)
         h, errors = row["held_out"], ", ".join(f"{p} {v['error']:+.3g}" for p, v in row["params"].items())
         verdict = "" if h["passes"] is None else (" passes" if h["passes"] else " FAILS")
         print(f"  held-out {100 * h['before_m']:.1f} -> {100 * h['after_m']:.1f} cm (cut {h['cut']:.1f}x{verdict}); "
-              f"fitted - truth: {errors}; {row['reason']}; "
+              f"fitted - truth: {errors}; the twin's rolling radius {1000 * row['twin_rolling_radius']:.1f} mm "
+              f"(fitted {1000 * row['wheel_radius_vs_rolling']:+.1f} mm from it); {row['reason']}; "
               f"{'MISFIT flagged' if (row.get('misfit') or {}).get('flagged') else 'model check passes'}", flush=True)
     if not rows:
         print("no rover finished: nothing to write", file=sys.stderr)
@@ -134,6 +160,8 @@ def main() -> int:
                "converged": sum(bool(r["converged"]) for r in rows),
                "misfit_flagged": sum(bool((r.get("misfit") or {}).get("flagged")) for r in rows),
                "within_by_parameter": {p: sum(r["params"][p]["within"] for r in rows) for p in RANGES},
+               "wheel_radius_vs_geometric_mm": [1000 * r["params"]["wheel_radius"]["error"] for r in rows],
+               "wheel_radius_vs_rolling_mm": [1000 * r["wheel_radius_vs_rolling"] for r in rows],
                "target": f"held-out error cut >= {CUT_TARGET:g}x where the nominal model misses by > {100 * MISSES:g} cm"}
     print(f"\ncut >= {CUT_TARGET:g}x on {summary['cut_passes']} of the {summary['held_to_the_cut']} rovers the nominal "
           f"model misses by > {100 * MISSES:g} cm (smallest cut {summary['cut_min']:.1f}x); median held-out error after "
@@ -145,7 +173,10 @@ def main() -> int:
     path = write_results(args.out, result, version=VERSION, driver=True)
     print(f"wrote {path}")
     if args.figure:
-        plot(rows, ROOT / args.figure)
+        plot(rows, ROOT / args.figure,
+             title=f"our simulator fitted to {len(rows)} rovers recorded in the MuJoCo twin: blue within tolerance, red outside",
+             extra={"wheel_radius": ("the twin's rolling radius", [r["truth"]["wheel_radius"] for r in rows],
+                                     [r["twin_rolling_radius"] for r in rows])})
         print(f"figure: {args.figure}")
     return 0
 

@@ -513,6 +513,30 @@ def calibration_misfit() -> str:
                   ["---"] + ["---:"] * 5 + ["---:", "---", "---"], rows)
 
 
+def calibration_twin() -> str:
+    """``calibration_twin.json``: each rover recorded in the MuJoCo twin and fitted in ours, beside the same rover
+    recorded in ours (the sweep's row, where it ran it)."""
+    d = _load("calibration_twin.json")
+    rows = []
+    for r in d["rovers"]:
+        p, t, h, m = r["params"], r["truth"], r["held_out"], r.get("misfit") or {}
+        errors = [f"{100 * p['friction']['error'] / t['friction']:+.1f} %",
+                  f"{100 * p['torque_scale']['error'] / t['torque_scale']:+.1f} %",
+                  f"{p['payload_mass']['error']:+.1f} kg", f"{1000 * p['wheel_radius']['error']:+.1f} mm"]
+        cut = f"{h['cut']:.1f}×" + ("" if h["passes"] is None else " ✓" if h["passes"] else " ✗")
+        ratios = " / ".join(f"{m['ratio'][c]:.1f}" for c in ("position", "wheel_speed", "effort") if c in m.get("ratio", {}))
+        o = r.get("ours")
+        rows.append([r["rover"].replace("_", " "), (f"{t['friction']:.2f}, {t['torque_scale']:.2f}, "
+                     f"{t['payload_mass']:.1f}, {1000 * t['wheel_radius']:.1f}"), *errors,
+                     f"{100 * h['before_m']:.1f} → {100 * h['after_m']:.1f} cm", cut, "yes" if r["converged"] else "no",
+                     f"{ratios}{': **misfit**' if m.get('flagged') else ''}",
+                     "-" if o is None else f"{100 * o['held_out']['before_m']:.1f} → {100 * o['held_out']['after_m']:.1f} cm"])
+    return _table(["rover", "truth: µ, torque, payload [kg], wheel [mm]", "µ error", "torque error", "payload error",
+                   "wheel error", "held-out error", "cut", "converged",
+                   "model check (position / wheel speed / effort ÷ noise)", "the same rover in ours"],
+                  ["---", "---"] + ["---:"] * 6 + ["---", "---", "---:"], rows)
+
+
 def _diff_gradients(kind: str, name: str = "diff_gradients.json") -> str:
     d = _load(name)
     rows = d["agreement"]
@@ -736,6 +760,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "env_scaling": env_scaling,
     "nav_throughput": nav_throughput,
     "calibration_misfit": calibration_misfit,
+    "calibration_twin": calibration_twin,
     "mujoco_transfer_plain": lambda: mujoco_transfer("mujoco_transfer_plain.json"),
     "calibration_sweep_seed1": lambda: calibration_sweep("calibration_sweep_seed1.json"),
     "nav_throughput_cuda": nav_throughput_cuda,

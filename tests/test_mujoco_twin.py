@@ -179,3 +179,94 @@ def test_the_wheels_friction_pairs_replace_the_wheels_ground_contacts():
     wheel = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "left_front_wheel_link/cylinder")
     wall = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "wall_+x")
     assert (m.geom_contype[wheel] & m.geom_conaffinity[wall]) != 0
+
+
+def test_the_twin_carries_a_payload_as_our_chassis_does():
+    """A payload off the chassis' centre of mass gives the twin's chassis the mass, centre of mass and inertia that
+    our simulator gives its chassis (a point mass, the parallel-axis theorem)."""
+    from atrv_warp.integrations.mujoco import MujocoTwin
+    from atrv_warp.sim import RoverSim
+    from atrv_warp.sim.config import RoverConfig
+
+    rover = RoverConfig(payload_mass=12.0, payload_offset=(0.2, -0.1, 0.05))
+    twin = MujocoTwin(rover=rover)
+    sim = RoverSim(1, rover=rover)
+    m, c = sim.model, sim.layout.chassis_body
+    b = twin.chassis_body
+    assert twin.model.body_mass[b] == pytest.approx(float(m.body_mass.numpy()[c]), rel=1e-6)
+    assert twin.model.body_mass[b] == pytest.approx(twin.description.chassis_inertial.mass + 12.0, rel=1e-9)
+    np.testing.assert_allclose(twin.model.body_ipos[b], m.body_com.numpy()[c], atol=1e-6)
+    # MuJoCo holds the inertia in its principal axes (body_iquat); turned back into the chassis frame
+    rot = np.zeros(9)
+    mujoco.mju_quat2Mat(rot, twin.model.body_iquat[b])
+    rot = rot.reshape(3, 3)
+    inertia = rot @ np.diag(twin.model.body_inertia[b]) @ rot.T
+    np.testing.assert_allclose(inertia, m.body_inertia.numpy()[c], rtol=1e-5, atol=1e-6)
+
+
+def test_a_motor_stronger_than_nominal_applies_its_scaled_torque():
+    """The driver's torque limit times the rover's ``torque_scale`` reaches the wheels, as in ours: the motors'
+    control range is not the driver's limit where the motor is stronger than nominal."""
+    from atrv_warp.integrations.mujoco import MujocoTwin
+    from atrv_warp.sim.config import RoverConfig
+
+    for scale, limit in ((1.3, 26.0), (0.7, 20.0)):
+        twin = MujocoTwin(rover=RoverConfig(torque_scale=scale))
+        np.testing.assert_allclose(twin.model.actuator_ctrlrange, [[-limit, limit]] * len(twin.description.wheels))
+    twin = MujocoTwin(rover=RoverConfig(torque_scale=1.3, wheel_speed_limit=1e4))  # the taper far off
+    twin.step(torques=(20.0, -20.0))
+    np.testing.assert_allclose(twin.wheel_sign * twin.data.actuator_force, np.where(twin.wheel_side == 0, 26.0, -26.0))
+
+
+def test_a_twin_bag_reads_back_as_a_calibration_bag(tmp_path):
+    """``record_twin_bag`` writes what the fit reads, as the simulator node does: the scripted drive's commands
+    (re-sent every 0.1 s and on each change, stamped at the step they are given before), the wheels' speeds and efforts after every
+    0.05 s step, the reference pose and the wheel odometry."""
+    from atrv_warp.integrations.calibration import read_drive_log
+    from atrv_warp.integrations.calibration.excitation import Excitation
+    from atrv_warp.integrations.mujoco.record import record_twin_bag
+    from atrv_warp.sim.config import RoverConfig
+    from atrv_warp.sim.driver import DriverConfig
+    from atrv_warp.sim.urdf import load_rover
+
+    rover = RoverConfig(torque_scale=1.3, wheel_radius=0.121, payload_mass=8.0)
+    path = record_twin_bag(tmp_path / "twin.mcap", 0.25, seed=4, rover=rover, friction=0.9, truth_noise=0.0,
+                           truth_yaw_noise=0.0)
+    wheels = {w.joint: (w.side, w.drive_sign) for w in load_rover(rover).wheels}
+    log = read_drive_log(path, wheels)
+    assert {"/cmd_vel", "/joint_states", "/ground_truth/odom", "/odom"} <= set(log.topics)
+    assert len(log.pose_time) == len(log.joint_time) == 301 and log.duration == pytest.approx(15.0)
+    gaps = np.round(np.diff(log.cmd_time) / 0.05)  # re-sent every 0.1 s, and at once on a change of target
+    assert set(gaps.tolist()) <= {1.0, 2.0} and log.cmd_time[0] == pytest.approx(0.05)
+    assert 5.0 < np.abs(log.effort).max() <= 1.3 * DriverConfig().torque_limit + 1e-9
+    # the commands are the scripted drive's for the recorded poses (noise-free here)
+    excitation, sent = Excitation(4), []
+    for t, pose in zip(log.pose_time[1:-1], log.pose[1:-1]):
+        command = excitation.update(float(t), tuple(pose))
+        if command is not None:
+            sent.append(command)
+    np.testing.assert_allclose(np.array(sent), log.cmd, atol=1e-12)
+    # the rover drove: the wheels' mean speed and the reference path agree on its direction of travel
+    speed = np.hypot(*np.gradient(log.pose[:, :2], log.pose_time, axis=0).T)
+    assert speed.max() > 0.3
+
+
+def test_calibrate_records_an_example_bag_from_the_twin(tmp_path, capsys):
+    """``atrv-calibrate --record-example OUT --engine mujoco --truth FILE`` records the twin of the truth's rover; a
+    contact setting the twin does not take, or a simulator-node parameter, is refused in one line, nothing written."""
+    from atrv_warp.calibrate import main
+
+    truth = tmp_path / "truth.toml"
+    truth.write_text("[rover]\npayload_mass = 5.0\n[contact]\nfriction = 0.6\n")
+    bag = tmp_path / "twin.mcap"
+    assert main(["--record-example", str(bag), "--engine", "mujoco", "--truth", str(truth), "--minutes", "0.05"]) == 0
+    assert bag.is_file() and "MuJoCo twin" in capsys.readouterr().out
+    stiff = tmp_path / "stiff.toml"
+    stiff.write_text("[contact]\nfriction = 0.6\nstiffness = 1.0e6\n")
+    for extra, why in ((["--truth", str(stiff)], "[contact] stiffness is our contact model's"),
+                       (["-p", "motor_lag:=0.1"], "-p motor_lag:=0.1: simulator-node parameters are for --engine ours")):
+        out = tmp_path / "refused.mcap"
+        assert main(["--record-example", str(out), "--engine", "mujoco", *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and why in err[0], err
+        assert not out.exists()
