@@ -14,6 +14,8 @@ a real rover brings, a contact that is not ours, while its truth is still known.
 3. Reports, per rover, the held-out position error before (the nominal rover) and after the fit, and the cut (target
    >= 2x where the nominal model misses by more than 5 cm), the fitted values against the twin's, the model check's
    ratios, and the same rover's figures on our own engine from the sweep's results file, where it has them.
+4. And what tells the engines apart for that rover: the twin's rolling radius (its tyre sinks, and pushes on the
+   ground inside its geometric radius), and an in-place turn at 1 rad/s through the nominal driver in both.
 
 Each rover's bag, report and console output stay in ``--work``; an interrupted run resumes. Writes
 ``benchmarks/results/calibration_twin.json`` and, with ``--figure``, fitted against true values per parameter.
@@ -100,6 +102,36 @@ def rolling_radius(truth: dict[str, float], speed: float = 0.5, seconds: float =
     return float(np.mean(ratios))
 
 
+def in_place_turn(truth: dict[str, float], rate: float = 1.0, seconds: float = 3.0) -> dict[str, float]:
+    """Rover ``truth`` turning in place at ``rate`` [rad/s] through the nominal driver, in ours and in the twin: each
+    one's yaw rate over the command, averaged over the last second, and the share of the twin's steps in which a
+    wheel left the ground for a substep (MuJoCo's soft contact lifts a sliding wheel; physics page)."""
+    import numpy as np
+    import torch
+
+    from atrv_warp.integrations.mujoco import MujocoTwin
+    from atrv_warp.integrations.mujoco.record import twin_driver
+    from atrv_warp.sim import RoverSim
+    from atrv_warp.sim.config import ContactConfig, RoverConfig
+
+    rover = RoverConfig(torque_scale=truth["torque_scale"], payload_mass=truth["payload_mass"],
+                        wheel_radius=truth["wheel_radius"])
+    sim = RoverSim(1, rover=rover, contact=ContactConfig(friction=truth["friction"]), driver=twin_driver())
+    twin = MujocoTwin(rover=rover, friction=truth["friction"], driver=twin_driver())
+    steps, last = round(seconds / twin.sim_cfg.step_dt), round(1.0 / twin.sim_cfg.step_dt)
+    ours, theirs, airborne = [], [], 0
+    for k in range(steps):
+        sim.set_twist(torch.tensor([[0.0, rate]]))
+        sim.step()
+        twin.command(0.0, rate)
+        twin.step()
+        if k >= steps - last:
+            ours.append(float(sim.ang_vel[0, 2]) / rate)
+            theirs.append(float(twin.angular_velocity[2]) / rate)
+            airborne += int(twin.wheel_ground_substeps.min() < twin.substeps)
+    return {"rate": rate, "ours": float(np.mean(ours)), "twin": float(np.mean(theirs)), "twin_airborne": airborne / last}
+
+
 def ours(sweep: dict | None, k: int) -> dict | None:
     """Rover ``k`` of the sweep on our own engine (its held-out errors and fitted values), if the sweep ran it."""
     for r in (sweep or {}).get("rovers", []):
@@ -142,12 +174,15 @@ def main() -> int:
         row["ours"] = ours(sweep, k - 1) if k > 0 else None
         row["twin_rolling_radius"] = rolling_radius(t)
         row["wheel_radius_vs_rolling"] = row["params"]["wheel_radius"]["fitted"] - row["twin_rolling_radius"]
+        row["in_place_turn"] = turn = in_place_turn(t)
         rows.append(row)
         h, errors = row["held_out"], ", ".join(f"{p} {v['error']:+.3g}" for p, v in row["params"].items())
         verdict = "" if h["passes"] is None else (" passes" if h["passes"] else " FAILS")
         print(f"  held-out {100 * h['before_m']:.1f} -> {100 * h['after_m']:.1f} cm (cut {h['cut']:.1f}x{verdict}); "
               f"fitted - truth: {errors}; the twin's rolling radius {1000 * row['twin_rolling_radius']:.1f} mm "
-              f"(fitted {1000 * row['wheel_radius_vs_rolling']:+.1f} mm from it); {row['reason']}; "
+              f"(fitted {1000 * row['wheel_radius_vs_rolling']:+.1f} mm from it); in place at {turn['rate']:g} rad/s ours "
+              f"turns at {turn['ours']:.2f} of it, the twin {turn['twin']:.2f} (a wheel airborne in "
+              f"{100 * turn['twin_airborne']:.0f} % of its steps); {row['reason']}; "
               f"{'MISFIT flagged' if (row.get('misfit') or {}).get('flagged') else 'model check passes'}", flush=True)
     if not rows:
         print("no rover finished: nothing to write", file=sys.stderr)
