@@ -7,9 +7,12 @@ ray casting, through the observation code a robot runs (the ``mujoco`` extra: ``
 - :mod:`.twin`: :class:`~.twin.MujocoTwin`, one rover stepped at the control period with our motor driver's loop,
   MuJoCo's rays for the scanner, the IMU and the wheel odometry;
 - :mod:`.episodes`: our evaluation episodes in the twin (:func:`~.episodes.draw_episodes`,
-  :func:`~.episodes.run_twin_episodes`) and :class:`~.episodes.DeployablePolicy`.
+  :func:`~.episodes.run_twin_episodes`) and :class:`~.episodes.DeployablePolicy`;
+- :mod:`.record`: a calibration bag recorded from the twin (:func:`~.record.record_twin_bag`), for fitting our
+  simulator to another engine's contact.
 
-``python -m atrv_warp.evaluate --engine mujoco`` runs it; ``benchmarks/mujoco_agreement.py`` compares its physics
+``python -m atrv_warp.evaluate --engine mujoco`` runs it, ``atrv-calibrate --record-example OUT --engine mujoco``
+records it; ``benchmarks/mujoco_agreement.py`` compares its physics
 with ours and ``benchmarks/mujoco_transfer.py`` measures the transfer (docs/physics.md).
 """
 
