@@ -18,6 +18,7 @@ from atrv_warp.core import (
     quat_to_matrix,
     quat_to_rpy,
     quat_to_yaw,
+    rpy_to_quat,
     sector_readings,
     track_width,
     wrap_angle,
@@ -74,6 +75,8 @@ def test_quaternion_maths_round_trips():
     assert torch.allclose(quat_to_yaw(yaw_to_quat(yaw)), yaw, atol=1e-12)
     assert torch.allclose(quat_to_rpy(yaw_to_quat(yaw))[:, :2], torch.zeros(13, 2, dtype=torch.float64))
     assert wrap_angle(torch.tensor([2.5 * math.pi, -1.5 * math.pi])).tolist() == pytest.approx([0.5 * math.pi] * 2)
+    rpy = quat_to_rpy(q)  # roll, pitch, yaw back to the same rotation
+    assert torch.allclose(rpy_to_quat(rpy) * torch.sign(rpy_to_quat(rpy)[:, 3:]), q * torch.sign(q[:, 3:]), atol=1e-9)
 
 
 def test_skid_steer_kinematics():

@@ -17,6 +17,7 @@ from atrv_warp.core.geometry import (
     quat_to_matrix,
     quat_to_rpy,
     quat_to_yaw,
+    rpy_to_quat,
     wrap_angle,
     yaw_to_quat,
 )
@@ -34,6 +35,7 @@ __all__ = [
     "quat_to_matrix",
     "quat_to_rpy",
     "quat_to_yaw",
+    "rpy_to_quat",
     "sector_readings",
     "side_speeds",
     "track_width",

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["matrix_to_quat", "quat_to_matrix", "quat_to_rpy", "quat_to_yaw", "wrap_angle", "yaw_to_quat"]
+__all__ = ["matrix_to_quat", "quat_to_matrix", "quat_to_rpy", "quat_to_yaw", "rpy_to_quat", "wrap_angle", "yaw_to_quat"]
 
 
 def _as_tensor(x) -> torch.Tensor:
@@ -50,6 +50,16 @@ def matrix_to_quat(m) -> torch.Tensor:
     y = torch.copysign((1.0 - m00 + m11 - m22).clamp(min=0.0).sqrt() / 2, m[..., 0, 2] - m[..., 2, 0])
     z = torch.copysign((1.0 - m00 - m11 + m22).clamp(min=0.0).sqrt() / 2, m[..., 1, 0] - m[..., 0, 1])
     return torch.stack([x, y, z, w], -1)
+
+
+def rpy_to_quat(rpy) -> torch.Tensor:
+    """Unit quaternions (..., 4) (x, y, z, w) of roll, pitch, yaw [rad] (..., 3), intrinsic Z-Y-X (the inverse of
+    :func:`quat_to_rpy`)."""
+    half = _as_tensor(rpy) / 2
+    cr, cp, cy = half.cos().unbind(-1)
+    sr, sp, sy = half.sin().unbind(-1)
+    return torch.stack([sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+                        cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy], -1)
 
 
 def yaw_to_quat(yaw) -> torch.Tensor:

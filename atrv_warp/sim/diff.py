@@ -388,16 +388,25 @@ class DiffRollout:
 
     def moving_state(self, poses: torch.Tensor, velocity: torch.Tensor, yaw_rate: torch.Tensor,
                      wheel_speed: torch.Tensor, *, wheel_radius: torch.Tensor | float | None = None,
-                     payload_mass: torch.Tensor | float | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-        """Generalised coordinates (joint_q, joint_qd) of level rovers on flat ground, in motion: at (x, y, yaw)
+                     payload_mass: torch.Tensor | float | None = None, tilt: torch.Tensor | None = None,
+                     tilt_rate: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Generalised coordinates (joint_q, joint_qd) of rovers on flat ground, in motion: at (x, y, yaw)
         ``poses`` (N, 3), with chassis-origin velocity ``velocity`` (N, 2) (forward, left) in the chassis
-        frame [m/s], ``yaw_rate`` (N,) [rad/s], and each side's forward wheel speed ``wheel_speed`` (N, 2)
-        (left, right) [rad/s] (a state recorded on a real rover: its pose, twist and wheel encoders).
+        frame [m/s], ``yaw_rate`` (N,) [rad/s] about the chassis' z, and the wheels' forward speeds
+        ``wheel_speed`` [rad/s]: (N, 2) each side's (left, right), or (N, W) each wheel's in the description's order
+        (a state recorded on a real rover: its pose, twist and wheel encoders).
+
+        ``tilt`` (N, 2): the chassis' roll and pitch [rad] (default level), as a reference pose's orientation gives
+        them; ``tilt_rate`` (N, 2): its angular velocity about its own x and y [rad/s] (default none), as an
+        ``Odometry``'s twist gives it. A rover that pitches as it accelerates, restarted level, rocks back, and that
+        shortens the path a replay rolls out.
 
         Each rover stands at its own rest height (:meth:`~atrv_warp.sim.RoverSim.rest_heights`) for the rolling
         radius ``wheel_radius`` [m] and payload ``payload_mass`` [kg] it will be rolled out with (default: the
         configured rover's): a rollout with another radius than the configured one would otherwise start with its
         wheels in the air or in the ground."""
+        from atrv_warp.core.geometry import quat_to_matrix, rpy_to_quat
+
         q, qd = self.initial_state(poses)
         sim, lay = self.sim, self.sim.layout
         n = self.num_worlds
@@ -407,20 +416,30 @@ class DiffRollout:
             height = sim.rest_heights(radius, 0.0 if payload_mass is None else payload_mass)
             q[:, lay.chassis_coord + 2] = height.to(device=q.device, dtype=q.dtype).expand(n)
         yaw = torch.as_tensor(poses, dtype=torch.float32)[:, 2]
+        rpy = torch.zeros(n, 3)
+        rpy[:, 2] = yaw
+        if tilt is not None:
+            rpy[:, :2] = torch.as_tensor(tilt, dtype=torch.float32)
+            q[:, lay.chassis_coord + 3:lay.chassis_coord + 7] = rpy_to_quat(rpy).to(device=q.device, dtype=q.dtype)
+        rot = quat_to_matrix(rpy_to_quat(rpy))  # (N, 3, 3) world from chassis
         cos, sin = torch.cos(yaw), torch.sin(yaw)
         v = torch.as_tensor(velocity, dtype=torch.float32)
-        w = torch.as_tensor(yaw_rate, dtype=torch.float32)
-        vx, vy = cos * v[:, 0] - sin * v[:, 1], sin * v[:, 0] + cos * v[:, 1]
+        omega = torch.zeros(n, 3)  # the chassis' angular velocity, its own frame, then the world's
+        omega[:, 2] = torch.as_tensor(yaw_rate, dtype=torch.float32)
+        if tilt_rate is not None:
+            omega[:, :2] = torch.as_tensor(tilt_rate, dtype=torch.float32)
+        omega = (rot @ omega[..., None])[..., 0]
         # Featherstone's free joint: the centre of mass' velocity, world frame, then the angular velocity
-        com = [float(c) for c in sim.nominal_chassis.com]
-        rx, ry = cos * com[0] - sin * com[1], sin * com[0] + cos * com[1]
+        com = (rot @ torch.tensor([float(c) for c in sim.nominal_chassis.com])[:, None])[..., 0]
+        linear = torch.stack([cos * v[:, 0] - sin * v[:, 1], sin * v[:, 0] + cos * v[:, 1], torch.zeros(n)], -1)
+        linear = linear + torch.linalg.cross(omega, com)
         d = lay.chassis_dof
-        qd[:, d + 0], qd[:, d + 1] = vx - w * ry, vy + w * rx
-        qd[:, d + 5] = w
+        qd[:, d:d + 3] = linear.to(device=qd.device, dtype=qd.dtype)
+        qd[:, d + 3:d + 6] = omega.to(device=qd.device, dtype=qd.dtype)
         ws = torch.as_tensor(wheel_speed, dtype=torch.float32)
         dofs = lay.wheel_dof.numpy()
         for j, wheel in enumerate(sim.description.wheels):
-            qd[:, int(dofs[j])] = wheel.drive_sign * ws[:, wheel.side]
+            qd[:, int(dofs[j])] = wheel.drive_sign * (ws[:, wheel.side] if ws.shape[1] == 2 else ws[:, j])
         return q.reshape(-1), qd.reshape(-1)
 
     def __call__(self, actions: torch.Tensor, initial_state: tuple[torch.Tensor, torch.Tensor] | None = None,

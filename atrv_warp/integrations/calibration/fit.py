@@ -28,6 +28,7 @@ from atrv_warp.core.kinematics import track_width
 from atrv_warp.integrations.calibration.log import DriveLog
 from atrv_warp.sim.config import ContactConfig, RoverConfig, get_variant
 from atrv_warp.sim.driver import DriverConfig
+from atrv_warp.sim.kernels.rover import MOTOR_TAPER_START
 
 __all__ = ["COMMAND_SOURCES", "CONFOUNDED", "DEFAULT_FIT", "FIT_FIDELITY", "FIT_PARAMETERS", "MISFIT_FLOOR", "MOTOR_PARAMETERS", "CalibrationConfig",
            "CalibrationError", "CalibrationResult", "Segments", "calibrate", "make_segments", "recording_noise",
@@ -104,7 +105,8 @@ class CalibrationConfig:
     and changes a path that bends at 1 rad/s by well under a millimetre."""
     warmup: float = 0.25
     """Each segment's first seconds [s] left out of the wheel-speed and effort terms (a ``cmd_vel`` replay): the
-    driver's integral at a segment's start is reconstructed from 20 Hz wheel speeds, and its error decays there."""
+    driver's integral at a segment's start is reconstructed (from the recorded efforts, or from 20 Hz wheel speeds
+    where the bag has none), and its error decays there."""
     held_out_every: int = 5
     """Every k-th segment is held out of the fit, and only measured."""
     starts: int = 2
@@ -219,6 +221,13 @@ class Segments:
     command: str
     latency: float = 0.0
     """The commands' latency [s] the inputs were cut with (a ``cmd_vel`` replay)."""
+    tilt: np.ndarray | None = None  # (S, 2) roll, pitch at the start [rad]
+    tilt_rate: np.ndarray | None = None  # (S, 2) angular velocity about the chassis' x and y at the start [rad/s]
+    wheel_each: np.ndarray | None = None  # (S, W) each wheel's forward speed at the start, the rover's order [rad/s]
+    wheel_joints: tuple[str, ...] = ()
+    """The joints of ``wheel_each``'s columns."""
+    start_effort: np.ndarray | None = None  # (S, 2) side efforts at the start [N·m] (a cmd_vel replay with efforts)
+    start_target: np.ndarray | None = None  # (S, 2) the driver's wheel-speed targets at the start [rad/s]
 
     def __len__(self) -> int:
         return len(self.t0)
@@ -299,8 +308,8 @@ def _controller(log: DriveLog, driver: DriverConfig, grid: np.ndarray, wheel: np
                 substeps: int, latency: float = 0.0):
     """The base's motor driver replayed along the log on the recorded wheel speeds
     (:func:`atrv_warp.sim.driver.replay`): each step's command (zero once the timeout has stopped the base), and
-    the driver's PI integral before the step. ``latency`` [s]: a command reaches the driver this long after its
-    stamp."""
+    the driver's PI integral before the step, and its wheel-speed targets there (left, right [rad/s]).
+    ``latency`` [s]: a command reaches the driver this long after its stamp."""
     from atrv_warp.sim.driver import replay
 
     arrived = grid - latency
@@ -308,9 +317,11 @@ def _controller(log: DriveLog, driver: DriverConfig, grid: np.ndarray, wheel: np
     last = np.maximum(received - 1, 0)
     fresh = (received > 0) & (arrived - log.cmd_time[last] <= driver.cmd_vel_timeout + 1e-9)
     twist = np.where(fresh[:, None], log.cmd[last, :2], 0.0)
-    state = replay(driver, driver.kinematics(None, None), twist[None], fresh[None],
+    kinematics = driver.kinematics(None, None)
+    state = replay(driver, kinematics, twist[None], fresh[None],
                    np.concatenate([wheel, wheel[-1:]])[None], step_dt=dt, substeps=substeps)
-    return twist, state["integral"][0, :-1].double().numpy()
+    targets = kinematics.wheel_speeds(state["reference"][0, :-1, 0].double(), state["reference"][0, :-1, 1].double())
+    return twist, state["integral"][0, :-1].double().numpy(), targets.numpy().reshape(-1, 2)
 
 
 def _smooth(x: np.ndarray, window: int) -> np.ndarray:
@@ -356,14 +367,21 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, d
         vx, vy = np.gradient(pose[:, 0], dt), np.gradient(pose[:, 1], dt)
         c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
         vel = np.stack([c * vx + s * vy, -s * vx + c * vy, np.gradient(pose[:, 2], dt)], -1)
+    # the start state's tilt, its rate and each wheel's speed (a pitching rover restarted level rocks back)
+    tilt = None if log.tilt is None else np.stack([np.interp(grid, log.pose_time, log.tilt[:, i]) for i in (0, 1)], -1)
+    tilt_rate = (None if log.tilt_rate is None else
+                 np.stack([np.interp(grid, log.pose_time, log.tilt_rate[:, i]) for i in (0, 1)], -1))
+    each = (None if log.wheel_each is None else
+            np.stack([np.interp(grid, log.joint_time, log.wheel_each[:, j]) for j in range(log.wheel_each.shape[1])], -1))
     # the effort stamped at a step's end is what the motors held over it
     effort = (None if log.effort is None else
               np.stack([np.interp(grid + dt, log.joint_time, log.effort[:, s]) for s in (0, 1)], -1))
     latency = (cfg.latency or 0.0) if latency is None else latency
     if command == "cmd_vel":
-        inputs, integral = _controller(log, driver, grid, wheel, dt, substeps, latency)
+        inputs, integral, targets = _controller(log, driver, grid, wheel, dt, substeps, latency)
     else:
-        inputs, integral = effort, np.zeros_like(effort)
+        inputs, integral, targets = effort, np.zeros_like(effort), None
+    # the effort stamped at a step's start: the torque of the previous step's last loop, which the integral made
     steps = round(cfg.segment_seconds / dt)
     starts = np.arange(0, len(grid) - steps, steps)
     keep = []
@@ -387,7 +405,12 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, d
                     ref_wheel=wheel[idx],
                     ref_effort=effort[idx[:, :-1]] if command == "cmd_vel" and effort is not None else None,
                     held_out=(np.arange(len(keep)) % cfg.held_out_every) == cfg.held_out_every - 1,
-                    command=command, latency=latency if command == "cmd_vel" else 0.0)
+                    command=command, latency=latency if command == "cmd_vel" else 0.0,
+                    tilt=None if tilt is None else tilt[keep], tilt_rate=None if tilt_rate is None else tilt_rate[keep],
+                    wheel_each=None if each is None else each[keep], wheel_joints=log.wheel_joints,
+                    start_effort=(None if command != "cmd_vel" or log.effort is None else
+                                  np.stack([np.interp(grid[keep], log.joint_time, log.effort[:, s]) for s in (0, 1)], -1)),
+                    start_target=None if targets is None else targets[keep])
 
 
 class _Replay:
@@ -404,8 +427,37 @@ class _Replay:
                                 twist=segments.command == "cmd_vel", driver=driver, action_scale=1.0,
                                 mass_matrix_interval=None)
         self.segments, self.worlds = segments, worlds
+        self.rover, self.driver = rover, driver
         self.warmup = round(cfg.warmup / 0.05) if segments.command == "cmd_vel" else 0
         self.nominal_chassis_mass = self.roll.nominal_chassis_mass
+        joints = [w.joint for w in self.roll.sim.description.wheels]
+        self.start_wheels = segments.wheel  # (S, 2) each side's speed, or (S, W) each wheel's in the rover's order
+        if segments.wheel_each is not None and set(segments.wheel_joints) == set(joints):
+            self.start_wheels = segments.wheel_each[:, [segments.wheel_joints.index(j) for j in joints]]
+
+    def start_integral(self, pad: np.ndarray, kwargs: dict) -> torch.Tensor:
+        """(W, 2) the driver's PI integral at the segments' starts, for each world's motor. Where the bag has
+        efforts, from the torque the driver asked for in its last loop before the start: the recorded effort over
+        the world's torque scale (and the motor's taper), less the proportional term, over the integral gain. That
+        holds the integral to a few thousandths of a radian, where the driver replayed on 20 Hz wheel speeds is
+        several hundredths off, and a replay whose integral is off drives too far. Elsewhere (no efforts, a
+        saturated or tapering motor) the replayed driver's."""
+        seg, d = self.segments, self.driver
+        replayed = torch.as_tensor(seg.integral[pad], dtype=torch.float32)
+        if seg.start_effort is None or seg.start_target is None or d.ki <= 0:
+            return replayed
+        w = len(pad)
+        scale = torch.as_tensor(kwargs.get("torque_scale", self.rover.torque_scale), dtype=torch.float32).expand(w)
+        limit = torch.as_tensor(kwargs.get("speed_limit", self.rover.wheel_speed_limit), dtype=torch.float32).expand(w)
+        effort = torch.as_tensor(seg.start_effort[pad], dtype=torch.float32)
+        speed = torch.as_tensor(seg.wheel[pad], dtype=torch.float32)
+        taper = ((1.0 - speed.abs() / limit[:, None]) / (1.0 - float(MOTOR_TAPER_START))).clamp(0.0, 1.0)
+        taper = torch.where(effort * speed <= 0.0, torch.ones_like(taper), taper)  # braking: the full torque
+        asked = effort / (scale[:, None] * taper).clamp(min=1e-6)
+        error = torch.as_tensor(seg.start_target[pad], dtype=torch.float32) - speed
+        from_effort = (asked - d.kp * error) / d.ki
+        usable = (taper > 0.5) & (asked.abs() < 0.999 * d.torque_limit) & (scale[:, None] > 1e-3)
+        return torch.where(usable, from_effort, replayed)
 
     @torch.no_grad()
     def _chunk(self, index: np.ndarray, values: dict[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor,
@@ -425,10 +477,12 @@ class _Replay:
         payload = kwargs["chassis_mass"] - self.nominal_chassis_mass if "chassis_mass" in kwargs else None
         state = self.roll.moving_state(poses, torch.as_tensor(seg.velocity[pad], dtype=torch.float32),
                                        torch.as_tensor(seg.yaw_rate[pad], dtype=torch.float32),
-                                       torch.as_tensor(seg.wheel[pad], dtype=torch.float32),
-                                       wheel_radius=kwargs.get("wheel_radius"), payload_mass=payload)
+                                       torch.as_tensor(self.start_wheels[pad], dtype=torch.float32),
+                                       wheel_radius=kwargs.get("wheel_radius"), payload_mass=payload,
+                                       tilt=None if seg.tilt is None else torch.as_tensor(seg.tilt[pad]),
+                                       tilt_rate=None if seg.tilt_rate is None else torch.as_tensor(seg.tilt_rate[pad]))
         actions = torch.as_tensor(seg.inputs[pad], dtype=torch.float32).transpose(0, 1).contiguous()
-        integral = torch.as_tensor(seg.integral[pad], dtype=torch.float32)
+        integral = self.start_integral(pad, kwargs)
         sim_poses, speeds, torques = self.roll(actions, state, integral=integral, wheel_speeds=True,
                                                wheel_torques=True, **kwargs)
         ref = torch.as_tensor(seg.ref_pose[pad], dtype=torch.float32).transpose(0, 1)  # (L + 1, W, 3)

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from atrv_warp.core.geometry import quat_to_yaw
+from atrv_warp.core.geometry import quat_to_rpy, quat_to_yaw
 
 __all__ = ["POSE_TYPES", "BagError", "DriveLog", "Topics", "read_drive_log"]
 
@@ -61,6 +61,12 @@ class DriveLog:
         topics: Every topic in the bag and its message type.
         twist: Whether the pose topic carried the velocity (Odometry); if not, ``body_velocity`` is from
             finite differences, which a fit takes again from smoothed poses.
+        tilt: (P, 2) the chassis' roll and pitch [rad] from the reference pose's orientation (zero where it
+            gives the heading alone).
+        tilt_rate: (P, 2) the chassis' angular velocity about its own x and y [rad/s] (the Odometry's twist), or
+            ``None`` for a PoseStamped topic.
+        wheel_joints, wheel_each: The wheel joints in the order of ``wheels``, and (J, W) each one's forward
+            speed [rad/s].
     """
 
     path: str
@@ -74,6 +80,10 @@ class DriveLog:
     cmd: np.ndarray
     topics: dict[str, str] = field(default_factory=dict)
     twist: bool = True
+    tilt: np.ndarray | None = None
+    tilt_rate: np.ndarray | None = None
+    wheel_joints: tuple[str, ...] = ()
+    wheel_each: np.ndarray | None = None
 
     @property
     def duration(self) -> float:
@@ -180,12 +190,15 @@ def _arrays(path: Path, rows: dict, wheels: dict[str, tuple[int, float]], topics
         pose.append((p.position.x, p.position.y, o.x, o.y, o.z, o.w))
         if hasattr(m, "twist"):
             tw = m.twist.twist
-            twist.append((tw.linear.x, tw.linear.y, tw.angular.z))
+            twist.append((tw.linear.x, tw.linear.y, tw.angular.z, tw.angular.x, tw.angular.y))
     pose = np.array(pose, dtype=np.float64)
+    rpy = quat_to_rpy(torch.from_numpy(pose[:, 2:])).numpy()
     pose = np.concatenate([pose[:, :2], quat_to_yaw(torch.from_numpy(pose[:, 2:])).numpy()[:, None]], 1)
     pose[:, 2] = np.unwrap(pose[:, 2])
+    tilt_rate = None
     if twist:
         body_velocity = np.array(twist, dtype=np.float64)
+        body_velocity, tilt_rate = body_velocity[:, :3], body_velocity[:, 3:]
     else:  # PoseStamped: the velocity from the poses, turned into the chassis frame
         vx, vy = np.gradient(pose[:, 0], pose_time), np.gradient(pose[:, 1], pose_time)
         c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
@@ -213,8 +226,10 @@ def _arrays(path: Path, rows: dict, wheels: dict[str, tuple[int, float]], topics
         wheel_speed=np.array(velocity, dtype=np.float64) @ weight,
         effort=np.array(effort, dtype=np.float64) @ weight if has_effort else None,
         cmd_time=np.array([(t - t0) * 1e-9 for t, _ in cmds]),
-        cmd=np.array(cmd, dtype=np.float64).reshape(-1, 2), topics=dict(sorted(seen.items())), twist=bool(twist))
-    for name in ("pose", "body_velocity", "wheel_speed", "cmd"):
-        if not np.isfinite(getattr(arrays, name)).all():
+        cmd=np.array(cmd, dtype=np.float64).reshape(-1, 2), topics=dict(sorted(seen.items())), twist=bool(twist),
+        tilt=rpy[:, :2], tilt_rate=tilt_rate, wheel_joints=tuple(wheels),
+        wheel_each=np.array(velocity, dtype=np.float64) * sign[None, :])
+    for name in ("pose", "body_velocity", "wheel_speed", "cmd", "tilt_rate"):  # the tilt and each wheel: as these
+        if getattr(arrays, name) is not None and not np.isfinite(getattr(arrays, name)).all():
             raise BagError(f"{path}: non-finite values in the {name.replace('_', ' ')}")
     return arrays
