@@ -384,7 +384,9 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, d
         inputs, integral, targets = _controller(log, driver, grid, wheel, dt, substeps, latency)
     else:
         inputs, integral, targets = effort, np.zeros_like(effort), None
-    # the effort stamped at a step's start: the torque of the previous step's last loop, which the integral made
+    # the effort stamped at a segment's start: the torque of the driver's last loop before it, which its integral made
+    start_effort = (None if command != "cmd_vel" or log.effort is None else
+                    np.stack([np.interp(grid, log.joint_time, log.effort[:, s]) for s in (0, 1)], -1))
     steps = round(cfg.segment_seconds / dt)
     starts = np.arange(0, len(grid) - steps, steps)
     keep = []
@@ -411,8 +413,7 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, d
                     command=command, latency=latency if command == "cmd_vel" else 0.0,
                     tilt=None if tilt is None else tilt[keep], tilt_rate=None if tilt_rate is None else tilt_rate[keep],
                     wheel_each=None if each is None else each[keep], wheel_joints=log.wheel_joints,
-                    start_effort=(None if command != "cmd_vel" or log.effort is None else
-                                  np.stack([np.interp(grid[keep], log.joint_time, log.effort[:, s]) for s in (0, 1)], -1)),
+                    start_effort=None if start_effort is None else start_effort[keep],
                     start_target=None if targets is None else targets[keep])
 
 
