@@ -97,12 +97,12 @@ def main() -> int:
         print(f"held-out position error {100 * held['before_m']:.1f} cm -> {100 * held['after_m']:.1f} cm "
               f"({held['reduction']:.1f}x); fit {report['fit_seconds']:.0f} s + compile "
               f"{report['compile_seconds']:.0f} s ({'cold' if name == 'cmd_vel' else 'warm'} kernel cache)", flush=True)
-        if name == "cmd_vel":  # the console output, as docs/calibration.md shows it
+        if name == "cmd_vel":  # the console output, as docs/calibration.md shows it, and the figure: written after
+            # the results file, whose provenance would otherwise count them as uncommitted changes
             console = proc.stdout.replace(str(bag), "drive.mcap").replace(str(work) + "/", "")
-            (RESULTS / "calibration_console.txt").write_text(console)
-        if name == "cmd_vel" and args.figure and out.with_suffix(".png").is_file():
-            shutil.copy(out.with_suffix(".png"), ROOT / args.figure)
-            print(f"figure: {args.figure}")
+            figure = out.with_suffix(".png") if args.figure and out.with_suffix(".png").is_file() else None
+            if figure is not None:
+                shutil.copy(figure, work / "figure.png")
 
     old = None
     if args.old:
@@ -124,13 +124,17 @@ def main() -> int:
         print(f"\n== cmd_vel replay, {args.old}'s fit: " + "  ".join(
             f"{p} {v:.4g} ({100 * old['relative_error'][p]:.1f} %)" for p, v in report["values"].items())
             + f"; held-out {100 * held['before_m']:.1f} -> {100 * held['after_m']:.1f} cm; fit {old['fit_s']:.0f} s, "
-            f"{old['fit_s'] / runs['cmd_vel']['fit_s']:.0f}x this tree's", flush=True)
+            f"{old['fit_s'] / runs['cmd_vel']['fit_s']:.1f}x this tree's", flush=True)
 
     result = {"benchmark": "calibration", "minutes": args.minutes, "seed": args.seed, "pose_noise_m": args.noise,
               "truth": truth, "truth_file": str(TRUTH_FILE.relative_to(ROOT)), "runs": runs, "old": old,
               "cores": os.cpu_count(), "time": time.strftime("%Y-%m-%d %H:%M:%S")}
     path = write_results(RESULTS / "calibration.json", result, version=VERSION, driver=True)
     print(f"\nwrote {path}")
+    (RESULTS / "calibration_console.txt").write_text(console)
+    if figure is not None:
+        shutil.copy(work / "figure.png", ROOT / args.figure)
+        print(f"figure: {args.figure}")
     shutil.rmtree(work, ignore_errors=True)
     return 0
 

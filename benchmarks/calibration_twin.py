@@ -204,6 +204,8 @@ def main() -> int:
                "converged": sum(bool(r["converged"]) for r in rows),
                "misfit_flagged": sum(bool((r.get("misfit") or {}).get("flagged")) for r in rows),
                "within_by_parameter": {p: sum(r["params"][p]["within"] for r in rows) for p in RANGES},
+               "interval_coverage": (sum(v["covered"] for r in rows for v in r["params"].values())
+                                     / sum(len(r["params"]) for r in rows)),
                "wheel_radius_vs_geometric_mm": [1000 * r["params"]["wheel_radius"]["error"] for r in rows],
                "wheel_radius_vs_rolling_mm": [1000 * r["wheel_radius_vs_rolling"] for r in rows],
                # the ranges the docs cite: [smallest, largest]
