@@ -1,7 +1,7 @@
 """Calibration across engines: our simulator fitted to bags recorded from the MuJoCo twin (issue 42 part 7).
 
     python benchmarks/calibration_twin.py [--rovers 4] [--seed 0] [--minutes 3] [--work DIR]
-                                          [--figure docs/calibration_twin.png]
+                                          [--figure docs/calibration_twin.png] [--contact friction_pair --out FILE]
 
 The twin (``atrv_warp.integrations.mujoco``) is the same rover, URDF and motor driver on MuJoCo's contact: soft
 constraints with the tyre's compliance, an elliptic friction cone, its own solver. So a fit to its drive meets what
@@ -16,6 +16,9 @@ a real rover brings, a contact that is not ours, while its truth is still known.
    ratios, and the same rover's figures on our own engine from the sweep's results file, where it has them.
 4. And what tells the engines apart for that rover: the twin's rolling radius (its tyre sinks, and pushes on the
    ground inside its geometric radius), and an in-place turn at 1 rad/s through the nominal driver in both.
+
+``--contact friction_pair`` records the twin with its wheels' friction on pairs of their own, which keeps them on
+flat ground in brisk turns: what is left of the gap once the twin's turns follow Coulomb's law as ours do.
 
 Each rover's bag, report and console output stay in ``--work``; an interrupted run resumes. Writes
 ``benchmarks/results/calibration_twin.json`` and, with ``--figure``, fitted against true values per parameter.
@@ -61,8 +64,36 @@ def nominal_truth() -> dict[str, float]:
     return {p: float(getattr(contact if table == "contact" else rover, key)) for p, (_, _, table, key) in RANGES.items()}
 
 
+CONTACTS = {"tyre": None, "friction_pair": {"solreffriction": (0.87, 1.0), "impratio": 10.0}}
+"""The twin's contact settings a run can take: MuJoCo's contact with the tyre's compliance (the twin's default, what
+``atrv-calibrate --record-example --engine mujoco`` records), or that with the wheels' friction on pairs of their own
+(``mujoco_turning_study.py``'s ``tyre_friction_pair``: no wheel leaves flat ground in a brisk turn)."""
+
+
+def twin_contact(name: str):
+    """The :class:`~atrv_warp.integrations.mujoco.MujocoContact` of :data:`CONTACTS`' ``name``."""
+    import dataclasses
+
+    from atrv_warp.integrations.mujoco import MujocoContact
+
+    return dataclasses.replace(MujocoContact(), **(CONTACTS[name] or {}))
+
+
+def record_with_contact(folder: Path, truth: dict[str, float], drive_seed: int, minutes: float, noise: float,
+                        contact: str) -> None:
+    """``folder/drive.mcap`` recorded in the twin with the ``contact`` settings of :data:`CONTACTS` other than the
+    default, through the library the CLI calls (``record_twin_bag``), as the CLI would record it."""
+    from atrv_warp.integrations.mujoco.record import record_twin_bag
+    from atrv_warp.sim.config import RoverConfig
+
+    rover = RoverConfig(torque_scale=truth["torque_scale"], payload_mass=truth["payload_mass"],
+                        wheel_radius=truth["wheel_radius"])
+    record_twin_bag(folder / "drive.mcap", minutes, seed=drive_seed, rover=rover, friction=truth["friction"],
+                    truth_noise=noise, truth_yaw_noise=noise / 0.5, contact=twin_contact(contact))
+
+
 def run_rover(label: str, truth: dict[str, float], drive_seed: int, *, minutes: float, noise: float, work: Path,
-              env: dict) -> dict:
+              env: dict, contact: str = "tyre") -> dict:
     """Record rover ``label`` in the twin and fit it (or read what an earlier run left in ``work``): its row."""
     folder = work / label
     done = folder / "row.json"
@@ -72,6 +103,8 @@ def run_rover(label: str, truth: dict[str, float], drive_seed: int, *, minutes: 
             return row
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "truth.toml").write_text(truth_toml(truth))
+    if not (folder / "drive.mcap").is_file() and contact != "tyre":
+        record_with_contact(folder, truth, drive_seed, minutes, noise, contact)
     if not (folder / "drive.mcap").is_file():
         record_bag(folder, label, ["--engine", "mujoco", "--minutes", str(minutes), "--noise", str(noise),
                                    "--seed", str(drive_seed)], env)
@@ -88,7 +121,7 @@ def run_rover(label: str, truth: dict[str, float], drive_seed: int, *, minutes: 
     return row
 
 
-def rolling_radius(truth: dict[str, float], speed: float = 0.5, seconds: float = 4.0) -> float:
+def rolling_radius(truth: dict[str, float], speed: float = 0.5, seconds: float = 4.0, contact: str = "tyre") -> float:
     """The twin's rolling radius [m] for rover ``truth``: forward speed over the wheels' mean speed, driving
     straight at ``speed`` [m/s], averaged over the last second (its wheel sinks, and pushes on the ground at its
     contact point, inside the geometric radius)."""
@@ -100,7 +133,7 @@ def rolling_radius(truth: dict[str, float], speed: float = 0.5, seconds: float =
 
     rover = RoverConfig(torque_scale=truth["torque_scale"], payload_mass=truth["payload_mass"],
                         wheel_radius=truth["wheel_radius"])
-    twin = MujocoTwin(rover=rover, friction=truth["friction"], driver=twin_driver())
+    twin = MujocoTwin(rover=rover, friction=truth["friction"], driver=twin_driver(), contact=twin_contact(contact))
     ratios = []
     for k in range(round(seconds / twin.sim_cfg.step_dt)):
         twin.command(speed, 0.0)
@@ -111,7 +144,8 @@ def rolling_radius(truth: dict[str, float], speed: float = 0.5, seconds: float =
     return float(np.mean(ratios))
 
 
-def in_place_turn(truth: dict[str, float], rate: float = 1.0, seconds: float = 3.0) -> dict[str, float]:
+def in_place_turn(truth: dict[str, float], rate: float = 1.0, seconds: float = 3.0,
+                  contact: str = "tyre") -> dict[str, float]:
     """Rover ``truth`` turning in place at ``rate`` [rad/s] through the nominal driver, in ours and in the twin: each
     one's yaw rate over the command, averaged over the last second, and the share of the twin's steps in which a
     wheel left the ground for a substep (MuJoCo's soft contact lifts a sliding wheel; physics page)."""
@@ -126,7 +160,7 @@ def in_place_turn(truth: dict[str, float], rate: float = 1.0, seconds: float = 3
     rover = RoverConfig(torque_scale=truth["torque_scale"], payload_mass=truth["payload_mass"],
                         wheel_radius=truth["wheel_radius"])
     sim = RoverSim(1, rover=rover, contact=ContactConfig(friction=truth["friction"]), driver=twin_driver())
-    twin = MujocoTwin(rover=rover, friction=truth["friction"], driver=twin_driver())
+    twin = MujocoTwin(rover=rover, friction=truth["friction"], driver=twin_driver(), contact=twin_contact(contact))
     steps, last = round(seconds / twin.sim_cfg.step_dt), round(1.0 / twin.sim_cfg.step_dt)
     ours, theirs, airborne = [], [], 0
     for k in range(steps):
@@ -158,6 +192,9 @@ def main() -> int:
     parser.add_argument("--noise", type=float, default=0.01, help="reference position noise [m] (%(default)s)")
     parser.add_argument("--work", default=None, help="folder kept between runs (default: one in /tmp)")
     parser.add_argument("--figure", default=None, help="write the fitted-against-true figure here")
+    parser.add_argument("--contact", default="tyre", choices=list(CONTACTS),
+                        help="the twin's contact settings (%(default)s: its default; friction_pair: the wheels' "
+                             "friction on pairs of their own, which keeps them on flat ground in brisk turns)")
     parser.add_argument("--out", default=str(RESULTS / "calibration_twin.json"), help="results file (%(default)s)")
     args = parser.parse_args()
     if args.rovers < 0 or not (math.isfinite(args.minutes) and args.minutes > 0):
@@ -176,14 +213,15 @@ def main() -> int:
         print(f"{label}: mu {t['friction']:.3f}, torque x{t['torque_scale']:.3f}, payload {t['payload_mass']:.1f} kg, "
               f"wheel {1000 * t['wheel_radius']:.1f} mm ...", flush=True)
         try:
-            row = run_rover(label, t, drive_seed, minutes=args.minutes, noise=args.noise, work=work, env=env)
+            row = run_rover(label, t, drive_seed, minutes=args.minutes, noise=args.noise, work=work, env=env,
+                            contact=args.contact)
         except RuntimeError as err:  # one rover's failure is reported; the others' rows are kept
             print(f"  {err}", file=sys.stderr, flush=True)
             continue
         row["ours"] = ours(sweep, k - 1) if k > 0 else None
-        row["twin_rolling_radius"] = rolling_radius(t)
+        row["twin_rolling_radius"] = rolling_radius(t, contact=args.contact)
         row["wheel_radius_vs_rolling"] = row["params"]["wheel_radius"]["fitted"] - row["twin_rolling_radius"]
-        row["in_place_turn"] = turn = in_place_turn(t)
+        row["in_place_turn"] = turn = in_place_turn(t, contact=args.contact)
         rows.append(row)
         h, errors = row["held_out"], ", ".join(f"{p} {v['error']:+.3g}" for p, v in row["params"].items())
         verdict = "" if h["passes"] is None else (" passes" if h["passes"] else " FAILS")
@@ -224,7 +262,8 @@ def main() -> int:
           f"model misses by > {100 * MISSES:g} cm (smallest cut {summary['cut_min']:.1f}x); median held-out error after "
           f"the fit {100 * summary['after_m_median']:.1f} cm; converged {summary['converged']} of {len(rows)}; "
           f"misfit flagged on {summary['misfit_flagged']}")
-    result = {"benchmark": "calibration_twin", "seed": args.seed, "minutes": args.minutes, "pose_noise_m": args.noise,
+    result = {"benchmark": "calibration_twin", "contact": args.contact, "seed": args.seed, "minutes": args.minutes,
+              "pose_noise_m": args.noise,
               "sweep_results": sweep_file.name if sweep else None, "summary": summary, "rovers": rows,
               "cores": os.cpu_count(), "time": time.strftime("%Y-%m-%d %H:%M:%S")}
     path = write_results(args.out, result, version=VERSION, driver=True)

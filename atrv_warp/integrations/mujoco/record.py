@@ -26,6 +26,7 @@ from atrv_warp.sim.config import RoverConfig
 from atrv_warp.sim.driver import DriverConfig
 from atrv_warp.sim.urdf import load_rover
 
+from .mjcf import MujocoContact
 from .twin import MujocoTwin
 
 __all__ = ["record_twin_bag", "twin_driver"]
@@ -44,12 +45,14 @@ def twin_driver(driver: DriverConfig | None = None, nominal: RoverConfig | None 
 
 def record_twin_bag(path, minutes: float = 5.0, *, seed: int = 0, rover: RoverConfig | None = None,
                     friction: float | None = None, driver: DriverConfig | None = None, truth_noise: float = 0.01,
-                    truth_yaw_noise: float = 0.02, wheel_speed_noise: float = 0.0, progress=None) -> str:
+                    truth_yaw_noise: float = 0.02, wheel_speed_noise: float = 0.0, contact: MujocoContact | None = None,
+                    progress=None) -> str:
     """Drive the MuJoCo twin of ``rover`` at Coulomb ``friction`` for ``minutes`` of sim time with the scripted
     drive of ``seed`` and record the bag at ``path`` (see the module). ``driver``: the base's driver, its radius and
     track the nominal rover's unless set (:func:`twin_driver`); ``truth_noise`` [m], ``truth_yaw_noise`` [rad]:
     Gaussian noise on the reference pose; ``wheel_speed_noise`` [rad/s]: on the encoders' speeds (the simulator
-    node's parameters of the same names). ``progress(seconds)`` is called every 10 s of sim time. Returns ``path``.
+    node's parameters of the same names); ``contact``: MuJoCo's contact settings (default: the tyre's compliance,
+    :class:`~.mjcf.MujocoContact`). ``progress(seconds)`` is called every 10 s of sim time. Returns ``path``.
 
     Raises:
         ValueError: ``minutes`` or a noise is not a finite number >= 0 (one line naming it); the twin blew up.
@@ -58,7 +61,7 @@ def record_twin_bag(path, minutes: float = 5.0, *, seed: int = 0, rover: RoverCo
                         ("wheel_speed_noise", wheel_speed_noise)):
         if not (math.isfinite(value) and value >= 0):
             raise ValueError(f"record_twin_bag: {name} must be a finite number >= 0, got {value!r}")
-    twin = MujocoTwin(rover=rover, friction=friction, driver=twin_driver(driver))
+    twin = MujocoTwin(rover=rover, friction=friction, driver=twin_driver(driver), contact=contact)
     excitation = Excitation(seed)
     noise = np.random.default_rng([seed, 1])  # the reference's and the encoders' noise, apart from the drive's draws
     joints = [w.joint for w in twin.description.wheels]
