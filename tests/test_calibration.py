@@ -637,3 +637,28 @@ def test_a_replay_starts_from_the_recorded_tilt_wheels_and_effort():
     bare = replay_errors(dataclasses.replace(log, tilt=None, tilt_rate=None, wheel_each=None, effort=None), truth, cfg)
     full, bare = np.concatenate([full["train"], full["held_out"]]), np.concatenate([bare["train"], bare["held_out"]])
     assert np.mean(full) < 2e-3 and np.mean(bare) > 2.5 * np.mean(full), (np.mean(full), np.mean(bare))
+
+
+def test_a_rollout_keeps_the_rover_configs_payload_unless_given_another():
+    """A rover config's payload rides on the rollout's chassis whether or not a chassis mass is passed (a fit that
+    leaves the payload out of ``--params`` replays the weighed rover of ``--sim-config``), and the replayed rover
+    starts at that loaded rover's rest height."""
+    import dataclasses
+
+    from atrv_warp.sim.config import get_variant
+    from atrv_warp.sim.diff import DiffRollout
+
+    loaded = DiffRollout(2, steps=20, twist=True, rover=dataclasses.replace(get_variant("realistic"), payload_mass=20.0))
+    empty = DiffRollout(2, steps=20, twist=True)
+    assert loaded.nominal_chassis_mass == empty.nominal_chassis_mass  # the URDF's chassis
+    twist = torch.tensor([1.0, 0.0]).expand(20, 2, 2)
+    state = loaded.moving_state(torch.zeros(2, 3), torch.zeros(2, 2), torch.zeros(2), torch.zeros(2, 2),
+                                wheel_radius=0.125)
+    z0 = state[0].view(2, -1)[0, loaded.sim.layout.chassis_coord + 2].item()
+    assert z0 == pytest.approx(float(loaded.sim.rest_heights(0.125, 20.0)), abs=1e-6)
+    with torch.no_grad():
+        default = loaded(twist, state)
+        given = loaded(twist, state, chassis_mass=loaded.nominal_chassis_mass + 20.0)
+        none = loaded(twist, state, chassis_mass=loaded.nominal_chassis_mass)
+    assert torch.equal(default, given)
+    assert (default[-1, :, 0] - none[-1, :, 0]).abs().min().item() > 1e-3  # 20 kg accelerate more slowly

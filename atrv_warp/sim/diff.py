@@ -226,8 +226,10 @@ class DiffRollout:
         for name in ("friction", "wheel_radius", "torque_scale", "speed_limit"):
             setattr(physics, name, self._params[name])
         self._physics = physics
-        self.nominal_chassis_mass = float(model.body_mass.numpy()[self.sim.layout.chassis_body])
-        self._nominal = {"friction": self.sim.contact_cfg.friction, "chassis_mass": self.nominal_chassis_mass,
+        # the URDF's chassis: a rover config's payload is a point mass on it, as every other payload here
+        self.nominal_chassis_mass = float(self.sim.nominal_chassis.mass)
+        self._nominal = {"friction": self.sim.contact_cfg.friction,
+                         "chassis_mass": self.nominal_chassis_mass + self.sim.rover_cfg.payload_mass,
                          "torque_scale": self.sim.rover_cfg.torque_scale,
                          "speed_limit": self.sim.rover_cfg.wheel_speed_limit,
                          "wheel_radius": self.sim.rover_cfg.wheel_radius}
@@ -413,7 +415,7 @@ class DiffRollout:
         q, qd = q.view(n, -1), qd.view(n, -1)
         if wheel_radius is not None or payload_mass is not None:
             radius = sim.rover_cfg.wheel_radius if wheel_radius is None else wheel_radius
-            height = sim.rest_heights(radius, 0.0 if payload_mass is None else payload_mass)
+            height = sim.rest_heights(radius, sim.rover_cfg.payload_mass if payload_mass is None else payload_mass)
             q[:, lay.chassis_coord + 2] = height.to(device=q.device, dtype=q.dtype).expand(n)
         yaw = torch.as_tensor(poses, dtype=torch.float32)[:, 2]
         rpy = torch.zeros(n, 3)
@@ -459,9 +461,9 @@ class DiffRollout:
                 every rover at the origin, at rest); differentiable.
             friction: Coulomb coefficient, one for all worlds or (N,) one per world (default: the
                 contact config's), differentiable.
-            chassis_mass: Chassis mass [kg], one or (N,) one per world, e.g. with a payload (default:
-                the URDF's, :attr:`nominal_chassis_mass`). The difference is a point mass at the chassis'
-                centre of mass (the simulator's payload, :meth:`~atrv_warp.sim.RoverSim.set_params`), which
+            chassis_mass: Chassis mass [kg], one or (N,) one per world, e.g. with a payload (default: the
+                URDF's, :attr:`nominal_chassis_mass`, plus the rover config's payload). The difference from the URDF's
+                is a point mass at the chassis' centre of mass (the simulator's payload, :meth:`~atrv_warp.sim.RoverSim.set_params`), which
                 the wheels' friction solver's model of the rover carries too. Differentiable.
             torque_scale, speed_limit, wheel_radius: The motor's torque scale [-] and no-load speed [rad/s],
                 and the wheels' rolling radius [m]; one or (N,) each (default: the rover config's),
