@@ -31,8 +31,8 @@ from atrv_warp.sim.driver import DriverConfig
 from atrv_warp.sim.kernels.rover import MOTOR_TAPER_START
 
 __all__ = ["COMMAND_SOURCES", "CONFOUNDED", "DEFAULT_FIT", "FIT_FIDELITY", "FIT_PARAMETERS", "MISFIT_FLOOR", "MOTOR_PARAMETERS", "CalibrationConfig",
-           "CalibrationError", "CalibrationResult", "Segments", "calibrate", "make_segments", "recording_noise",
-           "replay_errors"]
+           "CalibrationError", "CalibrationResult", "Segments", "calibrate", "integral_from_effort", "make_segments",
+           "recording_noise", "replay_errors"]
 
 
 @dataclass(frozen=True)
@@ -327,6 +327,28 @@ def _controller(log: DriveLog, driver: DriverConfig, grid: np.ndarray, wheel: np
     return twist, state["integral"][0, :-1].double().numpy(), targets.numpy().reshape(-1, 2)
 
 
+def integral_from_effort(effort, target, speed, driver: DriverConfig, *, torque_scale=1.0,
+                         speed_limit=math.inf) -> torch.Tensor:
+    """The base driver's PI integral [rad] from what a bag records at a step's end, (..., 2) each side's: the
+    ``effort`` [N·m] (the torque of the driver's last loop times the motor's ``torque_scale``, tapered near its
+    no-load ``speed_limit`` [rad/s] as the simulator's motor is), the driver's wheel-speed ``target`` and the wheels'
+    ``speed`` [rad/s]. The torque the driver asked for, less its proportional term, over its integral gain. NaN where
+    the effort cannot tell it: a saturated motor (the integral is held there), one tapering past half its torque, a
+    zero torque scale or integral gain.
+
+    It holds the integral to a few thousandths of a radian, where the driver replayed along 20 Hz wheel speeds is
+    several hundredths off (``benchmarks/calibration_start_state.py``)."""
+    effort, target, speed = (torch.as_tensor(x, dtype=torch.float32) for x in (effort, target, speed))
+    scale = torch.as_tensor(torque_scale, dtype=torch.float32)
+    limit = torch.as_tensor(speed_limit, dtype=torch.float32)
+    taper = ((1.0 - speed.abs() / limit) / (1.0 - float(MOTOR_TAPER_START))).clamp(0.0, 1.0)
+    taper = torch.where(effort * speed <= 0.0, torch.ones_like(taper), taper)  # braking: the full torque
+    asked = effort / (scale * taper).clamp(min=1e-6)
+    integral = (asked - driver.kp * (target - speed)) / max(driver.ki, 1e-12)
+    usable = (taper > 0.5) & (asked.abs() < 0.999 * driver.torque_limit) & (scale > 1e-3) & (driver.ki > 0)
+    return torch.where(usable, integral, torch.full_like(integral, math.nan))
+
+
 def _smooth(x: np.ndarray, window: int) -> np.ndarray:
     """Centred moving average of ``window`` samples (made odd) along axis 0; the ends repeat the first and last."""
     half = max(0, window) // 2
@@ -440,28 +462,18 @@ class _Replay:
             self.start_wheels = segments.wheel_each[:, [segments.wheel_joints.index(j) for j in joints]]
 
     def start_integral(self, pad: np.ndarray, kwargs: dict) -> torch.Tensor:
-        """(W, 2) the driver's PI integral at the segments' starts, for each world's motor. Where the bag has
-        efforts, from the torque the driver asked for in its last loop before the start: the recorded effort over
-        the world's torque scale (and the motor's taper), less the proportional term, over the integral gain. That
-        holds the integral to a few thousandths of a radian, where the driver replayed on 20 Hz wheel speeds is
-        several hundredths off, and a replay whose integral is off drives too far. Elsewhere (no efforts, a
-        saturated or tapering motor) the replayed driver's."""
-        seg, d = self.segments, self.driver
+        """(W, 2) the driver's PI integral at the segments' starts, for each world's motor
+        (:func:`integral_from_effort`, and the replayed driver's where that has none)."""
+        seg = self.segments
         replayed = torch.as_tensor(seg.integral[pad], dtype=torch.float32)
-        if seg.start_effort is None or seg.start_target is None or d.ki <= 0:
+        if seg.start_effort is None or seg.start_target is None:
             return replayed
         w = len(pad)
         scale = torch.as_tensor(kwargs.get("torque_scale", self.rover.torque_scale), dtype=torch.float32).expand(w)
         limit = torch.as_tensor(kwargs.get("speed_limit", self.rover.wheel_speed_limit), dtype=torch.float32).expand(w)
-        effort = torch.as_tensor(seg.start_effort[pad], dtype=torch.float32)
-        speed = torch.as_tensor(seg.wheel[pad], dtype=torch.float32)
-        taper = ((1.0 - speed.abs() / limit[:, None]) / (1.0 - float(MOTOR_TAPER_START))).clamp(0.0, 1.0)
-        taper = torch.where(effort * speed <= 0.0, torch.ones_like(taper), taper)  # braking: the full torque
-        asked = effort / (scale[:, None] * taper).clamp(min=1e-6)
-        error = torch.as_tensor(seg.start_target[pad], dtype=torch.float32) - speed
-        from_effort = (asked - d.kp * error) / d.ki
-        usable = (taper > 0.5) & (asked.abs() < 0.999 * d.torque_limit) & (scale[:, None] > 1e-3)
-        return torch.where(usable, from_effort, replayed)
+        integral = integral_from_effort(seg.start_effort[pad], seg.start_target[pad], seg.wheel[pad], self.driver,
+                                        torque_scale=scale[:, None], speed_limit=limit[:, None])
+        return torch.where(torch.isfinite(integral), integral, replayed)
 
     @torch.no_grad()
     def _chunk(self, index: np.ndarray, values: dict[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor,
