@@ -9,6 +9,7 @@ else it is made here from the ``nav_deploy`` task's contract.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -320,3 +321,10 @@ def test_the_deploy_node_loads_nothing_of_the_simulator():
 def test_the_contract_format_is_the_exporters():
     export = pytest.importorskip("atrv_warp.rl.export")
     assert export.EXPORT_FORMAT == EXPORT_FORMAT
+
+
+def test_the_node_names_the_base_limits_its_policy_was_trained_with(policy):
+    # the deployable task's base accelerates at up to 1 m/s²: the robot's diff_drive_controller should too
+    assert "linear.x.max_acceleration 1 m/s²" in policy.describe()
+    bare = dict(policy.contract, action={k: v for k, v in policy.contract["action"].items() if k != "base_limits"})
+    assert "max_acceleration" not in dataclasses.replace(policy, contract=bare).describe()  # an older export: silent

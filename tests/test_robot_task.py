@@ -6,6 +6,7 @@ Run: ``python -m pytest -q tests/test_robot_task.py``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -22,6 +23,7 @@ from atrv_warp.task.spec import ROBOT_OBSERVATION, observation_fields
 ROBOT = {f.name: i for i, f in enumerate(ROBOT_OBSERVATION)}
 BOUND = torch.tensor([f.bound for f in ROBOT_OBSERVATION])
 FLAT = {"task": "reach", "action": "twist", "observation": "robot"}  # the flat arena: quick to build
+FLAT_FIELDS = {"action": "twist", "observation": "robot"}  # the same as TaskConfig fields (reach's defaults)
 
 
 def _drive(env, td, action, steps):
@@ -193,7 +195,8 @@ def test_snapshot_restores_nav_deploy_bit_for_bit():
 
 
 @pytest.mark.parametrize("bad", [{"action": "velocity"}, {"observation": "gps"}, {"max_linear": 0.0},
-                                 {"max_angular": -1.0}, {"max_linear": math.nan}])
+                                 {"max_angular": -1.0}, {"max_linear": math.nan}, {"linear_max_acceleration": 0.0},
+                                 {"angular_max_acceleration": math.inf}])
 def test_bad_action_or_observation_kinds_are_refused(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         TaskConfig(**bad)
@@ -233,3 +236,37 @@ def test_an_exported_twist_policy_says_it_commands_a_twist():
     assert spec["action"]["scale"] == [2.0, 2.0]
     assert [f["name"] for f in spec["observation"][:8]] == [f.name for f in ROBOT_OBSERVATION]
     assert contract(Path("p.pt"), {"task": "nav"})["action"]["kind"] == "torque"
+
+
+def test_the_tasks_base_limits_fill_the_drivers_unset_ones():
+    from atrv_warp.sim.driver import DriverConfig
+
+    task = TaskConfig(action="twist", linear_max_acceleration=1.0)
+    assert task.driver().linear_max_acceleration == 1.0 and task.driver().angular_max_acceleration is None
+    own = DriverConfig(linear_max_acceleration=3.0, angular_max_acceleration=2.0)
+    assert task.driver(own) == own  # a driver's own limits stand
+    assert TaskConfig().driver() == DriverConfig()
+    env = ATRVjrEnv(1, seed=0, task=dataclasses.replace(task, **FLAT_FIELDS))
+    assert env.sim.driver_cfg.linear_max_acceleration == 1.0
+    from pathlib import Path
+
+    from atrv_warp.rl.export import contract
+
+    limits = contract(Path("p.pt"), {"task": "nav_deploy"})["action"]["base_limits"]
+    assert limits == {"linear_max_acceleration": {"value": 1.0, "unit": "m/s²"}}
+
+
+def test_an_acceleration_limit_keeps_the_wheels_from_spinning_out_at_a_launch():
+    """A full-speed /cmd_vel from rest at the nominal µ 0.3: without a limit the driver answers with its full torque,
+    the wheels spin, and the encoders' distance runs ahead of the rover's (the deployable task's goal is seen
+    through them); with the nav_deploy base's 1 m/s² it stays within a few per cent."""
+    runs = {}
+    for limit in (None, 1.0):
+        env = ATRVjrEnv(1, seed=0, task=TaskConfig(**FLAT_FIELDS, linear_max_acceleration=limit))
+        td = env.reset()
+        start = env.sim.root_pose[0, :2].clone()
+        _drive(env, td, torch.tensor([[1.0, 0.0]]), 40)  # 2 s at 2 m/s
+        true = (env.sim.root_pose[0, :2] - start).norm().item()
+        runs[limit] = env.sim.driver.fused[0, 0].item() / true
+    assert runs[None] > 1.15, runs  # measured 1.24
+    assert abs(runs[1.0] - 1.0) < 0.03, runs  # measured 0.995

@@ -70,7 +70,17 @@ class Deployable:
         scan = f", {s.count} scan sectors over [{s.edges[0]:.3f}, {s.edges[-1]:.3f}] rad" if s else ""
         return (f"{self.path}: task {self.contract.get('task', '?')}, robot observation "
                 f"({len(self.observation.fields)},){scan}, twist action x ({self.scale[0]:g} m/s, {self.scale[1]:g} "
-                f"rad/s) at {self.rate_hz:g} Hz")
+                f"rad/s) at {self.rate_hz:g} Hz{self.base_limits()}")
+
+    def base_limits(self) -> str:
+        """The limits its training's base applied to /cmd_vel (the contract's ``base_limits``), for the robot's
+        ``diff_drive_controller`` to apply too: ``""`` where none, else ``"; base: linear.x.max_acceleration 1
+        m/s²"``."""
+        limits = (self.contract.get("action") or {}).get("base_limits") or {}
+        names = {"linear_max_acceleration": "linear.x.max_acceleration",
+                 "angular_max_acceleration": "angular.z.max_acceleration"}
+        cells = [f"{names.get(k, k)} {v['value']:g} {v['unit']}" for k, v in limits.items()]
+        return f"; trained on a base with {', '.join(cells)}" if cells else ""
 
 
 def load_deployable(path: str | Path) -> Deployable:

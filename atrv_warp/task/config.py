@@ -52,6 +52,14 @@ class TaskConfig:
     max_angular: float = 2.0
     """Yaw rate at action 1 [rad/s] (``action="twist"``): half the Jackal J100's 4 rad/s; the model turns in place at
     up to about 4 rad/s under torque control (the torque nav policy's peaks)."""
+    linear_max_acceleration: float | None = None
+    """The base's ``linear.x.max_acceleration`` [m/s²] (``action="twist"``; ``None``: no limit): the task's
+    :class:`~atrv_warp.sim.driver.DriverConfig` takes it where its own is unset (:meth:`driver`), and an exported
+    policy's contract carries it for the robot's base. Without it the driver meets a full-speed command with its
+    full torque: the wheels spin, and the encoders' distance runs ahead of the rover's (``nav_deploy``: 1.0, the
+    Husky A200's; docs/tasks.md)."""
+    angular_max_acceleration: float | None = None
+    """The base's ``angular.z.max_acceleration`` [rad/s²] (``None``: no limit), as ``linear_max_acceleration``."""
     observation: str = "arena"
     """What the policy observes (:data:`atrv_warp.task.spec.OBSERVATION_KINDS`): ``"arena"``, positions and
     velocities in the arena's frame (the reference), or ``"robot"``, only what a robot's stack publishes (goal from
@@ -95,9 +103,10 @@ class TaskConfig:
         if self.observation not in OBSERVATION_KINDS:
             raise ValueError(f"TaskConfig.observation={self.observation!r} is not an observation kind; known: "
                              f"{sorted(OBSERVATION_KINDS)}")
-        for name in ("max_linear", "max_angular", "action_scale"):
+        limits = [n for n in ("linear_max_acceleration", "angular_max_acceleration") if getattr(self, n) is not None]
+        for name in ("max_linear", "max_angular", "action_scale", *limits):
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+            if isinstance(value, bool) or not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"TaskConfig.{name} must be a finite number > 0, got {value!r}")
         if self.scan_sectors and (self.scan_beams % self.scan_sectors or self.scan_sectors < 0):
             raise ValueError(f"scan_beams={self.scan_beams} must be a multiple of scan_sectors={self.scan_sectors}")
@@ -115,6 +124,16 @@ class TaskConfig:
         if self.target_distance is not None and not 0 < self.target_distance[0] <= self.target_distance[1]:
             raise ValueError(f"target_distance must be 0 < low <= high, got {self.target_distance}")
 
+    def driver(self, driver=None):
+        """The base's motor driver for this task: ``driver`` (default: :class:`~atrv_warp.sim.driver.DriverConfig`'s
+        defaults) with the task's acceleration limits where it sets none."""
+        from atrv_warp.sim.driver import DriverConfig
+
+        driver = driver or DriverConfig()
+        limits = {name: getattr(self, name) for name in ("linear_max_acceleration", "angular_max_acceleration")
+                  if getattr(self, name) is not None and getattr(driver, name) is None}
+        return dataclasses.replace(driver, **limits) if limits else driver
+
 
 TASK_VARIANTS: dict[str, TaskConfig] = {
     "reach": TaskConfig(),
@@ -123,12 +142,14 @@ TASK_VARIANTS: dict[str, TaskConfig] = {
         flip_roll=0.5, scan_beams=64, scan_sectors=16, action_history=3, failure_reward=-10.0, heading_weight=1.0,
         clearance_weight=0.5),
 }
-TASK_VARIANTS["nav_deploy"] = dataclasses.replace(TASK_VARIANTS["nav"], action="twist", observation="robot")
+TASK_VARIANTS["nav_deploy"] = dataclasses.replace(TASK_VARIANTS["nav"], action="twist", observation="robot",
+                                                  linear_max_acceleration=1.0)
 """Registered tasks. ``reach``: the reference task (flat, no obstacles, no scanner). ``nav``: rolling
 terrain, six obstacles (one across the straight line to the target), targets 5–10 m away, 15 s
 episodes, a 64-beam scan observed as 16 sectors, and the last three actions observed (a delayed rover's
 pending commands: docs/randomization.md). ``nav_deploy``: the nav world for a policy that runs on a robot: it
-commands ``/cmd_vel`` (``action="twist"``) and observes only what the robot publishes (``observation="robot"``)."""
+commands ``/cmd_vel`` (``action="twist"``) through a base that accelerates at up to 1 m/s² (the Husky A200's
+``diff_drive_controller``) and observes only what the robot publishes (``observation="robot"``)."""
 
 
 def get_task(task: str | TaskConfig | None) -> TaskConfig:

@@ -123,7 +123,8 @@ class ATRVjrEnv(EnvBase):
         sim_config: A simulator-config TOML file (see :class:`RoverSim`), e.g. ``atrv-calibrate``'s
             calibration of a real rover.
         driver: The base's motor driver (:class:`~atrv_warp.sim.driver.DriverConfig`), which velocity actions
-            go through (see :class:`RoverSim`).
+            go through (see :class:`RoverSim`); the task's acceleration limits fill in those it leaves unset
+            (:meth:`TaskConfig.driver`).
         **task_overrides: Fields of :class:`TaskConfig` (e.g. ``max_steps=100``); an unknown
             name raises ``ValueError``.
     """
@@ -154,7 +155,7 @@ class ATRVjrEnv(EnvBase):
         ranges (one centred on ``sim_config``, resolved)."""
         self.sim = RoverSim(num_envs, rover=rover, contact=contact, arena=arena, sim=sim,
                             terrain=c.terrain, obstacles=ObstacleConfig(slots=c.obstacles) if c.obstacles else None,
-                            device=device, sim_config=sim_config, driver=driver)
+                            device=device, sim_config=sim_config, driver=c.driver(driver))
         self.scanner = None
         if c.scan_beams:
             noise = self.randomization.noise

@@ -215,6 +215,10 @@ def action_to_twist(action: torch.Tensor, max_linear: float, max_angular: float)
     return action.clamp(-1.0, 1.0) * scale
 
 
+BASE_LIMITS = (("linear_max_acceleration", "m/s²"), ("angular_max_acceleration", "rad/s²"))
+"""The base's limits a task trains with (:class:`~atrv_warp.task.config.TaskConfig` fields, named as
+``diff_drive_controller``'s), in an exported policy's contract: a robot's base should apply the same."""
+
 _ACTION_COMMANDS = {
     "torque": "action[0] x scale[0] is the torque of every left wheel, action[1] x scale[1] of every right wheel [N·m]",
     "twist": "a geometry_msgs/Twist on /cmd_vel (base_link): linear.x = action[0] x scale[0] [m/s], angular.z = "
@@ -230,6 +234,7 @@ def policy_contract(task) -> dict:
     ``index``, ``low``, ``high``, ``bound``, ``unit``, ``frame``, ``description``; ``action``: ``kind`` (``torque``
     | ``twist``), ``names``, ``low``/``high`` (-1, 1), ``scale`` and ``units`` per column (what 1.0 is worth),
     ``limits`` (the :class:`~atrv_warp.task.config.TaskConfig` fields the scale comes from, by name, with units),
+    ``base_limits`` (the :data:`BASE_LIMITS` the task's base applied to the command, by name, with units),
     ``command`` (what a robot does with it); ``scan``: ``{"sectors": ScanSectors.describe()}`` or ``None``;
     ``action_history``: ``steps``, ``columns`` and ``meaning``, or ``None``.
     """
@@ -253,7 +258,9 @@ def policy_contract(task) -> dict:
                    "scale": [float(getattr(task, f)) for f, _ in kind.scales], "units": [u for _, u in kind.scales],
                    "limits": {f: {"value": float(getattr(task, f)), "unit": u} for f, u in kind.scales},
                    "command": _ACTION_COMMANDS[kind.name], "meaning": kind.description + "; actions are clipped to "
-                   "[-1, 1]"},
+                   "[-1, 1]",
+                   "base_limits": {name: {"value": getattr(task, name), "unit": unit} for name, unit in BASE_LIMITS
+                                   if getattr(task, name) is not None}},
         "scan": {"sectors": sectors.describe()} if sectors is not None else None,
         "action_history": history,
     }

@@ -197,7 +197,7 @@ def run_twin_episodes(policy: DeployablePolicy, episodes: TwinEpisodes, *, frict
     mu = None
     for i, episode in enumerate(episodes.episodes):
         twin = MujocoTwin(terrain=episodes.terrain, tile=episode.tile, obstacles=episode.obstacles, friction=friction,
-                          obstacle_height=episodes.obstacle_height, scanner=scanner)
+                          obstacle_height=episodes.obstacle_height, scanner=scanner, driver=task.driver())
         mu = twin.friction
         reasons[i], returns[i], steps[i] = run_twin_episode(policy, twin, episode, task)
         if on_episode is not None:
