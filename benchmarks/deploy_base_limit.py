@@ -82,10 +82,10 @@ def main() -> int:
     task = get_task("nav_deploy")
     policy = load_policy(args.policy, task="nav_deploy")
     path = policy_path(args.policy)
-    bases = {"no limit": None, "nav_deploy's": task.linear_max_acceleration}
+    bases = {"unlimited": None, "limited": task.linear_max_acceleration}  # the base without and with the task's limit
     result = {"benchmark": "deploy_base_limit", "policy": str(path), "episodes": args.episodes, "seed": EVAL_SEED,
               "limit": {"linear_max_acceleration": task.linear_max_acceleration, "unit": "m/s²"}, "runs": []}
-    print(f"{path}: {args.episodes} test episodes; the base without limits and with "
+    print(f"{path}: {args.episodes} test episodes; the base without limits (unlimited) and with "
           f"linear.x.max_acceleration {task.linear_max_acceleration:g} m/s²", flush=True)
     for randomization in ("none", "wide"):
         for base, limit in bases.items():
