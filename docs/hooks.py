@@ -748,7 +748,45 @@ def mujoco_transfer(name: str = "mujoco_transfer.json") -> str:
                   ["---", "---", "---:", "---:", "---:", "---:", "---:", "---:"], rows)
 
 
+def deploy_policy() -> str:
+    """``deploy_policy.json``: the deployable and the torque nav policy on the same test episodes, how each ended
+    and how each drives."""
+    rows = []
+    for r in _load("deploy_policy.json")["rows"]:
+        rows.append([f"{r['policy']} (`{r['file']}`)", "`wide`" if r["randomization"] == "wide" else "nominal",
+                     f"**{r['success_rate']:.1%}**", f"{r['timeout_rate']:.1%}", f"{r['obstacle_rate']:.1%}",
+                     f"{r['mean_abs_dv']:.3f}", f"{r['mean_abs_dw']:.3f}", f"{r['mean_peak_speed']:.2f}",
+                     f"{r['mean_closest_obstacle']:.2f} / {r['p5_closest_obstacle']:.2f}"])
+    return _table(["policy", "rover", "success", "timeout", "obstacle", "mean \|Δv\| per step [m/s]",
+                   "mean \|Δω\| per step [rad/s]", "peak speed [m/s]", "closest obstacle, mean / 5th pct. [m]"],
+                  ["---", "---", "---:", "---:", "---:", "---:", "---:", "---:", "---:"], rows)
+
+
+def deploy_base_limit(name: str = "deploy_base_limit.json") -> str:
+    """``deploy_base_limit.json``: the deployable policy through a base without and with the task's acceleration
+    limit, success and how far the goal it sees from odometry is from the true one."""
+    d = _load(name)
+    rows = []
+    for r in d["runs"]:
+        base = "none" if r["base"] == "unlimited" else f"{d['limit']['linear_max_acceleration']:g} m/s²"
+        rows.append(["`wide`" if r["randomization"] == "wide" else "nominal", base, f"**{r['success_rate']:.1%}**",
+                     f"{r['timeout_rate']:.1%}", f"{r['obstacle_rate']:.1%}", f"{r['mean_steps']:.0f}",
+                     f"{r['odometry_error_median']:.2f} / {r['odometry_error_p90']:.2f}"])
+    return _table(["rover", "base's acceleration limit", "success", "timeout", "obstacle", "mean steps",
+                   "goal seen from odometry, off by up to [m] (median / 90th pct. episode)"],
+                  ["---", "---", "---:", "---:", "---:", "---:", "---:"], rows)
+
+
+def train_to_success_nav_deploy() -> str:
+    """``train_to_success_nav_deploy.json``: the deployable nav task's time to 90 % per seed (under ``wide``)."""
+    return _train_to_success("train_to_success_nav_deploy.json")
+
+
 TABLES: dict[str, Callable[[], str]] = {
+    "deploy_policy": deploy_policy,
+    "deploy_base_limit": deploy_base_limit,
+    "deploy_base_limit_old_policy": lambda: deploy_base_limit("deploy_base_limit_old_policy.json"),
+    "train_to_success_nav_deploy": train_to_success_nav_deploy,
     "diff_gradients_common": diff_gradients_common,
     "diff_gradients_differential": diff_gradients_differential,
     "diff_gradients_friction": diff_gradients_friction,

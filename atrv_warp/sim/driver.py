@@ -23,7 +23,8 @@ Clearpath Husky A200                   1.0         1.0            1.0          1
 Clearpath Jackal J100                  2.0         20.0           4.0          25.0
 =====================================  ==========  =============  ===========  ==============
 
-(Clearpath's ``clearpath_control`` configs run ``diff_drive_controller`` at 50 Hz.)
+(Clearpath's ``clearpath_control`` configs run ``diff_drive_controller`` at 50 Hz.) A task sets the limits its base
+trains with (:meth:`atrv_warp.task.config.TaskConfig.driver`): ``nav_deploy`` the Husky's 1 m/s².
 """
 
 from __future__ import annotations
