@@ -757,8 +757,8 @@ def deploy_policy() -> str:
                      f"**{r['success_rate']:.1%}**", f"{r['timeout_rate']:.1%}", f"{r['obstacle_rate']:.1%}",
                      f"{r['mean_abs_dv']:.3f}", f"{r['mean_abs_dw']:.3f}", f"{r['mean_peak_speed']:.2f}",
                      f"{r['mean_closest_obstacle']:.2f} / {r['p5_closest_obstacle']:.2f}"])
-    return _table(["policy", "rover", "success", "timeout", "obstacle", "mean \|Δv\| per step [m/s]",
-                   "mean \|Δω\| per step [rad/s]", "peak speed [m/s]", "closest obstacle, mean / 5th pct. [m]"],
+    return _table(["policy", "rover", "success", "timeout", "obstacle", "mean abs. Δv per step [m/s]",
+                   "mean abs. Δω per step [rad/s]", "peak speed [m/s]", "closest obstacle, mean / 5th pct. [m]"],
                   ["---", "---", "---:", "---:", "---:", "---:", "---:", "---:", "---:"], rows)
 
 
