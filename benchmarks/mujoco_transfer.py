@@ -9,7 +9,8 @@ EVAL_SEED`: the worlds, starts and goals ``python -m atrv_warp.evaluate`` runs),
 ``--frictions`` (0.3 is the nominal µ), its observation built by the light core's ``RobotObservation`` from the
 twin's odometry, IMU, scan and goal, as on a robot. Label a policy ``NAME=PATH`` (e.g. ``randomized=run1.pt
 plain=run2.pt``). The same policies in our simulator on the same episodes (``--ours``, at the nominal rover) give
-the engine gap beside it.
+the engine gap beside it. ``--odometry truth`` feeds the policies the chassis' true pose in place of the fused
+odometry (a study: what the odometry's error costs in each engine; ``--ours`` then stays on the odometry).
 
 Per policy and µ: the success rate and the failure breakdown (obstacle, timeout, flip, wall, nonfinite), printed
 as one table and written to ``benchmarks/results/mujoco_transfer.json``. The issue's target: the randomized
@@ -47,6 +48,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=None, help="evaluation set (default: EVAL_SEED)")
     parser.add_argument("--frictions", type=float, nargs="+", default=[0.3, 0.5, 0.8])
     parser.add_argument("--ours", action="store_true", help="also run each policy in our simulator")
+    parser.add_argument("--odometry", choices=("fused", "truth"), default="fused",
+                        help="the pose the policies see their goal from in the twin: the base's fused odometry (as "
+                             "on a robot), or the true pose (a study of what the odometry's error costs)")
     parser.add_argument("--out", default=str(RESULTS / "mujoco_transfer.json"))
     args = parser.parse_args(argv)
     if args.episodes < 1:
@@ -81,7 +85,8 @@ def main(argv: list[str] | None = None) -> int:
         table[name] = {}
         for mu in args.frictions:
             t0 = time.perf_counter()
-            table[name][f"mujoco µ {mu:g}"] = r = rates(run_twin_episodes(policy, episodes, friction=mu))
+            table[name][f"mujoco µ {mu:g}"] = r = rates(run_twin_episodes(policy, episodes, friction=mu,
+                                                                                odometry=args.odometry))
             r["seconds"] = time.perf_counter() - t0
             print(f"{name:16s} mujoco µ {mu:<4g} " + " ".join(f"{k} {100 * r[k]:5.1f}%" for k in ENDS)
                   + f"  ({r['seconds']:.0f} s)", flush=True)
@@ -92,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
             run = evaluate_policy(path, task=policy.task, episodes=args.episodes, seed=seed)
             table[name]["ours (nominal µ 0.3)"] = r = rates(run.record)
             print(f"{name:16s} ours          " + " ".join(f"{k} {100 * r[k]:5.1f}%" for k in ENDS), flush=True)
-    result = {"task": task, "seed": seed, "episodes": args.episodes,
+    result = {"task": task, "seed": seed, "episodes": args.episodes, "odometry": args.odometry,
               "frictions": args.frictions, "policies": table}
     out = write_results(args.out, result, version=VERSION, task=True, driver=True,
                         policies=tuple(f for f in files if Path(f).is_file()))

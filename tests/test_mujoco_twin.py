@@ -270,3 +270,37 @@ def test_calibrate_records_an_example_bag_from_the_twin(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and why in err[0], err
         assert not out.exists()
+
+
+def test_twin_episodes_go_through_the_tasks_base_and_can_see_the_true_pose():
+    """The twin's episodes drive through the task's base (nav_deploy's acceleration limit); ``odometry="truth"``
+    shows the policy its goal from the true pose (the transfer study's control), ``"fused"`` from the odometry."""
+    import dataclasses
+
+    import torch
+
+    from atrv_warp.integrations.mujoco import DeployablePolicy, MujocoTwin, draw_episodes, run_twin_episode
+    from atrv_warp.sim.scanner import ScannerConfig
+    from atrv_warp.task.config import get_task
+    from atrv_warp.task.spec import policy_contract
+
+    task = dataclasses.replace(get_task("nav_deploy"), max_steps=30)
+    episodes = draw_episodes(task, 1)
+    episode = episodes.episodes[0]
+    contract = {"task": "nav_deploy", **policy_contract(task), "step_dt": 0.05, "rate_hz": 20.0}
+    gaps = {}
+    for source in ("truth", "fused"):
+        seen, true = [], []
+        policy = DeployablePolicy(lambda obs: (seen.append(float(obs[0])), torch.tensor([1.0, 0.3]))[1], contract,
+                                  "nav_deploy", "forward")
+        twin = MujocoTwin(terrain=episodes.terrain, tile=episode.tile, obstacles=episode.obstacles,
+                          obstacle_height=episodes.obstacle_height,
+                          scanner=ScannerConfig(beams=task.scan_beams, fov=task.scan_fov), driver=task.driver())
+        assert twin.driver_cfg.linear_max_acceleration == 1.0
+        target = np.asarray(episode.target)
+        run_twin_episode(policy, twin, episode, task, odometry=source,
+                         on_step=lambda t: true.append(float(np.linalg.norm(t.root_pose[:2] - target))))
+        gaps[source] = max(abs(a - b) for a, b in zip(seen[1:], true, strict=False))
+    assert gaps["truth"] < 1e-4 < 1e-3 < gaps["fused"], gaps
+    with pytest.raises(ValueError, match="odometry='gps'"):
+        run_twin_episode(policy, twin, episode, task, odometry="gps")

@@ -12,10 +12,12 @@ builder a robot runs (:class:`~atrv_warp.core.observation.RobotObservation`).
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from atrv_warp.core.observation import RobotObservation, Scan
@@ -29,7 +31,7 @@ from atrv_warp.task.spec import EndReason, action_to_twist, policy_contract
 from .mjcf import Obstacle
 from .twin import FLAG_OBSTACLE, MujocoTwin
 
-__all__ = ["DeployablePolicy", "TwinEpisode", "TwinEpisodes", "draw_episodes", "run_twin_episode",
+__all__ = ["ODOMETRY_SOURCES", "DeployablePolicy", "TwinEpisode", "TwinEpisodes", "draw_episodes", "run_twin_episode",
            "run_twin_episodes"]
 
 
@@ -139,14 +141,33 @@ class DeployablePolicy:
         return self.act(observation).clamp(-1.0, 1.0)
 
 
+ODOMETRY_SOURCES = ("fused", "truth")
+"""Where a twin episode's policy sees its pose from: ``fused``, the base's encoder-and-gyro odometry (as on a
+robot); ``truth``, the chassis' true pose in the odometry frame (a study of what the odometry's error costs)."""
+
+
 def run_twin_episode(policy: DeployablePolicy, twin: MujocoTwin, episode: TwinEpisode, task: TaskConfig,
-                     on_step: Callable[[MujocoTwin], None] | None = None) -> tuple[int, float, int]:
+                     on_step: Callable[[MujocoTwin], None] | None = None, *,
+                     odometry: str = "fused") -> tuple[int, float, int]:
     """Drive one episode: the twin reset to the episode's start, the policy fed by :attr:`DeployablePolicy.build`
     every ``step_dt``, until the task's end. Returns (end reason code, return, steps).
 
+    ``odometry``: the pose the policy's goal is seen from (:data:`ODOMETRY_SOURCES`).
     The return is the task's progress, heading and step terms (:func:`atrv_warp.task.reward.progress_reward`) plus
     its success or failure reward; the clearance term is left out."""
+    if odometry not in ODOMETRY_SOURCES:
+        raise ValueError(f"odometry={odometry!r} is not a pose source; known: {list(ODOMETRY_SOURCES)}")
     twin.reset(episode.start[:3], episode.start[3:])
+    origin, yaw0 = twin.root_pose[:2].copy(), float(twin.rpy[2])
+
+    def pose() -> np.ndarray:
+        if odometry == "fused":
+            return twin.fused
+        c, s = math.cos(yaw0), math.sin(yaw0)
+        d = twin.root_pose[:2] - origin
+        yaw = float(twin.rpy[2]) - yaw0
+        return np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], math.atan2(math.sin(yaw), math.cos(yaw))])
+
     cfg = twin.scanner_cfg
     angle_step = float(twin.beam_angles[1] - twin.beam_angles[0]) if len(twin.beam_angles) > 1 else 1.0
     history = torch.zeros(max(policy.build.action_history, 1), 2, dtype=torch.float64)
@@ -155,7 +176,7 @@ def run_twin_episode(policy: DeployablePolicy, twin: MujocoTwin, episode: TwinEp
     poses, reward, reason, steps = [torch.from_numpy(twin.root_pose)], 0.0, EndReason.TIMEOUT, task.max_steps
     for step in range(1, task.max_steps + 1):
         q, omega = twin.imu()
-        obs = policy.build(odom_pose=twin.fused, odom_twist=twin.odom_twist, imu_orientation=q,
+        obs = policy.build(odom_pose=pose(), odom_twist=twin.odom_twist, imu_orientation=q,
                            imu_angular_velocity=omega, goal=goal,
                            scan=Scan(twin.scan(), float(twin.beam_angles[0]), angle_step, cfg.min_range, cfg.max_range),
                            last_actions=history[: policy.build.action_history] if policy.build.action_history else None)
@@ -185,9 +206,10 @@ def run_twin_episode(policy: DeployablePolicy, twin: MujocoTwin, episode: TwinEp
 
 
 def run_twin_episodes(policy: DeployablePolicy, episodes: TwinEpisodes, *, friction: float | None = None,
-                      on_episode: Callable[[int, int], None] | None = None) -> EpisodeRecord:
+                      on_episode: Callable[[int, int], None] | None = None, odometry: str = "fused") -> EpisodeRecord:
     """Run ``policy`` once on each of ``episodes`` in a twin of its world at Coulomb ``friction`` (default: the
-    nominal µ), deterministically. ``on_episode(index, end_reason)`` is called after each (progress output).
+    nominal µ), deterministically. ``on_episode(index, end_reason)`` is called after each (progress output);
+    ``odometry`` as :func:`run_twin_episode` takes it.
 
     Returns an :class:`~atrv_warp.task.evaluation.EpisodeRecord` (its ``params`` hold ``friction``)."""
     task = episodes.task
@@ -199,7 +221,7 @@ def run_twin_episodes(policy: DeployablePolicy, episodes: TwinEpisodes, *, frict
         twin = MujocoTwin(terrain=episodes.terrain, tile=episode.tile, obstacles=episode.obstacles, friction=friction,
                           obstacle_height=episodes.obstacle_height, scanner=scanner, driver=task.driver())
         mu = twin.friction
-        reasons[i], returns[i], steps[i] = run_twin_episode(policy, twin, episode, task)
+        reasons[i], returns[i], steps[i] = run_twin_episode(policy, twin, episode, task, odometry=odometry)
         if on_episode is not None:
             on_episode(i, int(reasons[i]))
     return EpisodeRecord(reasons, returns, steps, {"friction": torch.full((n,), float(mu or 0.0), dtype=torch.float64)})
