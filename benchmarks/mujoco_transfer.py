@@ -11,6 +11,8 @@ twin's odometry, IMU, scan and goal, as on a robot. Label a policy ``NAME=PATH``
 plain=run2.pt``). The same policies in our simulator on the same episodes (``--ours``, at the nominal rover) give
 the engine gap beside it. ``--odometry truth`` feeds the policies the chassis' true pose in place of the fused
 odometry (a study: what the odometry's error costs in each engine; ``--ours`` then stays on the odometry).
+``--driver-wheel-radius M`` configures the twin's base with a calibrated wheel radius, as a rover engineer sets
+their base's after ``atrv-calibrate``.
 
 Per policy and µ: the success rate and the failure breakdown (obstacle, timeout, flip, wall, nonfinite), printed
 as one table and written to ``benchmarks/results/mujoco_transfer.json``. The issue's target: the randomized
@@ -51,6 +53,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--odometry", choices=("fused", "truth"), default="fused",
                         help="the pose the policies see their goal from in the twin: the base's fused odometry (as "
                              "on a robot), or the true pose (a study of what the odometry's error costs)")
+    parser.add_argument("--driver-wheel-radius", type=float, default=None, metavar="M",
+                        help="the twin's base configured with this wheel radius [m] (e.g. atrv-calibrate's fit of a "
+                             "bag recorded from the twin; default: the nominal rover's)")
     parser.add_argument("--out", default=str(RESULTS / "mujoco_transfer.json"))
     args = parser.parse_args(argv)
     if args.episodes < 1:
@@ -80,13 +85,19 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     task = tasks.pop()
     episodes = draw_episodes(task, args.episodes, seed=seed)
+    from atrv_warp.sim.driver import DriverConfig
+
+    try:
+        driver = DriverConfig(wheel_radius=args.driver_wheel_radius)
+    except ValueError as err:
+        parser.error(f"--driver-wheel-radius: {err}")
     table = {}
     for name, policy in policies.items():
         table[name] = {}
         for mu in args.frictions:
             t0 = time.perf_counter()
             table[name][f"mujoco µ {mu:g}"] = r = rates(run_twin_episodes(policy, episodes, friction=mu,
-                                                                                odometry=args.odometry))
+                                                                                odometry=args.odometry, driver=driver))
             r["seconds"] = time.perf_counter() - t0
             print(f"{name:16s} mujoco µ {mu:<4g} " + " ".join(f"{k} {100 * r[k]:5.1f}%" for k in ENDS)
                   + f"  ({r['seconds']:.0f} s)", flush=True)
@@ -98,6 +109,7 @@ def main(argv: list[str] | None = None) -> int:
             table[name]["ours (nominal µ 0.3)"] = r = rates(run.record)
             print(f"{name:16s} ours          " + " ".join(f"{k} {100 * r[k]:5.1f}%" for k in ENDS), flush=True)
     result = {"task": task, "seed": seed, "episodes": args.episodes, "odometry": args.odometry,
+              "driver_wheel_radius": args.driver_wheel_radius,
               "frictions": args.frictions, "policies": table}
     out = write_results(args.out, result, version=VERSION, task=True, driver=True,
                         policies=tuple(f for f in files if Path(f).is_file()))

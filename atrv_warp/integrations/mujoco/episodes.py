@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from atrv_warp.core.observation import RobotObservation, Scan
+from atrv_warp.sim.driver import DriverConfig
 from atrv_warp.sim.scanner import ScannerConfig
 from atrv_warp.sim.terrain import HeightGrid
 from atrv_warp.task.config import TaskConfig, get_task
@@ -206,10 +207,12 @@ def run_twin_episode(policy: DeployablePolicy, twin: MujocoTwin, episode: TwinEp
 
 
 def run_twin_episodes(policy: DeployablePolicy, episodes: TwinEpisodes, *, friction: float | None = None,
-                      on_episode: Callable[[int, int], None] | None = None, odometry: str = "fused") -> EpisodeRecord:
+                      on_episode: Callable[[int, int], None] | None = None, odometry: str = "fused",
+                      driver: DriverConfig | None = None) -> EpisodeRecord:
     """Run ``policy`` once on each of ``episodes`` in a twin of its world at Coulomb ``friction`` (default: the
     nominal µ), deterministically. ``on_episode(index, end_reason)`` is called after each (progress output);
-    ``odometry`` as :func:`run_twin_episode` takes it.
+    ``odometry`` as :func:`run_twin_episode` takes it; ``driver``: the base's motor driver (e.g. a wheel radius
+    calibrated on the twin), the task's limits filling those it leaves unset (default: the task's base).
 
     Returns an :class:`~atrv_warp.task.evaluation.EpisodeRecord` (its ``params`` hold ``friction``)."""
     task = episodes.task
@@ -219,7 +222,7 @@ def run_twin_episodes(policy: DeployablePolicy, episodes: TwinEpisodes, *, frict
     mu = None
     for i, episode in enumerate(episodes.episodes):
         twin = MujocoTwin(terrain=episodes.terrain, tile=episode.tile, obstacles=episode.obstacles, friction=friction,
-                          obstacle_height=episodes.obstacle_height, scanner=scanner, driver=task.driver())
+                          obstacle_height=episodes.obstacle_height, scanner=scanner, driver=task.driver(driver))
         mu = twin.friction
         reasons[i], returns[i], steps[i] = run_twin_episode(policy, twin, episode, task, odometry=odometry)
         if on_episode is not None:
