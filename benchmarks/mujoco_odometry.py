@@ -1,0 +1,132 @@
+"""How far each engine's wheel odometry runs from the truth when the deployable policy drives the nav episodes.
+
+    pip install -e ".[mujoco]"
+    python benchmarks/mujoco_odometry.py [--policy nav_deploy] [--episodes 40] [--frictions 0.3 0.8]
+
+The policy drives the first ``--episodes`` episodes of the evaluation set in the MuJoCo twin at each µ, and in our
+simulator on the nominal rover (µ 0.3), as ``benchmarks/mujoco_transfer.py`` runs them. Per episode, over its
+steps: the distance the wheel encoders report (the odometry's |forward speed| x 0.05 s, summed) over the distance
+the chassis travelled (its path in the ground plane), the largest gap between the goal distance seen from the
+fused odometry and the true one [m], and the chassis' mean |yaw rate| over the mean |commanded yaw rate|. Printed
+as medians over the episodes, with the success rate, and written to ``benchmarks/results/mujoco_odometry.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+from pathlib import Path
+
+import numpy as np
+from _common import write_results
+
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
+RESULTS = Path(__file__).resolve().parent / "results"
+STEP = 0.05
+"""The policy's step [s]."""
+
+
+def summarize(episodes: list[dict]) -> dict:
+    """Medians over episodes (and the success rate) of the per-episode figures."""
+    return {"episodes": len(episodes), "success": statistics.fmean(e["success"] for e in episodes),
+            **{f"median_{k}": statistics.median(e[k] for e in episodes)
+               for k in ("encoder_over_true_path", "worst_goal_error_m", "yaw_rate_over_command")}}
+
+
+def episode_figures(true_xy: np.ndarray, encoder_speed: np.ndarray, seen: np.ndarray, true_distance: np.ndarray,
+                    yaw_rate: np.ndarray, command_yaw_rate: np.ndarray, success: bool) -> dict:
+    path = float(np.linalg.norm(np.diff(true_xy, axis=0), axis=1).sum())
+    return {"success": float(success), "encoder_over_true_path": float(np.abs(encoder_speed).sum() * STEP / max(path, 1e-6)),
+            "worst_goal_error_m": float(np.abs(seen - true_distance).max()),
+            "yaw_rate_over_command": float(np.abs(yaw_rate).mean() / max(np.abs(command_yaw_rate).mean(), 1e-6))}
+
+
+def twin_episode(policy, episodes, episode, mu: float) -> dict:
+    """One episode in the twin at µ ``mu``: its :func:`episode_figures`."""
+    from atrv_warp.integrations.mujoco import MujocoTwin, run_twin_episode
+    from atrv_warp.sim.scanner import ScannerConfig
+    from atrv_warp.task.spec import EndReason
+
+    task = episodes.task
+    twin = MujocoTwin(terrain=episodes.terrain, tile=episode.tile, obstacles=episode.obstacles, friction=mu,
+                      obstacle_height=episodes.obstacle_height,
+                      scanner=ScannerConfig(beams=task.scan_beams, fov=task.scan_fov), driver=task.driver())
+    rec = []
+    target, goal = np.asarray(episode.target), np.asarray(episode.goal)
+    reason, _, _ = run_twin_episode(policy, twin, episode, task, on_step=lambda t: rec.append(
+        (t.root_pose[:2].copy(), t.odom_twist[0], np.linalg.norm(goal - t.fused[:2]), t.angular_velocity[2],
+         t.twist[1])))
+    xy = np.array([r[0] for r in rec])
+    return episode_figures(xy, np.array([r[1] for r in rec]), np.array([r[2] for r in rec]),
+                           np.linalg.norm(xy - target, axis=1), np.array([r[3] for r in rec]),
+                           np.array([r[4] for r in rec]), reason == int(EndReason.SUCCESS))
+
+
+def ours_run(path: str, count: int, seed: int) -> list[dict]:
+    import torch
+
+    from atrv_warp.policy import load_policy
+    from atrv_warp.task.env import ATRVjrEnv
+    from atrv_warp.task.evaluation import run_episodes
+
+    env = ATRVjrEnv(count, task="nav_deploy")
+    rec = []
+
+    def on_step(env_, td):
+        sim = env_.sim
+        rec.append((sim.root_pose[:, :2].clone(), sim.driver.odom_twist[:, 0].clone(),
+                    td["next", "observation"][:, 0].clone(), env_.target_distance.clone(), sim.ang_vel[:, 2].clone(),
+                    sim.driver.twist[:, 1].clone(), td["next", "done"].reshape(-1).clone()))
+
+    record = run_episodes(load_policy(path, task="nav_deploy"), env, seed=seed, on_step=on_step)
+    stacked = [torch.stack([r[k] for r in rec]).numpy() for k in range(7)]
+    xy, enc, seen, true, yaw, cmd, done = stacked
+    out = []
+    for i in range(count):
+        n = int(np.argmax(done[:, i])) + 1 if done[:, i].any() else len(done)
+        out.append(episode_figures(xy[:n, i], enc[:n, i], seen[:n, i], true[:n, i], yaw[:n, i], cmd[:n, i],
+                                   bool(record.success[i])))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--policy", default="nav_deploy")
+    parser.add_argument("--episodes", type=int, default=40)
+    parser.add_argument("--frictions", type=float, nargs="+", default=[0.3, 0.8])
+    parser.add_argument("--out", default=str(RESULTS / "mujoco_odometry.json"))
+    args = parser.parse_args(argv)
+    try:
+        import mujoco  # noqa: F401
+    except ImportError:
+        print("MuJoCo is missing: pip install -e '.[mujoco]'", file=sys.stderr)
+        return 2
+    import torch
+
+    torch.set_num_threads(1)
+    from atrv_warp.integrations.mujoco import DeployablePolicy, draw_episodes
+    from atrv_warp.policy import policy_path
+    from atrv_warp.task.evaluation import EVAL_SEED
+
+    policy = DeployablePolicy.load(args.policy)
+    episodes = draw_episodes(policy.task, args.episodes, seed=EVAL_SEED)
+    rows = {}
+    for mu in args.frictions:
+        rows[f"mujoco µ {mu:g}"] = summarize([twin_episode(policy, episodes, e, mu) for e in episodes.episodes])
+    rows["ours (nominal µ 0.3)"] = summarize(ours_run(str(policy_path(args.policy)), args.episodes, EVAL_SEED))
+    for where, r in rows.items():
+        print(f"{where:22s} success {100 * r['success']:5.1f}%  encoders / true path {r['median_encoder_over_true_path']:.3f}"
+              f"  goal seen off by up to {r['median_worst_goal_error_m']:.2f} m  yaw rate / command "
+              f"{r['median_yaw_rate_over_command']:.2f}  (medians over {r['episodes']} episodes)", flush=True)
+    out = write_results(args.out, {"benchmark": "mujoco_odometry", "policy": args.policy, "seed": EVAL_SEED,
+                                   "episodes": args.episodes, "rows": rows},
+                        version=VERSION, task=True, driver=True, policies=(str(policy_path(args.policy)),))
+    print(f"written to {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
