@@ -49,9 +49,9 @@ PARAMETERS = (
     ("wheel_ki", DriverConfig.ki, "wheel-speed PI integral gain [N·m per rad]"),
     ("cmd_vel_timeout", DriverConfig.cmd_vel_timeout, "watchdog: stop when no /cmd_vel arrives for this long [s]"),
     ("linear_max_velocity", 0.0, "diff_drive_controller's linear.x.max_velocity [m/s]; 0 = no limit"),
-    ("linear_max_acceleration", 0.0, "linear.x.max_acceleration [m/s²]; 0 = no limit"),
+    ("linear_max_acceleration", 0.0, "linear.x.max_acceleration [m/s²]; 0 = the task's (nav_deploy: 1), else none"),
     ("angular_max_velocity", 0.0, "angular.z.max_velocity [rad/s]; 0 = no limit"),
-    ("angular_max_acceleration", 0.0, "angular.z.max_acceleration [rad/s²]; 0 = no limit"),
+    ("angular_max_acceleration", 0.0, "angular.z.max_acceleration [rad/s²]; 0 = the task's, else none"),
     ("cmd_vel_delay", 0.0, ("/cmd_vel reaches the driver this long after it arrives [s of sim time, whole steps]: a "
                             "command path's latency, which a bag's stamps do not show")),
     ("motor_lag", 0.0, "the motors' torque lag, a first-order time constant [s]; 0 = none (the driver's PI sees it)"),
