@@ -32,6 +32,7 @@ EXTRA_USERS = {
     "ray": ("atrv_warp/rl/collectors.py", "atrv_warp/rl/ray_collector.py", "tests/test_ray.py", "benchmarks/ray_collection.py"),
     "mujoco": ("atrv_warp/integrations/mujoco/", "benchmarks/sim_vs_mujoco.py", "benchmarks/mujoco_twin/",
                "benchmarks/mujoco_agreement.py", "benchmarks/mujoco_transfer.py", "benchmarks/mujoco_turning_study.py",
+               "benchmarks/mujoco_odometry.py",
                "tests/test_mujoco_twin.py"),
 }
 SCANNED = ("atrv_warp", "tests", "benchmarks", "examples", "docs")
