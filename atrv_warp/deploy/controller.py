@@ -74,8 +74,8 @@ class Deployable:
 
     def base_limits(self) -> str:
         """The limits its training's base applied to /cmd_vel (the contract's ``base_limits``), for the robot's
-        ``diff_drive_controller`` to apply too: ``""`` where none, else ``"; base: linear.x.max_acceleration 1
-        m/s²"``."""
+        ``diff_drive_controller`` to apply too: ``""`` where none, else e.g. ``"; trained on a base with
+        linear.x.max_acceleration 1 m/s²"``."""
         limits = (self.contract.get("action") or {}).get("base_limits") or {}
         names = {"linear_max_acceleration": "linear.x.max_acceleration",
                  "angular_max_acceleration": "angular.z.max_acceleration"}

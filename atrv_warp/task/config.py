@@ -7,6 +7,10 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from atrv_warp.sim.driver import DriverConfig
 
 __all__ = ["TASK_VARIANTS", "TaskConfig", "get_task"]
 
@@ -96,14 +100,14 @@ class TaskConfig:
     with action latency has commanded but not yet applied (Isaac Lab's ``last_action`` term)."""
 
     def __post_init__(self):
-        from atrv_warp.task.spec import ACTIONS, OBSERVATION_KINDS
+        from atrv_warp.task.spec import ACTIONS, BASE_LIMITS, OBSERVATION_KINDS
 
         if self.action not in ACTIONS:
             raise ValueError(f"TaskConfig.action={self.action!r} is not an action kind; known: {sorted(ACTIONS)}")
         if self.observation not in OBSERVATION_KINDS:
             raise ValueError(f"TaskConfig.observation={self.observation!r} is not an observation kind; known: "
                              f"{sorted(OBSERVATION_KINDS)}")
-        limits = [n for n in ("linear_max_acceleration", "angular_max_acceleration") if getattr(self, n) is not None]
+        limits = [name for name, _ in BASE_LIMITS if getattr(self, name) is not None]
         for name in ("max_linear", "max_angular", "action_scale", *limits):
             value = getattr(self, name)
             if isinstance(value, bool) or not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
@@ -124,13 +128,14 @@ class TaskConfig:
         if self.target_distance is not None and not 0 < self.target_distance[0] <= self.target_distance[1]:
             raise ValueError(f"target_distance must be 0 < low <= high, got {self.target_distance}")
 
-    def driver(self, driver=None):
+    def driver(self, driver: DriverConfig | None = None) -> DriverConfig:
         """The base's motor driver for this task: ``driver`` (default: :class:`~atrv_warp.sim.driver.DriverConfig`'s
-        defaults) with the task's acceleration limits where it sets none."""
+        defaults) with the task's limits (:data:`~atrv_warp.task.spec.BASE_LIMITS`) where it sets none."""
         from atrv_warp.sim.driver import DriverConfig
+        from atrv_warp.task.spec import BASE_LIMITS
 
         driver = driver or DriverConfig()
-        limits = {name: getattr(self, name) for name in ("linear_max_acceleration", "angular_max_acceleration")
+        limits = {name: getattr(self, name) for name, _ in BASE_LIMITS
                   if getattr(self, name) is not None and getattr(driver, name) is None}
         return dataclasses.replace(driver, **limits) if limits else driver
 
