@@ -11,6 +11,7 @@ import importlib.util
 import json
 import struct
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -144,7 +145,13 @@ def test_wandb_offline_run_folder_holds_config_scalars_and_video(tmp_path, nav_v
     assert loggers.log_video("eval_video", video, 4096) == ["WandbLogger"]
     loggers.close()
     (folder,) = (run_dir / "logs" / "wandb").glob(f"offline-run-*-{run_id}")
+    # W&B's writer process puts the records on disk a moment after finish() returns (about 0.1 s here; the file
+    # held only its header in about one run in four): wait for the run's exit record
+    deadline = time.monotonic() + 30.0
     records = wandb_records(folder)
+    while not any(r.HasField("exit") for r in records) and time.monotonic() < deadline:
+        time.sleep(0.1)
+        records = wandb_records(folder)
     key = lambda item: item.key or "/".join(item.nested_key)
     # the configuration is a config record, or folded into the run record when it reaches W&B's writer first
     updates = [r.run.config.update if r.HasField("run") else r.config.update for r in records
