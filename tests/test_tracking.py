@@ -110,7 +110,7 @@ def wandb_records(run_dir: Path) -> list:
             pos += block - pos % block
             continue
         _, length, kind = struct.unpack("<IHB", data[pos:pos + 7])
-        if kind == 0:
+        if kind == 0 or pos + 7 + length > len(data):  # padding, or a chunk still being written
             break
         pending += data[pos + 7:pos + 7 + length]
         pos += 7 + length
