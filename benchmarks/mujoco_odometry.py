@@ -46,14 +46,11 @@ def episode_figures(true_xy: np.ndarray, encoder_speed: np.ndarray, seen: np.nda
 
 def twin_episode(policy, episodes, episode, mu: float) -> dict:
     """One episode in the twin at µ ``mu``: its :func:`episode_figures`."""
-    from atrv_warp.integrations.mujoco import MujocoTwin, run_twin_episode
-    from atrv_warp.sim.scanner import ScannerConfig
+    from atrv_warp.integrations.mujoco import run_twin_episode
     from atrv_warp.task.spec import EndReason
 
     task = episodes.task
-    twin = MujocoTwin(terrain=episodes.terrain, tile=episode.tile, obstacles=episode.obstacles, friction=mu,
-                      obstacle_height=episodes.obstacle_height,
-                      scanner=ScannerConfig(beams=task.scan_beams, fov=task.scan_fov), driver=task.driver())
+    twin = episodes.twin(episode, friction=mu)
     rec = []
     target, goal = np.asarray(episode.target), np.asarray(episode.goal)
     reason, _, _ = run_twin_episode(policy, twin, episode, task, on_step=lambda t: rec.append(

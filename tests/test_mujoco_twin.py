@@ -279,8 +279,7 @@ def test_twin_episodes_go_through_the_tasks_base_and_can_see_the_true_pose():
 
     import torch
 
-    from atrv_warp.integrations.mujoco import DeployablePolicy, MujocoTwin, draw_episodes, run_twin_episode
-    from atrv_warp.sim.scanner import ScannerConfig
+    from atrv_warp.integrations.mujoco import DeployablePolicy, draw_episodes, run_twin_episode
     from atrv_warp.task.config import get_task
     from atrv_warp.task.spec import policy_contract
 
@@ -295,9 +294,7 @@ def test_twin_episodes_go_through_the_tasks_base_and_can_see_the_true_pose():
         seen, true = [], []
         policy = DeployablePolicy(lambda obs: (seen.append(float(obs[0])), torch.tensor([1.0, 0.3]))[1], contract,
                                   "nav_deploy", "forward")
-        twin = MujocoTwin(terrain=episodes.terrain, tile=episode.tile, obstacles=episode.obstacles,
-                          obstacle_height=episodes.obstacle_height,
-                          scanner=ScannerConfig(beams=task.scan_beams, fov=task.scan_fov), driver=task.driver())
+        twin = episodes.twin(episode)
         assert twin.driver_cfg.linear_max_acceleration == 1.0
         run_twin_episode(policy, twin, episode, task, odometry=source,
                          on_step=lambda t: true.append(float(np.linalg.norm(t.root_pose[:2] - target))))

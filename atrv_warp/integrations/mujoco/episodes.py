@@ -63,6 +63,16 @@ class TwinEpisodes:
     """Obstacles stand this high above the flat ground's top [m]."""
     episodes: tuple[TwinEpisode, ...]
 
+    def twin(self, episode: TwinEpisode, *, friction: float | None = None,
+             driver: DriverConfig | None = None) -> MujocoTwin:
+        """The twin of ``episode``'s world (its terrain tile and obstacles, the task's scanner) at Coulomb
+        ``friction`` (default: the nominal µ), through the task's base: ``driver`` with the task's limits filling
+        those it leaves unset (:meth:`~atrv_warp.task.config.TaskConfig.driver`)."""
+        task = self.task
+        scanner = ScannerConfig(beams=task.scan_beams, fov=task.scan_fov) if task.scan_beams else ScannerConfig()
+        return MujocoTwin(terrain=self.terrain, tile=episode.tile, obstacles=episode.obstacles, friction=friction,
+                          obstacle_height=self.obstacle_height, scanner=scanner, driver=task.driver(driver))
+
 
 def draw_episodes(task: TaskConfig | str, count: int, *, seed: int = EVAL_SEED) -> TwinEpisodes:
     """The first ``count`` episodes of evaluation set ``seed`` of ``task``: our environment with ``count`` worlds,
@@ -216,13 +226,11 @@ def run_twin_episodes(policy: DeployablePolicy, episodes: TwinEpisodes, *, frict
 
     Returns an :class:`~atrv_warp.task.evaluation.EpisodeRecord` (its ``params`` hold ``friction``)."""
     task = episodes.task
-    scanner = ScannerConfig(beams=task.scan_beams, fov=task.scan_fov) if task.scan_beams else ScannerConfig()
     n = len(episodes.episodes)
     reasons, returns, steps = torch.zeros(n, dtype=torch.long), torch.zeros(n), torch.zeros(n)
     mu = None
     for i, episode in enumerate(episodes.episodes):
-        twin = MujocoTwin(terrain=episodes.terrain, tile=episode.tile, obstacles=episode.obstacles, friction=friction,
-                          obstacle_height=episodes.obstacle_height, scanner=scanner, driver=task.driver(driver))
+        twin = episodes.twin(episode, friction=friction, driver=driver)
         mu = twin.friction
         reasons[i], returns[i], steps[i] = run_twin_episode(policy, twin, episode, task, odometry=odometry)
         if on_episode is not None:
