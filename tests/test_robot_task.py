@@ -172,12 +172,12 @@ def test_nonfinite_world_observes_a_neutral_robot_observation():
 def test_snapshot_restores_nav_deploy_bit_for_bit():
     g = torch.Generator().manual_seed(3)
     actions = torch.rand(24, 3, 2, generator=g) * 2 - 1
-    env = ATRVjrEnv(3, seed=7, task="nav_deploy", randomization="wide")
+    env = ATRVjrEnv(3, seed=7, task="nav_deploy", randomization="wide_slip")
     td = env.reset()
     for act in actions[:12]:
         td = env.step_and_maybe_reset(td.set("action", act))[1]
     saved, saved_td = env.state_dict(), td.clone()
-    assert {"task.goal_odom", "task.odom_drift", "sim.driver.odometry"} <= set(saved)
+    assert {"task.goal_odom", "task.odom_drift", "task.odom_scale", "sim.driver.odometry"} <= set(saved)
 
     def go_on(e, t):
         out = []
@@ -188,10 +188,36 @@ def test_snapshot_restores_nav_deploy_bit_for_bit():
         return torch.stack(out)
 
     original = go_on(env, td)
-    fresh = ATRVjrEnv(3, seed=0, task="nav_deploy", randomization="wide")
+    fresh = ATRVjrEnv(3, seed=0, task="nav_deploy", randomization="wide_slip")
     fresh.load_state_dict(saved)
     assert torch.equal(go_on(fresh, saved_td.clone()), original)
     assert not torch.equal(original[0], original[-1])
+
+
+def test_odometry_scale_moves_only_the_observed_odometry():
+    """Encoders that over-read by 1.2: the goal is seen from 1.2 x the fused position (the gyro's heading kept) and
+    the odometry's speed reads 1.2 x; the physics is the exact one; draws are seeded and within their range."""
+    over = RandomizationConfig(odometry_scale=Draw(1.2, 1.2))
+    envs = [ATRVjrEnv(4, seed=3, task="nav_deploy", randomization=r) for r in (None, over)]
+    tds = [e.reset() for e in envs]
+    act = torch.tensor([[0.5, 0.3]]).expand(4, 2)
+    for _ in range(15):
+        tds = [e.step(t.set("action", act))["next"] for e, t in zip(envs, tds, strict=True)]
+    fused = [wp.to_torch(e.sim.driver.state.fused).view(4, 3) for e in envs]
+    assert torch.equal(fused[0], fused[1]) and float(fused[0][:, :2].norm(dim=1).min()) > 0.2
+    seen = torch.cat([1.2 * fused[1][:, :2], fused[1][:, 2:]], 1)
+    dx = envs[1].goal_odom - seen[:, :2]
+    obs = tds[1]["observation"]
+    assert torch.allclose(obs[:, ROBOT["goal_distance"]], dx.norm(dim=1), atol=1e-5)
+    bearing = torch.atan2(dx[:, 1], dx[:, 0]) - seen[:, 2]
+    assert torch.allclose(obs[:, ROBOT["sin_goal_bearing"]], torch.sin(bearing), atol=1e-5)
+    assert torch.allclose(obs[:, ROBOT["odom_linear"]], 1.2 * tds[0]["observation"][:, ROBOT["odom_linear"]], atol=1e-5)
+    drawn = [ATRVjrEnv(64, seed=s, task="nav_deploy", randomization="wide_slip") for s in (5, 5, 6)]
+    for e in drawn:
+        e.reset()
+    scales = [e.odom_scale.clone() for e in drawn]
+    assert torch.equal(scales[0], scales[1]) and not torch.equal(scales[0], scales[2])
+    assert 1.0 <= float(scales[0].min()) and float(scales[0].max()) <= 1.25 and float(scales[0].std()) > 0.05
 
 
 @pytest.mark.parametrize("bad", [{"action": "velocity"}, {"observation": "gps"}, {"max_linear": 0.0},

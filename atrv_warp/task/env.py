@@ -211,6 +211,7 @@ class ATRVjrEnv(EnvBase):
         t.stream = wp.array(list(range(n)), dtype=wp.int32, device=dev)
         t.goal_odom = wp.zeros(n, dtype=wp.vec2, device=dev)
         t.odom_drift = wp.zeros(n, dtype=wp.vec3, device=dev)
+        t.odom_scale = wp.ones(n, dtype=float, device=dev)
         self._task = t
         self._obs = wp.zeros((n, self.obs_dim), dtype=float, device=dev)
         self._reward = wp.zeros(n, dtype=float, device=dev)
@@ -267,7 +268,11 @@ class ATRVjrEnv(EnvBase):
         the chassis rests there, settled onto the terrain (a view)."""
         self.odom_drift = wp.to_torch(t.odom_drift).view(n, 3)
         """(N, 3) the robot observation's odometry drift this episode (x [m], y [m], yaw [rad]; zero without
-        sensor noise): the goal is observed from ``sim.driver.fused + odom_drift`` (a view)."""
+        sensor noise): the goal is observed from ``sim.driver.fused`` (its position scaled by ``odom_scale``) plus
+        ``odom_drift`` (a view)."""
+        self.odom_scale = wp.to_torch(t.odom_scale)
+        """(N,) the robot observation's odometry distance per distance driven this episode (1 unless the
+        randomization draws :attr:`~atrv_warp.task.randomization.RandomizationConfig.odometry_scale`; a view)."""
         self._task_views = {
             "target": self.target, "prev_distance": wp.to_torch(t.prev_distance),
             "prev_heading_error": wp.to_torch(t.prev_heading_error), "step_count": self.step_count,
@@ -276,7 +281,8 @@ class ATRVjrEnv(EnvBase):
         if self._actions is not None:
             self._task_views["action_history"] = wp.to_torch(self._actions)
         if self._robot:
-            self._task_views.update({"goal_odom": self.goal_odom, "odom_drift": self.odom_drift})
+            self._task_views.update({"goal_odom": self.goal_odom, "odom_drift": self.odom_drift,
+                                     "odom_scale": self.odom_scale})
         if self._twist:  # every world drives by velocity, through the driver
             self.sim.driver.mode.fill_(int(DRIVE_TWIST))
         if self._nav:  # the episode's layout is part of the task's state
@@ -289,12 +295,13 @@ class ATRVjrEnv(EnvBase):
         r, n, dev = self.randomization, self.num_envs, self._wp_device
         low, high, log, mode, every = ([0.0] * DRAW_COUNT, [0.0] * DRAW_COUNT, [0] * DRAW_COUNT, [0] * DRAW_COUNT,
                                        [1] * DRAW_COUNT)
-        draws = [r.physics.get(name) for name in PHYSICS_DRAWS] + [None, r.motor_lag]  # DrawSpec's rows
+        # DrawSpec's rows: the physical parameters, the latency (below), the motor lag, the odometry's scale
+        draws = [r.physics.get(name) for name in PHYSICS_DRAWS] + [None, r.motor_lag, r.odometry_scale]
         for i, d in enumerate(draws):
             if d is not None:
                 low[i], high[i], log[i], mode[i], every[i] = d.low, d.high, int(d.log), MODE_CODES[d.mode], max(d.every, 1)
         if r.latency[1] > 0:  # whole steps in [low, high]: drawn from [low, high + 1) and rounded down
-            i = DRAW_COUNT - 2
+            i = len(PHYSICS_DRAWS)
             low[i], high[i], mode[i] = float(r.latency[0]), float(r.latency[1] + 1), MODE_CODES["reset"]
         spec = DrawSpec()
         spec.low, spec.high = wp.array(low, dtype=float, device=dev), wp.array(high, dtype=float, device=dev)

@@ -137,6 +137,7 @@ class TaskBuffers:
     stream: wp.array(dtype=wp.int32)  # the reset stream this world draws from: its index, unless replaying another's
     goal_odom: wp.array(dtype=wp.vec2)  # the target in the odometry frame (the episode's start pose) [m]
     odom_drift: wp.array(dtype=wp.vec3)  # the odometry noise's random walk (x [m], y [m], yaw [rad]) this episode
+    odom_scale: wp.array(dtype=float)  # the wheel odometry's distance per distance driven this episode [-] (1: exact)
 
 
 @wp.func
@@ -223,6 +224,13 @@ def write_goal_observation(obs: wp.array2d(dtype=float), world: int, goal: wp.ve
 
 
 @wp.func
+def scaled_odometry(odometry: wp.vec3, scale: float) -> wp.vec3:
+    """The pose a base's odometry reports when its encoders read ``scale`` times the distance driven: the position
+    from the odometry frame's origin (the episode's start) scaled, the gyro's heading kept."""
+    return wp.vec3(scale * odometry[0], scale * odometry[1], odometry[2])
+
+
+@wp.func
 def write_robot_observation(
     obs: wp.array2d(dtype=float),
     world: int,
@@ -255,8 +263,10 @@ def write_task_observation(
     """The observation's leading fields: the robot's (``params.robot_observation``) or the arena's."""
     r = rover.rpy[world]
     if params.robot_observation != 0:
-        write_robot_observation(obs, world, task.goal_odom[world], rover.odometry[world], rover.odom_twist[world], r,
-                                body_yaw_rate(pose, rover.ang_vel[world]))
+        scale = task.odom_scale[world]
+        twist = rover.odom_twist[world]
+        write_robot_observation(obs, world, task.goal_odom[world], scaled_odometry(rover.odometry[world], scale),
+                                wp.vec2(scale * twist[0], twist[1]), r, body_yaw_rate(pose, rover.ang_vel[world]))
     else:
         write_observation(obs, world, params, task.target[world], pose, rover.lin_vel[world], r[0],
                           rover.ang_vel[world][2], head_err)

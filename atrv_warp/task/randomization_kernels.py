@@ -31,6 +31,7 @@ from atrv_warp.task.kernels import (
     VELOCITY_BOUND,
     YAW_RATE_BOUND,
     TaskBuffers,
+    scaled_odometry,
     twist_command,
     write_goal_observation,
 )
@@ -62,7 +63,8 @@ DRAW_WHEEL_RADIUS = wp.constant(PHYSICS_DRAWS.index("wheel_radius"))
 DRAW_STIFFNESS = wp.constant(PHYSICS_DRAWS.index("stiffness"))
 DRAW_LATENCY = wp.constant(len(PHYSICS_DRAWS))
 DRAW_MOTOR_LAG = wp.constant(len(PHYSICS_DRAWS) + 1)
-DRAW_COUNT = len(PHYSICS_DRAWS) + 2
+DRAW_ODOMETRY_SCALE = wp.constant(len(PHYSICS_DRAWS) + 2)
+DRAW_COUNT = len(PHYSICS_DRAWS) + 3
 
 # DrawSpec.mode codes (RandomizationConfig's DRAW_MODES, and 0 for a parameter left alone)
 MODE_OFF = wp.constant(0)
@@ -195,6 +197,8 @@ def draw_physics(
             alpha = 1.0 - wp.exp(-step_dt / tau)
         delay.alpha[world] = alpha
         delay.tau[world] = tau
+    if due(spec, DRAW_ODOMETRY_SCALE, phase, episode, steps):
+        task.odom_scale[world] = sample(spec, DRAW_ODOMETRY_SCALE, stream, 0)
 
 
 @wp.func
@@ -311,4 +315,5 @@ def add_robot_observation_noise(
         yaw = odometry[world][2] + drift[2]
         drift = drift + wp.vec3(dv * step_dt * wp.cos(yaw), dv * step_dt * wp.sin(yaw), dg * step_dt)
         task.odom_drift[world] = drift
-    write_goal_observation(obs, world, task.goal_odom[world], odometry[world] + drift)
+    write_goal_observation(obs, world, task.goal_odom[world], scaled_odometry(odometry[world], task.odom_scale[world])
+                           + drift)
