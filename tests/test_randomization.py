@@ -198,6 +198,13 @@ def test_train_config_key():
     assert load_train_config("smoke", {"env.randomization": "wide"}).env.randomization == "wide"
     with pytest.raises(ValueError, match="randomization: unknown randomization preset 'wild'"):
         load_train_config("smoke", {"randomization": "wild"})
+    with pytest.raises(ValueError, match="train config: eval_randomization: unknown randomization preset 'wild'"):
+        load_train_config("smoke", {"eval_randomization": "wild"})
+    deploy = load_train_config("nav_deploy")  # trains wider than it is judged on
+    assert (deploy.env.randomization, deploy.env.eval_randomization) == ("wide_slip", "wide")
+    assert dict(deploy.env.eval_env_kwargs())["randomization"] == "wide"
+    assert dict(deploy.env.env_kwargs())["randomization"] == "wide_slip"
+    assert dict(load_train_config("smoke").env.eval_env_kwargs()) == dict(load_train_config("smoke").env.env_kwargs())
 
 
 # ------------------------------------------------------------------ around a simulator config

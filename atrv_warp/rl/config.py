@@ -88,6 +88,10 @@ class EnvConfig:
     :data:`atrv_warp.task.randomization.RANDOMIZATION_PRESETS` (``none``, ``mild``, ``wide``), or ``around``: each
     physical draw centred on ``sim_config``'s value (:data:`~atrv_warp.task.randomization.AROUND_PRESETS`;
     docs/randomization.md). The run folder's ``randomization.json`` records the ranges it resolved to."""
+    eval_randomization: str = ""
+    """The periodic (validation) and final (test) evaluations' randomization, a name as :attr:`randomization`'s;
+    empty: the training's. A policy may train on a wider distribution than the one it is judged on: ``nav_deploy``
+    trains under ``wide_slip`` and is validated and tested under ``wide``, the evaluation's test distribution."""
     sim_config: str = ""
     """A simulator-config TOML file applied to every world (``[rover]`` and ``[contact]`` tables), e.g. the
     calibration ``atrv-calibrate`` fitted to a real rover's bag (docs/calibration.md); empty: the nominal rover."""
@@ -101,6 +105,11 @@ class EnvConfig:
         kwargs = (("task", self.task), ("sim", SimConfig(sim_dt=step_dt / self.substeps)),
                   ("randomization", self.randomization))
         return (*kwargs, ("sim_config", self.sim_config)) if self.sim_config else kwargs
+
+    def eval_env_kwargs(self) -> tuple[tuple[str, object], ...]:
+        """:meth:`env_kwargs` of the evaluations' environments (:attr:`eval_randomization`, if set)."""
+        return tuple((k, self.eval_randomization or v) if k == "randomization" else (k, v)
+                     for k, v in self.env_kwargs())
 
 
 @dataclass(frozen=True)
@@ -304,10 +313,13 @@ class TrainConfig:
         """
         from atrv_warp.task.randomization import get_randomization
 
-        try:
-            return get_randomization(self.env.randomization, sim_config=self.env.sim_config or None)
-        except ValueError as err:
-            raise ValueError(f"train config: randomization: {err}") from None
+        for key in ("eval_randomization", "randomization"):  # the training's is returned
+            try:
+                shift = get_randomization(getattr(self.env, key) or self.env.randomization,
+                                          sim_config=self.env.sim_config or None)
+            except ValueError as err:
+                raise ValueError(f"train config: {key}: {err}") from None
+        return shift
 
 
 _GROUP_TYPES = typing.get_type_hints(TrainConfig)

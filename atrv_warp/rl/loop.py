@@ -59,7 +59,8 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     (run_dir / "config.toml").write_text(to_toml(cfg))
     # what the envs draw, in absolute ranges: `around` resolved against the sim config, so a run says what it trained on
     (run_dir / "randomization.json").write_text(json.dumps(
-        {"randomization": cfg.env.randomization, "sim_config": cfg.env.sim_config,
+        {"randomization": cfg.env.randomization, "eval_randomization": cfg.env.eval_randomization or None,
+         "sim_config": cfg.env.sim_config,
          "resolved": cfg.randomization().describe()}, indent=1) + "\n")
     loggers = make_loggers(cfg, run_dir, resume, state.tracking_id)
     state.tracking_id = loggers.tracking_id
@@ -106,7 +107,7 @@ class Evaluator:
 
     def __init__(self, cfg: TrainConfig, actor, *, recording=None, video_dir: Path | None = None, gif: bool = False):
         self.cfg, self.actor = cfg, actor
-        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=VALIDATION_SEED, **dict(cfg.env.env_kwargs()))
+        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=VALIDATION_SEED, **dict(cfg.env.eval_env_kwargs()))
         self.recorder = None
         if recording is not None:
             from atrv_warp.integrations.recorder import RerunRecorder
@@ -306,7 +307,7 @@ def _finish(cfg: TrainConfig, state: RunState, run_dir: Path, evaluator: Evaluat
     best_path = run_dir / "best_policy.pt"
     if best_path.is_file():
         final = evaluate(load_policy(best_path), num_episodes=cfg.logging.final_eval_episodes, seed=EVAL_SEED,
-                         **dict(cfg.env.env_kwargs()))
+                         **dict(cfg.env.eval_env_kwargs()))
         print(format_result("best policy, final evaluation", final))
         result["final_eval"] = final.as_dict()
         for k, v in final.as_dict().items():
