@@ -777,6 +777,24 @@ def deploy_base_limit(name: str = "deploy_base_limit.json") -> str:
                   ["---", "---", "---:", "---:", "---:", "---:", "---:"], rows)
 
 
+def deploy_odometry_scale(name: str = "deploy_odometry_scale.json") -> str:
+    """``deploy_odometry_scale.json``: deployable policies' success (and timeouts) against how many times the distance
+    driven their odometry reads, on the nominal rover and under ``wide``."""
+    d = _load(name)
+    presets = {"none": "nominal", "wide": "`wide`"}
+    columns = [(label, preset) for label in d["policies"] for preset in presets]
+    rows = []
+    for scale in d["scales"]:
+        cells = []
+        for label, preset in columns:
+            r = next(r for r in d["policies"][label]["runs"]
+                     if r["randomization"] == preset and r["odometry_scale"] == scale)
+            cells.append(f"**{r['success_rate']:.1%}** ({r['timeout_rate']:.1%})")
+        rows.append([f"{scale:.1f}", *cells])
+    return _table(["odometry / distance driven", *[f"{label}, {presets[p]}: success (timeout)" for label, p in columns]],
+                  ["---:"] * (1 + len(columns)), rows)
+
+
 def train_to_success_nav_deploy() -> str:
     """``train_to_success_nav_deploy.json``: the deployable nav task's time to 90 % per seed (under ``wide``)."""
     return _train_to_success("train_to_success_nav_deploy.json")
@@ -787,6 +805,9 @@ TABLES: dict[str, Callable[[], str]] = {
     "deploy_base_limit": deploy_base_limit,
     "deploy_base_limit_old_policy": lambda: deploy_base_limit("deploy_base_limit_old_policy.json"),
     "train_to_success_nav_deploy": train_to_success_nav_deploy,
+    "deploy_odometry_scale": deploy_odometry_scale,
+    "train_to_success_nav_deploy_slip": lambda: _train_to_success("train_to_success_nav_deploy_slip.json"),
+    "mujoco_transfer_wide_slip": lambda: mujoco_transfer("mujoco_transfer_wide_slip.json"),
     "diff_gradients_common": diff_gradients_common,
     "diff_gradients_differential": diff_gradients_differential,
     "diff_gradients_friction": diff_gradients_friction,

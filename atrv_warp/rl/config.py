@@ -90,8 +90,9 @@ class EnvConfig:
     docs/randomization.md). The run folder's ``randomization.json`` records the ranges it resolved to."""
     eval_randomization: str = ""
     """The periodic (validation) and final (test) evaluations' randomization, a name as :attr:`randomization`'s;
-    empty: the training's. A policy may train on a wider distribution than the one it is judged on: ``nav_deploy``
-    trains under ``wide_slip`` and is validated and tested under ``wide``, the evaluation's test distribution."""
+    empty: the training's. A policy may train on a wider distribution than the one it is judged on, e.g.
+    ``env.randomization=wide_slip env.eval_randomization=wide`` (validated and tested under ``wide``, the
+    evaluation's test distribution: docs/tasks.md)."""
     sim_config: str = ""
     """A simulator-config TOML file applied to every world (``[rover]`` and ``[contact]`` tables), e.g. the
     calibration ``atrv-calibrate`` fitted to a real rover's bag (docs/calibration.md); empty: the nominal rover."""

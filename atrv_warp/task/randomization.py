@@ -178,8 +178,8 @@ RANDOMIZATION_PRESETS["wide_slip"] = dataclasses.replace(RANDOMIZATION_PRESETS["
 """Named presets. ``none``: the nominal rover, perfect sensors, no delay (training as before). ``mild``: a
 rover like ours on ordinary ground. ``wide``: the evaluation's test distribution (mu 0.2-1.0, payload
 0-25 kg, motors +-20 %, latency 0-2 steps, the ROS node's sensor noise). ``wide_slip``: ``wide``, and wheel odometry
-that over-reads by up to a quarter (:attr:`RandomizationConfig.odometry_scale`; the deployable policy's training,
-``nav_deploy.toml``). Every draw happens on reset."""
+that over-reads by up to a quarter (:attr:`RandomizationConfig.odometry_scale`; a study of the deployable policy's
+training, docs/tasks.md). Every draw happens on reset."""
 
 
 @dataclass(frozen=True)
