@@ -789,7 +789,7 @@ def deploy_odometry_scale(name: str = "deploy_odometry_scale.json") -> str:
         for label, preset in columns:
             r = next(r for r in d["policies"][label]["runs"]
                      if r["randomization"] == preset and r["odometry_scale"] == scale)
-            cells.append(f"**{r['success_rate']:.1%}** ({r['timeout_rate']:.1%})")
+            cells.append(f"**{100 * r['success_rate']:.1f} %** ({100 * r['timeout_rate']:.1f} %)")
         rows.append([f"{scale:.1f}", *cells])
     return _table(["odometry / distance driven", *[f"{label}, {presets[p]}: success (timeout)" for label, p in columns]],
                   ["---:"] * (1 + len(columns)), rows)
