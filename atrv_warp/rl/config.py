@@ -309,18 +309,19 @@ class TrainConfig:
         (:class:`~atrv_warp.task.randomization.RandomizationConfig`; ``around`` resolved against ``sim_config``).
 
         Raises:
-            ValueError: One line: an unknown preset, or one centred on a ``sim_config`` that is missing or does not
-                set a parameter it draws.
+            ValueError: One line naming the key (``randomization`` or ``eval_randomization``): an unknown preset, or
+                one centred on a ``sim_config`` that is missing or does not set a parameter it draws.
         """
         from atrv_warp.task.randomization import get_randomization
 
-        for key in ("eval_randomization", "randomization"):  # the training's is returned
-            try:
-                shift = get_randomization(getattr(self.env, key) or self.env.randomization,
-                                          sim_config=self.env.sim_config or None)
-            except ValueError as err:
-                raise ValueError(f"train config: {key}: {err}") from None
-        return shift
+        shifts = {}
+        for key in ("randomization", "eval_randomization"):
+            if key == "randomization" or self.env.eval_randomization:  # an empty eval_randomization: the training's
+                try:
+                    shifts[key] = get_randomization(getattr(self.env, key), sim_config=self.env.sim_config or None)
+                except ValueError as err:
+                    raise ValueError(f"train config: {key}: {err}") from None
+        return shifts["randomization"]
 
 
 _GROUP_TYPES = typing.get_type_hints(TrainConfig)

@@ -112,7 +112,7 @@ class RandomizationConfig:
     odometry_scale: Draw | None = None
     """The wheel odometry's distance per distance driven [-] (a robot observation's odometry pose and twist; 1: no
     error). Wheels that creep or slip on slippery ground turn further than the rover moves, so a base's encoders
-    over-read: 1.06 in our simulator at µ 0.3, 1.19 in the MuJoCo twin (``benchmarks/mujoco_odometry.py``). A
+    over-read (``benchmarks/mujoco_odometry.py`` measures how much in our simulator and in the MuJoCo twin), and a
     policy that steers to a goal seen from odometry stops short of it; drawn above 1, training meets that."""
 
     def __post_init__(self):
