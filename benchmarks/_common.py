@@ -28,6 +28,12 @@ def pin_to_one_core() -> None:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
 
 
+def labelled(spec: str) -> tuple[str, str]:
+    """``(label, policy)`` of a command line's ``LABEL=POLICY``, or of ``POLICY`` (labelled by itself)."""
+    label, _, policy = spec.rpartition("=")
+    return (label or policy), policy
+
+
 def _git(*args: str) -> str:
     try:
         return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()

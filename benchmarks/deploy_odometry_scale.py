@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from _common import write_results
+from _common import labelled, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -28,12 +28,6 @@ VERSION = 1
 RESULTS = Path(__file__).resolve().parent / "results"
 SCALES = (1.0, 1.1, 1.2, 1.3)
 """The odometry's distance per distance driven in each run [-]."""
-
-
-def labelled(spec: str) -> tuple[str, str]:
-    """``LABEL=POLICY`` or ``POLICY`` (labelled by itself)."""
-    label, _, policy = spec.rpartition("=")
-    return (label or policy), policy
 
 
 def main() -> int:
@@ -60,7 +54,7 @@ def main() -> int:
         policy = load_policy(name, task="nav_deploy")
         path = policy_path(name)
         paths.append(str(path))
-        rows = result["policies"][label] = {"file": str(path), "runs": []}
+        rows = result["policies"][label] = {"runs": []}  # the file and its sha256: the provenance's policies
         print(f"{label} ({path}): {args.episodes} test episodes", flush=True)
         for preset in ("none", "wide"):
             for scale in SCALES:

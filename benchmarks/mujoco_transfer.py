@@ -26,7 +26,7 @@ import sys
 import time
 from pathlib import Path
 
-from _common import write_results
+from _common import labelled, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -72,9 +72,9 @@ def main(argv: list[str] | None = None) -> int:
     seed = EVAL_SEED if args.seed is None else args.seed
     policies, files = {}, []
     for item in args.policies:
-        label, _, path = item.rpartition("=")
+        label, path = labelled(item)
         try:
-            policies[label or path] = DeployablePolicy.load(path)
+            policies[label] = DeployablePolicy.load(path)
         except (FileNotFoundError, ValueError) as err:
             print(f"mujoco_transfer.py: error: cannot load policy {path}: {' '.join(str(err).split())}", file=sys.stderr)
             return 2

@@ -314,14 +314,16 @@ class TrainConfig:
         """
         from atrv_warp.task.randomization import get_randomization
 
-        shifts = {}
-        for key in ("randomization", "eval_randomization"):
-            if key == "randomization" or self.env.eval_randomization:  # an empty eval_randomization: the training's
-                try:
-                    shifts[key] = get_randomization(getattr(self.env, key), sim_config=self.env.sim_config or None)
-                except ValueError as err:
-                    raise ValueError(f"train config: {key}: {err}") from None
-        return shifts["randomization"]
+        def resolve(key: str):
+            try:
+                return get_randomization(getattr(self.env, key), sim_config=self.env.sim_config or None)
+            except ValueError as err:
+                raise ValueError(f"train config: {key}: {err}") from None
+
+        shift = resolve("randomization")
+        if self.env.eval_randomization:  # empty: the training's
+            resolve("eval_randomization")
+        return shift
 
 
 _GROUP_TYPES = typing.get_type_hints(TrainConfig)
