@@ -119,7 +119,7 @@ def policy_payload(actor: ProbabilisticActor, *, width: int, depth: int, meta: d
 
     meta = meta or {}
     config = get_task(task if task is not None else meta.get("task", "reach"))
-    sd = {k: v.detach().cpu() for k, v in actor.state_dict().items()}
+    sd = {k: v.detach().cpu().clone() for k, v in actor.state_dict().items()}  # a copy: the actor trains on
     obs_dim = next(v.numel() for k, v in sd.items() if k.endswith("loc") and v.ndim == 1)
     return {"format": POLICY_FORMAT, "width": width, "depth": depth, "obs_dim": obs_dim, "state_dict": sd,
             "meta": meta, "action": config.action, "observation": config.observation}

@@ -45,6 +45,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0, help="timed training loop [s]")
     parser.add_argument("--isolated-updates", type=int, default=300)
+    parser.add_argument("--config", default="default", help="training preset whose parts are profiled")
     parser.add_argument("--out", default=str(RESULTS / "train_profile.json"))
     args = parser.parse_args()
 
@@ -56,13 +57,16 @@ def main() -> int:
     from atrv_warp.rl.config import load_train_config
     from atrv_warp.rl.learner import Learner, make_buffer
     from atrv_warp.rl.loop import Evaluator
+    from atrv_warp.task.config import get_task
+    from atrv_warp.task.spec import observation_fields
 
-    cfg = load_train_config("default")
+    cfg = load_train_config(args.config)
     torch.manual_seed(0)
     torch.set_num_threads(cfg.run.threads)
     pin_to_core(0)
-    normalize = Normalize()
-    actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize)
+    obs_dim = len(observation_fields(get_task(cfg.env.task)))
+    normalize = Normalize(obs_dim)
+    actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize, obs_dim=obs_dim)
     buffer = make_buffer(cfg)
     collector = make_collector(cfg, actor, 0)
     phases, learner, frames, updates, credit = Phases(), None, 0, 0, 0.0
@@ -144,7 +148,7 @@ def main() -> int:
               "isolated_phases_ms": {p: 1e3 * iso.total[p] / args.isolated_updates for p in update_phases},
               "threads_after_collector_shutdown": threads_after, "update_ms_after_shutdown": after_shutdown,
               "update_ms_threads_restored": restored, "evaluation_s": eval_s, "evaluation_share": eval_share,
-              "config": "default preset", "time": time.strftime("%Y-%m-%d %H:%M:%S")}
+              "config": f"{args.config} preset", "time": time.strftime("%Y-%m-%d %H:%M:%S")}
     write_results(args.out, result, version=VERSION, task=True)
     print(f"wrote {args.out}")
     return 0

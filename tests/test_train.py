@@ -213,6 +213,40 @@ def test_sync_training_is_reproducible(smoke_run, tmp_path, run_module):
     assert all(torch.equal(a[k], b[k]) for k in a)
 
 
+@pytest.mark.slow  # trains
+def test_validation_in_the_background_judges_the_same_weights_alike(smoke_run, tmp_path, run_module):
+    """The periodic validation in a process of its own (the default outside the smoke preset) finds what the
+    in-trainer one finds, logged at the same frames, and saves the weights it judged, not the trainer's later ones:
+    with the bit-reproducible sync collector, the same figures and the same best policy, byte for byte."""
+    run_dir, _ = smoke_run
+    run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", "logging.eval_in_background=true")
+    background = tmp_path / "smoke"
+    for name in ("eval_success_rate", "eval_mean_return", "eval_mean_steps"):
+        ours = (background / "logs" / "scalars" / f"{name}.csv").read_text()
+        assert ours == (run_dir / "logs" / "scalars" / f"{name}.csv").read_text(), name
+    assert (background / "best_policy.pt").read_bytes() == (run_dir / "best_policy.pt").read_bytes()
+    taken = dict(line.split(",") for line in (background / "logs" / "scalars" / "wall_time_s.csv").read_text().split())
+    known = dict(line.split(",") for line in (background / "logs" / "scalars" / "eval_known_wall_s.csv").read_text().split())
+    assert taken.keys() == known.keys() and all(float(known[f]) > float(taken[f]) for f in taken)
+    assert json.loads((background / "final_eval.json").read_text())["final_eval"] == \
+        json.loads((run_dir / "final_eval.json").read_text())["final_eval"]
+
+
+def test_a_background_validation_that_fails_says_why():
+    """A failure in the validation's process is an error in the trainer carrying its cause, not a hang."""
+    from atrv_warp.rl.evaluators import BackgroundEvaluator
+
+    evaluator = BackgroundEvaluator(load_train_config(SMOKE, {"eval_episodes": "4"}))
+    try:
+        evaluator.submit(2048, {"state_dict": {}})  # weights that fit no actor
+        with pytest.raises(RuntimeError, match=r"the background validation failed: RuntimeError: Error\(s\) in "
+                                               r"loading state_dict"):
+            evaluator.poll(wait=True)
+    finally:
+        evaluator.close()
+    assert not evaluator.process.is_alive()
+
+
 class _TouchOnLoad:
     """Unpickling this creates ``path``: proof that a loader executed pickled code."""
 

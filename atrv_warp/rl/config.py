@@ -217,6 +217,11 @@ class LoggingConfig:
     picked on it, and only the final evaluation sees the test set, seed ``EVAL_SEED``)."""
     final_eval_episodes: int = 1000
     """Episodes of the final evaluation of the best policy."""
+    eval_in_background: bool = True
+    """Run the periodic evaluation in a process of its own on the second core, while the training goes on (its
+    figures are logged at the frames of the weights it judged, once it ends; ``eval_known_wall_s`` says when);
+    ``false``: in the trainer, which waits for it. ``logger=rerun`` keeps it in the trainer, whose recording
+    holds the evaluation's worlds."""
     logger: Literal["csv", "tensorboard", "rerun", "wandb", "mlflow"] = "csv"
     """Scalars always go to CSV (the learning curve is drawn from it); ``tensorboard`` adds a
     TensorBoard log, ``rerun`` a Rerun recording (``train.rrd``) that also holds two worlds of

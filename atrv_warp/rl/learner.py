@@ -12,13 +12,13 @@ import torch
 from torch import nn
 from torchrl.modules import MLP, ValueOperator
 
-from atrv_warp.policy import Normalize
+from atrv_warp.policy import Normalize, make_actor
 from atrv_warp.rl.config import TrainConfig
 from atrv_warp.rl.ppo import PPO_LOSS_KEYS, PPOLearner
 from atrv_warp.task.spec import ACTION_DIM
 
 __all__ = ["ALGOS", "SAC_LOSS_KEYS", "Algo", "Learner", "annealed_lr", "make_buffer", "make_learner", "make_loss",
-           "make_qvalue", "set_lr"]
+           "make_qvalue", "make_run_actor", "set_lr"]
 
 SAC_LOSS_KEYS = ("loss_actor", "loss_qvalue", "loss_alpha", "entropy")
 """The means of SAC's losses logged at every evaluation."""
@@ -169,6 +169,19 @@ def set_lr(learner, lr: float) -> None:
     for opt in learner.opts.values():
         for group in opt.param_groups:
             group["lr"] = lr
+
+
+def make_run_actor(cfg: TrainConfig):
+    """The actor a run trains, and its observation statistics (not yet set): the task's observation size, the
+    network's width and depth, and log-probabilities where the algorithm collects with them (PPO)."""
+    from atrv_warp.task.config import get_task
+    from atrv_warp.task.spec import observation_fields
+
+    obs_dim = len(observation_fields(get_task(cfg.env.task)))
+    normalize = Normalize(obs_dim)
+    actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize, obs_dim=obs_dim,
+                       return_log_prob=ALGOS[cfg.optim.algo].on_policy)
+    return actor, normalize
 
 
 def make_learner(cfg: TrainConfig, actor, normalize: Normalize):

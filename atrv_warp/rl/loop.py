@@ -12,18 +12,17 @@ from pathlib import Path
 import torch
 from tensordict import TensorDict
 
-from atrv_warp.policy import Normalize, load_policy, make_actor, save_policy
+from atrv_warp.policy import Normalize, load_policy, policy_payload
 from atrv_warp.rl.checkpoint import Checkpoint, RunState, load_checkpoint, warm_start
 from atrv_warp.rl.collectors import COLLECTORS, WORKER_KEY, make_collector, pin_to_core
 from atrv_warp.rl.config import TrainConfig, flat_config, to_toml
+from atrv_warp.rl.evaluators import EvalOutcome, Evaluator, make_evaluator
 from atrv_warp.rl.exploration import collection_policy
-from atrv_warp.rl.learner import ALGOS, annealed_lr, make_buffer, make_learner, set_lr
+from atrv_warp.rl.learner import ALGOS, annealed_lr, make_buffer, make_learner, make_run_actor, set_lr
 from atrv_warp.rl.reporting import Loggers, LossMeans, Progress, Stats, make_loggers, pct, plot_curve
 from atrv_warp.runtime import device_summary
-from atrv_warp.task.config import get_task
-from atrv_warp.task.env import ATRVjrEnv
-from atrv_warp.task.evaluation import EVAL_SEED, VALIDATION_SEED, evaluate, format_result
-from atrv_warp.task.spec import observation_fields
+from atrv_warp.storage import atomic_save
+from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result
 
 __all__ = ["Evaluator", "TrainLoop", "train"]
 
@@ -36,10 +35,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     kind = COLLECTORS[cfg.collector.kind]
     if kind.trainer_core is not None:
         pin_to_core(kind.trainer_core)
-    obs_dim = len(observation_fields(get_task(cfg.env.task)))
-    normalize = Normalize(obs_dim)
-    actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize, obs_dim=obs_dim,
-                       return_log_prob=ALGOS[cfg.optim.algo].on_policy)
+    actor, normalize = make_run_actor(cfg)
     buffer = make_buffer(cfg)
     checkpoint = Checkpoint(run_dir)
     state, learner = RunState(next_eval=cfg.logging.eval_every_frames), None
@@ -68,8 +64,9 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     # what the collectors step: the actor, or the actor with correlated exploration noise (SAC)
     policy = collection_policy(actor, cfg.collector.noise_correlation, seed=cfg.run.seed + 104_729 * state.frames)
     collector = make_collector(cfg, policy, state.frames)
-    evaluator = Evaluator(cfg, actor, recording=loggers.recording,
-                          video_dir=run_dir / "videos" if cfg.logging.video_episodes else None, gif=loggers.wants_gif)
+    evaluator = make_evaluator(cfg, actor, recording=loggers.recording,
+                               video_dir=run_dir / "videos" if cfg.logging.video_episodes else None,
+                               gif=loggers.wants_gif)
     budget = (f"{cfg.run.total_frames:,} frames or {cfg.run.max_minutes:g} min, whichever ends first"
               if cfg.run.max_minutes else f"{cfg.run.total_frames:,} frames, no time limit")
     print(f"run folder: {run_dir}  ({cfg.optim.algo}, {kind.describe(cfg)}, batch {cfg.frames_per_batch} frames, "
@@ -81,7 +78,10 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
         if kind.placements is not None:
             print(f"{cfg.collector.kind} collectors on: {kind.placements(collector)}")
         stopped_by = loop.run(collector)
+        if loop.record(evaluator.poll(wait=True)):  # the last validation, where it still runs
+            loop.save_checkpoint()
     finally:
+        evaluator.close()
         loop.progress.close()
         collector.shutdown()
         # TorchRL's shutdown resets torch's thread count (to the machine's cores); on the core this
@@ -92,65 +92,8 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
           f"{state.elapsed_s / 60:.1f} min")
     if loop.frames_by_collector:
         print(f"frames per collector: {', '.join(f'{n:,}' for n in loop.frames_by_collector)}")
-    _finish(cfg, state, run_dir, evaluator, loggers)
+    _finish(cfg, state, run_dir, loggers)
     return run_dir
-
-
-class Evaluator:
-    """The periodic deterministic evaluation on the fixed seeded validation set (``VALIDATION_SEED``).
-
-    ``recording``: a Rerun recording (the one the scalars go to, with ``logger=rerun``) that gets
-    two worlds of every evaluation, on its ``frames`` timeline; ``None``: nothing is recorded.
-    ``video_dir``: every evaluation's first ``video_episodes`` episodes are drawn into
-    ``video_dir/eval_<frames>.mp4`` (:attr:`last_video`; with ``gif``, also as a GIF for TensorBoard).
-    """
-
-    def __init__(self, cfg: TrainConfig, actor, *, recording=None, video_dir: Path | None = None, gif: bool = False):
-        self.cfg, self.actor = cfg, actor
-        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=VALIDATION_SEED, **dict(cfg.env.eval_env_kwargs()))
-        self.recorder = None
-        if recording is not None:
-            from atrv_warp.integrations.recorder import RerunRecorder
-
-            self.recorder = RerunRecorder(self.env.sim, recording=recording, worlds=range(2), training=True)
-        self.video, self.video_dir, self.gif = None, video_dir, gif
-        if video_dir is not None:
-            from atrv_warp.integrations.video import EvalVideo
-
-            self.video = EvalVideo(self.env, episodes=cfg.logging.video_episodes)
-        self.last_video = None
-        """The video of the latest evaluation (:class:`~atrv_warp.integrations.video.VideoFile`), or ``None``."""
-
-    def __call__(self, frames: int):
-        self.actor.eval()
-        hooks = []
-        if self.recorder is not None:
-            self.recorder.rec.set_time("frames", sequence=frames)
-            hooks.append(self.recorder.env_hook())
-        if self.video is not None:
-            hooks.append(self.video.env_hook())
-        result = evaluate(self.actor, num_episodes=self.cfg.logging.eval_episodes, seed=VALIDATION_SEED, env=self.env,
-                          on_step=_each(hooks))
-        self.actor.train()
-        if self.video is not None:
-            self.last_video = self.video.write(self.video_dir / f"eval_{frames:011d}.mp4", gif=self.gif)
-        return result
-
-    def close(self) -> None:
-        if self.recorder is not None:
-            self.recorder.close()
-
-
-def _each(hooks: list):
-    """One ``on_step`` callback that calls every one of ``hooks`` (``None`` for none)."""
-    if not hooks:
-        return None
-
-    def on_step(env, td):
-        for hook in hooks:
-            hook(env, td)
-
-    return on_step
 
 
 def _prepare_run(cfg: TrainConfig, resume: bool) -> tuple[Path, dict | None]:
@@ -180,7 +123,7 @@ class TrainLoop:
     """Collect, learn, evaluate and checkpoint until a budget ends the run."""
 
     def __init__(self, cfg: TrainConfig, state: RunState, actor, normalize: Normalize, buffer, learner,
-                 loggers: Loggers, evaluator: Evaluator, checkpoint: Checkpoint, run_dir: Path, *, policy=None):
+                 loggers: Loggers, evaluator, checkpoint: Checkpoint, run_dir: Path, *, policy=None):
         self.cfg, self.state, self.actor, self.normalize, self.buffer = cfg, state, actor, normalize, buffer
         self.policy = actor if policy is None else policy
         """What the collectors step (``actor``, or it inside :class:`~atrv_warp.rl.exploration.CorrelatedExploration`);
@@ -194,6 +137,8 @@ class TrainLoop:
         """Frames from each Ray collector (their batches carry the collector's index); empty otherwise."""
         self.progress = Progress(cfg, state.frames, state.elapsed_s)
         self.last_eval, self.last_train = float("nan"), (float("nan"), float("nan"), {})
+        self.summary = lambda success: ""
+        """The console line of the latest evaluation point, given its validation's success."""
         self.budget_s = cfg.run.max_minutes * 60.0 if cfg.run.max_minutes > 0 else math.inf
         self.clock0 = (state.elapsed_s, time.perf_counter())
 
@@ -221,6 +166,8 @@ class TrainLoop:
                     collector.update_policy_weights_(TensorDict.from_module(self.policy))
                 # ray: the next request to the collector that delivered `data` carries the weights, once
                 # this body is done
+            if self.record(self.evaluator.poll()):  # a background validation that found a new best
+                self.save_checkpoint()
             st.elapsed_s = self.elapsed()
             if st.frames >= st.next_eval or st.frames >= cfg.run.total_frames or st.elapsed_s >= self.budget_s:
                 self.evaluate_and_save()
@@ -264,7 +211,10 @@ class TrainLoop:
         return credit
 
     def evaluate_and_save(self) -> None:
+        """Log the training's figures, send the policy to be validated, and checkpoint the run."""
         cfg, st = self.cfg, self.state
+        if self.record(self.evaluator.poll(wait=True)):  # one validation at a time, logged in order
+            st.elapsed_s = self.elapsed()
         self.last_train = self.stats.pop()
         self.log("train_success_rate", self.last_train[0])
         self.log("train_reward", self.last_train[1])
@@ -274,33 +224,55 @@ class TrainLoop:
         for name, value in self.losses.pop().items():
             self.log(name, value)
         self.log("wall_time_s", st.elapsed_s)
+        frames, minutes, (train_success, train_reward, _), updates = st.frames, st.elapsed_s / 60, self.last_train, st.updates
+        self.summary = lambda success: (f"{frames:>11,} frames {minutes:5.1f} min  eval success {pct(success)}  training "
+                                        f"episodes {pct(train_success)}  reward {train_reward:+.3f}  updates {updates:,}")
         if self.learner is not None:
             self.log("lr", annealed_lr(cfg, st.frames))
             for name, value in self.learner.scalars().items():
                 self.log(name, value)
-            result = self.evaluator(st.frames)
-            video = self.evaluator.last_video
-            if video is not None:
-                self.log("video_render_s", video.render_s)
-                self.loggers.log_video("eval_video", video, st.frames)
-            for k, v in result.as_dict().items():
-                if k != "episodes":
-                    self.log(f"eval_{k}", v)
-            self.last_eval = result.success_rate
-            # equal success (100 % is common once learnt): the higher mean return, a quicker drive, wins
-            if (self.last_eval, result.mean_return) > (st.best_success, st.best_return):
-                st.best_success, st.best_return = self.last_eval, result.mean_return
-                save_policy(self.actor, self.run_dir / "best_policy.pt", width=cfg.network.width, depth=cfg.network.depth,
-                            meta={"frames": st.frames, "eval_success": st.best_success, "task": cfg.env.task})
+            self.evaluator.submit(st.frames, policy_payload(self.actor, width=cfg.network.width,
+                                                            depth=cfg.network.depth,
+                                                            meta={"frames": st.frames, "task": cfg.env.task}))
+            self.record(self.evaluator.poll())  # in the trainer, ready now; in the background, later
+        else:
+            self.progress.log(self.summary(math.nan))
         st.next_eval = (st.frames // cfg.logging.eval_every_frames + 1) * cfg.logging.eval_every_frames
-        st.elapsed_s = self.elapsed()  # the evaluation's time counts too
-        self.checkpoint.save(cfg, st, self.actor, self.learner, self.buffer)
-        self.progress.log(f"{st.frames:>11,} frames {st.elapsed_s / 60:5.1f} min  eval success "
-                          f"{pct(self.last_eval)}  training episodes {pct(self.last_train[0])}  reward "
-                          f"{self.last_train[1]:+.3f}  updates {st.updates:,}")
+        self.save_checkpoint()
+
+    def record(self, outcome: EvalOutcome | None) -> bool:
+        """Log a validation's figures at the frames of the weights it judged, and save those weights as the best
+        policy where they beat every earlier one; returns whether they did (``None``: nothing to record)."""
+        if outcome is None:
+            return False
+        st, result = self.state, outcome.result
+        if outcome.video is not None:
+            self.loggers.log("video_render_s", outcome.video.render_s, step=outcome.frames)
+            self.loggers.log_video("eval_video", outcome.video, outcome.frames)
+        for k, v in result.as_dict().items():
+            if k != "episodes":
+                self.loggers.log(f"eval_{k}", v, step=outcome.frames)
+        self.loggers.log("eval_s", outcome.seconds, step=outcome.frames)
+        # when the figures were known, on the training's clock: wall_time_s plus the validation in the trainer,
+        # later than wall_time_s by the validation's time (and the poll's) in the background
+        self.loggers.log("eval_known_wall_s", self.elapsed(), step=outcome.frames)
+        self.last_eval = result.success_rate
+        self.progress.log(self.summary(result.success_rate) + ("" if isinstance(self.evaluator, Evaluator) else
+                                                               f"  (validated in the background in {outcome.seconds:.0f} s)"))
+        # equal success (100 % is common once learnt): the higher mean return, a quicker drive, wins
+        if (result.success_rate, result.mean_return) <= (st.best_success, st.best_return):
+            return False
+        st.best_success, st.best_return = result.success_rate, result.mean_return
+        outcome.policy["meta"].update(eval_success=result.success_rate, eval_return=result.mean_return)
+        atomic_save(outcome.policy, self.run_dir / "best_policy.pt")
+        return True
+
+    def save_checkpoint(self) -> None:
+        self.state.elapsed_s = self.elapsed()
+        self.checkpoint.save(self.cfg, self.state, self.actor, self.learner, self.buffer)
 
 
-def _finish(cfg: TrainConfig, state: RunState, run_dir: Path, evaluator: Evaluator, loggers: Loggers) -> None:
+def _finish(cfg: TrainConfig, state: RunState, run_dir: Path, loggers: Loggers) -> None:
     """Final evaluation of the best policy on the full set, results file, learning curve, summary."""
     result = {"frames": state.frames, "updates": state.updates, "train_minutes": state.elapsed_s / 60,
               "best_periodic_success": state.best_success}
@@ -313,8 +285,7 @@ def _finish(cfg: TrainConfig, state: RunState, run_dir: Path, evaluator: Evaluat
         for k, v in final.as_dict().items():
             loggers.log(f"final_eval_{k}", v, step=state.frames)
     (run_dir / "final_eval.json").write_text(json.dumps(result, indent=2) + "\n")
-    if evaluator.recorder is not None:
-        evaluator.close()
+    if loggers.recording is not None:
         print(f"rerun recording: {loggers.rerun.path}")
     loggers.close()
     if plot_curve(run_dir / "logs", run_dir / "learning_curve.png", f"ATRV-Jr {cfg.env.task}, {cfg.optim.algo.upper()}"):
