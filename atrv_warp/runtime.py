@@ -21,11 +21,16 @@ import os
 import sys
 import tempfile
 
-__all__ = ["VERBOSE_ENV", "add_verbose_argument", "configure", "configure_logging", "device_summary", "error_line",
-           "is_configured", "is_verbose", "set_verbose"]
+__all__ = ["CORES_ENV", "VERBOSE_ENV", "add_verbose_argument", "configure", "configure_logging", "device_summary",
+           "error_line", "is_configured", "is_verbose", "pin_to_core", "run_cores", "set_verbose"]
 
 VERBOSE_ENV = "ATRV_WARP_VERBOSE"
 """Environment variable: ``1`` (or ``true``/``yes``/``on``) shows library detail."""
+
+CORES_ENV = "ATRV_WARP_CORES"
+"""Environment variable: the cores a run may use, comma-separated (``0,1``). The run's first :func:`pin_to_core`
+records them before it pins its own process to one, so that the worker processes started after it (which
+inherit that one-core affinity) still pin themselves to the others."""
 
 _held_back = ""  # what Warp's native init wrote to stderr while we were quiet
 
@@ -133,3 +138,27 @@ def error_line(prog: str, message: str) -> int:
     """Print ``prog: error: message`` as one line on stderr; returns the exit status 2."""
     print(f"{prog}: error: {' '.join(str(message).split())}", file=sys.stderr)
     return 2
+
+
+def run_cores() -> list[int]:
+    """The cores this run may use: :data:`CORES_ENV` where set (by the run's first pin, inherited by its workers),
+    else those this process may run on now."""
+    recorded = os.environ.get(CORES_ENV, "").strip()
+    if not recorded:
+        return sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else list(range(os.cpu_count() or 1))
+    try:
+        cores = sorted({int(c) for c in recorded.split(",")})
+    except ValueError:
+        raise ValueError(f"{CORES_ENV}={recorded!r}: expected core numbers separated by commas, e.g. 0,1") from None
+    return cores
+
+
+def pin_to_core(index: int) -> None:
+    """Pin this process to the ``index``-th of :func:`run_cores` (modulo their number); the first pin records the
+    run's cores in :data:`CORES_ENV` for the processes started after it. Does nothing where the OS has no
+    affinity call."""
+    if not hasattr(os, "sched_setaffinity"):
+        return
+    cores = run_cores()
+    os.environ.setdefault(CORES_ENV, ",".join(map(str, cores)))
+    os.sched_setaffinity(0, {cores[index % len(cores)]})

@@ -39,6 +39,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.collectors import Collector
 
 from atrv_warp.rl.config import TrainConfig
+from atrv_warp.runtime import pin_to_core
 from atrv_warp.task.env import ATRVjrEnv, EnvFactory
 
 __all__ = ["COLLECTORS", "INSTALL_HINT", "OBJECT_STORE_BYTES", "WORKER_KEY", "CollectorKind", "RayWorker",
@@ -185,13 +186,6 @@ def describe_placements(collector) -> str:
 def worker_weights(collector) -> list[TensorDictBase]:
     """:meth:`RayWorker.policy_weights` of every collector of ``collector``, in order."""
     return collector.map_fn("policy_weights")
-
-
-def pin_to_core(index: int) -> None:
-    """Pin this process to the ``index``-th core it may run on (modulo their number)."""
-    if hasattr(os, "sched_setaffinity"):
-        cores = sorted(os.sched_getaffinity(0))
-        os.sched_setaffinity(0, {cores[index % len(cores)]})
 
 
 def make_sync_collector(cfg: TrainConfig, actor, *, total_frames: int, init_random_frames: int, env_seed: int):

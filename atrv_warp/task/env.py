@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 from collections.abc import Mapping, Sequence
 
 import torch
@@ -668,9 +667,10 @@ class EnvFactory:
     taken by TorchRL's collectors for their own)."""
 
     def __call__(self) -> ATRVjrEnv:
-        if self.core is not None and hasattr(os, "sched_setaffinity"):
-            cores = sorted(os.sched_getaffinity(0))
-            os.sched_setaffinity(0, {cores[self.core % len(cores)]})
+        if self.core is not None:
+            from atrv_warp.runtime import pin_to_core
+
+            pin_to_core(self.core)  # of the run's cores, not of the one the trainer pinned itself to
         torch.set_num_threads(1)
         return ATRVjrEnv(self.num_envs, seed=self.seed, **dict(self.env_kwargs))
 
