@@ -153,12 +153,12 @@ def run_cores() -> list[int]:
     return cores
 
 
-def pin_to_core(index: int) -> None:
-    """Pin this process to the ``index``-th of :func:`run_cores` (modulo their number); the first pin records the
-    run's cores in :data:`CORES_ENV` for the processes started after it. Does nothing where the OS has no
-    affinity call."""
+def pin_to_core(index: int, pid: int = 0) -> None:
+    """Pin this process (or process ``pid``, one this process started) to the ``index``-th of :func:`run_cores`
+    (modulo their number); the first pin records the run's cores in :data:`CORES_ENV` for the processes started
+    after it. Does nothing where the OS has no affinity call."""
     if not hasattr(os, "sched_setaffinity"):
         return
     cores = run_cores()
     os.environ.setdefault(CORES_ENV, ",".join(map(str, cores)))
-    os.sched_setaffinity(0, {cores[index % len(cores)]})
+    os.sched_setaffinity(pid, {cores[index % len(cores)]})

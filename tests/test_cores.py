@@ -44,3 +44,21 @@ def test_a_bad_cores_variable_is_one_line(monkeypatch):
     monkeypatch.setenv("ATRV_WARP_CORES", "0,one")
     with pytest.raises(ValueError, match=r"ATRV_WARP_CORES='0,one': expected core numbers separated by commas"):
         run_cores()
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity") or len(os.sched_getaffinity(0)) < 2,
+                    reason="needs an OS with affinity calls and two cores")
+def test_a_started_process_is_pinned_by_its_parent(monkeypatch):
+    """The background validation is pinned from the trainer as it starts, before its imports run anywhere."""
+    from atrv_warp.runtime import pin_to_core, run_cores
+
+    monkeypatch.delenv("ATRV_WARP_CORES", raising=False)
+    cores = run_cores()
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        pin_to_core(1, pid=child.pid)
+        assert os.sched_getaffinity(child.pid) == {cores[1]}
+        assert os.sched_getaffinity(0) == set(cores)  # this process left as it was
+    finally:
+        child.kill()
+        child.wait()

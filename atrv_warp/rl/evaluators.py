@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from atrv_warp.rl.config import TrainConfig
+from atrv_warp.runtime import pin_to_core
 from atrv_warp.task.env import ATRVjrEnv
 from atrv_warp.task.evaluation import VALIDATION_SEED, EvalResult, evaluate
 
@@ -116,6 +117,7 @@ class BackgroundEvaluator:
         self.process = context.Process(target=_serve, args=(child, cfg, video_dir, gif, core), daemon=True,
                                        name="atrv-validation")
         self.process.start()
+        pin_to_core(core, pid=self.process.pid)  # now, not once it has imported the simulator on the trainer's core
         child.close()
         self.in_flight: tuple[int, dict] | None = None
         self.ready = False
@@ -172,7 +174,6 @@ def _serve(conn, cfg: TrainConfig, video_dir: Path | None, gif: bool, core: int)
     set of weights sent until ``None`` comes."""
     import torch
 
-    from atrv_warp.rl.collectors import pin_to_core
     from atrv_warp.rl.learner import make_run_actor
 
     try:
