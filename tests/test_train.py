@@ -362,7 +362,7 @@ def test_each_loss_learns_and_its_state_round_trips(loss):
     """``loss=`` switches TorchRL's SAC, CrossQ or REDQ loss: each fits its critics on a fixed batch,
     CrossQ without target networks, and a learner rebuilt from the state dict takes the same step."""
     from atrv_warp.policy import Normalize, make_actor
-    from atrv_warp.rl.learner import Learner
+    from atrv_warp.rl.learner import REPLAY_KEYS, Learner
 
     cfg = load_train_config(SMOKE, {"loss": loss})
     torch.manual_seed(0)
@@ -370,6 +370,7 @@ def test_each_loss_learns_and_its_state_round_trips(loss):
     assert (learner.target_update is None) == (loss == "crossq")
     assert type(learner.loss).__name__ == {"sac": "SACLoss", "crossq": "CrossQLoss", "redq": "REDQLoss"}[loss]
     batch = _fixed_batch()
+    assert set(batch.keys(True, True)) <= set(REPLAY_KEYS)  # the loss learns from what the replay buffer keeps
     first = [float(learner.update(batch.clone())["loss_qvalue"]) for _ in range(3)]
     for _ in range(150):
         out = learner.update(batch.clone())

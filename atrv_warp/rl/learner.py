@@ -17,7 +17,7 @@ from atrv_warp.rl.config import TrainConfig
 from atrv_warp.rl.ppo import PPO_LOSS_KEYS, PPOLearner
 from atrv_warp.task.spec import ACTION_DIM
 
-__all__ = ["ALGOS", "SAC_LOSS_KEYS", "Algo", "Learner", "annealed_lr", "make_buffer", "make_learner", "make_loss",
+__all__ = ["ALGOS", "REPLAY_KEYS", "SAC_LOSS_KEYS", "Algo", "Learner", "annealed_lr", "make_buffer", "make_learner", "make_loss",
            "make_qvalue", "make_run_actor", "set_lr"]
 
 SAC_LOSS_KEYS = ("loss_actor", "loss_qvalue", "loss_alpha", "entropy")
@@ -48,6 +48,13 @@ def make_qvalue(width: int = 128, depth: int = 2, normalize: Normalize | None = 
     """
     return ValueOperator(_QNet(normalize if normalize is not None else Normalize(), width, depth, batch_renorm),
                          in_keys=["observation", "action"])
+
+
+REPLAY_KEYS = ("observation", "action", ("next", "observation"), ("next", "reward"), ("next", "done"),
+               ("next", "terminated"), ("next", "truncated"))
+"""What the replay buffer keeps of every frame: what the losses of the SAC family read (their ``in_keys``). The
+rest of a collected batch (the scan, the reward terms, the actor's distribution, the episode bookkeeping) is
+logged from the batch itself; kept, it would double what every sample gathers and every checkpoint writes."""
 
 
 def make_buffer(cfg: TrainConfig):
