@@ -54,6 +54,9 @@ class Evaluator:
     ``video_dir/eval_<frames>.mp4`` (:attr:`last_video`; with ``gif``, also as a GIF for TensorBoard).
     """
 
+    in_background = False
+    """The training waits for it."""
+
     def __init__(self, cfg: TrainConfig, actor, *, recording=None, video_dir: Path | None = None, gif: bool = False):
         self.cfg, self.actor = cfg, actor
         self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=VALIDATION_SEED, **dict(cfg.env.eval_env_kwargs()))
@@ -110,6 +113,9 @@ class BackgroundEvaluator:
     set of weights at a time; :meth:`poll` returns the outcome once it has ended (``wait``: blocks until then).
     A failure in the process is re-raised here as a ``RuntimeError`` carrying its message.
     """
+
+    in_background = True
+    """The training goes on while it runs."""
 
     def __init__(self, cfg: TrainConfig, *, video_dir: Path | None = None, gif: bool = False, core: int = EVAL_CORE):
         context = multiprocessing.get_context("spawn")  # a fresh interpreter: no Warp or torch state forked

@@ -137,8 +137,8 @@ class TrainLoop:
         """Frames from each Ray collector (their batches carry the collector's index); empty otherwise."""
         self.progress = Progress(cfg, state.frames, state.elapsed_s)
         self.last_eval, self.last_train = float("nan"), (float("nan"), float("nan"), {})
-        self.summary = lambda success: ""
-        """The console line of the latest evaluation point, given its validation's success."""
+        self.point = ""
+        """The console line of the latest evaluation point, its validation's success left as ``{}``."""
         self.budget_s = cfg.run.max_minutes * 60.0 if cfg.run.max_minutes > 0 else math.inf
         self.clock0 = (state.elapsed_s, time.perf_counter())
 
@@ -223,9 +223,8 @@ class TrainLoop:
         for name, value in self.losses.pop().items():
             self.log(name, value)
         self.log("wall_time_s", st.elapsed_s)
-        frames, minutes, (train_success, train_reward, _), updates = st.frames, st.elapsed_s / 60, self.last_train, st.updates
-        self.summary = lambda success: (f"{frames:>11,} frames {minutes:5.1f} min  eval success {pct(success)}  training "
-                                        f"episodes {pct(train_success)}  reward {train_reward:+.3f}  updates {updates:,}")
+        self.point = (f"{st.frames:>11,} frames {st.elapsed_s / 60:5.1f} min  eval success {{}}  training episodes "
+                      f"{pct(self.last_train[0])}  reward {self.last_train[1]:+.3f}  updates {st.updates:,}")
         if self.learner is not None:
             self.log("lr", annealed_lr(cfg, st.frames))
             for name, value in self.learner.scalars().items():
@@ -235,7 +234,7 @@ class TrainLoop:
                                                             meta={"frames": st.frames, "task": cfg.env.task}))
             self.record(self.evaluator.poll())  # in the trainer, ready now; in the background, later
         else:
-            self.progress.log(self.summary(math.nan))
+            self.progress.log(self.point.format(pct(math.nan)))
         st.next_eval = (st.frames // cfg.logging.eval_every_frames + 1) * cfg.logging.eval_every_frames
         self.save_checkpoint()
 
@@ -256,8 +255,8 @@ class TrainLoop:
         # later than wall_time_s by the validation's time (and the poll's) in the background
         self.loggers.log("eval_known_wall_s", self.elapsed(), step=outcome.frames)
         self.last_eval = result.success_rate
-        self.progress.log(self.summary(result.success_rate) + ("" if isinstance(self.evaluator, Evaluator) else
-                                                               f"  (validated in the background in {outcome.seconds:.0f} s)"))
+        aside = f"  (validated in the background in {outcome.seconds:.0f} s)" if self.evaluator.in_background else ""
+        self.progress.log(self.point.format(pct(result.success_rate)) + aside)
         # equal success (100 % is common once learnt): the higher mean return, a quicker drive, wins
         if (result.success_rate, result.mean_return) <= (st.best_success, st.best_return):
             return False
