@@ -102,7 +102,7 @@ def main() -> int:
         with iso("sample"):
             batch = buffer.sample()
         learner.update(batch, phase=iso)
-    evaluator = Evaluator(cfg, actor)  # the periodic evaluation, on this core as in train()
+    evaluator = Evaluator(cfg, actor)  # the periodic evaluation in the trainer (logging.eval_in_background=false)
     evaluator(frames)  # warm: its environment's first steps
     t_eval = time.perf_counter()
     evaluator(frames)

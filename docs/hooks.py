@@ -800,11 +800,17 @@ def train_to_success_nav_deploy() -> str:
     return _train_to_success("train_to_success_nav_deploy.json")
 
 
+def train_to_success_nav_deploy_shipped() -> str:
+    """``train_to_success_nav_deploy_shipped.json``: the run the shipped deployable policy comes from (seed 0)."""
+    return _train_to_success("train_to_success_nav_deploy_shipped.json")
+
+
 TABLES: dict[str, Callable[[], str]] = {
     "deploy_policy": deploy_policy,
     "deploy_base_limit": deploy_base_limit,
     "deploy_base_limit_old_policy": lambda: deploy_base_limit("deploy_base_limit_old_policy.json"),
     "train_to_success_nav_deploy": train_to_success_nav_deploy,
+    "train_to_success_nav_deploy_shipped": train_to_success_nav_deploy_shipped,
     "deploy_odometry_scale": deploy_odometry_scale,
     "train_to_success_nav_deploy_slip": lambda: _train_to_success("train_to_success_nav_deploy_slip.json"),
     "mujoco_transfer_wide_slip": lambda: mujoco_transfer("mujoco_transfer_wide_slip.json"),

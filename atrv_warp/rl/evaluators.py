@@ -148,8 +148,8 @@ class BackgroundEvaluator:
         return EvalOutcome(frames, result, policy, seconds, video)
 
     def close(self) -> None:
-        """Stop the process (an evaluation in flight is dropped)."""
-        if self.process.is_alive():
+        """Stop the process (an evaluation in flight is dropped, at once)."""
+        if self.process.is_alive() and self.in_flight is None:
             try:
                 self.conn.send(None)
             except (BrokenPipeError, OSError):
