@@ -9,8 +9,9 @@ task, ``--config ppo`` / ``nav_ppo`` for PPO on many worlds; overrides as in
 evaluating every 100k frames on 1,000 seeded validation episodes (``VALIDATION_SEED``, on which the run picks
 its best policy). Per seed it reports when the success rate first reached the threshold (wall time since the
 start of training, evaluations included, until that validation's figures were known: in the background, the
-validation runs beside the training and ends later than the weights it judged were taken), the best policy's rate on the 1,000-episode test set (``EVAL_SEED``,
-unseen by training), and updates/s and frames/s; then the medians.
+validation runs beside the training and ends later than the weights it judged were taken), the best policy's
+rate on the 1,000-episode test set (``EVAL_SEED``, unseen by training), and updates/s and frames/s; then the
+medians.
 Kernel compilation is paid once, before the first seed, and reported separately. Figures are
 printed and written to ``benchmarks/results/train_to_success.json``
 (``train_to_success_<config>.json`` for another preset); the run folders are kept under
@@ -61,8 +62,8 @@ def _summarize(run_dir: Path, seed: int, threshold: float, total_s: float | None
     scalars = run_dir / "logs" / "scalars"
     success = _series(scalars / "eval_success_rate.csv")
     taken = dict(_series(scalars / "wall_time_s.csv"))  # when the weights were taken
-    # when the validation's figures were known: later by the validation (in the trainer) or by the validation and
-    # the poll (in the background); runs from before eval_known_wall_s was logged have only the former
+    # when the validation's figures were known: later than the weights by the validation (in the trainer), or by
+    # the validation and the poll (in the background); runs from before eval_known_wall_s have only `taken`
     known = dict(_series(scalars / "eval_known_wall_s.csv"))
     wall = known or taken
     # rates are logged as float32: 900 of 1,000 episodes reads 0.89999998, which is 90 %
