@@ -21,7 +21,7 @@ import os
 import sys
 import tempfile
 
-__all__ = ["CORES_ENV", "VERBOSE_ENV", "add_verbose_argument", "configure", "configure_logging", "device_summary",
+__all__ = ["CORES_ENV", "TRAINER_CORE", "VERBOSE_ENV", "WORKER_CORE", "add_verbose_argument", "configure", "configure_logging", "device_summary",
            "error_line", "is_configured", "is_verbose", "pin_to_core", "run_cores", "set_verbose"]
 
 VERBOSE_ENV = "ATRV_WARP_VERBOSE"
@@ -31,6 +31,12 @@ CORES_ENV = "ATRV_WARP_CORES"
 """Environment variable: the cores a run may use, comma-separated (``0,1``). The run's first :func:`pin_to_core`
 records them before it pins its own process to one, so that the worker processes started after it (which
 inherit that one-core affinity) still pin themselves to the others."""
+
+TRAINER_CORE = 0
+"""The run's core (an index into :func:`run_cores`) the trainer pins itself to, where its collector has a worker."""
+WORKER_CORE = 1
+"""The run's core the ``async`` collector's worker and the background validation run on: the worker waits for
+the learner most of the time, so the validation fits beside it."""
 
 _held_back = ""  # what Warp's native init wrote to stderr while we were quiet
 

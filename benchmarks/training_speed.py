@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import statistics
 import subprocess
@@ -40,7 +41,7 @@ def _train(tree: Path, out_dir: Path, args, frames: int) -> dict:
                f"total_frames={frames}", "max_minutes=0", "eval_every_frames=100000", "eval_episodes=1000",
                f"final_eval_episodes={args.final_episodes}", "progress=false"]
     t0 = time.perf_counter()
-    subprocess.run(command, cwd=tree, env={**_env(tree)}, check=True, capture_output=True, text=True)
+    subprocess.run(command, cwd=tree, env=_env(tree), check=True, capture_output=True, text=True)
     wall = time.perf_counter() - t0
     final = json.loads((run / "final_eval.json").read_text())
     seconds = final["train_minutes"] * 60
@@ -49,8 +50,7 @@ def _train(tree: Path, out_dir: Path, args, frames: int) -> dict:
 
 
 def _env(tree: Path) -> dict:
-    import os
-
+    """This environment for a run in ``tree``: its package first, and a fresh run's cores."""
     env = {k: v for k, v in os.environ.items() if k != "ATRV_WARP_CORES"}
     env["PYTHONPATH"] = str(tree)
     return env

@@ -39,7 +39,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.collectors import Collector
 
 from atrv_warp.rl.config import TrainConfig
-from atrv_warp.runtime import pin_to_core
+from atrv_warp.runtime import TRAINER_CORE, WORKER_CORE, pin_to_core
 from atrv_warp.task.env import ATRVjrEnv, EnvFactory
 
 __all__ = ["COLLECTORS", "INSTALL_HINT", "OBJECT_STORE_BYTES", "WORKER_KEY", "CollectorKind", "RayWorker",
@@ -200,7 +200,7 @@ def make_async_collector(cfg: TrainConfig, actor, *, total_frames: int, init_ran
     """One worker process, pinned to the second core, with a copy of ``actor``."""
     from torchrl.collectors import MultiAsyncCollector
 
-    factory = EnvFactory(cfg.env.num_envs, seed=env_seed, core=1, env_kwargs=cfg.env.env_kwargs())
+    factory = EnvFactory(cfg.env.num_envs, seed=env_seed, core=WORKER_CORE, env_kwargs=cfg.env.env_kwargs())
     failure = None
     try:
         return MultiAsyncCollector([factory], actor, frames_per_batch=cfg.frames_per_batch, total_frames=total_frames,
@@ -259,7 +259,8 @@ def make_collector(cfg: TrainConfig, actor, frames_done: int):
 
 
 COLLECTORS: dict[str, CollectorKind] = {
-    "async": CollectorKind(make_async_collector, _describe_local, push_weights=True, trainer_core=0),
+    "async": CollectorKind(make_async_collector, _describe_local, push_weights=True,
+                           trainer_core=TRAINER_CORE),
     "sync": CollectorKind(make_sync_collector, _describe_local),
     "ray": CollectorKind(make_ray_collector, _describe_ray, require=require_ray, placements=describe_placements),
 }

@@ -18,15 +18,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from atrv_warp.rl.config import TrainConfig
-from atrv_warp.runtime import pin_to_core
+from atrv_warp.runtime import WORKER_CORE, pin_to_core
 from atrv_warp.task.env import ATRVjrEnv
 from atrv_warp.task.evaluation import VALIDATION_SEED, EvalResult, evaluate
 
-__all__ = ["EVAL_CORE", "BackgroundEvaluator", "EvalOutcome", "Evaluator", "make_evaluator"]
-
-EVAL_CORE = 1
-"""The core the background validation is pinned to (modulo the cores this process may use): the async
-collector's (``collectors.make_async_collector``), which stays idle while the learner works through a batch."""
+__all__ = ["BackgroundEvaluator", "EvalOutcome", "Evaluator", "make_evaluator"]
 
 
 @dataclass
@@ -117,7 +113,7 @@ class BackgroundEvaluator:
     in_background = True
     """The training goes on while it runs."""
 
-    def __init__(self, cfg: TrainConfig, *, video_dir: Path | None = None, gif: bool = False, core: int = EVAL_CORE):
+    def __init__(self, cfg: TrainConfig, *, video_dir: Path | None = None, gif: bool = False, core: int = WORKER_CORE):
         context = multiprocessing.get_context("spawn")  # a fresh interpreter: no Warp or torch state forked
         self.conn, child = context.Pipe()
         self.process = context.Process(target=_serve, args=(child, cfg, video_dir, gif, core), daemon=True,

@@ -17,8 +17,8 @@ from atrv_warp.rl.config import TrainConfig
 from atrv_warp.rl.ppo import PPO_LOSS_KEYS, PPOLearner
 from atrv_warp.task.spec import ACTION_DIM
 
-__all__ = ["ALGOS", "REPLAY_KEYS", "SAC_LOSS_KEYS", "Algo", "Learner", "annealed_lr", "make_buffer", "make_learner", "make_loss",
-           "make_qvalue", "make_run_actor", "set_lr"]
+__all__ = ["ALGOS", "REPLAY_KEYS", "SAC_LOSS_KEYS", "Algo", "Learner", "annealed_lr", "make_buffer", "make_learner",
+           "make_loss", "make_qvalue", "make_run_actor", "set_lr"]
 
 SAC_LOSS_KEYS = ("loss_actor", "loss_qvalue", "loss_alpha", "entropy")
 """The means of SAC's losses logged at every evaluation."""

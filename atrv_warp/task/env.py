@@ -30,6 +30,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
+from atrv_warp.runtime import pin_to_core
 from atrv_warp.sim.config import (
     ArenaConfig,
     ContactConfig,
@@ -668,8 +669,6 @@ class EnvFactory:
 
     def __call__(self) -> ATRVjrEnv:
         if self.core is not None:
-            from atrv_warp.runtime import pin_to_core
-
             pin_to_core(self.core)  # of the run's cores, not of the one the trainer pinned itself to
         torch.set_num_threads(1)
         return ATRVjrEnv(self.num_envs, seed=self.seed, **dict(self.env_kwargs))
