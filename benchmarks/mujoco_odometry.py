@@ -2,6 +2,7 @@
 
     pip install -e ".[mujoco]"
     python benchmarks/mujoco_odometry.py [--policy nav_deploy] [--episodes 40] [--frictions 0.3 0.8]
+                                         [--contacts noslip sphere]
 
 The policy drives the first ``--episodes`` episodes of the evaluation set in the MuJoCo twin at each µ, and in our
 simulator on the nominal rover (µ 0.3), as ``benchmarks/mujoco_transfer.py`` runs them. Per episode, over its
@@ -9,6 +10,15 @@ steps: the distance the wheel encoders report (the odometry's |forward speed| x 
 the chassis travelled (its path in the ground plane), the largest gap between the goal distance seen from the
 fused odometry and the true one [m], and the chassis' mean |yaw rate| over the mean |commanded yaw rate|. Printed
 as medians over the episodes, with the success rate, and written to ``benchmarks/results/mujoco_odometry.json``.
+
+Then what the twin's over-read is made of:
+
+- **Its contact, varied** (``--contacts``, at the nominal µ 0.3, the same episodes): ``noslip``, MuJoCo's post-solve
+  that removes the soft constraints' slip from the friction (10 iterations), and ``sphere``, each wheel a sphere of
+  its radius, one contact under the axle as ours has (the tyre then sinks twice as far).
+- **Scripted drives from rest** (``DRIVES``, through the task's base, no policy) in both engines at each µ: the
+  encoders' distance over the path in the launch (the first ``LAUNCH_S``, the base's acceleration limit
+  ramping the wheels) and in the steady drive after it, straight and on arcs.
 """
 
 from __future__ import annotations
@@ -21,12 +31,25 @@ from pathlib import Path
 import numpy as np
 from _common import write_results
 
-VERSION = 1
+VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parent / "results"
 STEP = 0.05
 """The policy's step [s]."""
+DRIVES = ((1.0, 0.0), (1.0, 1.0), (0.5, 1.5), (1.5, 0.5))
+"""Scripted /cmd_vel (linear [m/s], angular [rad/s]), each held from rest for ``DRIVE_S``."""
+DRIVE_S = 4.0
+"""[s] each scripted drive lasts."""
+LAUNCH_S = 1.5
+"""[s] of a scripted drive counted as its launch; the rest is its steady drive."""
+
+
+def contact_variants() -> dict:
+    """``--contacts``' names: the twin's contact with one of MuJoCo's settings changed."""
+    from atrv_warp.integrations.mujoco.mjcf import MujocoContact
+
+    return {"noslip": MujocoContact(noslip_iterations=10), "sphere": MujocoContact(wheel="sphere")}
 
 
 def summarize(episodes: list[dict]) -> dict:
@@ -44,13 +67,13 @@ def episode_figures(true_xy: np.ndarray, encoder_speed: np.ndarray, seen: np.nda
             "yaw_rate_over_command": float(np.abs(yaw_rate).mean() / max(np.abs(command_yaw_rate).mean(), 1e-6))}
 
 
-def twin_episode(policy, episodes, episode, mu: float) -> dict:
-    """One episode in the twin at µ ``mu``: its :func:`episode_figures`."""
+def twin_episode(policy, episodes, episode, mu: float, contact=None) -> dict:
+    """One episode in the twin at µ ``mu`` (``contact``: its MuJoCo contact settings): its :func:`episode_figures`."""
     from atrv_warp.integrations.mujoco import run_twin_episode
     from atrv_warp.task.spec import EndReason
 
     task = episodes.task
-    twin = episodes.twin(episode, friction=mu)
+    twin = episodes.twin(episode, friction=mu, contact=contact)
     rec = []
     target, goal = np.asarray(episode.target), np.asarray(episode.goal)
     reason, _, _ = run_twin_episode(policy, twin, episode, task, on_step=lambda t: rec.append(
@@ -89,13 +112,60 @@ def ours_run(path: str, count: int, seed: int) -> list[dict]:
     return out
 
 
+def scripted_drives(task, mu: float) -> list[dict]:
+    """Each of :data:`DRIVES` from rest in our simulator and in the twin at µ ``mu``, through ``task``'s base (the
+    nominal rover's radius and track, as the simulator node configures a base): encoders' distance over the path,
+    in the launch and in the steady drive."""
+    import torch
+
+    from atrv_warp.integrations.mujoco import MujocoTwin
+    from atrv_warp.integrations.mujoco.record import twin_driver
+    from atrv_warp.sim import RoverSim
+    from atrv_warp.sim.config import ContactConfig
+
+    driver = task.driver(twin_driver())
+    steps, launch = round(DRIVE_S / STEP), round(LAUNCH_S / STEP)
+    out = []
+    for linear, angular in DRIVES:
+        row = {"mu": mu, "linear": linear, "angular": angular}
+        for engine in ("ours", "twin"):
+            if engine == "ours":
+                sim = RoverSim(1, contact=ContactConfig(friction=mu), driver=driver)
+            else:
+                twin = MujocoTwin(friction=mu, driver=driver)
+            encoder, path, prev = [0.0, 0.0], [0.0, 0.0], None
+            for k in range(steps):
+                if engine == "ours":
+                    sim.set_twist(torch.tensor([[linear, angular]]))
+                    sim.step()
+                    xy, speed = sim.root_pose[0, :2].double().numpy(), float(sim.driver.odom_twist[0, 0])
+                else:
+                    twin.command(linear, angular)
+                    twin.step()
+                    xy, speed = twin.root_pose[:2].copy(), float(twin.odom_twist[0])
+                phase = int(k >= launch)
+                if prev is not None:
+                    encoder[phase] += abs(speed) * STEP
+                    path[phase] += float(np.linalg.norm(xy - prev))
+                prev = xy
+            row[engine] = {"launch": encoder[0] / max(path[0], 1e-6), "steady": encoder[1] / max(path[1], 1e-6)}
+        out.append(row)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--policy", default="nav_deploy")
     parser.add_argument("--episodes", type=int, default=40)
     parser.add_argument("--frictions", type=float, nargs="+", default=[0.3, 0.8])
+    parser.add_argument("--contacts", nargs="*", default=["noslip", "sphere"], metavar="NAME",
+                        help="the twin's contact varied, at µ 0.3 (known: noslip, sphere; none: skip)")
     parser.add_argument("--out", default=str(RESULTS / "mujoco_odometry.json"))
     args = parser.parse_args(argv)
+    known = ("noslip", "sphere")
+    unknown = [c for c in args.contacts if c not in known]
+    if unknown:
+        parser.error(f"--contacts: unknown {', '.join(unknown)}; known: {', '.join(known)}")
     try:
         import mujoco  # noqa: F401
     except ImportError:
@@ -113,13 +183,25 @@ def main(argv: list[str] | None = None) -> int:
     rows = {}
     for mu in args.frictions:
         rows[f"mujoco µ {mu:g}"] = summarize([twin_episode(policy, episodes, e, mu) for e in episodes.episodes])
+    variants = contact_variants()
+    for name in args.contacts:
+        rows[f"mujoco µ 0.3, {name}"] = summarize([twin_episode(policy, episodes, e, 0.3, variants[name])
+                                                  for e in episodes.episodes])
     rows["ours (nominal µ 0.3)"] = summarize(ours_run(str(policy_path(args.policy)), args.episodes, EVAL_SEED))
     for where, r in rows.items():
         print(f"{where:22s} success {100 * r['success']:5.1f}%  encoders / true path {r['median_encoder_over_true_path']:.3f}"
               f"  goal seen off by up to {r['median_worst_goal_error_m']:.2f} m  yaw rate / command "
               f"{r['median_yaw_rate_over_command']:.2f}  (medians over {r['episodes']} episodes)", flush=True)
+    drives = [row for mu in args.frictions for row in scripted_drives(episodes.task, mu)]
+    print(f"\nscripted drives from rest, encoders / path (launch: the first {LAUNCH_S:g} s; steady: the rest of "
+          f"{DRIVE_S:g} s)")
+    for d in drives:
+        print(f"µ {d['mu']:g}  {d['linear']:.1f} m/s {d['angular']:.1f} rad/s   ours launch {d['ours']['launch']:.3f} "
+              f"steady {d['ours']['steady']:.3f}   twin launch {d['twin']['launch']:.3f} steady "
+              f"{d['twin']['steady']:.3f}", flush=True)
     out = write_results(args.out, {"benchmark": "mujoco_odometry", "policy": args.policy, "seed": EVAL_SEED,
-                                   "episodes": args.episodes, "rows": rows},
+                                   "episodes": args.episodes, "rows": rows, "contacts": args.contacts,
+                                   "drives": drives, "drive_s": DRIVE_S, "launch_s": LAUNCH_S},
                         version=VERSION, task=True, driver=True, policies=(str(policy_path(args.policy)),))
     print(f"written to {out}")
     return 0

@@ -29,7 +29,7 @@ from atrv_warp.task.evaluation import EVAL_SEED, EpisodeRecord
 from atrv_warp.task.reward import progress_reward
 from atrv_warp.task.spec import EndReason, action_to_twist, policy_contract
 
-from .mjcf import Obstacle
+from .mjcf import MujocoContact, Obstacle
 from .twin import FLAG_OBSTACLE, MujocoTwin
 
 __all__ = ["ODOMETRY_SOURCES", "DeployablePolicy", "TwinEpisode", "TwinEpisodes", "draw_episodes", "run_twin_episode",
@@ -64,14 +64,16 @@ class TwinEpisodes:
     episodes: tuple[TwinEpisode, ...]
 
     def twin(self, episode: TwinEpisode, *, friction: float | None = None,
-             driver: DriverConfig | None = None) -> MujocoTwin:
+             driver: DriverConfig | None = None, contact: MujocoContact | None = None) -> MujocoTwin:
         """The twin of ``episode``'s world (its terrain tile and obstacles, the task's scanner) at Coulomb
         ``friction`` (default: the nominal µ), through the task's base: ``driver`` with the task's limits filling
-        those it leaves unset (:meth:`~atrv_warp.task.config.TaskConfig.driver`)."""
+        those it leaves unset (:meth:`~atrv_warp.task.config.TaskConfig.driver`); ``contact``: MuJoCo's contact
+        settings (default :class:`~.mjcf.MujocoContact`, the tyre's compliance)."""
         task = self.task
         scanner = ScannerConfig(beams=task.scan_beams, fov=task.scan_fov) if task.scan_beams else ScannerConfig()
         return MujocoTwin(terrain=self.terrain, tile=episode.tile, obstacles=episode.obstacles, friction=friction,
-                          obstacle_height=self.obstacle_height, scanner=scanner, driver=task.driver(driver))
+                          obstacle_height=self.obstacle_height, scanner=scanner, driver=task.driver(driver),
+                          contact=contact)
 
 
 def draw_episodes(task: TaskConfig | str, count: int, *, seed: int = EVAL_SEED) -> TwinEpisodes:
