@@ -305,3 +305,16 @@ def test_twin_episodes_go_through_the_tasks_base_and_can_see_the_true_pose():
     assert truth < 1e-4 and fused > 1e-3, (truth, fused)
     with pytest.raises(ValueError, match="odometry='gps'"):
         run_twin_episode(policy, twin, episode, task, odometry="gps")
+
+
+def test_twin_episodes_take_a_contact(episodes):
+    """``TwinEpisodes.twin(contact=...)`` builds the episode's world on those contact settings (the odometry study's
+    variants), and on the tyre's by default."""
+    from atrv_warp.integrations.mujoco.mjcf import MujocoContact
+
+    episode = episodes.episodes[0]
+    assert episodes.twin(episode).contact_cfg == MujocoContact()
+    twin = episodes.twin(episode, contact=MujocoContact(noslip_iterations=10, wheel="sphere"))
+    assert twin.model.opt.noslip_iterations == 10
+    wheels = [g for g in range(twin.model.ngeom) if twin.model.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE]
+    assert len(wheels) == 4
