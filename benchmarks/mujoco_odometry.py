@@ -45,11 +45,9 @@ LAUNCH_S = 1.5
 """[s] of a scripted drive counted as its launch; the rest is its steady drive."""
 
 
-def contact_variants() -> dict:
-    """``--contacts``' names: the twin's contact with one of MuJoCo's settings changed."""
-    from atrv_warp.integrations.mujoco.mjcf import MujocoContact
-
-    return {"noslip": MujocoContact(noslip_iterations=10), "sphere": MujocoContact(wheel="sphere")}
+CONTACTS = {"noslip": {"noslip_iterations": 10}, "sphere": {"wheel": "sphere"}}
+"""``--contacts``' names: the :class:`~atrv_warp.integrations.mujoco.mjcf.MujocoContact` fields each changes from
+the twin's contact."""
 
 
 def summarize(episodes: list[dict]) -> dict:
@@ -159,13 +157,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=40)
     parser.add_argument("--frictions", type=float, nargs="+", default=[0.3, 0.8])
     parser.add_argument("--contacts", nargs="*", default=["noslip", "sphere"], metavar="NAME",
-                        help="the twin's contact varied, at µ 0.3 (known: noslip, sphere; none: skip)")
+                        help=f"the twin's contact varied, at µ 0.3 (known: {', '.join(CONTACTS)}; none: skip)")
     parser.add_argument("--out", default=str(RESULTS / "mujoco_odometry.json"))
     args = parser.parse_args(argv)
-    known = ("noslip", "sphere")
-    unknown = [c for c in args.contacts if c not in known]
+    unknown = [c for c in args.contacts if c not in CONTACTS]
     if unknown:
-        parser.error(f"--contacts: unknown {', '.join(unknown)}; known: {', '.join(known)}")
+        parser.error(f"--contacts: unknown {', '.join(unknown)}; known: {', '.join(CONTACTS)}")
     try:
         import mujoco  # noqa: F401
     except ImportError:
@@ -183,9 +180,11 @@ def main(argv: list[str] | None = None) -> int:
     rows = {}
     for mu in args.frictions:
         rows[f"mujoco µ {mu:g}"] = summarize([twin_episode(policy, episodes, e, mu) for e in episodes.episodes])
-    variants = contact_variants()
+    from atrv_warp.integrations.mujoco.mjcf import MujocoContact
+
     for name in args.contacts:
-        rows[f"mujoco µ 0.3, {name}"] = summarize([twin_episode(policy, episodes, e, 0.3, variants[name])
+        contact = MujocoContact(**CONTACTS[name])
+        rows[f"mujoco µ 0.3, {name}"] = summarize([twin_episode(policy, episodes, e, 0.3, contact)
                                                   for e in episodes.episodes])
     rows["ours (nominal µ 0.3)"] = summarize(ours_run(str(policy_path(args.policy)), args.episodes, EVAL_SEED))
     for where, r in rows.items():
