@@ -811,6 +811,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "deploy_base_limit_old_policy": lambda: deploy_base_limit("deploy_base_limit_old_policy.json"),
     "train_to_success_nav_deploy": train_to_success_nav_deploy,
     "train_to_success_nav_deploy_shipped": train_to_success_nav_deploy_shipped,
+    "train_to_success_nav_deploy_earlier": lambda: _train_to_success("train_to_success_nav_deploy_earlier.json"),
     "deploy_odometry_scale": deploy_odometry_scale,
     "train_to_success_nav_deploy_slip": lambda: _train_to_success("train_to_success_nav_deploy_slip.json"),
     "mujoco_transfer_wide_slip": lambda: mujoco_transfer("mujoco_transfer_wide_slip.json"),
