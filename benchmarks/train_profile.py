@@ -55,7 +55,7 @@ def main() -> int:
     from atrv_warp.policy import Normalize, make_actor
     from atrv_warp.rl.collectors import make_collector, pin_to_core
     from atrv_warp.rl.config import load_train_config
-    from atrv_warp.rl.learner import REPLAY_KEYS, Learner, make_buffer
+    from atrv_warp.rl.learner import Learner, make_buffer, replay_frames
     from atrv_warp.rl.loop import Evaluator
     from atrv_warp.task.config import get_task
     from atrv_warp.task.spec import observation_fields
@@ -75,7 +75,7 @@ def main() -> int:
     while frames < cfg.collector.init_random_frames:  # warm-up: compile, random frames, statistics
         data = next(it)
         frames += data.numel()
-        buffer.extend(data.select(*REPLAY_KEYS, strict=False).reshape(-1).cpu())  # as the trainer keeps it
+        buffer.extend(replay_frames(data))  # as the trainer keeps it
     obs = buffer[:]["observation"]
     normalize.set_stats(obs.mean(0), obs.std(0))
     learner = Learner(cfg, actor, normalize)
@@ -86,7 +86,7 @@ def main() -> int:
             data = next(it)
         frames += data.numel()
         with phases("buffer extend"):
-            buffer.extend(data.select(*REPLAY_KEYS, strict=False).reshape(-1).cpu())  # as the trainer keeps it
+            buffer.extend(replay_frames(data))  # as the trainer keeps it
         credit += data.numel() * cfg.optim.utd_ratio
         while credit >= 1.0:
             credit -= 1.0

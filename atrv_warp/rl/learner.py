@@ -18,7 +18,7 @@ from atrv_warp.rl.ppo import PPO_LOSS_KEYS, PPOLearner
 from atrv_warp.task.spec import ACTION_DIM
 
 __all__ = ["ALGOS", "REPLAY_KEYS", "SAC_LOSS_KEYS", "Algo", "Learner", "annealed_lr", "make_buffer", "make_learner",
-           "make_loss", "make_qvalue", "make_run_actor", "set_lr"]
+           "make_loss", "make_qvalue", "make_run_actor", "replay_frames", "set_lr"]
 
 SAC_LOSS_KEYS = ("loss_actor", "loss_qvalue", "loss_alpha", "entropy")
 """The means of SAC's losses logged at every evaluation."""
@@ -55,6 +55,11 @@ REPLAY_KEYS = ("observation", "action", ("next", "observation"), ("next", "rewar
 """What the replay buffer keeps of every frame: what the losses of the SAC family read (their ``in_keys``). The
 rest of a collected batch (the scan, the reward terms, the actor's distribution, the episode bookkeeping) is
 logged from the batch itself; kept, it would double what every sample gathers and every checkpoint writes."""
+
+
+def replay_frames(batch):
+    """A collected ``batch`` as the replay buffer stores it: its :data:`REPLAY_KEYS`, one frame per row, on the CPU."""
+    return batch.select(*REPLAY_KEYS, strict=False).reshape(-1).cpu()
 
 
 def make_buffer(cfg: TrainConfig):

@@ -18,7 +18,7 @@ from atrv_warp.rl.collectors import COLLECTORS, WORKER_KEY, make_collector, pin_
 from atrv_warp.rl.config import TrainConfig, flat_config, to_toml
 from atrv_warp.rl.evaluators import EvalOutcome, Evaluator, make_evaluator
 from atrv_warp.rl.exploration import collection_policy
-from atrv_warp.rl.learner import ALGOS, REPLAY_KEYS, annealed_lr, make_buffer, make_learner, make_run_actor, set_lr
+from atrv_warp.rl.learner import ALGOS, annealed_lr, make_buffer, make_learner, make_run_actor, replay_frames, set_lr
 from atrv_warp.rl.reporting import Loggers, LossMeans, Progress, Stats, make_loggers, pct, plot_curve
 from atrv_warp.runtime import device_summary
 from atrv_warp.storage import atomic_save
@@ -158,7 +158,7 @@ class TrainLoop:
             self.stats.update(data)
             self.count_by_collector(data)
             if not (self.algo.on_policy and st.stats_ready):  # PPO keeps the random frames only, for the statistics
-                self.buffer.extend(data.select(*REPLAY_KEYS, strict=False).reshape(-1).cpu())
+                self.buffer.extend(replay_frames(data))
             if st.frames >= cfg.collector.init_random_frames:
                 credit = self.learn(data, credit + n * cfg.optim.utd_ratio)
                 if self.push_weights:  # the worker holds a copy; the sync collector shares `actor`
