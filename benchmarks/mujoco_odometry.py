@@ -110,45 +110,63 @@ def ours_run(path: str, count: int, seed: int) -> list[dict]:
     return out
 
 
+def encoders_over_path(step, steps: int, launch: int) -> dict:
+    """Encoders' distance over the path in the first ``launch`` of ``steps`` calls of ``step()`` (each returns the
+    chassis' (x, y) [m] and the odometry's forward speed [m/s] after one step) and in the rest."""
+    encoder, path, prev = [0.0, 0.0], [0.0, 0.0], None
+    for k in range(steps):
+        xy, speed = step()
+        phase = int(k >= launch)
+        if prev is not None:
+            encoder[phase] += abs(speed) * STEP
+            path[phase] += float(np.linalg.norm(xy - prev))
+        prev = xy
+    return {"launch": encoder[0] / max(path[0], 1e-6), "steady": encoder[1] / max(path[1], 1e-6)}
+
+
+def ours_stepper(mu: float, driver, linear: float, angular: float):
+    """One rover of our simulator at µ ``mu`` through ``driver``, commanded (``linear``, ``angular``) each step."""
+    import torch
+
+    from atrv_warp.sim import RoverSim
+    from atrv_warp.sim.config import ContactConfig
+
+    sim, twist = RoverSim(1, contact=ContactConfig(friction=mu), driver=driver), torch.tensor([[linear, angular]])
+
+    def step():
+        sim.set_twist(twist)
+        sim.step()
+        return sim.root_pose[0, :2].double().numpy(), float(sim.driver.odom_twist[0, 0])
+
+    return step
+
+
+def twin_stepper(mu: float, driver, linear: float, angular: float):
+    """The twin on flat ground at µ ``mu`` through ``driver``, commanded (``linear``, ``angular``) each step."""
+    from atrv_warp.integrations.mujoco import MujocoTwin
+
+    twin = MujocoTwin(friction=mu, driver=driver)
+
+    def step():
+        twin.command(linear, angular)
+        twin.step()
+        return twin.root_pose[:2].copy(), float(twin.odom_twist[0])
+
+    return step
+
+
 def scripted_drives(task, mu: float) -> list[dict]:
     """Each of :data:`DRIVES` from rest in our simulator and in the twin at µ ``mu``, through ``task``'s base (the
     nominal rover's radius and track, as the simulator node configures a base): encoders' distance over the path,
     in the launch and in the steady drive."""
-    import torch
-
-    from atrv_warp.integrations.mujoco import MujocoTwin
     from atrv_warp.integrations.mujoco.record import twin_driver
-    from atrv_warp.sim import RoverSim
-    from atrv_warp.sim.config import ContactConfig
 
     driver = task.driver(twin_driver())
     steps, launch = round(DRIVE_S / STEP), round(LAUNCH_S / STEP)
-    out = []
-    for linear, angular in DRIVES:
-        row = {"mu": mu, "linear": linear, "angular": angular}
-        for engine in ("ours", "twin"):
-            if engine == "ours":
-                sim = RoverSim(1, contact=ContactConfig(friction=mu), driver=driver)
-            else:
-                twin = MujocoTwin(friction=mu, driver=driver)
-            encoder, path, prev = [0.0, 0.0], [0.0, 0.0], None
-            for k in range(steps):
-                if engine == "ours":
-                    sim.set_twist(torch.tensor([[linear, angular]]))
-                    sim.step()
-                    xy, speed = sim.root_pose[0, :2].double().numpy(), float(sim.driver.odom_twist[0, 0])
-                else:
-                    twin.command(linear, angular)
-                    twin.step()
-                    xy, speed = twin.root_pose[:2].copy(), float(twin.odom_twist[0])
-                phase = int(k >= launch)
-                if prev is not None:
-                    encoder[phase] += abs(speed) * STEP
-                    path[phase] += float(np.linalg.norm(xy - prev))
-                prev = xy
-            row[engine] = {"launch": encoder[0] / max(path[0], 1e-6), "steady": encoder[1] / max(path[1], 1e-6)}
-        out.append(row)
-    return out
+    return [{"mu": mu, "linear": linear, "angular": angular,
+             **{engine: encoders_over_path(stepper(mu, driver, linear, angular), steps, launch)
+                for engine, stepper in (("ours", ours_stepper), ("twin", twin_stepper))}}
+            for linear, angular in DRIVES]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -800,6 +800,16 @@ def train_to_success_nav_deploy() -> str:
     return _train_to_success("train_to_success_nav_deploy.json")
 
 
+def mujoco_odometry_drives() -> str:
+    """``mujoco_odometry.json``'s scripted drives: encoders' distance over the path, launch and steady, per engine."""
+    d = _load("mujoco_odometry.json")
+    rows = [[f"{r['mu']:g}", f"{r['linear']:g} m/s, {r['angular']:g} rad/s",
+             *(f"{r[engine][phase]:.3f}" for engine in ("ours", "twin") for phase in ("launch", "steady"))]
+            for r in d["drives"]]
+    return _table(["µ", "command", "ours, launch", "ours, steady", "twin, launch", "twin, steady"],
+                  ["---", "---", "---:", "---:", "---:", "---:"], rows)
+
+
 def train_to_success_nav_deploy_shipped() -> str:
     """``train_to_success_nav_deploy_shipped.json``: the run the shipped deployable policy comes from (seed 0)."""
     return _train_to_success("train_to_success_nav_deploy_shipped.json")
@@ -812,6 +822,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "train_to_success_nav_deploy": train_to_success_nav_deploy,
     "train_to_success_nav_deploy_shipped": train_to_success_nav_deploy_shipped,
     "train_to_success_nav_deploy_earlier": lambda: _train_to_success("train_to_success_nav_deploy_earlier.json"),
+    "mujoco_odometry_drives": mujoco_odometry_drives,
     "deploy_odometry_scale": deploy_odometry_scale,
     "train_to_success_nav_deploy_slip": lambda: _train_to_success("train_to_success_nav_deploy_slip.json"),
     "mujoco_transfer_wide_slip": lambda: mujoco_transfer("mujoco_transfer_wide_slip.json"),
