@@ -55,9 +55,11 @@ SHIPPED_POLICIES: dict[str, ShippedPolicy] = {
     "reach": ShippedPolicy("pretrained_policy.pt", "reach", "python -m atrv_warp.train"),
     "nav": ShippedPolicy("nav_policy.pt", "nav", "python -m atrv_warp.train --config nav randomization=wide"),
     "nav_plain": ShippedPolicy("nav_policy_plain.pt", "nav", "python -m atrv_warp.train --config nav"),
-    "nav_deploy": ShippedPolicy("nav_deploy_policy.pt", "nav_deploy", "python -m atrv_warp.train --config nav_deploy"),
+    # the two deployable policies were trained before nav_deploy.toml's batch went from 512 to 256
+    "nav_deploy": ShippedPolicy("nav_deploy_policy.pt", "nav_deploy",
+                                "python -m atrv_warp.train --config nav_deploy batch_size=512"),
     "nav_deploy_plain": ShippedPolicy("nav_deploy_policy_plain.pt", "nav_deploy",
-                                      "python -m atrv_warp.train --config nav_deploy randomization=none"),
+                                      "python -m atrv_warp.train --config nav_deploy randomization=none batch_size=512"),
 }
 """The shipped policies by name: ``reach`` (the reference task), ``nav`` (navigation, trained under the ``wide``
 domain randomization), ``nav_plain`` (navigation on the nominal rover with perfect sensors), ``nav_deploy`` (the

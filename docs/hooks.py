@@ -822,6 +822,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "train_to_success_nav_deploy": train_to_success_nav_deploy,
     "train_to_success_nav_deploy_shipped": train_to_success_nav_deploy_shipped,
     "train_to_success_nav_deploy_earlier": lambda: _train_to_success("train_to_success_nav_deploy_earlier.json"),
+    "train_to_success_nav_deploy_batch512": lambda: _train_to_success("train_to_success_nav_deploy_batch512.json"),
     "mujoco_odometry_drives": mujoco_odometry_drives,
     "deploy_odometry_scale": deploy_odometry_scale,
     "train_to_success_nav_deploy_slip": lambda: _train_to_success("train_to_success_nav_deploy_slip.json"),

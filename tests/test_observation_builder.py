@@ -269,7 +269,7 @@ def test_shipped_policies_load_by_name(monkeypatch):
     monkeypatch.setitem(SHIPPED_POLICIES, "nav_deploy", dataclasses.replace(SHIPPED_POLICIES["nav_deploy"],
                                                                            file="not_there.pt"))
     with pytest.raises(FileNotFoundError, match="not trained yet: train it with `python -m atrv_warp.train --config "
-                                                "nav_deploy`"):
+                                                "nav_deploy batch_size=512`"):
         load_policy("nav_deploy")
     with pytest.raises(ValueError, match="no shipped policy is called 'navx'"):
         shipped_policy_path("navx")
