@@ -225,7 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--task", default=None,
                         help="task: reach | nav | nav_deploy (default: the policy's own; reach for the baseline)")
     parser.add_argument("--randomization", default="none", metavar="PRESET",
-                        help="evaluate under domain randomization: none | mild | wide | wide_slip (each world draws its physics, "
+                        help="evaluate under domain randomization: none | mild | wide | wide_slip | wide_slip_gain (each world draws its physics, "
                              "sensor noise and latency from the evaluation seed); prints success by parameter bin. "
                              "around (with --sim-config): on the config's rover, then across the spread around it, "
                              "two rows")

@@ -153,7 +153,7 @@ def test_observation_and_scan_noise():
 
 
 @pytest.mark.parametrize("make,message", [
-    (lambda: get_randomization("wild"), "unknown randomization preset 'wild'; known: \\['around', 'mild', 'none', 'wide', 'wide_slip'\\]"),
+    (lambda: get_randomization("wild"), "unknown randomization preset 'wild'; known: \\['around', 'mild', 'none', 'wide', 'wide_slip', 'wide_slip_gain'\\]"),
     (lambda: RandomizationConfig(friction=Draw(0.8, 0.2)), "randomization.friction: low 0.8 > high 0.2"),
     (lambda: RandomizationConfig(friction=Draw(0.0, 0.5)), "randomization.friction: friction must be > 0"),
     (lambda: RandomizationConfig(payload_mass=Draw(-5.0, 5.0)), "randomization.payload_mass: payload_mass must be >= 0"),
@@ -161,6 +161,7 @@ def test_observation_and_scan_noise():
     (lambda: RandomizationConfig(odometry_scale=Draw(0.0, 1.2)), "randomization.odometry_scale: a scale must be > 0"),
     (lambda: RandomizationConfig(odometry_scale=Draw(1.0, math.inf)),
      "randomization.odometry_scale: low and high must be finite"),
+    (lambda: RandomizationConfig(odometry_slip_gain=Draw(-0.5, 1.0)), "randomization.odometry_slip_gain: a gain must be >= 0"),
     (lambda: RandomizationConfig(friction=Draw(0.2, 1.0, mode="sometimes")), "unknown mode 'sometimes'"),
     (lambda: ATRVjrEnv(2, randomization="wild"), "unknown randomization preset"),
 ])

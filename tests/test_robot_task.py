@@ -220,6 +220,40 @@ def test_odometry_scale_moves_only_the_observed_odometry():
     assert 1.0 <= float(scales[0].min()) and float(scales[0].max()) <= 1.25 and float(scales[0].std()) > 0.05
 
 
+def test_odometry_slip_gain_moves_the_observed_pose_by_the_encoders_slip():
+    """Gain 1 on slippery ground: each step the goal's pose moves along the odometry's heading by the encoders'
+    forward speed less the chassis's, times the step; the physics, the fused odometry and the odometry's twist are
+    the exact ones; draws are seeded and within their range."""
+    slippery = RandomizationConfig(friction=Draw(0.3, 0.3))
+    gain = dataclasses.replace(slippery, odometry_slip_gain=Draw(1.0, 1.0))
+    envs = [ATRVjrEnv(4, seed=3, task="nav_deploy", randomization=r) for r in (slippery, gain)]
+    tds = [e.reset() for e in envs]
+    act = torch.tensor([[1.0, 0.6]]).expand(4, 2)
+    expected = torch.zeros(4, 2)
+    dt = envs[1].sim.sim_cfg.step_dt
+    for _ in range(15):
+        tds = [e.step(t.set("action", act))["next"] for e, t in zip(envs, tds, strict=True)]
+        sim = envs[1].sim
+        _, pitch, yaw = sim.rpy.unbind(1)  # the chassis's forward axis in the world, ZYX Euler angles
+        forward = torch.stack([torch.cos(yaw) * torch.cos(pitch), torch.sin(yaw) * torch.cos(pitch), -torch.sin(pitch)], 1)
+        slip = wp.to_torch(sim.driver.state.odom_twist).view(4, 2)[:, 0] - (sim.lin_vel * forward).sum(1)
+        heading = wp.to_torch(sim.driver.state.fused).view(4, 3)[:, 2]
+        expected += (slip * dt).unsqueeze(1) * torch.stack([torch.cos(heading), torch.sin(heading)], 1)
+    fused = [wp.to_torch(e.sim.driver.state.fused).view(4, 3) for e in envs]
+    assert torch.equal(fused[0], fused[1]) and float(expected.norm(dim=1).max()) > 0.05
+    assert torch.allclose(envs[1].odom_drift[:, :2], expected, atol=1e-4) and not envs[0].odom_drift.any()
+    dx = envs[1].goal_odom - (fused[1][:, :2] + envs[1].odom_drift[:, :2])
+    obs = tds[1]["observation"]
+    assert torch.allclose(obs[:, ROBOT["goal_distance"]], dx.norm(dim=1), atol=1e-5)
+    assert torch.equal(obs[:, ROBOT["odom_linear"]], tds[0]["observation"][:, ROBOT["odom_linear"]])
+    drawn = [ATRVjrEnv(64, seed=s, task="nav_deploy", randomization="wide_slip_gain") for s in (5, 5, 6)]
+    for e in drawn:
+        e.reset()
+    gains = [e.odom_slip_gain.clone() for e in drawn]
+    assert torch.equal(gains[0], gains[1]) and not torch.equal(gains[0], gains[2])
+    assert 0.0 <= float(gains[0].min()) and float(gains[0].max()) <= 1.5 and float(gains[0].std()) > 0.2
+
+
 @pytest.mark.parametrize("bad", [{"action": "velocity"}, {"observation": "gps"}, {"max_linear": 0.0},
                                  {"max_angular": -1.0}, {"max_linear": math.nan}, {"linear_max_acceleration": 0.0},
                                  {"angular_max_acceleration": math.inf}])

@@ -85,7 +85,7 @@ class EnvConfig:
     less per frame; docs/performance.md has the figures)."""
     randomization: str = "none"
     """Domain randomization of the training envs and of the evaluations during training: a preset of
-    :data:`atrv_warp.task.randomization.RANDOMIZATION_PRESETS` (``none``, ``mild``, ``wide``, ``wide_slip``), or ``around``: each
+    :data:`atrv_warp.task.randomization.RANDOMIZATION_PRESETS` (``none``, ``mild``, ``wide``, ``wide_slip``, ``wide_slip_gain``), or ``around``: each
     physical draw centred on ``sim_config``'s value (:data:`~atrv_warp.task.randomization.AROUND_PRESETS`;
     docs/randomization.md). The run folder's ``randomization.json`` records the ranges it resolved to."""
     eval_randomization: str = ""

@@ -194,6 +194,7 @@ class ATRVjrEnv(EnvBase):
         p.clearance_weight = c.clearance_weight
         p.clearance_radius = c.clearance_radius
         p.robot_observation = int(self._robot)
+        p.step_dt = self.sim.sim_cfg.step_dt
         self._params = p
         sp = SceneParams()
         sp.distance_min, sp.distance_max = c.target_distance or (c.reach_radius, 2.0 * c.spawn_bound)
@@ -212,6 +213,7 @@ class ATRVjrEnv(EnvBase):
         t.goal_odom = wp.zeros(n, dtype=wp.vec2, device=dev)
         t.odom_drift = wp.zeros(n, dtype=wp.vec3, device=dev)
         t.odom_scale = wp.ones(n, dtype=float, device=dev)
+        t.odom_slip_gain = wp.zeros(n, dtype=float, device=dev)
         self._task = t
         self._obs = wp.zeros((n, self.obs_dim), dtype=float, device=dev)
         self._reward = wp.zeros(n, dtype=float, device=dev)
@@ -268,11 +270,15 @@ class ATRVjrEnv(EnvBase):
         the chassis rests there, settled onto the terrain (a view)."""
         self.odom_drift = wp.to_torch(t.odom_drift).view(n, 3)
         """(N, 3) the robot observation's odometry drift this episode (x [m], y [m], yaw [rad]; zero without
-        sensor noise): the goal is observed from ``sim.driver.fused`` (its position scaled by ``odom_scale``) plus
+        sensor noise or ``odom_slip_gain``): the goal is observed from ``sim.driver.fused`` (its position scaled by ``odom_scale``) plus
         ``odom_drift`` (a view)."""
         self.odom_scale = wp.to_torch(t.odom_scale)
         """(N,) the robot observation's odometry distance per distance driven this episode (1 unless the
         randomization draws :attr:`~atrv_warp.task.randomization.RandomizationConfig.odometry_scale`; a view)."""
+        self.odom_slip_gain = wp.to_torch(t.odom_slip_gain)
+        """(N,) how much further the robot observation's odometry runs per metre the encoders slip this episode (0
+        unless the randomization draws
+        :attr:`~atrv_warp.task.randomization.RandomizationConfig.odometry_slip_gain`; a view)."""
         self._task_views = {
             "target": self.target, "prev_distance": wp.to_torch(t.prev_distance),
             "prev_heading_error": wp.to_torch(t.prev_heading_error), "step_count": self.step_count,
@@ -282,7 +288,7 @@ class ATRVjrEnv(EnvBase):
             self._task_views["action_history"] = wp.to_torch(self._actions)
         if self._robot:
             self._task_views.update({"goal_odom": self.goal_odom, "odom_drift": self.odom_drift,
-                                     "odom_scale": self.odom_scale})
+                                     "odom_scale": self.odom_scale, "odom_slip_gain": self.odom_slip_gain})
         if self._twist:  # every world drives by velocity, through the driver
             self.sim.driver.mode.fill_(int(DRIVE_TWIST))
         if self._nav:  # the episode's layout is part of the task's state
@@ -295,8 +301,8 @@ class ATRVjrEnv(EnvBase):
         r, n, dev = self.randomization, self.num_envs, self._wp_device
         low, high, log, mode, every = ([0.0] * DRAW_COUNT, [0.0] * DRAW_COUNT, [0] * DRAW_COUNT, [0] * DRAW_COUNT,
                                        [1] * DRAW_COUNT)
-        # DrawSpec's rows: the physical parameters, the latency (below), the motor lag, the odometry's scale
-        draws = [r.physics.get(name) for name in PHYSICS_DRAWS] + [None, r.motor_lag, r.odometry_scale]
+        # DrawSpec's rows: the physical parameters, the latency (below), the motor lag, the odometry's scale and slip gain
+        draws = [r.physics.get(name) for name in PHYSICS_DRAWS] + [None, r.motor_lag, r.odometry_scale, r.odometry_slip_gain]
         for i, d in enumerate(draws):
             if d is not None:
                 low[i], high[i], log[i], mode[i], every[i] = d.low, d.high, int(d.log), MODE_CODES[d.mode], max(d.every, 1)

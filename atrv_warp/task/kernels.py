@@ -92,6 +92,7 @@ class TaskParams:
     clearance_weight: float  # cost per metre an obstacle reaches inside clearance_radius [1/m]
     clearance_radius: float  # [m] from the chassis origin
     robot_observation: int  # 1: the observation's leading fields are ROBOT_OBSERVATION's, 0: OBSERVATION's
+    step_dt: float  # [s]
 
 
 @wp.struct
@@ -138,6 +139,7 @@ class TaskBuffers:
     goal_odom: wp.array(dtype=wp.vec2)  # the target in the odometry frame (the episode's start pose) [m]
     odom_drift: wp.array(dtype=wp.vec3)  # the odometry noise's random walk (x [m], y [m], yaw [rad]) this episode
     odom_scale: wp.array(dtype=float)  # the wheel odometry's distance per distance driven this episode [-] (1: exact)
+    odom_slip_gain: wp.array(dtype=float)  # the odometry's extra distance per metre the encoders slip, this episode [-]
 
 
 @wp.func
@@ -265,7 +267,8 @@ def write_task_observation(
     if params.robot_observation != 0:
         scale = task.odom_scale[world]
         twist = rover.odom_twist[world]
-        write_robot_observation(obs, world, task.goal_odom[world], scaled_odometry(rover.odometry[world], scale),
+        write_robot_observation(obs, world, task.goal_odom[world],
+                                scaled_odometry(rover.odometry[world], scale) + task.odom_drift[world],
                                 wp.vec2(scale * twist[0], twist[1]), r, body_yaw_rate(pose, rover.ang_vel[world]))
     else:
         write_observation(obs, world, params, task.target[world], pose, rover.lin_vel[world], r[0],
@@ -416,6 +419,14 @@ def compute_step_outcome(
     r = rover.rpy[world]
     err = heading_error(pose, target, r[2])
     d = planar_distance(pose, target)
+    gain = task.odom_slip_gain[world]
+    if params.robot_observation != 0 and gain != 0.0:
+        # the encoders' slip this step (their forward speed less the chassis's), amplified into the odometry's drift
+        # along its heading (RandomizationConfig.odometry_slip_gain)
+        v_true = wp.quat_rotate_inv(wp.transform_get_rotation(pose), rover.lin_vel[world])[0]
+        slip = gain * (rover.odom_twist[world][0] - v_true) * params.step_dt
+        yaw = rover.odometry[world][2] + task.odom_drift[world][2]
+        task.odom_drift[world] = task.odom_drift[world] + wp.vec3(slip * wp.cos(yaw), slip * wp.sin(yaw), 0.0)
     write_task_observation(out.obs, world, params, task, rover, pose, err)
     reason = END_NONE
     clear_terms(out.reward_terms, world)

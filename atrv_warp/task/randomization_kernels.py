@@ -64,7 +64,8 @@ DRAW_STIFFNESS = wp.constant(PHYSICS_DRAWS.index("stiffness"))
 DRAW_LATENCY = wp.constant(len(PHYSICS_DRAWS))
 DRAW_MOTOR_LAG = wp.constant(len(PHYSICS_DRAWS) + 1)
 DRAW_ODOMETRY_SCALE = wp.constant(len(PHYSICS_DRAWS) + 2)
-DRAW_COUNT = len(PHYSICS_DRAWS) + 3
+DRAW_ODOMETRY_SLIP_GAIN = wp.constant(len(PHYSICS_DRAWS) + 3)
+DRAW_COUNT = len(PHYSICS_DRAWS) + 4
 
 # DrawSpec.mode codes (RandomizationConfig's DRAW_MODES, and 0 for a parameter left alone)
 MODE_OFF = wp.constant(0)
@@ -199,6 +200,8 @@ def draw_physics(
         delay.tau[world] = tau
     if due(spec, DRAW_ODOMETRY_SCALE, phase, episode, steps):
         task.odom_scale[world] = sample(spec, DRAW_ODOMETRY_SCALE, stream, 0)
+    if due(spec, DRAW_ODOMETRY_SLIP_GAIN, phase, episode, steps):
+        task.odom_slip_gain[world] = sample(spec, DRAW_ODOMETRY_SLIP_GAIN, stream, 0)
 
 
 @wp.func
