@@ -827,6 +827,8 @@ TABLES: dict[str, Callable[[], str]] = {
     "deploy_odometry_scale": deploy_odometry_scale,
     "train_to_success_nav_deploy_slip": lambda: _train_to_success("train_to_success_nav_deploy_slip.json"),
     "mujoco_transfer_wide_slip": lambda: mujoco_transfer("mujoco_transfer_wide_slip.json"),
+    "train_to_success_nav_deploy_slip_gain": lambda: _train_to_success("train_to_success_nav_deploy_slip_gain.json"),
+    "mujoco_transfer_wide_slip_gain": lambda: mujoco_transfer("mujoco_transfer_wide_slip_gain.json"),
     "diff_gradients_common": diff_gradients_common,
     "diff_gradients_differential": diff_gradients_differential,
     "diff_gradients_friction": diff_gradients_friction,
