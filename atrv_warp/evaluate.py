@@ -70,7 +70,7 @@ class Evaluation:
 def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: str | None = None,
                     episodes: int = 1000, seed: int | None = None, baseline: bool = False,
                     randomization: str = "none", friction: float | None = None, sim_config: str | None = None,
-                    device: str = "cpu", attach: Callable | None = None) -> Evaluation:
+                    device: str = "cpu", attach: Callable | None = None, driver=None) -> Evaluation:
     """Run a policy once on each of the first ``episodes`` episodes of evaluation set ``seed``.
 
     Args:
@@ -86,6 +86,9 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
         sim_config: A simulator-config TOML (``ours`` only).
         device: The simulation device (``ours``).
         attach: ``attach(env)`` returns an ``on_step(env, tensordict)`` callback or ``None`` (recorders; ``ours``).
+        driver: The base's motor driver (:class:`~atrv_warp.sim.driver.DriverConfig`, e.g. a calibrated wheel radius
+            or an accelerometer-aided odometry) that velocity actions go through, on either engine; the task's limits
+            fill in those it leaves unset (default: the task's base).
 
     Raises:
         ValueError: One line naming the problem: an unknown engine, task or preset; a policy that cannot be loaded
@@ -106,12 +109,13 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
     seed = EVAL_SEED if seed is None else seed
     if engine == "mujoco":
         return _evaluate_twin(policy, task=task, episodes=episodes, seed=seed, friction=friction,
-                              baseline=baseline, randomization=randomization, sim_config=sim_config)
+                              baseline=baseline, randomization=randomization, sim_config=sim_config, driver=driver)
     if friction is not None:
         raise ValueError("friction sets the MuJoCo twin's µ (engine mujoco); our simulator's comes from the rover "
                          "config or the randomization")
     return _evaluate_ours(policy, task=task, episodes=episodes, seed=seed, baseline=baseline,
-                          randomization=randomization, sim_config=sim_config, device=device, attach=attach)
+                          randomization=randomization, sim_config=sim_config, device=device, attach=attach,
+                          driver=driver)
 
 
 def evaluate_around(policy: str | None = None, *, sim_config: str, randomization: str = "around",
@@ -155,7 +159,8 @@ def _load(path: str, task: str | None):
     return module, trained_on
 
 
-def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim_config, device, attach) -> Evaluation:
+def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim_config, device, attach,
+                   driver) -> Evaluation:
     from atrv_warp.policy import SHIPPED_POLICIES
     from atrv_warp.task.evaluation import range_bins, run_episodes, success_by_bin
     from atrv_warp.task.randomization import AROUND_PRESETS, get_randomization
@@ -175,7 +180,7 @@ def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim
         module, task = _load(name, task)
     from atrv_warp.task.env import ATRVjrEnv
 
-    env = ATRVjrEnv(episodes, device=device, task=task, randomization=shift, sim_config=sim_config)
+    env = ATRVjrEnv(episodes, device=device, task=task, randomization=shift, sim_config=sim_config, driver=driver)
     module = module.to(env.device)  # loaded on the CPU; the env's observations live on its device
     record = run_episodes(module, env, seed=seed, on_step=attach(env) if attach is not None else None)
     extra = {}
@@ -187,7 +192,8 @@ def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim
     return Evaluation(str(name), task, seed, "ours", record, extra)
 
 
-def _evaluate_twin(policy, *, task, episodes, seed, friction, baseline, randomization, sim_config) -> Evaluation:
+def _evaluate_twin(policy, *, task, episodes, seed, friction, baseline, randomization, sim_config,
+                   driver) -> Evaluation:
     for option, given in (("baseline", baseline), ("randomization", randomization != "none"),
                           ("sim_config", sim_config)):
         if given:
@@ -204,7 +210,8 @@ def _evaluate_twin(policy, *, task, episodes, seed, friction, baseline, randomiz
         raise ValueError(f"cannot load policy: {err}") from None
     if task is not None and task != deployable.task:
         raise ValueError(f"{name} was trained on task {deployable.task!r}, not {task!r}")
-    record = run_twin_episodes(deployable, draw_episodes(deployable.task, episodes, seed=seed), friction=friction)
+    record = run_twin_episodes(deployable, draw_episodes(deployable.task, episodes, seed=seed), friction=friction,
+                               driver=driver)
     mu = float(record.params["friction"][0])
     return Evaluation(str(name), deployable.task, seed, "mujoco", record, {"engine": "mujoco", "friction": mu})
 

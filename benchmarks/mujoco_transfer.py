@@ -56,6 +56,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--driver-wheel-radius", type=float, default=None, metavar="M",
                         help="the twin's base configured with this wheel radius [m] (e.g. atrv-calibrate's fit of a "
                              "bag recorded from the twin; default: the nominal rover's)")
+    parser.add_argument("--driver-accel-time", type=float, default=None, metavar="S",
+                        help="the twin's base fuses its accelerometer into the odometry's speed with this time "
+                             "constant [s] (DriverConfig.odometry_accel_time; default: the encoders alone)")
     parser.add_argument("--out", default=str(RESULTS / "mujoco_transfer.json"))
     args = parser.parse_args(argv)
     if args.episodes < 1:
@@ -88,9 +91,9 @@ def main(argv: list[str] | None = None) -> int:
     from atrv_warp.sim.driver import DriverConfig
 
     try:
-        driver = DriverConfig(wheel_radius=args.driver_wheel_radius)
+        driver = DriverConfig(wheel_radius=args.driver_wheel_radius, odometry_accel_time=args.driver_accel_time)
     except ValueError as err:
-        parser.error(f"--driver-wheel-radius: {err}")
+        parser.error(str(err))
     table = {}
     for name, policy in policies.items():
         table[name] = {}
@@ -105,11 +108,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.ours and not path.endswith(".pt2"):  # our simulator runs the .pt (an exported file is for robots)
             from atrv_warp.evaluate import evaluate_policy
 
-            run = evaluate_policy(path, task=policy.task, episodes=args.episodes, seed=seed)
+            run = evaluate_policy(path, task=policy.task, episodes=args.episodes, seed=seed, driver=driver)
             table[name]["ours (nominal µ 0.3)"] = r = rates(run.record)
             print(f"{name:16s} ours          " + " ".join(f"{k} {100 * r[k]:5.1f}%" for k in ENDS), flush=True)
     result = {"task": task, "seed": seed, "episodes": args.episodes, "odometry": args.odometry,
-              "driver_wheel_radius": args.driver_wheel_radius,
+              "driver_wheel_radius": args.driver_wheel_radius, "driver_accel_time": args.driver_accel_time,
               "frictions": args.frictions, "policies": table}
     out = write_results(args.out, result, version=VERSION, task=True, driver=True,
                         policies=tuple(f for f in files if Path(f).is_file()))

@@ -285,3 +285,34 @@ def test_bad_contact_config_is_named(field, value):
 
     with pytest.raises(ValueError, match=f"ContactConfig.{field}"):
         ContactConfig(**{field: value})
+
+
+def _fused_error_on_an_arc(accel_time: float | None, seconds: float = 4.0) -> float:
+    """How far [m] the base's fused odometry ends from the chassis' true displacement after a launch onto a tight
+    arc (0.5 m/s, 1.5 rad/s) at µ 0.3, where the wheels slip."""
+    from atrv_warp.sim import ContactConfig
+    from atrv_warp.sim.driver import DRIVE_TWIST, DriverConfig
+
+    sim = RoverSim(1, contact=ContactConfig(friction=0.3), driver=DriverConfig(odometry_accel_time=accel_time))
+    sim.driver.mode.fill_(int(DRIVE_TWIST))
+    start = sim.root_pose[0, :2].clone()
+    for _ in range(round(seconds / sim.sim_cfg.step_dt)):
+        sim.set_twist(torch.tensor([[0.5, 1.5]]))
+        sim.step()
+    return float((sim.driver.fused[0, :2] - (sim.root_pose[0, :2] - start)).norm())
+
+
+def test_the_accelerometer_aided_odometry_follows_the_chassis_where_the_wheels_slip():
+    """``DriverConfig.odometry_accel_time``: the fused odometry blends the integrated accelerometer with the
+    encoders, so on a slippery arc it ends nearer the chassis than the encoders' distance does (ours slips there
+    too); a time constant the substep cannot resolve, or one <= 0, is refused by name."""
+    from atrv_warp.sim.driver import DriverConfig
+
+    encoders, aided = _fused_error_on_an_arc(None), _fused_error_on_an_arc(3.0)
+    assert encoders > 0.1  # the wheels slip on the arc and the encoders' distance runs ahead
+    assert aided < 0.6 * encoders, (encoders, aided)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="DriverConfig.odometry_accel_time"):
+            DriverConfig(odometry_accel_time=bad)
+    with pytest.raises(ValueError, match="odometry_accel_time must be at least two substeps"):
+        RoverSim(1, driver=DriverConfig(odometry_accel_time=0.001))

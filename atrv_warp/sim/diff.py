@@ -326,7 +326,8 @@ class DiffRollout:
         wp.to_torch(s0.joint_q).copy_(joint_q.reshape(-1))
         wp.to_torch(s0.joint_qd).copy_(joint_qd.reshape(-1))
         for d in self._driver:
-            for a in (d.reference, d.integral, d.applied, d.age, d.odometry, d.odom_twist, d.fused):
+            for a in (d.reference, d.integral, d.applied, d.age, d.odometry, d.odom_twist, d.fused, d.fused_velocity,
+                      d.velocity):
                 a.zero_()
         wp.to_torch(self._driver[0].integral).copy_(integral)
         if self.twist:  # the driver tracked the first command already (its limits, if any, start from there)

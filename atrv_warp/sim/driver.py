@@ -74,10 +74,18 @@ class DriverConfig:
     """``angular.z.max_acceleration`` [rad/s²] (``None``: no limit)."""
     cmd_vel_timeout: float = 0.5
     """Without a command for this long [s], the target drops to zero (``diff_drive_controller``'s default)."""
+    odometry_accel_time: float | None = None
+    """The fused odometry's velocity from the encoders and the IMU's accelerometer: a complementary filter with this
+    time constant [s], which follows the integrated accelerometer over shorter spans and the encoders (their speed
+    along the gyro's heading, no sideways motion) over longer ones, as ``robot_localization`` fusing the IMU's linear
+    acceleration with wheel odometry. Where the wheels slip, in launches and turns on slippery ground, the encoders
+    over-read and the accelerometer does not. ``None`` (the default): the encoders' speed alone. The accelerometer
+    here is the simulator's, without noise or bias (a bias ``b`` would add up to ``b x odometry_accel_time`` to the
+    velocity)."""
 
     def __post_init__(self):
         positive = ["effective_track_factor", "torque_limit", "cmd_vel_timeout", *DRIVER_LIMITS]
-        positive += [n for n in ("wheel_radius", "track_width") if getattr(self, n) is not None]
+        positive += [n for n in ("wheel_radius", "track_width", "odometry_accel_time") if getattr(self, n) is not None]
         for name in positive:
             value = getattr(self, name)
             if value is None and name in DRIVER_LIMITS:
@@ -104,6 +112,10 @@ class DriverConfig:
         p.max_linear, p.max_linear_accel = limit["linear_max_velocity"], limit["linear_max_acceleration"]
         p.max_angular, p.max_angular_accel = limit["angular_max_velocity"], limit["angular_max_acceleration"]
         p.timeout, p.dt = self.cmd_vel_timeout, dt
+        p.accel_time = 0.0 if self.odometry_accel_time is None else float(self.odometry_accel_time)
+        if p.accel_time and p.accel_time < 2.0 * dt:
+            raise ValueError(f"DriverConfig.odometry_accel_time must be at least two substeps ({2.0 * dt:g} s), got "
+                             f"{p.accel_time:g}")
         return p
 
 
@@ -125,7 +137,8 @@ class Driver:
         ``fused`` (N, 3): x [m], y [m], yaw [rad] in the odometry frame as a base's filter keeps it
         (``robot_localization`` fusing wheel odometry and an IMU, Clearpath's ``odometry/filtered``): the encoders'
         distance along the heading the gyro integrates. Skid-steer wheel odometry's heading drifts on every turn
-        (a rover's wheels turn before its chassis does); this one's does not, its distance still slips.
+        (a rover's wheels turn before its chassis does); this one's does not, its distance still slips (less with
+        :attr:`DriverConfig.odometry_accel_time`, which blends in the accelerometer).
         ``reference`` (N, 2): the limited twist being tracked.
         ``age`` (N,): time since the last command [s]; past ``cmd_vel_timeout`` the driver stops the rover.
         ``lag`` (N,): the motor's torque lag time constant [s] (0: none), e.g. a randomization's draw.
@@ -162,7 +175,7 @@ class Driver:
         return {"driver.mode": self.mode_array, "driver.twist": self.twist_array, "driver.lag": self.lag_array,
                 "driver.reference": s.reference, "driver.integral": s.integral, "driver.applied": s.applied,
                 "driver.age": s.age, "driver.odometry": s.odometry, "driver.odom_twist": s.odom_twist,
-                "driver.fused": s.fused}
+                "driver.fused": s.fused, "driver.fused_velocity": s.fused_velocity, "driver.velocity": s.velocity}
 
     def reset(self, mask: wp.array) -> None:
         wp.launch(reset_driver, dim=len(mask), inputs=[mask], outputs=[self.twist_array, self.state],
@@ -179,6 +192,8 @@ def make_state(num_worlds: int, device, requires_grad: bool = False) -> DriverSt
     s.odometry = wp.zeros(num_worlds, dtype=wp.vec3, device=device, requires_grad=requires_grad)
     s.odom_twist = wp.zeros(num_worlds, dtype=wp.vec2, device=device, requires_grad=requires_grad)
     s.fused = wp.zeros(num_worlds, dtype=wp.vec3, device=device, requires_grad=requires_grad)
+    s.fused_velocity = wp.zeros(num_worlds, dtype=wp.vec2, device=device, requires_grad=requires_grad)
+    s.velocity = wp.zeros(num_worlds, dtype=wp.vec3, device=device, requires_grad=requires_grad)
     return s
 
 

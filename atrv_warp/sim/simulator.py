@@ -432,7 +432,7 @@ class RoverSim:
         s_in.clear_forces()
         wp.launch(drive_wheels, dim=self.num_worlds,
                   inputs=[self._layout, d.params, d.mode_array if mode is None else mode, commands,
-                          d.twist_array if twist is None else twist, d.lag_array, physics, s_in.joint_qd,
+                          d.twist_array if twist is None else twist, d.lag_array, physics, s_in.joint_q, s_in.joint_qd,
                           d.state if driver_in is None else driver_in],
                   outputs=[d.state if driver_out is None else driver_out, control.joint_f,
                            self._wheel_torque if torque is None else torque], device=self.device)

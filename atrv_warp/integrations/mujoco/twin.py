@@ -126,6 +126,8 @@ class MujocoTwin:
         self.odometry = np.zeros(3)
         self.odom_twist = np.zeros(2)
         self.fused = np.zeros(3)
+        self.fused_velocity = np.zeros(2)  # odometry frame (with DriverConfig.odometry_accel_time)
+        self.velocity = np.zeros(3)  # the chassis COM's at the last substep (the accelerometer's)
         self.contact_flags = 0
         self.wheel_ground_substeps = np.zeros(len(self.description.wheels), dtype=np.int64)
         self.time = 0.0
@@ -155,6 +157,12 @@ class MujocoTwin:
     def linear_velocity(self) -> np.ndarray:
         """(3,) the chassis origin's velocity [m/s], world frame."""
         return self.data.qvel[:3].copy()
+
+    @property
+    def com_velocity(self) -> np.ndarray:
+        """(3,) the velocity of the chassis' centre of mass [m/s], world frame (ours' free-joint velocity)."""
+        b = self.chassis_body
+        return self.linear_velocity + np.cross(self.angular_velocity, self.data.xipos[b] - self.data.xpos[b])
 
     @property
     def rpy(self) -> np.ndarray:
@@ -218,15 +226,30 @@ class MujocoTwin:
         return out
 
     def _integrate_odometry(self, speeds: np.ndarray, dt: float) -> None:
-        """Wheel odometry and the fused pose over one substep (midpoint rule), as ``integrate_odometry`` and
-        ``integrate_fused`` do."""
+        """Wheel odometry and the fused pose over one substep (midpoint rule), as ``integrate_odometry``,
+        ``accel_aided_velocity`` and ``integrate_fused_velocity`` (with ``DriverConfig.odometry_accel_time``) and ``integrate_fused`` do."""
         v, w = (float(t) for t in self.kinematics.twist(speeds))
         self.odom_twist = np.array([v, w])
-        for pose, rate in ((self.odometry, w), (self.fused, float(self.angular_velocity[2]))):
+        gyro = float(self.angular_velocity[2])
+        tau = self.driver_cfg.odometry_accel_time
+        poses = ((self.odometry, w), (self.fused, gyro)) if tau is None else ((self.odometry, w),)
+        for pose, rate in poses:
             mid = pose[2] + 0.5 * rate * dt
             yaw = pose[2] + rate * dt
             pose[:] = (pose[0] + v * math.cos(mid) * dt, pose[1] + v * math.sin(mid) * dt,
                        math.atan2(math.sin(yaw), math.cos(yaw)))
+        if tau is not None:  # accel_aided_velocity and integrate_fused_velocity
+            velocity, rot = self.com_velocity, self.chassis_rotation
+            change = velocity - self.velocity
+            ax, ay = float(change @ rot[:, 0]), float(change @ rot[:, 1])
+            mid = self.fused[2] + 0.5 * gyro * dt
+            c, s = math.cos(mid), math.sin(mid)
+            integrated = self.fused_velocity + np.array([c * ax - s * ay, s * ax + c * ay])
+            self.fused_velocity = integrated + (np.array([c * v, s * v]) - integrated) * (dt / tau)
+            self.velocity = velocity
+            yaw = self.fused[2] + gyro * dt
+            self.fused[:] = (self.fused[0] + self.fused_velocity[0] * dt, self.fused[1] + self.fused_velocity[1] * dt,
+                             math.atan2(math.sin(yaw), math.cos(yaw)))
 
     def _note_contacts(self) -> None:
         d = self.data

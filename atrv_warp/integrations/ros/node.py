@@ -193,8 +193,9 @@ class RoverIO:
 
     def odometry(self, fused: bool = False) -> tuple[float, float, float, float, float]:
         """The base's wheel odometry in the node's odometry frame (the start pose composed with the driver's):
-        x [m], y [m], yaw [rad], linear [m/s], angular [rad/s]; ``fused``: the driver's encoder-and-gyro odometry
-        (``odometry/filtered``, what the robot observation is trained on) instead of the wheels' alone."""
+        x [m], y [m], yaw [rad], linear [m/s], angular [rad/s]; ``fused``: the driver's fused odometry (encoders and
+        gyro, and the accelerometer with ``odometry_accel_time``; ``odometry/filtered``, what the robot observation is
+        trained on) instead of the wheels' alone."""
         d = self.node.sim.driver
         x, y, yaw = (d.fused if fused else d.odometry)[self.index].double().tolist()
         x0, y0, yaw0 = self.start

@@ -48,6 +48,8 @@ PARAMETERS = (
     ("wheel_kp", DriverConfig.kp, "wheel-speed PI proportional gain [N·m per rad/s], run every substep"),
     ("wheel_ki", DriverConfig.ki, "wheel-speed PI integral gain [N·m per rad]"),
     ("cmd_vel_timeout", DriverConfig.cmd_vel_timeout, "watchdog: stop when no /cmd_vel arrives for this long [s]"),
+    ("odometry_accel_time", 0.0, ("the fused odometry's velocity blends the IMU's accelerometer into the encoders', "
+                                  "a complementary filter of this time constant [s]; 0 = the encoders alone")),
     ("linear_max_velocity", 0.0, "diff_drive_controller's linear.x.max_velocity [m/s]; 0 = no limit"),
     ("linear_max_acceleration", 0.0, "linear.x.max_acceleration [m/s²]; 0 = the task's (nav_deploy: 1), else none"),
     ("angular_max_velocity", 0.0, "angular.z.max_velocity [rad/s]; 0 = no limit"),
@@ -74,7 +76,8 @@ PARAMETERS = (
 
 DRIVER_PARAMETERS = {"wheel_radius": "wheel_radius", "track_width": "track_width",
                      "effective_track_factor": "effective_track_factor", "wheel_kp": "kp", "wheel_ki": "ki",
-                     "cmd_vel_timeout": "cmd_vel_timeout", "linear_max_velocity": "linear_max_velocity",
+                     "cmd_vel_timeout": "cmd_vel_timeout", "odometry_accel_time": "odometry_accel_time",
+                     "linear_max_velocity": "linear_max_velocity",
                      "linear_max_acceleration": "linear_max_acceleration",
                      "angular_max_velocity": "angular_max_velocity",
                      "angular_max_acceleration": "angular_max_acceleration"}
@@ -82,10 +85,10 @@ DRIVER_PARAMETERS = {"wheel_radius": "wheel_radius", "track_width": "track_width
 
 
 def driver_config(params: dict) -> DriverConfig:
-    """The base's motor driver from the node's parameters (0 for a radius, track or limit: unset); a bad value is a
+    """The base's motor driver from the node's parameters (0 for a radius, track, limit or filter: unset); a bad value is a
     ``ValueError`` naming it."""
     optional = {"wheel_radius", "track_width", "linear_max_velocity", "linear_max_acceleration",
-                "angular_max_velocity", "angular_max_acceleration"}
+                "angular_max_velocity", "angular_max_acceleration", "odometry_accel_time"}
     values = {}
     for name, field in DRIVER_PARAMETERS.items():
         value = params[name]

@@ -35,6 +35,7 @@ class DriverParams:
     max_angular: float  # [rad/s]
     max_angular_accel: float  # [rad/s²]
     timeout: float  # [s] without a command, the target drops to zero
+    accel_time: float  # the fused odometry's complementary filter time constant [s] (0: the encoders' speed alone)
     dt: float  # the substep [s]
 
 
@@ -49,6 +50,8 @@ class DriverState:
     odometry: wp.array(dtype=wp.vec3)  # x [m], y [m], yaw [rad] in the odometry frame (the pose at reset)
     odom_twist: wp.array(dtype=wp.vec2)  # linear [m/s], angular [rad/s] from the encoders
     fused: wp.array(dtype=wp.vec3)  # x [m], y [m], yaw [rad]: the encoders' distance along the gyro's heading
+    fused_velocity: wp.array(dtype=wp.vec2)  # the fused odometry's velocity [m/s], odometry frame (accel_time > 0)
+    velocity: wp.array(dtype=wp.vec3)  # the chassis' velocity at the last substep [m/s] (the accelerometer's)
 
 
 @wp.func
@@ -148,6 +151,30 @@ def integrate_fused(pose: wp.vec3, linear: float, yaw_rate: float, dt: float) ->
     return wp.vec3(pose[0] + linear * wp.cos(mid) * dt, pose[1] + linear * wp.sin(mid) * dt, yaw)
 
 
+@wp.func
+def accel_aided_velocity(estimate: wp.vec2, encoders: float, velocity_change: wp.vec3, forward: wp.vec3, left: wp.vec3,
+                         yaw: float, accel_time: float, dt: float) -> wp.vec2:
+    """The fused odometry's velocity [m/s] (odometry frame) one substep on: the accelerometer's reading integrated
+    (the chassis' ``velocity_change`` [m/s] over the substep along its ``forward`` and ``left`` axes, gravity removed,
+    turned to the odometry frame by the fused heading ``yaw``), pulled toward the encoders' velocity (their forward
+    speed along ``yaw``) with time constant ``accel_time`` [s]. A complementary filter, as ``robot_localization``
+    fuses an IMU's linear acceleration with wheel odometry: the encoders' velocity over spans longer than
+    ``accel_time``, the accelerometer's over shorter ones, where the wheels slip (launches, turns)."""
+    c = wp.cos(yaw)
+    s = wp.sin(yaw)
+    ax = wp.dot(velocity_change, forward)
+    ay = wp.dot(velocity_change, left)
+    integrated = estimate + wp.vec2(c * ax - s * ay, s * ax + c * ay)
+    return integrated + (wp.vec2(c * encoders, s * encoders) - integrated) * (dt / accel_time)
+
+
+@wp.func
+def integrate_fused_velocity(pose: wp.vec3, velocity: wp.vec2, yaw_rate: float, dt: float) -> wp.vec3:
+    """The fused pose over one substep from an odometry-frame ``velocity`` [m/s] and the gyro's yaw rate."""
+    yaw = pose[2] + yaw_rate * dt
+    return wp.vec3(pose[0] + velocity[0] * dt, pose[1] + velocity[1] * dt, wp.atan2(wp.sin(yaw), wp.cos(yaw)))
+
+
 @wp.kernel
 def drive_wheels(
     layout: RoverLayout,
@@ -157,6 +184,7 @@ def drive_wheels(
     twist: wp.array(dtype=wp.vec2),
     lag: wp.array(dtype=float),
     physics: WorldPhysics,
+    joint_q: wp.array(dtype=float),
     joint_qd: wp.array(dtype=float),
     state_in: DriverState,
     state_out: DriverState,
@@ -172,8 +200,22 @@ def drive_wheels(
     pose, odom_twist = integrate_odometry(params, state_in.odometry[world], speeds)
     state_out.odometry[world] = pose
     state_out.odom_twist[world] = odom_twist
-    gyro = joint_qd[world * layout.dofs_per_world + layout.chassis_dof + 5]  # the chassis' yaw rate (world z)
-    state_out.fused[world] = integrate_fused(state_in.fused[world], odom_twist[0], gyro, params.dt)
+    chassis = world * layout.dofs_per_world + layout.chassis_dof
+    gyro = joint_qd[chassis + 5]  # the chassis' yaw rate (world z)
+    fused = state_in.fused[world]
+    if params.accel_time > 0.0:
+        c = world * layout.coords_per_world + layout.chassis_coord
+        q = wp.quat(joint_q[c + 3], joint_q[c + 4], joint_q[c + 5], joint_q[c + 6])
+        velocity = wp.vec3(joint_qd[chassis], joint_qd[chassis + 1], joint_qd[chassis + 2])  # the COM's, world frame
+        estimate = accel_aided_velocity(state_in.fused_velocity[world], odom_twist[0],
+                                        velocity - state_in.velocity[world], wp.quat_rotate(q, wp.vec3(1.0, 0.0, 0.0)),
+                                        wp.quat_rotate(q, wp.vec3(0.0, 1.0, 0.0)), fused[2] + 0.5 * gyro * params.dt,
+                                        params.accel_time, params.dt)
+        state_out.velocity[world] = velocity
+        state_out.fused_velocity[world] = estimate
+        state_out.fused[world] = integrate_fused_velocity(fused, estimate, gyro, params.dt)
+    else:
+        state_out.fused[world] = integrate_fused(fused, odom_twist[0], gyro, params.dt)
     side = commands[world]
     reference = state_in.reference[world]
     integral = state_in.integral[world]
@@ -212,6 +254,8 @@ def reset_driver(mask: wp.array(dtype=bool), twist: wp.array(dtype=wp.vec2), sta
     state.odometry[world] = wp.vec3(0.0, 0.0, 0.0)
     state.odom_twist[world] = wp.vec2(0.0, 0.0)
     state.fused[world] = wp.vec3(0.0, 0.0, 0.0)
+    state.fused_velocity[world] = wp.vec2(0.0, 0.0)
+    state.velocity[world] = wp.vec3(0.0, 0.0, 0.0)
 
 
 @wp.kernel
