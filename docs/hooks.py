@@ -843,6 +843,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "calibration_twin": calibration_twin,
     "mujoco_transfer_plain": lambda: mujoco_transfer("mujoco_transfer_plain.json"),
     "mujoco_transfer_truth_odometry": lambda: mujoco_transfer("mujoco_transfer_truth_odometry.json"),
+    "mujoco_transfer_accel_odometry": lambda: mujoco_transfer("mujoco_transfer_accel_odometry.json"),
     "calibration_sweep_seed1": lambda: calibration_sweep("calibration_sweep_seed1.json"),
     "nav_throughput_cuda": nav_throughput_cuda,
     "ray_collection": ray_collection,
