@@ -226,6 +226,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "of the nav world, for a deployable policy; the mujoco extra)")
     parser.add_argument("--friction", type=float, default=None, metavar="MU",
                         help="the MuJoCo twin's Coulomb µ (--engine mujoco; default: the nominal µ)")
+    parser.add_argument("--odometry-accel-time", type=float, default=None, metavar="S",
+                        help="the base's fused odometry blends in the IMU's accelerometer with this time constant [s] "
+                             "(DriverConfig.odometry_accel_time; default: the encoders alone)")
     parser.add_argument("--episodes", type=int, default=1000, help="number of seeded episodes (one world each)")
     parser.add_argument("--seed", type=int, default=None, help="evaluation-set seed (default: the standard set)")
     parser.add_argument("--baseline", action="store_true", help="evaluate the scripted baseline instead")
@@ -330,9 +333,18 @@ def main(argv: list[str] | None = None) -> int:
             print(device_summary(args.device))
         except (RuntimeError, ValueError) as err:
             return error_line(parser.prog, f"--device {args.device!r}: {err}")
+    driver = None
+    if args.odometry_accel_time is not None:
+        from atrv_warp.sim.driver import DriverConfig
+
+        try:
+            driver = DriverConfig(odometry_accel_time=args.odometry_accel_time)
+        except ValueError as err:
+            return error_line(parser.prog, f"--odometry-accel-time: {err}")
     viewers = _Viewers(args)
     options = {"engine": args.engine, "task": args.task, "episodes": args.episodes, "seed": args.seed,
-               "baseline": args.baseline, "friction": args.friction, "device": args.device, "attach": viewers}
+               "baseline": args.baseline, "friction": args.friction, "device": args.device, "attach": viewers,
+               "driver": driver}
     on = None
     try:
         if around:  # the config's rover itself, then across the spread around it

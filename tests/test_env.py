@@ -196,6 +196,20 @@ def test_a_snapshot_that_does_not_fit_is_refused_and_the_env_is_unchanged():
                if not k.startswith("snapshot."))
 
 
+def test_a_snapshot_from_before_the_accelerometer_filter_restores_its_state_as_zero():
+    """The driver's accelerometer-filter entries (``SNAPSHOT_ADDED``) came after snapshots were first written: a
+    snapshot without them still restores, the entries zero, as they were wherever the filter is off."""
+    from atrv_warp.sim.driver import SNAPSHOT_ADDED
+
+    env = ATRVjrEnv(2, seed=1)
+    env.reset()
+    older = {k: v for k, v in env.state_dict().items() if k.removeprefix("sim.") not in SNAPSHOT_ADDED}
+    assert len(older) == len(env.state_dict()) - len(SNAPSHOT_ADDED)
+    env.sim.driver.state.velocity.fill_(wp.vec3(1.0, 2.0, 3.0))
+    env.load_state_dict(older)
+    assert not wp.to_torch(env.sim.driver.state.velocity).any()
+
+
 def test_bad_actions_raise_clear_errors():
     env = ATRVjrEnv(3, seed=0)
     td = env.reset()

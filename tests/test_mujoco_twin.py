@@ -83,7 +83,7 @@ def test_flat_ground_scan_agrees_within_2_cm():
 
 
 @pytest.mark.slow
-def test_a_deployable_policy_drives_twin_episodes(tmp_path):
+def test_a_deployable_policy_drives_twin_episodes(tmp_path, capsys):
     """A few episodes of an (untrained) deployable policy in the twin end for the task's reasons, through
     ``evaluate --engine mujoco``; a torque policy is refused in one line."""
     import json
@@ -102,6 +102,10 @@ def test_a_deployable_policy_drives_twin_episodes(tmp_path):
     assert result["engine"] == "mujoco" and result["episodes"] == 3 and result["friction"] == pytest.approx(0.3)
     ends = ("success_rate", "wall_rate", "flip_rate", "timeout_rate", "obstacle_rate", "nonfinite_rate")
     assert sum(result[k] for k in ends) == pytest.approx(1.0) and result["nonfinite_rate"] == 0.0
+    # through a base whose odometry fuses the accelerometer; a time constant <= 0 is named
+    assert main([str(path), "--engine", "mujoco", "--episodes", "1", "--odometry-accel-time", "3"]) == 0
+    assert main([str(path), "--engine", "mujoco", "--episodes", "1", "--odometry-accel-time", "0"]) == 2
+    assert "--odometry-accel-time: DriverConfig.odometry_accel_time must be" in capsys.readouterr().err
 
 
 def test_the_twins_tyres_sink_at_rest_as_ours():

@@ -38,11 +38,16 @@ import warp as wp
 from atrv_warp.core.kinematics import EFFECTIVE_TRACK_FACTOR, SkidSteer, track_width
 from atrv_warp.sim.kernels.driver import DRIVE_TORQUE, DRIVE_TWIST, DriverParams, DriverState, reset_driver
 
-__all__ = ["DRIVER_LIMITS", "DRIVE_TORQUE", "DRIVE_TWIST", "Driver", "DriverConfig"]
+__all__ = ["DRIVER_LIMITS", "DRIVE_TORQUE", "DRIVE_TWIST", "SNAPSHOT_ADDED", "Driver", "DriverConfig"]
 
 DRIVER_LIMITS = ("linear_max_velocity", "linear_max_acceleration", "angular_max_velocity", "angular_max_acceleration")
 """The limits, each ``diff_drive_controller``'s ``linear.x.max_velocity``, ``linear.x.max_acceleration``,
 ``angular.z.max_velocity`` and ``angular.z.max_acceleration``."""
+
+SNAPSHOT_ADDED = ("driver.fused_velocity", "driver.velocity")
+"""Snapshot entries that a snapshot of an earlier version lacks: the accelerometer filter's state
+(:attr:`DriverConfig.odometry_accel_time`), zero wherever the filter is off, so such a snapshot restores them as
+zero."""
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ from atrv_warp.sim.config import (
     load_sim_config,
 )
 from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
-from atrv_warp.sim.driver import DRIVE_TORQUE, DRIVE_TWIST, Driver, DriverConfig
+from atrv_warp.sim.driver import DRIVE_TORQUE, DRIVE_TWIST, SNAPSHOT_ADDED, Driver, DriverConfig
 from atrv_warp.sim.kernels.contact import FLAG_BODY_GROUND, FLAG_OBSTACLE, FLAG_WALL
 from atrv_warp.sim.kernels.driver import MAX_WHEELS, DriverState, drive_wheels
 from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics, apply_payload
@@ -599,11 +599,13 @@ class RoverSim:
         """Raise ``ValueError`` naming the first entry of ``snapshot`` that :meth:`set_state` cannot restore here
         (missing, or another shape: a snapshot of another world count or rover); nothing is written."""
         views = self._snapshot_views()
-        missing = sorted(set(views) - set(snapshot))
+        missing = sorted(set(views) - set(snapshot) - set(SNAPSHOT_ADDED))
         if missing or "sim_time" not in snapshot:
             raise ValueError(f"simulator snapshot lacks {missing or ['sim_time']} (taken by an older version of "
                              "atrv_warp, or not a snapshot)")
         for k, v in views.items():
+            if k not in snapshot:  # an entry added since (SNAPSHOT_ADDED): restored as zero
+                continue
             got = tuple(torch.as_tensor(snapshot[k]).shape)
             if got != tuple(v.shape):
                 worlds = f" ({self.num_worlds} worlds here)" if k == "commands" else ""
@@ -616,7 +618,10 @@ class RoverSim:
         self.check_state(snapshot)
         with torch.no_grad():  # a differentiable simulator's arrays are leaves that require grad
             for k, v in self._snapshot_views().items():
-                v.copy_(torch.as_tensor(snapshot[k]))
+                if k in snapshot:
+                    v.copy_(torch.as_tensor(snapshot[k]))
+                else:  # an entry added since (SNAPSHOT_ADDED)
+                    v.zero_()
         self.sim_time = float(snapshot["sim_time"])
         # Newton's route for runtime mass changes: the solver re-derives its spatial inertias from the model
         self.solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
