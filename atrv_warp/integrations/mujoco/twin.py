@@ -226,8 +226,9 @@ class MujocoTwin:
         return out
 
     def _integrate_odometry(self, speeds: np.ndarray, dt: float) -> None:
-        """Wheel odometry and the fused pose over one substep (midpoint rule), as ``integrate_odometry``,
-        ``accel_aided_velocity`` and ``integrate_fused_velocity`` (with ``DriverConfig.odometry_accel_time``) and ``integrate_fused`` do."""
+        """Wheel odometry and the fused pose over one substep, as ``integrate_odometry`` and ``integrate_fused`` do
+        (midpoint rule), or with ``DriverConfig.odometry_accel_time`` ``accel_aided_velocity`` and
+        ``integrate_fused_velocity``."""
         v, w = (float(t) for t in self.kinematics.twist(speeds))
         self.odom_twist = np.array([v, w])
         gyro = float(self.angular_velocity[2])
