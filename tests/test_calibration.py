@@ -90,6 +90,7 @@ def test_sim_config_file_is_read_by_the_simulator_and_checked(tmp_path):
         RoverSim(1).model.body_mass.numpy()[sim.layout.chassis_body] + 12.0)
     for text, words in (("[rover]\ntorque_scael = 1.0\n", ["torque_scael", "known"]),
                         ("[rover]\npayload_mass = -3.0\n", ["payload_mass", ">= 0"]),
+                        ("[contact]\nfriction_rise = -0.5\n", ["friction_rise", ">= 0"]),
                         ("[contact]\nfriction = 'high'\n", ["friction"]),
                         ("[rover\nx = 1\n", ["not valid TOML"])):
         bad = tmp_path / "bad.toml"
@@ -421,6 +422,26 @@ def test_a_tiny_fit_runs_on_the_first_seconds_of_a_drive(tmp_path):
     assert again["held_out"].tolist() == pytest.approx(result.errors["held_out"]["after"], abs=1e-6)
     with pytest.raises(CalibrationError, match="duration"):
         CalibrationConfig(duration=0.0)
+
+
+def test_a_fitted_friction_rise_reaches_the_sim_config_and_the_simulator(tmp_path):
+    """``--params ...,friction_rise`` (not a default): the fit stays in its bounds, the written config carries it
+    under [contact], and a simulator built from that file has it in every world."""
+    from atrv_warp import RoverSim
+    from atrv_warp.integrations.calibration import calibrate
+    from atrv_warp.integrations.calibration.fit import DEFAULT_FIT, FIT_PARAMETERS
+    from atrv_warp.integrations.calibration.output import write_sim_config
+
+    assert "friction_rise" not in DEFAULT_FIT
+    log = read_drive_log(_bag(tmp_path / "drive.mcap", seconds=30.0), WHEELS)
+    result = calibrate(log, CalibrationConfig(params=("friction_rise",), duration=16.0, iterations=1))
+    rise = result.values["friction_rise"]
+    assert FIT_PARAMETERS["friction_rise"].low <= rise <= FIT_PARAMETERS["friction_rise"].high
+    write_sim_config(tmp_path / "cal.toml", result, "drive.mcap")
+    _, contact = load_sim_config(tmp_path / "cal.toml")
+    assert contact.friction_rise == pytest.approx(rise)
+    sim = RoverSim(2, sim_config=tmp_path / "cal.toml")
+    assert sim.params.physics.friction_rise.numpy().tolist() == pytest.approx([rise, rise])
 
 
 def test_record_example_drives_a_worn_truth_with_the_nominal_driver(tmp_path, monkeypatch):

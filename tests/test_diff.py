@@ -142,6 +142,25 @@ def test_friction_identification_example():
     assert history[-1][1] < history[0][1] * 1e-3
 
 
+def test_friction_rise_gradient_while_spinning(roll20):
+    """d(final yaw) / d(friction_rise) skidding in place over 1 s: the sliding friction's rise with slip
+    (ContactConfig.friction_rise) is an input of the tape. Under torque commands the sliding wheels' friction both
+    drives the turn and resists it, so only the tape's agreement with the finite difference is asserted."""
+    roll, state = roll20
+    a = torch.empty(20, 1, 2)
+    a[..., 0], a[..., 1] = -0.6, 0.6
+    rise = torch.tensor(0.5, requires_grad=True)
+    roll(a, state, friction_rise=rise)[-1, 0, 5].backward()
+    f = lambda r: roll(a, state, friction_rise=r)[-1, 0, 5].item()
+    fd = (f(0.52) - f(0.48)) / 0.04
+    assert abs(fd) > 0.05  # the rise changes the turn
+    assert rise.grad.item() == pytest.approx(fd, rel=0.05)
+    # zero is the contact config's default and a valid value; a negative one is refused by name
+    assert roll(a, state, friction_rise=0.0)[-1, 0, 5].item() == roll(a, state)[-1, 0, 5].item()
+    with pytest.raises(ValueError, match=r"friction_rise must be >= 0 and finite"):
+        roll(a, state, friction_rise=-0.1)
+
+
 def test_errors_are_clear():
     roll = DiffRollout(1, steps=2)
     with pytest.raises(ValueError, match=r"actions must have shape \(2, 1, 2\)"):

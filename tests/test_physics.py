@@ -279,12 +279,40 @@ def test_rolls_without_slip_below_the_traction_limit_and_saturates_at_mu_g():
 
 @pytest.mark.parametrize(("field", "value"), [("friction", 0.0), ("friction", -0.3), ("friction", float("nan")),
                                               ("friction", float("inf")), ("stiffness", -1.0),
-                                              ("friction_law", "sticky")])
+                                              ("friction_law", "sticky"), ("friction_rise", -0.1),
+                                              ("friction_rise", float("nan"))])
 def test_bad_contact_config_is_named(field, value):
     from atrv_warp.sim import ContactConfig
 
     with pytest.raises(ValueError, match=f"ContactConfig.{field}"):
         ContactConfig(**{field: value})
+
+
+def test_friction_rising_with_slip_caps_a_brisk_turn_near_the_torque_limit():
+    """A heavy, weak-motored rover at high µ turns in place near its torque limit. Under Coulomb's law the
+    resistance does not depend on the turn's rate, so it turns at 1 rad/s as at 0.25; with the sliding friction
+    rising with slip (ContactConfig.friction_rise) the brisk turn is capped where the motors run out, the slow one
+    hardly changes (calibration_twin.py: the MuJoCo twin's turns on such a rover)."""
+    from atrv_warp.sim import ContactConfig, RoverConfig
+    from atrv_warp.sim.driver import DriverConfig
+
+    rover = RoverConfig(torque_scale=0.62, payload_mass=18.0, wheel_radius=0.1185)
+    driver = DriverConfig(wheel_radius=RoverConfig().wheel_radius)
+    commands = torch.tensor([[0.0, 0.25], [0.0, 1.0]])
+    rates = {}
+    for rise in (0.0, 0.3):
+        sim = RoverSim(2, rover=rover, contact=ContactConfig(friction=0.886, friction_rise=rise), driver=driver)
+        yaw = torch.zeros(2)
+        for k in range(60):
+            sim.set_twist(commands)
+            sim.step()
+            if k >= 40:
+                yaw += sim.ang_vel[:, 2] / 20
+        rates[rise] = yaw / commands[:, 1]
+    assert torch.isfinite(rates[0.3]).all()
+    assert float(rates[0.0][1]) > 0.85  # Coulomb: the brisk turn as the slow one
+    assert float(rates[0.3][1]) < 0.8 * float(rates[0.0][1])
+    assert float(rates[0.3][0]) == pytest.approx(float(rates[0.0][0]), rel=0.1)
 
 
 def _fused_error_on_an_arc(accel_time: float | None, seconds: float = 4.0) -> float:

@@ -51,7 +51,7 @@ DEFAULT_ACTION_SCALE = 20.0
 (``TaskConfig.action_scale``; the simulator knows no task, so a test keeps the two equal)."""
 
 
-DIFF_PARAMETERS = ("friction", "chassis_mass", "torque_scale", "speed_limit", "wheel_radius")
+DIFF_PARAMETERS = ("friction", "chassis_mass", "torque_scale", "speed_limit", "wheel_radius", "friction_rise")
 """The physical parameters a rollout differentiates, one value per world each: Coulomb mu [-], chassis
 mass [kg] (the URDF's plus a payload at its centre of mass), motor torque scale [-], motor no-load speed
 [rad/s] and wheel rolling radius [m] (:data:`atrv_warp.sim.params.PARAMETERS`)."""
@@ -223,7 +223,7 @@ class DiffRollout:
         # the simulator's per-world physics, every parameter but the stiffness an input of the tape
         physics = WorldPhysics()
         physics.stiffness = self.sim.params.physics.stiffness
-        for name in ("friction", "wheel_radius", "torque_scale", "speed_limit"):
+        for name in ("friction", "wheel_radius", "torque_scale", "speed_limit", "friction_rise"):
             setattr(physics, name, self._params[name])
         self._physics = physics
         # the URDF's chassis: a rover config's payload is a point mass on it, as every other payload here
@@ -232,7 +232,8 @@ class DiffRollout:
                          "chassis_mass": self.nominal_chassis_mass + self.sim.rover_cfg.payload_mass,
                          "torque_scale": self.sim.rover_cfg.torque_scale,
                          "speed_limit": self.sim.rover_cfg.wheel_speed_limit,
-                         "wheel_radius": self.sim.rover_cfg.wheel_radius}
+                         "wheel_radius": self.sim.rover_cfg.wheel_radius,
+                         "friction_rise": self.sim.contact_cfg.friction_rise}
         self._flags = wp.zeros(num_worlds, dtype=wp.int32, device=dev)
         # The friction solver starts each substep from the previous one's impulses: one array per
         # substep boundary, so the tape differentiates through that chain too.
@@ -449,7 +450,8 @@ class DiffRollout:
                  friction: torch.Tensor | float | None = None,
                  chassis_mass: torch.Tensor | float | None = None, *,
                  torque_scale: torch.Tensor | float | None = None, speed_limit: torch.Tensor | float | None = None,
-                 wheel_radius: torch.Tensor | float | None = None, integral: torch.Tensor | None = None,
+                 wheel_radius: torch.Tensor | float | None = None, friction_rise: torch.Tensor | float | None = None,
+                 integral: torch.Tensor | None = None,
                  wheel_speeds: bool = False, wheel_torques: bool = False
                  ) -> torch.Tensor | tuple[torch.Tensor, ...]:
         """Roll out and return chassis poses (steps + 1, N, 7): x, y, z [m], quaternion (x, y, z, w).
@@ -469,6 +471,9 @@ class DiffRollout:
             torque_scale, speed_limit, wheel_radius: The motor's torque scale [-] and no-load speed [rad/s],
                 and the wheels' rolling radius [m]; one or (N,) each (default: the rover config's),
                 differentiable.
+            friction_rise: The wheels' sliding friction's rise with slip speed [s/m]
+                (:attr:`~atrv_warp.sim.config.ContactConfig.friction_rise`), one or (N,) (default: the contact
+                config's), differentiable.
             integral: (N, 2) the motor driver's PI integral per side at the start [rad] (default zero),
                 differentiable.
             wheel_speeds: Also return each side's mean forward wheel speed (steps + 1, N, 2) [rad/s].
@@ -485,13 +490,14 @@ class DiffRollout:
         if initial_state is None:
             initial_state = self.initial_state()
         given = {"friction": friction, "chassis_mass": chassis_mass, "torque_scale": torque_scale,
-                 "speed_limit": speed_limit, "wheel_radius": wheel_radius}
+                 "speed_limit": speed_limit, "wheel_radius": wheel_radius, "friction_rise": friction_rise}
         params = []
         for name in DIFF_PARAMETERS:
             value = self._per_world(name, self._nominal[name] if given[name] is None else given[name])
-            low_ok = (value >= 0.0) if name == "torque_scale" else (value > 0.0)
+            zero_ok = name in ("torque_scale", "friction_rise")
+            low_ok = (value >= 0.0) if zero_ok else (value > 0.0)
             if not (torch.isfinite(value).all() and bool(low_ok.all())):
-                raise ValueError(f"{name} must be {'>= 0' if name == 'torque_scale' else '> 0'} and finite, got "
+                raise ValueError(f"{name} must be {'>= 0' if zero_ok else '> 0'} and finite, got "
                                  f"{value.detach().tolist()}")
             params.append(value)
         integral = torch.zeros(self.num_worlds, 2) if integral is None else torch.as_tensor(integral).float()

@@ -88,6 +88,8 @@ class WorldParams:
         p = WorldPhysics()
         for name in ("friction", "stiffness", "wheel_radius", "torque_scale", "speed_limit"):
             setattr(p, name, wp.full(num_worlds, self.nominal[name], dtype=float, device=device))
+        # not a drawn parameter (PARAMETERS): every world takes the contact config's
+        p.friction_rise = wp.full(num_worlds, contact.friction_rise, dtype=float, device=device)
         self.physics = p
         self.payload_mass_array = wp.full(num_worlds, rover.payload_mass, dtype=float, device=device)
         self.payload_offset_array = wp.array(np.tile(np.asarray(rover.payload_offset, dtype=np.float32),

@@ -52,9 +52,12 @@ FIT_PARAMETERS: dict[str, FitParameter] = {
     "payload_mass": FitParameter("rover", "payload_mass", 0.0, 60.0, "kg"),
     "speed_limit": FitParameter("rover", "wheel_speed_limit", 10.0, 120.0, "rad/s"),
     "wheel_radius": FitParameter("rover", "wheel_radius", 0.10, 0.16, "m"),
+    "friction_rise": FitParameter("contact", "friction_rise", 0.0, 1.0, "s/m"),
 }
 """What the fit can adjust, with its bounds: Coulomb mu, motor torque scale, payload at the chassis' centre of
-mass, motor no-load speed, wheel rolling radius."""
+mass, motor no-load speed, wheel rolling radius, and the sliding friction's rise with slip speed
+(:attr:`~atrv_warp.sim.config.ContactConfig.friction_rise`: not in :data:`DEFAULT_FIT`; for a rover whose brisk
+turns the model check flags, ``docs/calibration.md``)."""
 DEFAULT_FIT = ("friction", "torque_scale", "payload_mass", "wheel_radius")
 COMMAND_SOURCES = ("auto", "cmd_vel", "effort")
 """``cmd_vel``: replay the velocity commands through the base's PI controller (and match the recorded wheel
@@ -70,10 +73,10 @@ _WHEEL_SCALE = 0.5  # [rad/s]: wheel-speed error that costs 1
 _EFFORT_SCALE = 1.0  # [N·m]: wheel-effort error that costs 1
 _NO_TAPER = 1.0e4  # [rad/s]: an effort replay's motor no-load speed (the recorded torques already taper)
 FIT_FIDELITY = {"friction": 0.003, "torque_scale": 0.0065, "payload_mass": 0.6, "speed_limit": 1.0,
-                "wheel_radius": 0.0009}
+                "wheel_radius": 0.0009, "friction_rise": 0.05}
 """How well the replay pins each parameter beyond the recording's noise [its unit]: the root-mean-square error of
 the calibration sweep's converged fits of rovers it modelled exactly (``benchmarks/calibration_sweep.py --seed 0``;
-the speed limit, never fitted there, an estimate), added in quadrature to the statistical standard error. It is the
+the speed limit and the friction's rise, never fitted there, estimates), added in quadrature to the statistical standard error. It is the
 replay's own limit: its start is rebuilt from 20 Hz samples, and a slipping wheel amplifies any difference. Measured
 before each segment's start took the recorded tilt, each wheel's speed and the driver's integral from the effort
 (``calibration_sweep_before_start_state.json``), which brought the fits closer: the intervals are now wider than
@@ -555,7 +558,8 @@ def _driver_record(driver: DriverConfig) -> dict[str, float]:
 
 def _nominal(rover: RoverConfig, contact: ContactConfig) -> dict[str, float]:
     return {"friction": contact.friction, "torque_scale": rover.torque_scale, "payload_mass": rover.payload_mass,
-            "speed_limit": rover.wheel_speed_limit, "wheel_radius": rover.wheel_radius}
+            "speed_limit": rover.wheel_speed_limit, "wheel_radius": rover.wheel_radius,
+            "friction_rise": contact.friction_rise}
 
 
 @dataclass

@@ -27,6 +27,8 @@ model and Newton's articulation, is slip that the next substep removes
 (``benchmarks/skid_calibration.py`` measures what that leaves on slopes). The result is Coulomb friction: no
 creep at rest on a slope below ``atan(mu)``, rolling without slip under traction below
 ``mu f_n``, and turning set by the directions of the sliding forces, not by their magnitude.
+With ``ContactConfig.friction_rise`` a sliding contact's disc grows with its slip speed at the substep's
+start (``mu (1 + rise x slip)``, a substep late, as the warm start is): friction that rises with sliding speed.
 
 Every loop has a constant bound (Warp unrolls it), so ``wp.Tape`` differentiates the kernel. The law
 is piecewise smooth: a contact that switches between sticking and sliding has a kink there.
@@ -181,14 +183,15 @@ def solve_wheel_friction(
     impulses: wp.array(dtype=wp.vec3),
 ):
     """One thread per world: the wheels' ground contact forces (normal and Coulomb friction), added to
-    ``body_f``. ``joint_f`` holds this substep's drive torques; ``physics`` each world's mu, stiffness and
-    wheel radius.
+    ``body_f``. ``joint_f`` holds this substep's drive torques; ``physics`` each world's mu (and its rise with
+    slip), stiffness and wheel radius.
 
     ``warm_start`` (N x WHEEL_SLOTS) holds the previous substep's friction impulses [N·s], where the
     sweeps start; ``impulses`` receives this substep's (the simulator passes one array as both; a tape
     passes one per substep)."""
     world = wp.tid()
     mu = physics.friction[world]
+    rise = physics.friction_rise[world]
     kp = physics.stiffness[world]
     dt = params.dt
     base = world * bodies_per_world
@@ -240,7 +243,11 @@ def solve_wheel_friction(
         spin = with_row(spin, k, w)
         free = with_row(free, k, v + w * (tau * slots.inv_spin_inertia[k] * dt))
         normal = with_row(normal, k, fn * n)
-        limit = with_entry(limit, k, mu * fn * dt)
+        mu_k = mu
+        if rise > 0.0:  # friction rising with the slip speed at the substep's start (ContactConfig.friction_rise)
+            vt = v - wp.dot(v, n) * n
+            mu_k = mu * (1.0 + rise * wp.sqrt(wp.dot(vt, vt) + 1.0e-12))
+        limit = with_entry(limit, k, mu_k * fn * dt)
         force += fn * n
         torque += wp.cross(p - centre, fn * n) - tau * u
     dv = force * (inv_mass * dt)

@@ -19,6 +19,7 @@ class WorldPhysics:
     wheel_radius: wp.array(dtype=float)  # rolling radius of every wheel [m]
     torque_scale: wp.array(dtype=float)  # motor torque per unit command torque [-]
     speed_limit: wp.array(dtype=float)  # motor no-load speed [rad/s]
+    friction_rise: wp.array(dtype=float)  # sliding friction's rise with slip speed [s/m] (ContactConfig.friction_rise)
 
 
 @wp.struct
