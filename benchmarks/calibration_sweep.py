@@ -102,14 +102,17 @@ def record_bag(folder: Path, label: str, args: list[str], env: dict) -> None:
         raise RuntimeError(f"{label}: recording failed (exit {code}); see {folder / 'record.log'}")
 
 
-def fit_bag(folder: Path, label: str, env: dict) -> tuple[dict, float, int]:
-    """Fit ``folder/drive.mcap`` with the CLI's defaults in a fresh process, its output to ``folder/fit.log``: the
-    report, the process's wall seconds and its exit code; raises, naming ``label``, where it wrote no report."""
-    out = folder / "calibrated.toml"
-    wall, code = _calibrate([str(folder / "drive.mcap"), "--out", str(out)], env, folder / "fit.log")
+def fit_bag(folder: Path, label: str, env: dict, args: tuple[str, ...] = (), into: Path | None = None
+            ) -> tuple[dict, float, int]:
+    """Fit ``folder/drive.mcap`` with the CLI's defaults (and ``args``) in a fresh process, its files and its output
+    (``fit.log``) in ``into`` (default ``folder``): the report, the process's wall seconds and its exit code; raises,
+    naming ``label``, where it wrote no report."""
+    into = into or folder
+    out = into / "calibrated.toml"
+    wall, code = _calibrate([str(folder / "drive.mcap"), "--out", str(out), *args], env, into / "fit.log")
     report_file = out.with_suffix(".report.json")
     if not report_file.is_file():
-        raise RuntimeError(f"{label}: the fit wrote no report (exit {code}); see {folder / 'fit.log'}")
+        raise RuntimeError(f"{label}: the fit wrote no report (exit {code}); see {into / 'fit.log'}")
     return json.loads(report_file.read_text()), wall, code
 
 

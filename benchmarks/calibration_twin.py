@@ -2,6 +2,7 @@
 
     python benchmarks/calibration_twin.py [--rovers 4] [--seed 0] [--minutes 3] [--work DIR]
                                           [--figure docs/calibration_twin.png] [--contact friction_pair --out FILE]
+                                          [--params friction,torque_scale,payload_mass,wheel_radius,friction_rise]
 
 The twin (``atrv_warp.integrations.mujoco``) is the same rover, URDF and motor driver on MuJoCo's contact: soft
 constraints with the tyre's compliance, an elliptic friction cone, its own solver. So a fit to its drive meets what
@@ -15,10 +16,14 @@ a real rover brings, a contact that is not ours, while its truth is still known.
    >= 2x where the nominal model misses by more than 5 cm), the fitted values against the twin's, the model check's
    ratios, and the same rover's figures on our own engine from the sweep's results file, where it has them.
 4. And what tells the engines apart for that rover: the twin's rolling radius (its tyre sinks, and pushes on the
-   ground inside its geometric radius), and an in-place turn at 1 rad/s through the nominal driver in both.
+   ground inside its geometric radius), and an in-place turn at 1 rad/s through the nominal driver in both (ours
+   with the twin's values and with the fitted ones).
 
 ``--contact friction_pair`` records the twin with its wheels' friction on pairs of their own, which keeps them on
 flat ground in brisk turns: what is left of the gap once the twin's turns follow Coulomb's law as ours do.
+``--params`` fits other parameters than the CLI's default (``atrv-calibrate --params``): with ``friction_rise``, our
+wheels' sliding friction rising with slip speed, which the twin's hopping wheels resist brisk turns with. Each
+``--params`` fits into a folder of its own beside the bag, so runs with and without share the recordings.
 
 Each rover's bag, report and console output stay in ``--work``; an interrupted run resumes. Writes
 ``benchmarks/results/calibration_twin.json`` and, with ``--figure``, fitted against true values per parameter.
@@ -27,6 +32,7 @@ Each rover's bag, report and console output stay in ``--work``; an interrupted r
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -38,7 +44,9 @@ from pathlib import Path
 from _common import write_results
 from calibration_sweep import RANGES, RESULTS, ROOT, draw_truths, fit_bag, judge, plot, record_bag, truth_toml
 
-VERSION = 1
+from atrv_warp.integrations.calibration.fit import DEFAULT_FIT, FIT_PARAMETERS
+
+VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 CUT_TARGET = 2.0
@@ -93,13 +101,15 @@ def record_with_contact(folder: Path, truth: dict[str, float], drive_seed: int, 
 
 
 def run_rover(label: str, truth: dict[str, float], drive_seed: int, *, minutes: float, noise: float, work: Path,
-              env: dict, contact: str = "tyre") -> dict:
-    """Record rover ``label`` in the twin and fit it (or read what an earlier run left in ``work``): its row."""
+              env: dict, contact: str = "tyre", params: tuple[str, ...] = DEFAULT_FIT) -> dict:
+    """Record rover ``label`` in the twin and fit ``params`` to it (or read what an earlier run left in ``work``): its
+    row."""
     folder = work / label
-    done = folder / "row.json"
+    into = folder if params == DEFAULT_FIT else folder / ("fit_" + "_".join(params))
+    done = into / "row.json"
     if done.is_file():
         row = json.loads(done.read_text())
-        if row["truth"] == truth and row["seed"] == drive_seed:
+        if row["truth"] == truth and row["seed"] == drive_seed and row.get("fit_params") == list(params):
             return row
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "truth.toml").write_text(truth_toml(truth))
@@ -108,7 +118,9 @@ def run_rover(label: str, truth: dict[str, float], drive_seed: int, *, minutes: 
     if not (folder / "drive.mcap").is_file():
         record_bag(folder, label, ["--engine", "mujoco", "--minutes", str(minutes), "--noise", str(noise),
                                    "--seed", str(drive_seed)], env)
-    report, wall, code = fit_bag(folder, label, env)
+    into.mkdir(exist_ok=True)
+    report, wall, code = fit_bag(folder, label, env, () if params == DEFAULT_FIT else ("--params", ",".join(params)),
+                                 into=into)
     row = judge(truth, report)
     before, after = row["held_out"]["before_m"], row["held_out"]["after_m"]
     cut = before / max(after, 1e-9)
@@ -116,7 +128,8 @@ def run_rover(label: str, truth: dict[str, float], drive_seed: int, *, minutes: 
                            rule=f"cut >= {CUT_TARGET:g}x" if before > MISSES else f"nominal misses by <= {100 * MISSES:g} cm")
     row.update(rover=label, seed=drive_seed, exit_code=code, process_wall_s=wall, latency=report.get("latency"),
                misfit=report.get("misfit"), correlation=report.get("correlation"), confounded=report.get("confounded"),
-               train=report["error_summary"]["train"])
+               train=report["error_summary"]["train"], fit_params=list(params),
+               fitted={p: report["values"][p] for p in params})
     done.write_text(json.dumps(row, indent=1) + "\n")
     return row
 
@@ -145,10 +158,11 @@ def rolling_radius(truth: dict[str, float], speed: float = 0.5, seconds: float =
 
 
 def in_place_turn(truth: dict[str, float], rate: float = 1.0, seconds: float = 3.0,
-                  contact: str = "tyre") -> dict[str, float]:
+                  contact: str = "tyre", fitted: dict[str, float] | None = None) -> dict[str, float]:
     """Rover ``truth`` turning in place at ``rate`` [rad/s] through the nominal driver, in ours and in the twin: each
     one's yaw rate over the command, averaged over the last second, and the share of the twin's steps in which a
-    wheel left the ground for a substep (MuJoCo's soft contact lifts a sliding wheel; physics page)."""
+    wheel left the ground for a substep (MuJoCo's soft contact lifts a sliding wheel; physics page); with
+    ``fitted`` (a fit's values), also ours with them (``ours_fitted``)."""
     import numpy as np
     import torch
 
@@ -159,20 +173,33 @@ def in_place_turn(truth: dict[str, float], rate: float = 1.0, seconds: float = 3
 
     rover = RoverConfig(torque_scale=truth["torque_scale"], payload_mass=truth["payload_mass"],
                         wheel_radius=truth["wheel_radius"])
-    sim = RoverSim(1, rover=rover, contact=ContactConfig(friction=truth["friction"]), driver=twin_driver())
+    sims = [RoverSim(1, rover=rover, contact=ContactConfig(friction=truth["friction"]), driver=twin_driver())]
+    if fitted:
+        values = {**truth, **fitted}
+        sims.append(RoverSim(1, rover=dataclasses.replace(rover, torque_scale=values["torque_scale"],
+                                                          payload_mass=values["payload_mass"],
+                                                          wheel_radius=values["wheel_radius"]),
+                             contact=ContactConfig(friction=values["friction"],
+                                                   friction_rise=values.get("friction_rise", 0.0)),
+                             driver=twin_driver()))
     twin = MujocoTwin(rover=rover, friction=truth["friction"], driver=twin_driver(), contact=twin_contact(contact))
     steps, last = round(seconds / twin.sim_cfg.step_dt), round(1.0 / twin.sim_cfg.step_dt)
-    ours, theirs, airborne = [], [], 0
+    ours, theirs, airborne = [[] for _ in sims], [], 0
     for k in range(steps):
-        sim.set_twist(torch.tensor([[0.0, rate]]))
-        sim.step()
+        for sim, rates in zip(sims, ours):
+            sim.set_twist(torch.tensor([[0.0, rate]]))
+            sim.step()
+            if k >= steps - last:
+                rates.append(float(sim.ang_vel[0, 2]) / rate)
         twin.command(0.0, rate)
         twin.step()
         if k >= steps - last:
-            ours.append(float(sim.ang_vel[0, 2]) / rate)
             theirs.append(float(twin.angular_velocity[2]) / rate)
             airborne += int(twin.wheel_ground_substeps.min() < twin.substeps)
-    return {"rate": rate, "ours": float(np.mean(ours)), "twin": float(np.mean(theirs)), "twin_airborne": airborne / last}
+    out = {"rate": rate, "ours": float(np.mean(ours[0])), "twin": float(np.mean(theirs)), "twin_airborne": airborne / last}
+    if fitted:
+        out["ours_fitted"] = float(np.mean(ours[1]))
+    return out
 
 
 def ours(sweep: dict | None, k: int) -> dict | None:
@@ -195,10 +222,16 @@ def main() -> int:
     parser.add_argument("--contact", default="tyre", choices=list(CONTACTS),
                         help="the twin's contact settings (%(default)s: its default; friction_pair: the wheels' "
                              "friction on pairs of their own, which keeps them on flat ground in brisk turns)")
+    parser.add_argument("--params", default=",".join(DEFAULT_FIT),
+                        help="the parameters to fit (atrv-calibrate --params; default %(default)s, the CLI's)")
     parser.add_argument("--out", default=str(RESULTS / "calibration_twin.json"), help="results file (%(default)s)")
     args = parser.parse_args()
     if args.rovers < 0 or not (math.isfinite(args.minutes) and args.minutes > 0):
         parser.error("--rovers must be >= 0 and --minutes a finite number > 0")
+    params = tuple(p.strip() for p in args.params.split(",") if p.strip())
+    if not set(RANGES) <= set(params) or not set(params) <= set(FIT_PARAMETERS):
+        parser.error(f"--params must hold {','.join(RANGES)} (the values judged against the twin's) and only "
+                     f"parameters the fit knows ({','.join(FIT_PARAMETERS)}), got {args.params!r}")
 
     sweep_file = RESULTS / ("calibration_sweep.json" if args.seed == 0 else f"calibration_sweep_seed{args.seed}.json")
     sweep = json.loads(sweep_file.read_text()) if sweep_file.is_file() else None
@@ -214,21 +247,22 @@ def main() -> int:
               f"wheel {1000 * t['wheel_radius']:.1f} mm ...", flush=True)
         try:
             row = run_rover(label, t, drive_seed, minutes=args.minutes, noise=args.noise, work=work, env=env,
-                            contact=args.contact)
+                            contact=args.contact, params=params)
         except RuntimeError as err:  # one rover's failure is reported; the others' rows are kept
             print(f"  {err}", file=sys.stderr, flush=True)
             continue
         row["ours"] = ours(sweep, k - 1) if k > 0 else None
         row["twin_rolling_radius"] = rolling_radius(t, contact=args.contact)
         row["wheel_radius_vs_rolling"] = row["params"]["wheel_radius"]["fitted"] - row["twin_rolling_radius"]
-        row["in_place_turn"] = turn = in_place_turn(t, contact=args.contact)
+        row["in_place_turn"] = turn = in_place_turn(t, contact=args.contact, fitted=row["fitted"])
         rows.append(row)
         h, errors = row["held_out"], ", ".join(f"{p} {v['error']:+.3g}" for p, v in row["params"].items())
         verdict = "" if h["passes"] is None else (" passes" if h["passes"] else " FAILS")
         print(f"  held-out {100 * h['before_m']:.1f} -> {100 * h['after_m']:.1f} cm (cut {h['cut']:.1f}x{verdict}); "
               f"fitted - truth: {errors}; the twin's rolling radius {1000 * row['twin_rolling_radius']:.1f} mm "
               f"(fitted {1000 * row['wheel_radius_vs_rolling']:+.1f} mm from it); in place at {turn['rate']:g} rad/s ours "
-              f"turns at {turn['ours']:.2f} of it, the twin {turn['twin']:.2f} (a wheel airborne in "
+              f"turns at {turn['ours']:.2f} of it ({turn['ours_fitted']:.2f} with the fitted values), the twin "
+              f"{turn['twin']:.2f} (a wheel airborne in "
               f"{100 * turn['twin_airborne']:.0f} % of its steps); {row['reason']}; "
               f"{'MISFIT flagged' if (row.get('misfit') or {}).get('flagged') else 'model check passes'}", flush=True)
     if not rows:
@@ -252,6 +286,11 @@ def main() -> int:
                "under_geometric_mm": span([-1000 * r["params"]["wheel_radius"]["error"] for r in rows]),
                "off_rolling_mm": span([abs(1000 * r["wheel_radius_vs_rolling"]) for r in rows]),
                "turn_ours": span([r["in_place_turn"]["ours"] for r in rows]),
+               "turn_ours_fitted_high_mu": span([r["in_place_turn"]["ours_fitted"] for r in rows
+                                                 if r["truth"]["friction"] > HIGH_MU]),
+               "friction_rise": span([r["fitted"]["friction_rise"] for r in rows if "friction_rise" in r["fitted"]]),
+               "friction_error_high_mu": span([r["params"]["friction"]["error"] for r in rows
+                                               if r["truth"]["friction"] > HIGH_MU]),
                "turn_twin_low_mu": span([r["in_place_turn"]["twin"] for r in rows if r["truth"]["friction"] <= HIGH_MU]),
                "turn_twin_high_mu": span([r["in_place_turn"]["twin"] for r in rows if r["truth"]["friction"] > HIGH_MU]),
                "high_mu": span([r["truth"]["friction"] for r in rows if r["truth"]["friction"] > HIGH_MU]),
@@ -262,7 +301,8 @@ def main() -> int:
           f"model misses by > {100 * MISSES:g} cm (smallest cut {summary['cut_min']:.1f}x); median held-out error after "
           f"the fit {100 * summary['after_m_median']:.1f} cm; converged {summary['converged']} of {len(rows)}; "
           f"misfit flagged on {summary['misfit_flagged']}")
-    result = {"benchmark": "calibration_twin", "contact": args.contact, "seed": args.seed, "minutes": args.minutes,
+    result = {"benchmark": "calibration_twin", "contact": args.contact, "fit_params": list(params), "seed": args.seed,
+              "minutes": args.minutes,
               "pose_noise_m": args.noise,
               "sweep_results": sweep_file.name if sweep else None, "summary": summary, "rovers": rows,
               "cores": os.cpu_count(), "time": time.strftime("%Y-%m-%d %H:%M:%S")}

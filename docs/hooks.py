@@ -513,10 +513,11 @@ def calibration_misfit() -> str:
                   ["---"] + ["---:"] * 5 + ["---:", "---", "---"], rows)
 
 
-def calibration_twin() -> str:
+def calibration_twin(name: str = "calibration_twin.json") -> str:
     """``calibration_twin.json``: each rover recorded in the MuJoCo twin and fitted in ours, beside the same rover
     recorded in ours (the sweep's row, where it ran it)."""
-    d = _load("calibration_twin.json")
+    d = _load(name)
+    rise = "friction_rise" in d.get("fit_params", [])
     rows = []
     for r in d["rovers"]:
         p, t, h, m = r["params"], r["truth"], r["held_out"], r.get("misfit") or {}
@@ -525,16 +526,24 @@ def calibration_twin() -> str:
                   f"{p['payload_mass']['error']:+.1f} kg", f"{1000 * p['wheel_radius']['error']:+.1f} mm"]
         cut = f"{h['cut']:.1f}×" + ("" if h["passes"] is None else " ✓" if h["passes"] else " ✗")
         ratios = " / ".join(f"{m['ratio'][c]:.1f}" for c in ("position", "wheel_speed", "effort") if c in m.get("ratio", {}))
-        o = r.get("ours")
+        o, turn = r.get("ours"), r["in_place_turn"]
         rows.append([r["rover"].replace("_", " "), (f"{t['friction']:.2f}, {t['torque_scale']:.2f}, "
                      f"{t['payload_mass']:.1f}, {1000 * t['wheel_radius']:.1f}"), *errors,
+                     *([f"{r['fitted']['friction_rise']:.2f}"] if rise else []),
                      f"{100 * h['before_m']:.1f} → {100 * h['after_m']:.1f} cm", cut, "yes" if r["converged"] else "no",
+                     f"{turn['twin']:.2f} / {turn['ours']:.2f} / {turn['ours_fitted']:.2f}",
                      f"{ratios}{': **misfit**' if m.get('flagged') else ''}",
                      "-" if o is None else f"{100 * o['held_out']['before_m']:.1f} → {100 * o['held_out']['after_m']:.1f} cm"])
     return _table(["rover", "truth: µ, torque, payload [kg], wheel [mm]", "µ error", "torque error", "payload error",
-                   "wheel error", "held-out error", "cut", "converged",
+                   "wheel error", *(["friction rise [s/m]"] if rise else []), "held-out error", "cut", "converged",
+                   "turn in place at 1 rad/s: twin / ours / ours fitted",
                    "model check (position / wheel speed / effort ÷ noise)", "the same rover in ours"],
-                  ["---", "---"] + ["---:"] * 6 + ["---", "---", "---:"], rows)
+                  ["---", "---"] + ["---:"] * (7 if rise else 6) + ["---", "---:", "---", "---:"], rows)
+
+
+def calibration_twin_friction_rise() -> str:
+    """``calibration_twin_friction_rise.json``: :func:`calibration_twin` with the friction's rise fitted too."""
+    return calibration_twin("calibration_twin_friction_rise.json")
 
 
 def _diff_gradients(kind: str, name: str = "diff_gradients.json") -> str:
@@ -841,6 +850,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "nav_throughput": nav_throughput,
     "calibration_misfit": calibration_misfit,
     "calibration_twin": calibration_twin,
+    "calibration_twin_friction_rise": calibration_twin_friction_rise,
     "mujoco_transfer_plain": lambda: mujoco_transfer("mujoco_transfer_plain.json"),
     "mujoco_transfer_truth_odometry": lambda: mujoco_transfer("mujoco_transfer_truth_odometry.json"),
     "mujoco_transfer_accel_odometry": lambda: mujoco_transfer("mujoco_transfer_accel_odometry.json"),

@@ -800,6 +800,9 @@ def _model_check(errors: dict, noise: dict[str, float], cfg: CalibrationConfig) 
         line += ("; the fit made the held-out path error worse" if worse else "")
         line += (". Something on this rover is not in the model (motor lag, a slope, an off-centre load, a latency "
                  f"over {cfg.max_latency:g} s ...): the fitted values absorb it, so do not trust them as measurements")
+        if "friction_rise" not in cfg.params:
+            line += ("; where brisk turns miss, a friction that rises with slip may be it (--params "
+                     f"{','.join(cfg.params)},friction_rise)")
     else:
         line = (f"model check: the held-out errors after the fit are {shown} the recording's noise (at most "
                 f"{cfg.misfit_ratio:g}x passes): no misfit seen")
