@@ -133,11 +133,11 @@ class ContactConfig:
     friction_rise: float = 0.0
     """How the wheels' sliding friction rises with slip speed [s/m]: a sliding contact's coefficient is
     ``mu (1 + friction_rise x slip)``, its slip speed [m/s] taken at the substep's start (0: Coulomb's constant
-    mu). Rubber's friction on hard ground rises with sliding speed over the slips of a skid turn (Grosch 1963), and
-    a contact that loses energy as its wheels slide harder (the MuJoCo twin's, whose wheels hop in brisk turns at
-    high mu) resists brisk turns more than slow ones: a rover near its torque limit then turns at a capped rate
-    where Coulomb's law lets it turn at any rate or not at all. Not drawn by the domain randomization; fitted by
-    ``atrv-calibrate --params ...,friction_rise`` (``docs/calibration.md``)."""
+    mu). Rubber's friction can rise with sliding speed (Grosch 1963), and a contact that loses energy as its wheels
+    slide harder (the MuJoCo twin's, whose wheels hop in brisk turns at high mu) resists brisk turns more than slow
+    ones: a rover near its torque limit then turns at a capped rate where Coulomb's law lets it turn at any rate or
+    not at all. Not drawn by the domain randomization; fitted by ``atrv-calibrate --params ...,friction_rise``
+    (``docs/calibration.md``)."""
     friction_law: str = "coulomb"
     """``"coulomb"``: the wheels' ground friction is solved at velocity level (stick and slide, as a
     real tyre on firm ground). ``"viscous"``: every contact uses the regularised law of releases
