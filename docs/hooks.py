@@ -541,6 +541,22 @@ def calibration_twin(name: str = "calibration_twin.json") -> str:
                   ["---", "---"] + ["---:"] * (7 if rise else 6) + ["---", "---:", "---", "---:"], rows)
 
 
+def calibration_twin_validation() -> str:
+    """``calibration_twin_seed1.json`` and ``calibration_twin_friction_rise_seed1.json``: rovers drawn from another
+    seed, fitted with the CLI's defaults and with the friction's rise, side by side."""
+    plain, rise = _load("calibration_twin_seed1.json"), _load("calibration_twin_friction_rise_seed1.json")
+    rows = []
+    for a, b in zip(plain["rovers"], rise["rovers"], strict=True):
+        t, ha, hb = a["truth"], a["held_out"], b["held_out"]
+        rows.append([a["rover"].replace("_", " "), (f"{t['friction']:.2f}, {t['torque_scale']:.2f}, "
+                     f"{t['payload_mass']:.1f}, {1000 * t['wheel_radius']:.1f}"), f"{100 * ha['before_m']:.1f} cm",
+                     f"{100 * ha['after_m']:.1f} cm ({ha['cut']:.1f}×)", f"{100 * hb['after_m']:.1f} cm ({hb['cut']:.1f}×)",
+                     f"{b['fitted']['friction_rise']:.2f}"])
+    return _table(["rover", "truth: µ, torque, payload [kg], wheel [mm]", "nominal model's held-out error",
+                   "after the default fit (cut)", "after the fit with the rise (cut)", "friction rise [s/m]"],
+                  ["---", "---", "---:", "---:", "---:", "---:"], rows)
+
+
 def calibration_twin_friction_rise() -> str:
     """``calibration_twin_friction_rise.json``: :func:`calibration_twin` with the friction's rise fitted too."""
     return calibration_twin("calibration_twin_friction_rise.json")
@@ -851,6 +867,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "calibration_misfit": calibration_misfit,
     "calibration_twin": calibration_twin,
     "calibration_twin_friction_rise": calibration_twin_friction_rise,
+    "calibration_twin_validation": calibration_twin_validation,
     "mujoco_transfer_plain": lambda: mujoco_transfer("mujoco_transfer_plain.json"),
     "mujoco_transfer_truth_odometry": lambda: mujoco_transfer("mujoco_transfer_truth_odometry.json"),
     "mujoco_transfer_accel_odometry": lambda: mujoco_transfer("mujoco_transfer_accel_odometry.json"),
