@@ -54,7 +54,9 @@ DEFAULT_ACTION_SCALE = 20.0
 DIFF_PARAMETERS = ("friction", "chassis_mass", "torque_scale", "speed_limit", "wheel_radius", "friction_rise")
 """The physical parameters a rollout differentiates, one value per world each: Coulomb mu [-], chassis
 mass [kg] (the URDF's plus a payload at its centre of mass), motor torque scale [-], motor no-load speed
-[rad/s] and wheel rolling radius [m] (:data:`atrv_warp.sim.params.PARAMETERS`)."""
+[rad/s] and wheel rolling radius [m] (:data:`atrv_warp.sim.params.PARAMETERS`), and the wheels' sliding friction's
+rise with slip speed [s/m] (:attr:`~atrv_warp.sim.config.ContactConfig.friction_rise`, one value for every world
+in a simulator)."""
 
 
 class NonFiniteGradientError(FloatingPointError):

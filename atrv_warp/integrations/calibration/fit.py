@@ -76,8 +76,9 @@ FIT_FIDELITY = {"friction": 0.003, "torque_scale": 0.0065, "payload_mass": 0.6, 
                 "wheel_radius": 0.0009, "friction_rise": 0.05}
 """How well the replay pins each parameter beyond the recording's noise [its unit]: the root-mean-square error of
 the calibration sweep's converged fits of rovers it modelled exactly (``benchmarks/calibration_sweep.py --seed 0``;
-the speed limit and the friction's rise, never fitted there, estimates), added in quadrature to the statistical standard error. It is the
-replay's own limit: its start is rebuilt from 20 Hz samples, and a slipping wheel amplifies any difference. Measured
+the speed limit and the friction's rise, never fitted there, estimates), added in quadrature to the statistical
+standard error. It is the replay's own limit: its start is rebuilt from 20 Hz samples, and a slipping wheel
+amplifies any difference. Measured
 before each segment's start took the recorded tilt, each wheel's speed and the driver's integral from the effort
 (``calibration_sweep_before_start_state.json``), which brought the fits closer: the intervals are now wider than
 the replay needs."""
