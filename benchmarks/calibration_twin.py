@@ -310,7 +310,9 @@ def main() -> int:
     print(f"wrote {path}")
     if args.figure:
         plot(rows, ROOT / args.figure,
-             title=f"our simulator fitted to {len(rows)} rovers recorded in the MuJoCo twin: blue within tolerance, red outside",
+             title=(f"our simulator fitted to {len(rows)} rovers recorded in the MuJoCo twin"
+                    f"{'' if params == DEFAULT_FIT else ' (also ' + ', '.join(sorted(set(params) - set(DEFAULT_FIT))) + ')'}"
+                    ": blue within tolerance, red outside"),
              extra={"wheel_radius": ("the twin's rolling radius", [r["truth"]["wheel_radius"] for r in rows],
                                      [r["twin_rolling_radius"] for r in rows])})
         print(f"figure: {args.figure}")
