@@ -44,8 +44,6 @@ from pathlib import Path
 from _common import write_results
 from calibration_sweep import RANGES, RESULTS, ROOT, draw_truths, fit_bag, judge, plot, record_bag, truth_toml
 
-from atrv_warp.integrations.calibration.fit import DEFAULT_FIT, FIT_PARAMETERS
-
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
@@ -101,9 +99,12 @@ def record_with_contact(folder: Path, truth: dict[str, float], drive_seed: int, 
 
 
 def run_rover(label: str, truth: dict[str, float], drive_seed: int, *, minutes: float, noise: float, work: Path,
-              env: dict, contact: str = "tyre", params: tuple[str, ...] = DEFAULT_FIT) -> dict:
-    """Record rover ``label`` in the twin and fit ``params`` to it (or read what an earlier run left in ``work``): its
-    row."""
+              env: dict, contact: str = "tyre", params: tuple[str, ...] | None = None) -> dict:
+    """Record rover ``label`` in the twin and fit ``params`` to it (default: the CLI's, ``DEFAULT_FIT``; or read what an
+    earlier run left in ``work``): its row."""
+    from atrv_warp.integrations.calibration.fit import DEFAULT_FIT
+
+    params = params or DEFAULT_FIT
     folder = work / label
     into = folder if params == DEFAULT_FIT else folder / ("fit_" + "_".join(params))
     done = into / "row.json"
@@ -212,6 +213,8 @@ def ours(sweep: dict | None, k: int) -> dict | None:
 
 
 def main() -> int:
+    from atrv_warp.integrations.calibration.fit import DEFAULT_FIT, FIT_PARAMETERS
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rovers", type=int, default=4, help="drawn rovers after the nominal one (%(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="the sweep's seed to draw them from (%(default)s)")
