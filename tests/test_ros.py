@@ -2,6 +2,7 @@
 
 import itertools
 import math
+import signal
 import subprocess
 import sys
 import time
@@ -51,8 +52,9 @@ def start_node(env, *params):
     return subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
-def stop(proc):
-    proc.send_signal(2)  # Ctrl-C
+def stop(proc, signum=signal.SIGINT):
+    """Ctrl-C (or ``signum``): the node ends its step loop and closes with its context alive."""
+    proc.send_signal(signum)
     try:
         out, _ = proc.communicate(timeout=20)
     except subprocess.TimeoutExpired:
@@ -106,6 +108,8 @@ def test_live_node_rate_stamps_and_commands(ros_env):
         out = stop(proc)
     assert "ignored unknown command 'fly to the moon'" in out
     assert proc.returncode == 0, out[-2000:]
+    # the last log line goes out on a live context (rclpy's own Ctrl-C handler shut it down under the node)
+    assert "stopped at sim time" in out and "context is invalid" not in out, out[-2000:]
 
 
 @pytest.mark.slow  # a live ROS 2 node
@@ -523,8 +527,9 @@ def test_latched_markers_show_the_nav_world_and_the_goal(ros_env):
         assert (disc.pose.position.x, disc.pose.position.y) == pytest.approx((3.0, 1.0))
     finally:
         client.close()
-        out = stop(proc)
+        out = stop(proc, signal.SIGTERM)  # as a launch system stops it
     assert proc.returncode == 0, out[-2000:]
+    assert "context is invalid" not in out, out[-2000:]
     from atrv_warp import ATRVjrEnv
 
     env = ATRVjrEnv(1, task="nav", seed=4)  # the node's own world: its first episode

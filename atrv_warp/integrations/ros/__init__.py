@@ -36,11 +36,21 @@ def run(args: list[str] | None = None) -> int:
     except ImportError:
         print(MISSING_ROS_MESSAGE, file=sys.stderr)
         return 2
-    rclpy.init(args=args)
+    import signal
+
+    from rclpy.signals import SignalHandlerOptions
+
+    # rclpy's own handlers would shut the context down under a running step, whose next publish then fails
+    # (exit 1 on a plain Ctrl-C). Until the simulator is built, Ctrl-C raises KeyboardInterrupt as usual; from
+    # then on Ctrl-C and SIGTERM only ask the step loop to stop, and the node closes with its context alive
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = RoverSimNode(args)
     try:
         node.setup()
-        node.spin_simulation()
+        stop_requested: list[int] = []
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, lambda received, _frame: stop_requested.append(received))
+        node.spin_simulation(stop_requested=stop_requested)
     except NodeConfigError:
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -11,6 +11,7 @@ import collections
 import json
 import math
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -385,6 +386,8 @@ class RoverSimNode(Node):
         """Simulator steps taken (:meth:`on_step_timer`; ``cmd_vel_delay`` counts in them)."""
         self.delay_steps = 0
         """``cmd_vel_delay`` in whole steps."""
+        self.stop_requested: Sequence = ()
+        """Non-empty once the process has been asked to stop (:meth:`spin_simulation`'s ``stop_requested``)."""
 
     def setup(self) -> None:
         self._check_parameters()
@@ -662,14 +665,19 @@ class RoverSimNode(Node):
             accel = (self.sim.lin_vel[rover.index] - rover.prev_vel) / dt
             rover.publish_state(ns, frames[rover.index], accel)
 
-    def spin_simulation(self, executor=None) -> None:
+    def spin_simulation(self, executor=None, stop_requested: Sequence = ()) -> None:
         """Step on a timer (period ``step_dt / real_time_factor``; 0 = as fast as possible) until
-        ``duration`` of sim time or shutdown; the executor serves the subscriptions between steps
-        (``executor``: one that also serves other nodes of this process, e.g. a scripted driver)."""
+        ``duration`` of sim time, shutdown, or ``stop_requested`` is non-empty (checked before each step: a
+        signal handler's list); the executor serves the subscriptions between steps (``executor``: one that
+        also serves other nodes of this process, e.g. a scripted driver)."""
         p, sim = self.params, self.sim
+        self.stop_requested = stop_requested
         first = self.rovers[0].pose_pub
-        while p["wait_for_subscribers"] > 0 and rclpy.ok() and first.get_subscription_count() < p["wait_for_subscribers"]:
+        while (p["wait_for_subscribers"] > 0 and rclpy.ok() and not stop_requested
+               and first.get_subscription_count() < p["wait_for_subscribers"]):
             rclpy.spin_once(self, timeout_sec=0.05)
+        if stop_requested:
+            return
         self.log.info(f"simulating {sim} ({len(self.rovers)} rover(s)) at real-time factor {p['real_time_factor']}, "
                       f"publishing every {self.every * sim.sim_cfg.step_dt:.3f} s of sim time, mode {p['mode']}")
         self.deadline = p["duration"] if p["duration"] > 0 else math.inf
@@ -693,6 +701,9 @@ class RoverSimNode(Node):
         the last, so the controller acts on it (its command is the episode's first action); the episode's last
         state goes out without ``/clock`` (nothing is left to act on), and nothing steps until the next
         ``reset_episode``, so a controller given its next goal meanwhile acts first on that episode's reset state."""
+        if self.stop_requested:
+            self.finish()
+            return
         for rover in self.rovers:
             if rover.pending_episode is not None:
                 self.start_episode(rover)
@@ -716,7 +727,12 @@ class RoverSimNode(Node):
             self.holding = ended and self.params["lockstep"]
             if not self.holding:
                 self.clock_pub.publish(Clock(clock=_stamp(self.stamp_ns())))
-        if self.sim.sim_time >= self.deadline - 1e-9 and not self.finished.done():
+        if self.sim.sim_time >= self.deadline - 1e-9:
+            self.finish()
+
+    def finish(self) -> None:
+        """End :meth:`spin_simulation`: no more steps."""
+        if not self.finished.done():
             self.step_timer.cancel()
             self.finished.set_result(True)
 
