@@ -14,6 +14,7 @@ is imported only when it is there.
 
 from __future__ import annotations
 
+import signal
 import sys
 
 __all__ = ["MISSING_ROS_MESSAGE", "run"]
@@ -31,25 +32,23 @@ def run(args: list[str] | None = None) -> int:
     try:
         import rclpy
         from rclpy.executors import ExternalShutdownException
+        from rclpy.signals import SignalHandlerOptions
 
         from atrv_warp.integrations.ros.node import NodeConfigError, RoverSimNode
     except ImportError:
         print(MISSING_ROS_MESSAGE, file=sys.stderr)
         return 2
-    import signal
-
-    from rclpy.signals import SignalHandlerOptions
-
     # rclpy's own handlers would shut the context down under a running step, whose next publish then fails
     # (exit 1 on a plain Ctrl-C). Until the simulator is built, Ctrl-C raises KeyboardInterrupt as usual; from
     # then on Ctrl-C and SIGTERM only ask the step loop to stop, and the node closes with its context alive
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = RoverSimNode(args)
+    stop_requested: list[int] = []
+    previous = {}
     try:
         node.setup()
-        stop_requested: list[int] = []
         for signum in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(signum, lambda received, _frame: stop_requested.append(received))
+            previous[signum] = signal.signal(signum, lambda received, _frame: stop_requested.append(received))
         node.spin_simulation(stop_requested=stop_requested)
     except NodeConfigError:
         return 2
@@ -58,4 +57,6 @@ def run(args: list[str] | None = None) -> int:
     finally:
         node.close()
         rclpy.try_shutdown()
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
     return 0
