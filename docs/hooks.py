@@ -9,7 +9,10 @@ A measured figure lives in its results file alone (``benchmarks/results/*.json``
   ``benchmarks/results/`` (or to the repository when it starts with ``docs/`` or ``benchmarks/``);
   ``KEY.PATH`` is dict keys and list indices joined by dots, and ``[field=value,other=value]`` picks the first
   list element with those fields; ``FORMAT`` is a Python format spec (``.1f``, ``,.0f``),
-  optional; ``.1%`` gives a percentage as the pages write it (``91.3 %``).
+  optional; ``.1%`` gives a percentage as the pages write it (``91.3 %``);
+- ``{{ verdict FILE:KEY.PATH OP BOUND | WHEN TRUE | WHEN FALSE }}`` inline: a page's verdict on one value (``OP``
+  one of ``>=``, ``>``, ``<=``, ``<``), so that "past the target" cannot outlive the figure it judges: it renders
+  the first text where the value at ``KEY.PATH`` compares so with ``BOUND``, the second where it does not.
 
 Every file a page cites is checked against the code as it is now (:func:`status`): the benchmark
 script's ``VERSION``, the dynamics fingerprint (``atrv_warp.sim.checks.dynamics_fingerprint``) and, for
@@ -35,6 +38,7 @@ import hashlib
 import itertools
 import json
 import math
+import operator
 import re
 import subprocess
 import sys
@@ -47,6 +51,9 @@ RESULTS = ROOT / "benchmarks" / "results"
 BENCHMARKS = ROOT / "benchmarks"
 PLACEHOLDER = re.compile(r"^\{\{ results_table (\w+) \}\}$", re.MULTILINE)
 RESULT = re.compile(r"\{\{ result (?P<file>[\w./-]+\.json):(?P<key>[^|}]+?)(?: \| (?P<fmt>[^}]*?))? \}\}")
+VERDICT = re.compile(r"\{\{ verdict (?P<file>[\w./-]+\.json):(?P<key>[^|}]+?) (?P<op>>=|<=|>|<) (?P<bound>[-+\d.e]+) "
+                     r"\| (?P<yes>[^|}]*?) \| (?P<no>[^|}]*?) \}\}")
+COMPARISONS = {">=": operator.ge, ">": operator.gt, "<=": operator.le, "<": operator.lt}
 HISTORICAL = re.compile(r"^\{\{ historical (?P<file>[\w./-]+\.json) \}\}$", re.MULTILINE)
 VERSION_LINE = re.compile(r"^VERSION = (\d+)$", re.MULTILINE)
 
@@ -211,6 +218,15 @@ def result(name: str, key: str, fmt: str = "") -> str:
         return format(value, fmt)
     except (TypeError, ValueError) as err:
         raise FigureError(f"results file {name}, key {key!r}: cannot format {value!r} as {fmt!r}") from err
+
+
+def verdict(name: str, key: str, op: str, bound: float, yes: str, no: str) -> str:
+    """``yes`` where the value at ``key`` in results file ``name`` compares with ``bound`` as ``op`` says, else
+    ``no``."""
+    value = lookup(_load(name), key, name=name)
+    if not isinstance(value, int | float) or isinstance(value, bool):
+        raise FigureError(f"results file {name}, key {key!r}: a verdict needs a number, got {value!r}")
+    return yes if COMPARISONS[op](value, bound) else no
 
 
 def _table(header: list[str], align: list[str], rows: list[list[str]]) -> str:
@@ -1054,8 +1070,12 @@ def render(markdown: str, page: str = "<page>") -> str:
         def value(match: re.Match) -> str:
             return result(match["file"], match["key"].strip(), (match["fmt"] or "").strip())
 
+        def judged(match: re.Match) -> str:
+            return verdict(match["file"], match["key"].strip(), match["op"], float(match["bound"]), match["yes"],
+                           match["no"])
+
         try:
-            out = RESULT.sub(value, PLACEHOLDER.sub(table, markdown))
+            out = VERDICT.sub(judged, RESULT.sub(value, PLACEHOLDER.sub(table, markdown)))
             out = COMMANDS_LINE.sub(lambda m: command_table(m.group(1).strip() if m.group(1) else None), out)
         except FigureError as err:
             raise FigureError(f"{page}: {err}") from err
@@ -1085,7 +1105,7 @@ def citations(markdown: str) -> list[str]:
         for name in PLACEHOLDER.findall(markdown):
             if name in TABLES:
                 TABLES[name]()
-        for m in RESULT.finditer(markdown):
+        for m in itertools.chain(RESULT.finditer(markdown), VERDICT.finditer(markdown)):
             _load(m["file"])
         return list(_cited)
     finally:

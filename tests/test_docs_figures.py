@@ -39,6 +39,24 @@ def test_a_current_figure_renders_from_its_file(hooks, tmp_path):
     assert hooks.render(page, "p.md") == "A 1,234, B 91.3 %, C 1024, D 64."
 
 
+def test_a_verdict_follows_its_figure(hooks, tmp_path):
+    """A page's verdict on a figure is drawn from the file with it: when the figure moves, so does the verdict."""
+    page = ("{{ result r.json:rows[n=1].success | .1% }}, {{ verdict r.json:rows[n=1].success >= 0.8 | past the target "
+            "| short of it }}; {{ verdict r.json:rows[n=1].success < 0.8 | under | not under }}.")
+    _write(tmp_path, "r.json", {"rows": [{"n": 1, "success": 0.805}]})
+    assert hooks.render(page, "p.md") == "80.5 %, past the target; not under."
+    _write(tmp_path, "r.json", {"rows": [{"n": 1, "success": 0.795}]})
+    assert hooks.render(page, "p.md") == "79.5 %, short of it; under."
+    _write(tmp_path, "old.json", {"x": 0.9}, dynamics="before")  # a verdict cites its file, so it goes stale too
+    with pytest.raises(hooks.FigureError, match=r"p\.md: cites old\.json, whose figures are stale"):
+        hooks.render("{{ verdict old.json:x > 0.5 | yes | no }}", "p.md")
+    assert hooks.citations("{{ verdict old.json:x > 0.5 | yes | no }}") == ["old.json"]
+    _write(tmp_path, "r.json", {"rows": [{"n": 1, "success": "many"}]})
+    with pytest.raises(hooks.FigureError, match=r"p\.md: results file r\.json, key 'rows\[n=1\]\.success': a verdict "
+                                                r"needs a number, got 'many'"):
+        hooks.render("{{ verdict r.json:rows[n=1].success >= 0.8 | yes | no }}", "p.md")
+
+
 def test_a_missing_file_or_key_names_the_page_file_and_key(hooks, tmp_path):
     _write(tmp_path, "r.json", {"rows": [{"n": 64}]})
     with pytest.raises(hooks.FigureError, match=r"p\.md: .*results file gone\.json not found"):
