@@ -32,7 +32,6 @@ Each rover's bag, report and console output stay in ``--work``; an interrupted r
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import math
 import os
@@ -70,6 +69,16 @@ def nominal_truth() -> dict[str, float]:
     return {p: float(getattr(contact if table == "contact" else rover, key)) for p, (_, _, table, key) in RANGES.items()}
 
 
+def configs(values: dict[str, float]):
+    """The :class:`~atrv_warp.sim.config.RoverConfig` and :class:`~atrv_warp.sim.config.ContactConfig` of fit
+    parameters' ``values`` (a truth, or a truth with fitted values over it), the others nominal."""
+    from atrv_warp.integrations.calibration.fit import sim_config_tables
+    from atrv_warp.sim.config import ContactConfig, RoverConfig
+
+    tables = sim_config_tables(values)
+    return RoverConfig(**tables["rover"]), ContactConfig(**tables["contact"])
+
+
 CONTACTS = {"tyre": None, "friction_pair": {"solreffriction": (0.87, 1.0), "impratio": 10.0}}
 """The twin's contact settings a run can take: MuJoCo's contact with the tyre's compliance (the twin's default, what
 ``atrv-calibrate --record-example --engine mujoco`` records), or that with the wheels' friction on pairs of their own
@@ -90,10 +99,8 @@ def record_with_contact(folder: Path, truth: dict[str, float], drive_seed: int, 
     """``folder/drive.mcap`` recorded in the twin with the ``contact`` settings of :data:`CONTACTS` other than the
     default, through the library the CLI calls (``record_twin_bag``), as the CLI would record it."""
     from atrv_warp.integrations.mujoco.record import record_twin_bag
-    from atrv_warp.sim.config import RoverConfig
 
-    rover = RoverConfig(torque_scale=truth["torque_scale"], payload_mass=truth["payload_mass"],
-                        wheel_radius=truth["wheel_radius"])
+    rover, _ = configs(truth)
     record_twin_bag(folder / "drive.mcap", minutes, seed=drive_seed, rover=rover, friction=truth["friction"],
                     truth_noise=noise, truth_yaw_noise=noise / 0.5, contact=twin_contact(contact))
 
@@ -143,10 +150,8 @@ def rolling_radius(truth: dict[str, float], speed: float = 0.5, seconds: float =
 
     from atrv_warp.integrations.mujoco import MujocoTwin
     from atrv_warp.integrations.mujoco.record import twin_driver
-    from atrv_warp.sim.config import RoverConfig
 
-    rover = RoverConfig(torque_scale=truth["torque_scale"], payload_mass=truth["payload_mass"],
-                        wheel_radius=truth["wheel_radius"])
+    rover, _ = configs(truth)
     twin = MujocoTwin(rover=rover, friction=truth["friction"], driver=twin_driver(), contact=twin_contact(contact))
     ratios = []
     for k in range(round(seconds / twin.sim_cfg.step_dt)):
@@ -170,19 +175,12 @@ def in_place_turn(truth: dict[str, float], rate: float = 1.0, seconds: float = 3
     from atrv_warp.integrations.mujoco import MujocoTwin
     from atrv_warp.integrations.mujoco.record import twin_driver
     from atrv_warp.sim import RoverSim
-    from atrv_warp.sim.config import ContactConfig, RoverConfig
 
-    rover = RoverConfig(torque_scale=truth["torque_scale"], payload_mass=truth["payload_mass"],
-                        wheel_radius=truth["wheel_radius"])
-    sims = [RoverSim(1, rover=rover, contact=ContactConfig(friction=truth["friction"]), driver=twin_driver())]
+    rover, truth_contact = configs(truth)
+    sims = [RoverSim(1, rover=rover, contact=truth_contact, driver=twin_driver())]
     if fitted:
-        values = {**truth, **fitted}
-        sims.append(RoverSim(1, rover=dataclasses.replace(rover, torque_scale=values["torque_scale"],
-                                                          payload_mass=values["payload_mass"],
-                                                          wheel_radius=values["wheel_radius"]),
-                             contact=ContactConfig(friction=values["friction"],
-                                                   friction_rise=values.get("friction_rise", 0.0)),
-                             driver=twin_driver()))
+        rover_fitted, contact_fitted = configs({**truth, **fitted})
+        sims.append(RoverSim(1, rover=rover_fitted, contact=contact_fitted, driver=twin_driver()))
     twin = MujocoTwin(rover=rover, friction=truth["friction"], driver=twin_driver(), contact=twin_contact(contact))
     steps, last = round(seconds / twin.sim_cfg.step_dt), round(1.0 / twin.sim_cfg.step_dt)
     ours, theirs, airborne = [[] for _ in sims], [], 0

@@ -32,7 +32,7 @@ from atrv_warp.sim.kernels.rover import MOTOR_TAPER_START
 
 __all__ = ["COMMAND_SOURCES", "CONFOUNDED", "DEFAULT_FIT", "FIT_FIDELITY", "FIT_PARAMETERS", "MISFIT_FLOOR", "MOTOR_PARAMETERS", "CalibrationConfig",
            "CalibrationError", "CalibrationResult", "Segments", "calibrate", "integral_from_effort", "make_segments",
-           "recording_noise", "replay_errors"]
+           "recording_noise", "replay_errors", "sim_config_tables"]
 
 
 @dataclass(frozen=True)
@@ -558,9 +558,20 @@ def _driver_record(driver: DriverConfig) -> dict[str, float]:
 
 
 def _nominal(rover: RoverConfig, contact: ContactConfig) -> dict[str, float]:
-    return {"friction": contact.friction, "torque_scale": rover.torque_scale, "payload_mass": rover.payload_mass,
-            "speed_limit": rover.wheel_speed_limit, "wheel_radius": rover.wheel_radius,
-            "friction_rise": contact.friction_rise}
+    """Every fit parameter's value in ``rover`` and ``contact``."""
+    configs = {"rover": rover, "contact": contact}
+    return {name: getattr(configs[p.table], p.key) for name, p in FIT_PARAMETERS.items()}
+
+
+def sim_config_tables(values: dict[str, float]) -> dict[str, dict[str, float]]:
+    """Fit parameters' ``values`` as a simulator config's tables, ``{"rover": {key: value}, "contact": {...}}``: the
+    keywords of :class:`~atrv_warp.sim.config.RoverConfig` and :class:`~atrv_warp.sim.config.ContactConfig`
+    (:data:`FIT_PARAMETERS`' ``table`` and ``key``)."""
+    tables: dict[str, dict[str, float]] = {"rover": {}, "contact": {}}
+    for name, value in values.items():
+        p = FIT_PARAMETERS[name]
+        tables[p.table][p.key] = value
+    return tables
 
 
 @dataclass

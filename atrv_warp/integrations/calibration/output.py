@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from atrv_warp.integrations.calibration.fit import FIT_PARAMETERS, CalibrationResult
+from atrv_warp.integrations.calibration.fit import FIT_PARAMETERS, CalibrationResult, sim_config_tables
 
 __all__ = ["format_report", "plot_paths", "write_report", "write_sim_config"]
 
@@ -29,10 +29,7 @@ def write_sim_config(path, result: CalibrationResult, source: str) -> None:
     ``[calibration]`` record (the bag, the errors, each value's standard error and spread, the driver the commands
     were replayed through) that the loader does not read. The driver's configuration is the robot's software, not its
     physics: the simulator takes it from ``RoverSim(driver=...)`` and the ROS node's parameters, never from this file."""
-    tables: dict[str, dict] = {"rover": {}, "contact": {}}
-    for name, value in result.values.items():
-        p = FIT_PARAMETERS[name]
-        tables[p.table][p.key] = value
+    tables = sim_config_tables(result.values)
     summary = result.error_summary()
     lines = [f"# Simulator config fitted by atrv-calibrate to {source}.",
              "# Use it with --sim-config FILE (train), sim_config=FILE (RoverSim, ATRVjrEnv), -p sim_config:=FILE (ROS).", ""]
