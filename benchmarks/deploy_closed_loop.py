@@ -56,9 +56,12 @@ SIM_PARAMETERS = ("task:=nav_deploy", "real_time_factor:=0.0", "lockstep:=true",
 """The simulator node's parameters: the evaluation's sensors (no noise, the task's 64-beam scan), at the policy's
 20 Hz, in lockstep with the controller: a step without the node's answer (``unanswered``, after 10 s) would act on
 the held command and put the answers a step late for the rest of the episode."""
-DEPLOY_PARAMETERS = ("use_sim_time:=true", "odom_topic:=odometry/filtered", "time_limit:=30.0", "goal_tolerance:=0.0")
+DEPLOY_PARAMETERS = ("use_sim_time:=true", "odom_topic:=odometry/filtered", "time_limit:=30.0", "goal_tolerance:=0.0",
+                     "odom_jump_margin:=1000.0")
 """The deploy node's: the simulator's clock, the fused odometry (encoders + gyro, what the robot observation is
-trained on), a time limit past the episode's (the simulator ends each episode first), and no goal tolerance:
+trained on), a time limit past the episode's (the simulator ends each episode first), no odometry-jump check (each
+episode's reset restarts the odometry under the goal sent for it, on purpose; on a robot such a jump aborts the
+goal), and no goal tolerance:
 ``evaluate`` ends an episode when the *true* position is within 1 m and its policy drives on until then, while a
 node judges the goal on its odometry, which wheel slip makes overshoot, and stops (at 0.25 m it stopped short in 35
 of 200 episodes, 15 of them reached by ``evaluate``: ``STOP_TOLERANCE``)."""

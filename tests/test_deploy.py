@@ -14,6 +14,7 @@ import itertools
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -203,13 +204,13 @@ def test_a_stale_sensor_stops_the_rover_on_ros_time(policy):
     assert c.tick(0.7).status["state"] == "active"
 
 
-def test_goals_in_another_frame_are_ignored_and_the_goal_ends_reached_or_at_the_time_limit(policy):
-    c = Controller(policy, Settings(goal_tolerance=1.0, time_limit=2.0))
+def test_goals_in_another_frame_are_refused_and_the_goal_ends_reached_or_at_the_time_limit(policy):
+    c = Controller(policy, Settings(goal_tolerance=1.0, time_limit=2.0, odom_jump_margin=5.0))  # the odometry hops
     c.on_odom(odom_msg(), 0.0)
     c.on_imu(imu_msg(), 0.0)
     c.on_scan(fov_scan(181, math.pi), 0.0)
     line = c.on_goal(goal_msg(3.0, 0.0, frame="map"), 0.0)
-    assert "frame 'map'" in line and "'odom'" in line and "Fixed Frame" in line
+    assert line.startswith("goal refused: it is in frame 'map'") and "'odom'" in line and "Fixed Frame" in line
     assert c.tick(0.05) == c.tick(0.1) and c.tick(0.15).command is None  # no goal: nothing published
     c.on_goal(goal_msg(3.0, 0.0), 0.2)
     assert c.tick(0.25).status["state"] == "active"
@@ -254,7 +255,7 @@ def test_a_goal_tolerance_of_zero_never_ends_the_goal_and_the_trace_holds_each_s
     assert record["observation"][:-6] == now[:-6] and record["observation"][-6:-2] == now[-4:]
     assert torch.allclose(torch.tensor(record["command"]), torch.tensor(record["action"]) * torch.tensor(policy.scale))
     assert c.trace(0.2, c.stop("shutdown"))["observation"] is None  # the policy did not drive this period
-    with pytest.raises(ValueError, match="stale_timeout must be > 0"):
+    with pytest.raises(ValueError, match=r"parameter stale_timeout must be a finite number > 0 \[s\], got 0.0"):
         Settings(stale_timeout=0.0)
 
 
@@ -297,7 +298,7 @@ def test_the_command_line_refuses_a_bad_policy_before_ros_starts(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "atrv_warp.deploy", str(garbage)], capture_output=True, text=True,
                           timeout=120, check=False)
     assert proc.returncode == 2, proc.stderr
-    line = (f"python -m atrv_warp.deploy: error: {garbage}: not an exported policy (torch.export.load: BadZipFile: "
+    line = (f"python -m atrv_warp.deploy: error: {garbage}: not an exported policy (not a torch.export archive: "
             "File is not a zip file)")
     assert proc.stderr.strip().splitlines() == [line], proc.stderr
     assert proc.stdout == ""
@@ -328,3 +329,145 @@ def test_the_node_names_the_base_limits_its_policy_was_trained_with(policy):
     assert "linear.x.max_acceleration 1 m/s²" in policy.describe()
     bare = dict(policy.contract, action={k: v for k, v in policy.contract["action"].items() if k != "base_limits"})
     assert "max_acceleration" not in dataclasses.replace(policy, contract=bare).describe()  # an older export: silent
+
+
+# ------------------------------------------------------------------ bad input: held still, never an exception
+
+def test_an_impossible_scan_holds_the_rover_naming_why_and_a_good_one_resumes(policy):
+    c = Controller(policy)
+    drive_ready(c, scan=fov_scan(181, math.pi))
+    assert c.tick(0.05).status["state"] == "active"
+    line = c.on_scan(scan_msg([3.0] * 181, -math.pi / 2, math.pi / 180, range_min=5.0, range_max=1.0), 0.06)
+    assert "impossible scan: range_min 5.0 m, range_max 1.0 m" in line, line
+    assert c.tick(0.1).command == (0.0, 0.0)
+    assert "no beams" not in line and "unusable scan geometry" in c.on_scan(scan_msg([], -1.0, 0.01), 0.11)
+    assert c.tick(0.15).command == (0.0, 0.0)
+    c.on_scan(fov_scan(181, math.pi), 0.16)
+    assert c.tick(0.2).status["state"] == "active"
+
+
+def test_an_odometry_jump_aborts_the_goal_and_the_next_goal_drives(policy):
+    c = Controller(policy, Settings(odom_jump_margin=0.5))
+    drive_ready(c, scan=fov_scan(181, math.pi))
+    assert c.tick(0.05).status["state"] == "active"
+    assert c.on_odom(odom_msg(x=0.1), 0.05) is None  # 0.1 m in 0.05 s: within 2 m/s x 0.05 s + 0.5 m
+    line = c.on_odom(odom_msg(x=1000.1), 0.1)
+    assert line.startswith("/odom jumped 1000.00 m in 0.05 s (more than the trained 2 m/s allows + odom_jump_margin "
+                           "0.5 m)") and line.endswith("the goal is aborted and the rover stops"), line
+    t = c.tick(0.1)
+    assert t.command == (0.0, 0.0) and t.status["state"] == "aborted" and t.status["reason"].startswith("/odom jumped")
+    assert t.log == () and c.goal is None  # the odometry's line said it
+    assert c.tick(0.15).command is None  # no goal: nothing more
+    c.on_odom(odom_msg(x=1000.15), 0.15)  # measured from the new odometry: no jump
+    assert c.on_goal(goal_msg(1005.0, 0.0), 0.15).startswith("goal (1005.00, 0.00)")
+    c.on_imu(imu_msg(), 0.15)
+    c.on_scan(fov_scan(181, math.pi), 0.15)
+    assert c.tick(0.2).status["state"] == "active"
+    # with no goal a jump is only said
+    idle = Controller(policy)
+    idle.on_odom(odom_msg(), 0.0)
+    assert idle.on_odom(odom_msg(y=50.0), 1.0).startswith("/odom jumped 50.00 m in 1.00 s")
+    assert idle.pending is None
+
+
+def test_a_refused_goal_stops_the_active_one(policy):
+    c = Controller(policy)
+    drive_ready(c, scan=fov_scan(181, math.pi))
+    assert c.tick(0.05).status["state"] == "active"
+    for k, (bad, why) in enumerate([(goal_msg(3.0, 0.0, frame="map"), "goal refused: it is in frame 'map'"),
+                                    (goal_msg(math.nan, 0.0), "goal refused: non-finite position (nan, 0.0)")]):
+        now = 0.1 + k
+        c.on_odom(odom_msg(), now)
+        c.on_imu(imu_msg(), now)
+        c.on_scan(fov_scan(181, math.pi), now)
+        c.on_goal(goal_msg(6.0, 2.0), now)
+        assert c.tick(now).status["state"] == "active"
+        line = c.on_goal(bad, now)
+        assert line.startswith(why) and line.endswith("the goal is aborted and the rover stops"), line
+        t = c.tick(now + 0.05)
+        assert t.command == (0.0, 0.0) and t.status["state"] == "aborted" and t.status["reason"].startswith(why)
+        assert c.tick(now + 0.1).command is None
+    # a goal past the farthest the policy observes (its goal_distance bound, 30 m) ends at the next period
+    c.on_odom(odom_msg(), 3.0)
+    c.on_imu(imu_msg(), 3.0)
+    c.on_scan(fov_scan(181, math.pi), 3.0)
+    c.on_goal(goal_msg(500.0, 0.0), 3.0)
+    t = c.tick(3.0)
+    assert t.status["state"] == "aborted" and t.command == (0.0, 0.0)
+    assert t.status["reason"] == "the goal is 500.0 m away, farther than max_goal_distance 30 m", t.status
+    near = Controller(policy, Settings(max_goal_distance=5.0))
+    drive_ready(near, scan=fov_scan(181, math.pi))  # a goal at 6.3 m
+    assert near.tick(0.05).status["reason"].endswith("farther than max_goal_distance 5 m")
+
+
+def test_a_policy_that_fails_or_a_callback_that_fails_holds_the_rover(policy):
+    c = Controller(policy)
+    drive_ready(c, scan=fov_scan(181, math.pi))
+    assert c.tick(0.05).status["state"] == "active"
+    broken = dataclasses.replace(policy, module=lambda obs: (_ for _ in ()).throw(AssertionError("Guard failed")))
+    c.policy = broken
+    t = c.tick(0.1)
+    assert t.command == (0.0, 0.0) and t.status["reason"] == "the policy failed (AssertionError: Guard failed)"
+    c.policy = policy
+    assert c.tick(0.15).status["state"] == "active"
+    t = c.fault("scan", "scan callback failed (TypeError: x)", 0.16)  # the node's guard, after an exception
+    assert t.command == (0.0, 0.0) and c.sensors["scan"].problem.startswith("scan callback failed")
+    assert c.tick(0.2).command == (0.0, 0.0)
+    c.on_scan(fov_scan(181, math.pi), 0.21)
+    assert c.tick(0.25).status["state"] == "active"
+    c.fault("goal", "goal callback failed", 0.26)
+    assert c.tick(0.3).status["state"] == "aborted"
+
+
+def test_parameters_are_checked_by_type_and_range_in_one_line():
+    from atrv_warp.deploy.parameters import ParameterError, check_parameters
+
+    assert check_parameters({"max_linear": 1})["max_linear"] == 1.0  # an integer is a number
+    assert check_parameters({})["goal_tolerance"] == 1.0
+    cases = {"max_linear": ("abc", "parameter max_linear must be a number [m/s], got 'abc' (str)"),
+             "enable_stamped_cmd_vel": ("maybe", "parameter enable_stamped_cmd_vel must be true or false, got 'maybe'"),
+             "cmd_vel_topic": ("", "parameter cmd_vel_topic must be a topic name (it is empty)"),
+             "odom_frame": ("", "parameter odom_frame must be a frame name (it is empty)"),
+             "base_frame": ("base link", "parameter base_frame must be a tf frame id without spaces"),
+             "stale_timeout": (0, "parameter stale_timeout must be a finite number > 0 [s], got 0 (an integer)"),
+             "time_limit": (-1.0, "parameter time_limit must be a finite number >= 0 [s], got -1.0"),
+             "goal_tolerance": (True, "parameter goal_tolerance must be a number [m], got True (bool)"),
+             "trace": (3, "parameter trace must be a string, got 3 (an integer)")}
+    for name, (value, message) in cases.items():
+        with pytest.raises(ParameterError) as err:
+            check_parameters({name: value})
+        assert str(err.value).startswith(message) and "\n" not in str(err.value), str(err.value)
+    with pytest.raises(ParameterError, match=r"unknown parameter\(s\) \['max_speed'\]"):
+        check_parameters({"max_speed": 1.0})
+
+
+def test_a_new_file_never_overwrites_one_and_a_bad_path_is_named(tmp_path):
+    from atrv_warp.core.files import OutputPathError, fresh_path
+
+    first, line = fresh_path(tmp_path / "trace.jsonl")
+    assert first == tmp_path / "trace.jsonl" and line is None and first.exists()
+    first.write_text("kept\n")
+    second, line = fresh_path(tmp_path / "trace.jsonl")
+    assert second == tmp_path / "trace-1.jsonl" and line == f"{first} exists and is kept: writing {second}"
+    assert first.read_text() == "kept\n"
+    for bad, why in [(tmp_path / "missing" / "t.jsonl", "does not exist"), (tmp_path, "is a folder"),
+                     (Path("/proc/atrv_trace.jsonl"), "cannot be written")]:
+        with pytest.raises(OutputPathError, match=why):
+            fresh_path(bad)
+
+
+def test_a_policy_whose_contract_does_not_fit_its_program_or_rate_is_refused(tmp_path, policy_file):
+    contract = json.loads(json.dumps(load_deployable(policy_file).contract))
+    path = write_policy(tmp_path / "ok.pt2", contract)
+    short = dict(contract, observation=contract["observation"][:-1])  # 29 fields for a 30-wide program
+    torch.export.save(torch.export.load(path), tmp_path / "short.pt2",
+                      extra_files={"atrv_warp.json": json.dumps(short)})
+    with pytest.raises(PolicyRefused, match=r"the contract lists 29 observation fields, but the program refuses a "
+                                            r"\(1, 29\) input"):
+        load_deployable(tmp_path / "short.pt2")
+    for rate in (1e9, 1e-6):
+        fast = dict(contract, rate_hz=rate, step_dt=1 / rate)
+        with pytest.raises(PolicyRefused, match=rf"control rate {re.escape(f'{rate:g}')} Hz is outside the 1-200 Hz"):
+            load_deployable(write_policy(tmp_path / "rate.pt2", fast))
+    with pytest.raises(PolicyRefused, match="rate_hz 20 disagrees with step_dt 0.1"):
+        load_deployable(write_policy(tmp_path / "dt.pt2", dict(contract, step_dt=0.1)))

@@ -39,10 +39,15 @@ class Robot:
             (time.monotonic(), m.linear.x, m.angular.z)), 100)
         self.node.create_subscription(String, f"{NS}/goal_status", lambda m: self.status.append(json.loads(m.data)), 100)
         self.imu_on = True
+        self.odom_x = 0.0
+        """The odometry's x [m] (a fault sets it far away, or to NaN)."""
+        self.scan_fault: dict = {}
+        """LaserScan fields to publish instead of the good scan's (``ranges``, ``range_min``…)."""
 
     def publish(self):
         odom = Odometry()
         odom.header.frame_id = "odom"
+        odom.pose.pose.position.x = self.odom_x
         odom.pose.pose.orientation.w = 1.0
         self.odom.publish(odom)
         if self.imu_on:
@@ -53,7 +58,20 @@ class Robot:
         scan.angle_min, scan.angle_increment = -math.pi / 2, math.pi / 180
         scan.range_min, scan.range_max = 0.1, 20.0
         scan.ranges = [3.0] * 181
+        for name, value in self.scan_fault.items():
+            setattr(scan, name, value)
         self.scan.publish(scan)
+
+    def send_goal(self, x: float, y: float, frame: str = "odom") -> None:
+        goal = PoseStamped()
+        goal.header.frame_id = frame
+        goal.pose.position.x, goal.pose.position.y = x, y
+        self.goal.publish(goal)
+
+    def driving(self) -> bool:
+        """The node's last status is active and its last command moves the rover."""
+        return bool(self.status) and self.status[-1]["state"] == "active" and bool(self.cmds) and \
+            abs(self.cmds[-1][1]) + abs(self.cmds[-1][2]) > 0
 
     def run(self, seconds, until=None):
         """Publish at 20 Hz for ``seconds`` (or until ``until()``); returns whether ``until`` came true."""
@@ -114,6 +132,125 @@ def test_a_stale_sensor_and_shutdown_stop_the_rover_in_a_namespace(ros_env, tmp_
     assert robot.status[-1]["state"] == "aborted" and robot.status[-1]["reason"] == "shutdown", robot.status[-1]
     assert out.count("holding still: /imu stale") == 1 and "resumed: driving by the policy" in out, out[-2000:]
     assert f"on {NS}/cmd_vel" in out and f"{NS}/goal_pose" in out
+
+
+@pytest.mark.slow  # a live ROS 2 node
+def test_no_input_ends_the_node_each_fault_stops_the_rover_and_good_input_drives_it_again(ros_env, tmp_path):
+    """Every fault of the hostile-user sweep, in sequences (bad then good, good then bad): the node stays up, commands
+    zero within 0.8 s of each fault (measured from the fault's first message), and drives again after it; what
+    crashed it before (one logging call site at two severities) is among them."""
+    policy = write_policy(tmp_path / "tiny.pt2", task_contract())
+    proc = subprocess.Popen([sys.executable, "-m", "atrv_warp.deploy", str(policy), "--ros-args", "-r",
+                             f"__ns:={NS}", "-p", "time_limit:=0.0"], env=ros_env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    robot = Robot()
+    faults = []
+
+    def stopped_after(name: str, fault) -> None:
+        """Apply ``fault``; the rover gets a zero command within 0.8 s and the node is still up."""
+        began = time.monotonic()
+        fault()
+        assert robot.run(3, lambda: any(t > began and v == 0.0 and w == 0.0 for t, v, w in robot.cmds)), name
+        first_zero = next(t for t, v, w in robot.cmds if t > began and v == 0.0 and w == 0.0)
+        faults.append((name, first_zero - began))
+        assert first_zero - began < 0.8, (name, first_zero - began)
+        robot.run(0.3)
+        assert proc.poll() is None, f"the node died after {name}"
+
+    def drives_again(name: str, fix=None) -> None:
+        if fix is not None:
+            fix()
+        assert robot.run(10, robot.driving), (name, robot.status[-2:])
+
+    try:
+        assert robot.run(120, lambda: robot.goal.get_subscription_count() > 0), "the node did not subscribe"
+        # a bad /odom before any goal, then a goal (crashed the node: warning, then info, at one call site)
+        robot.odom_x = math.nan
+        robot.run(0.5)
+        robot.odom_x = 0.0
+        robot.send_goal(20.0, 5.0)
+        drives_again("a goal after a bad /odom")
+        # a goal in another frame while driving cancels the goal; a valid goal drives again (crashed the node)
+        stopped_after("goal in map", lambda: robot.send_goal(3.0, 0.0, frame="map"))
+        assert robot.status[-1]["state"] == "aborted" and "frame 'map'" in robot.status[-1]["reason"]
+        drives_again("a valid goal after one in map", lambda: robot.send_goal(20.0, 5.0))
+        # a valid goal, then bad scans (a 0-beam scan crashed the node), then good ones
+        for name, fault in [("0-beam scan", {"ranges": []}), ("range_min > range_max", {"range_min": 5.0,
+                                                                                         "range_max": 1.0}),
+                            ("all-NaN scan", {"ranges": [math.nan] * 181})]:
+            stopped_after(name, lambda f=fault: robot.scan_fault.update(f))
+            assert robot.status[-1]["state"] == "holding", (name, robot.status[-1])
+            drives_again(name, robot.scan_fault.clear)
+        stopped_after("NaN odometry", lambda: setattr(robot, "odom_x", math.nan))
+        drives_again("NaN odometry", lambda: setattr(robot, "odom_x", 0.0))
+        # odometry that jumps 1 km: the goal is aborted; a new goal in the new odometry drives
+        stopped_after("odometry jump", lambda: setattr(robot, "odom_x", 1000.0))
+        assert robot.status[-1]["state"] == "aborted" and "/odom jumped" in robot.status[-1]["reason"]
+        drives_again("a goal after the jump", lambda: robot.send_goal(1020.0, 5.0))
+        stopped_after("a goal 1 km away", lambda: robot.send_goal(3000.0, 0.0))
+        assert "farther than max_goal_distance 30 m" in robot.status[-1]["reason"], robot.status[-1]
+        drives_again("a valid goal after a far one", lambda: robot.send_goal(1020.0, 5.0))
+        stopped_after("a NaN goal", lambda: robot.send_goal(math.nan, 0.0))
+        drives_again("a valid goal after a NaN one", lambda: robot.send_goal(1020.0, 5.0))
+        proc.send_signal(2)
+        robot.run(15, lambda: proc.poll() is not None)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        out = proc.communicate(timeout=30)[0]
+        robot.node.destroy_node()
+    print("\n".join(f"{name}: zero after {1000 * dt:.0f} ms" for name, dt in faults))
+    assert proc.returncode == 0 and "Traceback" not in out, out[-3000:]
+    assert len(faults) == 8
+    assert robot.cmds[-1][1:] == (0.0, 0.0)
+
+
+@pytest.mark.slow  # live ROS 2 contexts
+def test_every_parameter_type_and_unknown_keys_are_named_in_one_line(ros_env, tmp_path):
+    """Each bad parameter (its type, a value, a topic, a file, an unknown key in a --params-file) is one error line
+    naming it and exit 2 (here: the node's NodeConfigError, in this process, with the same rclpy)."""
+    from atrv_warp.deploy.controller import load_deployable
+    from atrv_warp.deploy.node import DeployNode, NodeConfigError
+
+    policy = load_deployable(write_policy(tmp_path / "tiny.pt2", task_contract()))
+    params = tmp_path / "params.yaml"
+    params.write_text("atrv_deploy:\n  ros__parameters:\n    max_linear: 0.5\n    max_speed: 1.0\n")
+    others = tmp_path / "others.yaml"
+    others.write_text("some_other_node:\n  ros__parameters:\n    anything: 1\n")
+    (tmp_path / "taken.jsonl").write_text("kept\n")
+    cases = [(["-p", "max_linear:=abc"], "parameter max_linear must be a number [m/s], got 'abc'"),
+             (["-p", "enable_stamped_cmd_vel:=maybe"], "parameter enable_stamped_cmd_vel must be true or false"),
+             (["-p", "scan_topic:=bad topic!"], "parameter scan_topic must be a ROS topic name, got 'bad topic!'"),
+             (["-p", "cmd_vel_topic:=''"], "parameter cmd_vel_topic must be a topic name (it is empty)"),
+             (["-p", "odom_frame:=''"], "parameter odom_frame must be a frame name (it is empty)"),
+             (["-p", f"trace:={tmp_path / 'missing' / 't.jsonl'}"], "parameter trace: "),
+             (["-p", "trace:=/proc/atrv_trace.jsonl"], "cannot be written"),
+             (["-p", "max_speed:=1.0"], "unknown parameter(s) max_speed;"),
+             (["--params-file", str(params)], f"unknown parameter(s) max_speed (in {params})")]
+    for args, message in cases:
+        ctx = rclpy.Context()
+        rclpy.init(args=["atrv-deploy", "--ros-args", *args], context=ctx)
+        try:
+            with pytest.raises(NodeConfigError) as err:
+                DeployNode(policy, ["--ros-args", *args], context=ctx)
+            assert message in str(err.value) and "\n" not in str(err.value), (args, str(err.value))
+        finally:
+            rclpy.shutdown(context=ctx)
+    for args in (["-p", "max_linear:=1"], ["--params-file", str(others)],
+                 ["-p", f"trace:={tmp_path / 'taken.jsonl'}"]):  # an integer, another node's file, a kept file
+        ctx = rclpy.Context()
+        rclpy.init(args=["atrv-deploy", "--ros-args", *args], context=ctx)
+        try:
+            node = DeployNode(policy, ["--ros-args", *args], context=ctx)
+            node.stop("test")
+            node.destroy_node()
+        finally:
+            rclpy.shutdown(context=ctx)
+    assert (tmp_path / "taken.jsonl").read_text() == "kept\n" and (tmp_path / "taken-1.jsonl").is_file()
+    proc = subprocess.run([sys.executable, "-m", "atrv_warp.deploy", str(tmp_path / "tiny.pt2"), "--ros-args", "-p",
+                           "max_linear:=abc"], env=ros_env, capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == 2 and "Traceback" not in proc.stdout + proc.stderr, proc.stdout + proc.stderr
+    assert [line for line in (proc.stdout + proc.stderr).splitlines() if "max_linear" in line], proc.stderr
 
 
 @pytest.mark.slow  # two live ROS 2 nodes and the simulator

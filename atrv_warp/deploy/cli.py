@@ -16,7 +16,7 @@ MISSING_ROS_MESSAGE = (
 EPILOG = """\
 Topics (relative: --ros-args -r __ns:=/rover_1 runs it for one rover of several):
   in:  scan (sensor_msgs/LaserScan), odom (nav_msgs/Odometry), imu (sensor_msgs/Imu),
-       goal_pose (geometry_msgs/PoseStamped in the odometry frame)
+       goal_pose (geometry_msgs/PoseStamped in the odometry frame; a goal it cannot take stops the rover)
   out: cmd_vel (geometry_msgs/Twist, or TwistStamped), goal_status (std_msgs/String, JSON)
 
 Examples:
@@ -69,7 +69,12 @@ def main(argv: list[str] | None = None) -> int:
     # Ctrl-C and SIGTERM end the spin here, with the context alive, so that the zero /cmd_vel still goes out. The
     # handler only asks the loop to stop: a KeyboardInterrupt raised inside rclpy's C++ take of a message surfaces as
     # a RuntimeError and would end the node with exit 1 after the stop
-    rclpy.init(args=["atrv-deploy", *argv[ros_at:]], signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=["atrv-deploy", *argv[ros_at:]], signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as err:  # noqa: BLE001 - rcl refuses malformed --ros-args with its own error types
+        print(f"{parser.prog}: error: the ROS arguments {' '.join(argv[ros_at + 1:])!r} are refused by ROS: "
+              f"{' '.join(str(err).split())[:300]}", file=sys.stderr)
+        return 2
     stop_requested: list[int] = []
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda received, _frame: stop_requested.append(received))
@@ -77,7 +82,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         node = DeployNode(policy, argv[ros_at:])
         while rclpy.ok() and not stop_requested:
-            rclpy.spin_once(node, timeout_sec=0.1)  # returns often, so a signal is taken within 0.1 s
+            try:
+                rclpy.spin_once(node, timeout_sec=0.1)  # returns often, so a signal is taken within 0.1 s
+            except (KeyboardInterrupt, ExternalShutdownException):
+                raise
+            except Exception as err:  # noqa: BLE001 - the executor's own failure holds the rover; the node stays up
+                node.on_executor_failure(err)
     except NodeConfigError:
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -14,8 +14,8 @@ Only torch and :mod:`atrv_warp.core` are imported here (``tests/test_layers.py``
 
 from __future__ import annotations
 
+import dataclasses
 import json
-import logging
 import math
 import time
 from collections.abc import Sequence
@@ -24,9 +24,11 @@ from pathlib import Path
 
 import torch
 
+from atrv_warp.core.files import ExportedFileError, load_exported_program
 from atrv_warp.core.observation import RobotObservation, Scan
+from atrv_warp.deploy.parameters import PARAMETER_BY_NAME
 
-__all__ = ["EXPORT_FORMAT", "STATES", "Controller", "Deployable", "PolicyRefused", "Settings", "Tick",
+__all__ = ["EXPORT_FORMAT", "RATE_RANGE_HZ", "STATES", "Controller", "Deployable", "PolicyRefused", "Settings", "Tick",
            "load_deployable", "read_imu", "read_odometry", "read_scan", "scan_geometry"]
 
 EXPORT_FORMAT = "atrv_warp.exported_policy/3"
@@ -83,30 +85,32 @@ class Deployable:
         return f"; trained on a base with {', '.join(cells)}" if cells else ""
 
 
+RATE_RANGE_HZ = (1.0, 200.0)
+"""The control rates [Hz] the node serves: a contract outside them is refused (a robot's base takes commands at
+tens of Hz; 10⁻⁶ Hz would never command, 10⁹ Hz would flood the bus)."""
+
+
 def load_deployable(path: str | Path) -> Deployable:
     """Open an exported policy and check that the node can serve its contract.
 
+    The file is checked before torch loads it (:func:`atrv_warp.core.files.load_exported_program`: nothing in it
+    can run code), and the program is run once on a zero observation of the contract's width.
+
     Raises:
-        PolicyRefused: One line naming the file and the problem: missing, not a ``torch.export`` archive, no or
-            another contract format, a ``torque`` action, an ``arena`` observation (its fields named), or a
-            contract the observation builder cannot read.
+        PolicyRefused: One line naming the file and the problem: missing, not a ``torch.export`` archive, refused
+            by the check, no or another contract format, a ``torque`` action, an ``arena`` observation (its fields
+            named), a contract the observation builder cannot read, a rate outside :data:`RATE_RANGE_HZ`, or a
+            program that does not take the contract's observation to a (1, 2) action.
     """
     path = str(path)
     if not Path(path).is_file():
         raise PolicyRefused(f"{path}: no such policy file (export one: python -m atrv_warp.export POLICY OUT.pt2)")
-    extra = {"atrv_warp.json": ""}
-    quiet = logging.getLogger("torch.export")  # it logs a traceback of its own before raising
-    level = quiet.level
-    quiet.setLevel(logging.CRITICAL)
     try:
-        program = torch.export.load(path, extra_files=extra)
-    except Exception as err:  # noqa: BLE001 - torch raises many kinds (zip, pickle, schema) on a file that is no archive
-        raise PolicyRefused(f"{path}: not an exported policy (torch.export.load: {type(err).__name__}: "
-                            f"{' '.join(str(err).split())[:160]})") from None
-    finally:
-        quiet.setLevel(level)
+        program, extra = load_exported_program(path)
+    except ExportedFileError as err:
+        raise PolicyRefused(str(err)) from None
     try:
-        contract = json.loads(extra["atrv_warp.json"])
+        contract = json.loads(extra.get("atrv_warp.json", ""))
     except json.JSONDecodeError:
         raise PolicyRefused(f"{path}: no atrv_warp.json contract in the file (export it with "
                             "python -m atrv_warp.export)") from None
@@ -116,12 +120,12 @@ def load_deployable(path: str | Path) -> Deployable:
                             "again (python -m atrv_warp.export POLICY OUT.pt2)")
     action = contract.get("action") or {}
     if action.get("kind") != "twist":
-        raise PolicyRefused(f"{path}: a {action.get('kind')!r} policy ({', '.join(action.get('names', []))} "
-                            f"[{', '.join(action.get('units', []))}]); the node commands /cmd_vel and serves 'twist' "
-                            "policies only (task nav_deploy)")
+        raise PolicyRefused(f"{path}: a {action.get('kind')!r} policy ({', '.join(map(str, action.get('names', [])))} "
+                            f"[{', '.join(map(str, action.get('units', [])))}]); the node commands /cmd_vel and serves "
+                            "'twist' policies only (task nav_deploy)")
     kind = contract.get("observation_kind", "arena")
     if kind != "robot":
-        names = [f.get("name") for f in contract.get("observation", [])]
+        names = [f.get("name") if isinstance(f, dict) else f for f in contract.get("observation", [])]
         raise PolicyRefused(f"{path}: the policy observes the {kind!r} observation ({', '.join(map(str, names[:8]))}"
                             f"{', …' if len(names) > 8 else ''}), which a robot does not publish; the node serves "
                             "'robot' observations (task nav_deploy)")
@@ -129,11 +133,30 @@ def load_deployable(path: str | Path) -> Deployable:
         observation = RobotObservation.from_contract(contract)
         scale = tuple(float(v) for v in action["scale"])
         rate = float(contract["rate_hz"])
-    except (ValueError, KeyError, TypeError) as err:
-        raise PolicyRefused(f"{path}: {err}") from None
-    if len(scale) != 2 or not all(math.isfinite(v) and v > 0 for v in scale) or not (math.isfinite(rate) and rate > 0):
-        raise PolicyRefused(f"{path}: action scale {list(scale)} and rate {rate} Hz must be finite and > 0")
-    return Deployable(path, program.module(), contract, observation, scale, rate)
+    except (ValueError, KeyError, TypeError, AttributeError) as err:
+        raise PolicyRefused(f"{path}: a contract the node cannot read ({type(err).__name__}: {err})") from None
+    if len(scale) != 2 or not all(math.isfinite(v) and v > 0 for v in scale):
+        raise PolicyRefused(f"{path}: action scale {list(scale)} must be two finite numbers > 0")
+    low, high = RATE_RANGE_HZ
+    if not (math.isfinite(rate) and low <= rate <= high):
+        raise PolicyRefused(f"{path}: control rate {rate:g} Hz is outside the {low:g}-{high:g} Hz the node serves")
+    step_dt = contract.get("step_dt")
+    if step_dt is not None and not (isinstance(step_dt, (int, float)) and math.isclose(rate * step_dt, 1.0,
+                                                                                         rel_tol=1e-6)):
+        raise PolicyRefused(f"{path}: rate_hz {rate:g} disagrees with step_dt {step_dt!r} s (the period, 1 / rate_hz)")
+    module = program.module()
+    width = len(observation.fields)
+    try:
+        with torch.no_grad():
+            out = module(torch.zeros(1, width))
+    except Exception as err:  # noqa: BLE001 - any failure here is a program that does not fit its contract
+        raise PolicyRefused(f"{path}: the contract lists {width} observation fields, but the program refuses a "
+                            f"(1, {width}) input ({type(err).__name__}: {' '.join(str(err).split())[:120]})") from None
+    if not isinstance(out, torch.Tensor) or tuple(out.shape) != (1, 2) or not bool(torch.isfinite(out).all()):
+        got = tuple(out.shape) if isinstance(out, torch.Tensor) else type(out).__name__
+        raise PolicyRefused(f"{path}: the program maps a (1, {width}) observation to {got}, not a finite (1, 2) "
+                            "action")
+    return Deployable(path, module, contract, observation, scale, rate)
 
 
 # ------------------------------------------------------------------ reading messages
@@ -192,6 +215,9 @@ def read_scan(msg, observation: RobotObservation) -> Scan:
         raise ValueError(f"unusable scan geometry: {len(msg.ranges)} beams, angle_min {msg.angle_min}, "
                          f"angle_increment {msg.angle_increment} (need > 0: counter-clockwise beams), range "
                          f"[{msg.range_min}, {msg.range_max}] m")
+    if not 0 <= msg.range_min < msg.range_max:
+        raise ValueError(f"impossible scan: range_min {msg.range_min} m, range_max {msg.range_max} m (need 0 <= "
+                         "range_min < range_max)")
     sectors = observation.sectors
     last = msg.angle_min + msg.angle_increment * (len(msg.ranges) - 1)
     if sectors is not None and not sectors.covered_by(msg.angle_min, last):
@@ -228,16 +254,16 @@ class Settings:
     """A sensor older than this (ROS time since its last message) stops the rover [s]."""
     time_limit: float = 60.0
     """A goal not reached in this long (ROS time) is aborted [s]; 0 = no limit."""
+    max_goal_distance: float = 0.0
+    """A goal farther than this from the rover is aborted at once, and stops the rover [m]; 0 = the farthest goal
+    the policy observes (its contract's ``goal_distance`` bound)."""
+    odom_jump_margin: float = 0.5
+    """Odometry that moves farther between two messages than the trained speed allows in the time between them,
+    plus this margin, has jumped (reset, or a broken estimate): the goal is aborted [m]."""
 
     def __post_init__(self):
-        for name in ("goal_tolerance", "max_linear", "max_angular", "stale_timeout", "time_limit"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
-                raise ValueError(f"parameter {name} must be a finite number >= 0, got {value!r}")
-        if not self.stale_timeout > 0:
-            raise ValueError("parameter stale_timeout must be > 0")
-        if not self.odom_frame:
-            raise ValueError("parameter odom_frame must name the odometry frame (e.g. odom)")
+        for f in dataclasses.fields(self):  # each field is the node parameter of its name, checked as the node does
+            PARAMETER_BY_NAME[f.name].check(getattr(self, f.name))
 
 
 @dataclass
@@ -273,7 +299,10 @@ class Controller:
     A goal drives the rover until it is reached (``goal_tolerance``, on the odometry), the ``time_limit`` passes,
     :meth:`stop` is called or a new goal replaces it. While a sensor the policy needs is missing, older than
     ``stale_timeout``, non-finite, or a scan unusable (no valid beam, a field of view short of the policy's
-    sectors), the rover is held still with zero commands and resumes by itself when they are valid again.
+    sectors, ``range_min > range_max``), the rover is held still with zero commands and resumes by itself when they
+    are valid again. A goal that cannot be taken (another frame, non-finite, farther than ``max_goal_distance``)
+    and odometry that jumps farther than the trained speed allows (``odom_jump_margin``) end the active goal: the
+    next period publishes zero and the aborted status, and the rover waits for a new goal.
     """
 
     def __init__(self, policy: Deployable, settings: Settings | None = None):
@@ -296,6 +325,13 @@ class Controller:
         """The policy's input (D,) at the last step it drove (float32)."""
         self.last_action: list[float] | None = None
         """The policy's action at the last step it drove, in [-1, 1] (before scaling and clamps)."""
+        self.pending: Tick | None = None
+        """An end decided between periods (a refused goal, an odometry jump), published by the next :meth:`tick`."""
+        self.odom_fix: tuple[float, float, float] | None = None
+        """The last valid odometry's (x [m], y [m], time [s]): what a jump is measured from."""
+        bound = {f.name: f.high for f in policy.observation.fields}.get("goal_distance", math.inf)
+        self.max_goal_distance = self.settings.max_goal_distance or bound
+        """Farther goals are aborted [m] (``max_goal_distance``, or the policy's ``goal_distance`` bound)."""
 
     # ---------------------------------------------------------------- messages
     def on_odom(self, msg, now: float) -> str | None:
@@ -305,9 +341,32 @@ class Controller:
             return self._store("odom", None, now, f"/odom is in frame {frame!r}, not the odom_frame "
                                f"{self.settings.odom_frame!r}: set -p odom_frame:={frame or '<frame>'}")
         try:
-            return self._store("odom", read_odometry(msg), now, None, msg)
+            odometry = read_odometry(msg)
         except ValueError as err:
             return self._store("odom", None, now, str(err), msg)
+        line = self._store("odom", odometry, now, None, msg)
+        jump = self._jump(odometry[0], now, self.sensors["odom"].stamp)
+        return self._cancel(jump) if jump else line
+
+    def _jump(self, pose: Sequence[float], now: float, stamp: float | None) -> str | None:
+        """Why the odometry's move since the last valid message is impossible for the rover, or None."""
+        x, y, t = pose[0], pose[1], stamp if stamp else now
+        fix, self.odom_fix = self.odom_fix, (x, y, t)
+        if fix is None:
+            return None
+        dt = max(t - fix[2], 0.0)
+        moved, allowed = math.hypot(x - fix[0], y - fix[1]), self.policy.scale[0] * dt + self.settings.odom_jump_margin
+        if moved <= allowed:
+            return None
+        return (f"/odom jumped {moved:.2f} m in {dt:.2f} s (more than the trained {self.policy.scale[0]:g} m/s allows "
+                f"+ odom_jump_margin {self.settings.odom_jump_margin:g} m): an odometry reset moves the goal's frame")
+
+    def _cancel(self, reason: str) -> str:
+        """End the active goal for ``reason`` at the next period (zero command, aborted status); the line to log."""
+        if self.goal is None:
+            return reason
+        self.pending = self._end("aborted", reason, log=False)
+        return f"{reason}; the goal is aborted and the rover stops"
 
     def on_imu(self, msg, now: float) -> str | None:
         """A ``sensor_msgs/Imu``; one line to log when it becomes unusable."""
@@ -338,19 +397,30 @@ class Controller:
         return None
 
     def on_goal(self, msg, now: float) -> str:
-        """A ``geometry_msgs/PoseStamped`` goal; returns the line to log (taken, or why it is ignored)."""
+        """A ``geometry_msgs/PoseStamped`` goal; returns the line to log (taken, or why it is refused). A refused goal
+        ends the active one (the rover stops), as a new goal that is taken replaces it."""
         frame, p = msg.header.frame_id, msg.pose.position
         if frame != self.settings.odom_frame:
-            return (f"goal ignored: it is in frame {frame!r}; send it in the odometry frame "
-                    f"{self.settings.odom_frame!r} (in RViz, set the Fixed Frame to {self.settings.odom_frame!r} "
-                    "before using 2D Goal Pose)")
+            return self._cancel(f"goal refused: it is in frame {frame!r}; send it in the odometry frame "
+                                f"{self.settings.odom_frame!r} (in RViz, set the Fixed Frame to "
+                                f"{self.settings.odom_frame!r} before using 2D Goal Pose)")
         if not (math.isfinite(p.x) and math.isfinite(p.y)):
-            return f"goal ignored: non-finite position ({p.x}, {p.y})"
+            return self._cancel(f"goal refused: non-finite position ({p.x}, {p.y})")
         self.goal, self.goal_time = (float(p.x), float(p.y)), now
         self.steps = self.clipped_steps = 0
-        self.hold_reason = None
+        self.hold_reason, self.pending = None, None
         self.history.zero_()
         return f"goal ({p.x:.2f}, {p.y:.2f}) in {frame}: driving"
+
+    def fault(self, source: str, reason: str, now: float) -> Tick:
+        """A callback that failed (``source``: a sensor's name, ``goal`` or ``tick``): its sensor is unusable until
+        its next good message, a goal that may have been half taken is ended, and the rover holds still now."""
+        if source in self.sensors:
+            self._store(source, None, now, reason)
+        elif self.goal is not None and source == "goal":
+            self.pending = self._end("aborted", reason, log=False)
+        self.hold_reason = f"fault: {source}"
+        return Tick((0.0, 0.0), self.status("holding", reason) if self.goal is not None else None)
 
     # ---------------------------------------------------------------- the control period
     def status(self, state: str, reason: str = "") -> dict:
@@ -370,6 +440,9 @@ class Controller:
             for s in self.sensors.values():
                 s.value = s.received = s.problem = None
         self.last_time = now
+        if self.pending is not None:
+            tick, self.pending = self.pending, None
+            return tick
         if self.goal is None:
             return Tick(None, None)
         limit = self.settings.time_limit
@@ -391,6 +464,9 @@ class Controller:
         if reasons:
             return self._hold("; ".join(reasons), "; ".join(keys), quiet)
         status = self.status("active")
+        if status["distance"] > self.max_goal_distance:
+            return self._end("aborted", f"the goal is {status['distance']:.1f} m away, farther than "
+                                        f"max_goal_distance {self.max_goal_distance:g} m")
         if self.settings.goal_tolerance and status["distance"] < self.settings.goal_tolerance:
             return self._end("reached", f"within {self.settings.goal_tolerance:g} m")
         start = time.perf_counter()
@@ -398,6 +474,9 @@ class Controller:
             action = self._act()
         except ValueError as err:
             return self._hold(f"observation: {err}", "observation")
+        except Exception as err:  # noqa: BLE001 - a policy that fails on some input holds the rover, never ends the node
+            return self._hold(f"the policy failed ({type(err).__name__}: {' '.join(str(err).split())[:120]})",
+                              "policy failed")
         self.compute_ms = 1e3 * (time.perf_counter() - start)
         if not all(math.isfinite(a) for a in action):
             return self._hold(f"the policy gave a non-finite action {action}", "non-finite action")
@@ -468,8 +547,8 @@ class Controller:
         self._remember((0.0, 0.0))
         return Tick((0.0, 0.0), self.status("holding", reason), log)
 
-    def _end(self, state: str, reason: str) -> Tick:
+    def _end(self, state: str, reason: str, *, log: bool = True) -> Tick:
         status = self.status(state, reason)
         self.goal, self.hold_reason = None, None
         line = f"goal {state}: {reason} ({status['steps']} steps, {status['clipped_steps']} clipped)"
-        return Tick((0.0, 0.0), status, (line,))
+        return Tick((0.0, 0.0), status, (line,) if log else ())

@@ -4,23 +4,39 @@
 its :class:`~atrv_warp.deploy.controller.Controller`, and on a timer at the policy's rate (ROS time: with
 ``use_sim_time`` a simulator's ``/clock`` paces it) publishes the controller's ``cmd_vel`` and ``goal_status``.
 Topic names are relative, so ``--ros-args -r __ns:=/rover_1`` runs it for one rover among several.
+
+No input ends the node: every callback runs inside a guard (:meth:`DeployNode.guarded`), so that a failure is one
+log line and a zero command, never an exception out of the executor, as Nav2's controller server publishes zero,
+aborts the goal and stays up. rclpy ties a logging call site to one severity, so each severity has its own.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
+from rclpy.expand_topic_name import expand_topic_name
 from rclpy.node import Node
+from rclpy.parameter import parameter_dict_from_yaml_file
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.validate_topic_name import validate_topic_name
 from sensor_msgs.msg import Imu, LaserScan
 from std_msgs.msg import String
 
+from atrv_warp.core.files import OutputPathError, fresh_path
 from atrv_warp.deploy.controller import Controller, Deployable, Settings, Tick
-from atrv_warp.deploy.parameters import PARAMETERS, unknown_parameters
+from atrv_warp.deploy.parameters import (
+    PARAMETERS,
+    ParameterError,
+    check_parameters,
+    params_files,
+    unknown_parameters,
+)
 
 __all__ = ["DeployNode", "NodeConfigError"]
 
@@ -33,37 +49,50 @@ class DeployNode(Node):
     """An exported policy as a ROS 2 controller (parameters: :data:`atrv_warp.deploy.parameters.PARAMETERS`).
 
     Raises:
-        NodeConfigError: An unknown parameter or a bad value, logged in one line naming it.
+        NodeConfigError: An unknown parameter (given with ``-p`` or in a ``--params-file``) or a bad value, logged in
+            one line naming it.
     """
 
-    def __init__(self, policy: Deployable, args: list[str] | None = None):
-        super().__init__("atrv_deploy")
-        self.params = {name: self.declare_parameter(name, default, ParameterDescriptor(description=text)).value
-                       for name, default, text in PARAMETERS}
+    def __init__(self, policy: Deployable, args: list[str] | None = None, **node_kwargs):
+        super().__init__("atrv_deploy", **node_kwargs)
         self.log = self.get_logger()
-        p = self.params
-        unknown = unknown_parameters(args)
-        if unknown:
-            self._fail(f"unknown parameter(s) {unknown}; known: {sorted(n for n, _, _ in PARAMETERS)}")
+        self.trace = None
+        self._said: str | None = None
+        """The last failure line logged (a failure repeated every period is said once)."""
+        dynamic = ParameterDescriptor(dynamic_typing=True)  # any type in; check_parameters names a wrong one
+        given = {p.name: self.declare_parameter(p.name, p.default, dynamic).value for p in PARAMETERS}
         try:
-            settings = Settings(odom_frame=p["odom_frame"], goal_tolerance=p["goal_tolerance"],
-                                max_linear=p["max_linear"], max_angular=p["max_angular"],
-                                stale_timeout=p["stale_timeout"], time_limit=p["time_limit"])
-        except ValueError as err:
+            unknown = unknown_parameters(args, self._params_file_names(args))
+            if unknown:
+                raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; known: "
+                                     f"{', '.join(p.name for p in PARAMETERS)}")
+            self.params = p = check_parameters(given)
+            for name in (q.name for q in PARAMETERS if q.kind == "topic"):
+                self._check_topic(name, p[name])
+            settings = Settings(**{f.name: p[f.name] for f in dataclasses.fields(Settings)})
+        except ParameterError as err:
             self._fail(str(err))
         self.policy = policy
         self.controller = Controller(policy, settings)
-        self.stamped = bool(p["enable_stamped_cmd_vel"])
+        self.stamped = p["enable_stamped_cmd_vel"]
         self.cmd_pub = self.create_publisher(TwistStamped if self.stamped else Twist, p["cmd_vel_topic"], 10)
         self.status_pub = self.create_publisher(String, p["status_topic"], 10)
         sensors = qos_profile_sensor_data  # best effort: matches a reliable publisher and a sensor driver's
-        self.create_subscription(Odometry, p["odom_topic"], self.on_odom, sensors)
-        self.create_subscription(Imu, p["imu_topic"], self.on_imu, sensors)
+        guard = self.guarded
+        self.create_subscription(Odometry, p["odom_topic"], guard("odom", self.controller.on_odom), sensors)
+        self.create_subscription(Imu, p["imu_topic"], guard("imu", self.controller.on_imu), sensors)
         if "scan" in self.controller.sensors:
-            self.create_subscription(LaserScan, p["scan_topic"], self.on_scan, sensors)
-        self.create_subscription(PoseStamped, p["goal_topic"], self.on_goal,
+            self.create_subscription(LaserScan, p["scan_topic"], guard("scan", self.controller.on_scan), sensors)
+        self.create_subscription(PoseStamped, p["goal_topic"], guard("goal", self.controller.on_goal),
                                  QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
-        self.trace = open(p["trace"], "w", encoding="utf-8") if p["trace"] else None  # noqa: SIM115 - closed in stop
+        if p["trace"]:
+            try:
+                path, line = fresh_path(p["trace"])
+            except OutputPathError as err:
+                self._fail(f"parameter trace: {err}")
+            if line:
+                self.log.warning(line)
+            self.trace = path.open("w", encoding="utf-8")
         self.timer = self.create_timer(policy.period, self.on_tick)
         clamp = ""
         if settings.max_linear or settings.max_angular:
@@ -74,38 +103,90 @@ class DeployNode(Node):
                       f"{self.cmd_pub.topic_name}, goals in {settings.odom_frame!r} on "
                       f"{self.resolve_topic_name(p['goal_topic'])}{clamp}")
 
+    # ---------------------------------------------------------------- parameters
+    def _params_file_names(self, args: list[str] | None) -> dict[str, list[str]]:
+        """Each ``--params-file``'s parameter names for this node (its name, namespace or ``/**``)."""
+        found = {}
+        for file in params_files(args):
+            try:
+                found[file] = list(parameter_dict_from_yaml_file(file, use_wildcard=True,
+                                                                 target_nodes=[self.get_fully_qualified_name()]))
+            except RuntimeError as err:
+                if "does not contain any valid parameters" not in str(err):
+                    raise ParameterError(f"--params-file {file}: {err}") from None
+                found[file] = []  # a file for other nodes
+            except (OSError, ValueError, AttributeError, TypeError) as err:  # unreadable, or YAML of another shape
+                raise ParameterError(f"--params-file {file}: not a ROS parameter file ({err})") from None
+        return found
+
+    def _check_topic(self, name: str, topic: str) -> None:
+        try:
+            validate_topic_name(expand_topic_name(topic, self.get_name(), self.get_namespace()))
+        except Exception as err:  # noqa: BLE001 - rclpy's name checks raise several kinds; each is a bad name
+            raise ParameterError(f"parameter {name} must be a ROS topic name, got {topic!r}: "
+                                 f"{' '.join(str(err).split())[:160]}") from None
+
     def _fail(self, message: str):
         self.log.error(message)
         raise NodeConfigError(message)
 
+    # ---------------------------------------------------------------- callbacks
     def now(self) -> float:
         """ROS time [s] (simulation time under ``use_sim_time``)."""
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _say(self, line: str | None, level: str = "warning") -> None:
-        if line:
-            getattr(self.log, level)(line)
+    def guarded(self, source: str, handle):
+        """A subscription callback: ``handle(msg, now)``'s line logged (``info`` for a goal taken, else ``warning``);
+        any exception it raises becomes one ``error`` line, the controller's :meth:`~Controller.fault` (the
+        ``source`` sensor unusable until its next good message) and a zero command."""
 
-    def on_odom(self, msg: Odometry) -> None:
-        self._say(self.controller.on_odom(msg, self.now()))
+        def callback(msg) -> None:
+            now = self.now()
+            try:
+                line = handle(msg, now)
+            except Exception as err:  # noqa: BLE001 - no message may end the node
+                self._failed(source, err, now)
+                return
+            if line and line.startswith("goal ("):
+                self.log.info(line)
+            elif line:
+                self.log.warning(line)
 
-    def on_imu(self, msg: Imu) -> None:
-        self._say(self.controller.on_imu(msg, self.now()))
-
-    def on_scan(self, msg: LaserScan) -> None:
-        self._say(self.controller.on_scan(msg, self.now()))
-
-    def on_goal(self, msg: PoseStamped) -> None:
-        line = self.controller.on_goal(msg, self.now())
-        self._say(line, "info" if line.startswith("goal (") else "warning")
+        return callback
 
     def on_tick(self) -> None:
+        """The control period: the controller's decision published (and traced); a failure holds the rover."""
         now = self.now()
-        tick = self.controller.tick(now)
-        self.publish(tick)
+        try:
+            tick = self.controller.tick(now)
+            self.publish(tick)
+        except Exception as err:  # noqa: BLE001 - no decision may end the node
+            self._failed("tick", err, now)
+            return
+        if tick.status is not None and tick.status["state"] == "active":
+            self._said = None  # driving again: a later failure is news
         if self.trace is not None:
-            self.trace.write(json.dumps(self.controller.trace(now, tick)) + "\n")
-            self.trace.flush()
+            try:
+                self.trace.write(json.dumps(self.controller.trace(now, tick)) + "\n")
+                self.trace.flush()
+            except (OSError, ValueError, TypeError) as err:
+                self.log.error(f"trace stopped: {err}")  # the rover drives on; only the record ends
+                self._close_trace()
+
+    def on_executor_failure(self, err: Exception) -> None:
+        """What the spin loop calls when rclpy itself raised (outside every guarded callback): one line and a hold."""
+        self._failed("executor", err, self.now())
+
+    def _failed(self, source: str, err: Exception, now: float) -> None:
+        """One error line (once while it repeats), and a zero command with the controller holding."""
+        line = f"{source} callback failed ({type(err).__name__}: {' '.join(str(err).split())[:200]}): holding still"
+        if line != self._said:
+            self.log.error(line)
+            self._said = line
+        try:
+            self.publish(self.controller.fault(source, line, now))
+        except Exception as again:  # noqa: BLE001 - a publisher that fails too: say so once, stay up
+            self.log.error(f"could not publish the zero command ({type(again).__name__}: {again})")
 
     def publish(self, tick: Tick) -> None:
         """Publish a tick's command and status, and log its lines."""
@@ -113,7 +194,7 @@ class DeployNode(Node):
             self.log.info(line)
         if tick.command is not None:
             twist = Twist()
-            twist.linear.x, twist.angular.z = tick.command
+            twist.linear.x, twist.angular.z = (float(v) if math.isfinite(v) else 0.0 for v in tick.command)
             if self.stamped:
                 msg = TwistStamped()
                 msg.header.stamp = self.get_clock().now().to_msg()
@@ -129,6 +210,12 @@ class DeployNode(Node):
         """Publish a zero command (and the goal's aborted status), and wait up to 0.5 s for subscribers to have it."""
         self.publish(self.controller.stop(reason))
         self.cmd_pub.wait_for_all_acked(Duration(seconds=0.5))
+        self._close_trace()
+
+    def _close_trace(self) -> None:
         if self.trace is not None:
-            self.trace.close()
+            try:
+                self.trace.close()
+            except OSError:
+                pass
             self.trace = None
