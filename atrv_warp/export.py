@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     columns = ", ".join(f"{n} x {k:g} {u}" for n, k, u in zip(action["names"], action["scale"], action["units"],
                                                                strict=True))
     print(f"wrote {path}: {spec['observation_kind']} observation ({len(spec['observation'])},) -> {action['kind']} "
-          f"action (2,) in [-1, 1] ({columns}); runs with torch alone (torch.export.load)")
+          f"action (2,) in [-1, 1] ({columns}); runs with torch alone (atrv_warp.core.files.load_exported_program checks it, then torch.export.load)")
     if args.onnx:
         print(f"wrote {path.with_suffix('.onnx')}: checked with onnxruntime against the torch policy (< 1e-5)")
     return 0

@@ -1,11 +1,15 @@
 """Reading and writing the package's files: atomic saves, and loads that name what is wrong.
 
-Every file is read with ``torch.load(weights_only=True)``: tensors and plain containers only,
-so a damaged or hostile file is refused without unpickling arbitrary objects.
+Every file is read with ``torch.load(weights_only=True)``: tensors and plain containers only, so a damaged or hostile
+file is refused without unpickling arbitrary objects. Before that, every member's CRC-32 (which ``torch.save``'s zip
+archive records and ``torch.load`` does not check) is checked, so that a changed byte is refused by name rather than
+loaded as a wrong weight.
 """
 
 from __future__ import annotations
 
+import hashlib
+import os
 import pickle
 import warnings
 import zipfile
@@ -13,7 +17,7 @@ from pathlib import Path
 
 import torch
 
-__all__ = ["FileFormatError", "atomic_save", "load_weights"]
+__all__ = ["FileFormatError", "atomic_save", "file_sha256", "load_weights"]
 
 
 def _detail(err: Exception) -> str:
@@ -27,12 +31,40 @@ class FileFormatError(ValueError):
 
 
 def atomic_save(obj, path: str | Path) -> None:
-    """``torch.save`` to a temporary file beside ``path``, then rename: a reader (or a crash)
-    never sees a half-written file, and the previous version survives a failed save."""
+    """``torch.save`` to a temporary file beside ``path``, flushed to the disk, then renamed over ``path`` (and the
+    folder's entry flushed): a reader, a kill or a power cut never sees a half-written file, and the previous version
+    survives a failed save."""
     path = Path(path)
     tmp = path.with_suffix(path.suffix + ".tmp")
-    torch.save(obj, tmp)
+    with open(tmp, "wb") as f:
+        torch.save(obj, f)
+        f.flush()
+        os.fsync(f.fileno())
     tmp.replace(path)
+    sync_folder(path.parent)
+
+
+def sync_folder(folder: str | Path) -> None:
+    """Flush a folder's entries (a rename in it) to the disk, where the system allows it."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def file_sha256(path: str | Path) -> str:
+    """The SHA-256 of a file's bytes, in hex."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def load_weights(path: str | Path, what: str, required: tuple[str, ...] = ()) -> dict:
@@ -40,7 +72,7 @@ def load_weights(path: str | Path, what: str, required: tuple[str, ...] = ()) ->
 
     Raises ``FileNotFoundError`` for a missing file and :class:`FileFormatError` (naming
     ``path`` and saying what is wrong) for anything that is not a complete ``what`` holding the
-    ``required`` keys: random bytes, a truncated file, a pickle of arbitrary objects.
+    ``required`` keys: random bytes, a truncated file, a changed byte, a pickle of arbitrary objects.
     """
     path = Path(path)
     if not path.is_file():
@@ -49,11 +81,20 @@ def load_weights(path: str | Path, what: str, required: tuple[str, ...] = ()) ->
         raise FileFormatError(f"{path}: not a {what}: not a complete file written by torch.save "
                               "(truncated, or another format)")
     try:
+        with zipfile.ZipFile(path) as archive:
+            bad = archive.testzip()
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError, RuntimeError) as err:
+        raise FileFormatError(f"{path}: not a readable {what}: damaged ({_detail(err)})") from None
+    if bad is not None:
+        raise FileFormatError(f"{path}: not a readable {what}: damaged (the checksum of its member {bad} does not "
+                              "match: a byte changed)")
+    try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # e.g. the pickle-protocol notice; the error below says enough
             payload = torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as err:
-        if "Unsupported global" in str(err):
+        if "unsupported global" in str(err).lower():  # "Unsupported global: …", or "unsupported GLOBAL posix.system
+            # whose module posix is blocked" (torch 2.13)
             raise FileFormatError(f"{path}: not a {what}: it holds Python objects other than tensors and plain "
                                   "containers, which are refused (nothing was unpickled)") from None
         raise FileFormatError(f"{path}: not a {what}: damaged ({_detail(err)})") from None

@@ -11,15 +11,16 @@ Usage::
     python -m atrv_warp.train --sim-config calibrated.toml randomization=around   # around a calibrated rover
 
 Outputs in ``<out_dir>/<name>/``: ``config.toml`` (resolved), ``randomization.json`` (the ranges the envs draw
-from, ``randomization=around`` resolved against ``--sim-config``), ``checkpoint.pt`` (atomic,
-at every evaluation), ``best_policy.pt`` (best periodic evaluation), ``final_eval.json``,
-``logs/`` (CSV or TensorBoard scalars), ``learning_curve.png``.
+from, ``randomization=around`` resolved against ``--sim-config``), ``checkpoint.pt`` and ``save/`` (one whole
+save at every evaluation: a kill at any instant resumes from the last with ``--resume``), ``best_policy.pt`` (best
+periodic evaluation), ``final_eval.json``, ``logs/`` (CSV or TensorBoard scalars), ``learning_curve.png``.
 """
 
 from __future__ import annotations
 
 import sys
 
+from atrv_warp.core.files import OutputPathError
 from atrv_warp.rl.config import PROG, parse_command
 from atrv_warp.rl.loop import train
 from atrv_warp.runtime import error_line, set_verbose
@@ -37,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
         set_verbose()
     try:
         train(cmd.train, resume=cmd.resume is not None)
-    except (FileExistsError, FileNotFoundError, ModuleNotFoundError, FileFormatError) as err:
+    except (FileExistsError, FileNotFoundError, ModuleNotFoundError, FileFormatError, OutputPathError) as err:
         return error_line(PROG, str(err))
     return 0
 

@@ -52,9 +52,15 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("policy", help="a .pt2 file written by python -m atrv_warp.export")
     args = parser.parse_args()
-    extra = {"atrv_warp.json": ""}
-    policy = torch.export.load(args.policy, extra_files=extra).module()
-    spec = json.loads(extra["atrv_warp.json"])
+    from atrv_warp.core.files import ExportedFileError, load_exported_program
+
+    try:  # checked before torch loads it: nothing in a .pt2 can run code (a plain torch.export.load can unpickle)
+        program, extra = load_exported_program(args.policy)
+    except (FileNotFoundError, ExportedFileError) as err:
+        print(err, file=sys.stderr)
+        return 2
+    policy = program.module()
+    spec = json.loads(extra.get("atrv_warp.json", "{}"))
     if spec.get("format") != FORMAT:
         print(f"{args.policy}: contract {spec.get('format')!r}, this example reads {FORMAT!r}: export it again",
               file=sys.stderr)

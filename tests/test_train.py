@@ -45,6 +45,11 @@ def test_config_files_and_errors(tmp_path):
     bad.write_text("[env]\nnum_envs = 8\nnum_env = 4\n")
     with pytest.raises(ValueError, match=r"unknown train config key\(s\) \['env.num_env'\] in .*bad.toml"):
         load_train_config(str(bad))
+    for name in ("../../x", "a/b", "..", ""):  # a run stays inside out_dir
+        with pytest.raises(ValueError, match="name must be a folder name inside out_dir"):
+            load_train_config(None, {"name": name})
+    with pytest.raises(ValueError, match=f"out_dir {bad} is a file, not a folder"):
+        load_train_config(None, {"out_dir": str(bad)})
 
 
 def test_substeps_reach_the_training_and_evaluation_envs():

@@ -44,8 +44,9 @@ class ExportedFileError(ValueError):
 
 
 def check_output_path(path: str | Path, what: str = "file") -> Path:
-    """Check, before any work, that a ``what`` can be written at ``path``: its folder exists (or can be made under an
-    existing one) and is writable, and ``path`` is not a folder. Nothing is created.
+    """Check, before any work, that a ``what`` can be written at ``path``: ``path`` is not a folder, and a file can be
+    created in its folder or, where that does not exist yet, in the nearest folder above it that does (tried, then
+    removed). Nothing is left behind.
 
     Raises:
         OutputPathError: One line naming the path and the problem.
@@ -53,16 +54,19 @@ def check_output_path(path: str | Path, what: str = "file") -> Path:
     path = Path(path)
     if path.is_dir():
         raise OutputPathError(f"{path}: is a folder; name a {what} in it")
-    folder = path.parent
-    existing = folder
-    while not existing.exists():
-        existing = existing.parent
-    if not existing.is_dir():
-        raise OutputPathError(f"{path}: {existing} is not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise OutputPathError(f"{path}: the folder {existing} is not writable")
     if path.exists() and not os.access(path, os.W_OK):
         raise OutputPathError(f"{path}: the {what} is not writable")
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise OutputPathError(f"{path}: {folder} is not a folder")
+    probe = folder / f".{path.name}.{os.getpid()}.probe"
+    try:
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+        os.unlink(probe)
+    except OSError as err:
+        raise OutputPathError(f"{path}: cannot write in {folder} ({err.strerror or err})") from None
     return path
 
 

@@ -27,10 +27,11 @@ builds the observation from the file alone. The maths is the environment's (``ta
 each clipped to its field's [low, high]. Example, one robot::
 
     import json, torch
+    from atrv_warp.core.files import load_exported_program
     from atrv_warp.core.observation import RobotObservation, Scan
 
-    extra = {"atrv_warp.json": ""}
-    policy = torch.export.load("nav_deploy.pt2", extra_files=extra).module()
+    program, extra = load_exported_program("nav_deploy.pt2")    # checked: nothing in the file can run code
+    policy = program.module()
     build = RobotObservation.from_contract(json.loads(extra["atrv_warp.json"]))
     obs = build(odom_pose=[x, y, yaw], odom_twist=[v, w], imu_orientation=q_xyzw, imu_angular_velocity=omega,
                 goal=[gx, gy], scan=Scan(ranges, angle_min, angle_increment, range_min, range_max),

@@ -1,10 +1,22 @@
-"""Where a run stands (:class:`RunState`) and the checkpoint that saves and restores it
-(:class:`Checkpoint`, mirrored; :func:`load_checkpoint` reads one safely)."""
+"""Where a run stands (:class:`RunState`) and the save that records and restores it (:class:`Checkpoint`, mirrored;
+:func:`load_checkpoint` reads one safely).
+
+A save is whole or absent. ``checkpoint.pt`` is its commit point: the run's state, networks and optimisers, and a
+record (``save``) of the other files that belong to it, each with its size and SHA-256: the replay buffer and the
+best policy under ``save/``, written under names of their own before the commit (``buffer-000012.pt``), and the
+length of every logged scalar's CSV file at that instant. ``checkpoint.pt`` is written beside and renamed over the
+old one, flushed to the disk; the files of the save before it are removed only after. So a kill at any instant
+leaves the previous save or the new one, whole: ``--resume`` checks each file against the record, truncates the
+logs to their recorded length (no row is logged twice), and puts ``best_policy.pt`` back to the save's copy. Every
+file is plain tensors and containers (``torch.load(weights_only=True)``), with no pickled field and no class named
+by the file.
+"""
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,12 +25,17 @@ import torch
 from atrv_warp.policy import Normalize, check_policy_task, policy_payload
 from atrv_warp.rl.config import TrainConfig
 from atrv_warp.rl.learner import make_learner
-from atrv_warp.storage import FileFormatError, atomic_save, load_weights
+from atrv_warp.storage import FileFormatError, atomic_save, file_sha256, load_weights, sync_folder
 
-__all__ = ["CHECKPOINT_KEYS", "Checkpoint", "RunState", "load_checkpoint"]
+__all__ = ["BUFFER_FORMAT", "CHECKPOINT_KEYS", "Checkpoint", "RunState", "buffer_state", "load_buffer_state",
+           "load_checkpoint"]
 
 CHECKPOINT_KEYS = ("frames", "updates", "best_success", "elapsed_s", "next_eval", "stats_ready", "rng", "policy")
 """Entries every training checkpoint holds (``loss`` and ``opts`` too once learning has started)."""
+
+BUFFER_FORMAT = "atrv_warp.replay_buffer/1"
+"""The saved replay buffer: its rows in storage order (each key a tensor, nested keys joined by dots), its length
+and its writer's state."""
 
 
 @dataclass
@@ -48,28 +65,135 @@ def load_checkpoint(path: Path) -> dict:
     return ck
 
 
+def buffer_state(buffer) -> dict:
+    """A replay buffer as plain tensors and numbers (:data:`BUFFER_FORMAT`): what a save writes."""
+    from tensordict import TensorDict
+
+    n = len(buffer)
+    rows = buffer.storage[:n]
+    rows = rows.exclude("index") if isinstance(rows, TensorDict) else rows  # the row's own position, set on extend
+    return {"format": BUFFER_FORMAT, "length": n, "writer": dict(buffer.writer.state_dict()),
+            "rows": {k: v.detach().cpu().clone() for k, v in rows.flatten_keys(".").items()}}
+
+
+def load_buffer_state(buffer, state: dict, source: Path) -> None:
+    """Fill an empty replay buffer from :func:`buffer_state`'s record: the same rows at the same places, the same
+    write cursor.
+
+    Raises:
+        FileFormatError: Another format, rows of unequal length, or more rows than the buffer holds (named).
+    """
+    from tensordict import TensorDict
+
+    rows, n = state.get("rows"), state.get("length")
+    if state.get("format") != BUFFER_FORMAT or not isinstance(rows, dict) or not isinstance(n, int):
+        raise FileFormatError(f"{source}: not a replay buffer of format {BUFFER_FORMAT!r}")
+    if not all(isinstance(v, torch.Tensor) and v.shape[:1] == (n,) for v in rows.values()):
+        raise FileFormatError(f"{source}: damaged replay buffer (rows of unequal length)")
+    if n > buffer.storage.max_size:
+        raise FileFormatError(f"{source}: holds {n:,} transitions, more than this run's buffer_size "
+                              f"{buffer.storage.max_size:,}: resume with optim.buffer_size={n} or more")
+    if n:
+        buffer.extend(TensorDict(rows, [n]).unflatten_keys("."))
+    buffer.writer.load_state_dict(state["writer"])
+
+
 class Checkpoint:
-    """``checkpoint.pt`` (atomic) and the replay buffer beside it; :meth:`save` and :meth:`restore`
-    mirror each other."""
+    """A run's save (module docstring): :meth:`save` writes one whole, :meth:`restore` reads it back, mirrored.
+
+    The loop stages a new best policy in :attr:`best` when a validation finds one; the next :meth:`save` writes it
+    with the rest and then publishes ``best_policy.pt``.
+    """
 
     def __init__(self, run_dir: Path):
-        self.path, self.buffer_dir = run_dir / "checkpoint.pt", run_dir / "buffer"
+        self.run_dir = run_dir
+        self.path = run_dir / "checkpoint.pt"
+        """The commit point."""
+        self.folder = run_dir / "save"
+        """The files a save names beside ``checkpoint.pt``."""
+        self.best_path = run_dir / "best_policy.pt"
+        self.logs = run_dir / "logs" / "scalars"
+        self.generation = 0
+        """The saves so far (the current one's number)."""
+        self.files: dict[str, dict] = {}
+        """The current save's files: ``buffer`` and ``best_policy``, each ``{"path", "bytes", "sha256"}`` (the path
+        relative to the run folder)."""
+        self.best: dict | None = None
+        """A best policy (its payload) not yet saved."""
+        self.notes: list[str] = []
+        """Lines for the console from :meth:`restore` (what it could not read, and why)."""
 
+    # ---------------------------------------------------------------- saving
     def save(self, cfg: TrainConfig, state: RunState, actor, learner, buffer) -> None:
-        """Write the checkpoint atomically, then the replay buffer beside it (``learner``: SAC's
-        :class:`~atrv_warp.rl.learner.Learner`, PPO's :class:`~atrv_warp.rl.ppo.PPOLearner`, or ``None``
-        before learning starts)."""
+        """Write a new save and make it current (``learner``: SAC's :class:`~atrv_warp.rl.learner.Learner`, PPO's
+        :class:`~atrv_warp.rl.ppo.PPOLearner`, or ``None`` before learning starts)."""
+        generation, files = self.generation + 1, dict(self.files)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        if learner is not None and len(buffer):
+            files["buffer"] = self._write(f"buffer-{generation:06d}.pt", buffer_state(buffer))
+        if self.best is not None:
+            files["best_policy"] = self._write(f"best_policy-{generation:06d}.pt", self.best)
+        sync_folder(self.folder)
         payload = {**dataclasses.asdict(state), "rng": torch.get_rng_state(), "config": dataclasses.asdict(cfg),
                    "policy": policy_payload(actor, width=cfg.network.width, depth=cfg.network.depth,
-                                          meta={"frames": state.frames, "task": cfg.env.task})}
+                                          meta={"frames": state.frames, "task": cfg.env.task}),
+                   "save": {"generation": generation, "files": files, "logs": self._log_lengths()}}
         if learner is not None:
             payload.update(learner.state_dict())
-        atomic_save(payload, self.path)
-        if learner is not None and len(buffer):
-            buffer.dumps(self.buffer_dir)
+        atomic_save(payload, self.path)  # the commit: from here on, this save is the run's
+        self.generation, self.files, self.best = generation, files, None
+        self._publish_best()
+        self._remove_others()
 
+    def _write(self, name: str, obj) -> dict:
+        path = self.folder / name
+        atomic_save(obj, path)
+        return {"path": str(path.relative_to(self.run_dir)), "bytes": path.stat().st_size, "sha256": file_sha256(path)}
+
+    def _log_lengths(self) -> dict[str, int]:
+        """Every logged scalar's CSV file and its length [bytes] now."""
+        return {p.name: p.stat().st_size for p in sorted(self.logs.glob("*.csv"))} if self.logs.is_dir() else {}
+
+    def _publish_best(self) -> None:
+        """``best_policy.pt`` made equal to the save's (copied beside, then renamed over it)."""
+        entry = self.files.get("best_policy")
+        if entry is None or (self.best_path.is_file() and self.best_path.stat().st_size == entry["bytes"]
+                             and file_sha256(self.best_path) == entry["sha256"]):
+            return
+        tmp = self.best_path.with_suffix(".pt.tmp")
+        shutil.copyfile(self.run_dir / entry["path"], tmp)
+        tmp.replace(self.best_path)
+        sync_folder(self.run_dir)
+
+    def _remove_others(self) -> None:
+        """Files under ``save/`` that the current save does not name (earlier saves', a killed save's)."""
+        keep = {self.run_dir / e["path"] for e in self.files.values()}
+        for path in self.folder.glob("*"):
+            if path not in keep and path.is_file():
+                path.unlink()
+
+    def start_over(self) -> None:
+        """Remove what a run that never completed a save left in its folder: its scalars' CSV files (a new run would
+        append to them), ``save/`` and half-written files. Nothing of a completed save is touched.
+
+        Raises:
+            FileExistsError: The folder holds a save (``checkpoint.pt``).
+        """
+        if self.path.exists():
+            raise FileExistsError(f"{self.run_dir} already holds a run; use --resume to continue it or another name=")
+        for path in [*self.logs.glob("*.csv"), *self.folder.glob("*"), *self.run_dir.glob("*.tmp")]:
+            if path.is_file():
+                path.unlink()
+
+    # ---------------------------------------------------------------- restoring
     def restore(self, ck: dict, cfg: TrainConfig, actor, normalize: Normalize, buffer) -> tuple[RunState, object]:
-        """Load a checkpoint read by :func:`load_checkpoint` into fresh networks and buffer."""
+        """Load a checkpoint read by :func:`load_checkpoint` into fresh networks and buffer, check and read the files
+        its save names, cut the logs back to the save and put ``best_policy.pt`` back to the save's.
+
+        Raises:
+            FileFormatError: A file of the save missing, of another size or checksum, or damaged (named); networks
+                that do not match this run's.
+        """
         # keys added after a checkpoint was written take their defaults
         state = RunState(**{f.name: ck[f.name] for f in dataclasses.fields(RunState) if f.name in ck})
         learner = None
@@ -83,13 +207,43 @@ class Checkpoint:
             raise FileFormatError(f"{self.path}: does not match this run's networks (width={cfg.network.width}, "
                                   f"depth={cfg.network.depth}): {_first_line(err)}") from None
         torch.set_rng_state(ck["rng"])
-        if self.buffer_dir.is_dir():
-            try:
-                buffer.loads(self.buffer_dir)
-            except Exception as err:  # noqa: BLE001 - any failure here means a damaged buffer folder
-                raise FileFormatError(f"{self.buffer_dir}: damaged replay buffer ({type(err).__name__}: "
-                                      f"{_first_line(err)})") from None
+        save = ck.get("save")
+        if not isinstance(save, dict):  # written before whole saves: its buffer is a TorchRL folder
+            if (self.run_dir / "buffer").is_dir():
+                self.notes.append(f"{self.run_dir / 'buffer'}: a replay buffer written before whole saves is not read "
+                                  "(such a folder may hold pickled objects); the run refills its buffer")
+            return state, learner
+        self.generation, self.files = int(save["generation"]), dict(save["files"])
+        for name, entry in self.files.items():
+            self._verify(name, entry)
+        if "buffer" in self.files:
+            path = self.run_dir / self.files["buffer"]["path"]
+            load_buffer_state(buffer, load_weights(path, "replay buffer", ("format", "rows")), path)
+        self._cut_logs(save.get("logs", {}))
+        self._publish_best()
+        if self.folder.is_dir():
+            self._remove_others()
         return state, learner
+
+    def _verify(self, name: str, entry: dict) -> None:
+        path = self.run_dir / entry["path"]
+        if not path.is_file():
+            raise FileFormatError(f"{path}: the {name} of the save {self.path} names is missing")
+        if path.stat().st_size != entry["bytes"] or file_sha256(path) != entry["sha256"]:
+            raise FileFormatError(f"{path}: the {name} differs from the one the save {self.path} recorded (its size "
+                                  "or checksum): damaged, or from another save")
+
+    def _cut_logs(self, lengths: dict[str, int]) -> None:
+        """Each scalar's CSV file back to its length at the save; those first written after it removed."""
+        if not self.logs.is_dir():
+            return
+        for path in self.logs.glob("*.csv"):
+            keep = lengths.get(path.name)
+            if keep is None:
+                path.unlink()
+            elif path.stat().st_size > keep:
+                with open(path, "r+b") as f:
+                    f.truncate(keep)
 
 
 def warm_start(path: str | Path, cfg: TrainConfig, actor, normalize: Normalize) -> object | None:

@@ -299,6 +299,12 @@ class TrainConfig:
             raise ValueError(f"train config: gae_lambda must be in [0, 1], got {self.ppo.gae_lambda}")
         if self.optim.batch_size > self.optim.buffer_size:
             raise ValueError("train config: batch_size must not exceed buffer_size")
+        name = self.run.name
+        if not name or name in (".", "..") or "/" in name or "\\" in name or name != name.strip():
+            raise ValueError(f"train config: name must be a folder name inside out_dir (no '/', not '..'), got {name!r}")
+        out_dir = Path(self.run.out_dir)
+        if out_dir.exists() and not out_dir.is_dir():
+            raise ValueError(f"train config: out_dir {out_dir} is a file, not a folder")
         from atrv_warp.task.config import get_task
 
         get_task(self.env.task)  # names the known tasks if this one is not

@@ -9,11 +9,13 @@ also carries ``atrv_warp.json``, the whole contract a robot stack needs to run i
 limits, the sectors' angular edges and clip) and how a missing or too-close return reads; and what the
 action history means. The exporter checks the policy against its task first, as ``load_policy`` does.
 
-Load it anywhere torch runs, with no Warp, Newton or TorchRL::
+Load it anywhere torch runs, with no Warp, Newton or TorchRL, through the light core's checked loader (a plain
+``torch.export.load`` can unpickle what a crafted file holds; :func:`atrv_warp.core.files.load_exported_program`
+refuses such a file before torch reads it)::
 
     import json, torch
-    extra = {"atrv_warp.json": ""}
-    program = torch.export.load("policy.pt2", extra_files=extra)
+    from atrv_warp.core.files import load_exported_program
+    program, extra = load_exported_program("policy.pt2")
     spec = json.loads(extra["atrv_warp.json"])
     action = program.module()(observation)          # (B, D) float32 -> (B, 2)
     command = action * torch.tensor(spec["action"]["scale"])   # torque: [left, right] N·m; twist: [m/s, rad/s]
@@ -35,6 +37,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from atrv_warp.core.files import ExportedFileError, load_exported_program
 from atrv_warp.policy import load_policy, policy_path
 from atrv_warp.sim.config import SimConfig
 from atrv_warp.sim.scanner import ScannerConfig
@@ -168,19 +171,23 @@ def export_onnx(net: PolicyNet, out: Path, spec: str, task=None, checks: int = 1
 
 
 def load_exported(path: str | Path) -> tuple[nn.Module, dict]:
-    """The exported program's module and its ``atrv_warp.json`` description.
+    """The exported program's module and its ``atrv_warp.json`` description, the file checked before torch loads it
+    (:func:`atrv_warp.core.files.load_exported_program`).
 
     Raises:
-        FileFormatError: The file carries no contract, or one of a format this version does not read (named, with
-            the one expected: export the policy again).
+        FileNotFoundError: No such file.
+        FileFormatError: The file is refused by the check (named: nothing in it ran), carries no contract, or one of
+            a format this version does not read (named, with the one expected: export the policy again).
     """
-    extra = {"atrv_warp.json": ""}
-    program = torch.export.load(str(path), extra_files=extra)
     try:
-        spec = json.loads(extra["atrv_warp.json"])
+        program, extra = load_exported_program(path)
+    except ExportedFileError as err:
+        raise FileFormatError(str(err)) from None
+    try:
+        spec = json.loads(extra.get("atrv_warp.json", ""))
     except json.JSONDecodeError:
         raise FileFormatError(f"{path}: no atrv_warp.json contract in the exported file") from None
-    if spec.get("format") != EXPORT_FORMAT:
-        raise FileFormatError(f"{path}: exported contract format {spec.get('format')!r}, this version reads "
+    if not isinstance(spec, dict) or spec.get("format") != EXPORT_FORMAT:
+        raise FileFormatError(f"{path}: exported contract format {spec.get('format') if isinstance(spec, dict) else None!r}, this version reads "
                               f"{EXPORT_FORMAT!r}: export the policy again (python -m atrv_warp.export POLICY OUT)")
     return program.module(), spec

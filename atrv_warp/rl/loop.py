@@ -12,6 +12,7 @@ from pathlib import Path
 import torch
 from tensordict import TensorDict
 
+from atrv_warp.core.files import check_output_path
 from atrv_warp.policy import Normalize, load_policy, policy_payload
 from atrv_warp.rl.checkpoint import Checkpoint, RunState, load_checkpoint, warm_start
 from atrv_warp.rl.collectors import COLLECTORS, WORKER_KEY, make_collector, pin_to_core
@@ -21,7 +22,6 @@ from atrv_warp.rl.exploration import collection_policy
 from atrv_warp.rl.learner import ALGOS, annealed_lr, make_buffer, make_learner, make_run_actor, replay_frames, set_lr
 from atrv_warp.rl.reporting import Loggers, LossMeans, Progress, Stats, make_loggers, pct, plot_curve
 from atrv_warp.runtime import device_summary
-from atrv_warp.storage import atomic_save
 from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result
 
 __all__ = ["Evaluator", "TrainLoop", "train"]
@@ -42,11 +42,15 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     if ck is not None:
         state, learner = checkpoint.restore(ck, cfg, actor, normalize, buffer)
         print(f"resumed {run_dir} at {state.frames:,} frames, {state.updates:,} updates, "
-              f"best success {100 * state.best_success:.1f}%")
-    elif cfg.run.init_from:
-        learner = warm_start(cfg.run.init_from, cfg, actor, normalize)
-        state.stats_ready = learner is not None
-        print(f"starting from the networks of {cfg.run.init_from}")
+              f"best success {100 * state.best_success:.1f}% (save {checkpoint.generation})")
+        for line in checkpoint.notes:
+            print(line)
+    else:
+        checkpoint.start_over()  # what a run killed before its first save left (its logs, a half-written file)
+        if cfg.run.init_from:
+            learner = warm_start(cfg.run.init_from, cfg, actor, normalize)
+            state.stats_ready = learner is not None
+            print(f"starting from the networks of {cfg.run.init_from}")
     if state.frames >= cfg.run.total_frames:
         print(f"nothing to do: {state.frames:,} frames already collected (total_frames={cfg.run.total_frames:,}); "
               "raise total_frames= to train further")
@@ -111,9 +115,11 @@ def _prepare_run(cfg: TrainConfig, resume: bool) -> tuple[Path, dict | None]:
     if require is not None:
         require()
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
+    check_output_path(run_dir / "config.toml", "run folder")  # a folder that cannot be written fails before any work
     ckpt_path = Checkpoint(run_dir).path
     if resume and not ckpt_path.is_file():
-        raise FileNotFoundError(f"--resume: no checkpoint at {ckpt_path}")
+        print(f"--resume: {run_dir} holds no save yet (stopped before its first): starting it from the beginning")
+        resume = False
     if not resume and ckpt_path.exists():
         raise FileExistsError(f"{run_dir} already holds a run; use --resume to continue it or another name=")
     return run_dir, (load_checkpoint(ckpt_path) if resume else None)  # a bad file loses nothing
@@ -239,7 +245,7 @@ class TrainLoop:
         self.save_checkpoint()
 
     def record(self, outcome: EvalOutcome | None) -> bool:
-        """Log a validation's figures at the frames of the weights it judged, and save those weights as the best
+        """Log a validation's figures at the frames of the weights it judged, and stage those weights as the best
         policy where they beat every earlier one; returns whether they did (``None``: nothing to record)."""
         if outcome is None:
             return False
@@ -262,7 +268,7 @@ class TrainLoop:
             return False
         st.best_success, st.best_return = result.success_rate, result.mean_return
         outcome.policy["meta"].update(eval_success=result.success_rate, eval_return=result.mean_return)
-        atomic_save(outcome.policy, self.run_dir / "best_policy.pt")
+        self.checkpoint.best = outcome.policy  # written with the save that follows, then best_policy.pt
         return True
 
     def save_checkpoint(self) -> None:

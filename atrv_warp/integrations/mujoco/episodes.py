@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from atrv_warp.core.files import load_exported_program
 from atrv_warp.core.observation import RobotObservation, Scan
 from atrv_warp.sim.driver import DriverConfig
 from atrv_warp.sim.scanner import ScannerConfig
@@ -126,10 +127,13 @@ class DeployablePolicy:
         if str(path).endswith(".pt2"):
             if not Path(path).is_file():
                 raise FileNotFoundError(f"exported policy not found: {path}")
-            extra = {"atrv_warp.json": ""}
-            program = torch.export.load(str(path), extra_files=extra).module()
-            contract = json.loads(extra["atrv_warp.json"])
-            return cls(lambda obs: program(obs[None])[0], contract, contract.get("task", "reach"), str(path))
+            program, extra = load_exported_program(path)  # checked first: nothing in the file can run code
+            try:
+                contract = json.loads(extra.get("atrv_warp.json", ""))
+            except json.JSONDecodeError:
+                raise ValueError(f"{path}: no atrv_warp.json contract in the exported file") from None
+            module = program.module()
+            return cls(lambda obs: module(obs[None])[0], contract, contract.get("task", "reach"), str(path))
         from tensordict import TensorDict
         from torchrl.envs.utils import ExplorationType, set_exploration_type
 
