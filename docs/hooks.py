@@ -1000,7 +1000,7 @@ def _deploy_rows() -> list[list[str]]:
     from atrv_warp.deploy.parameters import PARAMETERS
 
     return (_argparse_rows(_command("deploy").build_parser())
-            + [[f"`-p {name}:=…`", f"`{default!r}`", _cell(text)] for name, default, text in PARAMETERS])
+            + [[f"`-p {p.name}:=…`", f"`{p.default!r}`", _cell(p.text)] for p in PARAMETERS])
 
 
 def _command(module: str):
