@@ -48,6 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="calibrated.toml", help="simulator config to write (default %(default)s)")
     p.add_argument("--report", help="JSON report (default: <out>.report.json)")
     p.add_argument("--plot", help="PNG of recorded and simulated paths (default: <out>.png)")
+    p.add_argument("--force", action="store_true",
+                   help="overwrite --out, --report, --plot or --record-example where they exist (without it, an "
+                        "existing file is refused before any work)")
     p.add_argument("--pose-topic", default=Topics.pose,
                    help="reference pose, nav_msgs/Odometry or geometry_msgs/PoseStamped (default %(default)s)")
     p.add_argument("--cmd-vel-topic", default=Topics.cmd_vel, help="velocity commands (default %(default)s)")
@@ -117,7 +120,26 @@ def _node_params(items: list[str]) -> dict[str, float | int | bool | str] | str:
     return out
 
 
+def _unwritable(paths, force: bool) -> str | None:
+    """The first output that cannot be written, or exists without ``--force``, as an error line."""
+    from atrv_warp.core.files import OutputPathError, check_output_path
+
+    for path in paths:
+        try:
+            check_output_path(path)
+        except OutputPathError as err:
+            return f"error: {err}"
+        if Path(path).exists() and not force:
+            return f"error: {path} exists: pass --force to overwrite it, or name another file"
+    return None
+
+
 def _record(args) -> int:
+    bad = _unwritable([args.record_example], args.force)
+    if bad:
+        print(bad, file=sys.stderr)
+        return 2
+    Path(args.record_example).unlink(missing_ok=True)  # --force: the recorder writes a new file, never onto one
     if args.engine == "mujoco":
         return _record_twin(args)
     try:
@@ -232,10 +254,10 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     report = Path(args.report) if args.report else out.with_suffix(".report.json")
     plot = Path(args.plot) if args.plot else out.with_suffix(".png")
-    for path in (out, report, plot):
-        if not path.parent.is_dir():
-            print(f"error: {path}: folder {path.parent} does not exist", file=sys.stderr)
-            return 2
+    bad = _unwritable((out, report, plot), args.force)  # before the fit: a long fit never ends in a traceback
+    if bad:
+        print(bad, file=sys.stderr)
+        return 2
     try:
         rover, contact = load_sim_config(args.sim_config) if args.sim_config else (None, None)
         cfg = CalibrationConfig(params=tuple(p.strip() for p in args.params.split(",") if p.strip()),

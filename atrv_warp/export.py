@@ -31,6 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("paths", nargs="+", metavar="[POLICY] OUT", help="policy file or a shipped policy's name (default: the shipped reach "
                         "policy), output .pt2")
     parser.add_argument("--onnx", action="store_true", help="also write OUT.onnx, checked with onnxruntime")
+    parser.add_argument("--force", action="store_true", help="overwrite OUT (and OUT.onnx) where it exists")
     return parser
 
 
@@ -43,8 +44,8 @@ def main(argv: list[str] | None = None) -> int:
     from atrv_warp.rl.export import export_policy, load_exported
 
     try:
-        path = export_policy(policy, out, onnx=args.onnx)
-    except (FileNotFoundError, FileFormatError, ValueError, RuntimeError) as err:
+        path = export_policy(policy, out, onnx=args.onnx, force=args.force)
+    except (FileNotFoundError, FileExistsError, FileFormatError, ValueError, RuntimeError) as err:
         return error_line(parser.prog, str(err))
     except ModuleNotFoundError as err:
         return error_line(parser.prog, f"--onnx needs the onnx extra ({err.name} is missing): pip install -e '.[onnx]'")

@@ -272,7 +272,7 @@ def main() -> int:
     seed = EVAL_SEED if args.seed is None else args.seed
     path = resolve_policy(args.policy)
     workdir = Path(tempfile.mkdtemp(prefix="deploy_closed_loop_"))
-    pt2 = export_policy(path, workdir / "policy.pt2")
+    pt2 = export_policy(path, workdir / "policy.pt2", force=True)
     t0 = time.perf_counter()
     print(f"evaluate: {args.episodes} episodes of seed {seed} ...", flush=True)
     evaluated, goals, stopping = evaluate_episodes(path, args.episodes, seed)

@@ -189,6 +189,16 @@ def test_cli_bad_bag_writes_nothing(tmp_path, run_module):
     proc = run_module("atrv_warp.calibrate", str(good), "--out", str(tmp_path / "missing" / "cal.toml"), check=False)
     assert proc.returncode == 2 and "does not exist" in proc.stderr and str(tmp_path / "missing") in proc.stderr
     assert sorted(tmp_path.iterdir()) == sorted([path, good])
+    taken = tmp_path / "taken.toml"  # an existing output is refused before the fit, unless --force
+    taken.write_text("[rover]\n")
+    for option in (["--out", str(taken)], ["--report", str(taken)], ["--plot", str(taken)]):
+        proc = run_module("atrv_warp.calibrate", str(good), *option, check=False)
+        assert proc.returncode == 2 and f"{taken} exists: pass --force to overwrite it" in proc.stderr, proc.stderr
+    proc = run_module("atrv_warp.calibrate", str(good), "--out", "/proc/cal.toml", check=False)
+    assert proc.returncode == 2 and "cannot write in /proc" in proc.stderr, proc.stderr
+    proc = run_module("atrv_warp.calibrate", str(good), "--params", "friction,friction", check=False)
+    assert proc.returncode == 2 and "['friction'] named more than once" in proc.stderr, proc.stderr
+    assert taken.read_text() == "[rover]\n"
 
 
 # ------------------------------------------------------------------ the rollout
@@ -465,7 +475,7 @@ def test_record_example_drives_a_worn_truth_with_the_nominal_driver(tmp_path, mo
     monkeypatch.setattr(drive, "record_drive_bag", record)
     defaults = {name: default for name, default, _ in PARAMETERS}
     for extra, configured in (([], 0.125), (["--driver-wheel-radius", "0.13"], 0.13)):
-        assert main(["--record-example", str(tmp_path / "x.mcap"), "--truth", str(truth), *extra]) == 0
+        assert main(["--record-example", str(tmp_path / "x.mcap"), "--truth", str(truth), "--force", *extra]) == 0
         params = {**defaults, **seen[-1]}
         sim = RoverSim(1, variant=params["variant"], sim_config=params["sim_config"], driver=driver_config(params))
         assert sim.rover_cfg.wheel_radius == 0.121 and sim.driver.kinematics.wheel_radius == configured
@@ -683,3 +693,35 @@ def test_a_rollout_keeps_the_rover_configs_payload_unless_given_another():
         none = loaded(twist, state, chassis_mass=loaded.nominal_chassis_mass)
     assert torch.equal(default, given)
     assert (default[-1, :, 0] - none[-1, :, 0]).abs().min().item() > 1e-3  # 20 kg accelerate more slowly
+
+
+def test_a_pause_in_a_bag_splits_it_and_costs_no_memory():
+    """A drive with a day-long pause in the middle: the segments come from the two drives on either side (none
+    straddles the pause), in the time and memory the data takes, and a drive without pauses is cut as before."""
+    import dataclasses
+    import time
+    import tracemalloc
+
+    from atrv_warp.integrations.calibration.fit import drive_spans, make_segments
+
+    cfg = CalibrationConfig()
+    whole = _drive_log(60.0, pose_noise=0.0, wheel_noise=0.0)
+    gap = 1e6
+    later = {f: np.concatenate([getattr(whole, f), getattr(whole, f) + gap]) for f in ("pose_time", "joint_time",
+                                                                                        "cmd_time")}
+    twice = dataclasses.replace(whole, **later, **{f: np.concatenate([getattr(whole, f)] * 2) for f in (
+        "pose", "body_velocity", "wheel_speed", "cmd")})
+    assert drive_spans(twice, 0.0, float(twice.pose_time[-1])) == [(0.0, float(whole.pose_time[-1])),
+                                                                   (gap, gap + float(whole.pose_time[-1]))]
+    tracemalloc.start()
+    t0 = time.perf_counter()
+    seg = make_segments(twice, cfg, cfg.driver())
+    seconds = time.perf_counter() - t0
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    one = make_segments(whole, cfg, cfg.driver())
+    assert len(seg.t0) == 2 * len(one.t0) and seconds < 5.0 and peak < 50e6, (len(seg.t0), seconds, peak)
+    assert np.array_equal(seg.t0[: len(one.t0)], one.t0) and np.array_equal(seg.t0[len(one.t0):], one.t0 + gap)
+    assert np.array_equal(seg.inputs[: len(one.t0)], one.inputs)  # the drive before the pause, cut as alone
+    with pytest.raises(CalibrationError, match="duplicate|more than once"):
+        CalibrationConfig(params=("friction", "friction"))

@@ -11,6 +11,7 @@ import pytest
 import torch
 from tensordict import TensorDict
 
+from atrv_warp.core.files import OutputPathError
 from atrv_warp.policy import load_policy
 from atrv_warp.rl.export import export_policy, load_exported
 from atrv_warp.storage import FileFormatError
@@ -67,6 +68,15 @@ def test_export_cli_and_bad_input(tmp_path):
     with pytest.raises(ValueError, match=r"must end in \.pt2"):
         export_policy(None, tmp_path / "x.onnx")
     assert not (tmp_path / "x.pt2").exists()
+    before = (tmp_path / "p.pt2").read_bytes()  # an existing file is kept unless --force
+    again = subprocess.run([sys.executable, "-m", "atrv_warp.export", "nav", str(tmp_path / "p.pt2")],
+                           capture_output=True, text=True, check=False)
+    assert again.returncode == 2 and "p.pt2 exists: pass --force to overwrite it" in again.stderr, again.stderr
+    assert (tmp_path / "p.pt2").read_bytes() == before
+    export_policy("nav", tmp_path / "p.pt2", force=True)
+    assert (tmp_path / "p.pt2").read_bytes() != before
+    with pytest.raises(OutputPathError, match="cannot write in /proc"):
+        export_policy(None, "/proc/atrv/p.pt2")
 
 
 def test_onnx_export_checked_with_onnxruntime(tmp_path):

@@ -114,9 +114,11 @@ def test_live_node_rate_stamps_and_commands(ros_env):
 
 @pytest.mark.slow  # a live ROS 2 node
 def test_fast_run_matches_simulator_and_records_bag(ros_env, tmp_path):
-    bag = tmp_path / "run.mcap"
+    kept = tmp_path / "run.mcap"
+    kept.write_text("an earlier recording\n")  # is kept: the node records to the next free name, and says so
+    bag = tmp_path / "run-1.mcap"
     proc = start_node(ros_env, "real_time_factor:=0.0", "duration:=3.0", "mode:=forward", "x:=1.0", "y:=-2.0",
-                      "yaw:=0.5", "wait_for_subscribers:=1", f"bag:={bag}")
+                      "yaw:=0.5", "wait_for_subscribers:=1", f"bag:={kept}")
     client = Client("atrv_fast_client")
     try:
         assert client.wait_for(lambda: proc.poll() is not None, timeout=120), "node did not finish"
@@ -125,6 +127,7 @@ def test_fast_run_matches_simulator_and_records_bag(ros_env, tmp_path):
         client.close()
         out = stop(proc) if proc.poll() is None else proc.communicate()[0]
     assert proc.returncode == 0, out[-2000:]
+    assert kept.read_text() == "an earlier recording\n" and f"{kept} exists and is kept: writing {bag}" in out
     published = [(p.header.stamp.sec + 1e-9 * p.header.stamp.nanosec, p.pose.position.x, p.pose.position.y)
                  for p in client.poses]
     assert len(published) == 31  # t = 0, 0.1, ..., 3.0 s
@@ -472,7 +475,10 @@ def test_bad_parameters_are_refused_at_start(ros_env, tmp_path):
                             (["cmd_vel_delay:=-0.1"], "['cmd_vel_delay'] must be finite and >= 0"),
                             (["terrain:=moon"], "terrain='moon' is not a terrain"),
                             (["task:=nav", f"policy:={old}"], "observes 26 values, task 'nav' observes 32"),
-                            ([f"policy:={tmp_path / 'none.pt'}"], "parameter policy: policy file not found")):
+                            ([f"policy:={tmp_path / 'none.pt'}"], "parameter policy: policy file not found"),
+                            ([f"bag:={tmp_path / 'missing' / 'x.mcap'}"], "parameter bag: "),
+                            ([f"bag:={tmp_path}"], "is a folder"),
+                            (["bag:=/proc/atrv.mcap"], "cannot write in /proc")):
         proc = start_node(ros_env, *params)
         out, _ = proc.communicate(timeout=120)
         assert proc.returncode == 2, out[-2000:]

@@ -43,10 +43,10 @@ class ExportedFileError(ValueError):
     """An exported program that is refused; the message names the file and the problem (nothing was loaded)."""
 
 
-def check_output_path(path: str | Path, what: str = "file") -> Path:
-    """Check, before any work, that a ``what`` can be written at ``path``: ``path`` is not a folder, and a file can be
-    created in its folder or, where that does not exist yet, in the nearest folder above it that does (tried, then
-    removed). Nothing is left behind.
+def check_output_path(path: str | Path, what: str = "file", *, new_folders: bool = False) -> Path:
+    """Check, before any work, that a ``what`` can be written at ``path``: ``path`` is not a folder, its folder exists
+    (with ``new_folders``: or the nearest folder above it that does, where the writer will make the rest), and a file
+    can be created there (tried, then removed). Nothing is left behind.
 
     Raises:
         OutputPathError: One line naming the path and the problem.
@@ -57,6 +57,8 @@ def check_output_path(path: str | Path, what: str = "file") -> Path:
     if path.exists() and not os.access(path, os.W_OK):
         raise OutputPathError(f"{path}: the {what} is not writable")
     folder = path.parent
+    if not folder.exists() and not new_folders:
+        raise OutputPathError(f"{path}: the folder {folder} does not exist")
     while not folder.exists() and folder != folder.parent:
         folder = folder.parent
     if not folder.is_dir():

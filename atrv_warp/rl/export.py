@@ -95,14 +95,24 @@ def contract(source: Path, meta: dict, sim: SimConfig | None = None) -> dict:
             "step_dt": sim.step_dt, "rate_hz": 1.0 / sim.step_dt}
 
 
-def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = False) -> Path:
+def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = False, force: bool = False) -> Path:
     """Write the policy file ``policy`` (or a shipped policy's name, :data:`atrv_warp.policy.SHIPPED_POLICIES`;
     default: the shipped ``reach`` one) to ``out`` (``.pt2``), and with ``onnx`` also to ``out`` with the suffix
-    ``.onnx``."""
+    ``.onnx``.
+
+    Raises:
+        FileExistsError: ``out`` (or its ``.onnx``) exists and ``force`` is not set.
+        OutputPathError: ``out`` cannot be written (named), before anything is loaded.
+    """
+    from atrv_warp.core.files import check_output_path
     from atrv_warp.storage import load_weights
 
     if Path(out).suffix != ".pt2":
         raise ValueError(f"{out}: the exported file must end in .pt2 (a torch.export archive)")
+    for target in (Path(out), *([Path(out).with_suffix(".onnx")] if onnx else [])):
+        check_output_path(target, "exported policy", new_folders=True)
+        if target.exists() and not force:
+            raise FileExistsError(f"{target} exists: pass --force to overwrite it, or name another file")
     if onnx:  # a missing extra stops before anything is written
         import onnx as _onnx  # noqa: F401
         import onnxruntime  # noqa: F401

@@ -115,7 +115,7 @@ def _prepare_run(cfg: TrainConfig, resume: bool) -> tuple[Path, dict | None]:
     if require is not None:
         require()
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
-    check_output_path(run_dir / "config.toml", "run folder")  # a folder that cannot be written fails before any work
+    check_output_path(run_dir / "config.toml", "run folder", new_folders=True)  # fails before any work
     ckpt_path = Checkpoint(run_dir).path
     if resume and not ckpt_path.is_file():
         print(f"--resume: {run_dir} holds no save yet (stopped before its first): starting it from the beginning")

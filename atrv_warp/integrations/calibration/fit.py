@@ -176,6 +176,10 @@ class CalibrationConfig:
 
     def __post_init__(self):
         unknown = sorted(set(self.params) - set(FIT_PARAMETERS))
+        twice = sorted({p for p in self.params if self.params.count(p) > 1})
+        if twice:
+            raise CalibrationError(f"parameter(s) {twice} named more than once in the parameters to fit "
+                                   f"{list(self.params)}")
         if unknown or not self.params:
             raise CalibrationError(f"unknown or no parameter(s) to fit {unknown or list(self.params)}; "
                                    f"known: {list(FIT_PARAMETERS)}")
@@ -363,6 +367,63 @@ def _smooth(x: np.ndarray, window: int) -> np.ndarray:
     return np.stack([np.convolve(padded[:, i], kernel, mode="valid") for i in range(x.shape[1])], -1)
 
 
+MAX_GAP_S = 1.0
+"""A pause longer than this [s] between two poses or two joint states splits a drive: segments are cut within the
+spans between pauses, and a pause's time is never put on the step grid. So the memory a fit takes grows with the
+recorded drive, not with the time a bag spans (a bag with a day-long gap costs what its data costs)."""
+
+
+def drive_spans(log: DriveLog, start: float, end: float) -> list[tuple[float, float]]:
+    """The spans of [``start``, ``end``] [s] in which neither the poses nor the joint states pause longer than
+    :data:`MAX_GAP_S`, in order."""
+    pauses = sorted((float(t[k]), float(t[k + 1])) for t in (log.pose_time, log.joint_time)
+                    for k in np.nonzero(np.diff(t) > MAX_GAP_S)[0])
+    spans, lo = [], start
+    for a, b in pauses:
+        if a > lo:
+            spans.append((lo, min(a, end)))
+        lo = max(lo, b)
+        if lo >= end:
+            break
+    if lo < end:
+        spans.append((lo, end))
+    return [(a, b) for a, b in spans if b > a] or [(start, end)]
+
+
+def _along(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, grid: np.ndarray, dt: float, substeps: int,
+           latency: float, command: str) -> dict:
+    """What the fit reads of ``log`` on one span's step ``grid``: the wheels, the smoothed pose and its velocity, the
+    tilt, each wheel, the efforts, and the replayed driver's inputs, integral and targets."""
+    wheel = np.stack([np.interp(grid, log.joint_time, log.wheel_speed[:, s]) for s in (0, 1)], -1)
+    pose = _smooth(np.stack([np.interp(grid, log.pose_time, log.pose[:, i]) for i in range(3)], -1),
+                   round(cfg.pose_smoothing / dt))
+    if log.twist:
+        vel = np.stack([np.interp(grid, log.pose_time, log.body_velocity[:, i]) for i in range(3)], -1)
+    else:  # the velocity from the smoothed poses, in the chassis frame
+        vx, vy = np.gradient(pose[:, 0], dt), np.gradient(pose[:, 1], dt)
+        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        vel = np.stack([c * vx + s * vy, -s * vx + c * vy, np.gradient(pose[:, 2], dt)], -1)
+    # the start state's tilt, its rate and each wheel's speed (a pitching rover restarted level rocks back)
+    tilt = None if log.tilt is None else np.stack([np.interp(grid, log.pose_time, log.tilt[:, i]) for i in (0, 1)], -1)
+    tilt_rate = (None if log.tilt_rate is None else
+                 np.stack([np.interp(grid, log.pose_time, log.tilt_rate[:, i]) for i in (0, 1)], -1))
+    each = (None if log.wheel_each is None else
+            np.stack([np.interp(grid, log.joint_time, log.wheel_each[:, j]) for j in range(log.wheel_each.shape[1])], -1))
+    # the effort stamped at a step's end is what the motors held over it
+    effort = (None if log.effort is None else
+              np.stack([np.interp(grid + dt, log.joint_time, log.effort[:, s]) for s in (0, 1)], -1))
+    if command == "cmd_vel":
+        inputs, integral, targets = _controller(log, driver, grid, wheel, dt, substeps, latency)
+    else:
+        inputs, integral, targets = effort, np.zeros_like(effort), None
+    # the effort stamped at a segment's start: the torque of the driver's last loop before it, which its integral made
+    start_effort = (None if command != "cmd_vel" or log.effort is None else
+                    np.stack([np.interp(grid, log.joint_time, log.effort[:, s]) for s in (0, 1)], -1))
+    return {"grid": grid, "wheel": wheel, "pose": pose, "vel": vel, "tilt": tilt, "tilt_rate": tilt_rate,
+            "each": each, "effort": effort, "inputs": inputs, "integral": integral, "targets": targets,
+            "start_effort": start_effort}
+
+
 def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, dt: float = 0.05,
                   substeps: int = 5, *, latency: float | None = None, like: Segments | None = None) -> Segments:
     """Cut ``log`` into segments of ``cfg.segment_seconds`` on the controller's step grid, leaving out the
@@ -386,35 +447,19 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, d
     end = min(log.pose_time[-1], log.joint_time[-1])
     if cfg.duration is not None:
         end = min(end, start + cfg.duration)
-    grid = start + dt * np.arange(math.floor((end - start) / dt + 1e-6) + 1)
-    wheel = np.stack([np.interp(grid, log.joint_time, log.wheel_speed[:, s]) for s in (0, 1)], -1)
-    pose = _smooth(np.stack([np.interp(grid, log.pose_time, log.pose[:, i]) for i in range(3)], -1),
-                   round(cfg.pose_smoothing / dt))
-    if log.twist:
-        vel = np.stack([np.interp(grid, log.pose_time, log.body_velocity[:, i]) for i in range(3)], -1)
-    else:  # the velocity from the smoothed poses, in the chassis frame
-        vx, vy = np.gradient(pose[:, 0], dt), np.gradient(pose[:, 1], dt)
-        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
-        vel = np.stack([c * vx + s * vy, -s * vx + c * vy, np.gradient(pose[:, 2], dt)], -1)
-    # the start state's tilt, its rate and each wheel's speed (a pitching rover restarted level rocks back)
-    tilt = None if log.tilt is None else np.stack([np.interp(grid, log.pose_time, log.tilt[:, i]) for i in (0, 1)], -1)
-    tilt_rate = (None if log.tilt_rate is None else
-                 np.stack([np.interp(grid, log.pose_time, log.tilt_rate[:, i]) for i in (0, 1)], -1))
-    each = (None if log.wheel_each is None else
-            np.stack([np.interp(grid, log.joint_time, log.wheel_each[:, j]) for j in range(log.wheel_each.shape[1])], -1))
-    # the effort stamped at a step's end is what the motors held over it
-    effort = (None if log.effort is None else
-              np.stack([np.interp(grid + dt, log.joint_time, log.effort[:, s]) for s in (0, 1)], -1))
     latency = (cfg.latency or 0.0) if latency is None else latency
-    if command == "cmd_vel":
-        inputs, integral, targets = _controller(log, driver, grid, wheel, dt, substeps, latency)
-    else:
-        inputs, integral, targets = effort, np.zeros_like(effort), None
-    # the effort stamped at a segment's start: the torque of the driver's last loop before it, which its integral made
-    start_effort = (None if command != "cmd_vel" or log.effort is None else
-                    np.stack([np.interp(grid, log.joint_time, log.effort[:, s]) for s in (0, 1)], -1))
     steps = round(cfg.segment_seconds / dt)
-    starts = np.arange(0, len(grid) - steps, steps)
+    spans = [_along(log, cfg, driver, a + dt * np.arange(math.floor((b - a) / dt + 1e-6) + 1), dt, substeps, latency,
+                    command) for a, b in drive_spans(log, start, end)]
+    spans = [span for span in spans if len(span["grid"]) > steps] or spans[:1]
+    # segments are cut within a span: none straddles a gap, whose time is never gridded
+    offsets = np.cumsum([0] + [len(span["grid"]) for span in spans])
+    starts = np.concatenate([o + np.arange(0, len(span["grid"]) - steps, steps) for o, span in zip(offsets, spans)])
+    joined = {k: None if spans[0][k] is None else np.concatenate([span[k] for span in spans]) for k in spans[0]}
+    grid, wheel, pose, vel = joined["grid"], joined["wheel"], joined["pose"], joined["vel"]
+    tilt, tilt_rate, each, effort = joined["tilt"], joined["tilt_rate"], joined["each"], joined["effort"]
+    inputs, integral, targets, start_effort = (joined["inputs"], joined["integral"], joined["targets"],
+                                               joined["start_effort"])
     keep = []
     for k in starts:
         window = slice(k, k + steps + 1)
@@ -425,8 +470,11 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, d
     if like is not None:
         keep = list(np.searchsorted(grid, like.t0 - 1e-6))
     if len(keep) < cfg.min_segments:
+        gridded = (len(grid) - 1) * dt
         raise CalibrationError(f"{log.path}: too short to fit: {len(keep)} moving segment(s) of "
-                               f"{cfg.segment_seconds:g} s in {end - start:.1f} s of log (need {cfg.min_segments})")
+                               f"{cfg.segment_seconds:g} s in {gridded:.1f} s of log (need {cfg.min_segments})"
+                               + (f"; {end - start - gridded:.1f} s of it are pauses longer than {MAX_GAP_S:g} s"
+                                  if end - start - gridded > 1.0 else ""))
     keep = np.array(keep)
     idx = keep[:, None] + np.arange(steps + 1)[None, :]
     ref = pose[idx].copy()

@@ -29,6 +29,7 @@ from sensor_msgs.msg import Imu, JointState, LaserScan
 from std_msgs.msg import Int32, String
 from visualization_msgs.msg import MarkerArray
 
+from atrv_warp.core.files import OutputPathError, check_output_path, fresh_path
 from atrv_warp.core.geometry import quat_to_matrix, wrap_angle, yaw_to_quat
 from atrv_warp.integrations.ros.bag import BagWriter, joint_state_dict, odometry_dict, pose_dict, twist_dict
 from atrv_warp.integrations.ros.base import imu_reading
@@ -448,7 +449,15 @@ class RoverSimNode(Node):
         self.tf_pub = self.tf_message = None
         if p["tf"]:
             self._start_tf(latched)
-        self.bag = BagWriter(p["bag"]) if p["bag"] else None
+        self.bag = None
+        if p["bag"]:
+            try:
+                path, line = fresh_path(p["bag"])  # an existing bag is kept: the next free name is taken
+            except OutputPathError as err:
+                self._fail(f"parameter bag: {err}")
+            if line:
+                self.log.warning(line)
+            self.bag = BagWriter(path)
         if self.bag is not None:  # what a 3D panel needs to draw the rover from the bag alone
             self.record("/robot_description", "std_msgs/msg/String", {"data": urdf})
             self.record("/tf_static", "tf2_msgs/msg/TFMessage",
@@ -493,6 +502,11 @@ class RoverSimNode(Node):
                 self._fail(f"terrain={p['terrain']!r} is not a terrain; use one of {sorted(TERRAIN_PRESETS)}")
         if not 0.0 <= p["scan_dropout"] <= 1.0:
             self._fail(f"scan_dropout is a probability in [0, 1], got {p['scan_dropout']}")
+        if p["bag"]:  # before the simulator is built: a bag it cannot write fails in one line, not after the compile
+            try:
+                check_output_path(p["bag"], "bag")
+            except OutputPathError as err:
+                self._fail(f"parameter bag: {err}")
         if p["policy"]:  # goal mode's policy: a file the task can run, checked before any rover starts
             from tensordict import TensorDict
 
