@@ -21,7 +21,8 @@ import os
 import sys
 import tempfile
 
-__all__ = ["CORES_ENV", "TRAINER_CORE", "VERBOSE_ENV", "WORKER_CORE", "add_verbose_argument", "configure", "configure_logging", "device_summary",
+__all__ = ["CORES_ENV", "TRAINER_CORE", "VERBOSE_ENV", "WORKER_CORE", "add_verbose_argument", "available_memory",
+           "configure", "configure_logging", "device_summary",
            "error_line", "is_configured", "is_verbose", "pin_to_core", "run_cores", "set_verbose"]
 
 VERBOSE_ENV = "ATRV_WARP_VERBOSE"
@@ -132,6 +133,29 @@ def device_summary(device: str | None = None) -> str:
         return f"simulation on {dev.alias} ({dev.name}), Warp {wp.config.version}"
     extra = "no CUDA device found" if cuda == 0 else f"{cuda} CUDA device(s) available: pass device=cuda:0"
     return f"simulation on cpu ({extra}), Warp {wp.config.version}"
+
+
+def available_memory(device: str = "cpu") -> int | None:
+    """Bytes free for new allocations on ``device`` (``cpu``: the system's ``MemAvailable``; ``cuda:N``: the GPU's
+    free memory), or None where the system does not say."""
+    if str(device).startswith("cuda"):
+        try:
+            import torch
+
+            return int(torch.cuda.mem_get_info(torch.device(str(device)))[0])
+        except (RuntimeError, AssertionError, ValueError):
+            return None
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
 
 
 def add_verbose_argument(parser) -> None:

@@ -2,6 +2,9 @@
 values never leak into another's, a world set to a config's values steps exactly as a simulator built
 with that config, gradients reach a per-world mu and mass, and bad values are refused by name."""
 
+import re
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -147,3 +150,72 @@ def test_gradients_reach_each_worlds_mu_and_mass():
     fd_mass = (x0(rolling, mu, mass + dm) - x0(rolling, mu, mass - dm)) / 1.0
     assert gradients(rolling, mu, mass)[1] == pytest.approx(fd_mass, rel=0.03)
     assert fd_mu > 0 and fd_mass < 0  # more grip, further; heavier, less far
+
+
+# ------------------------------------------------------------------ configs that cannot run, refused by name
+
+def test_a_sim_config_of_the_wrong_shape_is_named_with_its_file_and_key(tmp_path):
+    from atrv_warp.sim.config import read_sim_config
+
+    cases = {"[rover]\ninertial_overrides = [1, 2]\n": "[rover] inertial_overrides: entry 0 must be a table",
+             "[robot]\nmass = 3\n": "unknown table(s) ['robot']; known: [rover], [contact]",
+             "[rover]\nwheel_radius = 'big'\n": "[rover] RoverConfig.wheel_radius must be a number, got 'big'",
+             "[rover]\nleft_wheels = [1, 2]\n": "[rover] RoverConfig.left_wheels must be a list of names",
+             "[rover]\npayload_offset = [1, 2]\n": "[rover] RoverConfig.payload_offset must be a list of 3 numbers",
+             "[contact]\nfriction = true\n": "[contact] ContactConfig.friction must be a number, got True",
+             "[[rover.inertial_overrides]]\nlink = 'center_link'\nmass = -4.0\n":
+                 "entry 0: InertialOverride.mass of 'center_link' must be a finite number > 0"}
+    for k, (text, message) in enumerate(cases.items()):
+        path = tmp_path / f"c{k}.toml"
+        path.write_text(text)
+        with pytest.raises(ValueError) as err:
+            read_sim_config(path)
+        assert str(err.value).startswith(f"sim config {path}: ") and message in str(err.value), str(err.value)
+    binary = tmp_path / "binary.toml"
+    binary.write_bytes(bytes(range(256)))
+    with pytest.raises(ValueError, match=f"sim config {binary}: not a text file"):
+        read_sim_config(binary)
+    ok = tmp_path / "ok.toml"
+    ok.write_text("[[rover.inertial_overrides]]\nlink = 'center_link'\nmass = 40.0\ninertia_diag = [1.0, 2.0, 2.5]\n")
+    (override,) = read_sim_config(ok).rover.inertial_overrides
+    assert override.mass == 40.0 and override.inertia_diag == (1.0, 2.0, 2.5)
+    with pytest.raises(TypeError, match="RoverConfig.inertial_overrides must be InertialOverride entries"):
+        RoverConfig(inertial_overrides=(1, 2))
+
+
+def test_values_that_blow_the_state_up_are_refused_relative_to_the_robot(tmp_path):
+    """Each value measured to make the state non-finite within 200 steps is refused, naming its bound and what it is
+    relative to; a smaller robot's own wheel passes where the ATRV-Jr's would not."""
+    from atrv_warp.sim.config import default_urdf_path
+
+    for rover, message in [(RoverConfig(torque_scale=1e308), "RoverConfig.torque_scale 1e+308 is outside 0 … 5"),
+                           (RoverConfig(wheel_radius=100.0), ("RoverConfig.wheel_radius 100 m is outside 0.0625 … "
+                                                             "0.25 (0.5 to 2 times the robot's wheel radius, 0.125 m)")),
+                           (RoverConfig(payload_mass=5.0, payload_offset=(1e9, 0.0, 0.0)),
+                            "RoverConfig.payload_offset 1e+09 m away is outside 0 … 0.781"),
+                           (RoverConfig(payload_mass=1e6), "RoverConfig.payload_mass 1e+06 kg is outside 0 … 174")]:
+        with pytest.raises(ValueError, match=re.escape(message)):
+            RoverSim(1, rover=rover)
+    config = tmp_path / "huge.toml"
+    config.write_text("[contact]\nstiffness = 1e12\n")
+    with pytest.raises(ValueError, match=rf"sim config {re.escape(str(config))}: \[contact\] stiffness 1e\+12 is outside"):
+        RoverSim(1, sim_config=config)
+    sim = RoverSim(2)
+    with pytest.raises(ValueError, match="payload_mass 1e\\+06 kg is outside"):
+        sim.set_params(payload_mass=1e6)
+    small = tmp_path / "small.urdf"  # the same rover with 5 cm wheels: its own radius passes, the ATRV-Jr's does not
+    small.write_text(Path(default_urdf_path()).read_text().replace('radius="0.125"', 'radius="0.05"'))
+    RoverSim(1, rover=RoverConfig(urdf=str(small), wheel_radius=0.05))
+    with pytest.raises(ValueError, match=r"outside 0.025 … 0.1 \(0.5 to 2 times the robot's wheel radius, 0.05 m\)"):
+        RoverSim(1, rover=RoverConfig(urdf=str(small), wheel_radius=0.125))
+
+
+def test_a_world_count_is_an_integer_that_fits_in_memory():
+    from atrv_warp import ATRVjrEnv
+
+    with pytest.raises(TypeError, match=r"num_worlds must be an integer, got True \(bool\)"):
+        RoverSim(True)
+    with pytest.raises(ValueError, match=r"10,000,000 worlds need about 320.0 GB on cpu \(32 kB each\), more than the"):
+        RoverSim(10**7)
+    with pytest.raises(ValueError, match="worlds need about"):
+        ATRVjrEnv(num_envs=10**7)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -42,6 +43,34 @@ def default_urdf_path() -> str:
     return str(resources.files("atrv_warp").joinpath("assets/atrvjr.urdf"))
 
 
+def _is_number(value) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _check_types(cfg) -> None:
+    """Each field of a config dataclass of the type its default has (a number, a string, a tuple of strings or of
+    numbers of the default's length), a list taken as a tuple; raise a ``TypeError`` naming the field."""
+    for f in dataclasses.fields(cfg):
+        value, default = getattr(cfg, f.name), f.default
+        if isinstance(value, list):
+            value = tuple(value)
+            object.__setattr__(cfg, f.name, value)
+        where = f"{type(cfg).__name__}.{f.name}"
+        if default is None or f.name == "inertial_overrides":
+            continue  # optional fields and the overrides' own checks
+        if _is_number(default) and not _is_number(value):
+            raise TypeError(f"{where} must be a number, got {value!r} ({type(value).__name__})")
+        if isinstance(default, str) and not isinstance(value, str):
+            raise TypeError(f"{where} must be a string, got {value!r} ({type(value).__name__})")
+        if isinstance(default, tuple):
+            kind = "a number" if default and all(map(_is_number, default)) else "a string"
+            ok = isinstance(value, tuple) and all(_is_number(v) if kind == "a number" else isinstance(v, str)
+                                                 for v in value)
+            if not ok or (kind == "a number" and len(value) != len(default)):
+                size = f"{len(default)} numbers" if kind == "a number" else "names (strings)"
+                raise TypeError(f"{where} must be a list of {size}, got {value!r}")
+
+
 @dataclass(frozen=True)
 class InertialOverride:
     """Replaces the mass properties a URDF gives one link (used by the ``reference`` variant)."""
@@ -53,6 +82,19 @@ class InertialOverride:
     inertia_diag: tuple[float, float, float] | None = None
     """Principal moments about the link's inertial frame [kg·m²]; ``None`` keeps the
     URDF's inertia tensor scaled by the mass ratio."""
+
+    def __post_init__(self):
+        if not isinstance(self.link, str) or not self.link:
+            raise TypeError(f"InertialOverride.link must name a link, got {self.link!r}")
+        if not (_is_number(self.mass) and math.isfinite(self.mass) and self.mass > 0):
+            raise ValueError(f"InertialOverride.mass of {self.link!r} must be a finite number > 0 [kg], got "
+                             f"{self.mass!r}")
+        if self.inertia_diag is not None:
+            diag = tuple(self.inertia_diag) if isinstance(self.inertia_diag, list | tuple) else None
+            if diag is None or len(diag) != 3 or not all(_is_number(v) and math.isfinite(v) and v > 0 for v in diag):
+                raise ValueError(f"InertialOverride.inertia_diag of {self.link!r} must be three finite numbers > 0 "
+                                 f"[kg·m²], got {self.inertia_diag!r}")
+            object.__setattr__(self, "inertia_diag", diag)
 
 
 @dataclass(frozen=True)
@@ -89,6 +131,13 @@ class RoverConfig:
     """Where the payload sits, from the chassis' centre of mass in the chassis frame [m]."""
 
     def __post_init__(self):
+        _check_types(self)
+        if self.urdf is not None and not isinstance(self.urdf, str | os.PathLike):
+            raise TypeError(f"RoverConfig.urdf must be a path, got {self.urdf!r}")
+        if not isinstance(self.inertial_overrides, tuple) or not all(
+                isinstance(ov, InertialOverride) for ov in self.inertial_overrides):
+            raise TypeError("RoverConfig.inertial_overrides must be InertialOverride entries (in a sim config: "
+                            f"tables with link, mass and inertia_diag), got {self.inertial_overrides!r}")
         for name in ("wheel_radius", "wheel_speed_limit"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -159,6 +208,9 @@ class ContactConfig:
     prints). ``None``: the plain law."""
 
     def __post_init__(self):
+        _check_types(self)
+        if self.damping_limit is not None and not _is_number(self.damping_limit):
+            raise TypeError(f"ContactConfig.damping_limit must be a number or None, got {self.damping_limit!r}")
         for name in ("stiffness", "damping", "linear_region"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
@@ -265,6 +317,7 @@ class SensorNoise:
     """Wheel-encoder speed noise (/joint_states velocity) [rad/s]."""
 
     def __post_init__(self):
+        _check_types(self)
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if not (math.isfinite(value) and value >= 0):
@@ -395,6 +448,29 @@ class SimConfigFile:
         return (table, key) in self.keys
 
 
+def _overrides(path: Path, value) -> tuple[InertialOverride, ...]:
+    """A sim config's ``[rover] inertial_overrides``: an array of tables ``{link = "...", mass = ..., inertia_diag =
+    [...]}``, each checked, or a ``ValueError`` naming the file, the key and the entry."""
+    where = f"sim config {path}: [rover] inertial_overrides"
+    if not isinstance(value, list):
+        raise ValueError(f"{where} must be an array of tables ([[rover.inertial_overrides]] with link, mass and "  # noqa: TRY004
+                         f"inertia_diag), got {value!r}")
+    out = []
+    for k, entry in enumerate(value):
+        if not isinstance(entry, dict):
+            raise ValueError(f"{where}: entry {k} must be a table with link, mass and inertia_diag, got "  # noqa: TRY004
+                             f"{entry!r}")
+        unknown = sorted(set(entry) - {"link", "mass", "inertia_diag"})
+        if unknown or "link" not in entry or "mass" not in entry:
+            raise ValueError(f"{where}: entry {k} must set link and mass (and may set inertia_diag), got "
+                             f"{sorted(entry)}")
+        try:
+            out.append(InertialOverride(**entry))
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"{where}: entry {k}: {err}") from None
+    return tuple(out)
+
+
 def load_sim_config(path, rover: RoverConfig | None = None,
                     contact: ContactConfig | None = None) -> tuple[RoverConfig, ContactConfig]:
     """``rover`` and ``contact`` (default: the realistic variant's and the default contact) with the
@@ -421,25 +497,28 @@ def read_sim_config(path, rover: RoverConfig | None = None, contact: ContactConf
     contact = contact or ContactConfig()
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as err:
         raise ValueError(f"sim config {path}: cannot read it ({err.strerror or err})") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"sim config {path}: not a text file (a TOML file of [rover] and [contact] tables)") from None
     try:
         tables = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ValueError(f"sim config {path}: not valid TOML ({err})") from None
+    unknown = sorted(set(tables) - {*SIM_CONFIG_TABLES, STANDARD_ERROR_TABLE[0]})
+    if unknown:
+        raise ValueError(f"sim config {path}: unknown table(s) {unknown}; known: [rover], [contact] (the simulation) "
+                         f"and [{STANDARD_ERROR_TABLE[0]}] (a record)")
     configs = {"rover": rover, "contact": contact}
     keys = set()
     for table in SIM_CONFIG_TABLES:
         values = tables.get(table, {})
         if not isinstance(values, dict):
             raise ValueError(f"sim config {path}: [{table}] must be a table of keys, got {values!r}")  # noqa: TRY004
-        values = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
-        for key, value in values.items():
-            current = getattr(configs[table], key, None)
-            number = isinstance(current, (int, float)) and not isinstance(current, bool)
-            if number and (isinstance(value, bool) or not isinstance(value, (int, float))):
-                raise ValueError(f"sim config {path}: [{table}] {key} must be a number, got {value!r}")
+        values = dict(values)
+        if table == "rover" and "inertial_overrides" in values:
+            values["inertial_overrides"] = _overrides(path, values["inertial_overrides"])
         try:
             configs[table] = replace_checked(configs[table], **values)
         except (TypeError, ValueError) as err:

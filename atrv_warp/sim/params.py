@@ -9,6 +9,8 @@ randomization does on reset, without a host round trip).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import torch
 import warp as wp
@@ -16,7 +18,8 @@ import warp as wp
 from atrv_warp.sim.config import ContactConfig, RoverConfig
 from atrv_warp.sim.kernels.params import WorldPhysics
 
-__all__ = ["PARAMETERS", "PARAMETER_KEYS", "WorldParams", "check_parameter", "parameter_values"]
+__all__ = ["PARAMETERS", "PARAMETER_KEYS", "Bound", "WorldParams", "check_bounds", "check_parameter", "parameter_bounds",
+           "parameter_values"]
 
 PARAMETERS: dict[str, str] = {  # this order is also the randomization's draw streams' (PHYSICS_DRAWS): keep it
     "friction": "Coulomb coefficient mu of the wheels (and every other contact) [-]",
@@ -65,6 +68,58 @@ def check_parameter(name: str, value) -> None:
             raise ValueError(f"{name} must be >= 0, got {value!r}")
     elif (v <= 0).any():
         raise ValueError(f"{name} must be > 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class Bound:
+    """The range of a parameter's values a robot's simulation stays meaningful in (a payload offset: its distance from
+    the chassis' centre of mass)."""
+
+    low: float
+    high: float
+    rule: str
+    """What the range is relative to, in words (e.g. "0.5 to 2 times the robot's wheel radius, 0.125 m")."""
+
+
+def parameter_bounds(description, configured_wheel_radius: float) -> dict[str, Bound]:
+    """Each bounded parameter's range for the robot ``description`` (:class:`~atrv_warp.sim.urdf.RoverDescription`),
+    stated relative to its own figures so that a smaller or larger robot's real values pass. Past them the explicit
+    step blows up or the robot is another robot (measured on the ATRV-Jr, 58 kg, driven 10 s at full torque: a wheel
+    radius of 100 m, a torque scale of 10⁴, a payload of 500 kg, a payload 10⁹ m away or a contact stiffness of 10⁷
+    made its state non-finite; a stiffness of 3·10⁶ bounced it 1.9 m high):
+
+    - ``wheel_radius``: 0.5 to 2 times the URDF's wheel radius (where it gives none: the configured one's);
+    - ``torque_scale``: 0 to 5 (at most five times the motors' torque);
+    - ``payload_mass``: 0 to 3 times the robot's mass;
+    - ``payload_offset``: within twice the body's reach (:attr:`~atrv_warp.sim.urdf.RoverDescription.reach`) of the
+      chassis' centre of mass;
+    - ``stiffness``: 0.1 to 10 times the reference contact's 10⁵ N/m^n.
+    """
+    radius = description.wheel_radius or configured_wheel_radius
+    mass, reach = description.total_mass, description.reach
+    return {"wheel_radius": Bound(0.5 * radius, 2.0 * radius, f"0.5 to 2 times the robot's wheel radius, {radius:g} m"),
+            "torque_scale": Bound(0.0, 5.0, "at most 5 times the motors' torque"),
+            "payload_mass": Bound(0.0, 3.0 * mass, f"at most 3 times the robot's mass, {mass:.1f} kg"),
+            "payload_offset": Bound(0.0, 2.0 * reach, f"within twice the body's reach, {2.0 * reach:.2f} m, of the "
+                                                      "chassis' centre of mass"),
+            "stiffness": Bound(1.0e4, 1.0e6, "0.1 to 10 times the reference contact's 1e5 N/m^n")}
+
+
+def check_bounds(bounds: dict[str, Bound], name: str, value, label: str | None = None) -> None:
+    """Raise a ``ValueError`` naming the parameter (as ``label`` where given: the file and key it came from) if
+    ``value`` (a number, or an array of them; a payload offset: (..., 3)) leaves its :func:`parameter_bounds`."""
+    bound = bounds.get(name)
+    if bound is None:
+        return
+    v = np.asarray(value, dtype=np.float64)
+    if name == "payload_offset":
+        v = np.linalg.norm(v.reshape(-1, 3), axis=-1)
+    bad = v[(v < bound.low) | (v > bound.high)]
+    if bad.size:
+        unit = "m" if name in ("wheel_radius", "payload_offset") else "kg" if name == "payload_mass" else ""
+        shown = f"{float(bad.flat[0]):g}{' ' + unit if unit else ''}"
+        raise ValueError(f"{label or name} {shown}{' away' if name == 'payload_offset' else ''} is outside "
+                         f"{bound.low:.3g} … {bound.high:.3g} ({bound.rule})")
 
 
 class WorldParams:

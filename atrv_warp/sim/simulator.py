@@ -20,6 +20,7 @@ import torch
 import warp as wp
 
 from atrv_warp.core.geometry import quat_to_matrix
+from atrv_warp.runtime import available_memory
 from atrv_warp.sim.config import (
     ArenaConfig,
     ContactConfig,
@@ -27,7 +28,7 @@ from atrv_warp.sim.config import (
     RoverConfig,
     SimConfig,
     get_variant,
-    load_sim_config,
+    read_sim_config,
 )
 from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
 from atrv_warp.sim.driver import DRIVE_TORQUE, DRIVE_TWIST, SNAPSHOT_ADDED, Driver, DriverConfig
@@ -37,8 +38,17 @@ from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics, apply_pay
 from atrv_warp.sim.kernels.rover import RoverLayout, compute_rover_state, reset_worlds
 from atrv_warp.sim.kernels.terrain import place_on_terrain
 from atrv_warp.sim.model import BuiltModel, build_model
-from atrv_warp.sim.params import PARAMETERS, WorldParams, check_parameter
+from atrv_warp.sim.params import (
+    PARAMETER_KEYS,
+    PARAMETERS,
+    WorldParams,
+    check_bounds,
+    check_parameter,
+    parameter_bounds,
+    parameter_values,
+)
 from atrv_warp.sim.terrain import HeightGrid, TerrainConfig, get_terrain
+from atrv_warp.sim.urdf import load_rover
 
 __all__ = ["DRIVE_MODE_TORQUES", "DriveMode", "RoverSim", "SimBuffers"]
 
@@ -123,6 +133,29 @@ class SimBuffers:
     """(N,) ``int32``: 1 where the world's state is no longer finite (stays until reset)."""
 
 
+BYTES_PER_WORLD = 32_000
+"""Memory one world takes, with headroom [bytes]: about 20 kB measured on the CPU (the resident memory of
+``RoverSim(4096)`` less ``RoverSim(64)``, and of the ``nav_deploy`` environment likewise)."""
+
+
+def check_world_count(num_worlds, device) -> None:
+    """Refuse a world count that is no positive integer (``True`` is not one world), or whose memory estimate
+    (:data:`BYTES_PER_WORLD` each) exceeds what ``device`` has free, before anything is allocated.
+
+    Raises:
+        TypeError: Not an integer.
+        ValueError: Below 1, or past the memory (the estimate and what is free named).
+    """
+    if isinstance(num_worlds, bool) or not isinstance(num_worlds, int | np.integer):
+        raise TypeError(f"num_worlds must be an integer, got {num_worlds!r} ({type(num_worlds).__name__})")
+    if num_worlds < 1:
+        raise ValueError(f"num_worlds must be >= 1, got {num_worlds}")
+    need, free = int(num_worlds) * BYTES_PER_WORLD, available_memory(str(device))
+    if free is not None and need > free:
+        raise ValueError(f"{num_worlds:,} worlds need about {need / 1e9:.1f} GB on {device} "
+                         f"({BYTES_PER_WORLD / 1e3:.0f} kB each), more than the {free / 1e9:.1f} GB free there")
+
+
 class RoverSim:
     """Batched ATRV-Jr simulator.
 
@@ -190,13 +223,24 @@ class RoverSim:
         sim_config: str | Path | None = None,
         driver: DriverConfig | None = None,
     ):
+        self.device = wp.get_device(device)
+        check_world_count(num_worlds, self.device)
         self.rover_cfg = nominal_rover = rover or get_variant(variant)
         self.contact_cfg = contact or ContactConfig()
+        read = None
         if sim_config:
-            self.rover_cfg, self.contact_cfg = load_sim_config(sim_config, self.rover_cfg, self.contact_cfg)
+            read = read_sim_config(sim_config, self.rover_cfg, self.contact_cfg)
+            self.rover_cfg, self.contact_cfg = read.rover, read.contact
+        self.bounds = parameter_bounds(load_rover(self.rover_cfg), nominal_rover.wheel_radius)
+        """Each bounded physical parameter's range for this robot (:func:`~atrv_warp.sim.params.parameter_bounds`):
+        the configs' values and :meth:`set_params` are held to them."""
+        for name, value in parameter_values(self.rover_cfg, self.contact_cfg).items():
+            table, key = PARAMETER_KEYS[name]
+            label = (f"sim config {read.path}: [{table}] {key}" if read is not None and read.sets(table, key) else
+                     f"{'RoverConfig' if table == 'rover' else 'ContactConfig'}.{key}")
+            check_bounds(self.bounds, name, value, label)
         self.arena_cfg = arena or ArenaConfig()
         self.sim_cfg = sim or SimConfig()
-        self.device = wp.get_device(device)
         self.num_worlds = num_worlds
         self.substeps = self.sim_cfg.substeps
         self.built: BuiltModel = build_model(num_worlds, rover=self.rover_cfg, arena=self.arena_cfg,
@@ -344,6 +388,7 @@ class RoverSim:
         staged = {}
         for name, value in values.items():
             check_parameter(name, value)
+            check_bounds(self.bounds, name, value)
             v = torch.as_tensor(np.asarray(value, dtype=np.float32))
             width = (3,) if name == "payload_offset" else ()
             if v.shape not in ((*width,), (count, *width)):

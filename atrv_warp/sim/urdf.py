@@ -51,6 +51,10 @@ class Wheel:
     outward: np.ndarray
     """Unit axle direction in the wheel link frame that points away from the chassis centre."""
     inertial: Inertial
+    radius: float | None = None
+    """The radius of the wheel's cylinder in the URDF (collision geometry before visual) [m]; None where it gives
+    none (the model replaces the wheel's geometry by :attr:`~atrv_warp.sim.config.RoverConfig.wheel_radius`'s
+    cylinder either way)."""
 
 
 @dataclass(frozen=True)
@@ -83,6 +87,24 @@ class RoverDescription:
     def total_mass(self) -> float:
         """Chassis plus wheels [kg]."""
         return self.chassis_inertial.mass + sum(w.inertial.mass for w in self.wheels)
+
+    @property
+    def wheel_radius(self) -> float | None:
+        """The wheels' radius in the URDF [m] (the largest of their cylinders), or None where it gives none."""
+        radii = [w.radius for w in self.wheels if w.radius is not None]
+        return max(radii) if radii else None
+
+    @property
+    def reach(self) -> float:
+        """Half the chassis box's diagonal, from the chassis' centre of mass to the box's farthest corner [m] (or to
+        the farthest wheel joint where the URDF gives no box): how far the rover's body extends."""
+        com = self.chassis_inertial.com
+        if self.chassis_box is not None:
+            pose, half = self.chassis_box
+            corners = [pose[:3, :3] @ (half * np.array(s)) + pose[:3, 3]
+                       for s in np.array(np.meshgrid(*[[-1, 1]] * 3)).T.reshape(-1, 3)]
+            return float(max(np.linalg.norm(c - com) for c in corners))
+        return float(max(np.linalg.norm(w.origin[:3, 3] - com) for w in self.wheels))
 
 
 def _inertial_of(link) -> Inertial:
@@ -206,7 +228,7 @@ def _frames(path: str, rover: RoverConfig, links: dict, joints_by_child: dict) -
     return frames
 
 
-def _wheel(path: str, rover: RoverConfig, name: str, j, inertial: Inertial) -> Wheel:
+def _wheel(path: str, rover: RoverConfig, name: str, j, inertial: Inertial, link) -> Wheel:
     """A wheel on a revolute joint from the chassis, about a lateral axis."""
     if j is None or j.type not in ("revolute", "continuous") or j.parent != rover.chassis_link:
         kind = "no joint" if j is None else f"a {j.type} joint to {j.parent!r}"
@@ -224,7 +246,17 @@ def _wheel(path: str, rover: RoverConfig, name: str, j, inertial: Inertial) -> W
     lateral = 1.0 if origin[1, 3] >= 0.0 else -1.0
     outward = axis * (1.0 if axis_chassis[1] * lateral > 0.0 else -1.0)
     _check_inertial(path, name, inertial)
-    return Wheel(name, j.name, 0 if name in rover.left_wheels else 1, origin, axis, drive_sign, outward, inertial)
+    return Wheel(name, j.name, 0 if name in rover.left_wheels else 1, origin, axis, drive_sign, outward, inertial,
+                 _cylinder_radius(link))
+
+
+def _cylinder_radius(link) -> float | None:
+    """The radius of the link's first cylinder, collision geometry before visual [m]."""
+    for geom_list in (link.collisions, link.visuals):
+        for g in geom_list or ():
+            if g.geometry is not None and g.geometry.cylinder is not None:
+                return float(g.geometry.cylinder.radius)
+    return None
 
 
 def _chassis_box(link) -> tuple[np.ndarray, np.ndarray] | None:
@@ -261,7 +293,7 @@ def load_rover(rover: RoverConfig | None = None) -> RoverDescription:
     parts = [(inertial(rover.chassis_link), np.eye(4))] + [(inertial(f.name), f.transform) for f in frames]
     chassis_inertial = _lump(parts)
     _check_inertial(path, rover.chassis_link, chassis_inertial)
-    wheels = [_wheel(path, rover, name, joints_by_child.get(name), inertial(name))
+    wheels = [_wheel(path, rover, name, joints_by_child.get(name), inertial(name), links[name])
               for name in tuple(rover.left_wheels) + tuple(rover.right_wheels)]
     tree = []
     for name in [rover.chassis_link] + [n for n in links if n != rover.chassis_link]:
