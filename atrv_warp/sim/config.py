@@ -56,7 +56,7 @@ def _check_types(cfg) -> None:
             value = tuple(value)
             object.__setattr__(cfg, f.name, value)
         where = f"{type(cfg).__name__}.{f.name}"
-        if default is None or f.name == "inertial_overrides":
+        if (value is None and "None" in str(f.type)) or default is None or f.name == "inertial_overrides":
             continue  # optional fields and the overrides' own checks
         if _is_number(default) and not _is_number(value):
             raise TypeError(f"{where} must be a number, got {value!r} ({type(value).__name__})")
