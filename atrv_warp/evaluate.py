@@ -70,7 +70,8 @@ class Evaluation:
 def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: str | None = None,
                     episodes: int = 1000, seed: int | None = None, baseline: bool = False,
                     randomization: str = "none", friction: float | None = None, sim_config: str | None = None,
-                    device: str = "cpu", attach: Callable | None = None, driver=None) -> Evaluation:
+                    device: str = "cpu", attach: Callable | None = None, driver=None,
+                    task_module: str | None = None) -> Evaluation:
     """Run a policy once on each of the first ``episodes`` episodes of evaluation set ``seed``.
 
     Args:
@@ -89,6 +90,7 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
         driver: The base's motor driver (:class:`~atrv_warp.sim.driver.DriverConfig`, e.g. a calibrated wheel radius
             or an accelerometer-aided odometry) that velocity actions go through, on either engine; the task's limits
             fill in those it leaves unset (default: the task's base).
+        task_module: A Python file that registers a task of your own (loaded first; never from a policy file).
 
     Raises:
         ValueError: One line naming the problem: an unknown engine, task or preset; a policy that cannot be loaded
@@ -97,13 +99,18 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
             not installed for ``mujoco``; a randomization centred on a ``sim_config`` that is missing or does not set
             a parameter it draws.
     """
-    from atrv_warp.task.config import TASK_VARIANTS
     from atrv_warp.task.evaluation import EVAL_SEED
+    from atrv_warp.task.registry import load_task_module, resolve_task
 
     if engine not in ENGINES:
         raise ValueError(f"unknown engine {engine!r}; known: {', '.join(ENGINES)}")
-    if task is not None and task not in TASK_VARIANTS:
-        raise ValueError(f"unknown task {task!r}; known: {sorted(TASK_VARIANTS)}")
+    if task_module:
+        try:
+            load_task_module(task_module)
+        except FileNotFoundError as err:
+            raise ValueError(str(err)) from None
+    if task is not None:
+        resolve_task(task)  # an unknown one is named, with the known ones
     if episodes < 1:
         raise ValueError(f"need at least 1 episode, got {episodes}")
     seed = EVAL_SEED if seed is None else seed
@@ -233,7 +240,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=None, help="evaluation-set seed (default: the standard set)")
     parser.add_argument("--baseline", action="store_true", help="evaluate the scripted baseline instead")
     parser.add_argument("--task", default=None,
-                        help="task: reach | nav | nav_deploy (default: the policy's own; reach for the baseline)")
+                        help="task: reach | nav | nav_deploy, or yours (--task-module) (default: the policy's own; reach "
+                             "for the baseline)")
+    parser.add_argument("--task-module", metavar="FILE.py", default=None,
+                        help="a Python file that registers a task of your own (docs/your-own-task.md)")
     parser.add_argument("--randomization", default="none", metavar="PRESET",
                         help="evaluate under domain randomization: none | mild | wide | wide_slip | wide_slip_gain (each world draws its physics, "
                              "sensor noise and latency from the evaluation seed); prints success by parameter bin. "
@@ -344,7 +354,7 @@ def main(argv: list[str] | None = None) -> int:
     viewers = _Viewers(args)
     options = {"engine": args.engine, "task": args.task, "episodes": args.episodes, "seed": args.seed,
                "baseline": args.baseline, "friction": args.friction, "device": args.device, "attach": viewers,
-               "driver": driver}
+               "driver": driver, "task_module": args.task_module}
     on = None
     try:
         if around:  # the config's rover itself, then across the spread around it

@@ -32,6 +32,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "policy), output .pt2")
     parser.add_argument("--onnx", action="store_true", help="also write OUT.onnx, checked with onnxruntime")
     parser.add_argument("--force", action="store_true", help="overwrite OUT (and OUT.onnx) where it exists")
+    parser.add_argument("--task-module", metavar="FILE.py", default=None,
+                        help="a Python file that registers the policy's task, a task of your own (never read from the "
+                             "policy file: docs/your-own-task.md)")
     return parser
 
 
@@ -42,8 +45,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("expected [POLICY] OUT")
     policy, out = (None, args.paths[0]) if len(args.paths) == 1 else args.paths
     from atrv_warp.rl.export import export_policy, load_exported
+    from atrv_warp.task.registry import load_task_module
 
     try:
+        if args.task_module:
+            load_task_module(args.task_module)
         path = export_policy(policy, out, onnx=args.onnx, force=args.force)
     except (FileNotFoundError, FileExistsError, FileFormatError, ValueError, RuntimeError) as err:
         return error_line(parser.prog, str(err))

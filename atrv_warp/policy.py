@@ -150,17 +150,19 @@ def _kinds(payload: dict) -> tuple[str, str]:
 
 def check_policy_task(payload: dict, task, *, source: str | Path) -> None:
     """Refuse a saved policy (``payload``, as :func:`policy_payload` writes it or a checkpoint's ``policy``
-    entry) that commands or observes another kind than ``task`` (a name or
-    :class:`~atrv_warp.task.config.TaskConfig`), in one line naming both.
+    entry) that commands or observes another kind than ``task`` (a name, a
+    :class:`~atrv_warp.task.definition.Task` or a :class:`~atrv_warp.task.config.TaskConfig`), in one line naming
+    both.
 
     Raises:
         PolicyTaskMismatch: e.g. ``policy nav_deploy_policy.pt commands twist but task 'nav' takes torque``.
     """
     from atrv_warp.task.config import get_task
+    from atrv_warp.task.definition import Task
 
-    config = get_task(task)
+    config = task.config if isinstance(task, Task) else get_task(task)
     action, observation = _kinds(payload)
-    name = f"task {task!r}" if isinstance(task, str) else "the task"
+    name = f"task {task.name!r}" if isinstance(task, Task) else f"task {task!r}" if isinstance(task, str) else "the task"
     if action != config.action:
         raise PolicyTaskMismatch(f"policy {source} commands {action} but {name} takes {config.action}")
     if observation != config.observation:

@@ -197,7 +197,7 @@ class Checkpoint:
         # keys added after a checkpoint was written take their defaults
         state = RunState(**{f.name: ck[f.name] for f in dataclasses.fields(RunState) if f.name in ck})
         learner = None
-        check_policy_task(ck["policy"], cfg.env.task, source=self.path)  # a policy that cannot drive the task
+        check_policy_task(ck["policy"], cfg.task(), source=self.path)  # a policy that cannot drive the task
         try:
             actor.load_state_dict(ck["policy"]["state_dict"])
             if state.stats_ready:
@@ -252,7 +252,7 @@ def warm_start(path: str | Path, cfg: TrainConfig, actor, normalize: Normalize) 
     policy commands or observes another kind than ``cfg.env.task``'s is refused
     (:class:`~atrv_warp.policy.PolicyTaskMismatch`), before anything is loaded."""
     ck = load_checkpoint(Path(path))
-    check_policy_task(ck["policy"], cfg.env.task, source=path)
+    check_policy_task(ck["policy"], cfg.task(), source=path)
     try:
         actor.load_state_dict(ck["policy"]["state_dict"])
         if not ck["stats_ready"]:

@@ -74,7 +74,16 @@ class EnvConfig:
     """The training environments."""
 
     task: str = "reach"
-    """Registered task (:data:`atrv_warp.task.config.TASK_VARIANTS`): ``reach`` (the reference) or ``nav``."""
+    """The task's name (:mod:`atrv_warp.task.registry`): ``reach`` (the reference), ``nav``, ``nav_deploy``, or one
+    of yours (``task_module``). Its config's fields are set with ``env.task.<field>=VALUE`` (an ``[env.task]`` table
+    in a TOML file, beside ``name``)."""
+    task_module: str = ""
+    """A Python file that registers tasks of your own (:func:`atrv_warp.task.registry.load_task_module`); empty: the
+    shipped tasks only. Imported by every process that builds the task's environments."""
+    task_fields: Annotated[tuple[tuple[str, str], ...], tyro.conf.Suppress] = ()
+    """The task config's fields this run sets, each as (name, TOML text of its value): ``env.task.reach_radius=0.5``
+    on the command line or ``reach_radius = 0.5`` in an ``[env.task]`` table. Checked by name against the task's
+    config (:meth:`TrainConfig.task`)."""
     num_envs: int = 256
     """Worlds stepped together by the collector."""
     steps_per_batch: int = 8
@@ -105,12 +114,65 @@ class EnvConfig:
         step_dt = SimConfig().step_dt
         kwargs = (("task", self.task), ("sim", SimConfig(sim_dt=step_dt / self.substeps)),
                   ("randomization", self.randomization))
+        if self.task_module:
+            kwargs = (*kwargs, ("task_module", self.task_module))
+        kwargs = (*kwargs, *task_field_values(self).items())
         return (*kwargs, ("sim_config", self.sim_config)) if self.sim_config else kwargs
 
     def eval_env_kwargs(self) -> tuple[tuple[str, object], ...]:
         """:meth:`env_kwargs` of the evaluations' environments (:attr:`eval_randomization`, if set)."""
         return tuple((k, self.eval_randomization or v) if k == "randomization" else (k, v)
                      for k, v in self.env_kwargs())
+
+
+def _toml_value(text: str):
+    """A value written as TOML (``0.5``, ``[5.0, 8.0]``, ``"rolling"``, ``true``), or the text itself where it is no
+    TOML value (a bare word on the command line: ``rolling``)."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def _toml_text(value) -> str:
+    import json
+
+    return str(value).lower() if isinstance(value, bool) else json.dumps(value)
+
+
+def task_field_values(env: EnvConfig) -> dict[str, object]:
+    """``env.task_fields`` as the task config's values, each of its field's type (a whole number for a float field
+    is a float; a list for a pair is a tuple).
+
+    Raises:
+        ValueError: A field the task's config does not have (the known ones named), or a value of another type.
+    """
+    from atrv_warp.task.registry import load_task_module, resolve_task
+
+    if not env.task_fields:
+        return {}
+    if env.task_module:
+        load_task_module(env.task_module)
+    config = resolve_task(env.task).config
+    hints, fields = typing.get_type_hints(type(config)), {f.name for f in dataclasses.fields(config)}
+    out = {}
+    for name, text in env.task_fields:
+        if name not in fields:
+            raise ValueError(f"env.task.{name}: task {env.task!r} ({type(config).__name__}) has no field {name!r}; "
+                             f"its fields: {sorted(fields)}")
+        value, kind = _toml_value(text), hints[name]
+        optional = type(None) in typing.get_args(kind)
+        base = next((k for k in typing.get_args(kind) if k is not type(None)), kind) if optional else kind
+        origin = typing.get_origin(base) or base
+        if origin is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        elif origin is tuple and isinstance(value, list):
+            value = tuple(float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value)
+        ok = isinstance(value, origin) and not (origin in (int, float) and isinstance(value, bool))
+        if not ok:
+            raise ValueError(f"env.task.{name} must be {getattr(origin, '__name__', origin)}, got {text!r}")
+        out[name] = value
+    return out
 
 
 @dataclass(frozen=True)
@@ -305,15 +367,30 @@ class TrainConfig:
         out_dir = Path(self.run.out_dir)
         if out_dir.exists() and not out_dir.is_dir():
             raise ValueError(f"train config: out_dir {out_dir} is a file, not a folder")
-        from atrv_warp.task.config import get_task
-
-        get_task(self.env.task)  # names the known tasks if this one is not
+        try:
+            self.task()  # loads task_module, names the known tasks if this one is not, checks every task field
+        except (ValueError, FileNotFoundError) as err:
+            raise ValueError(f"train config: {' '.join(str(err).split())}") from None
         if self.env.sim_config:
             from atrv_warp.sim.config import load_sim_config
 
             load_sim_config(self.env.sim_config)  # names the file and the key that is wrong
         self.randomization()
         return self
+
+    def task(self):
+        """The run's task (:class:`~atrv_warp.task.definition.Task`): ``env.task`` (from ``env.task_module`` where
+        set), its config with ``env.task_fields`` applied.
+
+        Raises:
+            ValueError: An unknown task, a field its config lacks, a bad value (named).
+            FileNotFoundError: A missing ``task_module``.
+        """
+        from atrv_warp.task.registry import load_task_module, resolve_task
+
+        if self.env.task_module:
+            load_task_module(self.env.task_module)
+        return resolve_task(self.env.task).with_config(**task_field_values(self.env))
 
     def randomization(self):
         """The training envs' randomization in absolute ranges
@@ -404,8 +481,34 @@ def cli_args(tokens: list[str]) -> list[str]:
     return out
 
 
+def _task_tokens(tokens: list[str]) -> tuple[list[str], tuple[tuple[str, str], ...]]:
+    """The command line's task fields (``env.task.<field>=VALUE`` or ``task.<field>=VALUE``) apart from the rest;
+    ``env.task.name=NAME`` names the task (as ``task=NAME``)."""
+    rest, fields = [], []
+    for token in tokens:
+        key, eq, value = token.partition("=")
+        prefix = next((p for p in ("env.task.", "task.") if eq and key.startswith(p)), None)
+        if prefix is None:
+            rest.append(token)
+        elif key[len(prefix):] == "name":
+            rest.append(f"env.task={value}")
+        else:
+            fields.append((key[len(prefix):], _toml_text(_toml_value(value))))
+    return rest, tuple(fields)
+
+
+def _with_task_fields(cfg: TrainConfig, fields: tuple[tuple[str, str], ...]) -> TrainConfig:
+    """``cfg`` with ``fields`` set among its task fields (a field given again takes the later value)."""
+    if not fields:
+        return cfg
+    merged = dict(cfg.env.task_fields)
+    merged.update(fields)
+    return dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, task_fields=tuple(merged.items())))
+
+
 def _toml_args(values: dict, label: str) -> list[str]:
-    """Tokens for tyro from a TOML document of one table per group; a flat key (as run folders
+    """Tokens for tyro from a TOML document of one table per group (an ``[env.task]`` table's ``name`` among them;
+    its other keys are the task's fields, :func:`_toml_task_fields`); a flat key (as run folders
     written before 0.2.0 hold) is a ``ValueError`` saying where it goes now."""
     flat = [k for k, v in values.items() if not (k in _GROUP_TYPES and isinstance(v, dict))]
     if flat:
@@ -417,6 +520,10 @@ def _toml_args(values: dict, label: str) -> list[str]:
     out, unknown = [], []
     for group, table in values.items():
         for name, value in table.items():
+            if group == "env" and name == "task" and isinstance(value, dict):
+                if "name" in value:
+                    out += _token("env.task", value["name"])
+                continue
             if f"{group}.{name}" in SPELLINGS.values():
                 out += _token(f"{group}.{name}", value)
             else:
@@ -476,7 +583,9 @@ def _file_config(source: str | None) -> TrainConfig:
         values = tomllib.loads(text.decode())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise ValueError(f"{label}: not valid TOML: {err}") from None
-    return _tyro(_toml_args(values, label), None, f" in {label}").train
+    task = values.get("env", {}).get("task") if isinstance(values.get("env"), dict) else None
+    fields = tuple((k, _toml_text(v)) for k, v in task.items() if k != "name") if isinstance(task, dict) else ()
+    return _with_task_fields(_tyro(_toml_args(values, label), None, f" in {label}").train, fields)
 
 
 def load_train_config(source: str | None = None, overrides: dict | None = None) -> TrainConfig:
@@ -488,13 +597,14 @@ def load_train_config(source: str | None = None, overrides: dict | None = None) 
     :class:`TrainConfig` defaults alone.
     """
     base = _file_config(source)
-    tokens = cli_args([f"{k}={v}" for k, v in (overrides or {}).items()])
-    return _tyro(tokens, TrainCommand(train=base)).train.validate()
+    rest, fields = _task_tokens([f"{k}={v}" for k, v in (overrides or {}).items()])
+    return _with_task_fields(_tyro(cli_args(rest), TrainCommand(train=base)).train, fields).validate()
 
 
 def parse_command(tokens: list[str]) -> TrainCommand:
     r"""The training command line: ``--config`` (or the ``--resume``\ d run's ``config.toml``), then
     every field given. ``ValueError`` or ``FileNotFoundError`` in one line on a bad one."""
+    tokens, fields = _task_tokens(tokens)
     args = cli_args(tokens)
     first = _tyro([a for a in args if a not in ("-h", "--help")], None)  # which file to start from
     if first.resume:
@@ -507,6 +617,7 @@ def parse_command(tokens: list[str]) -> TrainCommand:
     else:
         base = _file_config(first.config)
     cmd = _tyro(args, dataclasses.replace(first, train=base))
+    cmd = dataclasses.replace(cmd, train=_with_task_fields(cmd.train, fields))
     cmd.train.validate()
     return cmd
 
@@ -525,7 +636,13 @@ def to_toml(cfg: TrainConfig) -> str:
     for group in _GROUP_TYPES:
         lines.append(f"[{group}]")
         for f in dataclasses.fields(getattr(cfg, group)):
+            if (group, f.name) in (("env", "task"), ("env", "task_fields")):
+                continue  # the [env.task] table below
             v = getattr(getattr(cfg, group), f.name)
             lines.append(f"{f.name} = {str(v).lower() if isinstance(v, bool) else json.dumps(v)}")
+        if group == "env":
+            lines += ["", "[env.task]", f"name = {json.dumps(cfg.env.task)}",
+                      *(f"{name} = {text if _toml_value(text) is not text else json.dumps(text)}"
+                        for name, text in cfg.env.task_fields)]
         lines.append("")
     return "\n".join(lines)

@@ -186,10 +186,9 @@ def set_lr(learner, lr: float) -> None:
 def make_run_actor(cfg: TrainConfig):
     """The actor a run trains, and its observation statistics (not yet set): the task's observation size, the
     network's width and depth, and log-probabilities where the algorithm collects with them (PPO)."""
-    from atrv_warp.task.config import get_task
     from atrv_warp.task.spec import observation_fields
 
-    obs_dim = len(observation_fields(get_task(cfg.env.task)))
+    obs_dim = len(observation_fields(cfg.task().config))
     normalize = Normalize(obs_dim)
     actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize, obs_dim=obs_dim,
                        return_log_prob=ALGOS[cfg.optim.algo].on_policy)

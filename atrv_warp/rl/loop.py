@@ -57,6 +57,8 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
         return run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.toml").write_text(to_toml(cfg))
+    # the task resolved: every field of its config and its reward table, as this run trains it
+    (run_dir / "task.json").write_text(json.dumps(cfg.task().record(), indent=1, default=str) + "\n")
     # what the envs draw, in absolute ranges: `around` resolved against the sim config, so a run says what it trained on
     (run_dir / "randomization.json").write_text(json.dumps(
         {"randomization": cfg.env.randomization, "eval_randomization": cfg.env.eval_randomization or None,
@@ -137,7 +139,7 @@ class TrainLoop:
         self.learner, self.loggers, self.evaluator, self.checkpoint = learner, loggers, evaluator, checkpoint
         self.run_dir = run_dir
         self.algo = ALGOS[cfg.optim.algo]
-        self.stats, self.losses = Stats(), LossMeans(self.algo.loss_keys)
+        self.stats, self.losses = Stats(cfg.task().term_names), LossMeans(self.algo.loss_keys)
         self.push_weights = COLLECTORS[cfg.collector.kind].push_weights
         self.frames_by_collector: list[int] = []
         """Frames from each Ray collector (their batches carry the collector's index); empty otherwise."""

@@ -11,7 +11,7 @@ from pathlib import Path
 import torch
 
 from atrv_warp.rl.config import TrainConfig
-from atrv_warp.task.spec import REWARD_TERMS, EndReason
+from atrv_warp.task.spec import EndReason
 
 __all__ = ["Loggers", "LossMeans", "Progress", "Stats", "make_loggers", "pct", "plot_curve"]
 
@@ -69,12 +69,14 @@ class Stats:
     """Running training statistics from collected batches (episodes that ended in them), and the
     mean of every reward term over the collected steps."""
 
-    def __init__(self):
+    def __init__(self, terms: tuple[str, ...] = ()):
+        self.terms = tuple(terms)
+        """The task's reward terms, by name (its table: :attr:`atrv_warp.task.definition.Task.term_names`)."""
         self.ended = 0
         self.success = 0
         self.reward_sum = 0.0
         self.reward_n = 0
-        self.term_sums = torch.zeros(len(REWARD_TERMS), dtype=torch.float64)
+        self.term_sums = torch.zeros(len(self.terms), dtype=torch.float64)
 
     def update(self, data) -> None:
         done = data["next", "done"].reshape(-1)
@@ -85,15 +87,16 @@ class Stats:
         self.reward_sum += float(r.sum())
         self.reward_n += r.numel()
         terms = data["next", "reward_terms"]
-        self.term_sums += torch.stack([terms[name].sum() for name in REWARD_TERMS]).double()
+        if self.terms:
+            self.term_sums += torch.stack([terms[name].sum() for name in self.terms]).double()
 
     def pop(self) -> tuple[float, float, dict[str, float]]:
         """(success rate, mean reward, mean of each reward term), then start over."""
         rate = self.success / self.ended if self.ended else float("nan")
         n = self.reward_n
         reward = self.reward_sum / n if n else float("nan")
-        terms = {name: float(v) / n if n else float("nan") for name, v in zip(REWARD_TERMS, self.term_sums)}
-        self.__init__()
+        terms = {name: float(v) / n if n else float("nan") for name, v in zip(self.terms, self.term_sums)}
+        self.__init__(self.terms)
         return rate, reward, terms
 
 

@@ -156,6 +156,22 @@ def check_world_count(num_worlds, device) -> None:
                          f"({BYTES_PER_WORLD / 1e3:.0f} kB each), more than the {free / 1e9:.1f} GB free there")
 
 
+def checked_configs(rover: RoverConfig, contact: ContactConfig, sim_config: str | Path | None = None):
+    """``rover`` and ``contact`` with ``sim_config``'s tables applied, and this robot's parameter bounds, each value
+    checked against them (a value out of bounds is a ``ValueError`` naming the file and key it came from)."""
+    read = None
+    if sim_config:
+        read = read_sim_config(sim_config, rover, contact)
+    applied_rover, applied_contact = (read.rover, read.contact) if read is not None else (rover, contact)
+    bounds = parameter_bounds(load_rover(applied_rover), rover.wheel_radius)
+    for name, value in parameter_values(applied_rover, applied_contact).items():
+        table, key = PARAMETER_KEYS[name]
+        label = (f"sim config {read.path}: [{table}] {key}" if read is not None and read.sets(table, key) else
+                 f"{'RoverConfig' if table == 'rover' else 'ContactConfig'}.{key}")
+        check_bounds(bounds, name, value, label)
+    return applied_rover, applied_contact, bounds
+
+
 class RoverSim:
     """Batched ATRV-Jr simulator.
 
@@ -225,20 +241,11 @@ class RoverSim:
     ):
         self.device = wp.get_device(device)
         check_world_count(num_worlds, self.device)
-        self.rover_cfg = nominal_rover = rover or get_variant(variant)
-        self.contact_cfg = contact or ContactConfig()
-        read = None
-        if sim_config:
-            read = read_sim_config(sim_config, self.rover_cfg, self.contact_cfg)
-            self.rover_cfg, self.contact_cfg = read.rover, read.contact
-        self.bounds = parameter_bounds(load_rover(self.rover_cfg), nominal_rover.wheel_radius)
-        """Each bounded physical parameter's range for this robot (:func:`~atrv_warp.sim.params.parameter_bounds`):
-        the configs' values and :meth:`set_params` are held to them."""
-        for name, value in parameter_values(self.rover_cfg, self.contact_cfg).items():
-            table, key = PARAMETER_KEYS[name]
-            label = (f"sim config {read.path}: [{table}] {key}" if read is not None and read.sets(table, key) else
-                     f"{'RoverConfig' if table == 'rover' else 'ContactConfig'}.{key}")
-            check_bounds(self.bounds, name, value, label)
+        nominal_rover = rover or get_variant(variant)
+        self.rover_cfg, self.contact_cfg, self.bounds = checked_configs(nominal_rover, contact or ContactConfig(),
+                                                                        sim_config)
+        """``bounds``: each bounded physical parameter's range for this robot
+        (:func:`~atrv_warp.sim.params.parameter_bounds`): the configs' values and :meth:`set_params` are held to them."""
         self.arena_cfg = arena or ArenaConfig()
         self.sim_cfg = sim or SimConfig()
         self.num_worlds = num_worlds

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from atrv_warp.sim.driver import DriverConfig
 
-__all__ = ["TASK_VARIANTS", "TaskConfig", "get_task"]
+__all__ = ["TaskConfig", "get_task"]  # and TASK_VARIANTS, the registry's (module __getattr__)
 
 
 @dataclass(frozen=True)
@@ -27,13 +27,21 @@ class TaskConfig:
     """|roll| above this is a flip [rad]."""
     max_steps: int = 200
     """Truncation after this many steps (200 × 0.05 s = 10 s)."""
+    # ---- the reward table's weights (each a row of the task's table: atrv_warp.task.terms)
+    progress_weight: float = 1.0
+    """Weight of the progress term (distance gained toward the target) [1/m]."""
     success_reward: float = 4.0
+    """Reward on reaching the goal (the episode ends)."""
     failure_reward: float = -4.0
     """Reward on a wall, chassis or obstacle contact, or a flip (the episode ends)."""
     heading_weight: float = 4.0
     """Weight of the heading-progress term (previous |error| - |error|) [1/rad]."""
     step_penalty: float = 0.03
     """Subtracted from every non-terminal reward."""
+    action_rate_weight: float = 0.0
+    """Weight of the action-rate term (the squared change of the action since the step before); 0: off."""
+    energy_weight: float = 0.0
+    """Weight of the energy term (the motors' mechanical work this step) [1/J]; 0: off."""
     clearance_weight: float = 0.0
     """Weight of the clearance term [1/m]: each non-terminal step costs this times how far the nearest obstacle's
     bounding circle reaches inside ``clearance_radius`` of the chassis origin (0: no term). A dense cost of
@@ -140,32 +148,17 @@ class TaskConfig:
         return dataclasses.replace(driver, **limits) if limits else driver
 
 
-TASK_VARIANTS: dict[str, TaskConfig] = {
-    "reach": TaskConfig(),
-    "nav": TaskConfig(
-        terrain="rolling", target_distance=(5.0, 10.0), obstacles=6, obstacles_on_path=1, max_steps=300,
-        flip_roll=0.5, scan_beams=64, scan_sectors=16, action_history=3, failure_reward=-10.0, heading_weight=1.0,
-        clearance_weight=0.5),
-}
-TASK_VARIANTS["nav_deploy"] = dataclasses.replace(TASK_VARIANTS["nav"], action="twist", observation="robot",
-                                                  linear_max_acceleration=1.0)
-"""Registered tasks. ``reach``: the reference task (flat, no obstacles, no scanner). ``nav``: rolling
-terrain, six obstacles (one across the straight line to the target), targets 5–10 m away, 15 s
-episodes, a 64-beam scan observed as 16 sectors, and the last three actions observed (a delayed rover's
-pending commands: docs/randomization.md). ``nav_deploy``: the nav world for a policy that runs on a robot: it
-commands ``/cmd_vel`` (``action="twist"``) through a base that accelerates at up to 1 m/s² (the Husky A200's
-``diff_drive_controller``) and observes only what the robot publishes (``observation="robot"``)."""
+def get_task(task) -> TaskConfig:
+    """The config of the registered task called ``task`` (``None``: ``reach``), or ``task`` itself (a config); the
+    tasks are :mod:`atrv_warp.task.registry`'s."""
+    from atrv_warp.task.registry import resolve_task
+
+    return task if isinstance(task, TaskConfig) else resolve_task(task).config
 
 
-def get_task(task: str | TaskConfig | None) -> TaskConfig:
-    """The registered task called ``task`` (``None``: ``reach``), or ``task`` itself."""
-    if task is None:
-        return TASK_VARIANTS["reach"]
-    if isinstance(task, TaskConfig):
-        return task
-    try:
-        return TASK_VARIANTS[task]
-    except KeyError:
-        raise ValueError(f"unknown task {task!r}; known: {sorted(TASK_VARIANTS)}") from None
+def __getattr__(name: str):
+    if name == "TASK_VARIANTS":  # every registered task's config, by name (atrv_warp.task.registry declares them)
+        from atrv_warp.task.registry import TASK_VARIANTS
 
-
+        return TASK_VARIANTS
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -13,7 +13,8 @@ Keys produced (the contract is declared in :mod:`atrv_warp.task.spec`):
     sin and cos of the heading error (``OBSERVATION``), or with ``observation="robot"`` the goal's distance and
     bearing from wheel odometry, the odometry's twist and the IMU's roll, pitch and yaw rate
     (``ROBOT_OBSERVATION``); then a task's scan sectors and last actions (``observation_fields``). ``scan`` (N, beams) [m] with a scanner. ``reward`` (N, 1);
-    ``("reward_terms", name)`` (N, 1) for each of ``REWARD_TERMS``, which sum to the reward;
+    ``("reward_terms", name)`` (N, 1) for each of the task's reward terms (``env.task.term_names``), which sum to the
+    reward;
     ``done`` / ``terminated`` / ``truncated`` (N, 1) bool; ``end_reason`` (N, 1) int64
     (``EndReason``, named by :data:`END_REASONS`); ``distance`` (N, 1) distance to the target [m].
 """
@@ -38,30 +39,25 @@ from atrv_warp.sim.config import (
     RoverConfig,
     SimConfig,
     get_variant,
-    replace_checked,
 )
 from atrv_warp.sim.driver import DRIVE_TWIST, DriverConfig
 from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
 from atrv_warp.sim.simulator import RoverSim
-from atrv_warp.task.config import TaskConfig, get_task
-from atrv_warp.task.kernels import (
-    RoverState,
+from atrv_warp.task.config import TaskConfig
+from atrv_warp.task.definition import Task
+from atrv_warp.task.kernels.observe import (
     ScanReading,
-    SceneParams,
-    StepOutputs,
-    TaskBuffers,
-    TaskParams,
     clear_actions,
-    command_twist,
-    compute_step_outcome,
-    locate_goals,
     observe_reset,
+    observe_step,
     record_actions,
-    sample_episodes,
-    sample_nav_episodes,
     write_action_observation,
     write_scan_observation,
 )
+from atrv_warp.task.kernels.sampling import locate_goals, sample_episodes, sample_nav_episodes
+from atrv_warp.task.kernels.state import RoverState, StepOutputs, TaskBuffers, TermInputs, params_of
+from atrv_warp.task.kernels.steps import advance_odometry_drift, command_twist, sum_terms
+from atrv_warp.task.kernels.tables import ends_kernel, field_kernel, term_kernels
 from atrv_warp.task.randomization import PHYSICS_DRAWS, AroundConfig, RandomizationConfig, get_randomization
 from atrv_warp.task.randomization_kernels import (
     DRAW_COUNT,
@@ -78,23 +74,28 @@ from atrv_warp.task.randomization_kernels import (
     delay_twist,
     draw_physics,
 )
+from atrv_warp.task.registry import load_task_module, resolve_task
 from atrv_warp.task.spec import (
     ACTION_DIM,
     ACTIONS,
     END_REASONS,
     OBSERVATION_KINDS,
     OBSERVATION_NAMES,
-    REWARD_TERMS,
     action_to_torque,
     observation_bounds,
     observation_fields,
     scan_sectors,
 )
 
-__all__ = ["END_REASONS", "OBSERVATION_NAMES", "REWARD_TERMS", "SNAPSHOT_FORMAT", "ATRVjrEnv", "EnvFactory"]
+__all__ = ["END_REASONS", "OBSERVATION_NAMES", "SNAPSHOT_FORMAT", "ATRVjrEnv", "EnvFactory"]
 
-SNAPSHOT_FORMAT = 2
-"""Version of :meth:`ATRVjrEnv.state_dict`'s snapshot (2: everything the next step reads, restored bit for bit)."""
+SNAPSHOT_FORMAT = 3
+"""Version of :meth:`ATRVjrEnv.state_dict`'s snapshot (3: everything the next step reads, restored bit for bit, the
+reward terms' memory of the last action and the goal's heading included)."""
+
+OBSERVE_KINDS = {"arena": 0, "robot": 1}
+"""The leading fields the shipped observation kernels write (:mod:`atrv_warp.task.kernels.observe`); any other kind
+is a task's own, written field by field (:func:`~atrv_warp.task.kernels.tables.field_kernel`)."""
 
 
 def _torch_device(device: wp.context.Device) -> torch.device:
@@ -109,8 +110,12 @@ class ATRVjrEnv(EnvBase):
         device: ``"cpu"`` (default) or a CUDA device; the simulator runs there.
         seed: Seed of the per-world reset streams (and the scanner's noise); ``None`` leaves seed 0.
         variant: Registered rover variant.
-        task: Registered task name (``"reach"``, the default, or ``"nav"``) or a :class:`TaskConfig`;
-            keyword overrides of it via ``**task_overrides``.
+        task: A registered task's name (``"reach"``, the default, ``"nav"``, ``"nav_deploy"``, or one of yours:
+            :mod:`atrv_warp.task.registry`), a :class:`~atrv_warp.task.definition.Task`, or a :class:`TaskConfig`
+            (the shipped reward table, weighted by its fields); keyword overrides of its config via
+            ``**task_overrides``.
+        task_module: A Python file that registers tasks of your own (:func:`~atrv_warp.task.registry.load_task_module`),
+            loaded before ``task`` is looked up (so that a collector's worker process finds it too).
         rover: Rover configuration (see :class:`RoverSim`).
         contact: Contact law (see :class:`RoverSim`).
         arena: Arena geometry (see :class:`RoverSim`).
@@ -138,7 +143,8 @@ class ATRVjrEnv(EnvBase):
         device: str = "cpu",
         seed: int | None = None,
         variant: str = "realistic",
-        task: TaskConfig | str | None = None,
+        task: Task | TaskConfig | str | None = None,
+        task_module: str | None = None,
         rover: RoverConfig | None = None,
         contact: ContactConfig | None = None,
         arena: ArenaConfig | None = None,
@@ -148,7 +154,11 @@ class ATRVjrEnv(EnvBase):
         driver: DriverConfig | None = None,
         **task_overrides,
     ):
-        self.task_cfg = c = replace_checked(get_task(task), **task_overrides)
+        if task_module:
+            load_task_module(task_module)
+        self.task = resolve_task(task).with_config(**task_overrides)
+        """The task (:class:`~atrv_warp.task.definition.Task`): its config, reward table, success test."""
+        self.task_cfg = c = self.task.config
         rover = rover or get_variant(variant)
         self.randomization = get_randomization(randomization, sim_config=sim_config, rover=rover, contact=contact)
         """What each world randomizes (:class:`~atrv_warp.task.randomization.RandomizationConfig`), in absolute
@@ -168,10 +178,13 @@ class ATRVjrEnv(EnvBase):
         self.obs_dim = len(observation_fields(c))
         self._robot = c.observation == "robot"
         self._twist = c.action == "twist"
+        self._observe_kind = OBSERVE_KINDS.get(c.observation, -1)  # -1: the task's own fields
         self._lead_dim = len(OBSERVATION_KINDS[c.observation])  # the columns before the scan sectors
         self._nav = c.target_distance is not None or c.obstacles > 0 or self.sim.terrain.enabled
         self._wp_device = self.sim.device
         self._make_task_buffers()
+        self._make_task_kernels()
+        self._make_views()
         self._make_randomization()
         self._make_spec()
         self.nonfinite_count = 0
@@ -181,76 +194,87 @@ class ATRVjrEnv(EnvBase):
 
     # ------------------------------------------------------------------ set-up
     def _make_task_buffers(self) -> None:
+        """The task's per-world buffers and a step's outputs, allocated once."""
         n, dev, c = self.num_envs, self._wp_device, self.task_cfg
-        p = TaskParams()
-        p.spawn_bound = c.spawn_bound
-        p.reach_radius = c.reach_radius
-        p.flip_roll = c.flip_roll
-        p.max_steps = c.max_steps
-        p.success_reward = c.success_reward
-        p.failure_reward = c.failure_reward
-        p.heading_weight = c.heading_weight
-        p.step_penalty = c.step_penalty
-        p.clearance_weight = c.clearance_weight
-        p.clearance_radius = c.clearance_radius
-        p.robot_observation = int(self._robot)
-        p.step_dt = self.sim.sim_cfg.step_dt
-        self._params = p
-        sp = SceneParams()
-        sp.distance_min, sp.distance_max = c.target_distance or (c.reach_radius, 2.0 * c.spawn_bound)
-        sp.obstacles, sp.on_path, sp.path_offset = c.obstacles, c.obstacles_on_path, c.path_offset
-        sp.size_min, sp.size_max = c.obstacle_size
-        sp.clearance = c.clearance
-        sp.tiles = self.sim.terrain.grid.tiles if self.sim.terrain.enabled else 1
-        self._scene_params = sp
         t = TaskBuffers()
-        t.target = wp.zeros(n, dtype=wp.vec2, device=dev)
-        t.prev_distance = wp.zeros(n, dtype=float, device=dev)
-        t.prev_heading_error = wp.zeros(n, dtype=float, device=dev)
+        for name in ("target", "goal_odom"):
+            setattr(t, name, wp.zeros(n, dtype=wp.vec2, device=dev))
+        for name in ("target_yaw", "prev_distance", "prev_heading_error", "distance", "heading_error",
+                     "odom_slip_gain"):
+            setattr(t, name, wp.zeros(n, dtype=float, device=dev))
         t.step_count = wp.zeros(n, dtype=wp.int32, device=dev)
         t.episode = wp.zeros(n, dtype=wp.int32, device=dev)
         t.stream = wp.array(list(range(n)), dtype=wp.int32, device=dev)
-        t.goal_odom = wp.zeros(n, dtype=wp.vec2, device=dev)
         t.odom_drift = wp.zeros(n, dtype=wp.vec3, device=dev)
         t.odom_scale = wp.ones(n, dtype=float, device=dev)
-        t.odom_slip_gain = wp.zeros(n, dtype=float, device=dev)
+        t.prev_action = wp.zeros(n, dtype=wp.vec2, device=dev)
         self._task = t
-        self._obs = wp.zeros((n, self.obs_dim), dtype=float, device=dev)
-        self._reward = wp.zeros(n, dtype=float, device=dev)
-        self._reward_terms = wp.zeros((n, len(REWARD_TERMS)), dtype=float, device=dev)
-        self._terminated = wp.zeros(n, dtype=bool, device=dev)
-        self._truncated = wp.zeros(n, dtype=bool, device=dev)
-        self._end_reason = wp.zeros(n, dtype=wp.int32, device=dev)
-        self._distance = wp.zeros(n, dtype=float, device=dev)
+        out = StepOutputs()
+        out.obs = self._obs = wp.zeros((n, self.obs_dim), dtype=float, device=dev)
+        out.reward = self._reward = wp.zeros(n, dtype=float, device=dev)
+        out.reward_terms = self._reward_terms = wp.zeros((n, len(self.task.terms)), dtype=float, device=dev)
+        out.terminated = self._terminated = wp.zeros(n, dtype=bool, device=dev)
+        out.truncated = self._truncated = wp.zeros(n, dtype=bool, device=dev)
+        out.end_reason = self._end_reason = wp.zeros(n, dtype=wp.int32, device=dev)
+        out.distance = self._distance = wp.zeros(n, dtype=float, device=dev)
+        self._out = out
         self._mask = wp.zeros(n, dtype=bool, device=dev)
         self._reset_poses = wp.zeros(n, dtype=wp.vec3, device=dev)  # the sampler's starts (x, y, yaw)
         # the last actions, newest first ([left, right] in [-1, 1]), observed after the scan sectors
         self._actions = wp.zeros((n, c.action_history), dtype=wp.vec2, device=dev) if c.action_history else None
-        b, rover, out = self.sim.buffers, RoverState(), StepOutputs()  # the kernels' inputs and outputs, once
+        self._action = wp.zeros((n, 2), dtype=float, device=dev)  # this step's action, as the reward terms read it
+        if self._twist:  # every world drives by velocity, through the driver
+            self.sim.driver.mode.fill_(int(DRIVE_TWIST))
+
+    def _make_task_kernels(self) -> None:
+        """The kernels' inputs (the simulator's state, the task's buffers, the config's values), once, and the task's
+        own kernels: its ends, its reward terms, its observation fields."""
+        b, rover, c = self.sim.buffers, RoverState(), self.task_cfg
         rover.body_q, rover.lin_vel, rover.ang_vel, rover.rpy = b.body_q, b.lin_vel, b.ang_vel, b.rpy
         rover.bodies_per_world, rover.chassis_body = b.layout.bodies_per_world, b.layout.chassis_body
         rover.contact_flags, rover.nonfinite = b.contact_flags, b.nonfinite
+        rover.wheel_speed, rover.wheel_torque = b.wheel_speed, b.wheel_torque
         # the goal is seen from the base's fused odometry (encoders along the gyro's heading, as robot_localization
         # gives it): skid-steer wheel odometry alone loses its heading on every turn
         rover.odometry, rover.odom_twist = self.sim.driver.state.fused, self.sim.driver.state.odom_twist
-        out.obs, out.reward, out.reward_terms, out.distance = self._obs, self._reward, self._reward_terms, self._distance
-        out.terminated, out.truncated, out.end_reason = self._terminated, self._truncated, self._end_reason
-        self._rover, self._out = rover, out
+        self._rover = rover
+        inputs = TermInputs()
+        inputs.rover, inputs.task, inputs.obstacles = rover, self._task, self.sim.obstacles.kernel
+        inputs.action = self._action
+        inputs.scan = self.scanner.buffer if self.scanner is not None else wp.zeros((self.num_envs, 1), dtype=float,
+                                                                                    device=self._wp_device)
+        inputs.end_reason, inputs.terminated = self._end_reason, self._terminated
+        inputs.step_dt = self.sim.sim_cfg.step_dt
+        self._inputs = inputs
+        self._params = params_of(c)
+        """The task config's values, as the kernels take them (:func:`~atrv_warp.task.kernels.state.params_of`)."""
+        self._ends = ends_kernel(self.task.success)
+        self._terms = term_kernels(self.task)
+        fields = OBSERVATION_KINDS[c.observation]
+        self._fields = [] if self._observe_kind >= 0 else [
+            field_kernel(f.warp, i, -f.bound, f.bound) for i, f in enumerate(fields)]
+        self._target_distance = wp.vec2(*(c.target_distance or (c.reach_radius, 2.0 * c.spawn_bound)))
+        self._tiles = self.sim.terrain.grid.tiles if self.sim.terrain.enabled else 1
         self.scan_sectors = scan_sectors(c)
         """The observed scan's sectors (:class:`~atrv_warp.core.scan.ScanSectors`; ``None`` without them)."""
         if self.scan_sectors is not None:
             sc = self.scanner.cfg
             bounds = self.scan_sectors.beam_bounds(torch.as_tensor(sc.angles)).to(torch.int32)
             reading = ScanReading()
-            reading.first = wp.array(bounds[:, 0].numpy(), dtype=wp.int32, device=dev)
-            reading.end = wp.array(bounds[:, 1].numpy(), dtype=wp.int32, device=dev)
+            reading.first = wp.array(bounds[:, 0].numpy(), dtype=wp.int32, device=self._wp_device)
+            reading.end = wp.array(bounds[:, 1].numpy(), dtype=wp.int32, device=self._wp_device)
             reading.clip, reading.range_min, reading.range_max = c.scan_clip, sc.min_range, sc.max_range
             self._scan_reading = reading
-        # torch views (no copies)
+
+    def _make_views(self) -> None:
+        """Torch views of the buffers (no copies), and the task's state a snapshot holds."""
+        n, t = self.num_envs, self._task
         self.target = wp.to_torch(t.target)
         self.step_count = wp.to_torch(t.step_count)
         self.target_distance = wp.to_torch(self._distance)
         """(N,) chassis-to-target distance [m] after the last reset, step or :meth:`observe` (a view)."""
+        self.target_yaw = wp.to_torch(t.target_yaw)
+        """(N,) each episode's goal heading [rad], drawn on reset (a task that parks observes and judges it; a view)."""
         self._obs_t = wp.to_torch(self._obs)
         self._reward_t = wp.to_torch(self._reward).unsqueeze(-1)
         self._reward_terms_t = wp.to_torch(self._reward_terms)
@@ -261,6 +285,8 @@ class ATRVjrEnv(EnvBase):
         self._mask_t = wp.to_torch(self._mask)
         self._episode_t = wp.to_torch(t.episode)
         self._stream_t = wp.to_torch(t.stream)
+        self._action_t = wp.to_torch(self._action)
+        self._prev_action_t = wp.to_torch(t.prev_action).view(n, 2)
         self.goal_odom = wp.to_torch(t.goal_odom).view(n, 2)
         """(N, 2) each world's target in its odometry frame (the episode's start pose: the driver's
         ``odometry`` and ``fused`` origin) [m], from which the robot observation's goal is seen (a view)."""
@@ -280,17 +306,15 @@ class ATRVjrEnv(EnvBase):
         unless the randomization draws
         :attr:`~atrv_warp.task.randomization.RandomizationConfig.odometry_slip_gain`; a view)."""
         self._task_views = {
-            "target": self.target, "prev_distance": wp.to_torch(t.prev_distance),
+            "target": self.target, "target_yaw": self.target_yaw, "prev_distance": wp.to_torch(t.prev_distance),
             "prev_heading_error": wp.to_torch(t.prev_heading_error), "step_count": self.step_count,
-            "episode": self._episode_t, "observation": self._obs_t,
+            "episode": self._episode_t, "observation": self._obs_t, "prev_action": self._prev_action_t,
         }
         if self._actions is not None:
             self._task_views["action_history"] = wp.to_torch(self._actions)
         if self._robot:
             self._task_views.update({"goal_odom": self.goal_odom, "odom_drift": self.odom_drift,
                                      "odom_scale": self.odom_scale, "odom_slip_gain": self.odom_slip_gain})
-        if self._twist:  # every world drives by velocity, through the driver
-            self.sim.driver.mode.fill_(int(DRIVE_TWIST))
         if self._nav:  # the episode's layout is part of the task's state
             obstacles = self.sim.obstacles
             self._task_views.update({"tile": self.sim.terrain.tile, "obstacle_kind": obstacles.kind,
@@ -353,8 +377,8 @@ class ATRVjrEnv(EnvBase):
 
     def _add_noise(self, mask: wp.array, *, advance: bool = False) -> None:
         """The sensors' noise on the masked worlds' observation; ``advance``: a step went by (the robot
-        observation's odometry drifts)."""
-        if self.randomization.noise is None:
+        observation's odometry drifts). A task's own observation kind takes none: the noise is the shipped kinds'."""
+        if self.randomization.noise is None or self._observe_kind < 0:
             return
         if self._robot:
             wp.launch(add_robot_observation_noise, dim=self.num_envs,
@@ -370,7 +394,8 @@ class ATRVjrEnv(EnvBase):
         n, dev, dim = self.num_envs, self.device, self.obs_dim
         low, high = observation_bounds(task=self.task_cfg)
         bounds = (low.expand(n, dim), high.expand(n, dim))
-        terms = Composite({name: Unbounded(shape=(n, 1), dtype=torch.float32, device=dev) for name in REWARD_TERMS},
+        terms = Composite({name: Unbounded(shape=(n, 1), dtype=torch.float32, device=dev)
+                           for name in self.task.term_names},
                           shape=(n,), device=dev)
         self.observation_spec = Composite(
             observation=Bounded(*bounds, shape=(n, dim), dtype=torch.float32, device=dev),
@@ -444,7 +469,7 @@ class ATRVjrEnv(EnvBase):
             self._draw(PHASE_EPISODE, self._mask)
         if self._nav:
             wp.launch(sample_nav_episodes, dim=self.num_envs,
-                      inputs=[self._seed, self._params, self._scene_params, self._mask],
+                      inputs=[self._seed, self._params, self._target_distance, self._tiles, self._mask],
                       outputs=[self._task, self._reset_poses, sim.obstacles.kernel, sim.terrain.kernel],
                       device=self._wp_device)
         else:
@@ -453,6 +478,7 @@ class ATRVjrEnv(EnvBase):
         sim.reset_worlds(self._mask, self._reset_poses)
         if self._robot:  # a new odometry frame: the start pose, without drift yet
             self.odom_drift.masked_fill_(self._mask_t.unsqueeze(-1), 0.0)
+        self._prev_action_t.masked_fill_(self._mask_t.unsqueeze(-1), 0.0)  # a new episode has chosen no action yet
         if self._actions is not None:
             wp.launch(clear_actions, dim=(self.num_envs, self.task_cfg.action_history), inputs=[self._mask],
                       outputs=[self._actions], device=self._wp_device)
@@ -468,7 +494,7 @@ class ATRVjrEnv(EnvBase):
 
     def _terms_td(self, terms: torch.Tensor) -> TensorDict:
         """``("reward_terms", name)`` entries as (N, 1) views of one (N, K) tensor."""
-        return TensorDict({name: terms[:, i:i + 1] for i, name in enumerate(REWARD_TERMS)},
+        return TensorDict({name: terms[:, i:i + 1] for i, name in enumerate(self.task.term_names)},
                           batch_size=self.batch_size, device=self.device)
 
     def observe(self, targets: torch.Tensor) -> torch.Tensor:
@@ -488,8 +514,9 @@ class ATRVjrEnv(EnvBase):
         if self._robot:
             wp.launch(locate_goals, dim=self.num_envs, inputs=[self._mask, self._reset_poses], outputs=[self._task],
                       device=self._wp_device)
-        wp.launch(observe_reset, dim=self.num_envs, inputs=[self._params, self._mask, self._task, self._rover],
+        wp.launch(observe_reset, dim=self.num_envs, inputs=[self._observe_kind, self._mask, self._task, self._rover],
                   outputs=[self._out], device=self._wp_device)
+        self._launch_fields()
         self._launch_observation_tail()
         self._add_noise(self._mask)
 
@@ -517,6 +544,7 @@ class ATRVjrEnv(EnvBase):
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = self._check_action(tensordict.get("action"))
+        self._action_t.copy_(action)  # for the reward terms that read it
         sim = self.sim
         if self._twist:
             self._command_twist(action)
@@ -530,9 +558,7 @@ class ATRVjrEnv(EnvBase):
         sim.step()
         if self.scanner is not None:
             self.scanner.scan()
-        wp.launch(compute_step_outcome, dim=self.num_envs,
-                  inputs=[self._params, self._task, self._rover, sim.obstacles.kernel], outputs=[self._out],
-                  device=self._wp_device)
+        self._launch_outcome()
         self._launch_observation_tail()
         self._add_noise(self._all, advance=True)
         if self._draws_on_tick:
@@ -546,6 +572,28 @@ class ATRVjrEnv(EnvBase):
         if self.scanner is not None:
             out["scan"] = self.scanner.ranges.clone()
         return TensorDict(out, batch_size=self.batch_size, device=self.device)
+
+    def _launch_outcome(self) -> None:
+        """A step's ends, the odometry's drift, the observation's leading fields, each reward term and the reward
+        (:mod:`atrv_warp.task.kernels.steps`), in that order."""
+        n, dev = self.num_envs, self._wp_device
+        wp.launch(self._ends, dim=n, inputs=[self._params, self._inputs], outputs=[self._out], device=dev)
+        if self._robot:
+            wp.launch(advance_odometry_drift, dim=n, inputs=[self.sim.sim_cfg.step_dt, self._task, self._rover],
+                      device=dev)
+        wp.launch(observe_step, dim=n, inputs=[self._observe_kind, self._task, self._rover], outputs=[self._out],
+                  device=dev)
+        self._launch_fields()
+        for kernel, weight in self._terms:
+            wp.launch(kernel, dim=n, inputs=[self._params, self._inputs, weight], outputs=[self._reward_terms],
+                      device=dev)
+        wp.launch(sum_terms, dim=n, inputs=[self._inputs], outputs=[self._out], device=dev)
+
+    def _launch_fields(self) -> None:
+        """An observation kind of the task's own: its leading fields, one kernel each (none for the shipped kinds)."""
+        for kernel in self._fields:
+            wp.launch(kernel, dim=self.num_envs, inputs=[self._params, self._inputs], outputs=[self._obs],
+                      device=self._wp_device)
 
     def _command_twist(self, action: torch.Tensor) -> None:
         """A twist action's /cmd_vel, (linear, angular) = clip(action) x (max_linear [m/s], max_angular [rad/s]),

@@ -12,7 +12,7 @@ from __future__ import annotations
 import warp as wp
 
 from atrv_warp.sim.kernels.params import WorldPhysics
-from atrv_warp.task.kernels import (
+from atrv_warp.task.kernels.observe import (
     IMU_PITCH_BOUND,
     IMU_ROLL_BOUND,
     IMU_YAW_RATE_BOUND,
@@ -30,11 +30,11 @@ from atrv_warp.task.kernels import (
     ROLL_BOUND,
     VELOCITY_BOUND,
     YAW_RATE_BOUND,
-    TaskBuffers,
     scaled_odometry,
-    twist_command,
     write_goal_observation,
 )
+from atrv_warp.task.kernels.state import TaskBuffers
+from atrv_warp.task.kernels.steps import twist_command
 from atrv_warp.task.randomization import MAX_LATENCY, PHYSICS_DRAWS
 
 __all__ = [

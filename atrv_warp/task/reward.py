@@ -1,42 +1,168 @@
-"""The task's dense reward in torch, differentiable: for trajectories from
-:class:`~atrv_warp.sim.diff.DiffRollout` (``examples/trajectory_optimisation.py``).
+"""The reward in torch, from the same table as the environment's: each shipped term's torch twin
+(:attr:`~atrv_warp.task.definition.RewardTerm.torch`), applied to a rollout's tensors (:class:`TorchRollout`), and
+their weighted sum (:func:`dense_reward`), differentiable where the inputs are: for trajectories from
+:class:`~atrv_warp.sim.diff.DiffRollout` (``examples/trajectory_optimisation.py``) and the MuJoCo twin's returns.
 
-The environment computes the same terms in its Warp kernels (:mod:`atrv_warp.task.kernels`);
-``tests/test_diff.py`` checks the two against each other.
+``tests/test_task_terms.py`` holds every shipped term's twin to the environment's column, step by step.
 """
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+
 import torch
 
 from atrv_warp.core.geometry import quat_to_yaw, wrap_angle
-from atrv_warp.task.config import TaskConfig
+from atrv_warp.task.spec import EndReason
 
-__all__ = ["progress_reward"]
+__all__ = ["FAILURES", "TorchRollout", "dense_reward", "progress_reward"]
+
+FAILURES = (int(EndReason.WALL), int(EndReason.FLIP), int(EndReason.OBSTACLE))
+"""The end reasons a ``failure`` term counts on."""
 
 
-def progress_reward(poses: torch.Tensor, targets: torch.Tensor, task: TaskConfig | None = None) -> torch.Tensor:
-    """The task's dense reward of every step of a rollout, differentiable: (steps, N).
+@dataclass(frozen=True)
+class TorchRollout:
+    """A rollout's tensors, as the terms' torch twins read them: T steps of N worlds."""
 
-    ``(previous distance - distance) + heading_weight * (previous |heading error| - |heading error|)
-    - step_penalty``: the non-terminal terms of :data:`atrv_warp.task.spec.REWARD_TERMS`
-    (progress, heading, step_penalty), as the environment's ``compute_step_outcome`` kernel
-    computes them (tested against the environment). The terminal rewards (``success_reward`` within
-    ``reach_radius``, ``failure_reward`` on a wall or flip) are discrete events without a gradient and are
-    left out, and so is the clearance term, which needs obstacles (a :class:`~atrv_warp.sim.diff.DiffRollout`
-    has none).
+    poses: torch.Tensor
+    """(T + 1, N, 7) chassis poses (x, y, z, qx, qy, qz, qw), the first before the first step."""
+    targets: torch.Tensor
+    """(N, 2) the targets [m]."""
+    config: object
+    """The task config (``clearance_radius`` and the like)."""
+    actions: torch.Tensor | None = None
+    """(T, N, 2) each step's action as given."""
+    first_prev_action: torch.Tensor | None = None
+    """(N, 2) the action before the first step (clipped; zero at an episode's start)."""
+    obstacles: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None
+    """Each world's obstacles: kind (N, K) (0 none, 1 box, 2 cylinder), pose (N, K, 3), size (N, K, 2)."""
+    wheel_torque: torch.Tensor | None = None
+    """(T, N, W) the wheels' torques [N·m] (the last substep's of each step)."""
+    wheel_speed: torch.Tensor | None = None
+    """(T, N, W) their speeds [rad/s]."""
+    end_reason: torch.Tensor | None = None
+    """(T, N) each step's end (:class:`~atrv_warp.task.spec.EndReason`)."""
+    step_dt: float = 0.05
+
+    def distance(self) -> torch.Tensor:
+        """(T + 1, N) the chassis' distance to the target [m]."""
+        return (self.targets.to(self.poses).unsqueeze(0) - self.poses[..., :2]).norm(dim=-1)
+
+    def heading_error(self) -> torch.Tensor:
+        """(T + 1, N) |angle from the heading to the target's direction| [rad]."""
+        to_target = self.targets.to(self.poses).unsqueeze(0) - self.poses[..., :2]
+        bearing = torch.atan2(to_target[..., 1], to_target[..., 0]) - quat_to_yaw(self.poses[..., 3:7])
+        return wrap_angle(bearing).abs()
+
+    def need(self, name: str, term: str) -> torch.Tensor:
+        value = getattr(self, name)
+        if value is None:
+            raise ValueError(f"reward term {term!r} reads the rollout's {name}, which it does not have")
+        return value
+
+
+# ---- the shipped terms' twins (each the value before its weight, as its @wp.func in task/kernels/terms.py)
+
+def progress(r: TorchRollout) -> torch.Tensor:
+    d = r.distance()
+    return d[:-1] - d[1:]
+
+
+def heading(r: TorchRollout) -> torch.Tensor:
+    e = r.heading_error()
+    return e[:-1] - e[1:]
+
+
+def step(r: TorchRollout) -> torch.Tensor:
+    return -torch.ones(r.poses.shape[0] - 1, r.poses.shape[1], dtype=r.poses.dtype, device=r.poses.device)
+
+
+def succeeded(r: TorchRollout) -> torch.Tensor:
+    return (r.need("end_reason", "success") == int(EndReason.SUCCESS)).to(r.poses.dtype)
+
+
+def failed(r: TorchRollout) -> torch.Tensor:
+    reason = r.need("end_reason", "failure")
+    return torch.isin(reason, torch.tensor(FAILURES, device=reason.device)).to(r.poses.dtype)
+
+
+def clearance(r: TorchRollout) -> torch.Tensor:
+    """Without obstacles (a :class:`~atrv_warp.sim.diff.DiffRollout`'s flat arena), 0."""
+    if r.obstacles is None:
+        return torch.zeros_like(step(r))
+    kind, pose, size = r.obstacles
+    radius = torch.where(kind == 1, size.norm(dim=-1), size[..., 0])  # a box's corner, a cylinder's radius
+    gap = (pose[None, :, :, :2] - r.poses[1:, :, None, :2]).norm(dim=-1) - radius[None]
+    inside = torch.where(kind[None] != 0, r.config.clearance_radius - gap, torch.zeros_like(gap))
+    return -inside.amax(-1).clamp(min=0.0)
+
+
+def action_rate(r: TorchRollout) -> torch.Tensor:
+    a = r.need("actions", "action_rate").clamp(-1.0, 1.0)
+    first = r.first_prev_action if r.first_prev_action is not None else torch.zeros_like(a[0])
+    prev = torch.cat([first[None], a[:-1]])
+    return -((a - prev) ** 2).sum(-1)
+
+
+def energy(r: TorchRollout) -> torch.Tensor:
+    torque, speed = r.need("wheel_torque", "energy"), r.need("wheel_speed", "energy")
+    return -(torque * speed).abs().sum(-1) * r.step_dt
+
+
+def live(term, r: TorchRollout) -> torch.Tensor | None:
+    """(T, N) where ``term`` counts (its ``when``), from the rollout's end reasons; None without them (every step
+    counts: a rollout that never ends)."""
+    if r.end_reason is None:
+        return None
+    ended = (r.end_reason == int(EndReason.SUCCESS)) | torch.isin(
+        r.end_reason, torch.tensor((*FAILURES, int(EndReason.NONFINITE)), device=r.end_reason.device))
+    return {"running": ~ended, "success": r.end_reason == int(EndReason.SUCCESS),
+            "failure": torch.isin(r.end_reason, torch.tensor(FAILURES, device=r.end_reason.device))}[term.when]
+
+
+def term_values(task, r: TorchRollout) -> dict[str, torch.Tensor]:
+    """Each of ``task``'s terms (a :class:`~atrv_warp.task.definition.Task`) with a torch twin and a weight: its
+    weighted value where it counts, (T, N), by name, in column order; terms of weight 0 are left out."""
+    out = {}
+    for term in task.terms:
+        weight = term.weight_of(task.config)
+        if term.torch is None or weight == 0.0:
+            continue
+        value = weight * term.torch(r)
+        mask = live(term, r)
+        out[term.name] = value if mask is None else torch.where(mask, value, torch.zeros_like(value))
+    return out
+
+
+def dense_reward(task, r: TorchRollout) -> torch.Tensor:
+    """The task's running reward of every step of a rollout that never ends (T, N), differentiable: its running
+    terms' twins, weighted, summed in column order (the events of success and failure are discrete and left
+    out).
+
+    Raises:
+        ValueError: A running term with a weight reads what the rollout does not have (named).
+    """
+    running = dataclasses.replace(task, terms=tuple(t for t in task.terms if t.when == "running"))
+    values = term_values(running, dataclasses.replace(r, end_reason=None))
+    return sum(values.values(), torch.zeros_like(step(r)))
+
+
+def progress_reward(poses: torch.Tensor, targets: torch.Tensor, task=None) -> torch.Tensor:
+    """The dense reward of every step of a :class:`~atrv_warp.sim.diff.DiffRollout` (steps, N), differentiable: the
+    running terms of ``task`` (a :class:`~atrv_warp.task.definition.Task`, a task's name or a
+    :class:`~atrv_warp.task.config.TaskConfig`; default ``reach``) that a rollout of poses alone defines, weighted
+    (:func:`dense_reward`; on a flat arena without obstacles the clearance term is 0; terms that read actions or the
+    wheels are left out).
 
     Args:
-        poses: (steps + 1, N, 7) chassis poses from :class:`~atrv_warp.sim.diff.DiffRollout`.
+        poses: (steps + 1, N, 7) chassis poses.
         targets: (N, 2) target x, y [m].
-        task: Reward weights (default :class:`~atrv_warp.task.config.TaskConfig`).
+        task: The task (its weights).
     """
-    task = task or TaskConfig()
-    yaw = quat_to_yaw(poses[..., 3:7])
-    to_target = targets.to(poses).unsqueeze(0) - poses[..., :2]
-    distance = to_target.norm(dim=-1)
-    bearing = torch.atan2(to_target[..., 1], to_target[..., 0]) - yaw
-    heading_error = wrap_angle(bearing).abs()
-    return ((distance[:-1] - distance[1:]) + task.heading_weight * (heading_error[:-1] - heading_error[1:])
-            - task.step_penalty)
+    from atrv_warp.task.registry import resolve_task
 
+    task = resolve_task(task)
+    poses_only = dataclasses.replace(task, terms=tuple(t for t in task.terms if set(t.reads) <= {"state", "obstacles"}))
+    return dense_reward(poses_only, TorchRollout(poses=poses, targets=targets, config=task.config))

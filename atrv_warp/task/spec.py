@@ -37,7 +37,6 @@ __all__ = [
     "OBSERVATION_NAMES",
     "OBS_DIM",
     "OBS_INDEX",
-    "REWARD_TERMS",
     "ROBOT_OBSERVATION",
     "ActionKind",
     "EndReason",
@@ -47,6 +46,7 @@ __all__ = [
     "observation_bounds",
     "observation_fields",
     "policy_contract",
+    "register_observation",
     "scan_sectors",
 ]
 
@@ -63,6 +63,10 @@ class ObservationField:
     """SI unit of the value (``-``: dimensionless)."""
     frame: str
     """The frame the value is expressed in (``-``: none)."""
+    warp: object = None
+    """For an observation kind of a task's own (:func:`register_observation`): the value's ``@wp.func``
+    ``(params: Any, inputs: TermInputs, world: int) -> float``, clipped to the bound. None for the shipped kinds,
+    whose kernels write them (:mod:`atrv_warp.task.kernels.observe`)."""
 
 
 OBSERVATION: tuple[ObservationField, ...] = (
@@ -102,7 +106,25 @@ ROBOT_OBSERVATION: tuple[ObservationField, ...] = (
 the odometry frame; then the task's scan sectors and last actions). No arena coordinates."""
 
 OBSERVATION_KINDS: dict[str, tuple[ObservationField, ...]] = {"arena": OBSERVATION, "robot": ROBOT_OBSERVATION}
-"""``TaskConfig.observation`` -> the observation's leading fields."""
+"""``TaskConfig.observation`` -> the observation's leading fields (a task of your own adds its kind with
+:func:`register_observation`)."""
+
+
+def register_observation(kind: str, fields: tuple[ObservationField, ...]) -> tuple[ObservationField, ...]:
+    """Add an observation kind of a task's own: its leading fields, each with the ``@wp.func`` that computes it
+    (:attr:`ObservationField.warp`); the scan's sectors and the last actions follow them as for the shipped kinds.
+    The domain randomization's sensor noise is the shipped kinds' only.
+
+    Raises:
+        ValueError: A shipped kind's name, no fields, a field without its function, or two of one name.
+    """
+    if kind in ("arena", "robot"):
+        raise ValueError(f"observation kind {kind!r} is a shipped one; name yours otherwise")
+    names = [f.name for f in fields]
+    if not fields or any(f.warp is None for f in fields) or len(set(names)) != len(names):
+        raise ValueError(f"observation kind {kind!r}: needs fields of distinct names, each with its warp function")
+    OBSERVATION_KINDS[kind] = tuple(fields)
+    return OBSERVATION_KINDS[kind]
 
 
 @dataclass(frozen=True)
@@ -174,17 +196,12 @@ class EndReason(IntEnum):
 END_REASONS: tuple[str, ...] = tuple(r.name.lower() for r in EndReason)
 """``END_REASONS[end_reason]`` names an end reason."""
 
-REWARD_TERMS: tuple[str, ...] = ("progress", "heading", "step_penalty", "success", "failure", "clearance")
-"""Terms of the reward, in the order of the ``reward_terms`` kernel output; they sum to ``reward``.
+def __getattr__(name: str):
+    if name == "REWARD_TERMS":  # the shipped tasks' reward table's names (atrv_warp.task.terms declares the rows)
+        from atrv_warp.task.terms import REFERENCE_TERMS
 
-- ``progress``: previous distance to the target minus the distance now [m] (non-terminal steps);
-- ``heading``: ``heading_weight`` x (previous |heading error| - |heading error|) (non-terminal);
-- ``step_penalty``: ``-step_penalty`` on every non-terminal step;
-- ``success``: ``success_reward`` on reaching the target;
-- ``failure``: ``failure_reward`` on a wall, chassis or obstacle contact, or a flip;
-- ``clearance``: ``-clearance_weight`` x how far the nearest obstacle's bounding circle reaches inside
-  ``clearance_radius`` of the chassis origin [m] (non-terminal; 0 without obstacles or weight).
-"""
+        return tuple(t.name for t in REFERENCE_TERMS)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def observation_bounds(dtype: torch.dtype = torch.float32, task=None) -> tuple[torch.Tensor, torch.Tensor]:

@@ -1,0 +1,120 @@
+"""Reset sampling: each masked world's episode (start, target and, on the nav tasks, a terrain tile and an obstacle
+layout) from a per-(world, episode) random stream, and the target in the episode's odometry frame.
+
+One thread per world. ``params`` is a task config's :func:`~atrv_warp.task.kernels.state.params_struct` (any task
+config class: the kernels specialise on it).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import warp as wp
+
+from atrv_warp.sim.kernels.obstacles import OBSTACLE_BOX, OBSTACLE_CYLINDER, ObstacleSet, bounding_radius
+from atrv_warp.sim.kernels.terrain import TerrainGrid
+from atrv_warp.task.kernels.state import TaskBuffers
+
+__all__ = ["locate_goals", "obstacle_clear", "sample_episodes", "sample_nav_episodes"]
+
+
+@wp.kernel
+def sample_episodes(seed: int, params: Any, mask: wp.array(dtype=bool), task: TaskBuffers,
+                    poses: wp.array(dtype=wp.vec3)):
+    """Draw target, start position and yaw for masked worlds from a per-(world, episode) stream; the goal's heading
+    last (so the draws before it are the reference's)."""
+    world = wp.tid()
+    if not mask[world]:
+        return
+    h = wp.rand_init(seed, task.stream[world])
+    state = wp.rand_init(wp.int32(h), task.episode[world])
+    b = params.spawn_bound
+    task.target[world] = wp.vec2(wp.randf(state, -b, b), wp.randf(state, -b, b))
+    poses[world] = wp.vec3(wp.randf(state, -b, b), wp.randf(state, -b, b), wp.randf(state, -wp.pi, wp.pi))
+    task.target_yaw[world] = wp.randf(state, -wp.pi, wp.pi)
+    task.episode[world] = task.episode[world] + 1
+    task.step_count[world] = 0
+
+
+@wp.func
+def obstacle_clear(q: wp.vec2, r: float, start: wp.vec2, target: wp.vec2, clearance: float) -> bool:
+    return wp.length(q - start) > r + clearance and wp.length(q - target) > r + clearance
+
+
+@wp.kernel
+def sample_nav_episodes(
+    seed: int,
+    params: Any,
+    distance: wp.vec2,
+    tiles: int,
+    mask: wp.array(dtype=bool),
+    task: TaskBuffers,
+    poses: wp.array(dtype=wp.vec3),
+    obstacles: ObstacleSet,
+    terrain: TerrainGrid,
+):
+    """Draw a masked world's episode: start and yaw, a target ``distance`` (min, max) [m] away, one of ``tiles``
+    terrain tiles and an obstacle layout (``params.obstacles``, ``obstacles_on_path`` of them across the straight
+    line, ``obstacle_size``) that keeps ``params.clearance`` from both ends, from a per-(world, episode) stream; the
+    goal's heading last."""
+    world = wp.tid()
+    if not mask[world]:
+        return
+    h = wp.rand_init(seed, task.stream[world])
+    state = wp.rand_init(wp.int32(h), task.episode[world])
+    b = params.spawn_bound
+    start = wp.vec2(wp.randf(state, -b, b), wp.randf(state, -b, b))
+    poses[world] = wp.vec3(start[0], start[1], wp.randf(state, -wp.pi, wp.pi))
+    target = start
+    for _ in range(32):  # a direction whose target lies inside the bound (the last try is clamped)
+        a = wp.randf(state, -wp.pi, wp.pi)
+        d = wp.randf(state, distance[0], distance[1])
+        target = start + d * wp.vec2(wp.cos(a), wp.sin(a))
+        if wp.abs(target[0]) <= b and wp.abs(target[1]) <= b:
+            break
+    target = wp.vec2(wp.clamp(target[0], -b, b), wp.clamp(target[1], -b, b))
+    task.target[world] = target
+    terrain.tile[world] = wp.int32(wp.min(int(wp.randf(state) * float(tiles)), tiles - 1))
+    line = target - start
+    length = wp.max(wp.length(line), 1.0e-6)
+    along = line / length
+    across = wp.vec2(-along[1], along[0])
+    half = b + 2.0
+    size = params.obstacle_size
+    for o in range(obstacles.count):
+        obstacles.kind[world, o] = 0
+        if o >= params.obstacles:
+            continue
+        for _ in range(8):  # retry a layout that would crowd the start or the target
+            kind = OBSTACLE_CYLINDER
+            if wp.randf(state) < 0.5:
+                kind = OBSTACLE_BOX
+            extent = wp.vec2(wp.randf(state, size[0], size[1]), 0.0)
+            if kind == OBSTACLE_BOX:
+                extent = wp.vec2(extent[0], wp.randf(state, size[0], size[1]))
+            q = wp.vec2(wp.randf(state, -half, half), wp.randf(state, -half, half))
+            if o < params.obstacles_on_path:
+                q = start + wp.randf(state, 0.35, 0.65) * line + wp.randf(state, -1.0, 1.0) * params.path_offset * across
+            yaw = wp.randf(state, -wp.pi, wp.pi)
+            if obstacle_clear(q, bounding_radius(kind, extent), start, target, params.clearance):
+                obstacles.kind[world, o] = kind
+                obstacles.pose[world, o] = wp.vec3(q[0], q[1], yaw)
+                obstacles.size[world, o] = extent
+                break
+    task.target_yaw[world] = wp.randf(state, -wp.pi, wp.pi)
+    task.episode[world] = task.episode[world] + 1
+    task.step_count[world] = 0
+
+
+@wp.kernel
+def locate_goals(mask: wp.array(dtype=bool), starts: wp.array(dtype=wp.vec3), task: TaskBuffers):
+    """The masked worlds' targets in their odometry frame, whose origin is the episode's start pose (x [m],
+    y [m], yaw [rad]): ``R(-yaw) (target - start)`` [m]."""
+    world = wp.tid()
+    if not mask[world]:
+        return
+    s = starts[world]
+    d = task.target[world] - wp.vec2(s[0], s[1])
+    c = wp.cos(s[2])
+    n = wp.sin(s[2])
+    task.goal_odom[world] = wp.vec2(c * d[0] + n * d[1], -n * d[0] + c * d[1])
