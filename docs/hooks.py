@@ -869,6 +869,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "deploy_base_limit_old_policy": lambda: deploy_base_limit("deploy_base_limit_old_policy.json"),
     "train_to_success_nav_deploy": train_to_success_nav_deploy,
     "train_to_success_nav_deploy_shipped": train_to_success_nav_deploy_shipped,
+    "train_to_success_parking": lambda: _train_to_success("train_to_success_parking.json"),
     "train_to_success_nav_deploy_earlier": lambda: _train_to_success("train_to_success_nav_deploy_earlier.json"),
     "train_to_success_nav_deploy_batch512": lambda: _train_to_success("train_to_success_nav_deploy_batch512.json"),
     "mujoco_odometry_drives": mujoco_odometry_drives,

@@ -50,12 +50,14 @@ class ParkingConfig(TaskConfig):
     """... its heading this close to the goal's [rad] ..."""
     park_speed: float = 0.1
     """... and it stands: its forward speed below this [m/s] (and its yaw rate below this [rad/s])."""
-    near: float = 1.0
+    near: float = 1.5
     """Within this distance of the spot [m], turning to the goal's heading and stopping pay."""
-    alignment_weight: float = 2.0
+    alignment_weight: float = 1.0
     """Weight of the alignment term [1/rad]."""
-    stopping_weight: float = 0.5
-    """Weight of the stopping term [s/m]."""
+    stopping_weight: float = 1.0
+    """Weight of the stopping term [1/m]."""
+    posed_weight: float = 0.1
+    """Weight of the posed term (a step on the spot at the goal's heading)."""
 
 
 # ---- the observation: the goal in the rover's frame, the heading still to turn, the rover's speeds
@@ -154,18 +156,27 @@ def alignment(params: Any, inputs: TermInputs, world: int) -> float:
 
 @wp.func
 def stopping(params: Any, inputs: TermInputs, world: int) -> float:
-    """Minus the forward speed, near the spot [m/s]."""
-    return -_nearness(params, inputs, world) * wp.abs(_forward_speed(inputs, world))
+    """Minus the distance driven this step [m], on the spot (within twice ``park_radius``, fading out)."""
+    on_spot = wp.max(0.0, 1.0 - inputs.task.distance[world] / (2.0 * params.park_radius))
+    return -on_spot * wp.abs(_forward_speed(inputs, world)) * inputs.step_dt
+
+
+@wp.func
+def posed(params: Any, inputs: TermInputs, world: int) -> float:
+    """1 on a step that ends on the spot at the goal's heading (moving or not): what standing still there builds on."""
+    on_spot = inputs.task.distance[world] < params.park_radius and wp.abs(_yaw_error(inputs, world)) < params.park_yaw
+    return wp.where(on_spot, 1.0, 0.0)
 
 
 ALIGNMENT = RewardTerm("alignment", alignment, "alignment_weight", description="turning to the goal's heading, near "
                        "the spot [rad]")
-STOPPING = RewardTerm("stopping", stopping, "stopping_weight", description="minus the forward speed near the spot "
-                      "[m/s]")
+STOPPING = RewardTerm("stopping", stopping, "stopping_weight", description="minus the distance driven on the spot "
+                      "[m]")
+POSED = RewardTerm("posed", posed, "posed_weight", description="1 a step on the spot at the goal's heading")
 
 CONFIG = ParkingConfig(action="twist", observation="parking", max_linear=1.0, max_angular=1.5,
                        linear_max_acceleration=1.0, target_distance=(1.5, 4.0), max_steps=200, reach_radius=0.3,
                        success_reward=10.0, failure_reward=-5.0, step_penalty=0.01)
-TASK = register_task(Task("parking", CONFIG, (terms.PROGRESS, ALIGNMENT, STOPPING, terms.STEP_PENALTY, terms.SUCCESS,
-                                              terms.FAILURE), parked, description=__doc__.splitlines()[0]),
+TASK = register_task(Task("parking", CONFIG, (terms.PROGRESS, ALIGNMENT, STOPPING, POSED, terms.STEP_PENALTY,
+                                              terms.SUCCESS, terms.FAILURE), parked, description=__doc__.splitlines()[0]),
                      replace=True)

@@ -294,7 +294,8 @@ def _finish(cfg: TrainConfig, state: RunState, run_dir: Path, loggers: Loggers) 
     if loggers.recording is not None:
         print(f"rerun recording: {loggers.rerun.path}")
     loggers.close()
-    if plot_curve(run_dir / "logs", run_dir / "learning_curve.png", f"ATRV-Jr {cfg.env.task}, {cfg.optim.algo.upper()}"):
+    if plot_curve(run_dir / "logs", run_dir / "learning_curve.png", f"{cfg.env.task}, {cfg.optim.algo.upper()}"):
         print(f"learning curve: {run_dir / 'learning_curve.png'}")
+    module = f" --task-module {cfg.env.task_module}" if cfg.env.task_module else ""
     print(f"checkpoint: {Checkpoint(run_dir).path}\nbest policy: {best_path if best_path.is_file() else '(none yet)'}\n"
-          f"logs: {run_dir / 'logs'}\nevaluate: python -m atrv_warp.evaluate {best_path}")
+          f"logs: {run_dir / 'logs'}\nevaluate: python -m atrv_warp.evaluate {best_path}{module}")
