@@ -17,7 +17,7 @@ What a task declares, all here:
   rover's frame, the heading still to turn, the rover's speeds);
 - its **ends**: :func:`parked`, the success test (a wall or a flip fails, the time runs out, as in every task);
 - its **reward**: a table of :class:`~atrv_warp.task.definition.RewardTerm` rows, the shipped ``progress``,
-  ``step_penalty``, ``success`` and ``failure`` beside two of its own, ``alignment`` and ``stopping``.
+  ``step_penalty``, ``success`` and ``failure`` beside three of its own, ``alignment``, ``stopping`` and ``posed``.
 
 A term is one ``@wp.func`` of ``(params, inputs, world)`` and one row: ``params`` has every field of the config by
 name (``params.park_radius``), ``inputs`` everything a term may read (the rover's state, the task's buffers, the
@@ -51,7 +51,7 @@ class ParkingConfig(TaskConfig):
     park_speed: float = 0.1
     """... and it stands: its forward speed below this [m/s] (and its yaw rate below this [rad/s])."""
     near: float = 1.5
-    """Within this distance of the spot [m], turning to the goal's heading and stopping pay."""
+    """Within this distance of the spot [m], turning to the goal's heading pays."""
     alignment_weight: float = 1.0
     """Weight of the alignment term [1/rad]."""
     stopping_weight: float = 1.0
@@ -139,7 +139,7 @@ def parked(params: Any, inputs: TermInputs, world: int) -> bool:
             and wp.abs(inputs.rover.ang_vel[world][2]) < params.park_speed)
 
 
-# ---- two reward terms of its own: turning to the goal's heading, and slowing down, near the spot
+# ---- three reward terms of its own: turning to the goal's heading near the spot, standing still on it, being on it
 
 @wp.func
 def _nearness(params: Any, inputs: TermInputs, world: int) -> float:
