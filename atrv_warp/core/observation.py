@@ -15,7 +15,7 @@ publishes. :class:`RobotObservation` turns those messages into the policy's inpu
 Nothing is declared here: the field order, each field's clip bounds, the scan's sector edges and clip, and the
 action history's length come from an exported policy's contract (``atrv_warp.json`` in the ``.pt2``, written by
 :func:`atrv_warp.rl.export.contract` from :mod:`atrv_warp.task.spec`), so a deploy node or a second engine's twin
-builds the observation from the file alone. The maths is the environment's (``task/kernels.py``):
+builds the observation from the file alone. The maths is the environment's (``task/kernels/observe.py``):
 
 - ``goal_distance`` = |goal - p| [m]; the bearing = wrap(atan2(goal - p) - yaw) [rad], observed as its sine and
   cosine (p, yaw: the odometry pose);

@@ -13,7 +13,7 @@ A ``LaserScan``'s readings (REP 117):
 - ``-inf``, or below ``range_min``: an object too close to measure; the sector reads blocked (0.0);
 - ``NaN``: an invalid beam, left out of its sector; a sector with no valid beam reads blocked (0.0).
 
-The environment's kernel (``task/kernels.py``'s ``write_scan_observation``) applies the same rule to the
+The environment's kernel (``task/kernels/observe.py``'s ``write_scan_observation``) applies the same rule to the
 simulated ranges through the beam ranges :meth:`ScanSectors.beam_bounds` gives; ``tests/test_core.py``
 holds the two together.
 """

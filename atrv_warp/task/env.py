@@ -1,7 +1,7 @@
 """TorchRL environment: N ATRV-Jr rovers driving to targets, one batched ``EnvBase``.
 
 The task math (observations, rewards, terminations, reset sampling) runs in Warp kernels,
-one thread per world (``atrv_warp/task/kernels.py``); TensorDicts carry zero-copy views
+one thread per world (``atrv_warp/task/kernels/``); TensorDicts carry zero-copy views
 of the Warp buffers, cloned only where TorchRL would otherwise keep a reference to a buffer
 the next step overwrites.
 

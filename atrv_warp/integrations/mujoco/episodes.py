@@ -6,7 +6,7 @@ builder a robot runs (:class:`~atrv_warp.core.observation.RobotObservation`).
 - :class:`DeployablePolicy`: a ``.pt`` policy file (or a shipped name) or an exported ``.pt2``, with its contract;
   a policy that commands wheel torques or observes the arena is refused, naming why;
 - :func:`run_twin_episodes`: one twin per episode, the policy in the loop at the task's control period; the same
-  end reasons, in the same order, as the environment's ``compute_step_outcome``.
+  end reasons, in the same order, as the environment's ends kernel (``task/kernels/steps.py``).
 """
 
 from __future__ import annotations
