@@ -123,3 +123,93 @@ def test_config_errors():
         get_variant("fast")
     with pytest.raises(ValueError, match=r"unknown RoverConfig key\(s\) \['wheel_radus'\]"):
         replace_checked(RoverConfig(), wheel_radus=0.1)
+
+
+ROS_URDF = """<?xml version="1.0"?>
+<robot name="ros_rover">
+  <link name="base_footprint"/>
+  <joint name="base_footprint_joint" type="fixed">
+    <parent link="base_footprint"/><child link="base_link"/><origin xyz="0 0 0.0635"/>
+  </joint>
+  <link name="base_link"/>
+  <joint name="chassis_joint" type="fixed">
+    <parent link="base_link"/><child link="chassis_link"/>
+  </joint>
+  <link name="chassis_link">
+    <inertial><origin xyz="0.01 0 0.07"/><mass value="16.5"/>
+      <inertia ixx="0.31" iyy="0.39" izz="0.45" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0 0.092"/><geometry><box size="0.42 0.31 0.184"/></geometry></collision>
+  </link>
+  <link name="payload_link">
+    <inertial><mass value="2.0"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>
+  </link>
+  <joint name="payload_joint" type="fixed">
+    <parent link="chassis_link"/><child link="payload_link"/><origin xyz="0 0 0.2"/>
+  </joint>
+  <link name="laser"/>
+  <joint name="laser_joint" type="fixed">
+    <parent link="base_link"/><child link="laser"/><origin xyz="0.12 0 0.3"/>
+  </joint>
+  WHEELS
+</robot>
+"""
+WHEEL = """
+  <link name="{name}_wheel_link">
+    <inertial><mass value="0.477"/><inertia ixx="0.0013" iyy="0.0024" izz="0.0013" ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><origin rpy="1.5708 0 0"/><geometry><cylinder radius="0.098" length="0.04"/></geometry></collision>
+  </link>
+  <joint name="{name}_wheel_joint" type="continuous">
+    <parent link="chassis_link"/><child link="{name}_wheel_link"/>
+    <origin xyz="{x} {y} 0.0345"/><axis xyz="0 1 0"/>
+  </joint>"""
+
+
+def _ros_urdf(tmp_path, sides=(("front_left", 0.131, 0.1878), ("front_right", 0.131, -0.1878),
+                                ("rear_left", -0.131, 0.1878), ("rear_right", -0.131, -0.1878))) -> Path:
+    path = tmp_path / "ros_rover.urdf"
+    path.write_text(ROS_URDF.replace("WHEELS", "".join(WHEEL.format(name=n, x=x, y=y) for n, x, y in sides)))
+    return path
+
+
+def test_a_ros_urdf_loads_with_its_chassis_below_the_root_and_its_wheels_found(tmp_path):
+    """A URDF written in the ROS conventions: base_footprint the root, a massless base_link, the mass on chassis_link
+    below it with a payload fixed to it, a laser fixed to base_link, four wheels on continuous joints about +y. The
+    chassis is one body with every link fixed to it (masses merged, each a frame in its frame), the wheels are found
+    by the rule (left first, front first), each drives forward with a positive torque, and the rover settles."""
+    rover = RoverConfig(urdf=str(_ros_urdf(tmp_path)), chassis_link="chassis_link", left_wheels=(), right_wheels=(),
+                        sensor_frames=("laser",), wheel_radius=0.098, wheel_length=0.04, wheel_offset=0.0)
+    desc = load_rover(rover)
+    assert desc.chassis == "chassis_link" and desc.chassis_inertial.mass == pytest.approx(18.5)
+    assert [w.link for w in desc.wheels] == ["front_left_wheel_link", "rear_left_wheel_link",
+                                             "front_right_wheel_link", "rear_right_wheel_link"]
+    assert [w.side for w in desc.wheels] == [0, 0, 1, 1] and all(w.drive_sign == 1.0 for w in desc.wheels)
+    assert desc.wheel_radius == pytest.approx(0.098)
+    frames = {f.name: f.transform for f in desc.frames}
+    assert set(frames) == {"base_footprint", "base_link", "payload_link", "laser"}
+    np.testing.assert_allclose(frames["base_footprint"][:3, 3], [0, 0, -0.0635])
+    np.testing.assert_allclose(frames["laser"][:3, 3], [0.12, 0, 0.3])
+    assert {row[0]: row[1:] for row in desc.tree}["base_link"] == ("chassis_link", "chassis_joint", "fixed")
+    from atrv_warp import RoverSim
+
+    sim = RoverSim(1, rover=rover)
+    for _ in range(20):
+        sim.step()
+    z = float(sim.root_pose[0, 2])
+    sim.commands[:] = 2.0
+    for _ in range(20):
+        sim.step()
+    ground = sim.arena_cfg.ground_top
+    assert z - ground == pytest.approx(0.0635, abs=0.01)  # on its wheels: their radius less their joints' height
+    assert float(sim.root_pose[0, 0]) > 0.2  # and drives forward
+
+
+def test_wheels_on_one_side_or_none_are_named(tmp_path):
+    one_side = _ros_urdf(tmp_path, (("front_left", 0.1, 0.2), ("rear_left", -0.1, 0.2)))
+    rover = RoverConfig(urdf=str(one_side), chassis_link="chassis_link", left_wheels=(), right_wheels=(),
+                        sensor_frames=())
+    with pytest.raises(URDFError, match="wheels on one side only"):
+        load_rover(rover)
+    none = tmp_path / "none.urdf"
+    none.write_text(ROS_URDF.replace("WHEELS", ""))
+    with pytest.raises(URDFError, match="found 0 wheel joint"):
+        load_rover(dataclasses.replace(rover, urdf=str(none)))

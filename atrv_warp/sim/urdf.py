@@ -178,8 +178,8 @@ def _parse(path: str):
     return urdf.robot
 
 
-def _check_links(path: str, rover: RoverConfig, links: dict, joints_by_child: dict, joints) -> None:
-    """Every joint's ends exist, every role's link exists, the chassis is the root."""
+def _check_links(path: str, rover: RoverConfig, links: dict, joints) -> None:
+    """Every joint's ends exist, and every role's link."""
     for j in joints:
         for end in (j.parent, j.child):
             if end not in links:
@@ -192,49 +192,73 @@ def _check_links(path: str, rover: RoverConfig, links: dict, joints_by_child: di
             raise URDFError(
                 f"{path}: required {role} link {name!r} not found; links present: {sorted(links)}"
             )
-    if rover.chassis_link in joints_by_child:
-        raise URDFError(f"{path}: chassis link {rover.chassis_link!r} must be the root, but it is the child of "
-                        f"joint {joints_by_child[rover.chassis_link].name!r}")
     unknown = sorted({ov.link for ov in rover.inertial_overrides} - set(links))
     if unknown:
         raise URDFError(f"{path}: inertial overrides name unknown link(s) {unknown}")
 
 
-def _fixed_pose(name: str, chassis: str, joints_by_child: dict) -> np.ndarray | None:
-    """Pose in the chassis frame of a link fixed to it (directly or through fixed joints), else None."""
-    pose = np.eye(4)
-    while name != chassis:
-        j = joints_by_child.get(name)
-        if j is None or j.type != "fixed":
-            return None
-        origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float)
-        pose = origin @ pose
-        name = j.parent
-    return pose
+def _origin(j) -> np.ndarray:
+    return np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float)
 
 
-def _frames(path: str, rover: RoverConfig, links: dict, joints_by_child: dict) -> list[Frame]:
-    """Links fixed to the chassis (not the chassis or a wheel) become named frames."""
-    wheel_names = tuple(rover.left_wheels) + tuple(rover.right_wheels)
-    frames: list[Frame] = []
-    for name in links:
-        if name == rover.chassis_link or name in wheel_names:
-            continue
-        pose = _fixed_pose(name, rover.chassis_link, joints_by_child)
-        if pose is not None:
-            frames.append(Frame(name, pose))
-        elif name in rover.sensor_frames:
-            raise URDFError(f"{path}: sensor frame {name!r} must be fixed to {rover.chassis_link!r}")
+def _rigid_group(chassis: str, links: dict, joints) -> dict[str, np.ndarray]:
+    """Every link joined to ``chassis`` by fixed joints alone (above it in the tree or below), with its pose in the
+    chassis frame (4x4), in the URDF's link order: the one body they make."""
+    poses, todo = {chassis: np.eye(4)}, [chassis]
+    while todo:
+        name = todo.pop()
+        for j in joints:
+            if j.type != "fixed":
+                continue
+            if j.parent == name and j.child not in poses:  # down the tree
+                poses[j.child] = poses[name] @ _origin(j)
+                todo.append(j.child)
+            elif j.child == name and j.parent not in poses:  # up it
+                poses[j.parent] = poses[name] @ np.linalg.inv(_origin(j))
+                todo.append(j.parent)
+    return {name: poses[name] for name in links if name in poses}
+
+
+def _frames(path: str, rover: RoverConfig, group: dict[str, np.ndarray], wheel_names: set[str]) -> list[Frame]:
+    """The rigid group's links (not the chassis, not a wheel) become named frames."""
+    frames = [Frame(name, pose) for name, pose in group.items() if name != rover.chassis_link and name not in wheel_names]
+    missing = [n for n in rover.sensor_frames if n not in group]
+    if missing:
+        raise URDFError(f"{path}: sensor frame {missing[0]!r} must be fixed to {rover.chassis_link!r} (through fixed "
+                        "joints only)")
     return frames
 
 
-def _wheel(path: str, rover: RoverConfig, name: str, j, inertial: Inertial, link) -> Wheel:
-    """A wheel on a revolute joint from the chassis, about a lateral axis."""
-    if j is None or j.type not in ("revolute", "continuous") or j.parent != rover.chassis_link:
+def _wheel_joints(path: str, rover: RoverConfig, group: dict[str, np.ndarray], joints) -> list[tuple[str, object]]:
+    """(link, joint) of each wheel: the named ones (``left_wheels``, ``right_wheels``), or where none are named, every
+    revolute or continuous joint hanging from the chassis' rigid group about a lateral axis."""
+    named = tuple(rover.left_wheels) + tuple(rover.right_wheels)
+    by_child = {j.child: j for j in joints}
+    if named:
+        return [(name, by_child.get(name)) for name in named]
+    found = []
+    for j in joints:
+        if j.type in ("revolute", "continuous") and j.parent in group:
+            axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
+            lateral = (group[j.parent] @ _origin(j))[:3, :3] @ (axis / np.linalg.norm(axis))
+            if abs(lateral[1]) >= 0.9:
+                found.append((j.child, j))
+    if len(found) < 2:
+        raise URDFError(f"{path}: found {len(found)} wheel joint(s) (revolute or continuous joints from "
+                        f"{rover.chassis_link!r} or a link fixed to it, about a lateral axis); a skid-steer rover needs "
+                        "wheels on both sides (or name them: left_wheels, right_wheels)")
+    return found
+
+
+def _wheel(path: str, rover: RoverConfig, name: str, j, group: dict[str, np.ndarray], inertial: Inertial,
+           link) -> Wheel:
+    """A wheel on a revolute joint from the chassis (or a link fixed to it), about a lateral axis (+y or -y of the
+    chassis, however its link is turned: the ATRV-Jr's turn their z to the side, ROS robots turn about +y)."""
+    if j is None or j.type not in ("revolute", "continuous") or j.parent not in group:
         kind = "no joint" if j is None else f"a {j.type} joint to {j.parent!r}"
         raise URDFError(f"{path}: wheel {name!r} must hang on a revolute/continuous joint from "
-                        f"{rover.chassis_link!r}, found {kind}")
-    origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float)
+                        f"{rover.chassis_link!r} (or a link fixed to it), found {kind}")
+    origin = group[j.parent] @ _origin(j)  # the joint frame in the chassis frame
     axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
     axis = axis / np.linalg.norm(axis)
     axis_chassis = origin[:3, :3] @ axis
@@ -246,8 +270,9 @@ def _wheel(path: str, rover: RoverConfig, name: str, j, inertial: Inertial, link
     lateral = 1.0 if origin[1, 3] >= 0.0 else -1.0
     outward = axis * (1.0 if axis_chassis[1] * lateral > 0.0 else -1.0)
     _check_inertial(path, name, inertial)
-    return Wheel(name, j.name, 0 if name in rover.left_wheels else 1, origin, axis, drive_sign, outward, inertial,
-                 _cylinder_radius(link))
+    named = tuple(rover.left_wheels) + tuple(rover.right_wheels)
+    side = (0 if name in rover.left_wheels else 1) if named else (0 if lateral > 0 else 1)
+    return Wheel(name, j.name, side, origin, axis, drive_sign, outward, inertial, _cylinder_radius(link))
 
 
 def _cylinder_radius(link) -> float | None:
@@ -259,45 +284,86 @@ def _cylinder_radius(link) -> float | None:
     return None
 
 
-def _chassis_box(link) -> tuple[np.ndarray, np.ndarray] | None:
-    """(pose, half extents) of the chassis link's first box, collision geometry before visual."""
-    for geom_list in (link.collisions, link.visuals):
-        for g in geom_list or ():
-            if g.geometry is not None and g.geometry.box is not None:
-                pose = np.eye(4) if g.origin is None else np.asarray(g.origin, dtype=float)
-                return pose, 0.5 * np.asarray(g.geometry.box.size, dtype=float)
+def _chassis_box(chassis: str, links: dict, group: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
+    """(pose in the chassis frame, half extents) of the chassis' first box (collision geometry before visual), or of
+    the first box of a link fixed to it."""
+    for name in [chassis, *(n for n in group if n != chassis)]:
+        link = links[name]
+        for geom_list in (link.collisions, link.visuals):
+            for g in geom_list or ():
+                if g.geometry is not None and g.geometry.box is not None:
+                    pose = np.eye(4) if g.origin is None else np.asarray(g.origin, dtype=float)
+                    return group[name] @ pose, 0.5 * np.asarray(g.geometry.box.size, dtype=float)
     return None
 
 
 def load_rover(rover: RoverConfig | None = None) -> RoverDescription:
     """Load, check and describe the rover URDF named by ``rover.urdf``.
 
+    The chassis (``rover.chassis_link``) may be any link of the tree: the links joined to it by fixed joints alone,
+    above it (a massless ``base_link`` root, a ``base_footprint``) or below it (an ``inertial_link`` holding the mass,
+    sensor frames), are one body with it, their masses merged and each kept as a named frame. The wheels are the
+    named links (``left_wheels``, ``right_wheels``), or where none are named, every revolute or continuous joint from
+    that body about a lateral axis, left or right by the side of the chassis they sit on.
+
     Raises:
         URDFError: the file is missing or malformed, a required link is absent, a wheel is
-            not on a revolute/continuous joint to the chassis, or a sensor frame is not
-            fixed to it.
+            not on a revolute/continuous joint to the chassis or about a lateral axis, the wheels
+            are on one side only, or a sensor frame is not fixed to it.
     """
     rover = rover or RoverConfig()
     path = os.fspath(rover.urdf or default_urdf_path())
     robot = _parse(path)
     links = {link.name: link for link in robot.links}
-    joints_by_child = {j.child: j for j in robot.joints}
-    _check_links(path, rover, links, joints_by_child, robot.joints)
+    _check_links(path, rover, links, robot.joints)
     overrides = {ov.link: ov for ov in rover.inertial_overrides}
 
     def inertial(name: str) -> Inertial:
         base = _inertial_of(links[name])
         return _apply_override(base, overrides[name]) if name in overrides else base
 
-    frames = _frames(path, rover, links, joints_by_child)
+    group = _rigid_group(rover.chassis_link, links, robot.joints)
+    wheel_joints = _wheel_joints(path, rover, group, robot.joints)
+    wheels = [_wheel(path, rover, name, j, group, inertial(name), links[name]) for name, j in wheel_joints]
+    if not tuple(rover.left_wheels) + tuple(rover.right_wheels):  # found by the rule: left first, front first
+        wheels.sort(key=lambda w: (w.side, -float(w.origin[0, 3])))
+    if {w.side for w in wheels} != {0, 1}:
+        raise URDFError(f"{path}: wheels on one side only ({', '.join(w.link for w in wheels)}); a skid-steer rover "
+                        "drives a left and a right side")
+    frames = _frames(path, rover, group, {w.link for w in wheels})
     parts = [(inertial(rover.chassis_link), np.eye(4))] + [(inertial(f.name), f.transform) for f in frames]
     chassis_inertial = _lump(parts)
     _check_inertial(path, rover.chassis_link, chassis_inertial)
-    wheels = [_wheel(path, rover, name, joints_by_child.get(name), inertial(name), links[name])
-              for name in tuple(rover.left_wheels) + tuple(rover.right_wheels)]
-    tree = []
-    for name in [rover.chassis_link] + [n for n in links if n != rover.chassis_link]:
-        j = joints_by_child.get(name)
-        tree.append((name, "world", "root_joint", "free") if j is None else (name, j.parent, j.name, j.type))
     return RoverDescription(path, robot.name, rover.chassis_link, chassis_inertial,
-                            _chassis_box(links[rover.chassis_link]), tuple(wheels), tuple(frames), tuple(tree))
+                            _chassis_box(rover.chassis_link, links, group), tuple(wheels), tuple(frames),
+                            _tree(rover.chassis_link, links, robot.joints))
+
+
+def _tree(chassis: str, links: dict, joints) -> tuple[tuple[str, str, str, str], ...]:
+    """(body, the link it is joined to, joint name, joint type) of every URDF link, the chassis first (on the free
+    root joint): a link above the chassis in the URDF names the link below it that it is joined to."""
+    by_child = {j.child: j for j in joints}
+    by_parent: dict[str, list] = {}
+    for j in joints:
+        by_parent.setdefault(j.parent, []).append(j)
+    tree = [(chassis, "world", "root_joint", "free")]
+    for name in links:
+        if name == chassis:
+            continue
+        j = by_child.get(name)
+        if j is not None and not _above(name, chassis, by_child):
+            tree.append((name, j.parent, j.name, j.type))
+        else:  # above the chassis: joined to its child on the chassis' side
+            down = next(c for c in by_parent.get(name, []) if c.child == chassis or _above(c.child, chassis, by_child))
+            tree.append((name, down.child, down.name, down.type))
+    return tuple(tree)
+
+
+def _above(name: str, chassis: str, by_child: dict) -> bool:
+    """Whether ``name`` is an ancestor of the chassis in the URDF tree."""
+    node = chassis
+    while node in by_child:
+        node = by_child[node].parent
+        if node == name:
+            return True
+    return False
