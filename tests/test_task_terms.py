@@ -155,3 +155,16 @@ def test_a_term_from_outside_the_package_trains(tmp_path):
     assert record["terms"][-1] == {"name": "forward", "weight_field": "forward_weight", "weight": 0.1,
                                    "when": "running", "reads": ["state"], "function": record["terms"][-1]["function"]}
     assert "[env.task]" in (run / "config.toml").read_text() and "forward_weight = 0.1" in (run / "config.toml").read_text()
+
+
+def test_the_custom_task_example_registers_builds_and_steps():
+    """``examples/custom_task.py`` (the docs' "Your own task" page shows it whole): its task registers, its own
+    observation kind and reward terms build, and its environment steps with finite rewards."""
+    from atrv_warp.task.registry import load_task_module
+
+    assert load_task_module(ROOT / "examples" / "custom_task.py") == ["parking"]
+    env = ATRVjrEnv(4, task="parking", seed=0)
+    assert env.task.term_names == ("progress", "alignment", "stopping", "posed", "step_penalty", "success", "failure")
+    td = env.rollout(8)
+    assert td["next", "observation"].shape == (4, 8, 6) and torch.isfinite(td["next", "reward"]).all()
+    assert '--8<-- "examples/custom_task.py"' in (ROOT / "docs" / "your-own-task.md").read_text()
