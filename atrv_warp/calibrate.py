@@ -59,7 +59,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"parameters to fit, comma-separated, from {','.join(FIT_PARAMETERS)} (default %(default)s)")
     p.add_argument("--command", choices=COMMAND_SOURCES, default=d.command,
                    help="replay the velocity commands through the base's PI controller, or the wheel efforts")
-    p.add_argument("--sim-config", help="the rover to start from (default: the nominal realistic rover)")
+    p.add_argument("--robot", default=d.robot,
+                   help="the robot the bag was recorded on: a shipped robot's name or a robot file's path (%(default)s); "
+                        "its wheel joints, nominal rover and driver gains")
+    p.add_argument("--sim-config", help="the rover to start from (default: the robot's nominal rover)")
     p.add_argument("--segment", type=float, default=d.segment_seconds, help="segment length [s] (%(default)s)")
     p.add_argument("--duration", type=float, metavar="S",
                    help="fit only the drive's first S seconds (default: all of it)")
@@ -74,9 +77,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pose-smoothing", type=float, default=d.pose_smoothing,
                    help="centred moving average over the reference poses [s] (%(default)s; 0: none)")
     p.add_argument("--seed", type=int, default=d.seed)
-    p.add_argument("--wheel-kp", type=float, default=d.kp, help="the base's wheel-speed PI gains (the node's)")
+    p.add_argument("--wheel-kp", type=float, default=d.kp,
+                   help="the base's wheel-speed PI gains (the node's; default: the robot's)")
     p.add_argument("--wheel-ki", type=float, default=d.ki)
-    p.add_argument("--effective-track-factor", type=float, default=d.effective_track_factor)
+    p.add_argument("--effective-track-factor", type=float, default=d.effective_track_factor,
+                   help="the driver's effective track / wheel track (default: the robot's)")
     p.add_argument("--driver-wheel-radius", type=float, metavar="M",
                    help="the wheel radius the robot's driver is configured with [m]; /cmd_vel is replayed through it "
                         f"(default: the nominal rover's, {nominal.wheel_radius:g}; the physical radius is fitted)")
@@ -259,8 +264,7 @@ def main(argv: list[str] | None = None) -> int:
         print(bad, file=sys.stderr)
         return 2
     try:
-        rover, contact = load_sim_config(args.sim_config) if args.sim_config else (None, None)
-        cfg = CalibrationConfig(params=tuple(p.strip() for p in args.params.split(",") if p.strip()),
+        cfg = CalibrationConfig(robot=args.robot, params=tuple(p.strip() for p in args.params.split(",") if p.strip()),
                                 command=args.command, segment_seconds=args.segment, duration=args.duration,
                                 starts=args.starts,
                                 iterations=args.iterations, tolerance=args.tolerance, robust=args.robust or None,
@@ -268,6 +272,9 @@ def main(argv: list[str] | None = None) -> int:
                                 ki=args.wheel_ki, effective_track_factor=args.effective_track_factor,
                                 driver_wheel_radius=args.driver_wheel_radius,
                                 driver_track_width=args.driver_track_width, latency=args.latency)
+        nominal_rover = cfg.nominal_rover()
+        rover, contact = (load_sim_config(args.sim_config, nominal_rover) if args.sim_config
+                          else (nominal_rover, None))
         wheels = {w.joint: (w.side, w.drive_sign) for w in load_rover(rover).wheels}
         t0 = time.perf_counter()
         log = read_drive_log(args.bag, wheels, Topics(cmd_vel=args.cmd_vel_topic,

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import torch
 
-__all__ = ["FileFormatError", "atomic_save", "file_sha256", "load_weights"]
+__all__ = ["FileFormatError", "atomic_save", "atomic_write_text", "file_sha256", "load_weights"]
 
 
 def _detail(err: Exception) -> str:
@@ -38,6 +38,18 @@ def atomic_save(obj, path: str | Path) -> None:
     tmp = path.with_suffix(path.suffix + ".tmp")
     with open(tmp, "wb") as f:
         torch.save(obj, f)
+        f.flush()
+        os.fsync(f.fileno())
+    tmp.replace(path)
+    sync_folder(path.parent)
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    """Write ``text`` (UTF-8) as :func:`atomic_save` writes: a temporary file beside ``path``, flushed, renamed over it."""
+    path = Path(path)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write(text)
         f.flush()
         os.fsync(f.fileno())
     tmp.replace(path)

@@ -52,7 +52,7 @@ def _relative(path: str | Path) -> str:
 
 
 def provenance(version: int, *, script: str | Path | None = None, dynamics: bool = True, task: bool = False,
-               policies: tuple[str | Path, ...] = (), driver: bool = False) -> dict:
+               policies: tuple[str | Path, ...] = (), driver: bool = False, robots: tuple[str, ...] = ()) -> dict:
     """What a results file's figures depend on, recorded beside them (``docs/hooks.py`` checks it).
 
     Args:
@@ -65,11 +65,12 @@ def provenance(version: int, *, script: str | Path | None = None, dynamics: bool
         policies: the policy files the script ran; each one's sha256 is recorded.
         driver: whether they went through the base's motor driver (``/cmd_vel``, velocity actions); if so, the
             current :func:`atrv_warp.sim.checks.driver_fingerprint` is recorded.
+        robots: the robots the figures are of (names or robot files); each one's file and URDF sha256 is recorded.
 
     Returns:
         ``date`` (UTC), ``commit`` and ``dirty`` (uncommitted changes to tracked files), ``script``,
         ``script_version``, ``command`` (the command line that ran, when the script is the one being run),
-        and ``dynamics``, ``driver``, ``task`` and ``policies`` where they apply.
+        and ``dynamics``, ``driver``, ``task``, ``policies`` and ``robots`` where they apply.
     """
     main = getattr(sys.modules["__main__"], "__file__", None) or sys.argv[0]
     script = script or main
@@ -93,11 +94,16 @@ def provenance(version: int, *, script: str | Path | None = None, dynamics: bool
         record["task"] = task_fingerprint()
     if policies:
         record["policies"] = {_relative(p): file_sha256(p) for p in policies}
+    if robots:
+        from atrv_warp.core.robot import load_robot
+
+        files = [f for r in robots for f in (load_robot(r).path, load_robot(r).urdf)]
+        record["robots"] = {_relative(f): file_sha256(f) for f in files}
     return record
 
 
 def write_results(path: str | Path, result: dict, *, version: int, dynamics: bool = True, task: bool = False,
-                  policies: tuple[str | Path, ...] = (), driver: bool = False) -> Path:
+                  policies: tuple[str | Path, ...] = (), driver: bool = False, robots: tuple[str, ...] = ()) -> Path:
     """Write ``result`` as indented JSON to ``path``, creating its folder, with its
     :func:`provenance` under the key ``"provenance"``; returns the path.
 
@@ -109,9 +115,10 @@ def write_results(path: str | Path, result: dict, *, version: int, dynamics: boo
         task: whether they depend on the tasks (an environment ran).
         policies: the policy files the script ran.
         driver: whether they went through the base's motor driver.
+        robots: the robots they are of (their files' and URDFs' sha256 are recorded).
     """
     result = {**result, "provenance": provenance(version, dynamics=dynamics, task=task, policies=tuple(policies),
-                                                 driver=driver)}
+                                                 driver=driver, robots=tuple(robots))}
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")

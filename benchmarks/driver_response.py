@@ -79,7 +79,7 @@ def main() -> int:
     from atrv_warp.sim.checks import step_response
     from atrv_warp.sim.driver import DriverConfig
 
-    cfg = DriverConfig()
+    cfg = DriverConfig().resolved("atrvjr")  # the ATRV-Jr's (its robot file's gains)
     print(f"The base's motor driver (kp {cfg.kp:g}, ki {cfg.ki:g}, torque limit {cfg.torque_limit:g} N·m, every "
           "substep, limits off): /cmd_vel steps from rest, re-sent at 20 Hz")
     rows = step_response()

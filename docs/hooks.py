@@ -166,12 +166,13 @@ def status(name: str) -> Status:
         reasons.append(f"motor driver fingerprint {p['driver']} != {current_driver()} now")
     if "task" in p and p["task"] != current_task():
         reasons.append(f"task fingerprint {p['task']} != {current_task()} now")
-    for policy, digest in p.get("policies", {}).items():
-        path = ROOT / policy
-        if not path.is_file():
-            reasons.append(f"policy {policy} is gone")
-        elif hashlib.sha256(path.read_bytes()).hexdigest() != digest:
-            reasons.append(f"policy {policy} has changed")
+    for kind, files in (("policy", p.get("policies", {})), ("robot file", p.get("robots", {}))):
+        for file, digest in files.items():
+            path = ROOT / file
+            if not path.is_file():
+                reasons.append(f"{kind} {file} is gone")
+            elif hashlib.sha256(path.read_bytes()).hexdigest() != digest:
+                reasons.append(f"{kind} {file} has changed")
     return Status(name, "stale" if reasons else "current", reasons, p["date"][:10])
 
 
@@ -863,7 +864,56 @@ def train_to_success_nav_deploy_shipped() -> str:
     return _train_to_success("train_to_success_nav_deploy_shipped.json")
 
 
+def robot_check() -> str:
+    """``robot_check.json``: every shipped robot's check, one column per robot."""
+    d = _load("robot_check.json")
+    robots = d["robots"]
+
+    def settle(r: dict, v: float, w: float) -> str:
+        cells = [s for s in r["steps"] if (s["linear"], s["angular"]) == (v, w)]
+        return " / ".join("never" if not math.isfinite(s["settle"]) else f"{s['settle']:.2f} s" for s in cells)
+
+    rows = [
+        ["mass", *(f"{r['mass']:.1f} kg" for r in robots.values())],
+        ["wheel radius", *(f"{r['wheel_radius']:.4g} m" for r in robots.values())],
+        ["track / wheelbase", *(f"{r['track']:.3f} / {r['wheelbase']:.3f} m" for r in robots.values())],
+        ["reach (centre of mass to farthest corner)", *(f"{r['reach']:.2f} m" for r in robots.values())],
+        ["limits (file)", *(f"{r['file']['limits']['linear_velocity']:g} m/s, "
+                            f"{r['file']['limits']['angular_velocity']:g} rad/s" for r in robots.values())],
+        ["driver gains kp / ki (rule)", *(f"{r['gains']['kp']:g} / {r['gains']['ki']:g}" for r in robots.values())],
+        ["effective track factor (measured; file)", *(f"{r['effective_track_factor']:.2f}; "
+                                                      f"{r['file']['effective_track_factor']:g}"
+                                                      for r in robots.values())],
+        ["Clearpath's wheel_separation_multiplier", *(f"{r['clearpath_multiplier']:g}" if r["clearpath_multiplier"]
+                                                      else "-" for r in robots.values())],
+        ["top speed under full torque (µ 0.8)", *(f"{r['top_speed']:.2f} m/s" for r in robots.values())],
+        ["in place 0.5 rad/s settles (µ 0.3 / 0.8)", *(settle(r, 0.0, 0.5) for r in robots.values())],
+        ["arc 0.3 m/s, 0.3 rad/s settles", *(settle(r, 0.3, 0.3) for r in robots.values())],
+        ["arc 1 m/s, 0.2 rad/s settles", *(settle(r, 1.0, 0.2) for r in robots.values())],
+    ]
+    return _table(["", *(f"`{name}`" for name in robots)], ["---"] + ["---:"] * len(robots), rows)
+
+
+def robot_limits() -> str:
+    """The shipped robots' limits, read from their files (``atrv_warp/robots/*.toml``), with each one's source."""
+    from atrv_warp.core.robot import ROBOTS, load_robot
+
+    rows = []
+    for name in ROBOTS:
+        robot = load_robot(name)
+        lim = robot.limits
+        cells = [lim.linear_velocity, lim.angular_velocity, lim.linear_acceleration, lim.angular_acceleration]
+        sources = dict.fromkeys(robot.sources.get(f"limits.{k}", "").split(" (")[0] for k in
+                                ("linear_velocity", "angular_velocity", "linear_acceleration", "angular_acceleration"))
+        rows.append([f"`{name}`", *("-" if c is None else f"{c:g}" for c in cells),
+                     "; ".join(f"`{_cell(x)}`" for x in sources if x)])
+    return _table(["robot", "v [m/s]", "ω [rad/s]", "a [m/s²]", "α [rad/s²]", "source (repository@commit:path)"],
+                  ["---"] + ["---:"] * 4 + ["---"], rows)
+
+
 TABLES: dict[str, Callable[[], str]] = {
+    "robot_check": robot_check,
+    "robot_limits": robot_limits,
     "deploy_policy": deploy_policy,
     "deploy_base_limit": deploy_base_limit,
     "deploy_base_limit_old_policy": lambda: deploy_base_limit("deploy_base_limit_old_policy.json"),
@@ -932,7 +982,8 @@ TABLES: dict[str, Callable[[], str]] = {
 # --- the command table, from the command-line tools' own parsers ------------------------------
 
 COMMANDS = (("train", "atrv-train"), ("evaluate", "atrv-evaluate"), ("demo", "atrv-demo"), ("model", "atrv-model"),
-            ("export", "atrv-export"), ("calibrate", "atrv-calibrate"), ("ros", "atrv-ros"), ("deploy", "atrv-deploy"))
+            ("export", "atrv-export"), ("calibrate", "atrv-calibrate"), ("ros", "atrv-ros"), ("deploy", "atrv-deploy"),
+            ("robot", "atrv-robot"))
 """(``atrv_warp.<module>``, the command ``pyproject.toml`` installs) of every command-line tool."""
 COMMANDS_LINE = re.compile(r"^\{\{ command_table( \w+)? \}\}$", re.MULTILINE)
 
@@ -947,6 +998,12 @@ def _argparse_rows(parser) -> list[list[str]]:
     rows = []
     for action in parser._actions:  # noqa: SLF001 - argparse keeps its arguments here and nowhere public
         if isinstance(action, argparse._HelpAction):  # noqa: SLF001
+            continue
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001 - a tool of subcommands: each one's rows
+            helps = {a.dest: a.help for a in action._choices_actions}  # noqa: SLF001
+            for name, sub in action.choices.items():
+                rows.append([f"`{name}`", "", _cell(helps.get(name) or "")])
+                rows += [[f"`{name}` {row[0]}", *row[1:]] for row in _argparse_rows(sub)]
             continue
         value = "" if action.nargs == 0 else " " + (action.metavar or action.dest.upper())
         name = ", ".join(f"`{o}{value}`" for o in action.option_strings) or f"`{action.metavar or action.dest}`"

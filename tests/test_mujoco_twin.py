@@ -226,11 +226,11 @@ def test_a_twin_bag_reads_back_as_a_calibration_bag(tmp_path):
     """``record_twin_bag`` writes what the fit reads, as the simulator node does: the scripted drive's commands
     (re-sent every 0.1 s and on each change, stamped at the step they are given before), the wheels' speeds and efforts after every
     0.05 s step, the reference pose and the wheel odometry."""
+    from atrv_warp.core.robot import load_robot
     from atrv_warp.integrations.calibration import read_drive_log
     from atrv_warp.integrations.calibration.excitation import Excitation
     from atrv_warp.integrations.mujoco.record import record_twin_bag
     from atrv_warp.sim.config import RoverConfig
-    from atrv_warp.sim.driver import DriverConfig
     from atrv_warp.sim.urdf import load_rover
 
     rover = RoverConfig(torque_scale=1.3, wheel_radius=0.121, payload_mass=8.0)
@@ -242,7 +242,7 @@ def test_a_twin_bag_reads_back_as_a_calibration_bag(tmp_path):
     assert len(log.pose_time) == len(log.joint_time) == 301 and log.duration == pytest.approx(15.0)
     gaps = np.round(np.diff(log.cmd_time) / 0.05)  # re-sent every 0.1 s, and at once on a change of target
     assert set(gaps.tolist()) <= {1.0, 2.0} and log.cmd_time[0] == pytest.approx(0.05)
-    assert 5.0 < np.abs(log.effort).max() <= 1.3 * DriverConfig().torque_limit + 1e-9
+    assert 5.0 < np.abs(log.effort).max() <= 1.3 * load_robot("atrvjr").torque_limit + 1e-9
     # the commands are the scripted drive's for the recorded poses (noise-free here)
     excitation, sent = Excitation(4), []
     for t, pose in zip(log.pose_time[1:-1], log.pose[1:-1]):

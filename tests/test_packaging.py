@@ -133,7 +133,7 @@ def test_wheel_carries_configs_urdf_and_policy(tmp_path):
                    check=True, capture_output=True)
     (wheel,) = tmp_path.glob("atrv_warp-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
-    for needed in ("atrv_warp/rl/configs/default.toml", "atrv_warp/rl/configs/smoke.toml", "atrv_warp/assets/atrvjr.urdf",
+    for needed in ("atrv_warp/rl/configs/default.toml", "atrv_warp/rl/configs/smoke.toml", "atrv_warp/robots/atrvjr.urdf", "atrv_warp/robots/atrvjr.toml",
                    "atrv_warp/assets/pretrained_policy.pt", "atrv_warp/assets/nav_policy.pt",
                    "atrv_warp/assets/nav_policy_plain.pt",
                    "atrv_warp/rl/configs/nav.toml", "atrv_warp/py.typed"):

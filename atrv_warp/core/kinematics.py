@@ -13,12 +13,15 @@ from dataclasses import dataclass
 
 import torch
 
+from atrv_warp.core.robot import DEFAULT_ROBOT, load_robot
+
 __all__ = ["EFFECTIVE_TRACK_FACTOR", "SkidSteer", "side_speeds", "track_width"]
 
-EFFECTIVE_TRACK_FACTOR = 1.56
-"""Effective track / wheel track of the ATRV-Jr on our physics [-]: the median over turning commands measured
-by ``benchmarks/skid_calibration.py`` (``benchmarks/results/skid_calibration.json``). Coulomb friction predicts
-1.58 for this geometry, and Mandow et al. (IROS 2007) measured about 1.5 on a Pioneer 3-AT."""
+EFFECTIVE_TRACK_FACTOR = load_robot(DEFAULT_ROBOT).effective_track_factor
+"""Effective track / wheel track of the default robot, the ATRV-Jr, on our physics [-], from its robot file
+(``atrv_warp/robots/atrvjr.toml``: the median over turning commands measured by ``benchmarks/skid_calibration.py``).
+Coulomb friction predicts 1.58 for this geometry, and Mandow et al. (IROS 2007) measured about 1.5 on a Pioneer
+3-AT. Every robot's own is its file's :attr:`~atrv_warp.core.robot.Robot.effective_track_factor`."""
 
 
 @dataclass(frozen=True)

@@ -289,7 +289,7 @@ class RerunRecorder:
             colors=[_OBSTACLE_COLOR], fill_mode="solid"))
 
     def _log_scan(self, w: int, scanner, points: np.ndarray) -> None:
-        origin = self.sim.frame_pose(scanner.cfg.frame)[w, :3, 3].numpy()
+        origin = self.sim.frame_pose(scanner.frame)[w, :3, 3].numpy()
         hit = scanner.ranges[w].detach().cpu().numpy() < scanner.cfg.max_range
         self.rec.log(f"world_{w}/scan/hits", rr.Points3D(points[hit], colors=[_SCAN_COLOR], radii=0.04))
         self.rec.log(f"world_{w}/scan/rays", rr.LineStrips3D([[origin, p] for p in points],

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from atrv_warp.sim.config import ContactConfig, SimConfig
+from atrv_warp.sim.config import ContactConfig, RoverConfig, SimConfig
 from atrv_warp.sim.simulator import DriveMode, RoverSim
 
 __all__ = [
@@ -264,9 +264,9 @@ STEP_FRICTIONS: tuple[float, ...] = (0.2, 0.3, 0.8, 1.0)
 
 
 def step_response(commands=STEP_COMMANDS, frictions=STEP_FRICTIONS, *, seconds: float = 5.0, band: float = 0.1,
-                  driver=None, sim: SimConfig | None = None) -> list[dict]:
+                  driver=None, sim: SimConfig | None = None, rover: RoverConfig | None = None) -> list[dict]:
     """The motor driver's answer to ``/cmd_vel`` steps: one world per (command, µ), from rest, the command
-    re-sent every step (a 20 Hz controller), for ``seconds``.
+    re-sent every step (a 20 Hz controller), for ``seconds``, on ``rover`` (default: the ATRV-Jr).
 
     Per world: ``settle`` the time [s] after which the yaw rate stays within ``band`` of the commanded one,
     ``overshoot`` the yaw rate's peak over the command minus 1, ``steady`` the mean yaw rate over the last second
@@ -274,7 +274,7 @@ def step_response(commands=STEP_COMMANDS, frictions=STEP_FRICTIONS, *, seconds: 
     oscillation shows there), ``speed`` the mean forward speed over the last second over the command (arcs), and
     the traces ``time``, ``yaw_rate`` and ``speed_trace``."""
     cases = [(v, w, mu) for mu in frictions for v, w in commands]
-    rovers = RoverSim(len(cases), sim=sim, driver=driver)
+    rovers = RoverSim(len(cases), sim=sim, driver=driver, rover=rover)
     rovers.set_params(friction=[mu for _, _, mu in cases])
     # each rover starts on the circle it will drive, centred on the arena's centre (effective track ratio ~1.6)
     rovers.reset(poses=[[0.0, -v / w if w else 0.0, 0.0] for v, w, _ in cases])
@@ -305,7 +305,8 @@ def step_response(commands=STEP_COMMANDS, frictions=STEP_FRICTIONS, *, seconds: 
 
 
 def turning_response(commands, *, driver=None, contact: ContactConfig | None = None, seconds: float = 8.0,
-                     average: float = 3.0, sim: SimConfig | None = None) -> list[dict]:
+                     average: float = 3.0, sim: SimConfig | None = None, rover: RoverConfig | None = None
+                     ) -> list[dict]:
     """Drive one world per ``commands[i]`` = (linear [m/s], angular [rad/s]) through the motor driver
     (``driver``: a :class:`~atrv_warp.sim.driver.DriverConfig`) for ``seconds``, the command re-sent every step, and
     return per command the mean left and right wheel speeds [rad/s], yaw rate [rad/s] and speed [m/s] over the last
@@ -315,7 +316,7 @@ def turning_response(commands, *, driver=None, contact: ContactConfig | None = N
     on the arena's centre, so that it meets no wall; worlds never interact."""
     from atrv_warp.core.kinematics import side_speeds
 
-    rovers = RoverSim(len(commands), contact=contact, sim=sim, driver=driver)
+    rovers = RoverSim(len(commands), contact=contact, sim=sim, driver=driver, rover=rover)
     rovers.reset(poses=[[0.0, -1.6 * v / w if w else 0.0, 0.0] for v, w in commands])
     side = torch.tensor([w.side for w in rovers.description.wheels])
     twist = torch.tensor(commands, dtype=torch.float32)

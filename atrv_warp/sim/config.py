@@ -12,8 +12,9 @@ import math
 import os
 import tomllib
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
+
+from atrv_warp.core.robot import DEFAULT_ROBOT, Robot, load_robot
 
 __all__ = [
     "FAST_SIM_DT",
@@ -33,25 +34,27 @@ __all__ = [
     "default_urdf_path",
     "get_variant",
     "load_sim_config",
+    "nominal_rover_config",
     "read_sim_config",
     "replace_checked",
 ]
 
 
 def default_urdf_path() -> str:
-    """Path of the ATRV-Jr URDF shipped inside the package."""
-    return str(resources.files("atrv_warp").joinpath("assets/atrvjr.urdf"))
+    """Path of the default robot's URDF (the ATRV-Jr's, shipped inside the package)."""
+    return load_robot(DEFAULT_ROBOT).urdf
 
 
 def _is_number(value) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
-def _check_types(cfg) -> None:
+def _check_types(cfg, defaults: dict | None = None) -> None:
     """Each field of a config dataclass of the type its default has (a number, a string, a tuple of strings or of
-    numbers of the default's length), a list taken as a tuple; raise a ``TypeError`` naming the field."""
+    numbers of the default's length), a list taken as a tuple; raise a ``TypeError`` naming the field. ``defaults``
+    stands in for the defaults of fields whose default is ``None`` (a robot's values)."""
     for f in dataclasses.fields(cfg):
-        value, default = getattr(cfg, f.name), f.default
+        value, default = getattr(cfg, f.name), (defaults or {}).get(f.name, f.default)
         if isinstance(value, list):
             value = tuple(value)
             object.__setattr__(cfg, f.name, value)
@@ -99,28 +102,34 @@ class InertialOverride:
 
 @dataclass(frozen=True)
 class RoverConfig:
-    """Which URDF to load, which links play which role, and how the wheels are driven."""
+    """Which robot to simulate and what differs from its file: every field left ``None`` is the robot's
+    (:class:`~atrv_warp.core.robot.Robot`, filled in on construction), so ``RoverConfig()`` is the ATRV-Jr and
+    ``RoverConfig(robot="jackal")`` the Jackal. To change the robot of a config, build a new one
+    (:func:`replace_checked` does): ``dataclasses.replace`` would keep the old robot's filled-in fields."""
 
+    robot: str = DEFAULT_ROBOT
+    """A shipped robot's name (``atrvjr``, ``jackal``, ``husky``) or the path of a robot file."""
     urdf: str | None = None
-    """Path of the URDF; ``None`` uses the packaged ``atrvjr.urdf``."""
-    chassis_link: str = "center_link"
-    """Link joined to the world by the free 6-DOF joint."""
-    left_wheels: tuple[str, ...] = ("left_front_wheel_link", "left_rear_wheel_link")
-    """Wheel links driven by the first (left) command."""
-    right_wheels: tuple[str, ...] = ("right_front_wheel_link", "right_rear_wheel_link")
-    """Wheel links driven by the second (right) command."""
-    sensor_frames: tuple[str, ...] = ("cbimu_frame", "mpuimu_frame", "arm_base_frame", "lrf_frame", "novatel")
-    """Links fixed to the chassis that must exist; kept as named frames."""
-    wheel_radius: float = 0.125
-    """Radius of the wheel collision cylinder [m]."""
-    wheel_length: float = 0.075
-    """Length (width) of the wheel collision cylinder [m]."""
-    wheel_offset: float = 0.03
-    """Offset of the cylinder centre from the wheel joint along the axle, outward [m]."""
-    wheel_speed_limit: float = 50.0
-    """Motor no-load speed [rad/s] (50 rad/s = 6.25 m/s at the rim). Drive torque tapers linearly
-    from full at 80 % of this speed to zero at it, like a DC motor's back-EMF; an
-    unbounded torque source otherwise spins a slipping wheel to 1000+ rad/s."""
+    """Path of the URDF; ``None``: the robot's."""
+    chassis_link: str | None = None
+    """Link joined to the world by the free 6-DOF joint; ``None``: the robot's."""
+    left_wheels: tuple[str, ...] | None = None
+    """Wheel links driven by the first (left) command; ``None``: the robot's (empty: found by the rule)."""
+    right_wheels: tuple[str, ...] | None = None
+    """Wheel links driven by the second (right) command; ``None``: the robot's."""
+    sensor_frames: tuple[str, ...] | None = None
+    """Links fixed to the chassis that must exist; kept as named frames. ``None``: the robot's IMU, laser and other
+    frames."""
+    wheel_radius: float | None = None
+    """Radius of the wheel collision cylinder [m]; ``None``: the robot's."""
+    wheel_length: float | None = None
+    """Length (width) of the wheel collision cylinder [m]; ``None``: the robot's."""
+    wheel_offset: float | None = None
+    """Offset of the cylinder centre from the wheel joint along the axle, outward [m]; ``None``: the robot's."""
+    wheel_speed_limit: float | None = None
+    """Motor no-load speed [rad/s] (the ATRV-Jr's 50 rad/s = 6.25 m/s at the rim); ``None``: the robot's. Drive
+    torque tapers linearly from full at 80 % of this speed to zero at it, like a DC motor's back-EMF; an unbounded
+    torque source otherwise spins a slipping wheel to 1000+ rad/s."""
     inertial_overrides: tuple[InertialOverride, ...] = ()
     """Mass-property replacements applied after loading the URDF."""
     torque_scale: float = 1.0
@@ -130,9 +139,26 @@ class RoverConfig:
     payload_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """Where the payload sits, from the chassis' centre of mass in the chassis frame [m]."""
 
+    @property
+    def robot_spec(self) -> Robot:
+        """The :class:`~atrv_warp.core.robot.Robot` this config starts from."""
+        return load_robot(self.robot)
+
     def __post_init__(self):
-        _check_types(self)
-        if self.urdf is not None and not isinstance(self.urdf, str | os.PathLike):
+        if isinstance(self.robot, os.PathLike):
+            object.__setattr__(self, "robot", os.fspath(self.robot))
+        if not isinstance(self.robot, str):
+            raise TypeError(f"RoverConfig.robot must be a robot's name or a robot file's path, got {self.robot!r}")
+        robot = load_robot(self.robot)
+        own = {"urdf": robot.urdf, "chassis_link": robot.chassis, "left_wheels": robot.left_wheels,
+               "right_wheels": robot.right_wheels, "sensor_frames": robot.sensor_frames,
+               "wheel_radius": robot.wheel_radius, "wheel_length": robot.wheel_width,
+               "wheel_offset": robot.wheel_offset, "wheel_speed_limit": robot.no_load_speed}
+        for name, value in own.items():
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, value)
+        _check_types(self, {k: v for k, v in own.items() if k != "urdf"})
+        if not isinstance(self.urdf, str | os.PathLike):
             raise TypeError(f"RoverConfig.urdf must be a path, got {self.urdf!r}")
         if not isinstance(self.inertial_overrides, tuple) or not all(
                 isinstance(ov, InertialOverride) for ov in self.inertial_overrides):
@@ -149,6 +175,10 @@ class RoverConfig:
         if len(self.payload_offset) != 3 or not all(math.isfinite(v) for v in self.payload_offset):
             raise ValueError(f"RoverConfig.payload_offset must be three finite numbers [m], got {self.payload_offset!r}")
 
+
+ROBOT_FIELDS = ("urdf", "chassis_link", "left_wheels", "right_wheels", "sensor_frames", "wheel_radius",
+                "wheel_length", "wheel_offset", "wheel_speed_limit")
+"""The :class:`RoverConfig` fields that are the robot's unless set."""
 
 FRICTION_LAWS = ("coulomb", "viscous")
 """Values of :attr:`ContactConfig.friction_law`."""
@@ -405,12 +435,31 @@ def get_variant(name: str) -> RoverConfig:
         raise ValueError(f"unknown rover variant {name!r}; known: {sorted(VARIANTS)}") from None
 
 
+def nominal_rover_config(robot=None, variant: str = "realistic", rover: RoverConfig | None = None) -> RoverConfig:
+    """The rover a simulator builds: ``rover`` where given (its robot must be ``robot``'s where both are given), else
+    the registered ``variant`` of ``robot`` (a name or a robot file's path; ``None``: the ATRV-Jr)."""
+    if rover is not None:
+        if robot is not None and load_robot(robot).path != rover.robot_spec.path:
+            raise ValueError(f"robot {robot!r} and rover config's robot {rover.robot!r} differ: give one")
+        return rover
+    base = get_variant(variant)
+    if robot is None or load_robot(robot).path == base.robot_spec.path:
+        return base
+    if variant != "realistic":
+        raise ValueError(f"rover variant {variant!r} is the ATRV-Jr's; robot {robot!r} has only its own file")
+    return RoverConfig(robot=os.fspath(robot) if not isinstance(robot, Robot) else robot.path)
+
+
 def replace_checked(cfg, **changes):
-    """:func:`dataclasses.replace` that names an unknown field instead of a TypeError."""
+    """:func:`dataclasses.replace` that names an unknown field instead of a TypeError. A :class:`RoverConfig` given
+    another ``robot`` takes the new robot's values wherever it held the old one's."""
     names = {f.name for f in dataclasses.fields(cfg)}
     unknown = sorted(set(changes) - names)
     if unknown:
         raise ValueError(f"unknown {type(cfg).__name__} key(s) {unknown}; known: {sorted(names)}")
+    if isinstance(cfg, RoverConfig) and "robot" in changes and changes["robot"] != cfg.robot:
+        old = RoverConfig(robot=cfg.robot)
+        changes = {**{name: None for name in ROBOT_FIELDS if getattr(cfg, name) == getattr(old, name)}, **changes}
     return dataclasses.replace(cfg, **changes)
 
 

@@ -12,37 +12,32 @@ The kernels are in :mod:`atrv_warp.sim.kernels.driver`; :class:`~atrv_warp.sim.R
 step, :class:`~atrv_warp.sim.diff.DiffRollout` on its tape, and the ROS node, the velocity actions of the task
 and the calibration's replay all go through them.
 
-References for the limits (all off by default, as ``diff_drive_controller``'s are):
-
-=====================================  ==========  =============  ===========  ==============
-base                                   v [m/s]     a [m/s²]       ω [rad/s]    α [rad/s²]
-=====================================  ==========  =============  ===========  ==============
-ATRV-Jr's own driver (rFLEX, 10 Hz)    -           0.7            -            -
-ATRV-Jr under Nav2 (its config)        0.5         -              1.0          -
-Clearpath Husky A200                   1.0         1.0            1.0          1.0
-Clearpath Jackal J100                  2.0         20.0           4.0          25.0
-=====================================  ==========  =============  ===========  ==============
-
-(Clearpath's ``clearpath_control`` configs run ``diff_drive_controller`` at 50 Hz.) A task sets the limits its base
-trains with (:meth:`atrv_warp.task.config.TaskConfig.driver`): ``nav_deploy`` the Husky's 1 m/s².
+The limits are off by default, as ``diff_drive_controller``'s are. Each robot's published ones are in its robot file
+(``atrv_warp/robots/<name>.toml``, ``[limits]``, with their sources; the docs' robots page lists them), and a task
+sets the limits its base trains with (:meth:`atrv_warp.task.config.TaskConfig.driver`). The gains, the torque limit
+and the effective track factor are the robot's too, unless set here (:data:`ROBOT_OWN`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import torch
 import warp as wp
 
-from atrv_warp.core.kinematics import EFFECTIVE_TRACK_FACTOR, SkidSteer, track_width
+from atrv_warp.core.kinematics import SkidSteer, track_width
 from atrv_warp.sim.kernels.driver import DRIVE_TORQUE, DRIVE_TWIST, DriverParams, DriverState, reset_driver
 
-__all__ = ["DRIVER_LIMITS", "DRIVE_TORQUE", "DRIVE_TWIST", "SNAPSHOT_ADDED", "Driver", "DriverConfig"]
+__all__ = ["DRIVER_LIMITS", "DRIVE_TORQUE", "DRIVE_TWIST", "ROBOT_OWN", "SNAPSHOT_ADDED", "Driver", "DriverConfig"]
 
 DRIVER_LIMITS = ("linear_max_velocity", "linear_max_acceleration", "angular_max_velocity", "angular_max_acceleration")
 """The limits, each ``diff_drive_controller``'s ``linear.x.max_velocity``, ``linear.x.max_acceleration``,
 ``angular.z.max_velocity`` and ``angular.z.max_acceleration``."""
+
+ROBOT_OWN = ("kp", "ki", "torque_limit", "effective_track_factor")
+"""The :class:`DriverConfig` fields that are the robot's (its file's ``[driver]`` and ``[motor]``) unless set."""
 
 SNAPSHOT_ADDED = ("driver.fused_velocity", "driver.velocity")
 """Snapshot entries that a snapshot of an earlier version lacks: the accelerometer filter's state
@@ -59,16 +54,17 @@ class DriverConfig:
     :class:`~atrv_warp.sim.config.RoverConfig` before a calibration's ``sim_config`` is applied)."""
     track_width: float | None = None
     """The configured wheel track [m]; ``None``: the nominal rover's (:func:`~atrv_warp.core.kinematics.track_width`)."""
-    effective_track_factor: float = EFFECTIVE_TRACK_FACTOR
-    """Effective track / wheel track [-] the driver's kinematics assume (skid steering turns slower)."""
-    kp: float = 3.0
-    """PI proportional gain [N·m per rad/s]. The loop runs every substep; a slipping wheel (0.02 kg·m²) bounds
-    it: ``kp x sim_dt / J`` must stay below 2 (1.5 here). Chosen with ``ki`` by ``benchmarks/driver_response.py``:
-    the fastest pair whose yaw rate overshoots by at most 10 % at µ 0.2-1.0."""
-    ki: float = 30.0
-    """PI integral gain [N·m per rad]."""
-    torque_limit: float = 20.0
-    """The motor's torque limit [N·m] (the torque task's action scale)."""
+    effective_track_factor: float | None = None
+    """Effective track / wheel track [-] the driver's kinematics assume (skid steering turns slower); ``None``: the
+    robot's (:attr:`~atrv_warp.core.robot.Robot.effective_track_factor`)."""
+    kp: float | None = None
+    """PI proportional gain [N·m per rad/s]; ``None``: the robot's. The loop runs every substep; a slipping wheel
+    bounds it: ``kp x sim_dt / J`` must stay below 2 (the ATRV-Jr's 3.0 on its 0.02 kg·m² wheel: 1.5). The robot
+    check (``python -m atrv_warp.robot check``) chooses it with ``ki`` for the wheel's inertia."""
+    ki: float | None = None
+    """PI integral gain [N·m per rad]; ``None``: the robot's."""
+    torque_limit: float | None = None
+    """The motor's torque limit [N·m] (the torque task's action scale); ``None``: the robot's."""
     linear_max_velocity: float | None = None
     """``linear.x.max_velocity`` [m/s] (``None``: no limit)."""
     linear_max_acceleration: float | None = None
@@ -89,27 +85,41 @@ class DriverConfig:
     velocity)."""
 
     def __post_init__(self):
-        positive = ["effective_track_factor", "torque_limit", "cmd_vel_timeout", *DRIVER_LIMITS]
+        positive = ["cmd_vel_timeout", *DRIVER_LIMITS, *ROBOT_OWN]
         positive += [n for n in ("wheel_radius", "track_width", "odometry_accel_time") if getattr(self, n) is not None]
         for name in positive:
             value = getattr(self, name)
-            if value is None and name in DRIVER_LIMITS:
+            if value is None and name in DRIVER_LIMITS + ROBOT_OWN:
                 continue
-            if not _finite_positive(value):
-                raise ValueError(f"DriverConfig.{name} must be a finite number > 0, got {value!r}")
-        for name in ("kp", "ki"):
-            value = getattr(self, name)
-            if not (_finite_positive(value) or value == 0):
-                raise ValueError(f"DriverConfig.{name} must be a finite number >= 0, got {value!r}")
+            if not _finite_positive(value) and not (name in ("kp", "ki") and value == 0):
+                at_least = ">= 0" if name in ("kp", "ki") else "> 0"
+                raise ValueError(f"DriverConfig.{name} must be a finite number {at_least}, got {value!r}")
+
+    def resolved(self, robot) -> DriverConfig:
+        """This config with every field left ``None`` that is the robot's (:data:`ROBOT_OWN`) taken from ``robot``
+        (a :class:`~atrv_warp.core.robot.Robot`, a shipped robot's name or a robot file's path)."""
+        from atrv_warp.core.robot import load_robot
+
+        robot = load_robot(robot)
+        own = {name: getattr(robot, name) for name in ROBOT_OWN if getattr(self, name) is None}
+        return dataclasses.replace(self, **own) if own else self
 
     def kinematics(self, description, nominal_rover) -> SkidSteer:
-        """The driver's kinematics: its configured radius and track, else the nominal rover's."""
+        """The driver's kinematics: its configured radius, track and factor, else the nominal rover's (and its
+        robot's factor)."""
         radius = self.wheel_radius if self.wheel_radius is not None else nominal_rover.wheel_radius
         track = self.track_width if self.track_width is not None else track_width(description, nominal_rover)
-        return SkidSteer(radius, track, self.effective_track_factor)
+        factor = self.effective_track_factor
+        if factor is None:
+            factor = nominal_rover.robot_spec.effective_track_factor
+        return SkidSteer(radius, track, factor)
 
     def kernel_params(self, kinematics: SkidSteer, dt: float) -> DriverParams:
-        """The kernels' :class:`~atrv_warp.sim.kernels.driver.DriverParams` at substep ``dt`` [s]."""
+        """The kernels' :class:`~atrv_warp.sim.kernels.driver.DriverParams` at substep ``dt`` [s] (of a
+        :meth:`resolved` config)."""
+        unresolved = [name for name in ROBOT_OWN if getattr(self, name) is None]
+        if unresolved:
+            raise ValueError(f"DriverConfig {unresolved} unset: resolve the robot's values first (DriverConfig.resolved)")
         p = DriverParams()
         p.wheel_radius, p.effective_track = kinematics.wheel_radius, kinematics.effective_track
         p.kp, p.ki, p.torque_limit = self.kp, self.ki, self.torque_limit

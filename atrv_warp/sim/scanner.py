@@ -1,6 +1,6 @@
 """A 2-D laser range finder on every rover, after the ATRV-Jr's SICK LMS-class scanner.
 
-One Warp ray cast per (world, beam) from the URDF's ``lrf_frame`` against the arena walls, the
+One Warp ray cast per (world, beam) from the robot's laser frame (the ATRV-Jr's ``lrf_frame``) against the arena walls, the
 ground or terrain, and the world's obstacles (``kernels/scan.py``). The ranges are a zero-copy
 ``(N, beams)`` torch view, refreshed by :meth:`LaserScanner.scan`.
 """
@@ -36,8 +36,9 @@ class ScannerConfig:
     """Gaussian range noise [m] (a SICK LMS: about 0.01)."""
     dropout: float = 0.0
     """Probability that a beam returns nothing [-]."""
-    frame: str = "lrf_frame"
-    """URDF frame the beams start from; they lie in its x-y plane."""
+    frame: str | None = None
+    """URDF frame the beams start from; they lie in its x-y plane. ``None``: the robot's laser frame
+    (:attr:`~atrv_warp.core.robot.Robot.laser_frame`, the ATRV-Jr's ``lrf_frame``)."""
     march_step: float = 1.0
     """Ray-marching step over terrain [m]; crossings are refined to 1/256 of it. A ray that dips into
     the ground and out again within one step is missed: keep it below the terrain's shortest
@@ -75,9 +76,11 @@ class LaserScanner:
     def __init__(self, sim: RoverSim, config: ScannerConfig | None = None, *, seed: int = 0):
         self.sim, self.cfg = sim, config or ScannerConfig()
         frames = {f.name: f.transform for f in sim.description.frames}
-        if self.cfg.frame not in frames:
-            raise ValueError(f"scanner frame {self.cfg.frame!r} is not a frame of the rover; known: {sorted(frames)}")
-        m = np.asarray(frames[self.cfg.frame], dtype=np.float64)
+        self.frame = self.cfg.frame or sim.rover_cfg.robot_spec.laser_frame
+        """The URDF frame the beams start from."""
+        if self.frame not in frames:
+            raise ValueError(f"scanner frame {self.frame!r} is not a frame of the rover; known: {sorted(frames)}")
+        m = np.asarray(frames[self.frame], dtype=np.float64)
         rot = wp.mat33(*m[:3, :3].flatten().tolist())
         dev = sim.device
         p = ScanParams()
@@ -126,7 +129,7 @@ class LaserScanner:
         """World-frame hit points (len(worlds), beams, 3) [m] of the last scan (beams without a return
         end at ``max_range``), for drawing."""
         worlds = np.arange(self.sim.num_worlds) if worlds is None else np.asarray(worlds)
-        frame = self.sim.frame_pose(self.cfg.frame).numpy()[worlds]
+        frame = self.sim.frame_pose(self.frame).numpy()[worlds]
         r = self.ranges.detach().cpu().numpy()[worlds].astype(np.float64)
         a = self.cfg.angles
         local = np.stack([r * np.cos(a), r * np.sin(a), np.zeros_like(r), np.ones_like(r)], axis=-1)

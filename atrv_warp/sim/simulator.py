@@ -27,7 +27,7 @@ from atrv_warp.sim.config import (
     ObstacleConfig,
     RoverConfig,
     SimConfig,
-    get_variant,
+    nominal_rover_config,
     read_sim_config,
 )
 from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
@@ -173,13 +173,15 @@ def checked_configs(rover: RoverConfig, contact: ContactConfig, sim_config: str 
 
 
 class RoverSim:
-    """Batched ATRV-Jr simulator.
+    """Batched skid-steer rover simulator (the ATRV-Jr unless told otherwise).
 
     Args:
         num_worlds: Number of independent worlds (one rover each), 1 … 4096 and beyond.
-        variant: Registered rover variant (``"realistic"`` or ``"reference"``); ignored if
+        robot: A shipped robot's name (``"atrvjr"``, ``"jackal"``, ``"husky"``) or a robot file's path
+            (:func:`~atrv_warp.core.robot.load_robot`); ``None``: ``rover``'s robot, else the ATRV-Jr.
+        variant: Registered ATRV-Jr variant (``"realistic"`` or ``"reference"``); ignored if
             ``rover`` is given.
-        rover: Rover configuration (URDF, link roles, motor limit).
+        rover: Rover configuration (its robot, and what differs from it: URDF, link roles, payload).
         contact: Contact law.
         arena: Arena geometry.
         sim: Integrator settings.
@@ -193,7 +195,8 @@ class RoverSim:
             ``contact`` (:func:`~atrv_warp.sim.config.load_sim_config`), e.g. the calibration that
             ``atrv-calibrate`` wrote from a recorded bag.
         driver: The base's motor driver (:class:`~atrv_warp.sim.driver.DriverConfig`; default: its defaults).
-            Its radius and track default to the nominal rover's: ``rover`` before ``sim_config`` changes it.
+            Its radius and track default to the nominal rover's: ``rover`` before ``sim_config`` changes it; its
+            gains, torque limit and track factor to the robot's.
 
     State views (torch tensors on the sim device, updated in place by :meth:`step`; clone to keep):
         ``root_pose`` (N, 7): chassis position [m] and quaternion (x, y, z, w), world frame.
@@ -227,6 +230,7 @@ class RoverSim:
         self,
         num_worlds: int = 1,
         *,
+        robot: str | None = None,
         variant: str = "realistic",
         rover: RoverConfig | None = None,
         contact: ContactConfig | None = None,
@@ -241,7 +245,7 @@ class RoverSim:
     ):
         self.device = wp.get_device(device)
         check_world_count(num_worlds, self.device)
-        nominal_rover = rover or get_variant(variant)
+        nominal_rover = nominal_rover_config(robot, variant, rover)
         self.rover_cfg, self.contact_cfg, self.bounds = checked_configs(nominal_rover, contact or ContactConfig(),
                                                                         sim_config)
         """``bounds``: each bounded physical parameter's range for this robot
@@ -277,7 +281,8 @@ class RoverSim:
         self.params = WorldParams(num_worlds, rover=self.rover_cfg, contact=self.contact_cfg, device=self.device)
         """Each world's physical parameters (:class:`~atrv_warp.sim.params.WorldParams`): friction, stiffness,
         wheel radius, motor torque scale and speed limit, payload. Change them with :meth:`set_params`."""
-        self.driver_cfg = driver or DriverConfig()
+        self.driver_cfg = (driver or DriverConfig()).resolved(nominal_rover.robot_spec)
+        """The driver's configuration, the robot's gains, torque limit and track factor filled in."""
         self.driver = Driver(self.driver_cfg, self.driver_cfg.kinematics(self.description, nominal_rover), num_worlds,
                              self.sim_cfg.sim_dt, self.device)
         """Every world's motor driver and wheel odometry (:class:`~atrv_warp.sim.driver.Driver`)."""

@@ -15,11 +15,19 @@ import numpy as np
 
 from atrv_warp.sim.config import InertialOverride, RoverConfig, default_urdf_path
 
-__all__ = ["Frame", "Inertial", "RoverDescription", "URDFError", "Wheel", "load_rover"]
+__all__ = ["Frame", "Inertial", "RoverDescription", "URDFError", "Wheel", "load_rover", "read_urdf", "rigid_group"]
 
 
 class URDFError(ValueError):
-    """A URDF file that cannot be read or does not describe a skid-steer rover."""
+    """A URDF file that cannot be read or does not describe a skid-steer rover.
+
+    ``field`` names the :class:`~atrv_warp.sim.config.RoverConfig` field the problem is about (``"chassis_link"``,
+    ``"left_wheels"``, ``"sensor_frames"``, ``"urdf"`` …) and ``subject`` the link or joint, where there is one: a
+    robot check (``python -m atrv_warp.robot check``) names the robot file's field from them."""
+
+    def __init__(self, message: str, *, field: str = "urdf", subject: str | None = None):
+        super().__init__(message)
+        self.field, self.subject = field, subject
 
 
 @dataclass(frozen=True)
@@ -55,6 +63,8 @@ class Wheel:
     """The radius of the wheel's cylinder in the URDF (collision geometry before visual) [m]; None where it gives
     none (the model replaces the wheel's geometry by :attr:`~atrv_warp.sim.config.RoverConfig.wheel_radius`'s
     cylinder either way)."""
+    width: float | None = None
+    """The length of that cylinder [m]; None where the URDF gives none."""
 
 
 @dataclass(frozen=True)
@@ -146,12 +156,12 @@ def _apply_override(inertial: Inertial, ov: InertialOverride) -> Inertial:
 
 def _check_inertial(path: str, name: str, inertial: Inertial) -> None:
     if inertial.mass <= 0.0:
-        raise URDFError(f"{path}: link {name!r} needs a positive <inertial><mass>, got {inertial.mass}")
+        raise URDFError(f"{path}: link {name!r} needs a positive <inertial><mass>, got {inertial.mass}", subject=name)
     eig = np.linalg.eigvalsh(0.5 * (inertial.inertia + inertial.inertia.T))
     if eig.min() <= 0.0 or eig[0] + eig[1] < eig[2] * (1.0 - 1e-6):
         raise URDFError(
-            f"{path}: link {name!r} has an unphysical inertia tensor (principal moments {eig.round(6).tolist()} kg·m²)"
-        )
+            f"{path}: link {name!r} has an unphysical inertia tensor (principal moments {eig.round(6).tolist()} kg·m²)",
+            subject=name)
 
 
 def _parse(path: str):
@@ -178,23 +188,36 @@ def _parse(path: str):
     return urdf.robot
 
 
+def read_urdf(path) -> tuple[dict, list]:
+    """The URDF's links by name and its joints (yourdfpy's objects), or a :class:`URDFError` naming the file."""
+    robot = _parse(os.fspath(path))
+    return {link.name: link for link in robot.links}, list(robot.joints)
+
+
+def rigid_group(chassis: str, links: dict, joints) -> dict[str, np.ndarray]:
+    """Every link joined to ``chassis`` by fixed joints alone (above it in the tree or below), with its pose in the
+    chassis frame (4x4): the one body they make."""
+    return _rigid_group(chassis, links, joints)
+
+
 def _check_links(path: str, rover: RoverConfig, links: dict, joints) -> None:
     """Every joint's ends exist, and every role's link."""
     for j in joints:
         for end in (j.parent, j.child):
             if end not in links:
-                raise URDFError(f"{path}: joint {j.name!r} refers to missing link {end!r}")
-    required = [(rover.chassis_link, "chassis")]
-    required += [(n, "wheel") for n in tuple(rover.left_wheels) + tuple(rover.right_wheels)]
-    required += [(n, "sensor frame") for n in rover.sensor_frames]
-    for name, role in required:
+                raise URDFError(f"{path}: joint {j.name!r} refers to missing link {end!r}", subject=j.name)
+    required = [(rover.chassis_link, "chassis", "chassis_link")]
+    required += [(n, "wheel", "left_wheels") for n in rover.left_wheels]
+    required += [(n, "wheel", "right_wheels") for n in rover.right_wheels]
+    required += [(n, "sensor frame", "sensor_frames") for n in rover.sensor_frames]
+    for name, role, field in required:
         if name not in links:
-            raise URDFError(
-                f"{path}: required {role} link {name!r} not found; links present: {sorted(links)}"
-            )
+            raise URDFError(f"{path}: required {role} link {name!r} not found; links present: {sorted(links)}",
+                            field=field, subject=name)
     unknown = sorted({ov.link for ov in rover.inertial_overrides} - set(links))
     if unknown:
-        raise URDFError(f"{path}: inertial overrides name unknown link(s) {unknown}")
+        raise URDFError(f"{path}: inertial overrides name unknown link(s) {unknown}", field="inertial_overrides",
+                        subject=unknown[0])
 
 
 def _origin(j) -> np.ndarray:
@@ -225,7 +248,7 @@ def _frames(path: str, rover: RoverConfig, group: dict[str, np.ndarray], wheel_n
     missing = [n for n in rover.sensor_frames if n not in group]
     if missing:
         raise URDFError(f"{path}: sensor frame {missing[0]!r} must be fixed to {rover.chassis_link!r} (through fixed "
-                        "joints only)")
+                        "joints only)", field="sensor_frames", subject=missing[0])
     return frames
 
 
@@ -246,7 +269,7 @@ def _wheel_joints(path: str, rover: RoverConfig, group: dict[str, np.ndarray], j
     if len(found) < 2:
         raise URDFError(f"{path}: found {len(found)} wheel joint(s) (revolute or continuous joints from "
                         f"{rover.chassis_link!r} or a link fixed to it, about a lateral axis); a skid-steer rover needs "
-                        "wheels on both sides (or name them: left_wheels, right_wheels)")
+                        "wheels on both sides (or name them: left_wheels, right_wheels)", field="left_wheels")
     return found
 
 
@@ -257,31 +280,41 @@ def _wheel(path: str, rover: RoverConfig, name: str, j, group: dict[str, np.ndar
     if j is None or j.type not in ("revolute", "continuous") or j.parent not in group:
         kind = "no joint" if j is None else f"a {j.type} joint to {j.parent!r}"
         raise URDFError(f"{path}: wheel {name!r} must hang on a revolute/continuous joint from "
-                        f"{rover.chassis_link!r} (or a link fixed to it), found {kind}")
+                        f"{rover.chassis_link!r} (or a link fixed to it), found {kind}", field=_side_field(rover, name),
+                        subject=name)
     origin = group[j.parent] @ _origin(j)  # the joint frame in the chassis frame
     axis = np.asarray(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
     axis = axis / np.linalg.norm(axis)
     axis_chassis = origin[:3, :3] @ axis
     if abs(axis_chassis[1]) < 0.9:
         raise URDFError(f"{path}: wheel joint {j.name!r} axis {axis_chassis.round(3).tolist()} (chassis frame) "
-                        "is not lateral; a skid-steer wheel turns about the chassis y axis")
+                        "is not lateral; a skid-steer wheel turns about the chassis y axis",
+                        field=_side_field(rover, name), subject=j.name)
     # Rolling forward (+x) is a positive rotation about chassis +y.
     drive_sign = 1.0 if axis_chassis[1] > 0.0 else -1.0
     lateral = 1.0 if origin[1, 3] >= 0.0 else -1.0
     outward = axis * (1.0 if axis_chassis[1] * lateral > 0.0 else -1.0)
-    _check_inertial(path, name, inertial)
+    try:
+        _check_inertial(path, name, inertial)
+    except URDFError as err:
+        raise URDFError(str(err), field=_side_field(rover, name), subject=name) from None
     named = tuple(rover.left_wheels) + tuple(rover.right_wheels)
     side = (0 if name in rover.left_wheels else 1) if named else (0 if lateral > 0 else 1)
-    return Wheel(name, j.name, side, origin, axis, drive_sign, outward, inertial, _cylinder_radius(link))
+    return Wheel(name, j.name, side, origin, axis, drive_sign, outward, inertial, *_cylinder(link))
 
 
-def _cylinder_radius(link) -> float | None:
-    """The radius of the link's first cylinder, collision geometry before visual [m]."""
+def _side_field(rover: RoverConfig, wheel: str) -> str:
+    """The field that names ``wheel`` (``left_wheels`` where the wheels are found by the rule)."""
+    return "right_wheels" if wheel in rover.right_wheels else "left_wheels"
+
+
+def _cylinder(link) -> tuple[float | None, float | None]:
+    """The radius and length of the link's first cylinder, collision geometry before visual [m]."""
     for geom_list in (link.collisions, link.visuals):
         for g in geom_list or ():
             if g.geometry is not None and g.geometry.cylinder is not None:
-                return float(g.geometry.cylinder.radius)
-    return None
+                return float(g.geometry.cylinder.radius), float(g.geometry.cylinder.length)
+    return None, None
 
 
 def _chassis_box(chassis: str, links: dict, group: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
@@ -329,11 +362,14 @@ def load_rover(rover: RoverConfig | None = None) -> RoverDescription:
         wheels.sort(key=lambda w: (w.side, -float(w.origin[0, 3])))
     if {w.side for w in wheels} != {0, 1}:
         raise URDFError(f"{path}: wheels on one side only ({', '.join(w.link for w in wheels)}); a skid-steer rover "
-                        "drives a left and a right side")
+                        "drives a left and a right side", field="left_wheels" if wheels[0].side else "right_wheels")
     frames = _frames(path, rover, group, {w.link for w in wheels})
     parts = [(inertial(rover.chassis_link), np.eye(4))] + [(inertial(f.name), f.transform) for f in frames]
     chassis_inertial = _lump(parts)
-    _check_inertial(path, rover.chassis_link, chassis_inertial)
+    try:
+        _check_inertial(path, rover.chassis_link, chassis_inertial)
+    except URDFError as err:
+        raise URDFError(str(err), field="chassis_link", subject=rover.chassis_link) from None
     return RoverDescription(path, robot.name, rover.chassis_link, chassis_inertial,
                             _chassis_box(rover.chassis_link, links, group), tuple(wheels), tuple(frames),
                             _tree(rover.chassis_link, links, robot.joints))

@@ -25,8 +25,9 @@ import torch
 
 from atrv_warp.core.geometry import quat_to_yaw, wrap_angle
 from atrv_warp.core.kinematics import track_width
+from atrv_warp.core.robot import DEFAULT_ROBOT, RobotFileError, load_robot
 from atrv_warp.integrations.calibration.log import DriveLog
-from atrv_warp.sim.config import ContactConfig, RoverConfig, get_variant
+from atrv_warp.sim.config import ContactConfig, RoverConfig, nominal_rover_config
 from atrv_warp.sim.driver import DriverConfig
 from atrv_warp.sim.kernels.rover import MOTOR_TAPER_START
 
@@ -138,12 +139,16 @@ class CalibrationConfig:
     seed: int = 0
     min_segments: int = 5
     """A log with fewer moving segments is too short to fit."""
-    kp: float = DriverConfig.kp
-    """The base's wheel-speed PI, as the robot's driver runs it (:class:`~atrv_warp.sim.driver.DriverConfig`)."""
-    ki: float = DriverConfig.ki
-    effective_track_factor: float = DriverConfig.effective_track_factor
+    robot: str = DEFAULT_ROBOT
+    """The robot the bag was recorded on (a shipped robot's name or a robot file's path): its nominal rover, and its
+    driver's gains, torque limit and track factor where the fields below leave them ``None``."""
+    kp: float | None = None
+    """The base's wheel-speed PI, as the robot's driver runs it (:class:`~atrv_warp.sim.driver.DriverConfig`);
+    ``None``: the robot's."""
+    ki: float | None = None
+    effective_track_factor: float | None = None
     cmd_vel_timeout: float = DriverConfig.cmd_vel_timeout
-    torque_limit: float = DriverConfig.torque_limit
+    torque_limit: float | None = None
     driver_wheel_radius: float | None = None
     """The wheel radius the robot's driver is configured with [m]: it turns ``/cmd_vel`` into wheel-speed targets
     and wheel speeds into odometry. ``None``: the nominal rover's (the realistic variant's 0.125 m, as an unconfigured
@@ -167,12 +172,17 @@ class CalibrationConfig:
         (a real driver knows its configured values, not the wheel's wear), ``None`` resolved to the nominal rover's."""
         from atrv_warp.sim.urdf import load_rover
 
-        nominal = get_variant("realistic")
+        nominal = self.nominal_rover()
         radius = nominal.wheel_radius if self.driver_wheel_radius is None else self.driver_wheel_radius
         track = track_width(load_rover(nominal), nominal) if self.driver_track_width is None else self.driver_track_width
         return DriverConfig(wheel_radius=radius, track_width=track,
                             effective_track_factor=self.effective_track_factor, kp=self.kp, ki=self.ki,
-                            torque_limit=self.torque_limit, cmd_vel_timeout=self.cmd_vel_timeout)
+                            torque_limit=self.torque_limit, cmd_vel_timeout=self.cmd_vel_timeout
+                            ).resolved(nominal.robot_spec)
+
+    def nominal_rover(self) -> RoverConfig:
+        """The robot's nominal rover (the ATRV-Jr's realistic variant by default)."""
+        return nominal_rover_config(self.robot)
 
     def __post_init__(self):
         unknown = sorted(set(self.params) - set(FIT_PARAMETERS))
@@ -188,8 +198,12 @@ class CalibrationConfig:
         if not 0.0 <= self.pose_smoothing <= 0.5 * self.segment_seconds:
             raise CalibrationError(f"pose_smoothing must be within [0, segment_seconds / 2], got {self.pose_smoothing}")
         for name in ("segment_seconds", "kp", "effective_track_factor", "cmd_vel_timeout", "torque_limit"):
-            if not getattr(self, name) > 0:
+            if getattr(self, name) is not None and not getattr(self, name) > 0:
                 raise CalibrationError(f"{name} must be > 0, got {getattr(self, name)}")
+        try:
+            load_robot(self.robot)
+        except RobotFileError as err:
+            raise CalibrationError(f"robot: {err}") from None
         if self.robust is not None and not self.robust > 0:
             raise CalibrationError(f"robust must be > 0 or None, got {self.robust}")
         if self.duration is not None and not self.duration > 0:
@@ -431,7 +445,9 @@ def make_segments(log: DriveLog, cfg: CalibrationConfig, driver: DriverConfig, d
     ``driver``: the base's driver with its configured radius and track set (:meth:`CalibrationConfig.driver`);
     ``substeps``: the driver's loop runs this many times per step, as in the simulator; ``latency``: the commands'
     latency [s] (``None``: ``cfg.latency``, or 0 where it is fitted); ``like``: the same segments as these (their
-    start times), under another latency."""
+    start times), under another latency. The robot's gains, torque limit and track factor fill what ``driver``
+    leaves unset (``cfg.robot``'s)."""
+    driver = driver.resolved(cfg.robot)
     command = cfg.command
     if command == "auto":
         command = "cmd_vel" if len(log.cmd_time) else "effort"
@@ -742,7 +758,7 @@ def _standard_error(start: _Start, names: list[str], span: np.ndarray) -> tuple[
 def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
               rover: RoverConfig | None = None, contact: ContactConfig | None = None,
               progress: Callable[[str], None] | None = None) -> CalibrationResult:
-    """Fit ``cfg.params`` to ``log``, starting from ``rover`` and ``contact`` (default: the realistic rover).
+    """Fit ``cfg.params`` to ``log``, starting from ``rover`` and ``contact`` (default: ``cfg.robot``'s nominal rover).
 
     Where ``cfg.latency`` is ``None`` (a ``cmd_vel`` replay), the commands' latency is fitted too: after a fit at
     none, the training segments are replayed at the fitted values with each whole-step latency up to
@@ -750,7 +766,7 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
     in turn until no latency does. The result ends with the model check (:attr:`CalibrationResult.misfit`)."""
 
     say = progress or (lambda _text: None)
-    rover = rover or get_variant("realistic")
+    rover = rover or cfg.nominal_rover()
     contact = contact or ContactConfig()
     driver = cfg.driver()
     seg = make_segments(log, cfg, driver)
@@ -934,7 +950,7 @@ def replay_errors(log: DriveLog, values: dict[str, float], cfg: CalibrationConfi
     ``contact``'s), replayed as :func:`calibrate` replays ``log``: ``{"train": (S,), "held_out": (H,)}`` (a fit of a
     shorter part of the drive, measured on a longer one's held-out segments). ``latency``: the commands' [s] (a fit's
     ``result.latency["seconds"]``; ``None``: ``cfg``'s)."""
-    rover = rover or get_variant("realistic")
+    rover = rover or cfg.nominal_rover()
     contact = contact or ContactConfig()
     driver = cfg.driver()
     seg = make_segments(log, cfg, driver, latency=latency)

@@ -27,7 +27,7 @@ from atrv_warp.sim.urdf import RoverDescription, load_rover
 
 from .mjcf import SCENE_GROUP, MujocoContact, Obstacle, world_xml
 
-__all__ = ["FLAG_CHASSIS_GROUND", "FLAG_OBSTACLE", "FLAG_WALL", "IMU_FRAME", "MujocoTwin"]
+__all__ = ["FLAG_CHASSIS_GROUND", "FLAG_OBSTACLE", "FLAG_WALL", "MujocoTwin"]
 
 FLAG_WALL = 1
 """A rover shape touched a wall (:attr:`MujocoTwin.contact_flags`; the simulator's bits)."""
@@ -35,8 +35,6 @@ FLAG_CHASSIS_GROUND = 2
 """The chassis touched the ground."""
 FLAG_OBSTACLE = 4
 """A rover shape touched an obstacle."""
-IMU_FRAME = "cbimu_frame"
-"""The URDF frame the IMU reads in (``ROBOT_OBSERVATION``'s ``imu_*`` fields)."""
 
 
 class MujocoTwin:
@@ -65,7 +63,7 @@ class MujocoTwin:
         self.rover_cfg = rover or RoverConfig()
         self.arena_cfg = arena or ArenaConfig()
         self.sim_cfg = sim or SimConfig()
-        self.driver_cfg = driver or DriverConfig()
+        self.driver_cfg = (driver or DriverConfig()).resolved(self.rover_cfg.robot_spec)
         self.scanner_cfg = scanner or ScannerConfig()
         self.contact_cfg = contact or MujocoContact()
         self.friction = ContactConfig().friction if friction is None else float(friction)
@@ -87,8 +85,8 @@ class MujocoTwin:
         self.wheel_sign = np.array([w.drive_sign for w in self.description.wheels])
         self.wheel_side = np.array([w.side for w in self.description.wheels])
         frames = {f.name: np.asarray(f.transform, dtype=np.float64) for f in self.description.frames}
-        self.scanner_mount = frames[self.scanner_cfg.frame]
-        self.imu_mount = frames[IMU_FRAME]
+        self.scanner_mount = frames[self.scanner_cfg.frame or self.rover_cfg.robot_spec.laser_frame]
+        self.imu_mount = frames[self.rover_cfg.robot_spec.imu_frame]  # ROBOT_OBSERVATION's imu_* fields
         self.beam_angles = np.asarray(self.scanner_cfg.angles, dtype=np.float64)
         self._ray_group = np.zeros(6, dtype=np.uint8)
         self._ray_group[SCENE_GROUP] = 1

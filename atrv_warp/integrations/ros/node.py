@@ -327,7 +327,7 @@ class RoverIO:
         scanner = self.node.scanner
         cfg = scanner.cfg
         msg = LaserScan()
-        msg.header.stamp, msg.header.frame_id = _stamp(ns), cfg.frame
+        msg.header.stamp, msg.header.frame_id = _stamp(ns), scanner.frame
         msg.angle_min, msg.angle_max = float(cfg.angles[0]), float(cfg.angles[-1])
         msg.angle_increment = float(cfg.angles[1] - cfg.angles[0]) if cfg.beams > 1 else 0.0
         msg.time_increment = 0.0  # every beam of a scan is cast at the same simulated instant
@@ -430,7 +430,8 @@ class RoverSimNode(Node):
         desc = self.sim.description
         self.every = max(1, round(1.0 / (p["publish_rate"] * self.sim.sim_cfg.step_dt)))
         self.frame_id = p["frame_id"] or desc.chassis
-        self.odom_frame, self.base_frame, self.imu_frame = p["odom_frame"], p["base_frame"], "cbimu_frame"
+        self.odom_frame, self.base_frame, self.imu_frame = (p["odom_frame"], p["base_frame"],
+                                                           self.sim.rover_cfg.robot_spec.imu_frame)
         self.joint_names = [w.joint for w in desc.wheels]
         self.side = torch.tensor([w.side for w in desc.wheels])
         self.wheel_sign = [float(w.drive_sign) for w in desc.wheels]

@@ -6,11 +6,14 @@ from atrv_warp.sim.config import SENSOR_NOISE
 from atrv_warp.sim.driver import DriverConfig
 from atrv_warp.sim.simulator import DriveMode
 
-__all__ = ["COMMANDS", "DRIVER_PARAMETERS", "GOAL", "MAX_ROVERS", "PARAMETERS", "VELOCITY", "driver_config",
-           "parameter_help"]
+__all__ = ["COMMANDS", "DRIVER_PARAMETERS", "GOAL", "MAX_ROVERS", "PARAMETERS", "ROBOTS_OWN", "VELOCITY",
+           "driver_config", "parameter_help"]
 
 GOAL = "goal"
 COMMANDS = tuple(m.value for m in DriveMode) + (GOAL,)
+
+ROBOTS_OWN = -1.0
+"""The default of a driver parameter that is the robot's (its file's ``[driver]`` values)."""
 
 VELOCITY = "velocity"
 """The mode /cmd_vel switches to."""
@@ -44,9 +47,9 @@ PARAMETERS = (
     ("reach_radius", 1.0, "goal mode: reached within this distance [m]"),
     ("wheel_radius", 0.0, "the base driver's configured wheel radius [m]; 0 = the nominal rover's (not sim_config's)"),
     ("track_width", 0.0, "the base driver's configured wheel track [m]; 0 = the nominal rover's"),
-    ("effective_track_factor", DriverConfig.effective_track_factor, "skid: effective track / wheel track"),
-    ("wheel_kp", DriverConfig.kp, "wheel-speed PI proportional gain [N·m per rad/s], run every substep"),
-    ("wheel_ki", DriverConfig.ki, "wheel-speed PI integral gain [N·m per rad]"),
+    ("effective_track_factor", ROBOTS_OWN, "skid: effective track / wheel track; -1 = the robot's (its file's)"),
+    ("wheel_kp", ROBOTS_OWN, "wheel-speed PI proportional gain [N·m per rad/s], run every substep; -1 = the robot's"),
+    ("wheel_ki", ROBOTS_OWN, "wheel-speed PI integral gain [N·m per rad]; -1 = the robot's"),
     ("cmd_vel_timeout", DriverConfig.cmd_vel_timeout, "watchdog: stop when no /cmd_vel arrives for this long [s]"),
     ("odometry_accel_time", 0.0, ("the fused odometry's velocity blends the IMU's accelerometer into the encoders', "
                                   "a complementary filter of this time constant [s]; 0 = the encoders alone")),
@@ -85,14 +88,15 @@ DRIVER_PARAMETERS = {"wheel_radius": "wheel_radius", "track_width": "track_width
 
 
 def driver_config(params: dict) -> DriverConfig:
-    """The base's motor driver from the node's parameters (0 for a radius, track, limit or filter: unset); a bad value is a
-    ``ValueError`` naming it."""
+    """The base's motor driver from the node's parameters (0 for a radius, track, limit or filter: unset; -1 for a gain
+    or the track factor: the robot's); a bad value is a ``ValueError`` naming it."""
     optional = {"wheel_radius", "track_width", "linear_max_velocity", "linear_max_acceleration",
                 "angular_max_velocity", "angular_max_acceleration", "odometry_accel_time"}
     values = {}
     for name, field in DRIVER_PARAMETERS.items():
         value = params[name]
-        values[field] = None if name in optional and value == 0 else value
+        robots = field in ("kp", "ki", "effective_track_factor") and value == ROBOTS_OWN
+        values[field] = None if (name in optional and value == 0) or robots else value
     try:
         return DriverConfig(**values)
     except ValueError as err:

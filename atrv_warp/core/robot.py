@@ -1,0 +1,312 @@
+"""A robot is one file: a TOML file beside its URDF that holds everything that is the robot's and not the world's
+or the task's.
+
+The package ships one per robot in ``atrv_warp/robots/`` (:data:`ROBOTS`: ``atrvjr``, the default, ``jackal`` and
+``husky``); :func:`load_robot` takes a shipped robot's name or the path of a file of your own. A file reads::
+
+    name = "atrvjr"                      # how commands and saved policies call it
+    title = "iRobot ATRV-Jr"
+    urdf = "atrvjr.urdf"                 # relative to this file
+
+    [links]
+    chassis = "center_link"              # any link of the tree; links fixed to it are one body with it
+    left_wheels = ["left_front_wheel_link", "left_rear_wheel_link"]   # or leave both lists out: every joint
+    right_wheels = ["right_front_wheel_link", "right_rear_wheel_link"] # about a lateral axis, by its side
+    imu = "cbimu_frame"                  # the IMU's frame, fixed to the chassis
+    laser = "lrf_frame"                  # the laser scanner's frame, fixed to the chassis
+    frames = ["novatel"]                 # other frames that must exist (optional)
+
+    [wheels]                             # the contact cylinder that replaces the URDF's wheel geometry
+    radius = 0.125                       # [m]
+    width = 0.075                        # [m]
+    offset = 0.03                        # cylinder centre outward from the wheel joint, along the axle [m]
+
+    [motor]
+    torque_limit = 20.0                  # per wheel [N·m]
+    no_load_speed = 50.0                 # [rad/s]
+
+    [driver]                             # written by `python -m atrv_warp.robot check FILE --write`
+    kp = 3.0                             # wheel-speed PI [N·m per rad/s]
+    ki = 30.0                            # [N·m per rad]
+    effective_track_factor = 1.56        # effective track / wheel track, measured on our physics
+
+    [limits]                             # the robot's published diff_drive_controller limits
+    linear_velocity = 0.5                # [m/s]
+    angular_velocity = 1.0               # [rad/s]
+    linear_acceleration = 0.7            # [m/s²] (optional)
+    angular_acceleration = 1.0           # [rad/s²] (optional)
+
+    [sources]                            # where each value comes from, by its dotted name
+    "limits.linear_velocity" = "owner/repo@commit:path L12"
+
+Any other key is refused by name. This module reads only the TOML file (standard library), so code on a robot's
+computer can load it; :mod:`atrv_warp.sim` checks it against its URDF (``python -m atrv_warp.robot check``).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+__all__ = [
+    "DEFAULT_ROBOT",
+    "FIELDS",
+    "ROBOTS",
+    "Robot",
+    "RobotFileError",
+    "RobotLimits",
+    "load_robot",
+    "robot_file",
+    "robot_from_record",
+    "robot_record",
+]
+
+DEFAULT_ROBOT = "atrvjr"
+"""The robot everything uses unless told otherwise."""
+
+
+class RobotFileError(ValueError):
+    """A robot file that cannot be read, or a value in it that is missing or wrong (the message names the file and
+    the field)."""
+
+
+def _shipped_folder() -> Path:
+    return Path(str(resources.files("atrv_warp").joinpath("robots")))
+
+
+def _shipped() -> tuple[str, ...]:
+    folder = _shipped_folder()
+    return tuple(sorted(p.stem for p in folder.glob("*.toml"))) if folder.is_dir() else ()
+
+
+ROBOTS: tuple[str, ...] = _shipped()
+"""The shipped robots' names (one ``atrv_warp/robots/<name>.toml`` each)."""
+
+
+@dataclass(frozen=True)
+class RobotLimits:
+    """A robot's velocity and acceleration limits: its ``diff_drive_controller``'s ``linear.x.max_velocity``,
+    ``angular.z.max_velocity``, ``linear.x.max_acceleration`` and ``angular.z.max_acceleration``."""
+
+    linear_velocity: float
+    """[m/s]"""
+    angular_velocity: float
+    """[rad/s]"""
+    linear_acceleration: float | None = None
+    """[m/s²]; ``None``: none published."""
+    angular_acceleration: float | None = None
+    """[rad/s²]; ``None``: none published."""
+
+
+@dataclass(frozen=True)
+class Robot:
+    """One robot, as its file declares it. Every length in metres, every angle in radians."""
+
+    name: str
+    """How commands, configs and saved policies call it."""
+    title: str
+    """A human name ("Clearpath Jackal J100")."""
+    path: str = field(compare=False)
+    """The robot file it was read from (or the record it came from); two robots of the same values are equal
+    wherever they were read."""
+    urdf: str
+    """The URDF's path (the file gives it relative to itself)."""
+    chassis: str
+    """The link the free joint holds: any link of the tree."""
+    left_wheels: tuple[str, ...]
+    """Wheel links driven by the left command; empty with :attr:`right_wheels`: every revolute or continuous joint
+    from the chassis about a lateral axis, left or right by the side it sits on."""
+    right_wheels: tuple[str, ...]
+    imu_frame: str
+    """The IMU's frame (a link fixed to the chassis)."""
+    laser_frame: str
+    """The laser scanner's frame (a link fixed to the chassis)."""
+    frames: tuple[str, ...]
+    """Other frames that must exist, fixed to the chassis."""
+    wheel_radius: float
+    """The contact cylinder's radius [m]."""
+    wheel_width: float
+    """The contact cylinder's width [m]."""
+    wheel_offset: float
+    """The cylinder's centre outward from the wheel joint along the axle [m]."""
+    torque_limit: float
+    """Each wheel motor's torque limit [N·m]."""
+    no_load_speed: float
+    """The motor's no-load wheel speed [rad/s]: drive torque tapers from full at 80 % of it to zero at it."""
+    kp: float
+    """The driver's wheel-speed PI proportional gain [N·m per rad/s]."""
+    ki: float
+    """The driver's PI integral gain [N·m per rad]."""
+    effective_track_factor: float
+    """Effective track / wheel track on our physics [-] (skid steering turns slower than the wheel track says)."""
+    limits: RobotLimits
+    sources: dict[str, str] = field(default_factory=dict, compare=False)
+    """Where each value comes from, by dotted name (``"limits.linear_velocity"``)."""
+
+    @property
+    def sensor_frames(self) -> tuple[str, ...]:
+        """The IMU's, the laser's and the other frames: every link the robot needs fixed to its chassis."""
+        return tuple(dict.fromkeys((self.imu_frame, self.laser_frame, *self.frames)))
+
+    @property
+    def top_speed(self) -> float:
+        """The motor's top rim speed [m/s]: ``no_load_speed x wheel_radius``."""
+        return self.no_load_speed * self.wheel_radius
+
+    def summary(self) -> str:
+        """One line: the robot and its limits."""
+        lim = self.limits
+        acc = "" if lim.linear_acceleration is None else f", {lim.linear_acceleration:g} m/s²"
+        return (f"{self.name} ({self.title}): up to {lim.linear_velocity:g} m/s{acc} and {lim.angular_velocity:g} "
+                "rad/s")
+
+
+_SCHEMA: dict[str, dict[str, tuple[type, bool]]] = {
+    "": {"name": (str, True), "title": (str, True), "urdf": (str, True)},
+    "links": {"chassis": (str, True), "left_wheels": (list, False), "right_wheels": (list, False),
+              "imu": (str, True), "laser": (str, True), "frames": (list, False)},
+    "wheels": {"radius": (float, True), "width": (float, True), "offset": (float, True)},
+    "motor": {"torque_limit": (float, True), "no_load_speed": (float, True)},
+    "driver": {"kp": (float, True), "ki": (float, True), "effective_track_factor": (float, True)},
+    "limits": {"linear_velocity": (float, True), "angular_velocity": (float, True),
+               "linear_acceleration": (float, False), "angular_acceleration": (float, False)},
+}
+"""Each table's keys: (type, required). ``[sources]`` maps any of their dotted names to text."""
+
+FIELDS: tuple[str, ...] = tuple(f"{t}.{k}" if t else k for t, keys in _SCHEMA.items() for k in keys)
+"""Every key of a robot file, dotted (``"limits.linear_velocity"``)."""
+
+
+def robot_file(spec: str | os.PathLike) -> Path:
+    """The robot file ``spec`` names: a shipped robot's name (:data:`ROBOTS`) or a path to a ``.toml`` file."""
+    text = os.fspath(spec)
+    if not isinstance(text, str) or not text:
+        raise RobotFileError(f"a robot is a shipped robot's name ({', '.join(ROBOTS)}) or a robot file's path, got "
+                             f"{spec!r}")
+    if text in ROBOTS:
+        return _shipped_folder() / f"{text}.toml"
+    path = Path(text).expanduser()
+    if path.suffix == ".toml" or os.sep in text or "/" in text:
+        if not path.is_file():
+            raise RobotFileError(f"robot file not found: {path}")
+        return path.resolve()
+    raise RobotFileError(f"unknown robot {text!r}; shipped robots: {', '.join(ROBOTS)} (or give the path of a robot "
+                         "file, see docs/your-own-robot.md)")
+
+
+def load_robot(spec: str | os.PathLike | Robot = DEFAULT_ROBOT) -> Robot:
+    """The :class:`Robot` that ``spec`` names (a shipped robot's name or a robot file's path; a :class:`Robot` is
+    returned as is).
+
+    Raises:
+        RobotFileError: an unknown name (the message lists the shipped ones), a missing or malformed file, or a
+            missing, mistyped, out-of-range or unknown key (named with its table).
+    """
+    if isinstance(spec, Robot):
+        return spec
+    path = robot_file(spec)
+    return _load(str(path), path.stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=32)
+def _load(path: str, _mtime: int) -> Robot:
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as err:
+        raise RobotFileError(f"{path}: not valid TOML: {err}") from None
+    except OSError as err:
+        raise RobotFileError(f"{path}: cannot read: {err}") from None
+    return _from_table(path, data)
+
+
+def _from_table(path: str, data: dict) -> Robot:
+    def fail(message: str):
+        raise RobotFileError(f"{path}: {message}")
+
+    sources = data.pop("sources", {})
+    if not isinstance(sources, dict) or not all(isinstance(v, str) for v in sources.values()):
+        fail("[sources] must map dotted field names to text")
+    unknown_sources = sorted(set(sources) - set(FIELDS))
+    if unknown_sources:
+        fail(f"[sources] names unknown field(s) {unknown_sources}; known: {', '.join(FIELDS)}")
+    values: dict[str, object] = {}
+    for table, keys in _SCHEMA.items():
+        where = data if not table else data.get(table, {})
+        if not isinstance(where, dict):
+            fail(f"[{table}] must be a table")
+        for key, (kind, required) in keys.items():
+            name = f"{table}.{key}" if table else key
+            if key not in where:
+                if required:
+                    fail(f"missing {name}" + (f" (in [{table}])" if table else ""))
+                continue
+            value = where[key]
+            if kind is float:
+                if not (isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)):
+                    fail(f"{name} must be a finite number, got {value!r}")
+                if value < 0 or (value == 0 and name not in ("driver.ki", "wheels.offset")):
+                    fail(f"{name} must be > 0, got {value!r}")
+                value = float(value)
+            elif kind is list:
+                if not (isinstance(value, list) and all(isinstance(v, str) and v for v in value)):
+                    fail(f"{name} must be a list of link names, got {value!r}")
+                value = tuple(value)
+            elif not (isinstance(value, str) and value):
+                fail(f"{name} must be a non-empty string, got {value!r}")
+            values[name] = value
+    unknown = sorted({k for k, v in data.items() if not isinstance(v, dict) and k not in _SCHEMA[""]}
+                     | {f"[{k}]" for k, v in data.items() if isinstance(v, dict) and k not in _SCHEMA}
+                     | {f"{k}.{key}" for k, v in data.items() if isinstance(v, dict) and k in _SCHEMA
+                        for key in v if key not in _SCHEMA[k]})
+    if unknown:
+        fail(f"unknown field(s) {unknown}; known: {', '.join(FIELDS)}")
+    left, right = values.get("links.left_wheels", ()), values.get("links.right_wheels", ())
+    if bool(left) != bool(right):
+        fail("links.left_wheels and links.right_wheels name the wheels of both sides, or neither (the rule finds "
+             "them)")
+    if set(left) & set(right):
+        fail(f"links: wheel(s) {sorted(set(left) & set(right))} on both sides")
+    urdf = Path(values["urdf"]).expanduser()
+    urdf = urdf if urdf.is_absolute() else Path(path).parent / urdf
+    return Robot(
+        name=values["name"], title=values["title"], path=path, urdf=str(urdf), chassis=values["links.chassis"],
+        left_wheels=left, right_wheels=right, imu_frame=values["links.imu"], laser_frame=values["links.laser"],
+        frames=values.get("links.frames", ()), wheel_radius=values["wheels.radius"],
+        wheel_width=values["wheels.width"], wheel_offset=values["wheels.offset"],
+        torque_limit=values["motor.torque_limit"], no_load_speed=values["motor.no_load_speed"],
+        kp=values["driver.kp"], ki=values["driver.ki"],
+        effective_track_factor=values["driver.effective_track_factor"],
+        limits=RobotLimits(values["limits.linear_velocity"], values["limits.angular_velocity"],
+                           values.get("limits.linear_acceleration"), values.get("limits.angular_acceleration")),
+        sources=dict(sources))
+
+
+def robot_record(robot: Robot) -> dict:
+    """``robot`` as its file's tables (the URDF's path resolved): what a checkpoint and a saved policy keep, and what
+    :func:`robot_from_record` reads back."""
+    lim = robot.limits
+    limits = {"linear_velocity": lim.linear_velocity, "angular_velocity": lim.angular_velocity}
+    limits.update({k: v for k, v in (("linear_acceleration", lim.linear_acceleration),
+                                     ("angular_acceleration", lim.angular_acceleration)) if v is not None})
+    links = {"chassis": robot.chassis, "imu": robot.imu_frame, "laser": robot.laser_frame, "frames": list(robot.frames)}
+    if robot.left_wheels:
+        links.update(left_wheels=list(robot.left_wheels), right_wheels=list(robot.right_wheels))
+    return {"name": robot.name, "title": robot.title, "urdf": robot.urdf, "links": links,
+            "wheels": {"radius": robot.wheel_radius, "width": robot.wheel_width, "offset": robot.wheel_offset},
+            "motor": {"torque_limit": robot.torque_limit, "no_load_speed": robot.no_load_speed},
+            "driver": {"kp": robot.kp, "ki": robot.ki, "effective_track_factor": robot.effective_track_factor},
+            "limits": limits, "sources": dict(robot.sources)}
+
+
+def robot_from_record(record: dict, where: str) -> Robot:
+    """The :class:`Robot` a :func:`robot_record` holds (``where`` names the file it came from in errors)."""
+    if not isinstance(record, dict):
+        raise RobotFileError(f"{where}: a robot record is a table, got {type(record).__name__}")
+    copy = {k: dict(v) if isinstance(v, dict) else v for k, v in record.items()}
+    return _from_table(where, copy)

@@ -1,0 +1,222 @@
+"""A robot file checked against its URDF and measured in the simulator: what ``python -m atrv_warp.robot check``
+prints and ``benchmarks/robot_check.py`` keeps.
+
+:func:`check_robot` reads the file and its URDF and raises one :class:`~atrv_warp.core.robot.RobotFileError` per
+problem, naming the file's field and the link or joint. :func:`measure_robot` drives the robot: its effective track
+factor in steady turns, its top speed under full torque, and its driver's ``/cmd_vel`` step response.
+:func:`driver_gains` is the rule that picks the driver's PI gains for the wheel's inertia.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from atrv_warp.core.robot import Robot, RobotFileError, load_robot
+from atrv_warp.sim.config import ContactConfig, RoverConfig, SimConfig
+from atrv_warp.sim.urdf import RoverDescription, URDFError, load_rover
+
+__all__ = [
+    "GAIN_RATIO",
+    "INTEGRAL_RATIO",
+    "SETTLE_TARGET",
+    "STEP_CASES",
+    "TURN_COMMANDS",
+    "TURN_FRICTIONS",
+    "RobotCheck",
+    "check_robot",
+    "driver_gains",
+    "measure_robot",
+    "wheel_inertia",
+]
+
+GAIN_RATIO = 1.536
+"""The driver's rule: ``kp x sim_dt / J = GAIN_RATIO`` for the wheel's axial inertia ``J`` [kg·m²]: the ATRV-Jr's
+tuned 3.0 N·m per rad/s on its 0.01953 kg·m² wheel at the 0.01 s substep (``benchmarks/driver_response.py`` chose it:
+the fastest pair whose yaw rate overshoots by at most 10 % at µ 0.2-1.0). The loop runs every substep, and a
+slipping wheel (its own inertia alone) goes unstable where the ratio reaches 2."""
+INTEGRAL_RATIO = 10.0
+"""The rule's ``ki / kp`` [1/s] (the ATRV-Jr's 30 / 3)."""
+TURN_COMMANDS: tuple[tuple[float, float], ...] = ((0.0, 0.25), (0.0, 0.5), (0.0, 1.0), (0.3, 0.3), (0.5, 0.5),
+                                                  (0.5, -0.25), (1.0, 0.2))
+"""(linear [m/s], angular [rad/s]) steady turns the effective track factor is measured on
+(``benchmarks/skid_calibration.py``'s)."""
+TURN_FRICTIONS: tuple[float, ...] = (0.3, 0.8)
+"""Coulomb µ of the turns and the step response."""
+STEP_CASES: tuple[tuple[float, float], ...] = ((0.0, 0.5), (0.3, 0.3), (1.0, 0.2))
+"""``/cmd_vel`` steps from rest: in place at 0.5 rad/s, an arc at 0.3 m/s and 0.3 rad/s, and the ATRV-Jr's slow
+1 m/s, 0.2 rad/s arc."""
+SETTLE_TARGET = 0.5
+"""The first two step cases settle within this [s] on every shipped robot."""
+LEVEL_TOLERANCE = math.radians(3.0)
+"""How far a laser's or an IMU's axes may turn from the chassis' [rad]."""
+SIZE_TOLERANCE = 0.02
+"""How far the file's wheel radius and width may differ from the URDF's wheel cylinder [share]."""
+
+
+def _field_of(robot: Robot, err: URDFError) -> str:
+    """The robot file's field that a :class:`URDFError` is about."""
+    if err.field == "sensor_frames":
+        if err.subject == robot.imu_frame:
+            return "links.imu"
+        return "links.laser" if err.subject == robot.laser_frame else "links.frames"
+    return {"chassis_link": "links.chassis", "left_wheels": "links.left_wheels", "right_wheels": "links.right_wheels",
+            "urdf": "urdf"}.get(err.field, err.field)
+
+
+def check_robot(spec) -> tuple[Robot, RoverDescription]:
+    """Read the robot file ``spec`` (a shipped robot's name or a path) and its URDF, and check them against each
+    other: every named link exists, the wheels hang on lateral joints on both sides with positive masses and
+    inertias, the IMU and the laser are fixed to the chassis with their axes the chassis' (the observation reads
+    the IMU in the chassis' axes; the scan is a horizontal plane), and the file's wheel size is the URDF's cylinder.
+
+    Raises:
+        RobotFileError: the first problem, naming the file's field and the link or joint.
+    """
+    robot = load_robot(spec)
+    try:
+        description = load_rover(RoverConfig(robot=robot.path))
+    except URDFError as err:
+        where = f" ({err.subject})" if err.subject else ""
+        raise RobotFileError(f"{robot.path}: {_field_of(robot, err)}{where}: {err}") from None
+    frames = {f.name: f.transform for f in description.frames}
+    for field, name in (("links.imu", robot.imu_frame), ("links.laser", robot.laser_frame)):
+        rotation = np.asarray(frames[name])[:3, :3]
+        angle = math.acos(max(-1.0, min(1.0, (float(np.trace(rotation)) - 1.0) / 2.0)))
+        if angle > LEVEL_TOLERANCE:
+            raise RobotFileError(
+                f"{robot.path}: {field} ({name}): the frame is turned {math.degrees(angle):.1f} deg from the chassis "
+                f"{robot.chassis!r}; the {'IMU is read in the chassis axes' if field == 'links.imu' else 'scan is a horizontal plane looking forward'}: "
+                "mount a frame with the chassis' axes (a fixed joint with rpy 0 0 0) and name it")
+    for wheel in description.wheels:
+        for field, mine, urdf in (("wheels.radius", robot.wheel_radius, wheel.radius),
+                                  ("wheels.width", robot.wheel_width, wheel.width)):
+            if urdf is not None and abs(mine - urdf) > SIZE_TOLERANCE * urdf:
+                raise RobotFileError(f"{robot.path}: {field} ({wheel.link}): the file says {mine:g} m, the URDF's "
+                                     f"wheel cylinder {urdf:g} m")
+    return robot, description
+
+
+def wheel_inertia(description: RoverDescription) -> float:
+    """The wheels' smallest moment of inertia about their axle [kg·m²]."""
+    return min(float(w.axis @ w.inertial.inertia @ w.axis) for w in description.wheels)
+
+
+def driver_gains(description: RoverDescription, sim_dt: float | None = None) -> tuple[float, float]:
+    """(kp [N·m per rad/s], ki [N·m per rad]) by the rule: :data:`GAIN_RATIO` for the wheel's axial inertia at the
+    substep ``sim_dt`` (default :class:`~atrv_warp.sim.config.SimConfig`'s), ``ki = INTEGRAL_RATIO x kp``; three
+    significant figures."""
+    dt = SimConfig().sim_dt if sim_dt is None else sim_dt
+    kp = float(f"{GAIN_RATIO * wheel_inertia(description) / dt:.3g}")
+    return kp, float(f"{INTEGRAL_RATIO * kp:.3g}")
+
+
+@dataclass
+class RobotCheck:
+    """What :func:`measure_robot` measured."""
+
+    robot: str
+    title: str
+    mass: float
+    """[kg]"""
+    wheel_radius: float
+    """[m]"""
+    track: float
+    """Between the left and right wheels' contact centres [m]."""
+    wheelbase: float
+    """Between the front and rear wheel joints [m]."""
+    reach: float
+    """From the chassis' centre of mass to its farthest corner [m]."""
+    wheel_inertia: float
+    """[kg·m²]"""
+    gains: dict
+    """``{"kp", "ki"}`` by the rule (the file's are in ``file``)."""
+    effective_track_factor: float
+    """The median over the turns and frictions [-]."""
+    turns: list
+    """Each turn: command, µ, ``chi``."""
+    top_speed: float
+    """Under full torque on both sides at µ 0.8, the mean over the last half second of three [m/s]."""
+    steps: list
+    """Each ``/cmd_vel`` step: command, µ, ``settle`` [s], ``overshoot`` [-]."""
+    file: dict
+    """The file's own gains, factor and limits."""
+
+    def as_dict(self) -> dict:
+        from dataclasses import asdict
+
+        return asdict(self)
+
+
+def _turns(rover: RoverConfig, description: RoverDescription, frictions, seconds: float) -> list[dict]:
+    from atrv_warp.core.kinematics import track_width
+    from atrv_warp.sim.checks import turning_response
+    from atrv_warp.sim.driver import DriverConfig
+
+    r, track = rover.wheel_radius, track_width(description, rover)
+    driver = DriverConfig(wheel_radius=r, track_width=track, effective_track_factor=1.0)
+    rows = []
+    for mu in frictions:
+        for row in turning_response(TURN_COMMANDS, driver=driver, contact=ContactConfig(friction=mu), rover=rover,
+                                    seconds=seconds, average=min(4.0, seconds / 2)):
+            chi = r * (row["wheel_right"] - row["wheel_left"]) / (row["yaw_rate"] * track)
+            rows.append({"linear": row["linear"], "angular": row["angular"], "friction": mu, "chi": chi})
+    return rows
+
+
+def _top_speed(rover: RoverConfig, torque: float, seconds: float = 3.0) -> float:
+    """Full ``torque`` on both sides from rest at µ 0.8 for ``seconds``, from one end of the standard arena (Newton's
+    floating base keeps its velocity at the world origin: far from it, float32 rounding feeds a fast rover energy,
+    so the run stays in the arena): the mean speed over the last half second [m/s]."""
+    from atrv_warp.sim.simulator import RoverSim
+
+    sim = RoverSim(1, rover=rover, contact=ContactConfig(friction=0.8))
+    sim.reset(poses=[[-0.45 * sim.arena_cfg.size, 0.0, 0.0]])
+    dt = sim.sim_cfg.step_dt
+    speeds = []
+    for _ in range(round(seconds / dt)):
+        sim.set_commands(torch.tensor([[torque, torque]]))
+        sim.step()
+        speeds.append(float(sim.lin_vel[0, :2].norm()))
+    return statistics.fmean(speeds[-round(0.5 / dt):])
+
+
+def measure_robot(spec, *, frictions=TURN_FRICTIONS, turn_seconds: float = 15.0, step_seconds: float = 5.0,
+                  progress=None) -> RobotCheck:
+    """Check ``spec`` (:func:`check_robot`), then drive it: the effective track factor (steady turns through a
+    differential drive's wheel targets, :data:`TURN_COMMANDS` at each µ of ``frictions``; ``chi = r (w_right -
+    w_left) / (yaw rate x track)``, the median over all), the top speed under full torque, and the ``/cmd_vel``
+    step response of its driver with the rule's gains and the measured factor (:data:`STEP_CASES`, no limits; the
+    time after which the yaw rate stays within 10 % of the command to the end of ``step_seconds``). ``progress``:
+    called with a line before each part."""
+    from atrv_warp.core.kinematics import track_width
+    from atrv_warp.sim.checks import step_response
+    from atrv_warp.sim.driver import DriverConfig
+
+    say = progress or (lambda _line: None)
+    robot, description = check_robot(spec)
+    rover = RoverConfig(robot=robot.path)
+    kp, ki = driver_gains(description)
+    say("steady turns (effective track factor)")
+    turns = _turns(rover, description, frictions, turn_seconds)
+    say("full torque (top speed)")
+    top = _top_speed(rover, robot.torque_limit)
+    factor = statistics.median(t["chi"] for t in turns)
+    say("/cmd_vel steps (driver response)")
+    steps = step_response(STEP_CASES, frictions, seconds=step_seconds, rover=rover,
+                          driver=DriverConfig(kp=kp, ki=ki, effective_track_factor=round(factor, 2)))
+    xs = [float(w.origin[0, 3]) for w in description.wheels]
+    lim = robot.limits
+    return RobotCheck(
+        robot=robot.name, title=robot.title, mass=description.total_mass, wheel_radius=robot.wheel_radius,
+        track=track_width(description, rover), wheelbase=max(xs) - min(xs), reach=description.reach,
+        wheel_inertia=wheel_inertia(description), gains={"kp": kp, "ki": ki},
+        effective_track_factor=factor, turns=turns, top_speed=top,
+        steps=[{k: s[k] for k in ("linear", "angular", "friction", "settle", "overshoot")} for s in steps],
+        file={"kp": robot.kp, "ki": robot.ki, "effective_track_factor": robot.effective_track_factor,
+              "torque_limit": robot.torque_limit, "limits": {"linear_velocity": lim.linear_velocity,
+                                                             "angular_velocity": lim.angular_velocity}})

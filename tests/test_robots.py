@@ -1,0 +1,224 @@
+"""A robot is one file: the shipped robots load and check, a bad file is refused naming its field and the link or
+joint, a URDF in the ROS conventions becomes a robot file with ``python -m atrv_warp.robot new`` and drives."""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import pytest
+import torch
+
+from atrv_warp.core.robot import ROBOTS, RobotFileError, load_robot, robot_from_record, robot_record
+from atrv_warp.sim.config import RoverConfig, replace_checked
+
+ROBOTS_DIR = Path(__file__).resolve().parent.parent / "atrv_warp" / "robots"
+
+ROS_URDF = """<?xml version="1.0"?>
+<robot name="rosbot">
+  <link name="base_footprint"/>
+  <link name="base_link">
+    <inertial><origin xyz="0 0 0.05"/><mass value="12.0"/>
+      <inertia ixx="0.1" ixy="0" ixz="0" iyy="0.2" iyz="0" izz="0.25"/></inertial>
+    <collision><origin xyz="0 0 0.06"/><geometry><box size="0.5 0.3 0.12"/></geometry></collision>
+  </link>
+  <joint name="base_footprint_joint" type="fixed">
+    <parent link="base_footprint"/><child link="base_link"/><origin xyz="0 0 0.08"/>
+  </joint>
+  {wheels}
+  <link name="imu_link"/>
+  <joint name="imu_joint" type="fixed"><parent link="base_link"/><child link="imu_link"/><origin xyz="0 0 0.1"/></joint>
+  <link name="laser"/>
+  <joint name="laser_joint" type="fixed"><parent link="base_link"/><child link="laser"/>
+    <origin xyz="0.2 0 0.2" rpy="{laser_rpy}"/></joint>
+</robot>
+"""
+WHEEL = """
+  <link name="{name}_wheel"><inertial><mass value="0.8"/>
+      <inertia ixx="0.002" ixy="0" ixz="0" iyy="0.0036" iyz="0" izz="0.002"/></inertial>
+    <collision><origin rpy="1.5708 0 0"/><geometry><cylinder radius="0.1" length="0.05"/></geometry></collision>
+  </link>
+  <joint name="{name}_wheel_joint" type="continuous"><parent link="base_link"/><child link="{name}_wheel"/>
+    <origin xyz="{x} {y} 0.02"/><axis xyz="0 1 0"/></joint>"""
+
+
+def ros_urdf(folder: Path, *, sides=(1, -1), laser_rpy="0 0 0") -> Path:
+    """A URDF as ROS robots write them: base_footprint above base_link, wheel joints about +y, a laser ahead and up."""
+    wheels = "".join(WHEEL.format(name=f"{fr}_{'left' if s > 0 else 'right'}", x=0.15 if fr == "front" else -0.15,
+                                  y=0.2 * s) for fr in ("front", "rear") for s in sides)
+    path = folder / "rosbot.urdf"
+    path.write_text(ROS_URDF.format(wheels=wheels, laser_rpy=laser_rpy))
+    return path
+
+
+def test_three_robots_ship_and_check():
+    from atrv_warp.sim.robot_check import check_robot
+
+    assert set(ROBOTS) >= {"atrvjr", "jackal", "husky"}
+    for name in ROBOTS:
+        robot, description = check_robot(name)
+        assert robot.name == name and len(description.wheels) == 4
+        assert {w.side for w in description.wheels} == {0, 1}
+        for field in ("linear_velocity", "angular_velocity"):  # every limit cites where it comes from
+            assert f"limits.{field}" in robot.sources, (name, field)
+    jackal, husky = load_robot("jackal"), load_robot("husky")
+    assert (jackal.limits.linear_velocity, jackal.limits.angular_velocity) == (2.0, 4.0)
+    assert (husky.limits.linear_velocity, husky.limits.angular_velocity) == (1.0, 1.0)
+    assert load_robot("atrvjr").limits.linear_velocity == 0.5
+
+
+def test_a_rover_config_is_its_robots_unless_set():
+    assert RoverConfig().chassis_link == "center_link" and RoverConfig().wheel_radius == 0.125
+    jackal = RoverConfig(robot="jackal")
+    assert (jackal.chassis_link, jackal.wheel_radius, jackal.wheel_speed_limit) == ("chassis_link", 0.098, 40.0)
+    worn = RoverConfig(robot="jackal", wheel_radius=0.095, payload_mass=2.0)
+    assert worn.wheel_radius == 0.095
+    husky = replace_checked(worn, robot="husky")  # the new robot's values where it held the old one's
+    assert (husky.chassis_link, husky.wheel_radius, husky.payload_mass) == ("base_link", 0.095, 2.0)
+    assert replace_checked(jackal, robot="husky") == RoverConfig(robot="husky")
+
+
+def test_the_simulator_takes_the_robots_driver():
+    from atrv_warp.sim import RoverSim
+    from atrv_warp.sim.driver import DriverConfig
+
+    sim = RoverSim(1, robot="husky")
+    husky = load_robot("husky")
+    assert (sim.driver_cfg.kp, sim.driver_cfg.ki, sim.driver_cfg.torque_limit) == (husky.kp, husky.ki,
+                                                                                   husky.torque_limit)
+    assert sim.driver.kinematics.effective_track_factor == husky.effective_track_factor
+    assert RoverSim(1, robot="husky", driver=DriverConfig(kp=1.0)).driver_cfg.kp == 1.0
+    with pytest.raises(ValueError, match="differ"):
+        RoverSim(1, robot="husky", rover=RoverConfig(robot="jackal"))
+
+
+def test_the_gain_rule_gives_the_atrvjrs_tuned_gains():
+    from atrv_warp.sim.robot_check import check_robot, driver_gains
+
+    atrvjr = load_robot("atrvjr")
+    assert driver_gains(check_robot("atrvjr")[1]) == (atrvjr.kp, atrvjr.ki) == (3.0, 30.0)
+    for name in ("jackal", "husky"):
+        robot, description = check_robot(name)
+        assert driver_gains(description) == (robot.kp, robot.ki)
+
+
+def test_a_record_reads_back_as_the_robot():
+    for name in ROBOTS:
+        robot = load_robot(name)
+        assert robot_from_record(robot_record(robot), "a checkpoint") == robot
+
+
+def _copy(tmp_path: Path, name: str = "jackal") -> Path:
+    for suffix in (".toml", ".urdf"):
+        shutil.copy(ROBOTS_DIR / f"{name}{suffix}", tmp_path / f"{name}{suffix}")
+    return tmp_path / f"{name}.toml"
+
+
+@pytest.mark.parametrize(("edit", "message"), [
+    (lambda t: t.replace('title = "Clearpath Jackal J100"', 'title = "J"\ncolour = "yellow"'),
+     r"unknown field\(s\) \['colour'\]"),
+    (lambda t: t.replace("[motor]", "[motor]\npeak_torque = 3.0"), r"unknown field\(s\) \['motor.peak_torque'\]"),
+    (lambda t: t.replace("linear_velocity = 2.0\n", ""), "missing limits.linear_velocity"),
+    (lambda t: t.replace("kp = 0.369", "kp = -1.0"), "driver.kp must be > 0"),
+    (lambda t: t.replace('chassis = "chassis_link"', 'chassis = "body"'), r"links.chassis \(body\).*not found"),
+    (lambda t: t.replace('imu = "imu_0_link"', 'imu = "imu_link"'), r"links.imu \(imu_link\).*not found"),
+    (lambda t: t.replace("radius = 0.098", "radius = 0.12"),
+     r"wheels.radius \(front_left_wheel_link\): the file says 0.12 m, the URDF's wheel cylinder 0.098 m"),
+    (lambda t: t.replace('laser = "lidar2d_0_laser"', 'laser = "front_left_wheel_link"'),
+     r"links.laser \(front_left_wheel_link\): .*must be fixed to 'chassis_link'"),
+    (lambda t: t.replace("[links]", '[links]\nleft_wheels = ["front_left_wheel_link"]'),
+     "name the wheels of both sides, or neither"),
+])
+def test_a_bad_robot_file_names_its_field(tmp_path, edit, message):
+    from atrv_warp.sim.robot_check import check_robot
+
+    path = _copy(tmp_path)
+    path.write_text(edit(path.read_text()))
+    with pytest.raises(RobotFileError, match=message):
+        check_robot(path)
+
+
+def test_a_wheel_joint_about_the_wrong_axis_and_wheels_on_one_side_are_named(tmp_path):
+    from atrv_warp.sim.robot_check import check_robot
+
+    path = _copy(tmp_path)
+    urdf = tmp_path / "jackal.urdf"
+    text = urdf.read_text()
+    urdf.write_text(text.replace('<origin xyz="0.131 0.187795 0.0345" rpy="0 0 0"/>\n    <axis xyz="0 1 0"/>',
+                                 '<origin xyz="0.131 0.187795 0.0345" rpy="0 0 0"/>\n    <axis xyz="1 0 0"/>'))
+    path.write_text(path.read_text().replace("[links]", '[links]\nleft_wheels = ["front_left_wheel_link", '
+                                             '"rear_left_wheel_link"]\nright_wheels = ["front_right_wheel_link", '
+                                             '"rear_right_wheel_link"]'))
+    with pytest.raises(RobotFileError, match=r"links.left_wheels \(front_left_wheel_joint\): .*not lateral"):
+        check_robot(path)
+    urdf.write_text(text)
+    path.write_text(path.read_text().replace('right_wheels = ["front_right_wheel_link", "rear_right_wheel_link"]',
+                                             'right_wheels = ["rear_left_wheel_link"]'))
+    with pytest.raises(RobotFileError, match="on both sides"):
+        check_robot(path)
+
+
+def test_an_unknown_robot_lists_the_shipped_ones():
+    with pytest.raises(RobotFileError, match="unknown robot 'husk'; shipped robots: atrvjr, husky, jackal"):
+        load_robot("husk")
+    with pytest.raises(RobotFileError, match="robot file not found"):
+        load_robot("no/such/robot.toml")
+
+
+def test_a_ros_urdf_becomes_a_robot_that_drives(tmp_path, capsys):
+    """The newcomer's path: ``robot new`` on a URDF in the ROS conventions, the limits set, ``check --static``, and the
+    robot drives its limits through ``/cmd_vel``."""
+    from atrv_warp.robot import main
+    from atrv_warp.sim import RoverSim
+
+    urdf = ros_urdf(tmp_path)
+    assert main(["new", str(urdf), "--name", "rosbot"]) == 0
+    path = tmp_path / "rosbot.toml"
+    text = path.read_text()
+    assert 'chassis = "base_link"' in text and 'imu = "imu_link"' in text and 'laser = "laser"' in text
+    path.write_text(text.replace("linear_velocity = 1.0", "linear_velocity = 0.8"))
+    assert main(["check", str(path), "--static"]) == 0
+    assert "ok (rosbot: chassis base_link, 4 wheels" in capsys.readouterr().out
+    assert main(["new", str(urdf), "--name", "rosbot"]) == 2  # never overwrites without --force
+    robot = load_robot(path)
+    sim = RoverSim(2, robot=str(path))
+    sim.reset(poses=[[0.0, 0.0, 0.0], [0.0, 4.0, 0.0]])
+    twist = torch.tensor([[robot.limits.linear_velocity, 0.0], [0.0, robot.limits.angular_velocity]])
+    for _ in range(60):
+        sim.set_twist(twist)
+        sim.step()
+    assert sim.lin_vel[0, :2].norm() == pytest.approx(0.8, rel=0.1)
+    assert sim.ang_vel[1, 2] == pytest.approx(1.0, rel=0.15)
+    assert {f.name for f in sim.description.frames} >= {"base_footprint", "imu_link", "laser"}
+
+
+def test_a_turned_laser_or_imu_is_refused(tmp_path):
+    from atrv_warp.robot import starter_file
+    from atrv_warp.sim.robot_check import check_robot
+
+    urdf = ros_urdf(tmp_path, laser_rpy="3.14159 0 0")  # mounted upside down
+    path = tmp_path / "rosbot.toml"
+    path.write_text(starter_file(urdf, "rosbot"))
+    with pytest.raises(RobotFileError, match=r"links.laser \(laser\): the frame is turned 180.0 deg"):
+        check_robot(path)
+    one_side = ros_urdf(tmp_path, sides=(1,))
+    path.write_text(starter_file(one_side, "rosbot"))
+    with pytest.raises(RobotFileError, match="wheels on one side only"):
+        check_robot(path)
+
+
+def test_check_write_puts_the_measured_values_in_the_file(tmp_path):
+    from atrv_warp.robot import write_measured
+
+    path = _copy(tmp_path, "husky")
+    before = path.read_text()
+    report = {"gains": {"kp": 6.5, "ki": 65.0}, "effective_track_factor": 1.913, "wheel_inertia": 0.04411,
+              "turns": [{}] * 14, "file": {"kp": 6.78, "ki": 67.8, "effective_track_factor": 1.97}}
+    assert write_measured(path, report) == ["kp", "ki", "effective_track_factor"]
+    robot = load_robot(path)
+    assert (robot.kp, robot.ki, robot.effective_track_factor) == (6.5, 65.0, 1.91)
+    assert "measured by `python -m atrv_warp.robot check`" in robot.sources["driver.effective_track_factor"]
+    untouched = [line for line in before.splitlines() if not line.startswith(("kp", "ki", "effective", '"driver.'))]
+    assert all(line in path.read_text().splitlines() for line in untouched)
+    assert math.isclose(robot.limits.linear_velocity, 1.0)
