@@ -1,7 +1,7 @@
 """A PEP 517 build backend for ``atrv-deploy`` (``deploy/pyproject.toml``): the wheel of the deploy node alone.
 
 It packs :data:`FILES` from the repository's ``atrv_warp`` (the light core, the deploy node, the package's
-``__init__`` and console setup) with the metadata ``pyproject.toml`` declares. Only the standard library is used, so
+``__init__`` and console setup, the shipped robot files) with the metadata ``pyproject.toml`` declares. Only the standard library is used, so
 ``pip install ./deploy`` builds offline, in any virtualenv, with nothing to fetch for the build.
 """
 
@@ -20,7 +20,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE.parent / "atrv_warp"
-FILES = ("__init__.py", "runtime.py", "py.typed", "core/*.py", "deploy/*.py")
+FILES = ("__init__.py", "runtime.py", "py.typed", "core/*.py", "deploy/*.py", "robots/*.toml", "robots/*.urdf")
 """What the wheel holds, relative to ``atrv_warp/``."""
 TAG = "py3-none-any"
 

@@ -48,10 +48,15 @@ from __future__ import annotations
 import functools
 import math
 import os
-import tomllib
+import sys
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
+
+if sys.version_info >= (3, 11):  # noqa: UP036 (the slim install runs on 3.10)
+    import tomllib
+else:  # Python 3.10 (ROS 2 Humble's): the same parser from PyPI, which the slim install requires there
+    import tomli as tomllib
 
 __all__ = [
     "DEFAULT_ROBOT",
