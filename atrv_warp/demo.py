@@ -1,6 +1,6 @@
 """Drive the five reference driving modes side by side, one world each, and print what happened.
 
-Run: ``python -m atrv_warp.demo [--seconds 3] [--variant realistic]``
+Run: ``python -m atrv_warp.demo [--seconds 3] [--robot atrvjr] [--variant realistic]``
 """
 
 from __future__ import annotations
@@ -17,7 +17,9 @@ def build_parser() -> argparse.ArgumentParser:
     """The command line's parser (the docs' command table reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.demo", description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=3.0, help="driving time after 1 s of settling [s]")
-    parser.add_argument("--variant", default="realistic", help="rover variant: realistic | reference")
+    parser.add_argument("--robot", default=None, help="a shipped robot's name (atrvjr, jackal, husky) or a robot "
+                                                      "file's path (default: the ATRV-Jr)")
+    parser.add_argument("--variant", default="realistic", help="ATRV-Jr variant: realistic | reference")
     parser.add_argument("--device", default="cpu", help="Warp device, e.g. cpu or cuda:0")
     return parser
 
@@ -30,7 +32,11 @@ def main(argv: list[str] | None = None) -> int:
     modes = list(DriveMode)
     print(f"building {len(modes)} worlds (first run compiles Warp kernels, ~1 min on CPU) ...", flush=True)
     t0 = time.perf_counter()
-    sim = RoverSim(len(modes), variant=args.variant, device=args.device)
+    try:
+        sim = RoverSim(len(modes), robot=args.robot, variant=args.variant, device=args.device)
+    except ValueError as err:  # an unknown robot, a bad robot file or URDF
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     sim.step()
     print(f"ready in {time.perf_counter() - t0:.1f} s: {sim}")
     for _ in range(19):
@@ -48,7 +54,8 @@ def main(argv: list[str] | None = None) -> int:
         turned += (d + math.pi) % (2 * math.pi) - math.pi
         prev = sim.rpy[:, 2].clone()
     moved = sim.root_pose[:, :3] - start
-    print(f"\nafter {args.seconds:.1f} s in each mode ({args.variant} rover, rest height {sim.rest_height:.4f} m):")
+    rover = sim.rover_cfg.robot_spec.title + (f", {args.variant}" if args.variant != "realistic" else "")
+    print(f"\nafter {args.seconds:.1f} s in each mode ({rover}, rest height {sim.rest_height:.4f} m):")
     print(f"{'mode':13s} {'dx [m]':>8s} {'dy [m]':>8s} {'z [m]':>7s} {'yaw [deg]':>10s} {'speed [m/s]':>12s}")
     for i, mode in enumerate(modes):
         print(f"{mode.value:13s} {moved[i, 0].item():8.3f} {moved[i, 1].item():8.3f} "

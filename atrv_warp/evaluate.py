@@ -34,6 +34,7 @@ import argparse
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from atrv_warp.runtime import add_verbose_argument, device_summary, error_line, set_verbose
 
@@ -71,7 +72,8 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
                     episodes: int = 1000, seed: int | None = None, baseline: bool = False,
                     randomization: str = "none", friction: float | None = None, sim_config: str | None = None,
                     device: str = "cpu", attach: Callable | None = None, driver=None,
-                    task_module: str | None = None) -> Evaluation:
+                    task_module: str | None = None, robot: str | None = None,
+                    allow_other_robot: bool = False) -> Evaluation:
     """Run a policy once on each of the first ``episodes`` episodes of evaluation set ``seed``.
 
     Args:
@@ -91,6 +93,11 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
             or an accelerometer-aided odometry) that velocity actions go through, on either engine; the task's limits
             fill in those it leaves unset (default: the task's base).
         task_module: A Python file that registers a task of your own (loaded first; never from a policy file).
+        robot: The robot to run on (a shipped robot's name or a robot file's path); ``None``: the policy's own (the
+            one its file records; the ATRV-Jr for the baseline). A policy runs its recorded task, fitted to the robot
+            it was trained on, never today's declaration of it.
+        allow_other_robot: Run a policy on another robot than its own on purpose (a study); without it, that is
+            refused naming both.
 
     Raises:
         ValueError: One line naming the problem: an unknown engine, task or preset; a policy that cannot be loaded
@@ -114,15 +121,20 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
     if episodes < 1:
         raise ValueError(f"need at least 1 episode, got {episodes}")
     seed = EVAL_SEED if seed is None else seed
+    if robot is not None:
+        from atrv_warp.core.robot import load_robot
+
+        load_robot(robot)  # an unknown one is named, with the shipped ones
     if engine == "mujoco":
         return _evaluate_twin(policy, task=task, episodes=episodes, seed=seed, friction=friction,
-                              baseline=baseline, randomization=randomization, sim_config=sim_config, driver=driver)
+                              baseline=baseline, randomization=randomization, sim_config=sim_config, driver=driver,
+                              robot=robot, allow_other_robot=allow_other_robot)
     if friction is not None:
         raise ValueError("friction sets the MuJoCo twin's µ (engine mujoco); our simulator's comes from the rover "
                          "config or the randomization")
     return _evaluate_ours(policy, task=task, episodes=episodes, seed=seed, baseline=baseline,
                           randomization=randomization, sim_config=sim_config, device=device, attach=attach,
-                          driver=driver)
+                          driver=driver, robot=robot, allow_other_robot=allow_other_robot)
 
 
 def evaluate_around(policy: str | None = None, *, sim_config: str, randomization: str = "around",
@@ -152,22 +164,45 @@ def evaluate_around(policy: str | None = None, *, sim_config: str, randomization
 
 
 def _load(path: str, task: str | None):
-    """(policy module, trained-on task) of a saved policy, refused when it does not fit ``task``."""
-    from atrv_warp.policy import load_policy, policy_task
+    """(policy module, trained-on task name, :class:`~atrv_warp.policy.PolicyRecord`) of a saved policy, refused
+    when it does not fit ``task``."""
+    from atrv_warp.policy import load_policy, policy_record, policy_task
 
     try:
         trained_on = policy_task(path)
         # a policy that commands or observes another kind than the task's is refused first, naming both
         module = load_policy(path, task=task or trained_on)
+        record = policy_record(path)
     except (FileNotFoundError, ValueError) as err:  # FileFormatError is a ValueError
         raise ValueError(f"cannot load policy: {err}") from None
     if task is not None and task != trained_on:
         raise ValueError(f"{path} was trained on task {trained_on!r}, not {task!r}")
-    return module, trained_on
+    return module, trained_on, record
+
+
+def _robot_to_run(record, robot: str | None, allow: bool, source) -> tuple[str, str | None]:
+    """(the robot to build the environment on, a line to warn with) for a policy of ``record`` asked to run on
+    ``robot`` (``None``: its own)."""
+    from atrv_warp.core.robot import ROBOTS, load_robot
+    from atrv_warp.policy import PolicyRobotMismatch, check_policy_robot
+
+    if robot is None:
+        own = record.robot
+        if own.name in ROBOTS and load_robot(own.name) == own:
+            return own.name, None
+        if Path(own.path).is_file() and load_robot(own.path) == own:
+            return own.path, None
+        raise ValueError(f"{source} was trained on robot {own.name!r} ({own.title}), which is not a shipped robot "
+                         "(or has changed since): give its robot file with --robot FILE")
+    try:
+        warning = check_policy_robot(record, load_robot(robot), source=source, allow=allow)
+    except PolicyRobotMismatch as err:
+        raise ValueError(str(err)) from None
+    return robot, warning
 
 
 def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim_config, device, attach,
-                   driver) -> Evaluation:
+                   driver, robot=None, allow_other_robot=False) -> Evaluation:
     from atrv_warp.policy import SHIPPED_POLICIES
     from atrv_warp.task.evaluation import range_bins, run_episodes, success_by_bin
     from atrv_warp.task.randomization import AROUND_PRESETS, get_randomization
@@ -176,18 +211,25 @@ def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim
         from atrv_warp.sim.config import load_sim_config
 
         load_sim_config(sim_config)  # a bad file stops here, before the simulator is built
-    shift = get_randomization(randomization, sim_config=sim_config)  # `around` resolved against sim_config
     if baseline:
         from atrv_warp.task.baseline import scripted_policy
 
         task = task or "reach"
-        module, name = scripted_policy(), f"scripted baseline ({task})"
+        module, name, env_task = scripted_policy(), f"scripted baseline ({task})", task
     else:
         name = policy or (task if task in SHIPPED_POLICIES else "reach")  # the task's shipped policy
-        module, task = _load(name, task)
-    from atrv_warp.task.env import ATRVjrEnv
+        module, task, record = _load(name, task)
+        env_task = record.task  # the task it trained on, fitted to its robot: not today's declaration
+        robot, warning = _robot_to_run(record, robot, allow_other_robot, name)
+        if warning:
+            print(f"warning: {warning} (--allow-other-robot)", file=sys.stderr)
+    from atrv_warp.sim.config import nominal_rover_config
+    from atrv_warp.task.env import RoverEnv
 
-    env = ATRVjrEnv(episodes, device=device, task=task, randomization=shift, sim_config=sim_config, driver=driver)
+    # `around` resolved against sim_config; a preset fitted to the robot
+    shift = get_randomization(randomization, sim_config=sim_config, rover=nominal_rover_config(robot))
+    env = RoverEnv(episodes, device=device, task=env_task, randomization=shift, sim_config=sim_config,
+                   driver=driver, robot=robot)
     module = module.to(env.device)  # loaded on the CPU; the env's observations live on its device
     record = run_episodes(module, env, seed=seed, on_step=attach(env) if attach is not None else None)
     extra = {}
@@ -200,7 +242,7 @@ def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim
 
 
 def _evaluate_twin(policy, *, task, episodes, seed, friction, baseline, randomization, sim_config,
-                   driver) -> Evaluation:
+                   driver, robot=None, allow_other_robot=False) -> Evaluation:
     for option, given in (("baseline", baseline), ("randomization", randomization != "none"),
                           ("sim_config", sim_config)):
         if given:
@@ -215,12 +257,23 @@ def _evaluate_twin(policy, *, task, episodes, seed, friction, baseline, randomiz
         deployable = DeployablePolicy.load(name)
     except FileNotFoundError as err:
         raise ValueError(f"cannot load policy: {err}") from None
-    if task is not None and task != deployable.task:
-        raise ValueError(f"{name} was trained on task {deployable.task!r}, not {task!r}")
-    record = run_twin_episodes(deployable, draw_episodes(deployable.task, episodes, seed=seed), friction=friction,
-                               driver=driver)
+    trained_on = getattr(deployable.task, "name", deployable.task)
+    if task is not None and task != trained_on:
+        raise ValueError(f"{name} was trained on task {trained_on!r}, not {task!r}")
+    if robot is not None and robot != deployable.robot:
+        from atrv_warp.core.robot import load_robot
+
+        if load_robot(robot) != load_robot(deployable.robot):
+            line = f"policy {name} was trained on {deployable.robot} but this is {robot}"
+            if not allow_other_robot:
+                raise ValueError(f"{line}: evaluate it on its own robot, or pass --allow-other-robot")
+            print(f"warning: {line} (--allow-other-robot)", file=sys.stderr)
+    record = run_twin_episodes(deployable, draw_episodes(deployable.task, episodes, seed=seed,
+                                                         robot=robot or deployable.robot),
+                               friction=friction, driver=driver)
     mu = float(record.params["friction"][0])
-    return Evaluation(str(name), deployable.task, seed, "mujoco", record, {"engine": "mujoco", "friction": mu})
+    return Evaluation(str(name), trained_on, seed, "mujoco", record, {"engine": "mujoco", "friction": mu,
+                                                                     "robot": robot or deployable.robot})
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -236,6 +289,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--odometry-accel-time", type=float, default=None, metavar="S",
                         help="the base's fused odometry blends in the IMU's accelerometer with this time constant [s] "
                              "(DriverConfig.odometry_accel_time; default: the encoders alone)")
+    parser.add_argument("--robot", default=None,
+                        help="the robot to run on: a shipped robot's name or a robot file's path (default: the "
+                             "policy's own, as its file records; the ATRV-Jr for --baseline)")
+    parser.add_argument("--allow-other-robot", action="store_true",
+                        help="run a policy on another robot than its own on purpose (a study); refused without it")
     parser.add_argument("--episodes", type=int, default=1000, help="number of seeded episodes (one world each)")
     parser.add_argument("--seed", type=int, default=None, help="evaluation-set seed (default: the standard set)")
     parser.add_argument("--baseline", action="store_true", help="evaluate the scripted baseline instead")
@@ -354,7 +412,8 @@ def main(argv: list[str] | None = None) -> int:
     viewers = _Viewers(args)
     options = {"engine": args.engine, "task": args.task, "episodes": args.episodes, "seed": args.seed,
                "baseline": args.baseline, "friction": args.friction, "device": args.device, "attach": viewers,
-               "driver": driver, "task_module": args.task_module}
+               "driver": driver, "task_module": args.task_module, "robot": args.robot,
+               "allow_other_robot": args.allow_other_robot}
     on = None
     try:
         if around:  # the config's rover itself, then across the spread around it

@@ -61,6 +61,11 @@ def main(argv: list[str] | None = None) -> int:
                                                                strict=True))
     print(f"wrote {path}: {spec['observation_kind']} observation ({len(spec['observation'])},) -> {action['kind']} "
           f"action (2,) in [-1, 1] ({columns}); runs with torch alone (atrv_warp.core.files.load_exported_program checks it, then torch.export.load)")
+    robot = spec.get("robot")
+    if robot:
+        lim = robot["limits"]
+        print(f"trained on {robot['name']} ({robot['title']}), whose limits are {lim['linear_velocity']:g} m/s and "
+              f"{lim['angular_velocity']:g} rad/s; it controls at {spec['rate_hz']:g} Hz")
     if args.onnx:
         print(f"wrote {path.with_suffix('.onnx')}: checked with onnxruntime against the torch policy (< 1e-5)")
     return 0

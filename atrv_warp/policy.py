@@ -27,12 +27,18 @@ from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
 from atrv_warp.storage import FileFormatError, atomic_save, load_weights
 from atrv_warp.task.spec import ACTION_DIM, OBS_DIM, observation_fields
 
-__all__ = ["OLD_KINDS", "POLICY_FORMAT", "SHIPPED_POLICIES", "Normalize", "PolicyTaskMismatch", "ShippedPolicy",
-           "check_policy_task", "load_policy", "make_actor", "policy_kinds", "policy_path", "policy_payload",
-           "policy_task", "pretrained_nav_policy_path", "pretrained_policy_path", "save_policy", "shipped_policy_path"]
+__all__ = ["OLD_KINDS", "POLICY_FORMAT", "READ_FORMATS", "SHIPPED_POLICIES", "Normalize", "PolicyRecord",
+           "PolicyRobotMismatch", "PolicyTaskMismatch", "ShippedPolicy", "check_policy_robot", "check_policy_task",
+           "load_policy", "make_actor", "policy_kinds", "policy_path", "policy_payload", "policy_record",
+           "policy_task", "pretrained_nav_policy_path", "pretrained_policy_path", "run_record", "save_policy",
+           "shipped_policy_path"]
 
-POLICY_FORMAT = "atrv_warp.policy/1"
-"""Format tag of a saved policy (``save_policy``, and the ``policy`` entry of a training checkpoint)."""
+POLICY_FORMAT = "atrv_warp.policy/2"
+"""Format tag of a saved policy (``save_policy``, and the ``policy`` entry of a training checkpoint). 2: it records
+the task and the robot it was trained with, every field (``task_record``, ``robot``); a policy of format 1 (before
+issue 59) is read as what it was: its task as its module declared it then, on the ATRV-Jr."""
+READ_FORMATS = ("atrv_warp.policy/1", POLICY_FORMAT)
+"""The formats :func:`load_policy` reads."""
 
 OLD_KINDS = ("torque", "arena")
 """(action, observation) of a saved policy that records neither: every policy saved before twist actions and robot
@@ -69,6 +75,32 @@ navigation policy for a robot: ``/cmd_vel`` commands from the robot observation,
 
 class PolicyTaskMismatch(FileFormatError):
     """A saved policy commands or observes another kind than its task's (it cannot drive that task)."""
+
+
+class PolicyRobotMismatch(ValueError):
+    """A saved policy is asked to drive another robot than the one it was trained on."""
+
+
+@dataclass(frozen=True)
+class PolicyRecord:
+    """What a saved policy was trained with (:func:`policy_record`)."""
+
+    task: object
+    """The task (:class:`~atrv_warp.task.definition.Task`): the registered one's reward table and success test, with
+    the config the policy trained on, fitted to its robot."""
+    robot: object
+    """The robot (:class:`~atrv_warp.core.robot.Robot`), every field as it was."""
+    recorded: bool
+    """Whether the file records them (format 2), or they are what a format-1 file meant: the task as its module
+    declares it, on the ATRV-Jr."""
+
+
+def run_record(task, robot) -> dict:
+    """The ``task_record`` and ``robot`` entries a saved policy keeps (``task``: a
+    :class:`~atrv_warp.task.definition.Task`, fitted; ``robot``: a :class:`~atrv_warp.core.robot.Robot`)."""
+    from atrv_warp.core.robot import robot_record
+
+    return {"task_record": task.record(), "robot": robot_record(robot)}
 
 
 class Normalize(nn.Module):
@@ -114,17 +146,24 @@ def save_policy(actor: ProbabilisticActor, path: str | Path, *, width: int, dept
 
 
 def policy_payload(actor: ProbabilisticActor, *, width: int, depth: int, meta: dict | None = None,
-                   task=None) -> dict:
+                   task=None, record: dict | None = None) -> dict:
     """The saved form of a policy (``POLICY_FORMAT``), as :func:`load_policy` reads it: weights, sizes, ``meta``,
-    and the ``action`` and ``observation`` kinds of ``task`` (default: ``meta["task"]``, ``reach`` if absent)."""
-    from atrv_warp.task.config import get_task
+    the ``action`` and ``observation`` kinds of ``task`` (default: ``meta["task"]``, ``reach`` if absent), and
+    ``record`` (:func:`run_record`: the task and robot it trained with; default: ``task`` as declared, on the
+    ATRV-Jr)."""
+    from atrv_warp.core.robot import DEFAULT_ROBOT, load_robot
+    from atrv_warp.task.definition import Task
+    from atrv_warp.task.registry import resolve_task
 
     meta = meta or {}
-    config = get_task(task if task is not None else meta.get("task", "reach"))
+    resolved = task if isinstance(task, Task) else resolve_task(task if task is not None else meta.get("task", "reach"))
+    config = resolved.config
+    if record is None:
+        record = run_record(resolved, load_robot(DEFAULT_ROBOT))
     sd = {k: v.detach().cpu().clone() for k, v in actor.state_dict().items()}  # a copy: the actor trains on
     obs_dim = next(v.numel() for k, v in sd.items() if k.endswith("loc") and v.ndim == 1)
     return {"format": POLICY_FORMAT, "width": width, "depth": depth, "obs_dim": obs_dim, "state_dict": sd,
-            "meta": meta, "action": config.action, "observation": config.observation}
+            "meta": meta, "action": config.action, "observation": config.observation, **record}
 
 
 def _read(path: Path) -> dict:
@@ -136,6 +175,59 @@ def policy_task(path: str | Path) -> str:
     """The task a saved policy (a file or a shipped name) was trained on (``meta["task"]``; ``reach`` for older
     files)."""
     return str(_read(policy_path(path)).get("meta", {}).get("task", "reach"))
+
+
+def policy_record(path_or_payload) -> PolicyRecord:
+    """The task and robot a saved policy (a file, a shipped name, or a loaded payload) was trained with: as it records
+    them (format 2), or for a format-1 file what it meant (its task as the module declares it, on the ATRV-Jr).
+
+    Raises:
+        FileFormatError: a record that does not read back (named), or a task no longer registered.
+    """
+    from atrv_warp.core.robot import DEFAULT_ROBOT, RobotFileError, load_robot, robot_from_record
+    from atrv_warp.task.registry import resolve_task
+
+    if isinstance(path_or_payload, dict):
+        payload, where = path_or_payload, "the policy"
+    else:
+        where = str(policy_path(path_or_payload))
+        payload = _read(Path(where))
+    name = str(payload.get("meta", {}).get("task", "reach"))
+    registered = resolve_task(name)
+    if "task_record" not in payload:
+        import dataclasses
+
+        return PolicyRecord(dataclasses.replace(registered, robot=DEFAULT_ROBOT), load_robot(DEFAULT_ROBOT), False)
+    try:
+        robot = robot_from_record(payload["robot"], f"{where} (its robot record)")
+        fields = payload["task_record"]["config"]
+        config_class = type(registered.config)
+        config = config_class(**{k: tuple(tuple(x) if isinstance(x, list) else x for x in v) if isinstance(v, list)
+                                 else v for k, v in fields.items()})
+    except (RobotFileError, KeyError, TypeError, ValueError) as err:
+        raise FileFormatError(f"{where}: its task or robot record does not read back ({err})") from None
+    import dataclasses
+
+    task = dataclasses.replace(registered, config=config, robot=payload["task_record"].get("robot") or robot.name)
+    return PolicyRecord(task, robot, True)
+
+
+def check_policy_robot(record: PolicyRecord, robot, *, source, allow: bool = False) -> str | None:
+    """Refuse a policy trained on another robot than ``robot`` (a :class:`~atrv_warp.core.robot.Robot`), naming both;
+    with ``allow``, return the line to warn with instead. ``None`` where they are the same.
+
+    Raises:
+        PolicyRobotMismatch: e.g. ``policy nav_deploy_husky was trained on husky (Clearpath Husky A200) but this is
+            jackal (Clearpath Jackal J100)``.
+    """
+    if record.robot == robot:
+        return None
+    line = (f"policy {source} was trained on {record.robot.name} ({record.robot.title}) but this is {robot.name} "
+            f"({robot.title})")
+    if allow:
+        return line
+    raise PolicyRobotMismatch(f"{line}: evaluate or deploy it on its own robot, or pass the flag that allows another "
+                              "on purpose (--allow-other-robot)")
 
 
 def policy_kinds(path: str | Path) -> tuple[str, str]:
@@ -229,9 +321,9 @@ def load_policy(path: str | Path | None = None, *, deterministic: bool = True, t
     label = path if isinstance(path, str) and path in SHIPPED_POLICIES else None
     path = policy_path(path)
     payload = _read(path)  # a training checkpoint: its policy
-    if payload.get("format") != POLICY_FORMAT:
+    if payload.get("format") not in READ_FORMATS:
         raise FileFormatError(f"{path}: not an atrv_warp policy (format {payload.get('format')!r}, "
-                              f"expected {POLICY_FORMAT!r})")
+                              f"expected one of {list(READ_FORMATS)})")
     if task is not None:
         check_policy_task(payload, task, source=label or path)
         _check_observes(path, int(payload.get("obs_dim", OBS_DIM)), task)

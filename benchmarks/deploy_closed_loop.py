@@ -51,12 +51,12 @@ VERSION = 2
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SIM_PARAMETERS = ("task:=nav_deploy", "real_time_factor:=0.0", "lockstep:=true", "lockstep_timeout:=10.0",
-                  "publish_rate:=20.0", "scan_beams:=64", "scan_noise:=0.0", "scan_dropout:=0.0",
+                  "scan_beams:=64", "scan_noise:=0.0", "scan_dropout:=0.0",
                   "imu_accel_noise:=0.0", "imu_gyro_noise:=0.0", "wheel_speed_noise:=0.0", "tf:=false")
-"""The simulator node's parameters: the evaluation's sensors (no noise, the task's 64-beam scan), at the policy's
-20 Hz, in lockstep with the controller: a step without the node's answer (``unanswered``, after 10 s) would act on
-the held command and put the answers a step late for the rest of the episode."""
-DEPLOY_PARAMETERS = ("use_sim_time:=true", "odom_topic:=odometry/filtered", "time_limit:=30.0", "goal_tolerance:=0.0",
+"""The simulator node's parameters: the evaluation's sensors (no noise, the task's 64-beam scan), in lockstep with the
+controller (at the policy's rate: :func:`world_parameters`): a step without the node's answer (``unanswered``, after
+10 s) would act on the held command and put the answers a step late for the rest of the episode."""
+DEPLOY_PARAMETERS = ("use_sim_time:=true", "odom_topic:=odometry/filtered", "goal_tolerance:=0.0",
                      "odom_jump_margin:=1000.0")
 """The deploy node's: the simulator's clock, the fused odometry (encoders + gyro, what the robot observation is
 trained on), a time limit past the episode's (the simulator ends each episode first), no odometry-jump check (each
@@ -101,13 +101,14 @@ def resolve_policy(name: str) -> Path:
 def evaluate_episodes(path: Path, episodes: int, seed: int) -> tuple[list[dict], list[tuple[float, float]], float]:
     """Each episode's ``end_reason`` and ``steps`` under ``evaluate``, its goal (x, y) [m] in the world (= the
     odometry frame at its start), and the success rate with :class:`StopWithin` :data:`STOP_TOLERANCE`."""
-    from atrv_warp.policy import load_policy, policy_task
+    from atrv_warp.policy import load_policy, policy_record
     from atrv_warp.task.env import ATRVjrEnv
     from atrv_warp.task.evaluation import run_episodes
     from atrv_warp.task.spec import END_REASONS, observation_fields
 
-    task = policy_task(path)
-    env = ATRVjrEnv(episodes, task=task)
+    record = policy_record(path)
+    task = record.task.name
+    env = ATRVjrEnv(episodes, task=record.task, robot=robot_of(record))  # the task as it trained, on its robot
     env.set_seed(seed)
     env.reset()  # the episodes run_episodes draws again (it seeds and resets the same way)
     goals = [tuple(g) for g in env.target.tolist()]
@@ -201,19 +202,41 @@ def stop(proc: subprocess.Popen) -> int:
     return proc.returncode
 
 
+def robot_of(record) -> str:
+    """The robot a policy's record names: a shipped robot's name, else its file's path."""
+    from atrv_warp.core.robot import ROBOTS, load_robot
+
+    own = record.robot
+    return own.name if own.name in ROBOTS and load_robot(own.name) == own else own.path
+
+
+def world_parameters(path: Path) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(the simulator node's, the deploy node's) parameters that follow the policy at ``path``: the world runs the
+    task it records on its robot (``policy:=``), publishing at its control rate; the node's time limit is twice its
+    episode."""
+    from atrv_warp.policy import policy_record
+    from atrv_warp.sim.config import SimConfig
+
+    record = policy_record(path)
+    period = record.task.config.control_period or SimConfig().step_dt
+    episode = record.task.config.max_steps * period
+    return ((f"policy:={path}", f"robot:={robot_of(record)}", f"publish_rate:={1 / period:g}"),
+            (f"time_limit:={2 * episode:g}",))
+
+
 def ros_episodes(pt2: Path, goals: list[tuple[float, float]], seed: int, workdir: Path, timeout: float,
-                 trace: str | None = None) -> list[dict]:
+                 trace: str | None = None, world: tuple[tuple[str, ...], tuple[str, ...]] = ((), ())) -> list[dict]:
     """Each episode (of ``goals``) through ROS 2 (the simulator and the deploy node in their own processes, on
-    loopback); ``trace``: the node's trace file."""
+    loopback); ``trace``: the node's trace file; ``world``: :func:`world_parameters`."""
     import rclpy
 
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", str(random.randint(101, 200))), PYTHONUNBUFFERED="1")
     os.environ.update({k: env[k] for k in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID")})
     params = lambda ps: [a for p in ps for a in ("-p", p)]
-    sim = start(["-m", "atrv_warp.ros", "--ros-args", *params((*SIM_PARAMETERS, f"episode_seed:={seed}"))], env,
-                workdir / "sim.log")
-    deploy = (*DEPLOY_PARAMETERS, f"trace:={Path(trace).resolve()}") if trace else DEPLOY_PARAMETERS
+    sim = start(["-m", "atrv_warp.ros", "--ros-args", *params((*SIM_PARAMETERS, *world[0], f"episode_seed:={seed}"))],
+                env, workdir / "sim.log")
+    deploy = (*DEPLOY_PARAMETERS, *world[1], *((f"trace:={Path(trace).resolve()}",) if trace else ()))
     node = start(["-m", "atrv_warp.deploy", str(pt2), "--ros-args", *params(deploy)], env, workdir / "deploy.log")
     rclpy.init()
     driver = Driver()
@@ -278,7 +301,7 @@ def main() -> int:
     evaluated, goals, stopping = evaluate_episodes(path, args.episodes, seed)
     t1 = time.perf_counter()
     print(f"over ROS 2 (logs in {workdir}) ...", flush=True)
-    rows = ros_episodes(pt2, goals, seed, workdir, args.timeout, args.trace)
+    rows = ros_episodes(pt2, goals, seed, workdir, args.timeout, args.trace, world_parameters(path))
     t2 = time.perf_counter()
     for row, ev in zip(rows, evaluated, strict=True):
         row["evaluate_end_reason"], row["evaluate_steps"] = ev["end_reason"], ev["steps"]

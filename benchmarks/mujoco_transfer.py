@@ -87,7 +87,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"mujoco_transfer.py: error: the policies were trained on different tasks {sorted(tasks)}", file=sys.stderr)
         return 2
     task = tasks.pop()
-    episodes = draw_episodes(task, args.episodes, seed=seed)
+    robots = {p.robot for p in policies.values()}
+    if len(robots) != 1:
+        print(f"mujoco_transfer.py: error: the policies were trained on different robots {sorted(robots)}",
+              file=sys.stderr)
+        return 2
+    robot = robots.pop()
+    episodes = draw_episodes(task, args.episodes, seed=seed, robot=robot)
     from atrv_warp.sim.driver import DriverConfig
 
     try:
@@ -108,10 +114,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.ours and not path.endswith(".pt2"):  # our simulator runs the .pt (an exported file is for robots)
             from atrv_warp.evaluate import evaluate_policy
 
-            run = evaluate_policy(path, task=policy.task, episodes=args.episodes, seed=seed, driver=driver)
+            run = evaluate_policy(path, episodes=args.episodes, seed=seed, driver=driver)
             table[name]["ours (nominal µ 0.3)"] = r = rates(run.record)
             print(f"{name:16s} ours          " + " ".join(f"{k} {100 * r[k]:5.1f}%" for k in ENDS), flush=True)
-    result = {"task": task, "seed": seed, "episodes": args.episodes, "odometry": args.odometry,
+    result = {"task": getattr(task, "name", task), "robot": robot, "seed": seed, "episodes": args.episodes,
+              "odometry": args.odometry,
               "driver_wheel_radius": args.driver_wheel_radius, "driver_accel_time": args.driver_accel_time,
               "frictions": args.frictions, "policies": table}
     out = write_results(args.out, result, version=VERSION, task=True, driver=True,

@@ -157,7 +157,7 @@ def main() -> int:
     extra = dict(item.split("=", 1) for item in args.overrides)
 
     from atrv_warp.rl.config import load_train_config
-    from atrv_warp.task.env import ATRVjrEnv
+    from atrv_warp.task.env import RoverEnv
 
     if args.figure_only:
         if not args.figure:
@@ -183,9 +183,9 @@ def main() -> int:
         for r in runs:
             r["total_wall_s_including_final_eval"] = totals.get(r["seed"])
     else:
-        task = load_train_config(args.config, extra).env.task
+        env_cfg = load_train_config(args.config, extra).env
         t0 = time.perf_counter()
-        ATRVjrEnv(2, task=task).rollout(2)  # compiles (or loads) every kernel the run uses
+        RoverEnv(2, task=env_cfg.task, robot=env_cfg.robot).rollout(2)  # compiles (or loads) every kernel the run uses
         compile_s, minutes = time.perf_counter() - t0, args.minutes
         print(f"kernel compilation / cache load before the first seed: {compile_s:.1f} s", flush=True)
         runs = [_train_seed(args, f"bench_{out.stem}_seed{seed}", extra, seed) for seed in args.seeds]
@@ -199,11 +199,12 @@ def main() -> int:
     }
     cfg = load_train_config(args.config, extra)
     result = {"benchmark": "train_to_success", "preset": args.config, "algo": cfg.optim.algo, "task": cfg.env.task,
+              "robot": cfg.env.robot,
               "num_envs": cfg.env.num_envs, "eval_every_frames": args.eval_every, "threshold": args.threshold,
               "minutes_per_seed": minutes, "overrides": extra, "compile_s": compile_s,
               "summarized_from_kept_runs": args.summarize, "seeds": runs,
               "median": median, "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    write_results(out, result, version=VERSION, task=True)
+    write_results(out, result, version=VERSION, task=True, robots=(cfg.env.robot,))
     print(f"\n| seed | {100 * args.threshold:.0f} % after [s] | frames then | final success of the best policy | updates/s | frames/s |"
           "\n|---:|---:|---:|---:|---:|---:|")
     for r in runs:

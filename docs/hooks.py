@@ -911,7 +911,33 @@ def robot_limits() -> str:
                   ["---"] + ["---:"] * 4 + ["---"], rows)
 
 
+def task_fit() -> str:
+    """The ``nav_deploy`` task fitted to each shipped robot (:mod:`atrv_warp.task.scaling`), computed from the code."""
+    from atrv_warp.core.robot import ROBOTS
+    from atrv_warp.sim.config import RoverConfig
+    from atrv_warp.task.registry import resolve_task
+    from atrv_warp.task.scaling import fit_task
+
+    declared = resolve_task("nav_deploy")
+    rows = []
+    for name in ROBOTS:
+        c = fit_task(declared, RoverConfig(robot=name)).config
+        period = c.control_period or 0.05
+        acc = "-" if c.linear_max_acceleration is None else f"{c.linear_max_acceleration:g}"
+        rows.append([f"`{name}`", f"{c.max_linear:g} / {c.max_angular:g}", acc, f"{period:g} s ({1 / period:g} Hz)",
+                     f"{c.max_steps * period:g} s", f"{c.max_steps * period * c.max_linear:g} m",
+                     f"{c.reach_radius:g} / {c.clearance_radius:g} m", f"{c.action_scale:g} N·m"])
+    c = declared.config
+    rows.append(["as declared (before robots had files)", f"{c.max_linear:g} / {c.max_angular:g}",
+                 f"{c.linear_max_acceleration:g}", "0.05 s (20 Hz)", f"{c.max_steps * 0.05:g} s",
+                 f"{c.max_steps * 0.05 * c.max_linear:g} m", f"{c.reach_radius:g} / {c.clearance_radius:g} m",
+                 f"{c.action_scale:g} N·m"])
+    return _table(["robot", "action 1: m/s / rad/s", "a [m/s²]", "control period", "episode", "at full speed",
+                   "reach / clearance radius", "torque action 1"], ["---"] + ["---:"] * 7, rows)
+
+
 TABLES: dict[str, Callable[[], str]] = {
+    "task_fit": task_fit,
     "robot_check": robot_check,
     "robot_limits": robot_limits,
     "deploy_policy": deploy_policy,

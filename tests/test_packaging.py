@@ -32,7 +32,7 @@ EXTRA_USERS = {
     "ray": ("atrv_warp/rl/collectors.py", "atrv_warp/rl/ray_collector.py", "tests/test_ray.py", "benchmarks/ray_collection.py"),
     "mujoco": ("atrv_warp/integrations/mujoco/", "benchmarks/sim_vs_mujoco.py", "benchmarks/mujoco_twin/",
                "benchmarks/mujoco_agreement.py", "benchmarks/mujoco_transfer.py", "benchmarks/mujoco_turning_study.py",
-               "benchmarks/mujoco_odometry.py",
+               "benchmarks/mujoco_odometry.py", "benchmarks/robot_policies.py",
                "tests/test_mujoco_twin.py"),
 }
 SCANNED = ("atrv_warp", "tests", "benchmarks", "examples", "docs")
@@ -49,10 +49,19 @@ def declared(pyproject_text: str) -> tuple[set[str], dict[str, set[str]]]:
     return {_name(r) for r in project["dependencies"]}, extras
 
 
+def without_older_python_branches(tree: ast.AST) -> ast.AST:
+    """``tree`` less the ``else`` of each ``if sys.version_info >= ...`` (a fallback for Pythons this install does
+    not run on: ``tomli`` for ``tomllib`` on the slim install's 3.10, which ``deploy/pyproject.toml`` declares)."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "sys.version_info" in ast.unparse(node.test):
+            node.orelse = []
+    return tree
+
+
 def imported_modules(source: str) -> set[str]:
     """Top-level names of the absolute imports in ``source``, lazy ones (inside functions) included."""
     out = set()
-    for node in ast.walk(ast.parse(source)):
+    for node in ast.walk(without_older_python_branches(ast.parse(source))):
         if isinstance(node, ast.Import):
             out.update(alias.name.split(".")[0] for alias in node.names)
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:

@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 PUBLIC = [
     "DRIVE_MODE_TORQUES", "END_REASONS", "VARIANTS", "ATRVjrEnv", "ArenaConfig", "ContactConfig", "DiffRollout",
-    "DriveMode", "EndReason", "EnvFactory", "InertialOverride", "RoverConfig", "RoverSim", "SimBuffers", "SimConfig",
+    "DriveMode", "EndReason", "EnvFactory", "InertialOverride", "RoverConfig", "RoverEnv", "RoverSim", "SimBuffers", "SimConfig",
     "TaskConfig", "TrainConfig", "URDFError", "get_variant", "load_policy", "load_rover",
 ]
 

@@ -295,11 +295,12 @@ def test_an_exported_twist_policy_says_it_commands_a_twist():
 
     from atrv_warp.rl.export import contract
 
-    spec = contract(Path("p.pt"), {"task": "nav_deploy"})
+    spec = contract(Path("p.pt"), {"meta": {"task": "nav_deploy"}})  # a policy of format 1: the task as declared
     assert spec["action"]["kind"] == "twist" and spec["action"]["names"] == ["linear", "angular"]
-    assert spec["action"]["scale"] == [2.0, 2.0]
+    assert spec["action"]["scale"] == [2.0, 2.0] and spec["rate_hz"] == 20.0
+    assert spec["robot"]["name"] == "atrvjr" and not spec["robot"]["recorded"]
     assert [f["name"] for f in spec["observation"][:8]] == [f.name for f in ROBOT_OBSERVATION]
-    assert contract(Path("p.pt"), {"task": "nav"})["action"]["kind"] == "torque"
+    assert contract(Path("p.pt"), {"meta": {"task": "nav"}})["action"]["kind"] == "torque"
 
 
 def test_the_tasks_base_limits_fill_the_drivers_unset_ones():
@@ -316,7 +317,7 @@ def test_the_tasks_base_limits_fill_the_drivers_unset_ones():
 
     from atrv_warp.rl.export import contract
 
-    limits = contract(Path("p.pt"), {"task": "nav_deploy"})["action"]["base_limits"]
+    limits = contract(Path("p.pt"), {"meta": {"task": "nav_deploy"}})["action"]["base_limits"]
     assert limits == {"linear_max_acceleration": {"value": 1.0, "unit": "m/s²"}}
 
 

@@ -222,3 +222,93 @@ def test_check_write_puts_the_measured_values_in_the_file(tmp_path):
     untouched = [line for line in before.splitlines() if not line.startswith(("kp", "ki", "effective", '"driver.'))]
     assert all(line in path.read_text().splitlines() for line in untouched)
     assert math.isclose(robot.limits.linear_velocity, 1.0)
+
+
+@pytest.mark.parametrize(("robot", "linear", "angular", "period"), [
+    ("atrvjr", 0.5, 1.0, 0.2), ("jackal", 2.0, 4.0, 0.05), ("husky", 1.0, 1.0, 0.1)])
+def test_a_twist_task_is_fitted_to_the_robot(robot, linear, angular, period):
+    """Its action 1 is the robot's limits, its base the robot's accelerations, its period long enough that an episode
+    covers the distance it did at 2 m/s, its radii the margin they had over the ATRV-Jr's footprint."""
+    from atrv_warp.task.env import RoverEnv
+    from atrv_warp.task.registry import resolve_task
+    from atrv_warp.task.scaling import REFERENCE_FOOTPRINT, REFERENCE_SPEED, REFERENCE_STEP_DT
+
+    env = RoverEnv(1, robot=robot, task="nav_deploy", seed=0)
+    c, declared, lim = env.task_cfg, resolve_task("nav_deploy").config, load_robot(robot).limits
+    assert (c.max_linear, c.max_angular, c.control_period) == (linear, angular, pytest.approx(period))
+    assert (c.linear_max_acceleration, c.angular_max_acceleration) == (lim.linear_acceleration, lim.angular_acceleration)
+    assert env.sim.sim_cfg.step_dt == pytest.approx(period) and env.sim.driver_cfg.linear_max_acceleration == \
+        lim.linear_acceleration
+    reach = declared.max_steps * REFERENCE_STEP_DT * REFERENCE_SPEED  # metres an episode drove at 2 m/s
+    assert c.max_steps * c.control_period * c.max_linear == pytest.approx(reach)
+    from atrv_warp.task.scaling import footprint_radius
+
+    grow = footprint_radius(env.sim.description, env.sim.rover_cfg) - REFERENCE_FOOTPRINT
+    assert c.clearance_radius == pytest.approx(declared.clearance_radius + grow, abs=2e-3)
+    assert c.reach_radius == pytest.approx(declared.reach_radius + grow, abs=2e-3)
+
+
+def test_the_atrvjrs_torque_tasks_are_as_declared_and_others_take_their_torque():
+    from atrv_warp.task.env import RoverEnv
+    from atrv_warp.task.registry import resolve_task
+
+    for task in ("reach", "nav"):
+        env = RoverEnv(1, task=task)
+        assert env.task_cfg == resolve_task(task).config and env.sim.sim_cfg.step_dt == 0.05
+    assert RoverEnv(1, robot="husky", task="nav").task_cfg.action_scale == load_robot("husky").torque_limit
+    from atrv_warp.task.config import TaskConfig
+
+    given = TaskConfig(action_scale=7.0)  # a config given directly is used as it is, on any robot
+    assert RoverEnv(1, robot="husky", task=given).task_cfg == given
+
+
+def test_a_preset_randomization_follows_the_robots_size():
+    from atrv_warp.task.randomization import RANDOMIZATION_PRESETS, get_randomization
+
+    wide = RANDOMIZATION_PRESETS["wide"]
+    assert get_randomization("wide", rover=RoverConfig()) == wide
+    jackal = get_randomization("wide", rover=RoverConfig(robot="jackal"))
+    assert jackal.payload_mass.high == pytest.approx(wide.payload_mass.high * 18.432 / 58.0, rel=1e-3)
+    assert jackal.wheel_radius.low == pytest.approx(wide.wheel_radius.low * 0.098 / 0.125)
+    assert jackal.friction == wide.friction and jackal.latency == wide.latency
+
+
+def test_a_saved_policy_records_its_task_and_robot_and_export_reads_them(tmp_path):
+    """Export writes the contract from the policy's record, not from today's task: a Husky policy says 1 m/s at
+    10 Hz on the Husky, and a format-1 file is read as what it was."""
+    import dataclasses
+
+    from atrv_warp.policy import (
+        PolicyRobotMismatch,
+        check_policy_robot,
+        make_actor,
+        policy_payload,
+        policy_record,
+        run_record,
+    )
+    from atrv_warp.rl.export import contract
+    from atrv_warp.storage import atomic_save
+    from atrv_warp.task.env import RoverEnv
+
+    env = RoverEnv(1, robot="husky", task="nav_deploy")
+    actor = make_actor(16, 1, obs_dim=env.obs_dim)
+    payload = policy_payload(actor, width=16, depth=1, meta={"task": "nav_deploy"}, task=env.task,
+                             record=run_record(env.task, env.robot))
+    path = tmp_path / "husky.pt"
+    atomic_save(payload, path)
+    record = policy_record(path)
+    assert record.recorded and record.robot == load_robot("husky") and record.task.config == env.task_cfg
+    spec = contract(path, payload)
+    assert spec["robot"]["name"] == "husky" and spec["robot"]["limits"]["linear_velocity"] == 1.0
+    assert spec["action"]["scale"] == [1.0, 1.0] and spec["rate_hz"] == pytest.approx(10.0)
+    assert check_policy_robot(record, load_robot("husky"), source=path) is None
+    with pytest.raises(PolicyRobotMismatch, match=r"trained on husky \(Clearpath Husky A200\) but this is jackal"):
+        check_policy_robot(record, load_robot("jackal"), source=path)
+    assert "trained on husky" in check_policy_robot(record, load_robot("jackal"), source=path, allow=True)
+    # a task whose declared limits change later does not move the record
+    changed = dataclasses.replace(record.task.config, max_linear=9.0)
+    assert policy_record(path).task.config != changed
+    old = {k: v for k, v in payload.items() if k not in ("task_record", "robot")}  # format 1
+    old["format"] = "atrv_warp.policy/1"
+    was = policy_record(old)
+    assert not was.recorded and was.robot.name == "atrvjr" and was.task.config.max_linear == 2.0

@@ -4,7 +4,11 @@ their observations, rewards, reward terms and end reasons (``reach`` is pinned b
 actions are a policy's plus seeded noise, so that episodes end several ways (reached, timeouts; nav's collide too):
 the policies are frozen copies in ``tests/data`` (``golden_*_policy.pt``, the shipped ones of 2026-11-27), so that a
 retrained shipped policy does not move these files. Written by ``python tests/write_golden.py --tasks`` before the
-task refactor of issue 58; rewritten only where a task changes on purpose, and the commit says why."""
+task refactor of issue 58; rewritten only where a task changes on purpose, and the commit says why.
+
+They pin each task as its module declares it: the ATRV-Jr's configs before robots had files (issue 59). On the ATRV-Jr
+``nav_deploy`` is now fitted to its own limits (:mod:`atrv_warp.task.scaling`); the protocol runs the declared config
+(a task marked fitted already), so these files still hold the kernels to what they did."""
 
 from pathlib import Path
 
@@ -19,15 +23,19 @@ TASK_GOLDENS = {"nav": ("nav", None), "nav_deploy": ("nav_deploy", None),
 
 def task_rollout(task: str, randomization: str | None) -> dict[str, np.ndarray]:
     """The task golden protocol: 32 worlds, seed 7, 200 steps of the frozen policy plus seeded noise."""
+    import dataclasses
+
     import torch
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
     from atrv_warp.policy import load_policy
-    from atrv_warp.task.env import ATRVjrEnv
+    from atrv_warp.task.env import RoverEnv
+    from atrv_warp.task.registry import resolve_task
     from atrv_warp.task.spec import REWARD_TERMS
 
     policy = load_policy(DATA / f"golden_{task}_policy.pt", task=task)
-    env = ATRVjrEnv(32, seed=7, task=task, randomization=randomization, max_steps=100)
+    declared = dataclasses.replace(resolve_task(task), robot="atrvjr")  # as declared: not fitted again
+    env = RoverEnv(32, seed=7, task=declared, randomization=randomization, max_steps=100)
     td = env.reset()
     g = torch.Generator().manual_seed(1)
     out = {"observation": [], "reward": [], "end_reason": [], "reward_terms": []}

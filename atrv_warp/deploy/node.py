@@ -72,6 +72,14 @@ class DeployNode(Node):
             settings = Settings(**{f.name: p[f.name] for f in dataclasses.fields(Settings)})
         except ParameterError as err:
             self._fail(str(err))
+        trained_on = policy.robot or "atrvjr"
+        if p["robot"] and p["robot"] != trained_on:
+            line = (f"the policy was trained on {trained_on}, but this robot is {p['robot']} (robot:=): its limits, "
+                    "period and footprint are another robot's")
+            if not p["allow_other_robot"]:
+                self._fail(f"{line}; deploy one trained on {p['robot']}, or set allow_other_robot:=true on purpose")
+            self.log.warning(f"{line} (allow_other_robot:=true)")
+        self.log.info(policy.describe_robot())
         self.policy = policy
         self.controller = Controller(policy, settings)
         self.stamped = p["enable_stamped_cmd_vel"]

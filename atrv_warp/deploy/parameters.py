@@ -16,7 +16,7 @@ __all__ = ["PARAMETERS", "PARAMETER_BY_NAME", "Parameter", "ParameterError", "ch
            "params_files",
            "unknown_parameters"]
 
-KINDS = ("topic", "frame", "file", "switch", "number")
+KINDS = ("topic", "frame", "file", "name", "switch", "number")
 
 
 class ParameterError(ValueError):
@@ -33,7 +33,7 @@ class Parameter:
     """What it does (the ``--help`` line)."""
     kind: str
     """:data:`KINDS`: ``topic`` (a ROS topic name, relative or absolute), ``frame`` (a tf frame id), ``file`` (a path
-    to write, ``''`` = off), ``switch`` (``true`` | ``false``) or ``number``."""
+    to write, ``''`` = off), ``name`` (a word, ``''`` = none), ``switch`` (``true`` | ``false``) or ``number``."""
     unit: str = ""
     """The unit of a number (``m/s``)."""
     positive: bool = False
@@ -62,6 +62,8 @@ class Parameter:
             raise self._error(f"a {self.kind} name (it is empty)", value)
         if self.kind == "frame" and (value.strip() != value or " " in value or value.startswith("/")):
             raise self._error("a tf frame id without spaces or a leading '/' (e.g. odom)", value)
+        if self.kind == "name" and value and not value.replace("_", "").replace("-", "").isalnum():
+            raise self._error("a name of letters, digits, '_' and '-'", value)
         return value
 
     def _error(self, needs: str, value) -> ParameterError:
@@ -98,6 +100,11 @@ PARAMETERS = (
               "number", "s", positive=True),
     Parameter("time_limit", 60.0, "abort a goal not reached in this long, in ROS time [s]; 0 = no limit", "number",
               "s"),
+    Parameter("robot", "", "this robot's name, as its robot file names it (atrvjr, jackal, husky, or yours): a policy "
+              "trained on another robot is refused at start, naming both; '' = no check (the node logs the policy's "
+              "robot either way)", "name"),
+    Parameter("allow_other_robot", False, "run a policy trained on another robot than robot:= on purpose (a study)",
+              "switch"),
     Parameter("trace", "", "write every control period here as a JSON line (time, state, sensor stamps, observation, "
               "action, command): to compare the node's inputs with the simulator's step by step; an existing file is "
               "kept and a new name taken; '' = off", "file"),

@@ -8,8 +8,9 @@ Registered ids (importing this module registers them; ``gymnasium.make`` accepts
 - ``ATRVjrNav-v0``: the same on the navigation task (terrain, obstacles, the scan in the
   observation and the full scan in ``info["scan"]``).
 
-Both run on :class:`atrv_warp.task.env.ATRVjrEnv`; the episode limit (200 steps) is the task's own
-truncation, so no ``TimeLimit`` wrapper is added.
+Both run on :class:`atrv_warp.task.env.RoverEnv` and take its keywords: ``gymnasium.make("ATRVjr-v0",
+robot="jackal")`` drives the Jackal (a shipped robot's name or a robot file's path). The episode limit (200 steps) is
+the task's own truncation, so no ``TimeLimit`` wrapper is added.
 """
 
 from __future__ import annotations
@@ -23,12 +24,12 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from tensordict import TensorDict
 
-from atrv_warp.task.env import END_REASONS, ATRVjrEnv
+from atrv_warp.task.env import END_REASONS, RoverEnv
 
 __all__ = ["ATRVjrGymEnv", "ATRVjrVectorEnv"]
 
 
-def _spaces(env: ATRVjrEnv) -> tuple[spaces.Box, spaces.Box]:
+def _spaces(env: RoverEnv) -> tuple[spaces.Box, spaces.Box]:
     spec = env.observation_spec["observation"]
     obs = spaces.Box(spec.space.low[0].numpy(), spec.space.high[0].numpy(), dtype=np.float32)
     act = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
@@ -41,7 +42,7 @@ class ATRVjrGymEnv(gymnasium.Env):
     metadata: ClassVar[dict] = {"render_modes": []}
 
     def __init__(self, **env_kwargs):
-        self._env = ATRVjrEnv(1, **env_kwargs)
+        self._env = RoverEnv(1, **env_kwargs)
         self.observation_space, self.action_space = _spaces(self._env)
         self._started = False
 
@@ -73,7 +74,7 @@ class ATRVjrVectorEnv(VectorEnv):
     metadata: ClassVar[dict] = {"autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 1, **env_kwargs):
-        self._env = ATRVjrEnv(num_envs, **env_kwargs)
+        self._env = RoverEnv(num_envs, **env_kwargs)
         self.num_envs = num_envs
         self.single_observation_space, self.single_action_space = _spaces(self._env)
         self.observation_space = gymnasium.vector.utils.batch_space(self.single_observation_space, num_envs)

@@ -136,7 +136,8 @@ class Checkpoint:
         sync_folder(self.folder)
         payload = {**dataclasses.asdict(state), "rng": torch.get_rng_state(), "config": dataclasses.asdict(cfg),
                    "policy": policy_payload(actor, width=cfg.network.width, depth=cfg.network.depth,
-                                          meta={"frames": state.frames, "task": cfg.env.task}),
+                                          meta={"frames": state.frames, "task": cfg.env.task}, task=cfg.task(),
+                                          record=cfg.run_record()),
                    "save": {"generation": generation, "files": files, "logs": self._log_lengths()}}
         if learner is not None:
             payload.update(learner.state_dict())

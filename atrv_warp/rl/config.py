@@ -73,6 +73,10 @@ class RunConfig:
 class EnvConfig:
     """The training environments."""
 
+    robot: str = "atrvjr"
+    """The robot: a shipped robot's name (``atrvjr``, ``jackal``, ``husky``) or a robot file's path (docs/robots.md).
+    The task is fitted to it (its limits, a control period for its speed, radii for its footprint:
+    :mod:`atrv_warp.task.scaling`)."""
     task: str = "reach"
     """The task's name (:mod:`atrv_warp.task.registry`): ``reach`` (the reference), ``nav``, ``nav_deploy``, or one
     of yours (``task_module``). Its config's fields are set with ``env.task.<field>=VALUE`` (an ``[env.task]`` table
@@ -113,7 +117,7 @@ class EnvConfig:
 
         step_dt = SimConfig().step_dt
         kwargs = (("task", self.task), ("sim", SimConfig(sim_dt=step_dt / self.substeps)),
-                  ("randomization", self.randomization))
+                  ("randomization", self.randomization), ("robot", self.robot))
         if self.task_module:
             kwargs = (*kwargs, ("task_module", self.task_module))
         kwargs = (*kwargs, *task_field_values(self).items())
@@ -380,17 +384,28 @@ class TrainConfig:
 
     def task(self):
         """The run's task (:class:`~atrv_warp.task.definition.Task`): ``env.task`` (from ``env.task_module`` where
-        set), its config with ``env.task_fields`` applied.
+        set) fitted to ``env.robot``, its config with ``env.task_fields`` applied.
 
         Raises:
             ValueError: An unknown task, a field its config lacks, a bad value (named).
             FileNotFoundError: A missing ``task_module``.
         """
+        from atrv_warp.sim.config import nominal_rover_config
         from atrv_warp.task.registry import load_task_module, resolve_task
+        from atrv_warp.task.scaling import fit_task
 
         if self.env.task_module:
             load_task_module(self.env.task_module)
-        return resolve_task(self.env.task).with_config(**task_field_values(self.env))
+        rover = nominal_rover_config(self.env.robot)
+        return fit_task(resolve_task(self.env.task), rover).with_config(**task_field_values(self.env))
+
+    def run_record(self) -> dict:
+        """The task and the robot this run trains with, every field (:func:`atrv_warp.policy.run_record`): what its
+        saved policies and checkpoints keep, so that an export or an evaluation reads them, not today's code."""
+        from atrv_warp.core.robot import load_robot
+        from atrv_warp.policy import run_record
+
+        return run_record(self.task(), load_robot(self.env.robot))
 
     def randomization(self):
         """The training envs' randomization in absolute ranges
@@ -400,11 +415,13 @@ class TrainConfig:
             ValueError: One line naming the key (``randomization`` or ``eval_randomization``): an unknown preset, or
                 one centred on a ``sim_config`` that is missing or does not set a parameter it draws.
         """
+        from atrv_warp.sim.config import nominal_rover_config
         from atrv_warp.task.randomization import get_randomization
 
         def resolve(key: str):
             try:
-                return get_randomization(getattr(self.env, key), sim_config=self.env.sim_config or None)
+                return get_randomization(getattr(self.env, key), sim_config=self.env.sim_config or None,
+                                         rover=nominal_rover_config(self.env.robot))
             except ValueError as err:
                 raise ValueError(f"train config: {key}: {err}") from None
 

@@ -38,11 +38,10 @@ import torch
 from torch import nn
 
 from atrv_warp.core.files import ExportedFileError, load_exported_program
-from atrv_warp.policy import load_policy, policy_path
+from atrv_warp.policy import load_policy, policy_path, policy_record
 from atrv_warp.sim.config import SimConfig
 from atrv_warp.sim.scanner import ScannerConfig
 from atrv_warp.storage import FileFormatError
-from atrv_warp.task.config import get_task
 from atrv_warp.task.spec import ACTION_DIM, observation_fields, policy_contract
 
 __all__ = ["EXPORT_FORMAT", "PolicyNet", "contract", "export_onnx", "export_policy", "load_exported"]
@@ -65,34 +64,44 @@ class PolicyNet(nn.Module):
         return torch.tanh(loc)
 
 
-def contract(source: Path, meta: dict, sim: SimConfig | None = None) -> dict:
+def contract(source: Path, payload: dict, sim: SimConfig | None = None) -> dict:
     """What the exported program expects and gives, as plain values (the file's ``atrv_warp.json``, format 3).
 
     The task's part (:func:`atrv_warp.task.spec.policy_contract`): ``observation_kind`` and every observation field
     with low, high, unit and frame; the ``action``'s kind (``torque`` | ``twist``), its scale and units per column
     and the task's limits they come from (``action_scale`` [N·m], or ``max_linear`` [m/s] and ``max_angular``
     [rad/s]), and what a robot does with it; the scan's sectors; the action history. Added here: the format, the
-    source file, the policy's metadata, the control period (``step_dt`` [s], ``rate_hz``) and the scanner's
-    geometry (``beams``, ``fov_rad``, ``range_min_m``, ``range_max_m``, ``frame``).
-    :class:`atrv_warp.core.observation.RobotObservation` builds a robot policy's input from it.
+    source file, the policy's metadata, the ``robot`` it was trained on (name, title, limits, IMU and laser frames),
+    the control period (``step_dt`` [s], ``rate_hz``) and the scanner's geometry (``beams``, ``fov_rad``,
+    ``range_min_m``, ``range_max_m``, ``frame``). All of it from the task and robot the policy records
+    (:func:`atrv_warp.policy.policy_record`), never from today's code: a task's limits changed since do not enter an
+    old policy's contract. :class:`atrv_warp.core.observation.RobotObservation` builds a robot policy's input from it.
 
     Args:
         source: The policy file it was exported from.
-        meta: The policy's metadata (``meta["task"]``: the task it observes, ``reach`` if absent).
+        payload: The saved policy (:func:`atrv_warp.policy.policy_payload`'s form).
         sim: The simulator's settings it was trained at (default: :class:`~atrv_warp.sim.config.SimConfig`'s);
-            the control period is its ``step_dt``.
+            the control period is the task's ``control_period`` where it sets one, else its ``step_dt``.
     """
-    name = meta.get("task", "reach")
-    task, sim = get_task(name), sim or SimConfig()
+    record = policy_record(payload)
+    meta = payload.get("meta", {})
+    task, robot, sim = record.task.config, record.robot, sim or SimConfig()
     spec = policy_contract(task)
     if task.scan_beams:
         sc = ScannerConfig(beams=task.scan_beams, fov=task.scan_fov)
         spec["scan"] = {"beams": sc.beams, "fov_rad": sc.fov, "angles": "evenly spaced over fov, centred on the "
                         "scanner's +x, counter-clockwise (right to left), as sensor_msgs/LaserScan orders them",
-                        "frame": sc.frame, "range_min_m": sc.min_range, "range_max_m": sc.max_range,
-                        **(spec["scan"] or {"sectors": None})}
-    return {"format": EXPORT_FORMAT, "source": str(source), "policy_meta": meta, "task": name, **spec,
-            "step_dt": sim.step_dt, "rate_hz": 1.0 / sim.step_dt}
+                        "frame": sc.frame or robot.laser_frame, "range_min_m": sc.min_range,
+                        "range_max_m": sc.max_range, **(spec["scan"] or {"sectors": None})}
+    step_dt = task.control_period or sim.step_dt
+    lim = robot.limits
+    robot_part = {"name": robot.name, "title": robot.title, "imu_frame": robot.imu_frame,
+                  "laser_frame": robot.laser_frame, "recorded": record.recorded,
+                  "limits": {"linear_velocity": lim.linear_velocity, "angular_velocity": lim.angular_velocity,
+                             "linear_acceleration": lim.linear_acceleration,
+                             "angular_acceleration": lim.angular_acceleration}}
+    return {"format": EXPORT_FORMAT, "source": str(source), "policy_meta": meta, "task": record.task.name,
+            "robot": robot_part, **spec, "step_dt": step_dt, "rate_hz": 1.0 / step_dt}
 
 
 def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = False, force: bool = False) -> Path:
@@ -131,11 +140,11 @@ def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = Fa
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.stem}.tmp.pt2")  # atomic: written beside, then renamed
-    spec = json.dumps(contract(source, meta), default=str)
+    spec = json.dumps(contract(source, payload), default=str)
     torch.export.save(program, tmp, extra_files={"atrv_warp.json": spec})
     tmp.replace(out)
     if onnx:
-        export_onnx(net, out.with_suffix(".onnx"), spec, get_task(meta.get("task", "reach")))
+        export_onnx(net, out.with_suffix(".onnx"), spec, policy_record(payload).task.config)
     return out
 
 

@@ -22,6 +22,7 @@ from atrv_warp.rl.exploration import collection_policy
 from atrv_warp.rl.learner import ALGOS, annealed_lr, make_buffer, make_learner, make_run_actor, replay_frames, set_lr
 from atrv_warp.rl.reporting import Loggers, LossMeans, Progress, Stats, make_loggers, pct, plot_curve
 from atrv_warp.runtime import device_summary
+from atrv_warp.sim.config import SimConfig
 from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result
 
 __all__ = ["Evaluator", "TrainLoop", "train"]
@@ -59,6 +60,8 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     (run_dir / "config.toml").write_text(to_toml(cfg))
     # the task resolved: every field of its config and its reward table, as this run trains it
     (run_dir / "task.json").write_text(json.dumps(cfg.task().record(), indent=1, default=str) + "\n")
+    # the robot resolved: every field of its file, as this run trains on it (its saved policies keep the same)
+    (run_dir / "robot.json").write_text(json.dumps(cfg.run_record()["robot"], indent=1) + "\n")
     # what the envs draw, in absolute ranges: `around` resolved against the sim config, so a run says what it trained on
     (run_dir / "randomization.json").write_text(json.dumps(
         {"randomization": cfg.env.randomization, "eval_randomization": cfg.env.eval_randomization or None,
@@ -76,7 +79,11 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     budget = (f"{cfg.run.total_frames:,} frames or {cfg.run.max_minutes:g} min, whichever ends first"
               if cfg.run.max_minutes else f"{cfg.run.total_frames:,} frames, no time limit")
     print(f"run folder: {run_dir}  ({cfg.optim.algo}, {kind.describe(cfg)}, batch {cfg.frames_per_batch} frames, "
-          f"{cfg.env.substeps} substeps per step; budget {budget})")
+          f"solver substep {SimConfig().step_dt / cfg.env.substeps:.4g} s; budget {budget})")
+    task_cfg = cfg.task().config
+    speeds = f" at {task_cfg.max_linear:g} m/s, {task_cfg.max_angular:g} rad/s" if task_cfg.action == "twist" else ""
+    period = task_cfg.control_period or 0.05
+    print(f"robot {cfg.env.robot}, task {cfg.env.task}{speeds}, controlled every {period:g} s")
     print(device_summary("cpu"))
     loop = TrainLoop(cfg, state, actor, normalize, buffer, learner, loggers, evaluator, checkpoint, run_dir,
                      policy=policy)
@@ -239,7 +246,8 @@ class TrainLoop:
                 self.log(name, value)
             self.evaluator.submit(st.frames, policy_payload(self.actor, width=cfg.network.width,
                                                             depth=cfg.network.depth,
-                                                            meta={"frames": st.frames, "task": cfg.env.task}))
+                                                            meta={"frames": st.frames, "task": cfg.env.task},
+                                                            task=cfg.task(), record=cfg.run_record()))
             self.record(self.evaluator.poll())  # in the trainer, ready now; in the background, later
         else:
             self.progress.log(self.point.format(pct(math.nan)))

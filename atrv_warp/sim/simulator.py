@@ -50,7 +50,7 @@ from atrv_warp.sim.params import (
 from atrv_warp.sim.terrain import HeightGrid, TerrainConfig, get_terrain
 from atrv_warp.sim.urdf import load_rover
 
-__all__ = ["DRIVE_MODE_TORQUES", "DriveMode", "RoverSim", "SimBuffers"]
+__all__ = ["DRIVE_MODE_REFERENCE_TORQUE", "DRIVE_MODE_TORQUES", "DriveMode", "RoverSim", "SimBuffers"]
 
 
 class DriveMode(str, Enum):
@@ -70,7 +70,10 @@ DRIVE_MODE_TORQUES: dict[DriveMode, tuple[float, float]] = {
     DriveMode.ROTATE_RIGHT: (5.0, -5.0),
     DriveMode.ROTATE_LEFT: (-5.0, 5.0),
 }
-"""(left, right) wheel torque [N·m] of each mode."""
+"""(left, right) wheel torque [N·m] of each mode, on the ATRV-Jr (the reference tutorial's): another robot's are the same
+share of its motors' torque limit (:data:`DRIVE_MODE_REFERENCE_TORQUE` is the ATRV-Jr's)."""
+DRIVE_MODE_REFERENCE_TORQUE = 20.0
+"""[N·m] The ATRV-Jr's torque limit, which :data:`DRIVE_MODE_TORQUES` are shares of."""
 
 
 def _as_world_mask(mask, num_worlds: int) -> np.ndarray:
@@ -566,12 +569,15 @@ class RoverSim:
         return c
 
     def set_mode(self, mode: DriveMode | str, worlds=None) -> None:
-        """Apply a fixed-torque driving mode to all worlds, or to the masked/indexed ``worlds``."""
+        """Apply a fixed-torque driving mode to all worlds, or to the masked/indexed ``worlds`` (the ATRV-Jr's torques
+        of :data:`DRIVE_MODE_TORQUES`, as the same share of this robot's torque limit)."""
         try:
             mode = DriveMode(mode)
         except ValueError:
             raise ValueError(f"unknown driving mode {mode!r}; known: {[m.value for m in DriveMode]}") from None
-        self.set_commands(DRIVE_MODE_TORQUES[mode], worlds)
+        share = self.rover_cfg.robot_spec.torque_limit / DRIVE_MODE_REFERENCE_TORQUE
+        left, right = DRIVE_MODE_TORQUES[mode]
+        self.set_commands((left * share, right * share) if share != 1.0 else (left, right), worlds)
 
     def reset(self, mask=None, poses=None, *, height: float | None = None) -> None:
         """Re-pose the selected worlds at rest, level, wheels still; others are untouched.

@@ -49,29 +49,31 @@ class TaskConfig:
     or its delay."""
     clearance_radius: float = 1.0
     """Distance from the chassis origin [m] inside which an obstacle costs: the ATRV-Jr's footprint reaches 0.43 m
-    from it at the wheels' outer corners, so 1 m keeps a margin of about 0.6 m."""
+    from it at the wheels' outer corners, so 1 m keeps a margin of about 0.6 m (on another robot, the same margin
+    over its footprint: :mod:`atrv_warp.task.scaling`)."""
     action_scale: float = 20.0
-    """Wheel torque per unit action [N·m] (``action="torque"``)."""
+    """Wheel torque per unit action [N·m] (``action="torque"``). On a robot, its motor's torque limit (the ATRV-Jr's
+    20 N·m)."""
     action: str = "torque"
     """What the policy commands (:data:`atrv_warp.task.spec.ACTIONS`): ``"torque"``, each side's wheel torque (the
     reference), or ``"twist"``, a ``/cmd_vel`` (forward speed, yaw rate) through the base's motor driver."""
     max_linear: float = 2.0
-    """Forward speed at action 1 [m/s] (``action="twist"``): the Jackal J100's ``diff_drive_controller`` limit. The
-    model's motors give full torque up to 80 % of their 50 rad/s no-load speed (5 m/s at the rim), so traction
-    and the task bound the speed, not the motors; the torque nav policy peaks near 3 m/s. The Husky A200's 1 m/s
-    (and the ATRV-Jr's Nav2 0.5 m/s) leave a 15 s nav episode no time to drive around its obstacle: a policy
-    trained at 1 m/s had not reached a goal after 200,000 frames."""
+    """Forward speed at action 1 [m/s] (``action="twist"``). On a robot, its own ``linear.x.max_velocity``
+    (:mod:`atrv_warp.task.scaling`); 2 m/s is the speed the twist tasks were shaped at (the Jackal J100's limit)."""
     max_angular: float = 2.0
-    """Yaw rate at action 1 [rad/s] (``action="twist"``): half the Jackal J100's 4 rad/s; the model turns in place at
-    up to about 4 rad/s under torque control (the torque nav policy's peaks)."""
+    """Yaw rate at action 1 [rad/s] (``action="twist"``). On a robot, its own ``angular.z.max_velocity``."""
     linear_max_acceleration: float | None = None
     """The base's ``linear.x.max_acceleration`` [m/s²] (``action="twist"``; ``None``: no limit): the task's
     :class:`~atrv_warp.sim.driver.DriverConfig` takes it where its own is unset (:meth:`driver`), and an exported
     policy's contract carries it for the robot's base. Without it the driver meets a full-speed command with its
-    full torque: the wheels spin, and the encoders' distance runs ahead of the rover's (``nav_deploy``: 1.0, the
-    Husky A200's; docs/tasks.md)."""
+    full torque: the wheels spin, and the encoders' distance runs ahead of the rover's (docs/tasks.md). On a robot,
+    its own (:mod:`atrv_warp.task.scaling`)."""
     angular_max_acceleration: float | None = None
     """The base's ``angular.z.max_acceleration`` [rad/s²] (``None``: no limit), as ``linear_max_acceleration``."""
+    control_period: float | None = None
+    """The control period [s]: one step of the environment (``None``: the simulator's ``step_dt``, 0.05 s). The rule
+    that fits a task to its robot (:mod:`atrv_warp.task.scaling`) sets it for a twist task on a robot slower than
+    2 m/s, so that a step covers the same distance."""
     observation: str = "arena"
     """What the policy observes (:data:`atrv_warp.task.spec.OBSERVATION_KINDS`): ``"arena"``, positions and
     velocities in the arena's frame (the reference), or ``"robot"``, only what a robot's stack publishes (goal from
@@ -120,6 +122,11 @@ class TaskConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"TaskConfig.{name} must be a finite number > 0, got {value!r}")
+        if self.control_period is not None and not (isinstance(self.control_period, int | float)
+                                                    and not isinstance(self.control_period, bool)
+                                                    and math.isfinite(self.control_period) and self.control_period > 0):
+            raise ValueError(f"TaskConfig.control_period must be a finite number > 0 [s] or None, got "
+                             f"{self.control_period!r}")
         if self.scan_sectors and (self.scan_beams % self.scan_sectors or self.scan_sectors < 0):
             raise ValueError(f"scan_beams={self.scan_beams} must be a multiple of scan_sectors={self.scan_sectors}")
         if self.obstacles_on_path > self.obstacles or self.obstacles < 0:

@@ -86,6 +86,14 @@ class Task:
     description: str = ""
     source: str = ""
     """Where it was declared (a module's file)."""
+    scale: Callable | None = None
+    """How the task follows the robot it runs on: ``(config, robot, footprint) -> config`` (a
+    :class:`~atrv_warp.core.robot.Robot`, its footprint radius [m]); ``None``: the shipped rule,
+    :func:`atrv_warp.task.scaling.scale_to_robot` (the robot's limits and torque, a control period for its speed, radii
+    for its footprint). A task that must not change with the robot passes ``lambda config, robot, footprint:
+    config``."""
+    robot: str | None = None
+    """The robot the config was fitted to (:meth:`for_robot`), or ``None``: as declared."""
 
     def __post_init__(self):
         names = [t.name for t in self.terms]
@@ -102,7 +110,7 @@ class Task:
         """The task as plain values (JSON-ready): its name, description and source, every config field, and its
         reward table (each term's name, weight field and value, when it counts, what it reads) and success test."""
         config = {f.name: getattr(self.config, f.name) for f in dataclasses.fields(self.config)}
-        return {"name": self.name, "description": self.description, "source": self.source,
+        return {"name": self.name, "description": self.description, "source": self.source, "robot": self.robot,
                 "config_class": f"{type(self.config).__module__}.{type(self.config).__qualname__}", "config": config,
                 "terms": [{"name": t.name, "weight_field": t.weight, "weight": t.weight_of(self.config),
                            "when": t.when, "reads": list(t.reads), "function": getattr(t.warp, "key", str(t.warp))}
@@ -113,6 +121,16 @@ class Task:
     def term_names(self) -> tuple[str, ...]:
         """The reward terms' names, in column order."""
         return tuple(t.name for t in self.terms)
+
+    def for_robot(self, robot, footprint: float) -> Task:
+        """This task fitted to ``robot`` (a :class:`~atrv_warp.core.robot.Robot`, whose footprint radius is
+        ``footprint`` [m]) by :attr:`scale`; a task fitted already is returned as it is."""
+        if self.robot is not None:
+            return self
+        from atrv_warp.task.scaling import scale_to_robot
+
+        config = (self.scale or scale_to_robot)(self.config, robot, footprint)
+        return dataclasses.replace(self, config=config, robot=robot.name)
 
     def with_config(self, **changes) -> Task:
         """This task with config fields changed (checked by name: an unknown one is a ``ValueError`` naming the known

@@ -38,7 +38,7 @@ from atrv_warp.sim.config import (
     ObstacleConfig,
     RoverConfig,
     SimConfig,
-    get_variant,
+    nominal_rover_config,
 )
 from atrv_warp.sim.driver import DRIVE_TWIST, DriverConfig
 from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
@@ -75,6 +75,7 @@ from atrv_warp.task.randomization_kernels import (
     draw_physics,
 )
 from atrv_warp.task.registry import load_task_module, resolve_task
+from atrv_warp.task.scaling import fit_task
 from atrv_warp.task.spec import (
     ACTION_DIM,
     ACTIONS,
@@ -87,7 +88,7 @@ from atrv_warp.task.spec import (
     scan_sectors,
 )
 
-__all__ = ["END_REASONS", "OBSERVATION_NAMES", "SNAPSHOT_FORMAT", "ATRVjrEnv", "EnvFactory"]
+__all__ = ["END_REASONS", "OBSERVATION_NAMES", "SNAPSHOT_FORMAT", "ATRVjrEnv", "EnvFactory", "RoverEnv"]
 
 SNAPSHOT_FORMAT = 3
 """Version of :meth:`ATRVjrEnv.state_dict`'s snapshot (3: everything the next step reads, restored bit for bit, the
@@ -102,18 +103,23 @@ def _torch_device(device: wp.context.Device) -> torch.device:
     return torch.device("cpu") if device.is_cpu else torch.device(f"cuda:{device.ordinal}")
 
 
-class ATRVjrEnv(EnvBase):
-    """N skid-steer rovers learning to drive to a target (the reference RL task).
+class RoverEnv(EnvBase):
+    """N skid-steer rovers learning to drive to a target (the reference RL task), on any robot
+    (:class:`ATRVjrEnv`, its name before robots had files, is this class).
 
     Args:
         num_envs: Number of worlds (the batch size).
         device: ``"cpu"`` (default) or a CUDA device; the simulator runs there.
         seed: Seed of the per-world reset streams (and the scanner's noise); ``None`` leaves seed 0.
-        variant: Registered rover variant.
+        robot: A shipped robot's name (``"atrvjr"``, ``"jackal"``, ``"husky"``) or a robot file's path; ``None``:
+            ``rover``'s robot, else the ATRV-Jr. The task is fitted to it (:meth:`Task.for_robot
+            <atrv_warp.task.definition.Task.for_robot>`: its limits, a control period for its speed, radii for its
+            footprint) and so is a randomization preset (:func:`~atrv_warp.task.randomization.scale_preset`).
+        variant: Registered ATRV-Jr variant.
         task: A registered task's name (``"reach"``, the default, ``"nav"``, ``"nav_deploy"``, or one of yours:
             :mod:`atrv_warp.task.registry`), a :class:`~atrv_warp.task.definition.Task`, or a :class:`TaskConfig`
-            (the shipped reward table, weighted by its fields); keyword overrides of its config via
-            ``**task_overrides``.
+            (the shipped reward table, weighted by its fields; taken as it is, not fitted to the robot); keyword
+            overrides of its config via ``**task_overrides`` (after the fit).
         task_module: A Python file that registers tasks of your own (:func:`~atrv_warp.task.registry.load_task_module`),
             loaded before ``task`` is looked up (so that a collector's worker process finds it too).
         rover: Rover configuration (see :class:`RoverSim`).
@@ -142,6 +148,7 @@ class ATRVjrEnv(EnvBase):
         *,
         device: str = "cpu",
         seed: int | None = None,
+        robot: str | None = None,
         variant: str = "realistic",
         task: Task | TaskConfig | str | None = None,
         task_module: str | None = None,
@@ -156,10 +163,15 @@ class ATRVjrEnv(EnvBase):
     ):
         if task_module:
             load_task_module(task_module)
-        self.task = resolve_task(task).with_config(**task_overrides)
-        """The task (:class:`~atrv_warp.task.definition.Task`): its config, reward table, success test."""
+        rover = nominal_rover_config(robot, variant, rover)
+        self.robot = rover.robot_spec
+        """The robot (:class:`~atrv_warp.core.robot.Robot`)."""
+        self.task = fit_task(resolve_task(task), rover).with_config(**task_overrides)
+        """The task (:class:`~atrv_warp.task.definition.Task`) fitted to the robot: its config, reward table, success
+        test."""
         self.task_cfg = c = self.task.config
-        rover = rover or get_variant(variant)
+        if c.control_period is not None:
+            sim = dataclasses.replace(sim or SimConfig(), step_dt=c.control_period)
         self.randomization = get_randomization(randomization, sim_config=sim_config, rover=rover, contact=contact)
         """What each world randomizes (:class:`~atrv_warp.task.randomization.RandomizationConfig`), in absolute
         ranges (one centred on ``sim_config``, resolved)."""
@@ -700,7 +712,8 @@ class ATRVjrEnv(EnvBase):
         return super().load_state_dict(state_dict, strict=strict, assign=assign)
 
     def __repr__(self) -> str:
-        return (f"ATRVjrEnv(num_envs={self.num_envs}, device={self.device}, terrain={self.task_cfg.terrain!r}, "
+        return (f"RoverEnv(robot={self.robot.name!r}, num_envs={self.num_envs}, device={self.device}, "
+                f"task={self.task.name!r}, terrain={self.task_cfg.terrain!r}, "
                 f"randomized={self.randomization.enabled}, "
                 f"obstacles={self.task_cfg.obstacles}, scan_beams={self.task_cfg.scan_beams}, "
                 f"urdf={self.sim.description.path!r})")
@@ -718,12 +731,15 @@ class EnvFactory:
     seed: int | None = None
     core: int | None = None
     env_kwargs: tuple[tuple[str, object], ...] = ()
-    """Keyword arguments of :class:`ATRVjrEnv` as (name, value) pairs (a field called ``kwargs`` would be
+    """Keyword arguments of :class:`RoverEnv` as (name, value) pairs (a field called ``kwargs`` would be
     taken by TorchRL's collectors for their own)."""
 
-    def __call__(self) -> ATRVjrEnv:
+    def __call__(self) -> RoverEnv:
         if self.core is not None:
             pin_to_core(self.core)  # of the run's cores, not of the one the trainer pinned itself to
         torch.set_num_threads(1)
-        return ATRVjrEnv(self.num_envs, seed=self.seed, **dict(self.env_kwargs))
+        return RoverEnv(self.num_envs, seed=self.seed, **dict(self.env_kwargs))
 
+
+ATRVjrEnv = RoverEnv
+"""The environment's name before robots had files (issue 59): :class:`RoverEnv`, on the ATRV-Jr by default."""

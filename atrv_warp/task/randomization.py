@@ -36,6 +36,7 @@ __all__ = [
     "get_randomization",
     "randomization_names",
     "resolve_around",
+    "scale_preset",
 ]
 
 DRAW_MODES = ("startup", "reset", "interval")
@@ -197,6 +198,29 @@ by up to 1.5 times that slip again (:attr:`RandomizationConfig.odometry_slip_gai
 draw happens on reset."""
 
 
+def scale_preset(config: RandomizationConfig, rover: RoverConfig) -> RandomizationConfig:
+    """A preset (written for the ATRV-Jr, :data:`RANDOMIZATION_PRESETS`) for ``rover``'s robot: its payload in
+    proportion to the robot's mass, its payload offset to its footprint, its motors' no-load speed and its wheel
+    radius to the robot's own; the ATRV-Jr's preset as it is. The other draws (friction, torque scale, stiffness,
+    latency, noise, odometry) are relative or the ground's already."""
+    from atrv_warp.core.robot import DEFAULT_ROBOT, load_robot
+
+    if rover.robot_spec == load_robot(DEFAULT_ROBOT):
+        return config
+    from atrv_warp.sim.urdf import load_rover
+    from atrv_warp.task.scaling import REFERENCE_FOOTPRINT, footprint_radius
+
+    reference = RoverConfig(robot=DEFAULT_ROBOT)
+    ratios = {"payload_mass": load_rover(rover).total_mass / load_rover(reference).total_mass,
+              "payload_offset": footprint_radius(load_rover(rover), rover) / REFERENCE_FOOTPRINT,
+              "speed_limit": rover.wheel_speed_limit / reference.wheel_speed_limit,
+              "wheel_radius": rover.wheel_radius / reference.wheel_radius}
+    changes = {name: dataclasses.replace(getattr(config, name), low=getattr(config, name).low * ratio,
+                                         high=getattr(config, name).high * ratio)
+               for name, ratio in ratios.items() if getattr(config, name) is not None}
+    return dataclasses.replace(config, **changes)
+
+
 @dataclass(frozen=True)
 class AroundConfig:
     """A randomization centred on a simulator-config file, e.g. the rover ``atrv-calibrate`` fitted: each drawn
@@ -303,7 +327,8 @@ def get_randomization(value: RandomizationConfig | AroundConfig | str | None, *,
                       rover: RoverConfig | None = None, contact: ContactConfig | None = None) -> RandomizationConfig:
     """The randomization ``value`` names or is (``None``: ``none``), as absolute ranges: one centred on a simulator
     config (:data:`AROUND_PRESETS`, an :class:`AroundConfig`) resolved against ``sim_config`` on ``rover`` and
-    ``contact`` (:func:`resolve_around`).
+    ``contact`` (:func:`resolve_around`); a preset of :data:`RANDOMIZATION_PRESETS` fitted to ``rover``'s robot
+    (:func:`scale_preset`).
 
     Raises:
         ValueError: One line: an unknown name; one centred on a simulator config without ``sim_config``; what
@@ -321,6 +346,7 @@ def get_randomization(value: RandomizationConfig | AroundConfig | str | None, *,
                              "--sim-config FILE)")
         return resolve_around(around, sim_config, rover=rover, contact=contact)
     try:
-        return RANDOMIZATION_PRESETS[value]
+        preset = RANDOMIZATION_PRESETS[value]
     except KeyError:
         raise ValueError(f"unknown randomization preset {value!r}; known: {sorted(randomization_names())}") from None
+    return scale_preset(preset, rover) if rover is not None else preset

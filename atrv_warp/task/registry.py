@@ -46,6 +46,11 @@ def register_task(task: Task, *, replace: bool = False) -> Task:
     return task
 
 
+def _as_given(config, robot, footprint):
+    """A task config given directly stays as given on every robot."""
+    return config
+
+
 def task_names() -> list[str]:
     """The registered tasks' names."""
     return sorted(TASKS)
@@ -53,15 +58,15 @@ def task_names() -> list[str]:
 
 def resolve_task(task: Task | TaskConfig | str | None) -> Task:
     """The task ``task`` names (``None``: ``reach``); a :class:`~atrv_warp.task.config.TaskConfig` is a task with the
-    shipped reward table and success test (the reference's, weighted by its fields).
+    shipped reward table and success test (the reference's, weighted by its fields), used on any robot as it is.
 
     Raises:
         ValueError: An unknown name (the known ones listed; a task of your own needs its module loaded first).
     """
     if isinstance(task, Task):
         return task
-    if isinstance(task, TaskConfig):
-        return Task("custom", task, reach.TASK.terms, reach.TASK.success)
+    if isinstance(task, TaskConfig):  # the caller's config, as it is: not fitted to a robot
+        return Task("custom", task, reach.TASK.terms, reach.TASK.success, scale=_as_given)
     name = "reach" if task is None else task
     try:
         return TASKS[name]

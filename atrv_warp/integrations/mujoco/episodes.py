@@ -22,10 +22,11 @@ import torch
 
 from atrv_warp.core.files import load_exported_program
 from atrv_warp.core.observation import RobotObservation, Scan
+from atrv_warp.sim.config import RoverConfig, SimConfig
 from atrv_warp.sim.driver import DriverConfig
 from atrv_warp.sim.scanner import ScannerConfig
 from atrv_warp.sim.terrain import HeightGrid
-from atrv_warp.task.config import TaskConfig, get_task
+from atrv_warp.task.config import TaskConfig
 from atrv_warp.task.evaluation import EVAL_SEED, EpisodeRecord
 from atrv_warp.task.reward import progress_reward
 from atrv_warp.task.spec import EndReason, action_to_twist, policy_contract
@@ -63,6 +64,8 @@ class TwinEpisodes:
     obstacle_height: float
     """Obstacles stand this high above the flat ground's top [m]."""
     episodes: tuple[TwinEpisode, ...]
+    rover: RoverConfig | None = None
+    """The robot's nominal rover (``None``: the ATRV-Jr's)."""
 
     def twin(self, episode: TwinEpisode, *, friction: float | None = None,
              driver: DriverConfig | None = None, contact: MujocoContact | None = None) -> MujocoTwin:
@@ -72,19 +75,22 @@ class TwinEpisodes:
         settings (default :class:`~.mjcf.MujocoContact`, the tyre's compliance)."""
         task = self.task
         scanner = ScannerConfig(beams=task.scan_beams, fov=task.scan_fov) if task.scan_beams else ScannerConfig()
+        sim = SimConfig(step_dt=task.control_period) if task.control_period else None
         return MujocoTwin(terrain=self.terrain, tile=episode.tile, obstacles=episode.obstacles, friction=friction,
                           obstacle_height=self.obstacle_height, scanner=scanner, driver=task.driver(driver),
-                          contact=contact)
+                          contact=contact, rover=self.rover, sim=sim)
 
 
-def draw_episodes(task: TaskConfig | str, count: int, *, seed: int = EVAL_SEED) -> TwinEpisodes:
-    """The first ``count`` episodes of evaluation set ``seed`` of ``task``: our environment with ``count`` worlds,
-    seeded and reset as :func:`~atrv_warp.task.evaluation.run_episodes` does, read through its public views (each
-    world's terrain tile, obstacles, chassis pose, target and goal in the odometry frame). Nothing is stepped."""
+def draw_episodes(task, count: int, *, seed: int = EVAL_SEED, robot: str | None = None) -> TwinEpisodes:
+    """The first ``count`` episodes of evaluation set ``seed`` of ``task`` (a name, a
+    :class:`~atrv_warp.task.definition.Task` or a config) on ``robot`` (a name or a robot file; ``None``: the
+    ATRV-Jr): our environment with ``count`` worlds, seeded and reset as :func:`~atrv_warp.task.evaluation.run_episodes`
+    does, read through its public views (each world's terrain tile, obstacles, chassis pose, target and goal in the
+    odometry frame). Nothing is stepped."""
     from atrv_warp.sim.contact import OBSTACLE_KINDS
-    from atrv_warp.task.env import ATRVjrEnv
+    from atrv_warp.task.env import RoverEnv
 
-    env = ATRVjrEnv(count, task=task)
+    env = RoverEnv(count, task=task, robot=robot)
     env.set_seed(seed)
     env.reset()
     sim, names = env.sim, {code: name for name, code in OBSTACLE_KINDS.items()}
@@ -98,7 +104,7 @@ def draw_episodes(task: TaskConfig | str, count: int, *, seed: int = EVAL_SEED) 
         episodes.append(TwinEpisode(int(tiles[w]), obstacles, tuple(start[w].tolist()), tuple(target[w].tolist()),
                                     tuple(goal[w].tolist())))
     height = sim.obstacles.cfg.height if sim.obstacles.cfg is not None else 0.0
-    return TwinEpisodes(env.task_cfg, int(seed), sim.terrain.grid, height, tuple(episodes))
+    return TwinEpisodes(env.task_cfg, int(seed), sim.terrain.grid, height, tuple(episodes), env.sim.rover_cfg)
 
 
 class DeployablePolicy:
@@ -109,13 +115,18 @@ class DeployablePolicy:
     ``atrv_warp.json``); :attr:`task` the task it was trained on.
     """
 
-    def __init__(self, act: Callable[[torch.Tensor], torch.Tensor], contract: dict, task: str, name: str):
+    def __init__(self, act: Callable[[torch.Tensor], torch.Tensor], contract: dict, task, name: str,
+                 robot: str = "atrvjr"):
         action, observation = contract["action"]["kind"], contract.get("observation_kind", "arena")
         if (action, observation) != ("twist", "robot"):
             raise ValueError(f"{name} is not a deployable policy: it commands {action} and observes the {observation} "
                              "observation; a robot (and the MuJoCo twin) takes twist actions from the robot "
                              "observation (train one with: python -m atrv_warp.train --config nav_deploy)")
-        self.act, self.contract, self.task, self.name = act, contract, task, name
+        self.act, self.contract, self.name = act, contract, name
+        self.task = task
+        """The task it was trained on: a name, or the :class:`~atrv_warp.task.definition.Task` its file records."""
+        self.robot = robot
+        """The robot it was trained on (a shipped robot's name, or a robot file's path)."""
         self.build = RobotObservation.from_contract(contract)
         """The torch-only observation builder a robot runs (:class:`~atrv_warp.core.observation.RobotObservation`)."""
 
@@ -133,15 +144,18 @@ class DeployablePolicy:
             except json.JSONDecodeError:
                 raise ValueError(f"{path}: no atrv_warp.json contract in the exported file") from None
             module = program.module()
-            return cls(lambda obs: module(obs[None])[0], contract, contract.get("task", "reach"), str(path))
+            robot = contract.get("robot", {}).get("name", "atrvjr")
+            return cls(lambda obs: module(obs[None])[0], contract, contract.get("task", "reach"), str(path), robot)
         from tensordict import TensorDict
         from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-        from atrv_warp.policy import load_policy, policy_kinds, policy_task
+        from atrv_warp.core.robot import ROBOTS, load_robot
+        from atrv_warp.policy import load_policy, policy_kinds, policy_record, policy_task
 
         task = policy_task(path)
+        record = policy_record(path)
         action, observation = policy_kinds(path)
-        contract = policy_contract(get_task(task))
+        contract = policy_contract(record.task.config)
         if (action, observation) != ("twist", "robot"):  # refused before its network is built
             cls(lambda obs: obs, {**contract, "action": {"kind": action}, "observation_kind": observation}, task,
                 str(path))
@@ -151,7 +165,9 @@ class DeployablePolicy:
             with set_exploration_type(ExplorationType.DETERMINISTIC):
                 return module(TensorDict({"observation": obs[None]}, batch_size=[1]))["action"][0]
 
-        return cls(act, contract, task, str(path))
+        robot = record.robot.name if record.robot.name in ROBOTS and record.robot == load_robot(record.robot.name) \
+            else record.robot.path
+        return cls(act, contract, record.task, str(path), robot)
 
     @torch.no_grad()
     def __call__(self, observation: torch.Tensor) -> torch.Tensor:

@@ -135,6 +135,10 @@ class RoverIO:
         if not all(math.isfinite(v) for v in g):
             self.node.log.warning(f"ignored non-finite goal {g}")
             return
+        refusal = self.node.goal_policy_refusal()
+        if refusal:
+            self.node.log.warning(f"ignored goal {g}: {refusal}")
+            return
         self.node.record(f"{self.prefix}/goal", "geometry_msgs/msg/PoseStamped", pose_dict(msg))
         self.goal = g
         self.pending = GOAL
@@ -376,6 +380,9 @@ class RoverSimNode(Node):
         self.scanner = None
         self.rovers: list[RoverIO] = []
         self.policy = None  # goal mode's (policy, TensorDict): a -p policy file once checked, else loaded on first use
+        self.goal_refusal: str | None = None
+        """Why goal mode cannot drive this robot (:meth:`goal_policy_refusal`), once decided."""
+        self._goal_decided = False
         self.commanded = False
         """A /cmd_vel came since the last state publication (``lockstep``)."""
         self.published_at = 0.0
@@ -394,9 +401,20 @@ class RoverSimNode(Node):
         self._check_parameters()
         p = self.params
         k = p["num_rovers"]
+        task = p["task"]
+        if p["policy"]:  # the world runs the task the policy records (as it trained), not today's fit of its name
+            from atrv_warp.policy import policy_record
+            from atrv_warp.storage import FileFormatError
+
+            try:
+                task = policy_record(p["policy"]).task
+            except (FileNotFoundError, FileFormatError, ValueError) as err:
+                self._fail(f"parameter policy: {err}")
+            if task.name != p["task"]:
+                self._fail(f"parameter policy: {p['policy']} was trained on task {task.name!r}, not task={p['task']!r}")
         # goal mode reads the policy's observation kernel
         try:
-            self.env = ATRVjrEnv(k, variant=p["variant"], task=p["task"], seed=int(p["seed"]),
+            self.env = ATRVjrEnv(k, robot=p["robot"], variant=p["variant"], task=task, seed=int(p["seed"]),
                                  sim_config=p["sim_config"] or None, driver=self.driver,
                                  **({"terrain": p["terrain"]} if p["terrain"] else {}))
         except ValueError as err:
@@ -479,6 +497,12 @@ class RoverSimNode(Node):
             self._fail("real_time_factor must be >= 0 and publish_rate > 0")
         if not 1 <= p["num_rovers"] <= MAX_ROVERS:
             self._fail(f"num_rovers must be in 1 … {MAX_ROVERS}, got {p['num_rovers']}")
+        from atrv_warp.core.robot import RobotFileError, load_robot
+
+        try:
+            load_robot(p["robot"])
+        except RobotFileError as err:
+            self._fail(f"parameter robot: {err}")
         try:
             self.driver = driver_config(p)
         except ValueError as err:
@@ -516,8 +540,32 @@ class RoverSimNode(Node):
 
             try:
                 self.policy = (load_policy(p["policy"], task=p["task"]), TensorDict)
-            except (FileNotFoundError, FileFormatError) as err:
+                self._check_policy_robot(p["policy"])
+            except (FileNotFoundError, FileFormatError, ValueError) as err:
                 self._fail(f"parameter policy: {err}")
+
+    def goal_policy_refusal(self) -> str | None:
+        """Why goal mode cannot drive this robot (the task's shipped policy was trained on another robot, and no
+        ``-p policy:=`` gives one of its own), or ``None``; decided once."""
+        if self.policy is not None or self.params["policy"]:
+            return None
+        if not self._goal_decided:
+            from atrv_warp.policy import SHIPPED_POLICIES, PolicyRobotMismatch
+
+            task = self.params["task"]
+            try:
+                self._check_policy_robot(task if task in SHIPPED_POLICIES else "reach")
+            except PolicyRobotMismatch as err:
+                self.goal_refusal = f"{err} (give one trained on it: -p policy:=FILE)"
+            self._goal_decided = True
+        return self.goal_refusal
+
+    def _check_policy_robot(self, policy) -> None:
+        """A goal policy trained on another robot than the node's is refused, naming both."""
+        from atrv_warp.core.robot import load_robot
+        from atrv_warp.policy import check_policy_robot, policy_record
+
+        check_policy_robot(policy_record(policy), load_robot(self.params["robot"]), source=policy)
 
     def _start_tf(self, latched: QoSProfile) -> None:
         """Live /tf and /tf_static, where tf2_msgs loads (a ROS install's, or built from its definition on
@@ -591,7 +639,9 @@ class RoverSimNode(Node):
             from atrv_warp.policy import SHIPPED_POLICIES, load_policy
 
             task = self.params["task"]  # the task's shipped policy (reach, nav, nav_deploy), else reach's
-            self.policy = (load_policy(task if task in SHIPPED_POLICIES else None, task=task), TensorDict)
+            name = task if task in SHIPPED_POLICIES else "reach"
+            self.policy = (load_policy(name, task=task), TensorDict)
+            self._check_policy_robot(name)
         policy, td_cls = self.policy
         targets = self.sim.root_pose[:, :2].clone()  # rovers not in goal mode: their own position
         for rover in self.rovers:

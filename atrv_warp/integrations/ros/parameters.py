@@ -24,7 +24,9 @@ PARAMETERS = (
     ("publish_rate", 10.0, "rate of /pose, /odom, /ground_truth/odom, /joint_states, /imu and /scan [Hz of sim time]"),
     ("duration", 0.0, "stop after this much sim time [s]; 0 = until Ctrl-C"),
     ("mode", "coast", "initial driving mode: coast | forward | backward | rotate_left | rotate_right"),
-    ("variant", "realistic", "rover variant: realistic | reference"),
+    ("robot", "atrvjr", ("the robot: a shipped robot's name (atrvjr, jackal, husky) or a robot file's path; its URDF, "
+                         "driver gains, frames and the task fitted to its limits")),
+    ("variant", "realistic", "ATRV-Jr variant: realistic | reference"),
     ("task", "reach", ("world: reach (the flat arena) | nav (terrain and obstacles, drawn once at start) | nav_deploy "
                        "(nav's world; goal mode drives by /cmd_vel from the robot observation, the shipped nav_deploy "
                        "policy unless -p policy:=FILE)")),
@@ -36,7 +38,8 @@ PARAMETERS = (
     ("num_rovers", 1, f"rovers simulated (1 … {MAX_ROVERS}); more than one puts each under /rover_<k>"),
     ("frame_id", "", "frame_id of /pose (default: the URDF's chassis link)"),
     ("odom_frame", "odom", "frame of /odom (REP 105)"), ("base_frame", "base_link", "child frame of /odom"),
-    ("policy", "", "policy file for goal mode (default: the shipped one)"),
+    ("policy", "", ("policy file for goal mode (default: the shipped one); the world then runs the task it records, "
+                    "as it trained (its limits and control period)")),
     ("bag", "", ("write an MCAP ROS 2 bag here: /cmd_vel, /joint_states, /odom, /ground_truth/odom, /pose, "
                  "/command, /goal, /goal_status (what atrv-calibrate reads), /tf, /tf_static and "
                  "/robot_description (what a 3D view draws the rover from); not /imu or /scan")),
