@@ -78,7 +78,8 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
 
     Args:
         policy: A policy file (``.pt``, a training ``checkpoint.pt``; ``.pt2`` on ``mujoco``) or a shipped policy's
-            name; ``None``: the task's shipped policy (``reach``; ``nav_deploy`` on ``mujoco``).
+            name; ``None``: ``robot``'s shipped policy for the task where one ships (``nav_deploy_husky``), else the
+            task's (``reach``; ``nav_deploy`` on ``mujoco``).
         engine: One of :data:`ENGINES`.
         task: The task (default: the policy's own; ``reach`` for the baseline).
         episodes: How many episodes (one world each on ``ours``).
@@ -203,7 +204,7 @@ def _robot_to_run(record, robot: str | None, allow: bool, source) -> tuple[str, 
 
 def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim_config, device, attach,
                    driver, robot=None, allow_other_robot=False) -> Evaluation:
-    from atrv_warp.policy import SHIPPED_POLICIES
+    from atrv_warp.policy import shipped_policy_for
     from atrv_warp.task.evaluation import range_bins, run_episodes, success_by_bin
     from atrv_warp.task.randomization import AROUND_PRESETS, get_randomization
 
@@ -217,7 +218,7 @@ def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim
         task = task or "reach"
         module, name, env_task = scripted_policy(), f"scripted baseline ({task})", task
     else:
-        name = policy or (task if task in SHIPPED_POLICIES else "reach")  # the task's shipped policy
+        name = policy or shipped_policy_for(task or "reach", robot)  # the robot's shipped policy, else the task's
         module, task, record = _load(name, task)
         env_task = record.task  # the task it trained on, fitted to its robot: not today's declaration
         robot, warning = _robot_to_run(record, robot, allow_other_robot, name)
@@ -252,7 +253,9 @@ def _evaluate_twin(policy, *, task, episodes, seed, friction, baseline, randomiz
         from atrv_warp.integrations.mujoco import DeployablePolicy, draw_episodes, run_twin_episodes
     except ImportError as err:
         raise ValueError(f"engine mujoco needs MuJoCo ({err.name} is not installed): {MUJOCO_EXTRA}") from None
-    name = policy or (task or "nav_deploy")
+    from atrv_warp.policy import shipped_policy_for
+
+    name = policy or shipped_policy_for(task or "nav_deploy", robot)
     try:
         deployable = DeployablePolicy.load(name)
     except FileNotFoundError as err:

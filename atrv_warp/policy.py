@@ -31,7 +31,7 @@ __all__ = ["OLD_KINDS", "POLICY_FORMAT", "READ_FORMATS", "SHIPPED_POLICIES", "No
            "PolicyRobotMismatch", "PolicyTaskMismatch", "ShippedPolicy", "check_policy_robot", "check_policy_task",
            "load_policy", "make_actor", "policy_kinds", "policy_path", "policy_payload", "policy_record",
            "policy_task", "pretrained_nav_policy_path", "pretrained_policy_path", "run_record", "save_policy",
-           "shipped_policy_path"]
+           "shipped_policy_for", "shipped_policy_path"]
 
 POLICY_FORMAT = "atrv_warp.policy/2"
 """Format tag of a saved policy (``save_policy``, and the ``policy`` entry of a training checkpoint). 2: it records
@@ -61,16 +61,29 @@ SHIPPED_POLICIES: dict[str, ShippedPolicy] = {
     "reach": ShippedPolicy("pretrained_policy.pt", "reach", "python -m atrv_warp.train"),
     "nav": ShippedPolicy("nav_policy.pt", "nav", "python -m atrv_warp.train --config nav randomization=wide"),
     "nav_plain": ShippedPolicy("nav_policy_plain.pt", "nav", "python -m atrv_warp.train --config nav"),
-    # the two deployable policies were trained before nav_deploy.toml's batch went from 512 to 256
+    # each robot's deployable policy, at its own limits: seed 0 of benchmarks/train_to_success.py with the same
+    # arguments (its results file: train_to_success_nav_deploy_<robot>.json; benchmarks/robot_policies.py evaluates
+    # them). The Husky's validation still rose at nav_deploy's 1.4 M frames: it trained on 3 M.
+    "nav_deploy_atrvjr": ShippedPolicy("nav_deploy_atrvjr_policy.pt", "nav_deploy",
+                                       "python -m atrv_warp.train --config nav_deploy env.robot=atrvjr"),
+    "nav_deploy_jackal": ShippedPolicy("nav_deploy_jackal_policy.pt", "nav_deploy",
+                                       "python -m atrv_warp.train --config nav_deploy env.robot=jackal"),
+    "nav_deploy_husky": ShippedPolicy("nav_deploy_husky_policy.pt", "nav_deploy",
+                                      "python -m atrv_warp.train --config nav_deploy env.robot=husky "
+                                      "run.total_frames=3000000"),
+    # the two 2 m/s studies: trained before robots had files (the ATRV-Jr's body at the Jackal's speed, a 1 m/s² base)
+    # and before nav_deploy.toml's batch went from 512 to 256; the deploy and MuJoCo figures of the docs cite them
     "nav_deploy": ShippedPolicy("nav_deploy_policy.pt", "nav_deploy",
                                 "python -m atrv_warp.train --config nav_deploy batch_size=512"),
     "nav_deploy_plain": ShippedPolicy("nav_deploy_policy_plain.pt", "nav_deploy",
                                       "python -m atrv_warp.train --config nav_deploy randomization=none batch_size=512"),
 }
 """The shipped policies by name: ``reach`` (the reference task), ``nav`` (navigation, trained under the ``wide``
-domain randomization), ``nav_plain`` (navigation on the nominal rover with perfect sensors), ``nav_deploy`` (the
-navigation policy for a robot: ``/cmd_vel`` commands from the robot observation, trained under ``wide``),
-``nav_deploy_plain`` (the same trained on the nominal rover, without randomization: the MuJoCo twin's comparison)."""
+domain randomization), ``nav_plain`` (navigation on the nominal rover with perfect sensors),
+``nav_deploy_<robot>`` (each shipped robot's navigation policy: ``/cmd_vel`` commands at its own limits from the robot
+observation, trained under ``wide``), ``nav_deploy`` (the 2 m/s study it grew from: the ATRV-Jr at the Jackal's speed,
+the task as declared), ``nav_deploy_plain`` (the same study trained on the nominal rover, without randomization: the
+MuJoCo twin's comparison)."""
 
 
 class PolicyTaskMismatch(FileFormatError):
@@ -260,6 +273,15 @@ def check_policy_task(payload: dict, task, *, source: str | Path) -> None:
     if observation != config.observation:
         raise PolicyTaskMismatch(f"policy {source} observes the {observation} observation but {name} gives the "
                                  f"{config.observation} one")
+
+
+def shipped_policy_for(task: str, robot: str | None = None) -> str:
+    """The name of the shipped policy that drives ``task`` on ``robot`` (a shipped robot's name): the robot's own
+    (``nav_deploy_husky``) where one ships, else the task's, else ``reach``'s."""
+    for name in (f"{task}_{robot}" if robot else None, task):
+        if name in SHIPPED_POLICIES and SHIPPED_POLICIES[name].task == task:
+            return name
+    return "reach"
 
 
 def shipped_policy_path(name: str) -> Path:

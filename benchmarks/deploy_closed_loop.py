@@ -220,8 +220,8 @@ def world_parameters(path: Path) -> tuple[tuple[str, ...], tuple[str, ...]]:
     record = policy_record(path)
     period = record.task.config.control_period or SimConfig().step_dt
     episode = record.task.config.max_steps * period
-    return ((f"policy:={path}", f"robot:={robot_of(record)}", f"publish_rate:={1 / period:g}"),
-            (f"time_limit:={2 * episode:g}",))
+    return ((f"policy:={path}", f"robot:={robot_of(record)}", f"publish_rate:={float(1 / period)!r}"),
+            (f"time_limit:={float(2 * episode)!r}",))  # float literals: ROS reads "20" as an integer
 
 
 def ros_episodes(pt2: Path, goals: list[tuple[float, float]], seed: int, workdir: Path, timeout: float,

@@ -936,8 +936,34 @@ def task_fit() -> str:
                    "reach / clearance radius", "torque action 1"], ["---"] + ["---:"] * 7, rows)
 
 
+def robot_policies() -> str:
+    """``robot_policies.json``: each shipped robot's deployable nav policy on its own robot (the test set under
+    ``wide`` and nominal, and the MuJoCo twin), with the time it took to train from its own
+    ``train_to_success_nav_deploy_<robot>.json``."""
+    d = _load("robot_policies.json")
+    rows = []
+    for name, r in d["robots"].items():
+        train = _load(f"train_to_success_nav_deploy_{name}.json")
+        seeds = train["seeds"]
+        reached = [s for s in seeds if s["reached"]]
+        wall = train["median"]["wall_s_to_threshold"]
+        if len(seeds) > 1:
+            when = "not reached by every seed" if wall is None else f"{wall / 60:.1f} min (median of {len(seeds)})"
+        else:
+            when = f"{wall / 60:.1f} min" if wall is not None else "not reached"
+        frames = f"{sorted(s['frames_to_threshold'] for s in reached)[len(reached) // 2]:,}" if reached else "-"
+        twin = r.get("mujoco")
+        rows.append([f"`{name}`", f"{r['max_linear']:g} m/s, {r['max_angular']:g} rad/s",
+                     f"{r['control_period']:g} s", f"{100 * r['wide']['success']:.1f} %",
+                     f"{100 * r['nominal']['success']:.1f} %",
+                     f"{100 * twin['success']:.1f} % ({twin['episodes']})" if twin else "-", when, frames])
+    return _table(["robot", "limits", "period", "`wide` (1,000)", "nominal (1,000)", "MuJoCo twin, nominal µ",
+                   "90 % after", "frames then"], ["---"] + ["---:"] * 7, rows)
+
+
 TABLES: dict[str, Callable[[], str]] = {
     "task_fit": task_fit,
+    "robot_policies": robot_policies,
     "robot_check": robot_check,
     "robot_limits": robot_limits,
     "deploy_policy": deploy_policy,

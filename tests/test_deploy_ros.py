@@ -292,6 +292,7 @@ def test_over_ros_each_step_is_the_nodes_answer_to_the_state_evaluate_would_obse
     import torch
     from torchrl.envs.utils import step_mdp
 
+    from atrv_warp.policy import policy_record
     from atrv_warp.task.env import ATRVjrEnv
     from atrv_warp.task.spec import END_REASONS
 
@@ -305,7 +306,7 @@ def test_over_ros_each_step_is_the_nodes_answer_to_the_state_evaluate_would_obse
     rows = json.loads(out.read_text())["episodes_detail"]
     assert [r["unanswered"] for r in rows] == [0, 0], rows  # every step waited for the node's answer
     records = [json.loads(line) for line in trace.read_text().splitlines()]
-    sim = ATRVjrEnv(1, task="nav_deploy")
+    sim = ATRVjrEnv(1, task=policy_record("nav_deploy").task)  # the task the policy records, as the script runs it
     for row in rows:
         td = sim.reset_to_episodes([0], [row["episode"]], seed=2024)
         goal = sim.target[0].tolist()

@@ -312,3 +312,19 @@ def test_a_saved_policy_records_its_task_and_robot_and_export_reads_them(tmp_pat
     old["format"] = "atrv_warp.policy/1"
     was = policy_record(old)
     assert not was.recorded and was.robot.name == "atrvjr" and was.task.config.max_linear == 2.0
+
+
+def test_each_robot_has_its_shipped_nav_policy_and_commands_default_to_it():
+    """The shipped ``nav_deploy_<robot>`` files exist, each records its own robot and the task fitted to it (as
+    ``RoverEnv`` fits it today), and a command that names no policy takes the robot's own."""
+    from atrv_warp.policy import SHIPPED_POLICIES, policy_record, shipped_policy_for
+    from atrv_warp.task.env import RoverEnv
+
+    for robot in ROBOTS:
+        name = shipped_policy_for("nav_deploy", robot)
+        assert name == f"nav_deploy_{robot}" and SHIPPED_POLICIES[name].task == "nav_deploy"
+        record = policy_record(name)
+        assert record.recorded and record.robot == load_robot(robot)
+        assert record.task.config == RoverEnv(1, robot=robot, task="nav_deploy").task_cfg, robot
+    assert shipped_policy_for("nav_deploy") == "nav_deploy"  # the 2 m/s study, where no robot is named
+    assert shipped_policy_for("nav", "husky") == "nav" and shipped_policy_for("mine", "husky") == "reach"

@@ -550,11 +550,10 @@ class RoverSimNode(Node):
         if self.policy is not None or self.params["policy"]:
             return None
         if not self._goal_decided:
-            from atrv_warp.policy import SHIPPED_POLICIES, PolicyRobotMismatch
+            from atrv_warp.policy import PolicyRobotMismatch, shipped_policy_for
 
-            task = self.params["task"]
             try:
-                self._check_policy_robot(task if task in SHIPPED_POLICIES else "reach")
+                self._check_policy_robot(shipped_policy_for(self.params["task"], self.params["robot"]))
             except PolicyRobotMismatch as err:
                 self.goal_refusal = f"{err} (give one trained on it: -p policy:=FILE)"
             self._goal_decided = True
@@ -636,10 +635,10 @@ class RoverSimNode(Node):
         if self.policy is None:
             from tensordict import TensorDict
 
-            from atrv_warp.policy import SHIPPED_POLICIES, load_policy
+            from atrv_warp.policy import load_policy, shipped_policy_for
 
-            task = self.params["task"]  # the task's shipped policy (reach, nav, nav_deploy), else reach's
-            name = task if task in SHIPPED_POLICIES else "reach"
+            task = self.params["task"]  # the robot's shipped policy for the task (nav_deploy_husky), else the task's
+            name = shipped_policy_for(task, self.params["robot"])
             self.policy = (load_policy(name, task=task), TensorDict)
             self._check_policy_robot(name)
         policy, td_cls = self.policy

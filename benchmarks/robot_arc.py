@@ -1,0 +1,92 @@
+"""How far each robot turns on the nav world's ground when told to, and what its odometry makes of it.
+
+Run: ``python benchmarks/robot_arc.py [--linear 0.5] [--angular 0.5] [--seconds 6]``
+
+Each shipped robot, in the ``nav_deploy`` environment fitted to it (one world, the test set's first episode, the
+nominal rover, no randomization), is sent one ``/cmd_vel`` (``--linear`` m/s, ``--angular`` rad/s) through its
+base for ``--seconds`` from rest, on the nav world's terrain and on the same world made flat (``terrain="flat"``).
+Per robot and ground: the yaw it was told to turn and the yaw it turned, the distance its chassis origin moved, the
+distance its encoders read, and how far the fused odometry's position (the encoders along the gyro's heading: what
+the deployable policies steer by) ended from the true one. The robot files' effective track factors were measured
+on the flat arena (``benchmarks/robot_check.py``). One start, one command: a probe, not a survey.
+Writes ``benchmarks/results/robot_arc.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from _common import write_results
+
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
+RESULTS = Path(__file__).resolve().parent / "results"
+GROUNDS = {"nav": None, "flat": "flat"}
+"""Each ground the robots drive on: the nav world's own terrain (``nav_deploy``'s), and the same world made flat."""
+
+
+def drive(robot: str, linear: float, angular: float, seconds: float, terrain: str | None = None) -> dict:
+    import torch
+    import warp as wp
+
+    from atrv_warp.task.env import RoverEnv
+    from atrv_warp.task.evaluation import EVAL_SEED
+
+    env = RoverEnv(1, task="nav_deploy", robot=robot, **({"terrain": terrain} if terrain else {}))
+    env.set_seed(EVAL_SEED)
+    td = env.reset()
+    sim, cfg = env.sim, env.task_cfg
+    start, yaw0 = sim.root_pose[0, :2].clone().double(), float(sim.rpy[0, 2])
+    action = torch.tensor([[linear / cfg.max_linear, angular / cfg.max_angular]])
+    steps = round(seconds / sim.sim_cfg.step_dt)
+    travelled, read, yaw = 0.0, 0.0, 0.0
+    previous, previous_yaw = start, yaw0
+    for _ in range(steps):
+        td["action"] = action
+        td = env.step(td)["next"]
+        here, now = sim.root_pose[0, :2].clone().double(), float(sim.rpy[0, 2])
+        travelled += float((here - previous).norm())
+        yaw += math.remainder(now - previous_yaw, 2 * math.pi)
+        previous, previous_yaw = here, now
+        read += abs(float(wp.to_torch(sim.driver.state.odom_twist).view(-1, 2)[0, 0])) * sim.sim_cfg.step_dt
+    fused = wp.to_torch(sim.driver.state.fused).view(-1, 3)[0].double()
+    c, s = math.cos(yaw0), math.sin(yaw0)
+    true_odom = torch.tensor([c * (previous[0] - start[0]) + s * (previous[1] - start[1]),
+                              -s * (previous[0] - start[0]) + c * (previous[1] - start[1])])
+    return {"steps": steps, "step_dt": sim.sim_cfg.step_dt, "yaw_commanded": angular * steps * sim.sim_cfg.step_dt,
+            "yaw_turned": yaw, "distance_driven": travelled, "distance_encoders": read,
+            "encoders_over_driven": read / travelled if travelled > 0 else None,
+            "fused_position_error": float((fused[:2] - true_odom).norm())}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--linear", type=float, default=0.5, help="commanded forward speed [m/s]")
+    parser.add_argument("--angular", type=float, default=0.5, help="commanded yaw rate [rad/s]")
+    parser.add_argument("--seconds", type=float, default=6.0)
+    parser.add_argument("--out", default=str(RESULTS / "robot_arc.json"))
+    args = parser.parse_args(argv)
+    if args.seconds <= 0:
+        parser.error("--seconds must be > 0")
+    from atrv_warp.core.robot import ROBOTS
+
+    rows = {}
+    for robot in ROBOTS:
+        rows[robot] = {ground: drive(robot, args.linear, args.angular, args.seconds, terrain)
+                       for ground, terrain in GROUNDS.items()}
+        for ground, r in rows[robot].items():
+            print(f"{robot:8s} {ground:5s} yaw {r['yaw_turned']:.2f} of {r['yaw_commanded']:.2f} rad; drove {r['distance_driven']:.2f} m, "
+                  f"encoders read {r['distance_encoders']:.2f} m; fused odometry off by "
+                  f"{r['fused_position_error']:.2f} m", flush=True)
+    result = {"linear": args.linear, "angular": args.angular, "seconds": args.seconds, "robots": rows}
+    out = write_results(args.out, result, version=VERSION, task=True, driver=True, robots=tuple(ROBOTS))
+    print(f"written to {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
