@@ -22,19 +22,12 @@ import time
 from pathlib import Path
 
 from _common import write_results
+from mujoco_transfer import ENDS, rates
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parent / "results"
-ENDS = ("success", "obstacle", "timeout", "flip", "wall", "nonfinite")
-
-
-def rates(record) -> dict:
-    r = record.summary()
-    return {"episodes": r.episodes, "success": r.success_rate, "obstacle": r.obstacle_rate,
-            "timeout": r.timeout_rate, "flip": r.flip_rate, "wall": r.wall_rate, "nonfinite": r.nonfinite_rate,
-            "mean_steps": r.mean_steps}
 
 
 def main(argv: list[str] | None = None) -> int:
