@@ -34,7 +34,6 @@ import argparse
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 
 from atrv_warp.runtime import add_verbose_argument, device_summary, error_line, set_verbose
 
@@ -184,15 +183,14 @@ def _load(path: str, task: str | None):
 def _robot_to_run(record, robot: str | None, allow: bool, source) -> tuple[str, str | None]:
     """(the robot to build the environment on, a line to warn with) for a policy of ``record`` asked to run on
     ``robot`` (``None``: its own)."""
-    from atrv_warp.core.robot import ROBOTS, load_robot
+    from atrv_warp.core.robot import load_robot, robot_spec
     from atrv_warp.policy import PolicyRobotMismatch, check_policy_robot
 
     if robot is None:
         own = record.robot
-        if own.name in ROBOTS and load_robot(own.name) == own:
-            return own.name, None
-        if Path(own.path).is_file() and load_robot(own.path) == own:
-            return own.path, None
+        spec = robot_spec(own)
+        if spec is not None:
+            return spec, None
         raise ValueError(f"{source} was trained on robot {own.name!r} ({own.title}), which is not a shipped robot "
                          "(or has changed since): give its robot file with --robot FILE")
     try:

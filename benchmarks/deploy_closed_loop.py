@@ -204,10 +204,9 @@ def stop(proc: subprocess.Popen) -> int:
 
 def robot_of(record) -> str:
     """The robot a policy's record names: a shipped robot's name, else its file's path."""
-    from atrv_warp.core.robot import ROBOTS, load_robot
+    from atrv_warp.core.robot import robot_spec
 
-    own = record.robot
-    return own.name if own.name in ROBOTS and load_robot(own.name) == own else own.path
+    return robot_spec(record.robot) or record.robot.path
 
 
 def world_parameters(path: Path) -> tuple[tuple[str, ...], tuple[str, ...]]:

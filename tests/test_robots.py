@@ -328,3 +328,15 @@ def test_each_robot_has_its_shipped_nav_policy_and_commands_default_to_it():
         assert record.task.config == RoverEnv(1, robot=robot, task="nav_deploy").task_cfg, robot
     assert shipped_policy_for("nav_deploy") == "nav_deploy"  # the 2 m/s study, where no robot is named
     assert shipped_policy_for("nav", "husky") == "nav" and shipped_policy_for("mine", "husky") == "reach"
+
+
+def test_a_recorded_robot_is_found_again_by_its_shipped_name_or_not_at_all(tmp_path):
+    """``robot_spec``: a recorded shipped robot by its name; a robot from a file of one's own, or a shipped one whose
+    file has changed since, by none (``None``: the commands then ask for its file, ``--robot FILE``)."""
+    import dataclasses
+
+    from atrv_warp.core.robot import robot_spec
+
+    assert robot_spec(robot_from_record(robot_record(load_robot("husky")), "a test")) == "husky"
+    assert robot_spec(load_robot(_copy(tmp_path))) is None  # the same values, its own URDF path
+    assert robot_spec(dataclasses.replace(load_robot("husky"), torque_limit=30.0)) is None

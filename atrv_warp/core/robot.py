@@ -69,6 +69,7 @@ __all__ = [
     "robot_file",
     "robot_from_record",
     "robot_record",
+    "robot_spec",
 ]
 
 DEFAULT_ROBOT = "atrvjr"
@@ -307,6 +308,12 @@ def robot_record(robot: Robot) -> dict:
             "motor": {"torque_limit": robot.torque_limit, "no_load_speed": robot.no_load_speed},
             "driver": {"kp": robot.kp, "ki": robot.ki, "effective_track_factor": robot.effective_track_factor},
             "limits": limits, "sources": dict(robot.sources)}
+
+
+def robot_spec(robot: Robot) -> str | None:
+    """The shipped robot's name that loads ``robot`` (a recorded one) again, or ``None``: a robot of one's own (a
+    record keeps its values, not where its file was), or a shipped one whose file has changed since."""
+    return robot.name if robot.name in ROBOTS and load_robot(robot.name) == robot else None
 
 
 def robot_from_record(record: dict, where: str) -> Robot:

@@ -149,7 +149,7 @@ class DeployablePolicy:
         from tensordict import TensorDict
         from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-        from atrv_warp.core.robot import ROBOTS, load_robot
+        from atrv_warp.core.robot import robot_spec
         from atrv_warp.policy import load_policy, policy_kinds, policy_record, policy_task
 
         task = policy_task(path)
@@ -165,9 +165,7 @@ class DeployablePolicy:
             with set_exploration_type(ExplorationType.DETERMINISTIC):
                 return module(TensorDict({"observation": obs[None]}, batch_size=[1]))["action"][0]
 
-        robot = record.robot.name if record.robot.name in ROBOTS and record.robot == load_robot(record.robot.name) \
-            else record.robot.path
-        return cls(act, contract, record.task, str(path), robot)
+        return cls(act, contract, record.task, str(path), robot_spec(record.robot) or record.robot.path)
 
     @torch.no_grad()
     def __call__(self, observation: torch.Tensor) -> torch.Tensor:
