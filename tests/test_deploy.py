@@ -471,3 +471,16 @@ def test_a_policy_whose_contract_does_not_fit_its_program_or_rate_is_refused(tmp
             load_deployable(write_policy(tmp_path / "rate.pt2", fast))
     with pytest.raises(PolicyRefused, match="rate_hz 20 disagrees with step_dt 0.1"):
         load_deployable(write_policy(tmp_path / "dt.pt2", dict(contract, step_dt=0.1)))
+
+
+def test_a_malformed_robot_entry_in_a_contract_is_read_as_no_robot():
+    """A contract's ``robot`` entry comes from a file: any shape reads without an exception, a name only if it is
+    text."""
+    from atrv_warp.deploy.controller import Deployable
+
+    for entry, name in (({"name": ["x"], "limits": [1, 2]}, None), ("husky", None), (None, None),
+                        ({"name": "husky", "title": "Husky", "limits": {"linear_velocity": 1.0}}, "husky")):
+        policy = object.__new__(Deployable)  # the contract alone: what these two read
+        object.__setattr__(policy, "contract", {"robot": entry})
+        assert policy.robot == name
+        assert policy.describe_robot().startswith("trained on")

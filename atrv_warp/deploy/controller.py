@@ -71,18 +71,19 @@ class Deployable:
         """The robot it was trained on (its contract's ``robot.name``; ``None`` for a policy exported before robots had
         files, which trained on the ATRV-Jr)."""
         robot = self.contract.get("robot")
-        return robot.get("name") if isinstance(robot, dict) else None
+        name = robot.get("name") if isinstance(robot, dict) else None
+        return name if isinstance(name, str) and name else None
 
     def describe_robot(self) -> str:
         """One line: the robot it was trained on, and that robot's published limits."""
         robot = self.contract.get("robot")
         if not isinstance(robot, dict):
             return "trained on the ATRV-Jr (exported before policies recorded their robot)"
-        lim = robot.get("limits") or {}
+        lim = robot.get("limits") if isinstance(robot.get("limits"), dict) else {}  # a file's contract: any shape
         parts = [f"{lim[k]:g} {u}" for k, u in (("linear_velocity", "m/s"), ("angular_velocity", "rad/s"),
                                                 ("linear_acceleration", "m/s²"), ("angular_acceleration", "rad/s²"))
                  if isinstance(lim.get(k), (int, float))]
-        return f"trained on {robot.get('name')} ({robot.get('title')}), whose limits are {', '.join(parts)}"
+        return f"trained on {self.robot} ({robot.get('title')!s}), whose limits are {', '.join(parts) or 'not recorded'}"
 
     def describe(self) -> str:
         """One line: what the policy observes and commands, at what rate."""
