@@ -331,12 +331,20 @@ def test_each_robot_has_its_shipped_nav_policy_and_commands_default_to_it():
 
 
 def test_a_recorded_robot_is_found_again_by_its_shipped_name_or_not_at_all(tmp_path):
-    """``robot_spec``: a recorded shipped robot by its name; a robot from a file of one's own, or a shipped one whose
-    file has changed since, by none (``None``: the commands then ask for its file, ``--robot FILE``)."""
+    """``robot_spec``: a recorded shipped robot by its name, wherever it was recorded; a robot from a file of one's
+    own, or a shipped one whose file or URDF has changed since, by none (``None``: the commands then ask for its file, ``--robot FILE``)."""
     import dataclasses
 
     from atrv_warp.core.robot import robot_spec
 
     assert robot_spec(robot_from_record(robot_record(load_robot("husky")), "a test")) == "husky"
-    assert robot_spec(load_robot(_copy(tmp_path))) is None  # the same values, its own URDF path
+    # a record made on another machine (its URDF's path is that machine's) is the same robot, by its URDF's text
+    elsewhere = robot_record(load_robot("husky")) | {"urdf": "/elsewhere/husky.urdf"}
+    assert robot_spec(robot_from_record(elsewhere, "a test")) == "husky"
+    assert robot_spec(robot_from_record({k: v for k, v in elsewhere.items() if k != "urdf_sha256"}, "a test")) is None
+    copy = load_robot(_copy(tmp_path))
+    assert copy.path != load_robot("jackal").path and robot_spec(copy) == "jackal"  # the same file, copied
+    urdf = tmp_path / "jackal.urdf"
+    urdf.write_text(urdf.read_text().replace('<mass value="16.523"/>', '<mass value="17.0"/>'))
+    assert robot_spec(load_robot(tmp_path / "jackal.toml")) is None  # its URDF edited since: a robot of one's own
     assert robot_spec(dataclasses.replace(load_robot("husky"), torque_limit=30.0)) is None

@@ -45,7 +45,9 @@ computer can load it; :mod:`atrv_warp.sim` checks it against its URDF (``python 
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import hashlib
 import math
 import os
 import sys
@@ -120,8 +122,12 @@ class Robot:
     path: str = field(compare=False)
     """The robot file it was read from (or the record it came from); two robots of the same values are equal
     wherever they were read."""
-    urdf: str
-    """The URDF's path (the file gives it relative to itself)."""
+    urdf: str = field(compare=False)
+    """The URDF's path (the file gives it relative to itself); where it lies does not make the robot, its text does
+    (:attr:`urdf_sha256`)."""
+    urdf_sha256: str
+    """The SHA-256 of the URDF's bytes ("" where it cannot be read): two robots are the same robot wherever their
+    files lie, as long as the values and the URDF's text agree."""
     chassis: str
     """The link the free joint holds: any link of the tree."""
     left_wheels: tuple[str, ...]
@@ -216,7 +222,9 @@ def load_robot(spec: str | os.PathLike | Robot = DEFAULT_ROBOT) -> Robot:
     if isinstance(spec, Robot):
         return spec
     path = robot_file(spec)
-    return _load(str(path), path.stat().st_mtime_ns)
+    robot = _load(str(path), path.stat().st_mtime_ns)
+    digest = _file_digest(robot.urdf)  # the URDF may have changed since its robot file was read
+    return robot if digest == robot.urdf_sha256 else dataclasses.replace(robot, urdf_sha256=digest)
 
 
 @functools.lru_cache(maxsize=32)
@@ -231,7 +239,23 @@ def _load(path: str, _mtime: int) -> Robot:
     return _from_table(path, data)
 
 
-def _from_table(path: str, data: dict) -> Robot:
+@functools.lru_cache(maxsize=32)
+def _cached_digest(path: str, _mtime: int) -> str:
+    with open(path, "rb") as f:
+        return hashlib.sha256(f.read()).hexdigest()
+
+
+def _file_digest(path: str | os.PathLike) -> str:
+    """The SHA-256 of the file at ``path`` (a URDF), or "" where it cannot be read."""
+    try:
+        return _cached_digest(os.fspath(path), os.stat(path).st_mtime_ns)
+    except OSError:
+        return ""
+
+
+def _from_table(path: str, data: dict, urdf_sha256: str | None = None) -> Robot:
+    """``urdf_sha256``: a record's (whose URDF may lie on another machine); None: the URDF's, read now."""
+
     def fail(message: str):
         raise RobotFileError(f"{path}: {message}")
 
@@ -281,7 +305,8 @@ def _from_table(path: str, data: dict) -> Robot:
     urdf = Path(values["urdf"]).expanduser()
     urdf = urdf if urdf.is_absolute() else Path(path).parent / urdf
     return Robot(
-        name=values["name"], title=values["title"], path=path, urdf=str(urdf), chassis=values["links.chassis"],
+        name=values["name"], title=values["title"], path=path, urdf=str(urdf),
+        urdf_sha256=_file_digest(urdf) if urdf_sha256 is None else urdf_sha256, chassis=values["links.chassis"],
         left_wheels=left, right_wheels=right, imu_frame=values["links.imu"], laser_frame=values["links.laser"],
         frames=values.get("links.frames", ()), wheel_radius=values["wheels.radius"],
         wheel_width=values["wheels.width"], wheel_offset=values["wheels.offset"],
@@ -294,7 +319,7 @@ def _from_table(path: str, data: dict) -> Robot:
 
 
 def robot_record(robot: Robot) -> dict:
-    """``robot`` as its file's tables (the URDF's path resolved): what a checkpoint and a saved policy keep, and what
+    """``robot`` as its file's tables (the URDF's path resolved, its text's SHA-256 beside it): what a checkpoint and a saved policy keep, and what
     :func:`robot_from_record` reads back."""
     lim = robot.limits
     limits = {"linear_velocity": lim.linear_velocity, "angular_velocity": lim.angular_velocity}
@@ -303,7 +328,8 @@ def robot_record(robot: Robot) -> dict:
     links = {"chassis": robot.chassis, "imu": robot.imu_frame, "laser": robot.laser_frame, "frames": list(robot.frames)}
     if robot.left_wheels:
         links.update(left_wheels=list(robot.left_wheels), right_wheels=list(robot.right_wheels))
-    return {"name": robot.name, "title": robot.title, "urdf": robot.urdf, "links": links,
+    return {"name": robot.name, "title": robot.title, "urdf": robot.urdf, "urdf_sha256": robot.urdf_sha256,
+            "links": links,
             "wheels": {"radius": robot.wheel_radius, "width": robot.wheel_width, "offset": robot.wheel_offset},
             "motor": {"torque_limit": robot.torque_limit, "no_load_speed": robot.no_load_speed},
             "driver": {"kp": robot.kp, "ki": robot.ki, "effective_track_factor": robot.effective_track_factor},
@@ -321,4 +347,7 @@ def robot_from_record(record: dict, where: str) -> Robot:
     if not isinstance(record, dict):
         raise RobotFileError(f"{where}: a robot record is a table, got {type(record).__name__}")
     copy = {k: dict(v) if isinstance(v, dict) else v for k, v in record.items()}
-    return _from_table(where, copy)
+    digest = copy.pop("urdf_sha256", "")  # a record from before it was kept: never the same as a file's robot
+    if not isinstance(digest, str):
+        raise RobotFileError(f"{where}: urdf_sha256 must be text, got {digest!r}")
+    return _from_table(where, copy, digest)
