@@ -22,7 +22,7 @@ import sys
 import tempfile
 
 __all__ = ["CORES_ENV", "TRAINER_CORE", "VERBOSE_ENV", "WORKER_CORE", "add_verbose_argument", "available_memory",
-           "configure", "configure_logging", "device_summary",
+           "configure", "configure_logging", "device_summary", "enable_gradients",
            "error_line", "is_configured", "is_verbose", "pin_to_core", "run_cores", "set_verbose"]
 
 VERBOSE_ENV = "ATRV_WARP_VERBOSE"
@@ -90,6 +90,8 @@ def configure() -> None:
     verbose = is_verbose()
     configure_logging()
     wp.config.log_level = wp.LOG_INFO if verbose else wp.LOG_WARNING
+    # kernels without their adjoints: a third of the compile, and only gradients need them (enable_gradients)
+    wp.config.enable_backward = False
     if verbose:
         wp.init()
         return
@@ -99,6 +101,23 @@ def configure() -> None:
     _held_back += text
     if kept:
         print("\n".join(kept), file=sys.stderr)
+
+
+def enable_gradients() -> None:
+    """Compile Warp kernels with their adjoints from here on, those of the modules loaded already included (they
+    compile again, once): what a simulator that is differentiated needs (``RoverSim(requires_grad=True)`` calls it).
+    :func:`configure` leaves them out, which cuts a first compile to about a third."""
+    import warp as wp
+
+    if wp.config.enable_backward:
+        return
+    wp.config.enable_backward = True
+    try:
+        from warp._src.context import user_modules
+    except ImportError:
+        return
+    for module in list(user_modules.values()):
+        wp.set_module_options({"enable_backward": True}, module)
 
 
 def set_verbose(verbose: bool = True) -> None:

@@ -189,9 +189,9 @@ def worker_weights(collector) -> list[TensorDictBase]:
 
 
 def make_sync_collector(cfg: TrainConfig, actor, *, total_frames: int, init_random_frames: int, env_seed: int):
-    """Collect in this process, stepping the learner's own ``actor``."""
+    """Collect in this process, stepping the learner's own ``actor``, on the run's device."""
     # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
-    env = ATRVjrEnv(cfg.env.num_envs, seed=env_seed, **dict(cfg.env.env_kwargs()))
+    env = ATRVjrEnv(cfg.env.num_envs, seed=env_seed, device=cfg.run.device, **dict(cfg.env.env_kwargs()))
     return Collector(env, actor, frames_per_batch=cfg.frames_per_batch, total_frames=total_frames,
                      init_random_frames=init_random_frames, auto_register_policy_transforms=False)
 

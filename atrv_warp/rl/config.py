@@ -67,6 +67,10 @@ class RunConfig:
     threads: int = 1
     """torch threads of the trainer (a second thread makes an update a little cheaper, and the async
     collector needs that core: docs/training.md, from benchmarks/sac_update_cost.py)."""
+    device: str = "cpu"
+    """Where the whole loop runs: the worlds, the collector, the replay buffer, the networks, their updates and the
+    periodic validation (``cpu``, or a CUDA device: ``cuda``, ``cuda:0``). On a GPU the collector is ``sync`` and
+    the validation runs in the trainer; the preset ``nav_deploy_gpu`` is shaped for it (docs/gpu.md)."""
 
 
 @dataclass(frozen=True)
@@ -240,6 +244,11 @@ class OptimConfig:
     """Target-network soft-update rate."""
     init_alpha: float = 1.0
     """Initial entropy temperature (learned)."""
+    compile: Literal["off", "compile", "cudagraphs"] = "off"
+    """SAC's update as one function, built once and replayed: ``off`` (eager, as every CPU figure was measured);
+    ``compile`` (``torch.compile`` of the update: loss, backward, optimiser steps and target update); ``cudagraphs``
+    (CUDA only: the update captured in a CUDA graph, ``tensordict.nn.CudaGraphModule``, with capturable Adam). The
+    first updates compile or capture; the figures are the same function's (docs/gpu.md)."""
 
 
 @dataclass(frozen=True)
@@ -363,6 +372,7 @@ class TrainConfig:
             raise ValueError(f"train config: video_episodes must be >= 0, got {self.logging.video_episodes}")
         if not 0.0 <= self.ppo.gae_lambda <= 1.0:
             raise ValueError(f"train config: gae_lambda must be in [0, 1], got {self.ppo.gae_lambda}")
+        self._validate_device()
         if self.optim.batch_size > self.optim.buffer_size:
             raise ValueError("train config: batch_size must not exceed buffer_size")
         name = self.run.name
@@ -381,6 +391,36 @@ class TrainConfig:
             load_sim_config(self.env.sim_config)  # names the file and the key that is wrong
         self.randomization()
         return self
+
+    def _validate_device(self) -> None:
+        import torch
+
+        device, kind = self.run.device, self.collector.kind
+        try:
+            parsed = torch.device(device)
+        except (RuntimeError, TypeError) as err:
+            raise ValueError(f"train config: device must be cpu or a CUDA device (cuda, cuda:0), got {device!r}: "
+                             f"{err}") from None
+        if parsed.type not in ("cpu", "cuda"):
+            raise ValueError(f"train config: device must be cpu or a CUDA device (cuda, cuda:0), got {device!r}")
+        if parsed.type == "cuda":
+            if not torch.cuda.is_available():
+                raise ValueError(f"train config: device={device} but this torch ({torch.__version__}) sees no CUDA "
+                                 "device; train on device=cpu, or install a CUDA build of torch on a machine with a "
+                                 "GPU")
+            if parsed.index is not None and parsed.index >= torch.cuda.device_count():
+                raise ValueError(f"train config: device={device} but there are {torch.cuda.device_count()} CUDA "
+                                 "device(s)")
+            if kind != "sync":
+                raise ValueError(f"train config: device={device} steps the worlds in the trainer's process, on the "
+                                 f"GPU: set collector.kind=sync (collector {kind} steps them in CPU processes; the "
+                                 "preset nav_deploy_gpu sets it)")
+        if self.optim.compile == "cudagraphs" and parsed.type != "cuda":
+            raise ValueError("train config: compile=cudagraphs captures CUDA graphs: it needs device=cuda (on the "
+                             "CPU: compile=off or compile=compile)")
+        if self.optim.compile != "off" and self.optim.algo != "sac":
+            raise ValueError(f"train config: compile={self.optim.compile} builds SAC's update; PPO runs eager "
+                             "(compile=off)")
 
     def task(self):
         """The run's task (:class:`~atrv_warp.task.definition.Task`): ``env.task`` (from ``env.task_module`` where

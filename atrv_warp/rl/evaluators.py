@@ -55,7 +55,8 @@ class Evaluator:
 
     def __init__(self, cfg: TrainConfig, actor, *, recording=None, video_dir: Path | None = None, gif: bool = False):
         self.cfg, self.actor = cfg, actor
-        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=VALIDATION_SEED, **dict(cfg.env.eval_env_kwargs()))
+        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=VALIDATION_SEED, device=cfg.run.device,
+                             **dict(cfg.env.eval_env_kwargs()))
         self.recorder = None
         if recording is not None:
             from atrv_warp.integrations.recorder import RerunRecorder
@@ -201,8 +202,9 @@ def _serve(conn, cfg: TrainConfig, video_dir: Path | None, gif: bool, core: int)
 
 def make_evaluator(cfg: TrainConfig, actor, *, recording=None, video_dir: Path | None = None, gif: bool = False):
     """The run's periodic validation: in the background (``logging.eval_in_background``), except where a Rerun
-    recording of the training (``logger=rerun``) takes the validation's worlds, which only the trainer holds."""
-    if cfg.logging.eval_in_background and recording is None:
+    recording of the training (``logger=rerun``) takes the validation's worlds, which only the trainer holds, and
+    on a GPU (``run.device``), where it takes a second or two in the trainer."""
+    if cfg.logging.eval_in_background and recording is None and cfg.run.device == "cpu":
         return BackgroundEvaluator(cfg, video_dir=video_dir, gif=gif)
     return Evaluator(cfg, actor, recording=recording, video_dir=video_dir, gif=gif)
 

@@ -57,37 +57,39 @@ rest of a collected batch (the scan, the reward terms, the actor's distribution,
 logged from the batch itself; kept, it would double what every sample gathers and every checkpoint writes."""
 
 
-def replay_frames(batch):
-    """A collected ``batch`` as the replay buffer stores it: its :data:`REPLAY_KEYS`, one frame per row, on the CPU."""
-    return batch.select(*REPLAY_KEYS, strict=False).reshape(-1).cpu()
+def replay_frames(batch, device: str | torch.device = "cpu"):
+    """A collected ``batch`` as the replay buffer stores it: its :data:`REPLAY_KEYS`, one frame per row, on
+    ``device`` (the run's: no copy where the batch is there already)."""
+    return batch.select(*REPLAY_KEYS, strict=False).reshape(-1).to(device)
 
 
 def make_buffer(cfg: TrainConfig):
-    """The replay buffer: ``buffer_size`` frames in memory, sampled ``batch_size`` at a time."""
+    """The replay buffer: ``buffer_size`` frames in the run's device's memory, sampled ``batch_size`` at a time."""
     from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 
-    return TensorDictReplayBuffer(storage=LazyTensorStorage(cfg.optim.buffer_size), batch_size=cfg.optim.batch_size)
+    storage = LazyTensorStorage(cfg.optim.buffer_size, device=torch.device(cfg.run.device))
+    return TensorDictReplayBuffer(storage=storage, batch_size=cfg.optim.batch_size)
 
 
 def make_loss(cfg: TrainConfig, actor, normalize: Normalize):
     """The TorchRL loss ``cfg.optim.loss`` names, with new critics that share ``normalize``."""
     from torchrl.objectives import CrossQLoss, REDQLoss, SACLoss
 
-    width, depth = cfg.network.width, cfg.network.depth
+    width, depth, device = cfg.network.width, cfg.network.depth, torch.device(cfg.run.device)
     common = {"alpha_init": cfg.optim.init_alpha, "target_entropy": -2.0}
     if cfg.optim.loss == "crossq":
-        qvalue = make_qvalue(width, depth, normalize=normalize, batch_renorm=True)
+        qvalue = make_qvalue(width, depth, normalize=normalize, batch_renorm=True).to(device)
         loss = CrossQLoss(actor, qvalue, num_qvalue_nets=2, **common)
     elif cfg.optim.loss == "redq":
-        qvalue = make_qvalue(width, depth, normalize=normalize)
+        qvalue = make_qvalue(width, depth, normalize=normalize).to(device)
         # REDQLoss needs temperature bounds; its default floor (0.1) would outweigh this task's rewards
         loss = REDQLoss(actor, qvalue, num_qvalue_nets=10, sub_sample_len=2, min_alpha=1e-4, max_alpha=10.0,
                         **common)
     else:
-        loss = SACLoss(actor, make_qvalue(width, depth, normalize=normalize), num_qvalue_nets=2, **common)
+        loss = SACLoss(actor, make_qvalue(width, depth, normalize=normalize).to(device), num_qvalue_nets=2, **common)
     loss.make_value_estimator(gamma=cfg.optim.gamma)
     _ = loss.target_entropy  # REDQ registers this buffer lazily: a resumed run's state dict must find it
-    return loss
+    return loss.to(device)
 
 
 class Learner:
@@ -104,19 +106,20 @@ class Learner:
             from torchrl.objectives import SoftUpdate
 
             self.target_update = SoftUpdate(self.loss, tau=cfg.optim.tau)
+        captured = cfg.optim.compile == "cudagraphs"  # a captured step reads its learning rate from a tensor
+        lr = torch.tensor(cfg.optim.lr, device=cfg.run.device) if captured else cfg.optim.lr
+        adam = {"lr": lr, "capturable": captured}
         self.opts = {
-            "actor": torch.optim.Adam(self.loss.actor_network_params.flatten_keys().values(), lr=cfg.optim.lr),
-            "critic": torch.optim.Adam(self.loss.qvalue_network_params.flatten_keys().values(), lr=cfg.optim.lr),
-            "alpha": torch.optim.Adam([self.loss.log_alpha], lr=cfg.optim.lr),
+            "actor": torch.optim.Adam(self.loss.actor_network_params.flatten_keys().values(), **adam),
+            "critic": torch.optim.Adam(self.loss.qvalue_network_params.flatten_keys().values(), **adam),
+            "alpha": torch.optim.Adam([self.loss.log_alpha], **adam),
         }
+        self.compiled = cfg.optim.compile != "off"
+        self.step = _built_step(self._step, cfg.optim.compile)
+        """One whole update (:meth:`_step`), eager or compiled or captured (``optim.compile``)."""
 
-    def update(self, batch, phase=None):
-        """One gradient step on every network and the temperature; returns the loss TensorDict.
-
-        ``phase``: optional ``phase(name)`` context-manager factory that times each part (loss,
-        backward, optimiser, target), as ``benchmarks/train_profile.py`` does.
-        """
-        phase = phase or (lambda name: contextlib.nullcontext())
+    def _step(self, batch, phase=None):
+        phase = phase or _no_phase
         with phase("loss"):
             out = self.loss(batch)
         with phase("backward"):
@@ -129,7 +132,16 @@ class Learner:
         if self.target_update is not None:
             with phase("target"):
                 self.target_update.step()
-        return out
+        return out.detach()
+
+    def update(self, batch, phase=None):
+        """One gradient step on every network and the temperature; returns the losses (a detached TensorDict).
+
+        ``phase``: optional ``phase(name)`` context-manager factory that times each part (loss,
+        backward, optimiser, target), as ``benchmarks/train_profile.py`` does (eager only: a compiled or captured
+        update is one piece).
+        """
+        return self.step(batch) if self.compiled else self._step(batch, phase)
 
     @property
     def alpha(self) -> float:
@@ -146,6 +158,22 @@ class Learner:
         self.loss.load_state_dict(sd["loss"])
         for k, opt in self.opts.items():
             opt.load_state_dict(sd["opts"][k])
+
+
+def _no_phase(name: str):
+    return contextlib.nullcontext()
+
+
+def _built_step(step: Callable, how: str) -> Callable:
+    """``step`` as ``optim.compile`` says: as is (``off``), ``torch.compile``d, or captured in a CUDA graph after a
+    few eager warm-up calls (``cudagraphs``: tensordict's ``CudaGraphModule``, as TorchRL's SAC recipe does)."""
+    if how == "compile":
+        return torch.compile(step)
+    if how == "cudagraphs":
+        from tensordict.nn import CudaGraphModule
+
+        return CudaGraphModule(step, in_keys=[], out_keys=[], warmup=5)
+    return step
 
 
 @dataclass(frozen=True)
@@ -180,7 +208,10 @@ def set_lr(learner, lr: float) -> None:
     """Set every optimiser of ``learner`` (SAC's or PPO's: their ``opts``) to ``lr``."""
     for opt in learner.opts.values():
         for group in opt.param_groups:
-            group["lr"] = lr
+            if isinstance(group["lr"], torch.Tensor):  # a captured update's: changed in place, where it reads it
+                group["lr"].fill_(lr)
+            else:
+                group["lr"] = lr
 
 
 def make_run_actor(cfg: TrainConfig):
@@ -192,7 +223,7 @@ def make_run_actor(cfg: TrainConfig):
     normalize = Normalize(obs_dim)
     actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize, obs_dim=obs_dim,
                        return_log_prob=ALGOS[cfg.optim.algo].on_policy)
-    return actor, normalize
+    return actor.to(cfg.run.device), normalize
 
 
 def make_learner(cfg: TrainConfig, actor, normalize: Normalize):

@@ -84,7 +84,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     speeds = f" at {task_cfg.max_linear:g} m/s, {task_cfg.max_angular:g} rad/s" if task_cfg.action == "twist" else ""
     period = task_cfg.control_period or 0.05
     print(f"robot {cfg.env.robot}, task {cfg.env.task}{speeds}, controlled every {period:g} s")
-    print(device_summary("cpu"))
+    print(device_summary(cfg.run.device))
     loop = TrainLoop(cfg, state, actor, normalize, buffer, learner, loggers, evaluator, checkpoint, run_dir,
                      policy=policy)
     try:
@@ -173,7 +173,7 @@ class TrainLoop:
             self.stats.update(data)
             self.count_by_collector(data)
             if not (self.algo.on_policy and st.stats_ready):  # PPO keeps the random frames only, for the statistics
-                self.buffer.extend(replay_frames(data))
+                self.buffer.extend(replay_frames(data, cfg.run.device))
             if st.frames >= cfg.collector.init_random_frames:
                 credit = self.learn(data, credit + n * cfg.optim.utd_ratio)
                 if self.push_weights:  # the worker holds a copy; the sync collector shares `actor`
@@ -292,8 +292,8 @@ def _finish(cfg: TrainConfig, state: RunState, run_dir: Path, loggers: Loggers) 
               "best_periodic_success": state.best_success}
     best_path = run_dir / "best_policy.pt"
     if best_path.is_file():
-        final = evaluate(load_policy(best_path), num_episodes=cfg.logging.final_eval_episodes, seed=EVAL_SEED,
-                         **dict(cfg.env.eval_env_kwargs()))
+        final = evaluate(load_policy(best_path, device=cfg.run.device), num_episodes=cfg.logging.final_eval_episodes,
+                         seed=EVAL_SEED, device=cfg.run.device, **dict(cfg.env.eval_env_kwargs()))
         print(format_result("best policy, final evaluation", final))
         result["final_eval"] = final.as_dict()
         for k, v in final.as_dict().items():

@@ -55,7 +55,7 @@ class PPOLearner:
 
         p = cfg.ppo
         self.cfg = cfg
-        self.value = make_value(cfg.network.width, cfg.network.depth, normalize)
+        self.value = make_value(cfg.network.width, cfg.network.depth, normalize).to(cfg.run.device)
         self.advantage = GAE(gamma=cfg.optim.gamma, lmbda=p.gae_lambda, value_network=self.value, average_gae=False)
         self.loss = ClipPPOLoss(actor, self.value, clip_epsilon=p.clip_epsilon, entropy_coeff=p.entropy_coef,
                                 critic_coeff=p.critic_coef, loss_critic_type="smooth_l1", normalize_advantage=True)
@@ -72,7 +72,7 @@ class PPOLearner:
         flat = data.reshape(-1)
         opt = self.opts["ppo"]
         for _ in range(p.epochs):
-            for index in torch.randperm(flat.numel()).split(p.minibatch_size):
+            for index in torch.randperm(flat.numel()).to(flat.device).split(p.minibatch_size):
                 out = self.loss(flat[index])
                 total = out["loss_objective"] + out["loss_critic"] + out["loss_entropy"]
                 opt.zero_grad(set_to_none=True)

@@ -88,7 +88,7 @@ class Stats:
         self.reward_n += r.numel()
         terms = data["next", "reward_terms"]
         if self.terms:
-            self.term_sums += torch.stack([terms[name].sum() for name in self.terms]).double()
+            self.term_sums += torch.stack([terms[name].sum() for name in self.terms]).double().cpu()
 
     def pop(self) -> tuple[float, float, dict[str, float]]:
         """(success rate, mean reward, mean of each reward term), then start over."""
@@ -106,16 +106,17 @@ class LossMeans:
 
     def __init__(self, keys: tuple[str, ...]):
         self.keys = keys
-        self.sums = {k: 0.0 for k in keys}
+        self.sums: dict[str, torch.Tensor | float] = {k: 0.0 for k in keys}
         self.n = 0
 
     def add(self, out) -> None:
+        """Add one update's losses, where they are (on a GPU: no wait for the update to finish)."""
         for k in self.keys:
-            self.sums[k] += float(out[k].detach())
+            self.sums[k] = self.sums[k] + out[k].detach().double()
         self.n += 1
 
     def pop(self) -> dict[str, float]:
-        means = {k: v / self.n for k, v in self.sums.items()} if self.n else {}
+        means = {k: float(v) / self.n for k, v in self.sums.items()} if self.n else {}
         self.sums, self.n = {k: 0.0 for k in self.keys}, 0
         return means
 

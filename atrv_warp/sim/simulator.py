@@ -20,7 +20,7 @@ import torch
 import warp as wp
 
 from atrv_warp.core.geometry import quat_to_matrix
-from atrv_warp.runtime import available_memory
+from atrv_warp.runtime import available_memory, enable_gradients
 from atrv_warp.sim.config import (
     ArenaConfig,
     ContactConfig,
@@ -32,6 +32,7 @@ from atrv_warp.sim.config import (
 )
 from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
 from atrv_warp.sim.driver import DRIVE_TORQUE, DRIVE_TWIST, SNAPSHOT_ADDED, Driver, DriverConfig
+from atrv_warp.sim.kernel_cache import precompile
 from atrv_warp.sim.kernels.contact import FLAG_BODY_GROUND, FLAG_OBSTACLE, FLAG_WALL
 from atrv_warp.sim.kernels.driver import MAX_WHEELS, DriverState, drive_wheels
 from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics, apply_payload
@@ -248,6 +249,9 @@ class RoverSim:
     ):
         self.device = wp.get_device(device)
         check_world_count(num_worlds, self.device)
+        if requires_grad:
+            enable_gradients()
+        precompile(self.device)  # the first run on a machine compiles, in parallel, and says so
         nominal_rover = nominal_rover_config(robot, variant, rover)
         self.rover_cfg, self.contact_cfg, self.bounds = checked_configs(nominal_rover, contact or ContactConfig(),
                                                                         sim_config)

@@ -41,6 +41,7 @@ from atrv_warp.sim.config import (
     nominal_rover_config,
 )
 from atrv_warp.sim.driver import DRIVE_TWIST, DriverConfig
+from atrv_warp.sim.kernel_cache import precompile
 from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
 from atrv_warp.sim.simulator import RoverSim
 from atrv_warp.task.config import TaskConfig
@@ -196,6 +197,7 @@ class RoverEnv(EnvBase):
         self._wp_device = self.sim.device
         self._make_task_buffers()
         self._make_task_kernels()
+        precompile(self.sim.device)  # the task's own kernels (its reward terms, its ends), with the simulator's
         self._make_views()
         self._make_randomization()
         self._make_spec()
