@@ -65,6 +65,17 @@ def load_checkpoint(path: Path) -> dict:
     return ck
 
 
+def _on_cpu(value):
+    """``value`` (state dicts: dicts, lists and tuples of tensors and numbers) with every tensor on the CPU."""
+    if isinstance(value, torch.Tensor):
+        return value.detach().cpu()
+    if isinstance(value, dict):
+        return {k: _on_cpu(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return type(value)(_on_cpu(v) for v in value)
+    return value
+
+
 def buffer_state(buffer) -> dict:
     """A replay buffer as plain tensors and numbers (:data:`BUFFER_FORMAT`): what a save writes."""
     from tensordict import TensorDict
@@ -140,7 +151,9 @@ class Checkpoint:
                                           record=cfg.run_record()),
                    "save": {"generation": generation, "files": files, "logs": self._log_lengths()}}
         if learner is not None:
-            payload.update(learner.state_dict())
+            learned = learner.state_dict()
+            # a run trained on a GPU reads back on any machine
+            payload.update(learned if cfg.run.device == "cpu" else _on_cpu(learned))
         atomic_save(payload, self.path)  # the commit: from here on, this save is the run's
         self.generation, self.files, self.best = generation, files, None
         self._publish_best()

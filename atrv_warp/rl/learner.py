@@ -15,6 +15,7 @@ from torchrl.modules import MLP, ValueOperator
 from atrv_warp.policy import Normalize, make_actor
 from atrv_warp.rl.config import TrainConfig
 from atrv_warp.rl.ppo import PPO_LOSS_KEYS, PPOLearner
+from atrv_warp.runtime import is_verbose
 from atrv_warp.task.spec import ACTION_DIM
 
 __all__ = ["ALGOS", "REPLAY_KEYS", "SAC_LOSS_KEYS", "Algo", "Learner", "annealed_lr", "make_buffer", "make_learner",
@@ -168,6 +169,12 @@ def _built_step(step: Callable, how: str) -> Callable:
     """``step`` as ``optim.compile`` says: as is (``off``), ``torch.compile``d, or captured in a CUDA graph after a
     few eager warm-up calls (``cudagraphs``: tensordict's ``CudaGraphModule``, as TorchRL's SAC recipe does)."""
     if how == "compile":
+        if not is_verbose():  # what torch.compile says of TorchRL's and tensordict's code is not the user's to act on
+            import logging
+            import warnings
+
+            logging.getLogger("torch._dynamo").setLevel(logging.ERROR)
+            warnings.filterwarnings("ignore", message=".*inline_inbuilt_nn_modules.*", category=FutureWarning)
         return torch.compile(step)
     if how == "cudagraphs":
         from tensordict.nn import CudaGraphModule
