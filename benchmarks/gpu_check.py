@@ -1,9 +1,10 @@
-"""The GPU check: on a machine with a GPU, one command of at most 10 minutes, compile included.
+"""The GPU check: on a machine with a GPU, what docs/gpu.md should say about it, compile included.
 
 Run: ``python benchmarks/gpu_check.py [--device cuda:0] [--parts compile tiers updates train] [--seeds 0 1 2]
 [--minutes 1.5] [--with-adjoints] [--batch N] [--threads N]``
 
-Four parts, each written to the results file as it ends (so a run cut short keeps what it measured):
+Four parts, each written to the results file as it ends (so a run cut short keeps what it measured, and a later
+call adds to it): ``--parts compile tiers updates`` and ``--parts train`` each fit a call of 10 minutes.
 
 - ``compile``: seconds from an empty Warp kernel cache to the first step of ``nav_deploy`` at 1,024 worlds (a fresh
   process with its own cache folder, so nothing compiled before counts), then the same with the cache it left.
