@@ -1,6 +1,6 @@
 """How far each robot turns on the nav world's ground when told to, and what its odometry makes of it.
 
-Run: ``python benchmarks/robot_arc.py [--linear 0.5] [--angular 0.5] [--seconds 6]``
+Run: ``python benchmarks/robot_arc.py [--linear 0.5] [--angular 0.5] [--seconds 6] [--starts 64]``
 
 Each shipped robot, in the ``nav_deploy`` environment fitted to it (one world, the test set's first episode, the
 nominal rover, no randomization), is sent one ``/cmd_vel`` (``--linear`` m/s, ``--angular`` rad/s) through its
@@ -8,7 +8,9 @@ base for ``--seconds`` from rest, on the nav world's terrain and on the same wor
 Per robot and ground: the yaw it was told to turn and the yaw it turned, the distance its chassis origin moved, the
 distance its encoders read, and how far the fused odometry's position (the encoders along the gyro's heading: what
 the deployable policies steer by) ended from the true one. The robot files' effective track factors were measured
-on the flat arena (``benchmarks/robot_check.py``). One start, one command: a probe, not a survey.
+on the flat arena (``benchmarks/robot_check.py``). One start, one command: a probe. Then the survey: the same
+command from the test set's first ``--starts`` starts at once, per robot and ground, the quartiles of the yaw each
+world turned over the yaw commanded, and the share of starts that turned less than half of it.
 Writes ``benchmarks/results/robot_arc.json``.
 """
 
@@ -21,7 +23,7 @@ from pathlib import Path
 
 from _common import write_results
 
-VERSION = 1
+VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -63,15 +65,46 @@ def drive(robot: str, linear: float, angular: float, seconds: float, terrain: st
             "fused_position_error": float((fused[:2] - true_odom).norm())}
 
 
+def survey(robot: str, linear: float, angular: float, seconds: float, starts: int,
+           terrain: str | None = None) -> dict:
+    """:func:`drive`'s turn over the test set's first ``starts`` starts at once: how much of the commanded yaw each
+    world turned (its quartiles), and how many turned less than half of it."""
+    import torch
+
+    from atrv_warp.task.env import RoverEnv
+    from atrv_warp.task.evaluation import EVAL_SEED
+
+    env = RoverEnv(starts, task="nav_deploy", robot=robot, **({"terrain": terrain} if terrain else {}))
+    env.set_seed(EVAL_SEED)
+    td = env.reset()
+    sim, cfg = env.sim, env.task_cfg
+    action = torch.tensor([[linear / cfg.max_linear, angular / cfg.max_angular]]).expand(starts, 2)
+    steps = round(seconds / sim.sim_cfg.step_dt)
+    previous = sim.rpy[:, 2].clone().double()
+    yaw = torch.zeros(starts, dtype=torch.float64)
+    for _ in range(steps):
+        td["action"] = action
+        td = env.step(td)["next"]
+        now = sim.rpy[:, 2].clone().double()
+        yaw += torch.remainder(now - previous + math.pi, 2 * math.pi) - math.pi
+        previous = now
+    ratio = yaw / (angular * steps * sim.sim_cfg.step_dt)
+    q = torch.quantile(ratio, torch.tensor([0.25, 0.5, 0.75], dtype=torch.float64)).tolist()
+    return {"starts": starts, "turned_over_commanded": {"q25": q[0], "median": q[1], "q75": q[2]},
+            "under_half": float((ratio < 0.5).double().mean())}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--linear", type=float, default=0.5, help="commanded forward speed [m/s]")
     parser.add_argument("--angular", type=float, default=0.5, help="commanded yaw rate [rad/s]")
     parser.add_argument("--seconds", type=float, default=6.0)
+    parser.add_argument("--starts", type=int, default=64,
+                        help="the survey: this many of the test set's starts at once, per robot and ground")
     parser.add_argument("--out", default=str(RESULTS / "robot_arc.json"))
     args = parser.parse_args(argv)
-    if args.seconds <= 0:
-        parser.error("--seconds must be > 0")
+    if args.seconds <= 0 or args.starts <= 0:
+        parser.error("--seconds and --starts must be > 0")
     from atrv_warp.core.robot import ROBOTS
 
     rows = {}
@@ -82,7 +115,17 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{robot:8s} {ground:5s} yaw {r['yaw_turned']:.2f} of {r['yaw_commanded']:.2f} rad; drove {r['distance_driven']:.2f} m, "
                   f"encoders read {r['distance_encoders']:.2f} m; fused odometry off by "
                   f"{r['fused_position_error']:.2f} m", flush=True)
-    result = {"linear": args.linear, "angular": args.angular, "seconds": args.seconds, "robots": rows}
+    surveys = {}
+    for robot in ROBOTS:
+        surveys[robot] = {ground: survey(robot, args.linear, args.angular, args.seconds, args.starts, terrain)
+                          for ground, terrain in GROUNDS.items()}
+        for ground, r in surveys[robot].items():
+            t = r["turned_over_commanded"]
+            print(f"{robot:8s} {ground:5s} over {r['starts']} starts: turned {t['median']:.2f} of the commanded yaw "
+                  f"(quartiles {t['q25']:.2f}, {t['q75']:.2f}); under half on {100 * r['under_half']:.0f} % of them",
+                  flush=True)
+    result = {"linear": args.linear, "angular": args.angular, "seconds": args.seconds, "robots": rows,
+              "survey": surveys}
     out = write_results(args.out, result, version=VERSION, task=True, driver=True, robots=tuple(ROBOTS))
     print(f"written to {out}")
     return 0
