@@ -1,8 +1,9 @@
 """A PEP 517 build backend for ``atrv-deploy`` (``deploy/pyproject.toml``): the wheel of the deploy node alone.
 
 It packs :data:`FILES` from the repository's ``atrv_warp`` (the light core, the deploy node, the package's
-``__init__`` and console setup, the shipped robot files) with the metadata ``pyproject.toml`` declares. Only the standard library is used, so
-``pip install ./deploy`` builds offline, in any virtualenv, with nothing to fetch for the build.
+``__init__`` and console setup, the shipped robot files) with the metadata ``pyproject.toml`` declares. Only the
+standard library is used (and on Python 3.10 tomli, tomllib's stand-in, which ``pyproject.toml``'s build-system
+requires there), so on 3.11 and later ``pip install ./deploy`` builds offline with nothing to fetch for the build.
 """
 
 from __future__ import annotations
@@ -10,13 +11,14 @@ from __future__ import annotations
 import base64
 import hashlib
 import re
+import sys
 import zipfile
 from pathlib import Path
 
-try:
+if sys.version_info >= (3, 11):  # noqa: UP036 (the backend runs on 3.10)
     import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    tomllib = None
+else:  # Python 3.10 (ROS 2 Humble's): the same parser, which pyproject.toml's build-system requires there
+    import tomli as tomllib
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE.parent / "atrv_warp"
@@ -26,10 +28,7 @@ TAG = "py3-none-any"
 
 
 def _project() -> dict:
-    text = (HERE / "pyproject.toml").read_text()
-    if tomllib is not None:
-        return tomllib.loads(text)["project"]
-    raise RuntimeError("building atrv-deploy needs Python >= 3.11 (tomllib); install the wheel on Python 3.10")
+    return tomllib.loads((HERE / "pyproject.toml").read_text())["project"]
 
 
 def _version() -> str:

@@ -100,6 +100,14 @@ def goal_msg(x, y, frame="odom"):
     return NS(header=NS(frame_id=frame), pose=NS(position=v3(x, y)))
 
 
+def tf_msg(*edges):
+    """A ``tf2_msgs/TFMessage`` of (parent, child, x, y, yaw) planar transforms."""
+    return NS(transforms=[NS(header=NS(frame_id=parent), child_frame_id=child,
+                             transform=NS(translation=v3(x, y), rotation=NS(x=0.0, y=0.0, z=math.sin(yaw / 2),
+                                                                             w=math.cos(yaw / 2))))
+                          for parent, child, x, y, yaw in edges])
+
+
 def fov_scan(beams, fov, seed=0):
     """``beams`` ranges over ``fov`` [rad] centred on +x, with +inf, -inf and NaN beams among them."""
     g = torch.Generator().manual_seed(seed)
@@ -209,8 +217,8 @@ def test_goals_in_another_frame_are_refused_and_the_goal_ends_reached_or_at_the_
     c.on_odom(odom_msg(), 0.0)
     c.on_imu(imu_msg(), 0.0)
     c.on_scan(fov_scan(181, math.pi), 0.0)
-    line = c.on_goal(goal_msg(3.0, 0.0, frame="map"), 0.0)
-    assert line.startswith("goal refused: it is in frame 'map'") and "'odom'" in line and "Fixed Frame" in line
+    line = c.on_goal(goal_msg(3.0, 0.0, frame="map"), 0.0)  # a node that reads no /tf (no tf2_msgs)
+    assert line.startswith("goal refused: it is in frame 'map'") and "'odom'" in line and "reads no /tf" in line
     assert c.tick(0.05) == c.tick(0.1) and c.tick(0.15).command is None  # no goal: nothing published
     c.on_goal(goal_msg(3.0, 0.0), 0.2)
     assert c.tick(0.25).status["state"] == "active"
@@ -423,7 +431,7 @@ def test_parameters_are_checked_by_type_and_range_in_one_line():
     from atrv_warp.deploy.parameters import ParameterError, check_parameters
 
     assert check_parameters({"max_linear": 1})["max_linear"] == 1.0  # an integer is a number
-    assert check_parameters({})["goal_tolerance"] == 1.0
+    assert check_parameters({})["goal_tolerance"] == -1.0  # the policy's trained radius
     cases = {"max_linear": ("abc", "parameter max_linear must be a number [m/s], got 'abc' (str)"),
              "enable_stamped_cmd_vel": ("maybe", "parameter enable_stamped_cmd_vel must be true or false, got 'maybe'"),
              "cmd_vel_topic": ("", "parameter cmd_vel_topic must be a topic name (it is empty)"),
@@ -484,3 +492,58 @@ def test_a_malformed_robot_entry_in_a_contract_is_read_as_no_robot():
         object.__setattr__(policy, "contract", {"robot": entry})
         assert policy.robot == name
         assert policy.describe_robot().startswith("trained on")
+
+
+def test_the_goal_tolerance_defaults_to_the_radius_the_policy_trained_to_reach(tmp_path, policy):
+    """``goal_tolerance`` -1 (the default): the contract's ``reach_radius_m``; 1.0 m for a contract without it; a value
+    given is used as is, 0 never ends a goal; below 0 only -1 is accepted."""
+    from atrv_warp.deploy.parameters import ParameterError, check_parameters
+
+    recorded = load_deployable(write_policy(tmp_path / "husky.pt2", {**policy.contract, "reach_radius_m": 1.14}))
+    assert recorded.reach_radius == 1.14 and Controller(recorded).goal_tolerance == 1.14
+    assert policy.reach_radius is None and Controller(policy).goal_tolerance == 1.0  # exported before it was kept
+    assert Controller(recorded, Settings(goal_tolerance=0.25)).goal_tolerance == 0.25
+    assert Controller(recorded, Settings(goal_tolerance=0.0)).goal_tolerance == 0.0
+    assert check_parameters({"goal_tolerance": -1})["goal_tolerance"] == -1.0
+    with pytest.raises(ParameterError, match="goal_tolerance must be a finite number >= 0"):
+        check_parameters({"goal_tolerance": -2.0})
+
+
+def test_the_transform_buffer_carries_a_point_along_the_tree():
+    """Up and down the tree, through several edges, a leading slash ignored; frames it does not join give None; a
+    transform with a non-finite value or a zero rotation is skipped."""
+    from atrv_warp.core.tf import TransformBuffer
+
+    tf = TransformBuffer()
+    assert tf.add(tf_msg(("map", "odom", 2.0, 1.0, math.pi / 2), ("odom", "base_link", 1.0, 0.0, 0.0),
+                         ("base_link", "laser", 0.2, 0.0, math.radians(10)))) == 3
+    assert tf.transform_point((2.0, 4.0, 0.0), "odom", "/map") == pytest.approx((3.0, 0.0, 0.0))
+    assert tf.transform_point((3.0, 0.0, 0.0), "map", "odom") == pytest.approx((2.0, 4.0, 0.0))
+    laser_origin = tf.transform_point((0.0, 0.0, 0.0), "map", "laser")  # map -> odom -> base_link -> laser
+    assert laser_origin == pytest.approx((2.0, 2.2, 0.0))
+    assert tf.transform_point((1.0, 0.0, 0.0), "odom", "elsewhere") is None and not tf.can_transform("map", "gps")
+    bad = tf_msg(("map", "gps", math.nan, 0.0, 0.0))
+    bad.transforms.append(NS(header=NS(frame_id="map"), child_frame_id="imu",
+                             transform=NS(translation=v3(), rotation=NS(x=0.0, y=0.0, z=0.0, w=0.0))))
+    assert tf.add(bad) == 0 and not tf.can_transform("map", "gps")
+
+
+def test_a_goal_in_map_is_carried_into_odom_and_follows_the_transform(policy):
+    """A node that reads /tf: a goal in ``map`` waits, holding still, until /tf joins ``map`` to ``odom``; then it
+    drives to the goal carried into ``odom``, again every period as the localisation's correction moves."""
+    c = Controller(policy, Settings(time_limit=0.0), tf=True)
+    drive_ready(c, scan=fov_scan(181, math.pi))
+    line = c.on_goal(goal_msg(2.0, 4.0, frame="map"), 0.0)
+    assert line.startswith("goal (2.00, 4.00) in map: waiting for the transform from 'map' to 'odom'"), line
+    t = c.tick(0.05)
+    assert t.command == (0.0, 0.0) and t.status["state"] == "holding"
+    assert t.status["reason"] == "no transform from 'map' to 'odom' on /tf" and t.log
+    c.on_tf(tf_msg(("map", "odom", 2.0, 1.0, math.pi / 2)), 0.06)
+    t = c.tick(0.1)
+    assert t.status["state"] == "active" and t.status["goal"] == pytest.approx([3.0, 0.0])
+    c.on_tf(tf_msg(("map", "odom", 2.0, 2.0, math.pi / 2)), 0.12)  # the localisation corrects the odometry
+    for s in (c.on_odom, c.on_imu):
+        s(odom_msg() if s == c.on_odom else imu_msg(), 0.14)
+    c.on_scan(fov_scan(181, math.pi), 0.14)
+    assert c.tick(0.15).status["goal"] == pytest.approx([2.0, 0.0])
+    assert c.on_goal(goal_msg(1.0, 1.0, frame=""), 0.2).startswith("goal refused: it names no frame")

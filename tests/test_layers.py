@@ -147,8 +147,9 @@ def test_the_package_and_its_light_core_load_without_the_simulator():
     assert out.stderr == "", out.stderr  # quiet: no Warp banner, no CUDA-driver notice
 
 
-ROS_RUNTIME = {"rclpy", "geometry_msgs", "nav_msgs", "sensor_msgs", "std_msgs", "rcl_interfaces"}
-"""What the deploy node may import besides torch: rclpy and the message packages a robot's ROS 2 has."""
+ROS_RUNTIME = {"rclpy", "geometry_msgs", "nav_msgs", "sensor_msgs", "std_msgs", "rcl_interfaces", "tf2_msgs"}
+"""What the deploy node may import besides torch: rclpy and the message packages a robot's ROS 2 has (tf2_msgs only
+there: no package index has it, and the node reads no /tf without it)."""
 
 
 def test_the_deploy_node_imports_only_torch_ros_and_the_light_core():

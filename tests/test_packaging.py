@@ -38,6 +38,11 @@ EXTRA_USERS = {
 SCANNED = ("atrv_warp", "tests", "benchmarks", "examples", "docs")
 
 
+FROM_A_ROS_INSTALL = {"tf2_msgs"}
+"""Modules that only a ROS 2 install provides (no package index has them), imported behind an ``ImportError`` guard:
+the deploy node reads /tf only where the robot's ROS 2 gives it ``tf2_msgs``."""
+
+
 def _name(requirement: str) -> str:
     return re.sub(r"[-_.]+", "-", re.match(r"\s*([A-Za-z0-9_][A-Za-z0-9._-]*)", requirement).group(1)).lower()
 
@@ -90,6 +95,8 @@ def undeclared_imports(pyproject_text: str, files: dict[str, str]) -> list[str]:
             dists = {_name(d) for d in providers.get(module, ())}
             if not dists and _name(module) in optional:
                 continue  # an extra this file may use, not installed here (e.g. [bench]'s mujoco in CI)
+            if not dists and module in FROM_A_ROS_INSTALL:
+                continue
             if not dists:
                 problems.append(f"{rel}: imports {module!r}, which no installed distribution provides")
             elif not dists & allowed:

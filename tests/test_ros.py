@@ -425,19 +425,20 @@ def test_base_driver_two_rovers_cmd_vel_odometry_imu_watchdog(ros_env):
         turned, odo_turned = _wrap(_yaw(truth) - yaw_truth1), _wrap(_yaw(odom) - yaw_odom1)
         assert turned > 0.5 and odo_turned == pytest.approx(turned, rel=0.05), (odo_turned, turned)
         # message types, frames, joints, IMU at rest-ish on flat ground: specific force ~ +g up
-        odom = client.last("/rover_0/odom")
-        assert (odom.header.frame_id, odom.child_frame_id) == ("odom", "base_link")
+        odom = client.last("/rover_0/odom")  # the frames /tf names: one rule for /tf and the headers
+        assert (odom.header.frame_id, odom.child_frame_id) == ("rover_0/odom", "rover_0/base_link")
+        assert client.last("/rover_1/ground_truth/odom").child_frame_id == "rover_1/base_link"
         assert len(odom.pose.covariance) == 36 and odom.pose.covariance[0] > 0
         joints = client.last("/rover_1/joint_states")
         assert len(joints.name) == 4 and len(joints.position) == 4 and len(joints.velocity) == 4
         imu = client.last("/rover_0/imu")
-        assert imu.header.frame_id == "cbimu_frame"
+        assert imu.header.frame_id == "rover_0/cbimu_frame"
         assert imu.linear_acceleration.z == pytest.approx(9.81, abs=0.5)
         assert "<robot" in client.description[0]
         # /scan: 181 beams over 180 deg from lrf_frame (0.3 m ahead of the chassis origin); the forward
         # beam meets the +x wall (inner face at x = 15 m) and the leftmost the +y wall, same stamp as the truth
         scan, truth = _paired(client, "/rover_0/scan", "/rover_0/ground_truth/odom")
-        assert scan.header.frame_id == "lrf_frame" and len(scan.ranges) == 181
+        assert scan.header.frame_id == "rover_0/lrf_frame" and len(scan.ranges) == 181
         assert scan.angle_min == pytest.approx(-math.pi / 2) and scan.angle_max == pytest.approx(math.pi / 2)
         assert (scan.range_min, scan.range_max) == pytest.approx((0.1, 20.0))
         x, y = _planar(truth)

@@ -26,6 +26,7 @@ import torch
 
 from atrv_warp.core.files import ExportedFileError, load_exported_program
 from atrv_warp.core.observation import RobotObservation, Scan
+from atrv_warp.core.tf import TransformBuffer, frame_id
 from atrv_warp.deploy.parameters import PARAMETER_BY_NAME
 
 __all__ = ["EXPORT_FORMAT", "RATE_RANGE_HZ", "STATES", "Controller", "Deployable", "PolicyRefused", "Settings", "Tick",
@@ -65,6 +66,14 @@ class Deployable:
     def period(self) -> float:
         """The control period [s]."""
         return 1.0 / self.rate_hz
+
+    @property
+    def reach_radius(self) -> float | None:
+        """The distance from the goal within which the policy's task counted it reached [m] (its contract's
+        ``reach_radius_m``; ``None`` for a file exported before it was kept)."""
+        radius = self.contract.get("reach_radius_m")
+        ok = isinstance(radius, int | float) and not isinstance(radius, bool) and math.isfinite(radius) and radius > 0
+        return float(radius) if ok else None
 
     @property
     def robot(self) -> str | None:
@@ -255,16 +264,17 @@ def _short(values: Sequence[float]) -> str:
 
 # ------------------------------------------------------------------ deciding
 
+
 @dataclass(frozen=True)
 class Settings:
     """What the node's parameters set (``python -m atrv_warp.deploy --help`` lists them)."""
 
     odom_frame: str = "odom"
     """The odometry frame: ``/odom``'s ``header.frame_id``, and the frame goals must come in."""
-    goal_tolerance: float = 1.0
-    """The goal is reached within this distance of the odometry's position [m] (the nav tasks' reach radius); 0: the
-    node never ends a goal as reached (whoever sent it ends it with the next goal, as an evaluation's episodes end
-    on the true position)."""
+    goal_tolerance: float = -1.0
+    """The goal is reached within this distance of the odometry's position [m]; -1: the radius the policy was trained
+    to reach (:attr:`Deployable.reach_radius`); 0: the node never ends a goal as reached (whoever sent it ends it
+    with the next goal, as an evaluation's episodes end on the true position)."""
     max_linear: float = 0.0
     """Speed clamp on ``linear.x`` [m/s]; 0 = the policy's trained limit."""
     max_angular: float = 0.0
@@ -316,7 +326,9 @@ class Controller:
     Feed it the messages as they come (:meth:`on_odom`, :meth:`on_imu`, :meth:`on_scan`, :meth:`on_goal`, each with
     the ROS time it arrived [s]; each returns a line to log or None) and call :meth:`tick` once per control period.
     A goal drives the rover until it is reached (``goal_tolerance``, on the odometry), the ``time_limit`` passes,
-    :meth:`stop` is called or a new goal replaces it. While a sensor the policy needs is missing, older than
+    :meth:`stop` is called or a new goal replaces it. A goal in another frame than the odometry's (``map``) is carried
+    into it through the transforms :meth:`on_tf` is given (``tf``: the node reads ``/tf``), again every period, so it
+    follows a localisation's correction; until the tree joins the two frames the rover holds still. While a sensor the policy needs is missing, older than
     ``stale_timeout``, non-finite, or a scan unusable (no valid beam, a field of view short of the policy's
     sectors, ``range_min > range_max``), the rover is held still with zero commands and resumes by itself when they
     are valid again. A goal that cannot be taken (another frame, non-finite, farther than ``max_goal_distance``)
@@ -324,13 +336,23 @@ class Controller:
     next period publishes zero and the aborted status, and the rover waits for a new goal.
     """
 
-    def __init__(self, policy: Deployable, settings: Settings | None = None):
+    def __init__(self, policy: Deployable, settings: Settings | None = None, *, tf: bool = False):
         self.policy, self.settings = policy, settings or Settings()
+        self.tf = tf
+        """Whether transforms come (:meth:`on_tf`): goals in other frames than the odometry's are taken."""
+        self.frames = TransformBuffer()
+        """The latest transforms from ``/tf`` and ``/tf_static``."""
+        self.goal_given: tuple[str, float, float] | None = None
+        """The active goal as it was sent: its frame and position [m]."""
         self.sensors = {"odom": _Sensor("/odom"), "imu": _Sensor("/imu")}
         if policy.observation.sectors is not None:
             self.sensors["scan"] = _Sensor("/scan")
         self.limits = (self.settings.max_linear or policy.scale[0], self.settings.max_angular or policy.scale[1])
+        tolerance = self.settings.goal_tolerance
+        self.goal_tolerance = (policy.reach_radius or 1.0) if tolerance < 0 else tolerance
+        """The goal is reached within this distance [m] (0: never): the setting, or the policy's trained radius."""
         self.goal: tuple[float, float] | None = None
+        """The active goal in the odometry frame [m] (None: no goal, or no transform into that frame yet)."""
         self.goal_time = 0.0
         self.steps = self.clipped_steps = 0
         self.compute_ms = float("nan")
@@ -382,7 +404,7 @@ class Controller:
 
     def _cancel(self, reason: str) -> str:
         """End the active goal for ``reason`` at the next period (zero command, aborted status); the line to log."""
-        if self.goal is None:
+        if self.goal_given is None:
             return reason
         self.pending = self._end("aborted", reason, log=False)
         return f"{reason}; the goal is aborted and the rover stops"
@@ -417,29 +439,51 @@ class Controller:
 
     def on_goal(self, msg, now: float) -> str:
         """A ``geometry_msgs/PoseStamped`` goal; returns the line to log (taken, or why it is refused). A refused goal
-        ends the active one (the rover stops), as a new goal that is taken replaces it."""
-        frame, p = msg.header.frame_id, msg.pose.position
-        if frame != self.settings.odom_frame:
-            return self._cancel(f"goal refused: it is in frame {frame!r}; send it in the odometry frame "
-                                f"{self.settings.odom_frame!r} (in RViz, set the Fixed Frame to "
-                                f"{self.settings.odom_frame!r} before using 2D Goal Pose)")
+        ends the active one (the rover stops), as a new goal that is taken replaces it. A goal in another frame is
+        taken where transforms come (``tf``), and carried into the odometry frame every period."""
+        frame, p, odom = frame_id(msg.header.frame_id), msg.pose.position, self.settings.odom_frame
         if not (math.isfinite(p.x) and math.isfinite(p.y)):
             return self._cancel(f"goal refused: non-finite position ({p.x}, {p.y})")
-        self.goal, self.goal_time = (float(p.x), float(p.y)), now
+        if not frame:
+            return self._cancel(f"goal refused: it names no frame (header.frame_id is empty); send it in {odom!r} "
+                                "or a frame /tf joins to it (map)")
+        if frame != odom and not self.tf:
+            return self._cancel(f"goal refused: it is in frame {frame!r} and this node reads no /tf (tf2_msgs is not "
+                                f"installed: source the robot's ROS 2); send it in the odometry frame {odom!r}")
+        self.goal_given, self.goal_time = (frame, float(p.x), float(p.y)), now
         self.steps = self.clipped_steps = 0
         self.hold_reason, self.pending = None, None
         self.history.zero_()
-        return f"goal ({p.x:.2f}, {p.y:.2f}) in {frame}: driving"
+        at = f"goal ({p.x:.2f}, {p.y:.2f}) in {frame}"
+        if self._locate() is None:
+            return f"{at}: waiting for the transform from {frame!r} to {odom!r} on /tf, holding still"
+        there = f" = ({self.goal[0]:.2f}, {self.goal[1]:.2f}) in {odom}" if frame != odom else ""
+        return f"{at}{there}: driving"
+
+    def on_tf(self, msg, now: float) -> None:
+        """A ``tf2_msgs/TFMessage`` from ``/tf`` or ``/tf_static``: its transforms replace the ones they follow; an
+        active goal in another frame moves with them from the next period."""
+        self.frames.add(msg)
+
+    def _locate(self) -> tuple[float, float] | None:
+        """The active goal in the odometry frame now (:attr:`goal`), through the latest transforms."""
+        if self.goal_given is None:
+            self.goal = None
+            return None
+        frame, x, y = self.goal_given
+        point = self.frames.transform_point((x, y, 0.0), self.settings.odom_frame, frame)
+        self.goal = None if point is None else (point[0], point[1])
+        return self.goal
 
     def fault(self, source: str, reason: str, now: float) -> Tick:
         """A callback that failed (``source``: a sensor's name, ``goal`` or ``tick``): its sensor is unusable until
         its next good message, a goal that may have been half taken is ended, and the rover holds still now."""
         if source in self.sensors:
             self._store(source, None, now, reason)
-        elif self.goal is not None and source == "goal":
+        elif self.goal_given is not None and source == "goal":
             self.pending = self._end("aborted", reason, log=False)
         self.hold_reason = f"fault: {source}"
-        return Tick((0.0, 0.0), self.status("holding", reason) if self.goal is not None else None)
+        return Tick((0.0, 0.0), self.status("holding", reason) if self.goal_given is not None else None)
 
     # ---------------------------------------------------------------- the control period
     def status(self, state: str, reason: str = "") -> dict:
@@ -462,11 +506,14 @@ class Controller:
         if self.pending is not None:
             tick, self.pending = self.pending, None
             return tick
-        if self.goal is None:
+        if self.goal_given is None:
             return Tick(None, None)
         limit = self.settings.time_limit
         if limit and now - self.goal_time > limit:
             return self._end("aborted", f"time limit: not reached in {limit:g} s")
+        if self._locate() is None:
+            frame, odom = self.goal_given[0], self.settings.odom_frame
+            return self._hold(f"no transform from {frame!r} to {odom!r} on /tf", "no transform")
         reasons, keys, quiet = [], [], True  # quiet: every reason was logged when its message came
         for s in self.sensors.values():
             if s.received is None:
@@ -486,8 +533,8 @@ class Controller:
         if status["distance"] > self.max_goal_distance:
             return self._end("aborted", f"the goal is {status['distance']:.1f} m away, farther than "
                                         f"max_goal_distance {self.max_goal_distance:g} m")
-        if self.settings.goal_tolerance and status["distance"] < self.settings.goal_tolerance:
-            return self._end("reached", f"within {self.settings.goal_tolerance:g} m")
+        if self.goal_tolerance and status["distance"] < self.goal_tolerance:
+            return self._end("reached", f"within {self.goal_tolerance:g} m")
         start = time.perf_counter()
         try:
             action = self._act()
@@ -510,7 +557,7 @@ class Controller:
 
     def stop(self, reason: str) -> Tick:
         """End the goal now (e.g. ``"shutdown"``): zero command and an aborted status, or nothing without a goal."""
-        if self.goal is None:
+        if self.goal_given is None:
             return Tick((0.0, 0.0), None)
         return self._end("aborted", reason)
 
@@ -568,6 +615,6 @@ class Controller:
 
     def _end(self, state: str, reason: str, *, log: bool = True) -> Tick:
         status = self.status(state, reason)
-        self.goal, self.hold_reason = None, None
+        self.goal, self.goal_given, self.hold_reason = None, None, None
         line = f"goal {state}: {reason} ({status['steps']} steps, {status['clipped_steps']} clipped)"
         return Tick((0.0, 0.0), status, (line,) if log else ())

@@ -23,7 +23,7 @@ from rclpy.duration import Duration
 from rclpy.expand_topic_name import expand_topic_name
 from rclpy.node import Node
 from rclpy.parameter import parameter_dict_from_yaml_file
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.validate_topic_name import validate_topic_name
 from sensor_msgs.msg import Imu, LaserScan
 from std_msgs.msg import String
@@ -39,6 +39,15 @@ from atrv_warp.deploy.parameters import (
 )
 
 __all__ = ["DeployNode", "NodeConfigError"]
+
+
+def _tf_message() -> type | None:
+    """``tf2_msgs/msg/TFMessage`` where a ROS 2 install provides it (no package index does), else None."""
+    try:
+        from tf2_msgs.msg import TFMessage
+    except ImportError:
+        return None
+    return TFMessage
 
 
 class NodeConfigError(ValueError):
@@ -81,7 +90,8 @@ class DeployNode(Node):
             self.log.warning(f"{line} (allow_other_robot:=true)")
         self.log.info(policy.describe_robot())
         self.policy = policy
-        self.controller = Controller(policy, settings)
+        tf_message = _tf_message()
+        self.controller = Controller(policy, settings, tf=tf_message is not None)
         self.stamped = p["enable_stamped_cmd_vel"]
         self.cmd_pub = self.create_publisher(TwistStamped if self.stamped else Twist, p["cmd_vel_topic"], 10)
         self.status_pub = self.create_publisher(String, p["status_topic"], 10)
@@ -93,6 +103,13 @@ class DeployNode(Node):
             self.create_subscription(LaserScan, p["scan_topic"], guard("scan", self.controller.on_scan), sensors)
         self.create_subscription(PoseStamped, p["goal_topic"], guard("goal", self.controller.on_goal),
                                  QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        if tf_message is not None:  # goals in any frame: the tree from /tf and /tf_static, as tf2_ros's listener reads it
+            self.create_subscription(tf_message, "/tf", guard("tf", self.controller.on_tf), QoSProfile(depth=100))
+            self.create_subscription(tf_message, "/tf_static", guard("tf", self.controller.on_tf),
+                                     QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        else:
+            self.log.warning("tf2_msgs is not installed (it comes with a ROS 2 install): this node reads no /tf, so "
+                             f"it takes goals in {settings.odom_frame!r} only")
         if p["trace"]:
             try:
                 path, line = fresh_path(p["trace"])
@@ -107,9 +124,13 @@ class DeployNode(Node):
             clamp = (f"; speed clamp {self.controller.limits[0]:g} m/s, {self.controller.limits[1]:g} rad/s "
                      f"(trained at {policy.scale[0]:g}, {policy.scale[1]:g}): a clamp below the trained limits "
                      "changes how the policy drives")
+        tolerance = self.controller.goal_tolerance
+        reached = (f"reached within {tolerance:g} m" + (" (trained)" if settings.goal_tolerance < 0 else "")
+                   if tolerance else "never judged reached (goal_tolerance:=0)")
         self.log.info(f"{policy.describe()}; cmd_vel as {'TwistStamped' if self.stamped else 'Twist'} on "
                       f"{self.cmd_pub.topic_name}, goals in {settings.odom_frame!r} on "
-                      f"{self.resolve_topic_name(p['goal_topic'])}{clamp}")
+                      f"{self.resolve_topic_name(p['goal_topic'])}"
+                      f"{' (or any frame /tf joins to it)' if tf_message is not None else ''}, {reached}{clamp}")
 
     # ---------------------------------------------------------------- parameters
     def _params_file_names(self, args: list[str] | None) -> dict[str, list[str]]:

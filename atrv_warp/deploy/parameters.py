@@ -38,6 +38,8 @@ class Parameter:
     """The unit of a number (``m/s``)."""
     positive: bool = False
     """A number must be > 0 (else >= 0)."""
+    from_policy: bool = False
+    """A number may also be -1: the value the policy was trained with, read from its contract."""
 
     def check(self, value):
         """``value`` as the node runs with it (an integer number as a float).
@@ -53,8 +55,11 @@ class Parameter:
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise self._error(f"a number [{self.unit}]", value)
             number = float(value)
+            if self.from_policy and number == -1:
+                return number
             if not math.isfinite(number) or number < 0 or (self.positive and number == 0):
-                raise self._error(f"a finite number {'>' if self.positive else '>='} 0 [{self.unit}]", value)
+                policy = ", or -1 (the policy's)" if self.from_policy else ""
+                raise self._error(f"a finite number {'>' if self.positive else '>='} 0 [{self.unit}]{policy}", value)
             return number
         if not isinstance(value, str):
             raise self._error("a string", value)
@@ -76,18 +81,19 @@ PARAMETERS = (
               "sectors)", "topic"),
     Parameter("odom_topic", "odom", "nav_msgs/Odometry in (pose in odom_frame, twist in the base frame)", "topic"),
     Parameter("imu_topic", "imu", "sensor_msgs/Imu in (orientation and angular velocity)", "topic"),
-    Parameter("goal_topic", "goal_pose", "geometry_msgs/PoseStamped in: the goal, in odom_frame (RViz's 2D Goal "
-              "Pose)", "topic"),
+    Parameter("goal_topic", "goal_pose", "geometry_msgs/PoseStamped in: the goal, in odom_frame or any frame /tf joins "
+              "to it, e.g. map (RViz's 2D Goal Pose)", "topic"),
     Parameter("cmd_vel_topic", "cmd_vel", "geometry_msgs/Twist (or TwistStamped) out, at the policy's rate", "topic"),
     Parameter("status_topic", "goal_status", "std_msgs/String out: the goal status as JSON (state active | holding | "
               "reached | aborted, reason, goal, distance, steps, clipped_steps, compute_ms)", "topic"),
-    Parameter("odom_frame", "odom", "the odometry frame: /odom's header.frame_id, and the frame goals must be in",
-              "frame"),
+    Parameter("odom_frame", "odom", "the odometry frame: /odom's header.frame_id, where the policy sees its goal (a "
+              "goal in another frame is carried into it through /tf)", "frame"),
     Parameter("base_frame", "base_link", "frame_id of a stamped /cmd_vel", "frame"),
     Parameter("enable_stamped_cmd_vel", False, "publish geometry_msgs/TwistStamped instead of Twist (as Nav2's "
               "parameter)", "switch"),
-    Parameter("goal_tolerance", 1.0, "the goal is reached within this distance on the odometry [m] (the nav tasks' "
-              "radius); 0 = never: the next goal ends it", "number", "m"),
+    Parameter("goal_tolerance", -1.0, "the goal is reached within this distance on the odometry [m]; -1 = the radius "
+              "the policy was trained to reach (its contract's reach_radius_m; 1.0 m for a file exported before it "
+              "was kept); 0 = never: the next goal ends it", "number", "m", from_policy=True),
     Parameter("max_goal_distance", 0.0, "a goal farther than this from the rover is refused, and stops the rover [m]; "
               "0 = the farthest goal the policy observes (its goal_distance bound)", "number", "m"),
     Parameter("max_linear", 0.0, "clamp |linear.x| to this [m/s]; 0 = the policy's trained limit", "number", "m/s"),

@@ -72,8 +72,9 @@ def contract(source: Path, payload: dict, sim: SimConfig | None = None) -> dict:
     and the task's limits they come from (``action_scale`` [N·m], or ``max_linear`` [m/s] and ``max_angular``
     [rad/s]), and what a robot does with it; the scan's sectors; the action history. Added here: the format, the
     source file, the policy's metadata, the ``robot`` it was trained on (name, title, limits, IMU and laser frames),
-    the control period (``step_dt`` [s], ``rate_hz``) and the scanner's geometry (``beams``, ``fov_rad``,
-    ``range_min_m``, ``range_max_m``, ``frame``). All of it from the task and robot the policy records
+    the control period (``step_dt`` [s], ``rate_hz``), the radius within which its task counts a goal reached
+    (``reach_radius_m``: the deploy node's default ``goal_tolerance``) and the scanner's geometry (``beams``,
+    ``fov_rad``, ``range_min_m``, ``range_max_m``, ``frame``). All of it from the task and robot the policy records
     (:func:`atrv_warp.policy.policy_record`), never from today's code: a task's limits changed since do not enter an
     old policy's contract. :class:`atrv_warp.core.observation.RobotObservation` builds a robot policy's input from it.
 
@@ -101,7 +102,8 @@ def contract(source: Path, payload: dict, sim: SimConfig | None = None) -> dict:
                              "linear_acceleration": lim.linear_acceleration,
                              "angular_acceleration": lim.angular_acceleration}}
     return {"format": EXPORT_FORMAT, "source": str(source), "policy_meta": meta, "task": record.task.name,
-            "robot": robot_part, **spec, "step_dt": step_dt, "rate_hz": 1.0 / step_dt}
+            "robot": robot_part, **spec, "step_dt": step_dt, "rate_hz": 1.0 / step_dt,
+            "reach_radius_m": task.reach_radius}
 
 
 def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = False, force: bool = False) -> Path:

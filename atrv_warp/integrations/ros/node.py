@@ -238,7 +238,8 @@ class RoverIO:
         node, sim, k = self.node, self.node.sim, self.index
         x, y, yaw, linear, angular = self.odometry()
         msg = Odometry()
-        msg.header.stamp, msg.header.frame_id, msg.child_frame_id = _stamp(ns), node.odom_frame, node.base_frame
+        # the frames /tf names (rover_<k>/odom -> rover_<k>/base_link with several rovers): one naming rule
+        msg.header.stamp, msg.header.frame_id, msg.child_frame_id = _stamp(ns), self.tf_odom, self.tf_base
         msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
         o = msg.pose.pose.orientation
         o.x, o.y, o.z, o.w = yaw_to_quat(yaw).tolist()
@@ -252,7 +253,7 @@ class RoverIO:
         o.x, o.y, o.z, o.w = yaw_to_quat(fyaw).tolist()
         self.fused_pub.publish(msg)
         truth = Odometry()
-        truth.header.stamp, truth.header.frame_id, truth.child_frame_id = _stamp(ns), "world", node.base_frame
+        truth.header.stamp, truth.header.frame_id, truth.child_frame_id = _stamp(ns), WORLD_FRAME, self.tf_base
         t = truth.pose.pose
         t.position.x, t.position.y, t.position.z = pose[0], pose[1], pose[2]
         t.orientation.x, t.orientation.y, t.orientation.z, t.orientation.w = pose[3], pose[4], pose[5], pose[6]
@@ -331,7 +332,7 @@ class RoverIO:
         scanner = self.node.scanner
         cfg = scanner.cfg
         msg = LaserScan()
-        msg.header.stamp, msg.header.frame_id = _stamp(ns), scanner.frame
+        msg.header.stamp, msg.header.frame_id = _stamp(ns), self.tf_prefix + scanner.frame
         msg.angle_min, msg.angle_max = float(cfg.angles[0]), float(cfg.angles[-1])
         msg.angle_increment = float(cfg.angles[1] - cfg.angles[0]) if cfg.beams > 1 else 0.0
         msg.time_increment = 0.0  # every beam of a scan is cast at the same simulated instant
@@ -346,7 +347,7 @@ class RoverIO:
         r = imu_reading(frame_pose, node.sim.ang_vel[k], accel, node.sim.sim_cfg.gravity,
                         (node.params["imu_accel_noise"], node.params["imu_gyro_noise"]), node.noise)
         msg = Imu()
-        msg.header.stamp, msg.header.frame_id = _stamp(ns), node.imu_frame
+        msg.header.stamp, msg.header.frame_id = _stamp(ns), self.tf_prefix + node.imu_frame
         q = msg.orientation
         q.x, q.y, q.z, q.w = r["orientation"]
         msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = r["angular_velocity"]
