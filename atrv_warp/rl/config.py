@@ -247,8 +247,9 @@ class OptimConfig:
     compile: Literal["off", "compile", "cudagraphs"] = "off"
     """SAC's update as one function, built once and replayed: ``off`` (eager, as every CPU figure was measured);
     ``compile`` (``torch.compile`` of the update: loss, backward, optimiser steps and target update); ``cudagraphs``
-    (CUDA only: the update captured in a CUDA graph, ``tensordict.nn.CudaGraphModule``, with capturable Adam). The
-    first updates compile or capture; the figures are the same function's (docs/gpu.md)."""
+    (CUDA only: the update captured in a CUDA graph, ``tensordict.nn.CudaGraphModule``, with capturable Adam). Built,
+    the learning rate is a tensor the annealing changes in place. The first updates compile or capture; the figures
+    are the same function's (docs/gpu.md)."""
 
 
 @dataclass(frozen=True)

@@ -107,9 +107,14 @@ class Learner:
             from torchrl.objectives import SoftUpdate
 
             self.target_update = SoftUpdate(self.loss, tau=cfg.optim.tau)
-        captured = cfg.optim.compile == "cudagraphs"  # a captured step reads its learning rate from a tensor
-        lr = torch.tensor(cfg.optim.lr, device=cfg.run.device) if captured else cfg.optim.lr
-        adam = {"lr": lr, "capturable": captured}
+        # a built update reads its learning rate from a tensor, which the annealing changes in place (a float would be
+        # captured as a constant, or recompile the update at every change); on the CPU a tensor rate needs Adam's
+        # for-loop implementation, on a GPU its capturable one
+        built, cuda = cfg.optim.compile != "off", torch.device(cfg.run.device).type == "cuda"
+        if built:
+            adam = {"lr": torch.tensor(cfg.optim.lr, device=cfg.run.device), "capturable": cuda, "foreach": cuda}
+        else:
+            adam = {"lr": cfg.optim.lr}
         self.opts = {
             "actor": torch.optim.Adam(self.loss.actor_network_params.flatten_keys().values(), **adam),
             "critic": torch.optim.Adam(self.loss.qvalue_network_params.flatten_keys().values(), **adam),
