@@ -96,13 +96,15 @@ def _sync(device) -> None:
         torch.cuda.synchronize()
 
 
+def _on_device(args) -> dict:
+    """The preset's overrides for ``--device``: the device, and on the CPU the eager update (cudagraphs is CUDA's)."""
+    return {"run.device": args.device, **({"optim.compile": "off"} if args.device == "cpu" else {})}
+
+
 def _recipe(args, overrides: dict | None = None):
     from atrv_warp.rl.config import load_train_config
 
-    base = {"run.device": args.device}
-    if args.device == "cpu":
-        base["optim.compile"] = "off"
-    return load_train_config(PRESET, {**base, **(overrides or {})})
+    return load_train_config(PRESET, {**_on_device(args), **(overrides or {})})
 
 
 def part_tiers(args) -> dict:
@@ -213,9 +215,7 @@ def part_updates(args) -> dict:
 def part_train(args) -> dict:
     """Time to 90 % per seed with the GPU preset, as train_to_success.py counts it."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from train_to_success import _summarize
-
-    from atrv_warp.rl.loop import train
+    from train_to_success import _one_seed
 
     seeds = []
     for seed in args.seeds:
@@ -227,15 +227,7 @@ def part_train(args) -> dict:
                               "logging.final_eval_episodes": 8})
         else:
             overrides.update({"logging.final_eval_episodes": 1000})
-        cfg = _recipe(args, overrides)
-        run_dir = Path(cfg.run.out_dir) / cfg.run.name
-        if run_dir.exists():
-            import shutil
-
-            shutil.rmtree(run_dir)
-        t0 = time.perf_counter()
-        train(cfg)
-        r = _summarize(run_dir, seed, args.threshold, time.perf_counter() - t0)
+        r = _one_seed(PRESET, {**_on_device(args), **overrides}, args.threshold)  # a fresh run folder, trained, summarized
         reached = f"{r['wall_s_to_threshold']:.0f} s" if r["reached"] else "not reached"
         print(f"train: seed {seed}: {100 * args.threshold:.0f} % after {reached}; test set "
               f"{100 * r['final_eval_best_policy']['success_rate']:.1f} %", flush=True)

@@ -139,3 +139,24 @@ print(json.dumps([off, warp.config.enable_backward, loaded, listed]))
     out = io.StringIO()
     kernel_cache.precompile("cpu", out=out)  # this process's modules: compiled or cached, at most one line each way
     assert kernel_cache.precompile("cpu", out=out) == 0.0  # done once per process
+
+
+@pytest.mark.slow  # compiles in a fresh cache, trains
+def test_the_gpu_check_runs_every_part(tmp_path):
+    """``benchmarks/gpu_check.py``, which a GPU machine runs blind, runs every part (small, on the CPU)
+    and writes each part's figures with the results file's provenance."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    out, root = tmp_path / "gpu_check.json", Path(__file__).resolve().parent.parent
+    proc = subprocess.run([sys.executable, "benchmarks/gpu_check.py", "--device", "cpu", "--quick", "--seeds", "0",
+                           "--out", str(out), "--runs", str(tmp_path)], cwd=root, capture_output=True, text=True,
+                          timeout=600, check=False)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result = json.loads(out.read_text())
+    assert {"compile", "tiers", "updates", "train", "provenance"} <= result.keys()
+    assert result["compile"]["cold"]["first_step_s"] > result["compile"]["warm"]["first_step_s"]
+    assert [row["worlds"] for row in result["tiers"]["rows"]] == [16, 32]
+    assert set(result["updates"]["updates_per_s"]) == {"off", "compile"}
+    assert result["train"]["seeds"][0]["frames"] >= 2048 and result["provenance"]["task"]
