@@ -110,8 +110,9 @@ class Learner:
         # a built update reads its learning rate from a tensor, which the annealing changes in place (a float would be
         # captured as a constant, or recompile the update at every change); on the CPU a tensor rate needs Adam's
         # for-loop implementation, on a GPU its capturable one
-        built, cuda = cfg.optim.compile != "off", torch.device(cfg.run.device).type == "cuda"
-        if built:
+        self.compiled = cfg.optim.compile != "off"
+        cuda = torch.device(cfg.run.device).type == "cuda"
+        if self.compiled:
             adam = {"lr": torch.tensor(cfg.optim.lr, device=cfg.run.device), "capturable": cuda, "foreach": cuda}
         else:
             adam = {"lr": cfg.optim.lr}
@@ -120,7 +121,6 @@ class Learner:
             "critic": torch.optim.Adam(self.loss.qvalue_network_params.flatten_keys().values(), **adam),
             "alpha": torch.optim.Adam([self.loss.log_alpha], **adam),
         }
-        self.compiled = cfg.optim.compile != "off"
         self.step = _built_step(self._step, cfg.optim.compile)
         """One whole update (:meth:`_step`), eager or compiled or captured (``optim.compile``)."""
 
