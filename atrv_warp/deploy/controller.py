@@ -328,10 +328,11 @@ class Controller:
     A goal drives the rover until it is reached (``goal_tolerance``, on the odometry), the ``time_limit`` passes,
     :meth:`stop` is called or a new goal replaces it. A goal in another frame than the odometry's (``map``) is carried
     into it through the transforms :meth:`on_tf` is given (``tf``: the node reads ``/tf``), again every period, so it
-    follows a localisation's correction; until the tree joins the two frames the rover holds still. While a sensor the policy needs is missing, older than
-    ``stale_timeout``, non-finite, or a scan unusable (no valid beam, a field of view short of the policy's
-    sectors, ``range_min > range_max``), the rover is held still with zero commands and resumes by itself when they
-    are valid again. A goal that cannot be taken (another frame, non-finite, farther than ``max_goal_distance``)
+    follows a localisation's correction; until the tree joins the two frames the rover holds still. While a sensor
+    the policy needs is missing, older than ``stale_timeout``, non-finite, or a scan unusable (no valid beam, a field
+    of view short of the policy's sectors, ``range_min > range_max``), the rover is held still with zero commands and
+    resumes by itself when they are valid again. A goal that cannot be taken (in no frame, in another frame where no
+    transforms come, non-finite, farther than ``max_goal_distance``)
     and odometry that jumps farther than the trained speed allows (``odom_jump_margin``) end the active goal: the
     next period publishes zero and the aborted status, and the rover waits for a new goal.
     """
