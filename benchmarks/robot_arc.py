@@ -10,7 +10,8 @@ distance its encoders read, and how far the fused odometry's position (the encod
 the deployable policies steer by) ended from the true one. The robot files' effective track factors were measured
 on the flat arena (``benchmarks/robot_check.py``). One start, one command: a probe. Then the survey: the same
 command from the test set's first ``--starts`` starts at once, per robot and ground, the quartiles of the yaw each
-world turned over the yaw commanded, and the share of starts that turned less than half of it.
+world turned over the yaw commanded, and the share of starts that turned less than half of it; and the survey on
+the nav world again with the ground contact 0.1 and 10 times as stiff (``STIFFNESS_SCALES``).
 Writes ``benchmarks/results/robot_arc.json``.
 """
 
@@ -23,12 +24,15 @@ from pathlib import Path
 
 from _common import write_results
 
-VERSION = 2
+VERSION = 3
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parent / "results"
 GROUNDS = {"nav": None, "flat": "flat"}
 """Each ground the robots drive on: the nav world's own terrain (``nav_deploy``'s), and the same world made flat."""
+STIFFNESS_SCALES = {"nav_softer": 0.1, "nav_stiffer": 10.0}
+"""The survey on the nav world again, with the ground contact this many times as stiff (the robot's own is 1): how
+the turn on uneven ground depends on the contact law."""
 
 
 def drive(robot: str, linear: float, angular: float, seconds: float, terrain: str | None = None) -> dict:
@@ -66,10 +70,12 @@ def drive(robot: str, linear: float, angular: float, seconds: float, terrain: st
 
 
 def survey(robot: str, linear: float, angular: float, seconds: float, starts: int,
-           terrain: str | None = None) -> dict:
+           terrain: str | None = None, stiffness_scale: float = 1.0) -> dict:
     """:func:`drive`'s turn over the test set's first ``starts`` starts at once: how much of the commanded yaw each
-    world turned (its quartiles), and how many turned less than half of it."""
+    world turned (its quartiles), and how many turned less than half of it. ``stiffness_scale`` multiplies every
+    world's contact stiffness after the reset (a study of the ground contact, not a shipped setting)."""
     import torch
+    import warp as wp
 
     from atrv_warp.task.env import RoverEnv
     from atrv_warp.task.evaluation import EVAL_SEED
@@ -78,6 +84,7 @@ def survey(robot: str, linear: float, angular: float, seconds: float, starts: in
     env.set_seed(EVAL_SEED)
     td = env.reset()
     sim, cfg = env.sim, env.task_cfg
+    wp.to_torch(sim.params.physics.stiffness).mul_(stiffness_scale)
     action = torch.tensor([[linear / cfg.max_linear, angular / cfg.max_angular]]).expand(starts, 2)
     steps = round(seconds / sim.sim_cfg.step_dt)
     previous = sim.rpy[:, 2].clone().double()
@@ -90,7 +97,8 @@ def survey(robot: str, linear: float, angular: float, seconds: float, starts: in
         previous = now
     ratio = yaw / (angular * steps * sim.sim_cfg.step_dt)
     q = torch.quantile(ratio, torch.tensor([0.25, 0.5, 0.75], dtype=torch.float64)).tolist()
-    return {"starts": starts, "turned_over_commanded": {"q25": q[0], "median": q[1], "q75": q[2]},
+    return {"starts": starts, "stiffness_scale": stiffness_scale,
+            "turned_over_commanded": {"q25": q[0], "median": q[1], "q75": q[2]},
             "under_half": float((ratio < 0.5).double().mean())}
 
 
@@ -119,6 +127,8 @@ def main(argv: list[str] | None = None) -> int:
     for robot in ROBOTS:
         surveys[robot] = {ground: survey(robot, args.linear, args.angular, args.seconds, args.starts, terrain)
                           for ground, terrain in GROUNDS.items()}
+        for ground, scale in STIFFNESS_SCALES.items():
+            surveys[robot][ground] = survey(robot, args.linear, args.angular, args.seconds, args.starts, None, scale)
         for ground, r in surveys[robot].items():
             t = r["turned_over_commanded"]
             print(f"{robot:8s} {ground:5s} over {r['starts']} starts: turned {t['median']:.2f} of the commanded yaw "
