@@ -11,7 +11,8 @@ the deployable policies steer by) ended from the true one. The robot files' effe
 on the flat arena (``benchmarks/robot_check.py``). One start, one command: a probe. Then the survey: the same
 command from the test set's first ``--starts`` starts at once, per robot and ground, the quartiles of the yaw each
 world turned over the yaw commanded, and the share of starts that turned less than half of it; and the survey on
-the nav world again with the ground contact 0.1 and 10 times as stiff (``STIFFNESS_SCALES``).
+the nav world again with the ground contact 0.1 and 10 times as stiff, and on flat ground 10 times as stiff
+(``STIFFNESS_SCALES``), ten times as damped, and with a quarter of the substep (``CONTACT_VARIANTS``).
 Writes ``benchmarks/results/robot_arc.json``.
 """
 
@@ -24,15 +25,19 @@ from pathlib import Path
 
 from _common import write_results
 
-VERSION = 3
+VERSION = 4
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parent / "results"
 GROUNDS = {"nav": None, "flat": "flat"}
 """Each ground the robots drive on: the nav world's own terrain (``nav_deploy``'s), and the same world made flat."""
-STIFFNESS_SCALES = {"nav_softer": 0.1, "nav_stiffer": 10.0}
+STIFFNESS_SCALES = {"nav_softer": 0.1, "nav_stiffer": 10.0, "flat_stiffer": 10.0}
 """The survey on the nav world again, with the ground contact this many times as stiff (the robot's own is 1): how
-the turn on uneven ground depends on the contact law."""
+the turn on uneven ground depends on the contact law (and on flat ground: ``flat_*``)."""
+CONTACT_VARIANTS = {"nav_damped": {"contact": {"damping": 2.0e5, "damping_limit": None}},
+                    "nav_quarter_substep": {"sim_dt": 0.0025}}
+"""The survey on the nav world with the contact ten times as damped and no damping ceiling, and with substeps a
+quarter as long: whether the turn depends on them."""
 
 
 def drive(robot: str, linear: float, angular: float, seconds: float, terrain: str | None = None) -> dict:
@@ -70,17 +75,27 @@ def drive(robot: str, linear: float, angular: float, seconds: float, terrain: st
 
 
 def survey(robot: str, linear: float, angular: float, seconds: float, starts: int,
-           terrain: str | None = None, stiffness_scale: float = 1.0) -> dict:
+           terrain: str | None = None, stiffness_scale: float = 1.0, contact: dict | None = None,
+           sim_dt: float | None = None) -> dict:
     """:func:`drive`'s turn over the test set's first ``starts`` starts at once: how much of the commanded yaw each
     world turned (its quartiles), and how many turned less than half of it. ``stiffness_scale`` multiplies every
-    world's contact stiffness after the reset (a study of the ground contact, not a shipped setting)."""
+    world's contact stiffness after the reset, ``contact`` sets :class:`~atrv_warp.sim.config.ContactConfig` fields and
+    ``sim_dt`` the substep (studies of the ground contact, not shipped settings)."""
+    import dataclasses
+
     import torch
     import warp as wp
 
+    from atrv_warp.sim.config import ContactConfig, SimConfig
     from atrv_warp.task.env import RoverEnv
     from atrv_warp.task.evaluation import EVAL_SEED
 
-    env = RoverEnv(starts, task="nav_deploy", robot=robot, **({"terrain": terrain} if terrain else {}))
+    options = {"terrain": terrain} if terrain else {}
+    if contact:
+        options["contact"] = dataclasses.replace(ContactConfig(), **contact)
+    if sim_dt:
+        options["sim"] = SimConfig(sim_dt=sim_dt)
+    env = RoverEnv(starts, task="nav_deploy", robot=robot, **options)
     env.set_seed(EVAL_SEED)
     td = env.reset()
     sim, cfg = env.sim, env.task_cfg
@@ -97,7 +112,7 @@ def survey(robot: str, linear: float, angular: float, seconds: float, starts: in
         previous = now
     ratio = yaw / (angular * steps * sim.sim_cfg.step_dt)
     q = torch.quantile(ratio, torch.tensor([0.25, 0.5, 0.75], dtype=torch.float64)).tolist()
-    return {"starts": starts, "stiffness_scale": stiffness_scale,
+    return {"starts": starts, "stiffness_scale": stiffness_scale, "contact": contact or {}, "sim_dt": sim.sim_cfg.sim_dt,
             "turned_over_commanded": {"q25": q[0], "median": q[1], "q75": q[2]},
             "under_half": float((ratio < 0.5).double().mean())}
 
@@ -128,7 +143,11 @@ def main(argv: list[str] | None = None) -> int:
         surveys[robot] = {ground: survey(robot, args.linear, args.angular, args.seconds, args.starts, terrain)
                           for ground, terrain in GROUNDS.items()}
         for ground, scale in STIFFNESS_SCALES.items():
-            surveys[robot][ground] = survey(robot, args.linear, args.angular, args.seconds, args.starts, None, scale)
+            surveys[robot][ground] = survey(robot, args.linear, args.angular, args.seconds, args.starts,
+                                            GROUNDS[ground.split("_")[0]], scale)
+        for ground, options in CONTACT_VARIANTS.items():
+            surveys[robot][ground] = survey(robot, args.linear, args.angular, args.seconds, args.starts, None,
+                                            **options)
         for ground, r in surveys[robot].items():
             t = r["turned_over_commanded"]
             print(f"{robot:8s} {ground:5s} over {r['starts']} starts: turned {t['median']:.2f} of the commanded yaw "
