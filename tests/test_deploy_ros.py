@@ -170,9 +170,11 @@ def test_no_input_ends_the_node_each_fault_stops_the_rover_and_good_input_drives
         robot.odom_x = 0.0
         robot.send_goal(20.0, 5.0)
         drives_again("a goal after a bad /odom")
-        # a goal in another frame while driving cancels the goal; a valid goal drives again (crashed the node)
+        # a goal in map, which no /tf joins to odom here: taken, and the rover holds still; a valid goal drives again
+        # (a goal in another frame crashed the node)
         stopped_after("goal in map", lambda: robot.send_goal(3.0, 0.0, frame="map"))
-        assert robot.status[-1]["state"] == "aborted" and "frame 'map'" in robot.status[-1]["reason"]
+        assert robot.status[-1]["state"] == "holding", robot.status[-1]
+        assert robot.status[-1]["reason"] == "no transform from 'map' to 'odom' on /tf", robot.status[-1]
         drives_again("a valid goal after one in map", lambda: robot.send_goal(20.0, 5.0))
         # a valid goal, then bad scans (a 0-beam scan crashed the node), then good ones
         for name, fault in [("0-beam scan", {"ranges": []}), ("range_min > range_max", {"range_min": 5.0,
@@ -323,3 +325,135 @@ def test_over_ros_each_step_is_the_nodes_answer_to_the_state_evaluate_would_obse
                 assert not td["next", "done"].any(), f"episode {row['episode']} ended early in the replay"
                 td = step_mdp(td)
         assert td["next", "done"].all() and END_REASONS[int(td["next", "end_reason"])] == row["end_reason"]
+
+
+def _tf(parent: str, child: str, x: float, y: float, yaw: float):
+    """A ``tf2_msgs/TFMessage`` holding one transform (``child`` in ``parent``)."""
+    from geometry_msgs.msg import TransformStamped
+
+    from atrv_warp.core.ros_interfaces import TF2_MSGS, load_interface
+
+    TFMessage, where = load_interface(TF2_MSGS, "msg", "TFMessage")
+    assert TFMessage is not None, where
+    t = TransformStamped()
+    t.header.frame_id, t.child_frame_id = parent, child
+    t.transform.translation.x, t.transform.translation.y = x, y
+    t.transform.rotation.z, t.transform.rotation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+    return TFMessage(transforms=[t])
+
+
+@pytest.mark.slow  # a live ROS 2 node and an action client
+def test_navigate_to_pose_in_map_drives_feeds_back_cancels_and_is_replaced(ros_env, tmp_path):
+    """Goals in ``map`` with ``map`` -> ``odom`` offset and rotated on /tf_static, on ``goal_pose`` and through Nav2's
+    ``NavigateToPose``, which replaces it: accepted, driving, feedback with the distance in ``odom``; a goal with no frame rejected while the
+    active one drives on; a cancel stops the rover within 0.8 s (result cancelled); a new goal aborts the old one;
+    a goal the rover reaches succeeds."""
+    from action_msgs.msg import GoalStatus
+    from rclpy.action import ActionClient
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+
+    from atrv_warp.core.ros_interfaces import TF2_MSGS, load_interface
+    from atrv_warp.deploy.nav2 import load_navigate_to_pose
+
+    NavigateToPose, where = load_navigate_to_pose()
+    assert NavigateToPose is not None, where
+    TFMessage, _ = load_interface(TF2_MSGS, "msg", "TFMessage")
+    policy = write_policy(tmp_path / "tiny.pt2", task_contract())
+    robot = Robot()
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    robot.node.create_publisher(TFMessage, "/tf_static", latched).publish(_tf("map", "odom", 2.0, 1.0, math.pi / 2))
+    proc = subprocess.Popen([sys.executable, "-m", "atrv_warp.deploy", str(policy), "--ros-args", "-r",
+                             f"__ns:={NS}", "-p", "goal_tolerance:=0.5"], env=ros_env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    client = ActionClient(robot.node, NavigateToPose, f"{NS}/navigate_to_pose")
+    feedback = []
+
+    def send(x, y, frame="map"):
+        request = NavigateToPose.Goal()
+        request.pose.header.frame_id = frame
+        request.pose.pose.position.x, request.pose.pose.position.y = x, y
+        future = client.send_goal_async(request, feedback_callback=lambda m: feedback.append(m.feedback))
+        assert robot.run(10, future.done), "no answer to the goal"
+        return future.result()
+
+    try:
+        assert robot.run(120, lambda: client.server_is_ready()), "no NavigateToPose server"
+        # on goal_pose in map: map -> odom is (2, 1) turned 90 deg, so (4, 1) in map is (0, -2) in odom
+        robot.send_goal(4.0, 1.0, frame="map")
+        assert robot.run(10, lambda: any(s["state"] == "active" and s["goal"] is not None and max(
+            abs(a - b) for a, b in zip(s["goal"], [0.0, -2.0])) < 1e-6 for s in robot.status)), robot.status[-1:]
+        first = send(5.0, 1.0)  # in map: map -> odom is (2, 1) turned 90 deg, so (5, 1) in map is (0, -3) in odom
+        assert first.accepted
+        assert robot.run(10, lambda: robot.status[-1]["goal"] is not None and
+                         max(abs(a - b) for a, b in zip(robot.status[-1]["goal"], [0.0, -3.0])) < 1e-6), robot.status[-1]
+        assert robot.run(5, lambda: len(feedback) >= 3)
+        assert abs(feedback[-1].distance_remaining - 3.0) < 0.01 and feedback[-1].current_pose.header.frame_id == "odom"
+        refused = send(1.0, 1.0, frame="")  # rejected: no frame; the active goal drives on
+        assert not refused.accepted
+        robot.run(0.3)
+        assert robot.driving(), robot.status[-1]
+        cancel = first.cancel_goal_async()
+        cancelled = time.monotonic()
+        assert robot.run(5, lambda: robot.status[-1]["state"] == "aborted"), robot.status[-1]
+        stopped = next(t for t, v, w in robot.cmds if t > cancelled and v == 0.0 and w == 0.0)
+        assert stopped - cancelled < 0.8, stopped - cancelled
+        result = first.get_result_async()
+        assert robot.run(5, lambda: cancel.done() and result.done())
+        assert result.result().status == GoalStatus.STATUS_CANCELED
+        second = send(5.0, 1.0)
+        third = send(2.0, 1.2)  # (0.2, 0) in odom: within goal_tolerance of the rover, which stays at the origin
+        old = second.get_result_async()
+        assert robot.run(5, old.done)
+        assert old.result().status == GoalStatus.STATUS_ABORTED
+        if hasattr(old.result().result, "error_msg"):
+            assert old.result().result.error_msg == "replaced by a new NavigateToPose goal"
+        reached = third.get_result_async()
+        assert robot.run(5, reached.done) and reached.result().status == GoalStatus.STATUS_SUCCEEDED
+    finally:
+        client.destroy()
+        proc.send_signal(2)
+        robot.run(10, lambda: proc.poll() is not None)
+        if proc.poll() is None:
+            proc.kill()
+        out = proc.communicate(timeout=30)[0]
+        robot.node.destroy_node()
+    assert proc.returncode == 0, out[-3000:]
+    assert "NavigateToPose goal rejected: it names no frame" in out and "the active goal goes on" in out, out[-3000:]
+
+
+@pytest.mark.slow  # live ROS 2 contexts
+def test_each_shipped_robot_has_a_launch_file_and_a_parameters_file_the_node_runs_with(tmp_path):
+    """Every shipped robot: a launch file that launches it, a parameters file the node takes (every key known, every
+    value valid, the robot named), its topics resolved in the robot's namespace, and an RViz view of those topics."""
+    import yaml
+
+    from atrv_warp.core.robot import ROBOTS
+    from atrv_warp.deploy.controller import load_deployable
+    from atrv_warp.deploy.launching import LAUNCH, params_file, robot_parameters, rviz_config
+    from atrv_warp.deploy.node import DeployNode
+
+    policy = load_deployable(write_policy(tmp_path / "tiny.pt2", task_contract()))
+    for robot in ROBOTS:
+        launch = (LAUNCH / f"{robot}.launch.py").read_text()
+        assert "def generate_launch_description():" in launch and f'launch_description("{robot}")' in launch
+        params = robot_parameters(robot)
+        assert params["robot"] == robot
+        view = yaml.safe_load(rviz_config(robot))["Visualization Manager"]
+        topics = {d["Name"]: d["Topic"]["Value"] for d in view["Displays"] if "Topic" in d}
+        assert topics["Scan"] == params["scan_topic"] and topics["Path driven"] == params["odom_topic"]
+        assert view["Global Options"]["Fixed Frame"] == params["odom_frame"]
+        args = ["--ros-args", "-r", "__ns:=/robot_7", "--params-file", str(params_file(robot)),
+                "-p", "allow_other_robot:=true"]  # the test's policy was trained on the ATRV-Jr
+        ctx = rclpy.Context()
+        rclpy.init(args=["atrv-deploy", *args], context=ctx)
+        try:
+            node = DeployNode(policy, args, context=ctx)
+            names = {name for name, _ in node.get_topic_names_and_types()} | {
+                p.topic_name for p in node.publishers}
+            subscribed = {s.topic_name for s in node.subscriptions}
+            assert f"/robot_7/{params['scan_topic']}" in subscribed and f"/robot_7/{params['odom_topic']}" in subscribed
+            assert f"/robot_7/{params['cmd_vel_topic']}" in names and node.stamped == params["enable_stamped_cmd_vel"]
+            node.stop("test")
+            node.destroy_node()
+        finally:
+            rclpy.shutdown(context=ctx)

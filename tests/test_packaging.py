@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 # Files that may import what an optional extra brings (they check for it and say how to install it).
 EXTRA_USERS = {
-    "ros": ("atrv_warp/integrations/ros/", "atrv_warp/deploy/", "tests/test_ros.py", "tests/test_deploy.py", "tests/test_deploy_ros.py",
+    "ros": ("atrv_warp/integrations/ros/", "atrv_warp/deploy/", "atrv_warp/core/ros_interfaces.py", "tests/test_ros.py", "tests/test_deploy.py", "tests/test_deploy_ros.py",
             "benchmarks/deploy_closed_loop.py"),
     "test": ("tests/",),
     "browser": ("atrv_warp/integrations/browser.py", "docs/make_pictures.py"),
@@ -38,9 +38,9 @@ EXTRA_USERS = {
 SCANNED = ("atrv_warp", "tests", "benchmarks", "examples", "docs")
 
 
-FROM_A_ROS_INSTALL = {"tf2_msgs"}
-"""Modules that only a ROS 2 install provides (no package index has them), imported behind an ``ImportError`` guard:
-the deploy node reads /tf only where the robot's ROS 2 gives it ``tf2_msgs``."""
+FROM_A_ROS_INSTALL = {"launch", "launch_ros"}
+"""Modules that only a ROS 2 install provides (no package index has them): ``ros2 launch``'s, imported by the launch
+files (``atrv_warp/deploy/launching.py``) when a ROS install runs them."""
 
 
 def _name(requirement: str) -> str:

@@ -495,9 +495,9 @@ def test_latched_markers_show_the_nav_world_and_the_goal(ros_env):
     from nav_msgs.msg import Odometry
     from visualization_msgs.msg import MarkerArray
 
-    from atrv_warp.integrations.ros.tf2_build import load_tf_message
+    from atrv_warp.core.ros_interfaces import TF2_MSGS, load_interface
 
-    TFMessage, where = load_tf_message()
+    TFMessage, where = load_interface(TF2_MSGS, "msg", "TFMessage")
     assert TFMessage is not None, where
     proc = start_node(ros_env, "task:=nav", "seed:=4", "wait_for_subscribers:=1", "duration:=30.0")
     client = Client("atrv_marker_client")
@@ -567,10 +567,10 @@ def test_foxglove_layout_shows_what_the_node_publishes():
     assert all(k in ids for k in panels)  # every configured panel is placed
 
 
-def test_tf2_build_without_a_compiler_says_so(tmp_path, monkeypatch):
-    from atrv_warp.integrations.ros.tf2_build import build_tf2_msgs
+def test_interface_build_without_a_compiler_says_so(tmp_path, monkeypatch):
+    from atrv_warp.core.ros_interfaces import TF2_MSGS, build_interfaces
 
     monkeypatch.setenv("PATH", str(tmp_path))  # no gcc, no g++
     with pytest.raises(RuntimeError, match=r"no gcc on PATH \(a C and C\+\+ compiler builds tf2_msgs's type support\)"):
-        build_tf2_msgs(tmp_path / "tf2")
+        build_interfaces(TF2_MSGS, tmp_path / "tf2")
     assert not (tmp_path / "tf2").exists()

@@ -23,7 +23,7 @@ from atrv_warp.core.geometry import (
 )
 from atrv_warp.core.kinematics import EFFECTIVE_TRACK_FACTOR, SkidSteer, side_speeds, track_width
 from atrv_warp.core.observation import RobotObservation, Scan
-from atrv_warp.core.scan import ScanSectors, sector_readings
+from atrv_warp.core.scan import ScanSectors, remount, sector_readings
 
 __all__ = [
     "EFFECTIVE_TRACK_FACTOR",
@@ -35,6 +35,7 @@ __all__ = [
     "quat_to_matrix",
     "quat_to_rpy",
     "quat_to_yaw",
+    "remount",
     "rpy_to_quat",
     "sector_readings",
     "side_speeds",

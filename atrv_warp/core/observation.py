@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import torch
 
 from atrv_warp.core.geometry import quat_to_rpy, quat_to_yaw, wrap_angle
-from atrv_warp.core.scan import ScanSectors, sector_readings
+from atrv_warp.core.scan import ScanSectors, remount, sector_readings
 
 __all__ = ["ROBOT_SIGNALS", "RobotObservation", "Scan"]
 
@@ -76,6 +76,9 @@ class Scan:
     """Shorter ranges read as too close (blocked) [m]."""
     range_max: float
     """Longer ranges read as no return (clear) [m]."""
+    mount: tuple[float, float, float] | None = None
+    """Where this scanner is in the frame of the scanner the policy was trained with: (x [m], y [m], yaw [rad]);
+    ``None``: there (its returns are read as they are; else :func:`.scan.remount` carries them over)."""
 
     def angles(self) -> torch.Tensor:
         """(B,) float64 each beam's angle [rad]: ``angle_min + i * angle_increment``."""
@@ -220,7 +223,10 @@ class RobotObservation:
                 raise ValueError(f"scan.{name}: expected a finite number, got {value!r}")
         if not scan.angle_increment > 0:
             raise ValueError(f"scan.angle_increment: expected > 0 (beams counter-clockwise), got {scan.angle_increment}")
-        readings = sector_readings(ranges, scan.angles(), self.sectors, range_min=scan.range_min,
+        angles = scan.angles()
+        if scan.mount is not None and any(scan.mount):
+            ranges, angles = remount(ranges, angles, scan.mount, range_min=scan.range_min, range_max=scan.range_max)
+        readings = sector_readings(ranges, angles, self.sectors, range_min=scan.range_min,
                                    range_max=scan.range_max).to(torch.float64)
         return {f"scan_{k}": readings[..., k] for k in range(self.sectors.count)}
 

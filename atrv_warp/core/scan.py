@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import torch
 
-__all__ = ["ScanSectors", "sector_readings"]
+__all__ = ["ScanSectors", "remount", "sector_readings"]
 
 
 @dataclass(frozen=True)
@@ -100,7 +100,8 @@ def sector_readings(ranges: torch.Tensor, angles: torch.Tensor, sectors: ScanSec
 
     Args:
         ranges: (..., B) ranges [m] as a ``LaserScan`` carries them (``+inf``, ``-inf`` and ``NaN`` allowed).
-        angles: (B,) each beam's angle [rad] in the scanner's frame (``angle_min + i * angle_increment``).
+        angles: (B,) each beam's angle [rad] in the scanner's frame (``angle_min + i * angle_increment``), or
+            (..., B), one per range (a remounted scan's bearings, :func:`remount`).
         sectors: The observed sectors.
         range_min: The scanner's ``range_min`` [m].
         range_max: The scanner's ``range_max`` [m].
@@ -116,9 +117,37 @@ def sector_readings(ranges: torch.Tensor, angles: torch.Tensor, sectors: ScanSec
     valid = ~torch.isnan(r)
     reading = torch.where(valid, reading, torch.full_like(r, math.inf))
     sector = sectors.beam_sector(angles).to(r.device)
-    out = []
-    for k in range(sectors.count):
-        mine = reading[..., sector == k]
-        out.append(mine.amin(-1) if mine.shape[-1] else torch.full(r.shape[:-1], math.inf, device=r.device))
-    readings = torch.stack(out, -1)
+    far = torch.full_like(reading, math.inf)
+    readings = torch.stack([torch.where(sector == k, reading, far).amin(-1) for k in range(sectors.count)], -1)
     return torch.where(torch.isinf(readings), torch.zeros_like(readings), readings)  # no valid beam: blocked
+
+
+def remount(ranges: torch.Tensor, angles: torch.Tensor, mount: tuple[float, float, float], *, range_min: float,
+            range_max: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """A scan taken by a scanner mounted elsewhere, as the scanner the policy was trained with would read it.
+
+    Each return becomes the point it hit, seen from the trained scanner: its range and bearing from there. A beam
+    beyond ``range_max`` (no return) or below ``range_min`` (too close) keeps that meaning (``+inf``, ``-inf``) along
+    its direction turned by the mount's yaw; an invalid beam (``NaN``) stays invalid. Where the two scanners see
+    different things (behind an edge one of them cannot see round) the nearer one's view is not recovered.
+
+    Args:
+        ranges: (..., B) ranges [m] of the mounted scanner (REP 117).
+        angles: (B,) its beams' angles [rad] in its own frame.
+        mount: (x [m], y [m], yaw [rad]) of the mounted scanner in the trained scanner's frame.
+        range_min: The mounted scanner's ``range_min`` [m].
+        range_max: The mounted scanner's ``range_max`` [m].
+
+    Returns:
+        ((..., B) ranges [m], (..., B) bearings [rad] in the trained scanner's frame, in (-pi, pi]).
+    """
+    r = torch.as_tensor(ranges, dtype=torch.float64)
+    a = torch.as_tensor(angles, dtype=torch.float64).to(r.device) + mount[2]
+    r = torch.where(r > range_max, torch.full_like(r, math.inf), r)
+    r = torch.where(r < range_min, torch.full_like(r, -math.inf), r)
+    finite = torch.isfinite(r)
+    hit = torch.where(finite, r, torch.zeros_like(r))
+    x, y = mount[0] + hit * torch.cos(a), mount[1] + hit * torch.sin(a)
+    seen = torch.where(finite, torch.hypot(x, y), r)
+    bearing = torch.where(finite, torch.atan2(y, x), torch.atan2(torch.sin(a), torch.cos(a)).expand_as(r))
+    return seen, bearing

@@ -16,14 +16,19 @@ MISSING_ROS_MESSAGE = (
 EPILOG = """\
 Topics (relative: --ros-args -r __ns:=/rover_1 runs it for one rover of several):
   in:  scan (sensor_msgs/LaserScan), odom (nav_msgs/Odometry), imu (sensor_msgs/Imu),
-       goal_pose (geometry_msgs/PoseStamped in the odometry frame; a goal it cannot take stops the rover)
+       goal_pose (geometry_msgs/PoseStamped in the odometry frame or a frame /tf joins to it; a goal it
+       cannot take stops the rover), /tf and /tf_static
   out: cmd_vel (geometry_msgs/Twist, or TwistStamped), goal_status (std_msgs/String, JSON)
+  action: navigate_to_pose (nav2_msgs/action/NavigateToPose: RViz's "Nav2 Goal", Nav2's clients)
+
+Launch files and parameters per shipped robot (atrvjr, husky, jackal): python -m atrv_warp.deploy --launch-files
 
 Examples:
   python -m atrv_warp.export nav_deploy nav_deploy.pt2        # on the workstation
   atrv-deploy nav_deploy.pt2                                   # on the rover
   atrv-deploy nav_deploy.pt2 --ros-args -p use_sim_time:=true -p max_linear:=0.5
-  ros2 topic pub --once /goal_pose geometry_msgs/msg/PoseStamped \\
+  ros2 launch $(python -m atrv_warp.deploy --launch-files jackal) policy:=$PWD/jackal.pt2 namespace:=j100_0123
+  ros2 topic pub --once -w 1 /goal_pose geometry_msgs/msg/PoseStamped \\
       "{header: {frame_id: odom}, pose: {position: {x: 4.0, y: 2.0}}}"
 
 Parameters (--ros-args -p name:=value):
@@ -38,6 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=EPILOG + parameter_help())
     parser.add_argument("policy", metavar="POLICY.pt2", help="an exported twist policy (python -m atrv_warp.export)")
+    parser.add_argument("--launch-files", action="store_true",
+                        help="print the shipped launch file of the robot named instead of POLICY.pt2 (its parameters "
+                             "file: config/<robot>.yaml beside launch/), and exit")
     return parser
 
 
@@ -48,6 +56,15 @@ def main(argv: list[str] | None = None) -> int:
     ros_at = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
     parser = build_parser()
     args = parser.parse_args(argv[:ros_at])
+    if args.launch_files:
+        from atrv_warp.deploy.launching import LAUNCH, params_file
+
+        try:
+            params_file(args.policy)
+        except ValueError as err:
+            parser.error(str(err))
+        print(LAUNCH / f"{args.policy}.launch.py")
+        return 0
     from atrv_warp.deploy.controller import PolicyRefused, load_deployable
 
     try:

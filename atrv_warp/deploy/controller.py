@@ -343,6 +343,8 @@ class Controller:
         """Whether transforms come (:meth:`on_tf`): goals in other frames than the odometry's are taken."""
         self.frames = TransformBuffer()
         """The latest transforms from ``/tf`` and ``/tf_static``."""
+        self.mount_source: str | None = None
+        """How the last scan's mounting was found (:meth:`scan_mount`)."""
         self.goal_given: tuple[str, float, float] | None = None
         """The active goal as it was sent: its frame and position [m]."""
         self.sensors = {"odom": _Sensor("/odom"), "imu": _Sensor("/imu")}
@@ -422,9 +424,45 @@ class Controller:
         if "scan" not in self.sensors:
             return None
         try:
-            return self._store("scan", read_scan(msg, self.policy.observation), now, None, msg)
+            scan = read_scan(msg, self.policy.observation)
         except ValueError as err:
             return self._store("scan", None, now, str(err), msg)
+        mount, source = self.scan_mount(frame_id(getattr(getattr(msg, "header", None), "frame_id", "") or ""))
+        if mount is not None:
+            scan = dataclasses.replace(scan, mount=mount)
+        line = self._store("scan", scan, now, None, msg)
+        said, self.mount_source = self.mount_source, source
+        if source != said and (mount is not None or said is not None):
+            line = "; ".join(x for x in (line, f"/scan: {source}") if x)
+        return line
+
+    def scan_mount(self, frame: str) -> tuple[tuple[float, float, float] | None, str]:
+        """Where the scanner of frame ``frame`` sits relative to the one the policy was trained with (the contract's
+        ``scan.mount`` on the chassis), from ``/tf``: ((x [m], y [m], yaw [rad]), how it was found), or (None, why
+        the scan is read as it is: no mount recorded, no transform, or the trained mount)."""
+        trained = (self.policy.contract.get("scan") or {}).get("mount")
+        if not isinstance(trained, dict):
+            return None, "read as trained (the policy records no scanner mount)"
+        try:
+            parent, tx, ty, tyaw = (str(trained["parent"]), float(trained["x"]), float(trained["y"]),
+                                    float(trained["yaw"]))
+        except (KeyError, TypeError, ValueError):
+            return None, f"read as trained (the policy's scan.mount is unreadable: {trained!r:.80})"
+        if not all(map(math.isfinite, (tx, ty, tyaw))):
+            return None, "read as trained (the policy's scan.mount is not finite)"
+        origin = self.frames.transform_point((0.0, 0.0, 0.0), parent, frame) if frame and parent else None
+        ahead = self.frames.transform_point((1.0, 0.0, 0.0), parent, frame) if origin is not None else None
+        if ahead is None:
+            return None, f"read as mounted where the policy's was (no /tf from {parent!r} to {frame!r})"
+        yaw = math.atan2(ahead[1] - origin[1], ahead[0] - origin[0]) - tyaw
+        c, s = math.cos(tyaw), math.sin(tyaw)
+        dx, dy = origin[0] - tx, origin[1] - ty
+        mount = (c * dx + s * dy, -s * dx + c * dy, math.remainder(yaw, 2 * math.pi))
+        if math.hypot(mount[0], mount[1]) < 1e-3 and abs(mount[2]) < 1e-3:
+            return None, f"mounted where the policy's was (from /tf: {frame!r} in {parent!r})"
+        return mount, (f"its scanner ({frame!r}) is {mount[0]:+.3f} m, {mount[1]:+.3f} m and "
+                       f"{math.degrees(mount[2]):+.1f} deg from where the policy's was (from /tf); its returns are "
+                       "carried to the trained mount")
 
     def _store(self, name: str, value, now: float, problem: str | None, msg=None) -> str | None:
         s = self.sensors[name]
@@ -442,15 +480,10 @@ class Controller:
         """A ``geometry_msgs/PoseStamped`` goal; returns the line to log (taken, or why it is refused). A refused goal
         ends the active one (the rover stops), as a new goal that is taken replaces it. A goal in another frame is
         taken where transforms come (``tf``), and carried into the odometry frame every period."""
+        problem = self.goal_problem(msg)
+        if problem:
+            return self._cancel(f"goal refused: {problem}")
         frame, p, odom = frame_id(msg.header.frame_id), msg.pose.position, self.settings.odom_frame
-        if not (math.isfinite(p.x) and math.isfinite(p.y)):
-            return self._cancel(f"goal refused: non-finite position ({p.x}, {p.y})")
-        if not frame:
-            return self._cancel(f"goal refused: it names no frame (header.frame_id is empty); send it in {odom!r} "
-                                "or a frame /tf joins to it (map)")
-        if frame != odom and not self.tf:
-            return self._cancel(f"goal refused: it is in frame {frame!r} and this node reads no /tf (tf2_msgs is not "
-                                f"installed: source the robot's ROS 2); send it in the odometry frame {odom!r}")
         self.goal_given, self.goal_time = (frame, float(p.x), float(p.y)), now
         self.steps = self.clipped_steps = 0
         self.hold_reason, self.pending = None, None
@@ -460,6 +493,21 @@ class Controller:
             return f"{at}: waiting for the transform from {frame!r} to {odom!r} on /tf, holding still"
         there = f" = ({self.goal[0]:.2f}, {self.goal[1]:.2f}) in {odom}" if frame != odom else ""
         return f"{at}{there}: driving"
+
+    def goal_problem(self, msg) -> str | None:
+        """Why the ``geometry_msgs/PoseStamped`` goal ``msg`` cannot be taken (no frame, a frame no transforms join
+        to, a non-finite position), or None; nothing changes (a ``NavigateToPose`` goal refused this way leaves the
+        active one driving)."""
+        frame, p, odom = frame_id(msg.header.frame_id), msg.pose.position, self.settings.odom_frame
+        if not (math.isfinite(p.x) and math.isfinite(p.y)):
+            return f"non-finite position ({p.x}, {p.y})"
+        if not frame:
+            return (f"it names no frame (header.frame_id is empty); send it in {odom!r} or a frame /tf joins to it "
+                    "(map)")
+        if frame != odom and not self.tf:
+            return (f"it is in frame {frame!r} and this node reads no /tf (tf2_msgs is not installed: source the "
+                    f"robot's ROS 2); send it in the odometry frame {odom!r}")
+        return None
 
     def on_tf(self, msg, now: float) -> None:
         """A ``tf2_msgs/TFMessage`` from ``/tf`` or ``/tf_static``: its transforms replace the ones they follow; an

@@ -3,7 +3,11 @@
 :class:`DeployNode` subscribes to the robot's ``scan``, ``odom``, ``imu`` and ``goal_pose``, passes each message to
 its :class:`~atrv_warp.deploy.controller.Controller`, and on a timer at the policy's rate (ROS time: with
 ``use_sim_time`` a simulator's ``/clock`` paces it) publishes the controller's ``cmd_vel`` and ``goal_status``.
-Topic names are relative, so ``--ros-args -r __ns:=/rover_1`` runs it for one rover among several.
+Topic names are relative, so ``--ros-args -r __ns:=/rover_1`` runs it for one rover among several. Goals come on
+``goal_pose`` (RViz's "2D Goal Pose"; volatile, as RViz publishes: a goal is not replayed to a restarted node) and
+through Nav2's
+``NavigateToPose`` action on ``navigate_to_pose`` (RViz's "Nav2 Goal", a behaviour tree, a waypoint follower), in
+the odometry frame or any frame ``/tf`` joins to it.
 
 No input ends the node: every callback runs inside a guard (:meth:`DeployNode.guarded`), so that a failure is one
 log line and a zero command, never an exception out of the executor, as Nav2's controller server publishes zero,
@@ -38,16 +42,22 @@ from atrv_warp.deploy.parameters import (
     unknown_parameters,
 )
 
-__all__ = ["DeployNode", "NodeConfigError"]
+__all__ = ["RESULT_CODES", "DeployNode", "NodeConfigError"]
+
+RELIABLE = ReliabilityPolicy.RELIABLE
 
 
-def _tf_message() -> type | None:
-    """``tf2_msgs/msg/TFMessage`` where a ROS 2 install provides it (no package index does), else None."""
-    try:
-        from tf2_msgs.msg import TFMessage
-    except ImportError:
-        return None
-    return TFMessage
+RESULT_CODES = {"time limit": 9003}
+"""Nav2's ``NavigateToPose`` result ``error_code`` for an abort whose reason starts with a key (``TIMEOUT``); any other
+abort is ``UNKNOWN`` (9000). Humble's result carries no code."""
+
+
+def _tf_message() -> tuple[type | None, str]:
+    """``tf2_msgs/msg/TFMessage``: a ROS 2 install's, else built from its definition where the rosidl generators are
+    installed (:mod:`atrv_warp.core.ros_interfaces`); or None and why."""
+    from atrv_warp.core.ros_interfaces import TF2_MSGS, load_interface
+
+    return load_interface(TF2_MSGS, "msg", "TFMessage")
 
 
 class NodeConfigError(ValueError):
@@ -90,7 +100,7 @@ class DeployNode(Node):
             self.log.warning(f"{line} (allow_other_robot:=true)")
         self.log.info(policy.describe_robot())
         self.policy = policy
-        tf_message = _tf_message()
+        tf_message, tf_from = _tf_message()
         self.controller = Controller(policy, settings, tf=tf_message is not None)
         self.stamped = p["enable_stamped_cmd_vel"]
         self.cmd_pub = self.create_publisher(TwistStamped if self.stamped else Twist, p["cmd_vel_topic"], 10)
@@ -101,15 +111,18 @@ class DeployNode(Node):
         self.create_subscription(Imu, p["imu_topic"], guard("imu", self.controller.on_imu), sensors)
         if "scan" in self.controller.sensors:
             self.create_subscription(LaserScan, p["scan_topic"], guard("scan", self.controller.on_scan), sensors)
-        self.create_subscription(PoseStamped, p["goal_topic"], guard("goal", self.controller.on_goal),
-                                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        goal = guard("goal", self.on_goal_topic)
+        self.create_subscription(PoseStamped, p["goal_topic"], goal, QoSProfile(depth=10, reliability=RELIABLE))
+        self.action = None
+        """The ``NavigateToPose`` goal being driven: (goal handle, future its execution awaits), or None."""
+        self._start_action_server()
         if tf_message is not None:  # goals in any frame: the tree from /tf and /tf_static, as tf2_ros's listener reads it
             self.create_subscription(tf_message, "/tf", guard("tf", self.controller.on_tf), QoSProfile(depth=100))
             self.create_subscription(tf_message, "/tf_static", guard("tf", self.controller.on_tf),
                                      QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         else:
-            self.log.warning("tf2_msgs is not installed (it comes with a ROS 2 install): this node reads no /tf, so "
-                             f"it takes goals in {settings.odom_frame!r} only")
+            self.log.warning(f"no /tf ({tf_from}; tf2_msgs comes with a ROS 2 install): this node takes goals in "
+                             f"{settings.odom_frame!r} only")
         if p["trace"]:
             try:
                 path, line = fresh_path(p["trace"])
@@ -183,11 +196,137 @@ class DeployNode(Node):
 
         return callback
 
+    def on_goal_topic(self, msg, now: float) -> str | None:
+        """A goal on ``goal_topic``: taken (it replaces a ``NavigateToPose`` goal, which is aborted) or refused."""
+        line = self.controller.on_goal(msg, now)
+        if line.startswith("goal ("):
+            self._resolve("aborted", f"replaced by a goal on {self.resolve_topic_name(self.params['goal_topic'])}")
+        return line
+
+    # ---------------------------------------------------------------- NavigateToPose
+    def _start_action_server(self) -> None:
+        """Nav2's ``NavigateToPose`` on ``navigate_to_pose`` (relative: in the node's namespace), where ``nav2_msgs``
+        loads (a ROS install's, or built from the distribution's definition); otherwise one line says why."""
+        from atrv_warp.deploy.nav2 import load_navigate_to_pose
+
+        action, where = load_navigate_to_pose()
+        self.navigate_to_pose = action
+        if action is None:
+            self.log.warning(f"no NavigateToPose action: {where}; goals come on the goal topic only")
+            return
+        from rclpy.action import ActionServer
+
+        self.action_server = ActionServer(self, action, "navigate_to_pose", self._execute,
+                                          goal_callback=self._on_action_goal,
+                                          handle_accepted_callback=self._on_action_accepted,
+                                          cancel_callback=lambda _handle: self._cancel_response())
+        self.log.info(f"NavigateToPose on {self.get_namespace().rstrip('/')}/navigate_to_pose ({where})")
+
+    @staticmethod
+    def _cancel_response():
+        from rclpy.action import CancelResponse
+
+        return CancelResponse.ACCEPT
+
+    def _on_action_goal(self, request):
+        """Accept a goal the controller can take; reject another with one line, the active goal driving on (Nav2)."""
+        from rclpy.action import GoalResponse
+
+        try:
+            problem = self.controller.goal_problem(request.pose)
+        except Exception as err:  # noqa: BLE001 - a goal the checks cannot read is rejected, never the node's end
+            problem = f"{type(err).__name__}: {err}"
+        if problem is None:
+            return GoalResponse.ACCEPT
+        self.log.warning(f"NavigateToPose goal rejected: {problem}" +
+                         ("; the active goal goes on" if self.controller.goal_given else ""))
+        return GoalResponse.REJECT
+
+    def _on_action_accepted(self, handle) -> None:
+        """A new goal replaces the one being driven (aborted, as Nav2's navigator preempts), then runs."""
+        self._resolve("aborted", "replaced by a new NavigateToPose goal")
+        handle.execute()
+
+    async def _execute(self, handle):
+        """Drive to the goal until it ends; its result says reached, aborted (why) or cancelled."""
+        from rclpy.task import Future
+
+        future, now = Future(), self.now()
+        self.action = (handle, future)
+        try:
+            line = self.controller.on_goal(handle.request.pose, now)
+        except Exception as err:  # noqa: BLE001 - a goal that cannot be read ends itself, never the node
+            self._failed("goal", err, now)
+            line = f"goal refused: {type(err).__name__}: {err}"
+        self.log.info(f"NavigateToPose {line}")
+        if not line.startswith("goal ("):
+            self._resolve("aborted", line)
+        state, reason = await future
+        result = self.navigate_to_pose.Result()
+        if hasattr(result, "error_msg"):  # Jazzy and later; Humble's result is empty
+            result.error_msg = "" if state == "reached" else reason
+            result.error_code = 0 if state in ("reached", "cancelled") else next(
+                (code for key, code in RESULT_CODES.items() if reason.startswith(key)), 9000)
+        if state == "reached":
+            handle.succeed()
+        elif state == "cancelled" and handle.is_cancel_requested:
+            handle.canceled()
+        else:
+            handle.abort()
+        self.log.info(f"NavigateToPose goal {state}" + (f": {reason}" if reason else ""))
+        return result
+
+    def _resolve(self, state: str, reason: str) -> None:
+        """End the ``NavigateToPose`` goal being driven, if any, with ``state`` and ``reason``."""
+        if self.action is None:
+            return
+        _handle, future = self.action
+        self.action = None
+        if not future.done():
+            future.set_result((state, reason))
+
+    def _feedback(self, status: dict, now: float) -> None:
+        handle, _ = self.action
+        feedback = self.navigate_to_pose.Feedback()
+        odom = self.controller.sensors["odom"].value
+        if odom is not None:
+            pose = feedback.current_pose
+            pose.header.frame_id = self.controller.settings.odom_frame
+            pose.header.stamp = self.get_clock().now().to_msg()
+            pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = odom[0][:3]
+            (pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z,
+             pose.pose.orientation.w) = odom[0][3:]
+        feedback.navigation_time = Duration(seconds=max(now - self.controller.goal_time, 0.0)).to_msg()
+        distance = status["distance"]
+        if distance is not None:
+            feedback.distance_remaining = float(distance)
+            feedback.estimated_time_remaining = Duration(seconds=distance / self.policy.scale[0]).to_msg()
+        handle.publish_feedback(feedback)
+
+    def _follow_action(self, tick: Tick, now: float) -> Tick:
+        """The ``NavigateToPose`` goal against this period's decision: a cancel requested stops the rover (this
+        period's command becomes zero); an end resolves the goal; otherwise feedback."""
+        if self.action is None:
+            return tick
+        handle, _ = self.action
+        if handle.is_cancel_requested:
+            tick = self.controller.stop("cancelled")
+            self._resolve("cancelled", "cancelled by the client")
+            return tick
+        if tick.status is None:
+            return tick
+        if tick.status["state"] in ("reached", "aborted"):
+            self._resolve(tick.status["state"], tick.status["reason"])
+        else:
+            self._feedback(tick.status, now)
+        return tick
+
+    # ---------------------------------------------------------------- the control period
     def on_tick(self) -> None:
         """The control period: the controller's decision published (and traced); a failure holds the rover."""
         now = self.now()
         try:
-            tick = self.controller.tick(now)
+            tick = self._follow_action(self.controller.tick(now), now)
             self.publish(tick)
         except Exception as err:  # noqa: BLE001 - no decision may end the node
             self._failed("tick", err, now)
@@ -238,6 +377,12 @@ class DeployNode(Node):
     def stop(self, reason: str) -> None:
         """Publish a zero command (and the goal's aborted status), and wait up to 0.5 s for subscribers to have it."""
         self.publish(self.controller.stop(reason))
+        if self.action is not None:  # its client hears why: let the executor send the result
+            import rclpy
+
+            self._resolve("aborted", reason)
+            for _ in range(5):
+                rclpy.spin_once(self, timeout_sec=0.02)
         self.cmd_pub.wait_for_all_acked(Duration(seconds=0.5))
         self._close_trace()
 

@@ -64,6 +64,31 @@ class PolicyNet(nn.Module):
         return torch.tanh(loc)
 
 
+def scanner_mount(robot, frame: str | None = None) -> dict | None:
+    """Where the policy's scanner sat: ``frame`` (default: the robot's laser frame) in the robot's chassis link, as
+    its URDF places it (``{"parent", "x", "y", "z", "yaw"}``, [m] and [rad]), what the deploy node measures a real
+    scanner's mounting against; ``None`` where the robot's URDF cannot be read here."""
+    import math
+
+    from atrv_warp.core.robot import RobotFileError, load_robot
+    from atrv_warp.sim.config import RoverConfig
+    from atrv_warp.sim.urdf import URDFError, load_rover
+
+    frame = frame or robot.laser_frame
+    try:  # a record holds the robot's facts, not its URDF: the robot file of that name, if its URDF is the same
+        here = load_robot(robot.name)
+        if here.urdf_sha256 != robot.urdf_sha256:
+            return None
+        frames = {f.name: f.transform for f in load_rover(RoverConfig(robot=here.path)).frames}
+    except (OSError, RobotFileError, URDFError, ValueError):
+        return None
+    if frame not in frames:
+        return None
+    m = frames[frame]
+    return {"parent": robot.chassis, "x": float(m[0, 3]), "y": float(m[1, 3]), "z": float(m[2, 3]),
+            "yaw": math.atan2(float(m[1, 0]), float(m[0, 0]))}
+
+
 def contract(source: Path, payload: dict, sim: SimConfig | None = None) -> dict:
     """What the exported program expects and gives, as plain values (the file's ``atrv_warp.json``, format 3).
 
@@ -74,7 +99,7 @@ def contract(source: Path, payload: dict, sim: SimConfig | None = None) -> dict:
     source file, the policy's metadata, the ``robot`` it was trained on (name, title, limits, IMU and laser frames),
     the control period (``step_dt`` [s], ``rate_hz``), the radius within which its task counts a goal reached
     (``reach_radius_m``: the deploy node's default ``goal_tolerance``) and the scanner's geometry (``beams``,
-    ``fov_rad``, ``range_min_m``, ``range_max_m``, ``frame``). All of it from the task and robot the policy records
+    ``fov_rad``, ``range_min_m``, ``range_max_m``, ``frame``, and its ``mount`` on the chassis: :func:`scanner_mount`). All of it from the task and robot the policy records
     (:func:`atrv_warp.policy.policy_record`), never from today's code: a task's limits changed since do not enter an
     old policy's contract. :class:`atrv_warp.core.observation.RobotObservation` builds a robot policy's input from it.
 
@@ -92,8 +117,9 @@ def contract(source: Path, payload: dict, sim: SimConfig | None = None) -> dict:
         sc = ScannerConfig(beams=task.scan_beams, fov=task.scan_fov)
         spec["scan"] = {"beams": sc.beams, "fov_rad": sc.fov, "angles": "evenly spaced over fov, centred on the "
                         "scanner's +x, counter-clockwise (right to left), as sensor_msgs/LaserScan orders them",
-                        "frame": sc.frame or robot.laser_frame, "range_min_m": sc.min_range,
-                        "range_max_m": sc.max_range, **(spec["scan"] or {"sectors": None})}
+                        "frame": sc.frame or robot.laser_frame, "mount": scanner_mount(robot, sc.frame),
+                        "range_min_m": sc.min_range, "range_max_m": sc.max_range,
+                        **(spec["scan"] or {"sectors": None})}
     step_dt = task.control_period or sim.step_dt
     lim = robot.limits
     robot_part = {"name": robot.name, "title": robot.title, "imu_frame": robot.imu_frame,

@@ -4,8 +4,8 @@
 - :mod:`.parameters`: the node's parameters and driving commands;
 - :mod:`.node`: the rclpy node; :mod:`.base`: the base driver (velocity control, odometry, IMU);
 - :mod:`.bag`: the MCAP bag writer; :mod:`.drive`: the calibration's scripted excitation driver;
-- :mod:`.frames`: the frame tree the node publishes and records as /tf (:mod:`.tf2_build`: tf2_msgs's
-  type support where no ROS install has it); :mod:`.markers`: the world as ``visualization_msgs/MarkerArray``.
+- :mod:`.frames`: the frame tree the node publishes and records as /tf (tf2_msgs's type support, where no
+  ROS install has it, from :mod:`atrv_warp.core.ros_interfaces`); :mod:`.markers`: the world as ``visualization_msgs/MarkerArray``.
 
 rclpy is optional: this package imports without it (and without the simulator: importing
 :mod:`.base` loads torch alone), :func:`run` says how to install it, and :mod:`.node` (the rclpy node)

@@ -569,10 +569,10 @@ class RoverSimNode(Node):
 
     def _start_tf(self, latched: QoSProfile) -> None:
         """Live /tf and /tf_static, where tf2_msgs loads (a ROS install's, or built from its definition on
-        first use: :mod:`.tf2_build`); otherwise one line says why and the node goes on without."""
-        from atrv_warp.integrations.ros.tf2_build import load_tf_message
+        first use: :mod:`atrv_warp.core.ros_interfaces`); otherwise one line says why and the node goes on without."""
+        from atrv_warp.core.ros_interfaces import TF2_MSGS, load_interface
 
-        cls, where = load_tf_message()
+        cls, where = load_interface(TF2_MSGS, "msg", "TFMessage")
         if cls is None:
             self.log.warning(f"no live /tf: {where}")
             return
