@@ -399,6 +399,10 @@ def test_segments_replay_the_configured_driver_and_the_outputs_record_it(tmp_pat
                                compile_seconds=1.0, driver=record)
     write_report(tmp_path / "cal.report.json", result, "drive.mcap")
     assert json.loads((tmp_path / "cal.report.json").read_text())["driver"] == record
+    from atrv_warp.integrations.calibration.output import format_report
+
+    table = format_report(result)  # the console prints the 95 % interval, as the README promises, and says so
+    assert "95 % interval" in table.splitlines()[0] and "0.1208 to 0.1212" in table, table
     write_sim_config(tmp_path / "cal.toml", result, "drive.mcap")
     written = tomllib.loads((tmp_path / "cal.toml").read_text())
     assert written["calibration"]["driver"] == record and written["rover"] == {"wheel_radius": 0.121}

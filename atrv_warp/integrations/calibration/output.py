@@ -64,16 +64,21 @@ def format_report(result: CalibrationResult) -> str:
     def number(v: float) -> str:
         return "—" if math.isnan(v) else f"{v:.2g}"
 
-    rows = [f"{'parameter':<14}{'before':>10}{'fitted':>10}{'± std err':>11}{'spread':>9}  unit"]
+    def interval(value: float, error: float) -> str:
+        return "—" if math.isnan(error) else f"{value - 1.96 * error:.4g} to {value + 1.96 * error:.4g}"
+
+    rows = [f"{'parameter':<14}{'before':>10}{'fitted':>10}{'95 % interval':>22}{'spread':>9}  unit"]
     for name, value in result.values.items():
-        rows.append(f"{name:<14}{result.nominal[name]:>10.4g}{value:>10.4g}{number(result.standard_error[name]):>11}"
-                    f"{number(result.spread[name]):>9}  {FIT_PARAMETERS[name].unit}")
-    rows.append("± std err: the recording's noise and the replay's fidelity, in quadrature (1.96 of them: 95 %)")
+        rows.append(f"{name:<14}{result.nominal[name]:>10.4g}{value:>10.4g}"
+                    f"{interval(value, result.standard_error[name]):>22}{number(result.spread[name]):>9}  "
+                    f"{FIT_PARAMETERS[name].unit}")
+    rows.append("95 % interval: 1.96 standard errors either side (the recording's noise and the replay's fidelity, in "
+                "quadrature); spread: the standard deviation of the fit's starts' end points (how well they agree)")
     for a, b, r in result.confounded:
         rows.append(f"{a} and {b} are confounded (correlation {r:+.2f}): the drive fixes a combination of them, not "
                     "each; fit one with the other known (--params)")
     rows.append("")
-    rows.append(f"{'position error (median per segment)':<38}{'before':>9}{'after':>9}{'cut':>7}")
+    rows.append(f"{'position error (median per segment)':<38}{'before':>9}{'after':>9}{'cut':>7}  (cut: before / after)")
     for split, s in result.error_summary().items():
         n = len(result.errors[split]["before"])
         rows.append(f"{split.replace('_', '-') + f' ({n} segments)':<38}{s['before_m']:>8.3f}m{s['after_m']:>8.3f}m"
