@@ -643,3 +643,18 @@ def test_the_node_carries_a_scanner_mounted_elsewhere_on_tf_to_the_trained_mount
     naive, _ = observe(blind, _ray_cast((0.2, 0.0), yaw, wide, walls), wide, "front_laser")
     assert (naive[scan_at] - expected[scan_at]).abs().max() > 0.1
     assert blind.mount_source.startswith("read as mounted where the policy's was (no /tf from 'chassis'")
+
+
+def test_launch_files_are_found_by_robot_and_an_unknown_robot_is_named(capsys):
+    """``atrv-deploy --launch-files <robot>`` prints the robot's shipped launch file (its parameters file beside);
+    an unknown robot is one line naming the shipped ones, exit 2."""
+    from atrv_warp.deploy.cli import main
+
+    assert main(["--launch-files", "jackal"]) == 0
+    path = Path(capsys.readouterr().out.strip())
+    assert path.name == "jackal.launch.py" and path.is_file()
+    assert (path.parent.parent / "config" / "jackal.yaml").is_file()
+    with pytest.raises(SystemExit) as ended:
+        main(["--launch-files", "warthog"])
+    assert ended.value.code == 2
+    assert "no launch configuration for robot 'warthog'; shipped: atrvjr, husky, jackal" in capsys.readouterr().err
