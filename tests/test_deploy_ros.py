@@ -441,6 +441,7 @@ def test_each_shipped_robot_has_a_launch_file_and_a_parameters_file_the_node_run
         view = yaml.safe_load(rviz_config(robot))["Visualization Manager"]
         topics = {d["Name"]: d["Topic"]["Value"] for d in view["Displays"] if "Topic" in d}
         assert topics["Scan"] == params["scan_topic"] and topics["Path driven"] == params["odom_topic"]
+        assert topics["Command"] == "command_path"
         assert view["Global Options"]["Fixed Frame"] == params["odom_frame"]
         args = ["--ros-args", "-r", "__ns:=/robot_7", "--params-file", str(params_file(robot)),
                 "-p", "allow_other_robot:=true"]  # the test's policy was trained on the ATRV-Jr
@@ -453,6 +454,7 @@ def test_each_shipped_robot_has_a_launch_file_and_a_parameters_file_the_node_run
             subscribed = {s.topic_name for s in node.subscriptions}
             assert f"/robot_7/{params['scan_topic']}" in subscribed and f"/robot_7/{params['odom_topic']}" in subscribed
             assert f"/robot_7/{params['cmd_vel_topic']}" in names and node.stamped == params["enable_stamped_cmd_vel"]
+            assert "/robot_7/command_path" in names
             node.stop("test")
             node.destroy_node()
         finally:

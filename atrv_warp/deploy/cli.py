@@ -18,7 +18,8 @@ Topics (relative: --ros-args -r __ns:=/rover_1 runs it for one rover of several)
   in:  scan (sensor_msgs/LaserScan), odom (nav_msgs/Odometry), imu (sensor_msgs/Imu),
        goal_pose (geometry_msgs/PoseStamped in the odometry frame or a frame /tf joins to it; a goal it
        cannot take stops the rover), /tf and /tf_static
-  out: cmd_vel (geometry_msgs/Twist, or TwistStamped), goal_status (std_msgs/String, JSON)
+  out: cmd_vel (geometry_msgs/Twist, or TwistStamped), goal_status (std_msgs/String, JSON),
+       command_path (nav_msgs/Path: the command's next second in base_frame, for RViz)
   action: navigate_to_pose (nav2_msgs/action/NavigateToPose: RViz's "Nav2 Goal", Nav2's clients)
 
 Launch files and parameters per shipped robot (atrvjr, husky, jackal): python -m atrv_warp.deploy --launch-files

@@ -3,7 +3,8 @@
 
 It runs ``atrv-deploy`` with the robot's parameters file (``config/<robot>.yaml``: its topics, frames and command
 type, relative to the robot's namespace) and optionally RViz with a view made from that file (:func:`rviz_config`:
-the scan, the odometry's path driven, the goal sent on ``goal_pose``, the frames; the "2D Goal Pose" tool sends goals). Launch arguments:
+the scan, the odometry's path driven, the policy's command as the arc it drives in the next second
+(``command_path``), the goal sent on ``goal_pose``, the frames; the "2D Goal Pose" tool sends goals). Launch arguments:
 ``policy`` (the exported ``.pt2``, required), ``namespace`` (the robot's, e.g. a Clearpath robot's serial
 ``j100_0123``), ``use_sim_time``, ``rviz``.
 """
@@ -62,6 +63,9 @@ def rviz_config(robot: str) -> str:
         "    - Class: rviz_default_plugins/Odometry\n      Enabled: true\n      Name: Path driven\n"
         + topic(p["odom_topic"], "Best Effort") +
         "      Keep: 3000\n      Position Tolerance: 0.1\n      Angle Tolerance: 0.5\n"
+        "    - Class: rviz_default_plugins/Path\n      Enabled: true\n      Name: Command\n"
+        + topic("command_path") +
+        "      Color: 255; 85; 0\n"
         "    - Class: rviz_default_plugins/Pose\n      Enabled: true\n      Name: Goal\n"
         + topic(p.get("goal_topic", "goal_pose")) +
         "      Shape: Axes\n"

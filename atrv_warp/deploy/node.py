@@ -21,7 +21,7 @@ import json
 import math
 
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
-from nav_msgs.msg import Odometry
+from nav_msgs.msg import Odometry, Path
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
 from rclpy.expand_topic_name import expand_topic_name
@@ -42,11 +42,13 @@ from atrv_warp.deploy.parameters import (
     unknown_parameters,
 )
 
-__all__ = ["RESULT_CODES", "DeployNode", "NodeConfigError"]
+__all__ = ["COMMAND_PATH_SECONDS", "RESULT_CODES", "DeployNode", "NodeConfigError"]
 
 RELIABLE = ReliabilityPolicy.RELIABLE
 
 
+COMMAND_PATH_SECONDS = 1.0
+"""The ``command_path`` topic shows where this period's command would take the rover in this long [s]."""
 RESULT_CODES = {"time limit": 9003}
 """Nav2's ``NavigateToPose`` result ``error_code`` for an abort whose reason starts with a key (``TIMEOUT``); any other
 abort is ``UNKNOWN`` (9000). Humble's result carries no code."""
@@ -105,6 +107,8 @@ class DeployNode(Node):
         self.stamped = p["enable_stamped_cmd_vel"]
         self.cmd_pub = self.create_publisher(TwistStamped if self.stamped else Twist, p["cmd_vel_topic"], 10)
         self.status_pub = self.create_publisher(String, p["status_topic"], 10)
+        self.command_path_pub = self.create_publisher(Path, "command_path", 10)
+        """The command as the arc it drives in the next :data:`COMMAND_PATH_SECONDS`, in ``base_frame`` (RViz's view)."""
         sensors = qos_profile_sensor_data  # best effort: matches a reliable publisher and a sensor driver's
         guard = self.guarded
         self.create_subscription(Odometry, p["odom_topic"], guard("odom", self.controller.on_odom), sensors)
@@ -363,6 +367,7 @@ class DeployNode(Node):
         if tick.command is not None:
             twist = Twist()
             twist.linear.x, twist.angular.z = (float(v) if math.isfinite(v) else 0.0 for v in tick.command)
+            self._publish_command_path(twist.linear.x, twist.angular.z)
             if self.stamped:
                 msg = TwistStamped()
                 msg.header.stamp = self.get_clock().now().to_msg()
@@ -373,6 +378,23 @@ class DeployNode(Node):
                 self.cmd_pub.publish(twist)
         if tick.status is not None:
             self.status_pub.publish(String(data=json.dumps(tick.status)))
+
+    def _publish_command_path(self, v: float, w: float) -> None:
+        """The arc (v [m/s], w [rad/s]) drives in :data:`COMMAND_PATH_SECONDS` from the base, as a ``nav_msgs/Path``."""
+        msg = Path()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = self.params["base_frame"]
+        x = y = yaw = 0.0
+        dt = COMMAND_PATH_SECONDS / 10
+        for k in range(11):
+            pose = PoseStamped()
+            pose.header = msg.header
+            pose.pose.position.x, pose.pose.position.y = x, y
+            pose.pose.orientation.z, pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+            msg.poses.append(pose)
+            if k < 10:
+                x, y, yaw = x + v * dt * math.cos(yaw), y + v * dt * math.sin(yaw), yaw + w * dt
+        self.command_path_pub.publish(msg)
 
     def stop(self, reason: str) -> None:
         """Publish a zero command (and the goal's aborted status), and wait up to 0.5 s for subscribers to have it."""
