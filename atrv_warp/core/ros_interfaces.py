@@ -3,7 +3,7 @@
 A ROS installation's own package is always preferred: :func:`load_interface` imports it first. Where there is none
 (rclpy from the package index, as the ``ros`` extra installs it), the interface's type support is generated from its
 definition by the rosidl wheels and compiled with the system's C and C++ compilers, once, into a cache folder; the
-first build takes about half a minute. Without the generators or a compiler, :func:`load_interface` returns ``None``
+first use pays for the build. Without the generators or a compiler, :func:`load_interface` returns ``None``
 and the reason, and the caller goes on without the interface and says why.
 
 The steps are those of ``rosidl_generate_interfaces`` in a ROS build, without CMake or colcon: ``rosidl_adapter``
