@@ -29,13 +29,16 @@ from atrv_warp.core.observation import RobotObservation, Scan
 from atrv_warp.core.tf import TransformBuffer, frame_id
 from atrv_warp.deploy.parameters import PARAMETER_BY_NAME
 
-__all__ = ["EXPORT_FORMAT", "RATE_RANGE_HZ", "STATES", "Controller", "Deployable", "PolicyRefused", "Settings", "Tick",
+__all__ = ["EXPORT_FORMAT", "RATE_RANGE_HZ", "STATES", "TIME_LIMIT", "Controller", "Deployable", "PolicyRefused", "Settings", "Tick",
            "load_deployable", "read_imu", "read_odometry", "read_scan", "scan_geometry"]
 
 EXPORT_FORMAT = "atrv_warp.exported_policy/3"
 """The contract format this node reads (``atrv_warp.rl.export.EXPORT_FORMAT``; ``tests/test_deploy.py`` holds the
 two equal without importing the exporter here)."""
 
+TIME_LIMIT = "time limit"
+"""How an aborted status's ``reason`` starts when the goal ran out of ``time_limit`` (the node's ``NavigateToPose``
+result reports it as Nav2's ``TIMEOUT``)."""
 STATES = ("active", "holding", "reached", "aborted")
 """The goal status's ``state``: driving by the policy; held still for a ``reason`` (resumes by itself); the goal
 reached (within ``goal_tolerance``); given up for a ``reason`` (time limit, shutdown, a new goal)."""
@@ -559,7 +562,7 @@ class Controller:
             return Tick(None, None)
         limit = self.settings.time_limit
         if limit and now - self.goal_time > limit:
-            return self._end("aborted", f"time limit: not reached in {limit:g} s")
+            return self._end("aborted", f"{TIME_LIMIT}: not reached in {limit:g} s")
         if self._locate() is None:
             frame, odom = self.goal_given[0], self.settings.odom_frame
             return self._hold(f"no transform from {frame!r} to {odom!r} on /tf", "no transform")

@@ -33,7 +33,7 @@ from sensor_msgs.msg import Imu, LaserScan
 from std_msgs.msg import String
 
 from atrv_warp.core.files import OutputPathError, fresh_path
-from atrv_warp.deploy.controller import Controller, Deployable, Settings, Tick
+from atrv_warp.deploy.controller import TIME_LIMIT, Controller, Deployable, Settings, Tick
 from atrv_warp.deploy.parameters import (
     PARAMETERS,
     ParameterError,
@@ -49,7 +49,7 @@ RELIABLE = ReliabilityPolicy.RELIABLE
 
 COMMAND_PATH_SECONDS = 1.0
 """The ``command_path`` topic shows where this period's command would take the rover in this long [s]."""
-RESULT_CODES = {"time limit": 9003}
+RESULT_CODES = {TIME_LIMIT: 9003}
 """Nav2's ``NavigateToPose`` result ``error_code`` for an abort whose reason starts with a key (``TIMEOUT``); any other
 abort is ``UNKNOWN`` (9000). Humble's result carries no code."""
 
