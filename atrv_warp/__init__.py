@@ -2,8 +2,9 @@
 
 Layout: :mod:`atrv_warp.sim` (the simulator), :mod:`atrv_warp.task` (the drive-to-target task
 and its TorchRL environment), :mod:`atrv_warp.rl` (SAC training), :mod:`atrv_warp.integrations`
-(Rerun, ROS 2, Gymnasium), :mod:`atrv_warp.policy` (saved policies); the command-line tools are thin modules at the top
-(``python -m atrv_warp.train``, ``evaluate``, ``demo``, ``model``, ``ros``, ``export``).
+(Rerun, ROS 2, Gymnasium), :mod:`atrv_warp.policy` (saved policies); the command-line tools are thin modules in
+:mod:`atrv_warp.cli` (``python -m atrv_warp.train``, ``evaluate``, ``demo``, ``model``, ``ros``, ``export``,
+``calibrate``, ``robot``), and :mod:`atrv_warp.deploy` runs an exported policy on a robot.
 
 Public names are imported lazily so that ``python -m atrv_warp.<tool>`` loads only what
 the tool needs: importing the package loads neither Warp, Newton nor TorchRL, and :mod:`atrv_warp.core`

@@ -1,6 +1,6 @@
 """Saved policies: the actor network, its file format, and the policies that ship.
 
-This module sits below training and the integrations: :mod:`atrv_warp.evaluate`, the ROS node
+This module sits below training and the integrations: :mod:`atrv_warp.cli.evaluate`, the ROS node
 and the exporter load a policy from here without importing the trainer (:mod:`atrv_warp.rl`).
 
 Observation normalisation lives *inside* the networks (:class:`Normalize`, statistics as
@@ -61,8 +61,8 @@ SHIPPED_POLICIES: dict[str, ShippedPolicy] = {
     "reach": ShippedPolicy("pretrained_policy.pt", "reach", "python -m atrv_warp.train"),
     "nav": ShippedPolicy("nav_policy.pt", "nav", "python -m atrv_warp.train --config nav randomization=wide"),
     "nav_plain": ShippedPolicy("nav_policy_plain.pt", "nav", "python -m atrv_warp.train --config nav"),
-    # each robot's deployable policy, at its own limits: seed 0 of benchmarks/train_to_success.py with the same
-    # arguments (its results file: train_to_success_nav_deploy_<robot>.json; benchmarks/robot_policies.py evaluates
+    # each robot's deployable policy, at its own limits: seed 0 of benchmarks/training/train_to_success.py with the same
+    # arguments (its results file: train_to_success_nav_deploy_<robot>.json; benchmarks/robots/robot_policies.py evaluates
     # them). The Husky's validation still rose at nav_deploy's 1.4 M frames: it trained on 3 M.
     "nav_deploy_atrvjr": ShippedPolicy("nav_deploy_atrvjr_policy.pt", "nav_deploy",
                                        "python -m atrv_warp.train --config nav_deploy env.robot=atrvjr"),

@@ -13,17 +13,17 @@ import numpy as np
 import pytest
 import torch
 
-from atrv_warp.integrations.calibration import (
+from atrv_warp.integrations.ros.bag import BagWriter
+from atrv_warp.sim.config import SimConfig, load_sim_config
+from atrv_warp.sim.driver import DriverConfig
+from atrv_warp.sim.sysid import (
     DEFAULT_FIT,
     BagError,
     CalibrationConfig,
     CalibrationError,
     read_drive_log,
 )
-from atrv_warp.integrations.calibration.fit import make_segments
-from atrv_warp.integrations.ros.bag import BagWriter
-from atrv_warp.sim.config import SimConfig, load_sim_config
-from atrv_warp.sim.driver import DriverConfig
+from atrv_warp.sim.sysid.fit import make_segments
 from atrv_warp.sim.urdf import load_rover
 
 WHEELS = {w.joint: (w.side, w.drive_sign) for w in load_rover().wheels}
@@ -339,7 +339,7 @@ def test_a_replayed_rover_starts_at_the_rest_height_of_its_own_wheel_and_payload
 @pytest.mark.parametrize("args", [["--driver-wheel-radius", "0"], ["--driver-wheel-radius", "nan"],
                                   ["--driver-track-width", "-0.5"], ["--driver-track-width", "inf", "--record-example"]])
 def test_cli_refuses_a_bad_driver_radius_or_track_in_one_line_before_any_work(tmp_path, capsys, args):
-    from atrv_warp.calibrate import main
+    from atrv_warp.cli.calibrate import main
 
     option, value, *rest = args
     bag = tmp_path / "never_read.mcap"  # no such file: the bag is not read (that would be an error naming it)
@@ -380,8 +380,8 @@ def test_segments_replay_the_configured_driver_and_the_outputs_record_it(tmp_pat
     """The driver's integral at each segment's start is the configured driver's: a drive at 4 rad/s for 0.5 m/s is on
     target at 0.125 m, behind it at 0.121 m. The report and the written config record the driver; the loader still
     reads the config."""
-    from atrv_warp.integrations.calibration import CalibrationResult
-    from atrv_warp.integrations.calibration.output import write_report, write_sim_config
+    from atrv_warp.sim.sysid import CalibrationResult
+    from atrv_warp.sim.sysid.output import write_report, write_sim_config
 
     log = read_drive_log(_bag(tmp_path / "drive.mcap"), WHEELS)
     on = make_segments(log, CalibrationConfig(), CalibrationConfig().driver())
@@ -399,7 +399,7 @@ def test_segments_replay_the_configured_driver_and_the_outputs_record_it(tmp_pat
                                compile_seconds=1.0, driver=record)
     write_report(tmp_path / "cal.report.json", result, "drive.mcap")
     assert json.loads((tmp_path / "cal.report.json").read_text())["driver"] == record
-    from atrv_warp.integrations.calibration.output import format_report
+    from atrv_warp.sim.sysid.output import format_report
 
     table = format_report(result)  # the console prints the 95 % interval, as the README promises, and says so
     assert "95 % interval" in table.splitlines()[0] and "0.1208 to 0.1212" in table, table
@@ -420,8 +420,8 @@ def test_segments_replay_the_configured_driver_and_the_outputs_record_it(tmp_pat
 def test_a_tiny_fit_runs_on_the_first_seconds_of_a_drive(tmp_path):
     """A smoke run of the fit on a short kinematic drive: ``duration`` keeps the drive's first seconds, both starts
     run, the report has every segment's errors, and the residuals' squares are the loss the fit reports."""
-    from atrv_warp.integrations.calibration import calibrate
-    from atrv_warp.integrations.calibration.fit import replay_errors
+    from atrv_warp.sim.sysid import calibrate
+    from atrv_warp.sim.sysid.fit import replay_errors
 
     log = read_drive_log(_bag(tmp_path / "drive.mcap", seconds=30.0), WHEELS)
     cfg = CalibrationConfig(params=("wheel_radius",), duration=16.0, iterations=2)
@@ -442,9 +442,9 @@ def test_a_fitted_friction_rise_reaches_the_sim_config_and_the_simulator(tmp_pat
     """``--params ...,friction_rise`` (not a default): the fit stays in its bounds, the written config carries it
     under [contact], and a simulator built from that file has it in every world."""
     from atrv_warp import RoverSim
-    from atrv_warp.integrations.calibration import calibrate
-    from atrv_warp.integrations.calibration.fit import DEFAULT_FIT, FIT_PARAMETERS
-    from atrv_warp.integrations.calibration.output import write_sim_config
+    from atrv_warp.sim.sysid import calibrate
+    from atrv_warp.sim.sysid.fit import DEFAULT_FIT, FIT_PARAMETERS
+    from atrv_warp.sim.sysid.output import write_sim_config
 
     assert "friction_rise" not in DEFAULT_FIT
     log = read_drive_log(_bag(tmp_path / "drive.mcap", seconds=30.0), WHEELS)
@@ -464,7 +464,7 @@ def test_record_example_drives_a_worn_truth_with_the_nominal_driver(tmp_path, mo
     builds its driver and simulator."""
     pytest.importorskip("rclpy", reason="ROS 2 extra not installed: pip install -e '.[ros]'")
     from atrv_warp import RoverSim
-    from atrv_warp.calibrate import main
+    from atrv_warp.cli.calibrate import main
     from atrv_warp.integrations.ros import drive
     from atrv_warp.integrations.ros.parameters import PARAMETERS, driver_config
 
@@ -519,7 +519,7 @@ def test_fit_recovers_a_hidden_rover_from_a_recorded_bag(tmp_path, run_module, r
 # ------------------------------------------------------------------ latency and the model check (issue 42, part 4)
 def _drive_log(seconds: float, *, pose_noise: float, wheel_noise: float, seed: int = 0, commands=None):
     """A DriveLog of a smooth drive at 20 Hz with white noise on the reference position and the wheel speeds."""
-    from atrv_warp.integrations.calibration import DriveLog
+    from atrv_warp.sim.sysid import DriveLog
 
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, seconds, 0.05)
@@ -533,7 +533,7 @@ def _drive_log(seconds: float, *, pose_noise: float, wheel_noise: float, seed: i
 
 def test_the_recordings_noise_is_read_from_its_samples():
     """A 1 cm reference and 0.02 rad/s encoders on a smooth drive: each channel's noise within 10 %."""
-    from atrv_warp.integrations.calibration.fit import recording_noise
+    from atrv_warp.sim.sysid.fit import recording_noise
 
     noise = recording_noise(_drive_log(180.0, pose_noise=0.01, wheel_noise=0.02))
     assert noise["position"] == pytest.approx(0.01, rel=0.1)
@@ -557,7 +557,7 @@ def test_a_latency_delays_the_replayed_commands_by_whole_steps():
 def test_the_model_check_flags_a_misfit_in_one_line():
     """Held-out errors at the recording's noise pass; a channel over twice its noise (or its floor) is named in one
     line, and so is a fit that made the held-out path worse."""
-    from atrv_warp.integrations.calibration.fit import MISFIT_FLOOR, _model_check
+    from atrv_warp.sim.sysid.fit import MISFIT_FLOOR, _model_check
 
     noise = {"position": 0.01, "wheel_speed": 0.04, "effort": 0.01}  # a fine effort sensor: its floor counts
 
@@ -601,7 +601,7 @@ def test_a_fit_finds_a_latency_and_flags_what_it_cannot_model(tmp_path, run_modu
 def test_the_standard_error_adds_the_replays_fidelity_and_names_confounded_pairs():
     """Two parameters the residuals move almost alike are reported as confounded; each standard error is at least the
     replay's fidelity (issue 42, part 3)."""
-    from atrv_warp.integrations.calibration.fit import CONFOUNDED, FIT_FIDELITY, _standard_error, _Start
+    from atrv_warp.sim.sysid.fit import CONFOUNDED, FIT_FIDELITY, _standard_error, _Start
 
     rng = np.random.default_rng(0)
     base = rng.normal(size=(40, 30))
@@ -623,8 +623,8 @@ def _recorded_drive(seconds: float = 24.0, seed: int = 3):
 
     from atrv_warp import RoverSim
     from atrv_warp.core.geometry import quat_to_matrix, quat_to_rpy, quat_to_yaw
-    from atrv_warp.integrations.calibration import DriveLog
     from atrv_warp.sim.config import ContactConfig, get_variant
+    from atrv_warp.sim.sysid import DriveLog
 
     g = torch.Generator().manual_seed(seed)
     steps = round(seconds / 0.05)
@@ -663,7 +663,7 @@ def test_a_replay_starts_from_the_recorded_tilt_wheels_and_effort():
     20 Hz wheel speeds, the chassis level) the replay drives too far, which a fit made up for with a smaller wheel."""
     import dataclasses
 
-    from atrv_warp.integrations.calibration.fit import replay_errors
+    from atrv_warp.sim.sysid.fit import replay_errors
 
     log = _recorded_drive()
     truth = {"friction": 0.6, "torque_scale": 0.9, "payload_mass": 10.0, "wheel_radius": 0.125}
@@ -706,7 +706,7 @@ def test_a_pause_in_a_bag_splits_it_and_costs_no_memory():
     import time
     import tracemalloc
 
-    from atrv_warp.integrations.calibration.fit import drive_spans, make_segments
+    from atrv_warp.sim.sysid.fit import drive_spans, make_segments
 
     cfg = CalibrationConfig()
     whole = _drive_log(60.0, pose_noise=0.0, wheel_noise=0.0)

@@ -19,11 +19,11 @@ def test_every_script_entry_point_resolves():
     for name, target in scripts.items():
         module, _, func = target.partition(":")
         assert callable(getattr(importlib.import_module(module), func)), name
-    assert scripts["atrv-baseline"] == "atrv_warp.evaluate:baseline_main"
+    assert scripts["atrv-baseline"] == "atrv_warp.cli.evaluate:baseline_main"
 
 
 def test_atrv_baseline_is_evaluate_baseline(tmp_path, capsys):
-    from atrv_warp.evaluate import baseline_main, main
+    from atrv_warp.cli.evaluate import baseline_main, main
 
     assert baseline_main(["--episodes", "4", "--json", str(tmp_path / "a.json")]) == 0
     assert main(["--baseline", "--episodes", "4", "--json", str(tmp_path / "b.json")]) == 0
@@ -33,7 +33,7 @@ def test_atrv_baseline_is_evaluate_baseline(tmp_path, capsys):
 
 
 def test_evaluate_under_randomization_reports_success_by_bin(tmp_path, capsys):
-    from atrv_warp.evaluate import main
+    from atrv_warp.cli.evaluate import main
 
     out = tmp_path / "wide.json"
     assert main(["--task", "nav", "--randomization", "wide", "--episodes", "16", "--json", str(out)]) == 0
@@ -51,7 +51,7 @@ def test_evaluate_under_randomization_reports_success_by_bin(tmp_path, capsys):
 def test_a_policy_for_another_version_of_the_task_is_refused_by_name(tmp_path, capsys):
     """A nav policy saved before the nav task observed its last actions (26 values, not 32): one line naming
     the file and both sizes, exit 2, nothing run."""
-    from atrv_warp.evaluate import main
+    from atrv_warp.cli.evaluate import main
     from atrv_warp.policy import load_policy, make_actor, save_policy
     from atrv_warp.storage import FileFormatError
 

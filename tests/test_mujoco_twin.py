@@ -88,7 +88,7 @@ def test_a_deployable_policy_drives_twin_episodes(tmp_path, capsys):
     ``evaluate --engine mujoco``; a torque policy is refused in one line."""
     import json
 
-    from atrv_warp.evaluate import main
+    from atrv_warp.cli.evaluate import main
     from atrv_warp.policy import make_actor, save_policy
     from atrv_warp.task.config import get_task
     from atrv_warp.task.spec import observation_fields
@@ -159,7 +159,7 @@ def test_the_twin_turns_in_place_on_all_four_wheels_as_coulomb_friction_does():
     """At µ 0.8 every wheel stays on the ground through an in-place turn, the sliding wheels' friction is µ times
     their load, and chi is within 10 % of the Coulomb figure for this geometry, 1 + (wheelbase / track)² (ours:
     1.58). With MuJoCo's default stiff contact the sliding wheels hop (the soft constraint lifts a sliding contact
-    past its static sink) and chi is several times that: the gap ``benchmarks/mujoco_turning_study.py`` traced."""
+    past its static sink) and chi is several times that: the gap ``benchmarks/transfer/mujoco_turning_study.py`` traced."""
     from atrv_warp.integrations.mujoco.mjcf import MUJOCO_DEFAULT_CONTACT, MujocoContact
 
     chi, hops, ratio, coulomb = _turn_in_place(MujocoContact())
@@ -227,10 +227,10 @@ def test_a_twin_bag_reads_back_as_a_calibration_bag(tmp_path):
     (re-sent every 0.1 s and on each change, stamped at the step they are given before), the wheels' speeds and efforts after every
     0.05 s step, the reference pose and the wheel odometry."""
     from atrv_warp.core.robot import load_robot
-    from atrv_warp.integrations.calibration import read_drive_log
-    from atrv_warp.integrations.calibration.excitation import Excitation
     from atrv_warp.integrations.mujoco.record import record_twin_bag
     from atrv_warp.sim.config import RoverConfig
+    from atrv_warp.sim.sysid import read_drive_log
+    from atrv_warp.sim.sysid.excitation import Excitation
     from atrv_warp.sim.urdf import load_rover
 
     rover = RoverConfig(torque_scale=1.3, wheel_radius=0.121, payload_mass=8.0)
@@ -258,7 +258,7 @@ def test_a_twin_bag_reads_back_as_a_calibration_bag(tmp_path):
 def test_calibrate_records_an_example_bag_from_the_twin(tmp_path, capsys):
     """``atrv-calibrate --record-example OUT --engine mujoco --truth FILE`` records the twin of the truth's rover; a
     contact setting the twin does not take, or a simulator-node parameter, is refused in one line, nothing written."""
-    from atrv_warp.calibrate import main
+    from atrv_warp.cli.calibrate import main
 
     truth = tmp_path / "truth.toml"
     truth.write_text("[rover]\npayload_mass = 5.0\n[contact]\nfriction = 0.6\n")

@@ -278,7 +278,7 @@ def test_shipped_policies_load_by_name(monkeypatch):
 
 def test_evaluate_refuses_before_any_step(tmp_path, capsys, monkeypatch):
     """``evaluate --task nav`` with a twist policy: exit 2, one line naming both, no simulator built."""
-    from atrv_warp.evaluate import main
+    from atrv_warp.cli.evaluate import main
 
     deploy = tiny_policy(tmp_path, "nav_deploy")
     assert main([str(deploy), "--task", "nav", "--episodes", "1"]) == 2

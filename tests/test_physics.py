@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from atrv_warp import RoverSim
-from atrv_warp.sim import FAST_SIM_DT, REFERENCE_SIM_DT, SimConfig, checks
+from atrv_warp.sim import FAST_SIM_DT, REFERENCE_SIM_DT, SimConfig, protocols
 
 STEP = 0.05  # [s] per env step
 
@@ -18,7 +18,7 @@ def run(sim, seconds):
 @pytest.fixture(scope="module")
 def reference_drive():
     """Reference variant dropped 2 cm above rest, settled 1 s, then +4 N·m on all wheels."""
-    run = checks.reference_drive()
+    run = protocols.reference_drive()
     return run.sim, run.settle_z, run.track
 
 
@@ -62,7 +62,7 @@ def test_realistic_acceleration_matches_analytic():
     v0, t0 = sim.lin_vel[0, 0].item(), sim.sim_time
     run(sim, 1.5)
     accel = (sim.lin_vel[0, 0].item() - v0) / (sim.sim_time - t0)
-    assert accel == pytest.approx(checks.rolling_acceleration(sim, tau), rel=0.05)
+    assert accel == pytest.approx(protocols.rolling_acceleration(sim, tau), rel=0.05)
 
 
 def test_rotate_left_turns_in_place():
@@ -238,7 +238,7 @@ def test_wall_impacts_at_top_speed_stay_under_1_2x_top_speed(sim_dt):
     """Three substeps with the plain Hunt–Crossley law threw rovers off walls at up to 1.4x top speed
     (and one blew up); ``ContactConfig.damping_limit`` keeps every impact under 1.2x. At five substeps
     no rover passes top speed; at three a few still leave a wall a little faster than they hit it."""
-    got = checks.wall_impacts(sim=SimConfig(sim_dt=sim_dt))
+    got = protocols.wall_impacts(sim=SimConfig(sim_dt=sim_dt))
     assert got.nonfinite_worlds == 0
     assert got.overspeed_worlds == 0, f"{got.overspeed_worlds} worlds left a wall faster than 1.2x top speed"
     assert got.max_speed < 1.2 * got.top_speed
@@ -255,16 +255,16 @@ def test_skid_steer_turns_as_coulomb_friction_predicts(mu):
 
     contact = ContactConfig(friction=mu)
     sim = RoverSim(1, contact=contact)
-    xy = checks.wheel_contact_xy(sim)
+    xy = protocols.wheel_contact_xy(sim)
     track = float(xy[:, 1].max() - xy[:, 1].min())
     r = sim.rover_cfg.wheel_radius
     side = np.array([w.side for w in sim.description.wheels])
     driver = DriverConfig(wheel_radius=r, track_width=track, effective_track_factor=1.0)
-    for row in checks.turning_response([(0.0, 0.5), (0.5, 0.5)], driver=driver, contact=contact, seconds=6.0,
+    for row in protocols.turning_response([(0.0, 0.5), (0.5, 0.5)], driver=driver, contact=contact, seconds=6.0,
                                        average=2.0):
         left, right = row["wheel_left"], row["wheel_right"]
         chi = r * (right - left) / (row["yaw_rate"] * track)
-        coulomb = r * (right - left) / (checks.coulomb_twist(xy, r * np.where(side == 0, left, right))[2] * track)
+        coulomb = r * (right - left) / (protocols.coulomb_twist(xy, r * np.where(side == 0, left, right))[2] * track)
         assert 1.3 <= chi <= 2.0, row
         assert chi == pytest.approx(coulomb, rel=0.05), row
 
@@ -272,9 +272,9 @@ def test_skid_steer_turns_as_coulomb_friction_predicts(mu):
 def test_rolls_without_slip_below_the_traction_limit_and_saturates_at_mu_g():
     from atrv_warp.sim import ContactConfig
 
-    assert checks.slip_ratio(2.0) < 0.03  # +2 N·m per wheel, far below mu N r
+    assert protocols.slip_ratio(2.0) < 0.03  # +2 N·m per wheel, far below mu N r
     for mu in (0.3, 0.5):  # full torque: the wheels spin, the tyres slide (the chassis pitching as they do)
-        assert checks.full_torque_acceleration(ContactConfig(friction=mu)) == pytest.approx(mu * 9.81, rel=0.15)
+        assert protocols.full_torque_acceleration(ContactConfig(friction=mu)) == pytest.approx(mu * 9.81, rel=0.15)
 
 
 @pytest.mark.parametrize(("field", "value"), [("friction", 0.0), ("friction", -0.3), ("friction", float("nan")),

@@ -236,7 +236,7 @@ def calibrated(tmp_path):
 
 
 def test_around_resolves_to_ranges_centred_on_the_file(calibrated, tmp_path):
-    from atrv_warp.integrations.calibration.fit import DEFAULT_FIT
+    from atrv_warp.sim.sysid.fit import DEFAULT_FIT
 
     assert set(AroundConfig().parameters) == set(DEFAULT_FIT)  # what atrv-calibrate fits by default, as documented
     r = get_randomization("around", sim_config=calibrated)
@@ -328,7 +328,7 @@ def test_around_a_config_that_lacks_a_drawn_parameter_is_one_line(tmp_path, monk
 def test_evaluate_reports_the_calibrated_rover_and_the_spread_around_it(calibrated, tmp_path, capsys):
     """``evaluate --sim-config F --randomization around``: two rows on the same episodes, the rover of the file and
     across the spread, and the JSON holds both, the ranges and success by bins across them."""
-    from atrv_warp.evaluate import main
+    from atrv_warp.cli.evaluate import main
 
     out = tmp_path / "around.json"
     assert main(["--baseline", "--episodes", "8", "--sim-config", str(calibrated), "--randomization", "around",

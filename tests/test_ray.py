@@ -98,7 +98,7 @@ def no_ray_before():
 def test_without_the_extra_collector_ray_stops_before_any_work(tmp_path, run_command):
     """With ``ray`` not importable, one line says how to install the extra, and nothing is written."""
     code = ("import sys; sys.modules['ray'] = None\n"  # as if not installed: find_spec('ray') is None
-            "from atrv_warp.train import main\n"
+            "from atrv_warp.cli.train import main\n"
             f"sys.exit(main(['--config', 'smoke', 'collector=ray', 'out_dir={tmp_path}']))")
     proc = run_command([sys.executable, "-c", code], check=False)
     assert proc.returncode == 2, proc.stderr

@@ -169,7 +169,7 @@ def test_an_unknown_robot_lists_the_shipped_ones():
 def test_a_ros_urdf_becomes_a_robot_that_drives(tmp_path, capsys):
     """The newcomer's path: ``robot new`` on a URDF in the ROS conventions, the limits set, ``check --static``, and the
     robot drives its limits through ``/cmd_vel``."""
-    from atrv_warp.robot import main
+    from atrv_warp.cli.robot import main
     from atrv_warp.sim import RoverSim
 
     urdf = ros_urdf(tmp_path)
@@ -194,7 +194,7 @@ def test_a_ros_urdf_becomes_a_robot_that_drives(tmp_path, capsys):
 
 
 def test_a_turned_laser_or_imu_is_refused(tmp_path):
-    from atrv_warp.robot import starter_file
+    from atrv_warp.cli.robot import starter_file
     from atrv_warp.sim.robot_check import check_robot
 
     urdf = ros_urdf(tmp_path, laser_rpy="3.14159 0 0")  # mounted upside down
@@ -209,7 +209,7 @@ def test_a_turned_laser_or_imu_is_refused(tmp_path):
 
 
 def test_check_write_puts_the_measured_values_in_the_file(tmp_path):
-    from atrv_warp.robot import write_measured
+    from atrv_warp.cli.robot import write_measured
 
     path = _copy(tmp_path, "husky")
     before = path.read_text()

@@ -290,7 +290,7 @@ def test_goal_mode_drives_to_goal(ros_env):
 
 def test_missing_extra_message():
     """Without rclpy (its import blocked in a fresh interpreter) the node says how to install the extra, exit 2."""
-    code = "import sys\nsys.modules['rclpy'] = None\nfrom atrv_warp.ros import main\nsys.exit(main(['atrv-ros']))\n"
+    code = "import sys\nsys.modules['rclpy'] = None\nfrom atrv_warp.cli.ros import main\nsys.exit(main(['atrv-ros']))\n"
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False)
     assert proc.returncode == 2, proc.stderr[-2000:]
     assert "ROS 2 Python packages are not installed" in proc.stderr and "pip install -e '.[ros]'" in proc.stderr

@@ -78,7 +78,7 @@ def test_video_decodes_to_the_frames_drawn(nav_video):
 
 
 def test_evaluate_cli_writes_a_video_and_refuses_a_bad_path(tmp_path, capsys):
-    from atrv_warp.evaluate import main
+    from atrv_warp.cli.evaluate import main
 
     out = tmp_path / "new" / "folder" / "eval.mp4"  # a folder that does not exist yet is created
     assert main(["--episodes", "4", "--video", str(out), "--video-episodes", "2"]) == 0
@@ -247,7 +247,7 @@ def test_rerun_logger_takes_the_video_as_an_asset(tmp_path, nav_video):
 
 
 def test_missing_extra_and_unknown_backend_are_one_line(tmp_path, run_command, capsys):
-    from atrv_warp.train import main
+    from atrv_warp.cli.train import main
 
     assert main(["--config", "smoke", f"out_dir={tmp_path}", "logger=neptune"]) == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
@@ -256,7 +256,7 @@ def test_missing_extra_and_unknown_backend_are_one_line(tmp_path, run_command, c
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "invalid choice 'dqn'" in line and "('sac', 'ppo')" in line, line
     code = ("import sys; sys.modules['wandb'] = None\n"  # as if not installed
-            "from atrv_warp.train import main\n"
+            "from atrv_warp.cli.train import main\n"
             f"sys.exit(main(['--config', 'smoke', 'logger=wandb', 'out_dir={tmp_path}']))")
     proc = run_command([sys.executable, "-c", code], check=False)
     assert proc.returncode == 2, proc.stderr

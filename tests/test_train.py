@@ -67,7 +67,7 @@ def test_cli_rejects_bad_config_before_work(tmp_path, run_module, capsys):
     proc = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", "num_envs=-3", check=False)
     assert proc.returncode == 2 and "num_envs must be > 0" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1  # one line naming the problem, no usage dump
-    from atrv_warp.train import main  # the same entry point, in this process (a subprocess costs ~10 s)
+    from atrv_warp.cli.train import main  # the same entry point, in this process (a subprocess costs ~10 s)
 
     assert main([f"out_dir={tmp_path}", "lerning_rate=1e-3"]) == 2
     assert "unknown train config key(s) ['lerning_rate']" in capsys.readouterr().err
@@ -168,7 +168,7 @@ def test_init_from_fine_tunes_a_new_run_under_randomization(smoke_run, tmp_path,
 
 def test_resume_of_a_run_with_a_flat_config_says_what_changed(tmp_path, capsys):
     """Run folders from before 0.2.0 hold a flat config.toml: --resume names the change in one line."""
-    from atrv_warp.train import main
+    from atrv_warp.cli.train import main
 
     old = tmp_path / "old"
     old.mkdir()

@@ -19,7 +19,7 @@ __all__ = ["EFFECTIVE_TRACK_FACTOR", "SkidSteer", "side_speeds", "track_width"]
 
 EFFECTIVE_TRACK_FACTOR = load_robot(DEFAULT_ROBOT).effective_track_factor
 """Effective track / wheel track of the default robot, the ATRV-Jr, on our physics [-], from its robot file
-(``atrv_warp/robots/atrvjr.toml``: the median over turning commands measured by ``benchmarks/skid_calibration.py``).
+(``atrv_warp/robots/atrvjr.toml``: the median over turning commands measured by ``benchmarks/physics/skid_calibration.py``).
 Coulomb friction predicts 1.58 for this geometry, and Mandow et al. (IROS 2007) measured about 1.5 on a Pioneer
 3-AT. Every robot's own is its file's :attr:`~atrv_warp.core.robot.Robot.effective_track_factor`."""
 

@@ -66,7 +66,7 @@ class RunConfig:
     frame count, best policy and evaluations. Empty: start from scratch."""
     threads: int = 1
     """torch threads of the trainer (a second thread makes an update a little cheaper, and the async
-    collector needs that core: docs/training.md, from benchmarks/sac_update_cost.py)."""
+    collector needs that core: docs/studies/training.md, from benchmarks/perf/sac_update_cost.py)."""
     device: str = "cpu"
     """Where the whole loop runs: the worlds, the collector, the replay buffer, the networks, their updates and the
     periodic validation (``cpu``, or a CUDA device: ``cuda``, ``cuda:0``). On a GPU the collector is ``sync`` and
@@ -229,12 +229,12 @@ class OptimConfig:
     """Replay capacity [frames]."""
     batch_size: int = 256
     """Transitions per gradient step (256: a step is cheaper than at 512 and learns as well;
-    docs/training.md has the figures)."""
+    docs/studies/training.md has the figures)."""
     utd_ratio: float = 0.03125
     """Gradient steps per collected frame (1/32: one update per 32 frames)."""
     lr: float = 1e-3
     """Adam learning rate, actor, critics and temperature (on the reach task 1e-3 first passes 90 % in
-    several times fewer gradient steps than 3e-4; docs/training.md has the figures)."""
+    several times fewer gradient steps than 3e-4; docs/studies/training.md has the figures)."""
     lr_final_fraction: float = 1.0
     """The learning rate falls linearly with the frames collected, from ``lr`` at the start to ``lr`` x this at
     ``total_frames`` (1: constant), so that a run's last updates are small ones (the nav preset: 0.1)."""
@@ -322,7 +322,7 @@ class LoggingConfig:
 class TrainConfig:
     """Training of the drive-to-target task, SAC or PPO (``python -m atrv_warp.train``).
 
-    Defaults are chosen by measurement on a 2-core CPU (docs/training.md).
+    Defaults are chosen by measurement on a 2-core CPU (docs/training.md; the figures in docs/studies/training.md).
     """
 
     run: RunConfig = field(default_factory=RunConfig)
@@ -495,7 +495,7 @@ class TrainCommand:
     train: Annotated[TrainConfig, tyro.conf.arg(name=""), tyro.conf.FlagConversionOff] = field(
         default_factory=TrainConfig)
     config: str = DEFAULT_PRESET
-    """A preset shipped with the package (``default``, ``nav``, ``ppo``, ``nav_ppo``, ``smoke``) or a TOML file."""
+    """A preset shipped with the package (``default``, ``smoke``, ``nav``, ``nav_deploy``, ``nav_deploy_gpu``, ``ppo``, ``nav_ppo``) or a TOML file."""
     resume: str | None = None
     """Continue the run in this folder (its ``config.toml``, then the command line)."""
     verbose: Annotated[bool, tyro.conf.arg(aliases=("-v",))] = False

@@ -144,7 +144,7 @@ class Learner:
         """One gradient step on every network and the temperature; returns the losses (a detached TensorDict).
 
         ``phase``: optional ``phase(name)`` context-manager factory that times each part (loss,
-        backward, optimiser, target), as ``benchmarks/train_profile.py`` does (eager only: a compiled or captured
+        backward, optimiser, target), as ``benchmarks/perf/train_profile.py`` does (eager only: a compiled or captured
         update is one piece).
         """
         return self.step(batch) if self.compiled else self._step(batch, phase)

@@ -9,7 +9,10 @@
 - :mod:`.terrain`: seeded heightfields (:class:`TerrainConfig`, presets, :class:`HeightGrid`).
 - :mod:`.scanner`: :class:`LaserScanner`, the 2-D laser range finder.
 - :mod:`.diff`: :class:`DiffRollout`, gradients through the simulator.
-- :mod:`.checks`: the reference drive protocol and the wall-impact sweep, shared by benchmarks and tests.
+- :mod:`.protocols`: measurement protocols (the reference drive, wall impacts, slip, slopes, the driver's step and
+  turning responses), shared by benchmarks and tests; :mod:`.checks`: the fingerprints results files record.
+- :mod:`.sysid`: system identification, the simulator's parameters fitted to a drive recorded on a rover.
+- :mod:`.robot_check`: a robot file's figures measured in the simulator.
 
 Importing this package configures Warp (:func:`atrv_warp.runtime.configure`: a quiet console) before any of
 its modules imports Newton, whose import initialises Warp.

@@ -234,7 +234,7 @@ class ContactConfig:
     stability limit ``m_eff / sim_dt`` (``m_eff``: a quarter of the rover). The coefficient grows
     with depth, and an explicit step integrates a damper stably only while
     ``coefficient x sim_dt / m_eff`` stays small: past that it overshoots, and a deep impact leaves
-    faster than it came in. It engages only in impacts (where, ``benchmarks/physics_report.py``
+    faster than it came in. It engages only in impacts (where, ``benchmarks/physics/physics_report.py``
     prints). ``None``: the plain law."""
 
     def __post_init__(self):
@@ -368,9 +368,9 @@ the releases before issue 17 bit for bit."""
 
 FAST_SIM_DT = 0.05 / 3
 """Three substeps per step [s]: ``SimConfig(sim_dt=FAST_SIM_DT)`` makes a step cheaper, with the physics
-report's figures, non-finite checks and wall impacts validated (``benchmarks/substep_study.py``). Not
+report's figures, non-finite checks and wall impacts validated (``benchmarks/physics/substep_study.py``). Not
 the default: SAC on the reach task learns a little less per frame on it
-(``benchmarks/substep_training.py``), and training, bound by its updates, is no quicker. The figures
+(``benchmarks/training/substep_training.py``), and training, bound by its updates, is no quicker. The figures
 are on the docs' performance page. ``EnvConfig.substeps = 3`` trains on it."""
 
 
@@ -389,11 +389,11 @@ class SimConfig:
     (``substeps``), aligned with step boundaries so a reset never meets a stale matrix."""
     use_tile_gemm: bool = True
     """Use Warp's tile API for the mass-matrix factorisation: 2.6x faster at N=1024 on CPU
-    (69k vs 27k env-steps/s, benchmarks/sim_throughput.py)."""
+    (69k vs 27k env-steps/s, benchmarks/perf/sim_throughput.py)."""
     fuse_cholesky: bool | None = None
     """With the tile GEMM, factorise the mass matrix in the kernel that forms it (``True``, Newton's
     default) or in a kernel of its own (``False``). ``None``: separate on the CPU, where it is about
-    1.03x faster at N=1024 and bit-identical (``benchmarks/solver_options.py``), fused elsewhere."""
+    1.03x faster at N=1024 and bit-identical (``benchmarks/physics/solver_options.py``), fused elsewhere."""
     use_graph: bool = True
     """Record the whole step once (``wp.ScopedCapture``) and replay it."""
 

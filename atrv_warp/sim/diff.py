@@ -13,7 +13,7 @@ What makes the gradients agree with finite differences (the docs' differentiable
   (``kernels/contact.py``), a smooth function of the pose, so the contact point moves with the
   wheel in the derivative as it does in the simulation.
 
-``benchmarks/diff_gradients.py`` measures the agreement against the horizon over 0.05-5 s
+``benchmarks/physics/diff_gradients.py`` measures the agreement against the horizon over 0.05-5 s
 (the docs' page has the tables and the stated horizon).
 
 Example::
@@ -134,7 +134,7 @@ def restore_external_wrench(state_out: newton.State, state_in: newton.State):
     are wrong in every term that multiplies it, i.e. the derivative of the joint torques with
     respect to the pose (how turning the rover changes the torque its wheel forces exert). For
     a rover driven by contact forces that is the steering gradient (28-79 % off after 1 s:
-    ``benchmarks/diff_gradients.py --without-wrench-fix``). Recorded right after ``solver.step``, this
+    ``benchmarks/physics/diff_gradients.py --without-wrench-fix``). Recorded right after ``solver.step``, this
     function runs just before that step's adjoints and puts the unconverted wrench back, so the
     replay sees what the forward pass saw. (``body_f_ext`` = ``body_f`` plus FREE-joint entries of
     ``joint_f``, which this rollout never sets.)
@@ -190,7 +190,7 @@ class DiffRollout:
         self.num_worlds, self.steps = num_worlds, steps
         self.wrench_fix = wrench_fix
         """Record :func:`restore_external_wrench` after each solver step (``False`` only to measure
-        what the workaround fixes, as ``benchmarks/diff_gradients.py --without-wrench-fix`` does)."""
+        what the workaround fixes, as ``benchmarks/physics/diff_gradients.py --without-wrench-fix`` does)."""
         self.action_scale = float(action_scale)
         """Wheel torque per unit action [N·m]."""
         self.twist = twist

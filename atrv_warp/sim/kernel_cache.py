@@ -45,7 +45,7 @@ PROGRESS_S = 10.0
 """Seconds between progress lines while compiling."""
 
 FIRST_COMPILE = {"cpu": "about 20 s on 2 cores", "cuda": "a minute or more"}
-"""Roughly how long the first compile takes, by device kind (``benchmarks/gpu_check.py`` measures the GPU's)."""
+"""Roughly how long the first compile takes, by device kind (``benchmarks/perf/gpu_check.py`` measures the GPU's)."""
 
 _done: set[tuple[str, str]] = set()
 

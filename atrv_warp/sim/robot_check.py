@@ -1,5 +1,5 @@
 """A robot file checked against its URDF and measured in the simulator: what ``python -m atrv_warp.robot check``
-prints and ``benchmarks/robot_check.py`` keeps.
+prints and ``benchmarks/robots/robot_check.py`` keeps.
 
 :func:`check_robot` reads the file and its URDF and raises one :class:`~atrv_warp.core.robot.RobotFileError` per
 problem, naming the file's field and the link or joint. :func:`measure_robot` drives the robot: its effective track
@@ -36,7 +36,7 @@ __all__ = [
 
 GAIN_RATIO = 1.536
 """The driver's rule: ``kp x sim_dt / J = GAIN_RATIO`` for the wheel's axial inertia ``J`` [kg·m²]: the ATRV-Jr's
-tuned 3.0 N·m per rad/s on its 0.01953 kg·m² wheel at the 0.01 s substep (``benchmarks/driver_response.py`` chose it:
+tuned 3.0 N·m per rad/s on its 0.01953 kg·m² wheel at the 0.01 s substep (``benchmarks/physics/driver_response.py`` chose it:
 the fastest pair whose yaw rate overshoots by at most 10 % at µ 0.2-1.0). The loop runs every substep, and a
 slipping wheel (its own inertia alone) goes unstable where the ratio reaches 2."""
 INTEGRAL_RATIO = 10.0
@@ -44,7 +44,7 @@ INTEGRAL_RATIO = 10.0
 TURN_COMMANDS: tuple[tuple[float, float], ...] = ((0.0, 0.25), (0.0, 0.5), (0.0, 1.0), (0.3, 0.3), (0.5, 0.5),
                                                   (0.5, -0.25), (1.0, 0.2))
 """(linear [m/s], angular [rad/s]) steady turns the effective track factor is measured on
-(``benchmarks/skid_calibration.py``'s)."""
+(``benchmarks/physics/skid_calibration.py``'s)."""
 TURN_FRICTIONS: tuple[float, ...] = (0.3, 0.8)
 """Coulomb µ of the turns and the step response."""
 STEP_CASES: tuple[tuple[float, float], ...] = ((0.0, 0.5), (0.3, 0.3), (1.0, 0.2))
@@ -154,8 +154,8 @@ class RobotCheck:
 
 def _turns(rover: RoverConfig, description: RoverDescription, frictions, seconds: float) -> list[dict]:
     from atrv_warp.core.kinematics import track_width
-    from atrv_warp.sim.checks import turning_response
     from atrv_warp.sim.driver import DriverConfig
+    from atrv_warp.sim.protocols import turning_response
 
     r, track = rover.wheel_radius, track_width(description, rover)
     driver = DriverConfig(wheel_radius=r, track_width=track, effective_track_factor=1.0)
@@ -194,8 +194,8 @@ def measure_robot(spec, *, frictions=TURN_FRICTIONS, turn_seconds: float = 15.0,
     time after which the yaw rate stays within 10 % of the command to the end of ``step_seconds``). ``progress``:
     called with a line before each part."""
     from atrv_warp.core.kinematics import track_width
-    from atrv_warp.sim.checks import step_response
     from atrv_warp.sim.driver import DriverConfig
+    from atrv_warp.sim.protocols import step_response
 
     say = progress or (lambda _line: None)
     robot, description = check_robot(spec)

@@ -111,7 +111,7 @@ class LaserScanner:
         ``layout``: ``"beam"`` (a thread per beam, the default on a GPU) or ``"world"`` (a thread per
         world looping over its beams, the default on the CPU, where threads run one after another: a
         full scan is faster and rescanning a few reset worlds costs almost nothing; the figures are in
-        docs/tasks.md, from ``benchmarks/nav_throughput.py``). Both give the same ranges bit for bit
+        docs/tasks.md, from ``benchmarks/perf/nav_throughput.py``). Both give the same ranges bit for bit
         (tests/test_scene.py)."""
         if layout is None:
             layout = "world" if wp.get_device(self.sim.device).is_cpu else "beam"

@@ -113,14 +113,14 @@ class RandomizationConfig:
     odometry_scale: Draw | None = None
     """The wheel odometry's distance per distance driven [-] (a robot observation's odometry pose and twist; 1: no
     error). Wheels that creep or slip on slippery ground turn further than the rover moves, so a base's encoders
-    over-read (``benchmarks/mujoco_odometry.py`` measures how much in our simulator and in the MuJoCo twin), and a
+    over-read (``benchmarks/transfer/mujoco_odometry.py`` measures how much in our simulator and in the MuJoCo twin), and a
     policy that steers to a goal seen from odometry stops short of it; drawn above 1, training meets that."""
 
     odometry_slip_gain: Draw | None = None
     """How much further the wheel odometry's pose runs per metre the encoders slip [-] (0: the encoders' own reading). Each
     step the encoders' forward speed less the chassis's, times this gain, moves the pose the goal is seen from
     along its heading (``odom_drift``; the odometry's twist is left as it reads). The MuJoCo twin's wheels slip
-    more than ours in launches and on tight arcs (``benchmarks/mujoco_odometry.py``), so its odometry over-reads
+    more than ours in launches and on tight arcs (``benchmarks/transfer/mujoco_odometry.py``), so its odometry over-reads
     where ours slips; unlike :attr:`odometry_scale`, a policy can lower this error by how it drives."""
 
     def __post_init__(self):

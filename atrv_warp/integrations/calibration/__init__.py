@@ -1,20 +1,22 @@
-"""Calibration of the simulator from a drive recorded on a rover (``python -m atrv_warp.calibrate``).
+"""The old home of system identification, kept so that old imports work: it moved to :mod:`atrv_warp.sim.sysid`.
 
-- :mod:`.log`: the drive read from a ROS 2 bag (MCAP): commands, wheel encoders, reference pose;
-- :mod:`.fit`: the fit of the physical parameters to replays of the drive in the simulator, and its report;
-- :mod:`.excitation`: the scripted drive a calibration bag records (seeded commands, no transport);
-- :mod:`.output`: the simulator-config TOML, the JSON report and the plot of the paths.
+``from atrv_warp.integrations.calibration import calibrate`` gives :func:`atrv_warp.sim.sysid.calibrate`, and
+``atrv_warp.integrations.calibration.fit`` (``.log``, ``.excitation``, ``.output``) *is* the module
+``atrv_warp.sim.sysid.fit``: each of those files puts the new module in its place.
 """
 
-from atrv_warp.integrations.calibration.fit import (
+from atrv_warp.sim.sysid import (
     DEFAULT_FIT,
     FIT_PARAMETERS,
+    BagError,
     CalibrationConfig,
     CalibrationError,
     CalibrationResult,
+    DriveLog,
+    Topics,
     calibrate,
+    read_drive_log,
 )
-from atrv_warp.integrations.calibration.log import BagError, DriveLog, Topics, read_drive_log
 
 __all__ = ["DEFAULT_FIT", "FIT_PARAMETERS", "BagError", "CalibrationConfig", "CalibrationError", "CalibrationResult",
            "DriveLog", "Topics", "calibrate", "read_drive_log"]

@@ -12,8 +12,8 @@ ray casting, through the observation code a robot runs (the ``mujoco`` extra: ``
   simulator to another engine's contact.
 
 ``python -m atrv_warp.evaluate --engine mujoco`` runs it, ``atrv-calibrate --record-example OUT --engine mujoco``
-records it; ``benchmarks/mujoco_agreement.py`` compares its physics
-with ours and ``benchmarks/mujoco_transfer.py`` measures the transfer (docs/physics.md).
+records it; ``benchmarks/transfer/mujoco_agreement.py`` compares its physics
+with ours and ``benchmarks/transfer/mujoco_transfer.py`` measures the transfer (docs/physics.md).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@
 What MuJoCo does its own way, on purpose: the contact (soft constraints, an elliptic friction cone) in place of our
 Hunt–Crossley law and velocity-level Coulomb solve, and the height field's triangles in place of our bilinear
 patches. The soft constraint's compliance (:class:`MujocoContact`) is the tyre's: a wheel sinks at rest as far as
-ours does (``benchmarks/mujoco_turning_study.py`` says why MuJoCo's stiff default makes a skid-steer rover hop).
+ours does (``benchmarks/transfer/mujoco_turning_study.py`` says why MuJoCo's stiff default makes a skid-steer rover hop).
 """
 
 from __future__ import annotations
@@ -55,11 +55,11 @@ class MujocoContact:
     ``hills`` terrain the twin turns as ours does. In the nav task's fastest turns (2 rad/s) at µ 0.8 the wheels
     still hop on flat ground. A slower friction reference at the wheels (:attr:`solreffriction`) with a harder
     friction (:attr:`impratio`) stops that on flat ground, but on the height field the twin then turns at half our
-    rate; damping the tyre as lightly as ours makes the friction viscous (``benchmarks/mujoco_turning_study.py``)."""
+    rate; damping the tyre as lightly as ours makes the friction viscous (``benchmarks/transfer/mujoco_turning_study.py``)."""
 
     solref: tuple[float, float] = (0.087, 1.0)
     """(time constant [s], damping ratio [-]) of every contact: the time constant that gives, with
-    :attr:`solimp`, the tyre's static sink (the rest-height row of ``benchmarks/mujoco_agreement.py``);
+    :attr:`solimp`, the tyre's static sink (the rest-height row of ``benchmarks/transfer/mujoco_agreement.py``);
     MuJoCo's default damping ratio."""
     solimp: tuple[float, float, float] = (0.5, 0.5, 0.001)
     """(dmin [-], dmax [-], width [m]): a constant impedance of 0.5, the middle of the range (0.3 to 0.7) over

@@ -2,7 +2,7 @@
 for fitting our simulator across engines (``atrv-calibrate --record-example OUT.mcap --engine mujoco``).
 
 :func:`record_twin_bag` drives one :class:`~.twin.MujocoTwin` on flat ground with the calibration's scripted drive
-(:class:`~atrv_warp.integrations.calibration.excitation.Excitation`, the commands the simulator node's bags get for
+(:class:`~atrv_warp.sim.sysid.excitation.Excitation`, the commands the simulator node's bags get for
 the same seed and poses) and writes what the simulator node records for a fit, on the same topics, stamps and
 conventions: ``/cmd_vel`` when the command is given (before the step it drives), and after each step
 ``/joint_states`` (wheel positions, velocities, the motors' applied torques as efforts), ``/ground_truth/odom`` (the
@@ -20,10 +20,10 @@ import numpy as np
 
 from atrv_warp.core.geometry import quat_to_yaw, yaw_to_quat
 from atrv_warp.core.kinematics import track_width
-from atrv_warp.integrations.calibration.excitation import Excitation
 from atrv_warp.integrations.ros.bag import BagWriter
 from atrv_warp.sim.config import RoverConfig
 from atrv_warp.sim.driver import DriverConfig
+from atrv_warp.sim.sysid.excitation import Excitation
 from atrv_warp.sim.urdf import load_rover
 
 from .mjcf import MujocoContact

@@ -2,7 +2,7 @@
 :class:`BagWriter` and the message definitions it registers, without rclpy. ``tf2_msgs/msg/TFMessage``
 (/tf, /tf_static) is written from its definition text too, so a bag carries the frame tree although
 no tf2_msgs type support is installed. Reading them back is
-:mod:`atrv_warp.integrations.calibration.log`'s job."""
+:mod:`atrv_warp.sim.sysid.log`'s job."""
 
 from __future__ import annotations
 

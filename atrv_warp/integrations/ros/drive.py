@@ -1,5 +1,5 @@
 """A scripted drive over ROS 2, for calibration bags: :class:`ExcitationDriver` publishes
-:class:`~atrv_warp.integrations.calibration.excitation.Excitation`'s seeded random velocity commands on
+:class:`~atrv_warp.sim.sysid.excitation.Excitation`'s seeded random velocity commands on
 ``/cmd_vel`` (runs, arcs, turns in place, stops), steering back toward the start when the rover strays, and
 :func:`record_drive_bag` runs it against the simulator node, which records the bag. Imported only where rclpy is installed (``pip install -e '.[ros]'``).
 """
@@ -14,13 +14,13 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
 from atrv_warp.core.geometry import quat_to_yaw
-from atrv_warp.integrations.calibration.excitation import Excitation
+from atrv_warp.sim.sysid.excitation import Excitation
 
 __all__ = ["ExcitationDriver", "record_drive_bag"]
 
 
 class ExcitationDriver(Node):
-    """:class:`~atrv_warp.integrations.calibration.excitation.Excitation`'s commands on ``/cmd_vel``, timed by
+    """:class:`~atrv_warp.sim.sysid.excitation.Excitation`'s commands on ``/cmd_vel``, timed by
     ``/clock`` (sim time) and steering home from ``/ground_truth/odom``."""
 
     def __init__(self, seed: int = 0, radius: float = 8.0, max_linear: float = 1.2, max_angular: float = 1.2):

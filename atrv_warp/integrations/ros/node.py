@@ -2,7 +2,7 @@
 
 :class:`RoverSimNode` simulates ``num_rovers`` rovers in one simulator, each with its own topics
 (under ``/rover_<k>`` when there is more than one), and steps them on an rclpy timer in (scaled)
-real time; the executor serves the subscriptions between steps. Topics and parameters are listed in :mod:`atrv_warp.ros`.
+real time; the executor serves the subscriptions between steps. Topics and parameters are listed in :mod:`atrv_warp.cli.ros`.
 """
 
 from __future__ import annotations

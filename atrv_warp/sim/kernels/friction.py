@@ -24,7 +24,7 @@ Newton's method). One sweep per substep, warm-started, lets successive substeps'
 the coupled problem together, where several sweeps from zero each substep would cost several times
 as much and still leave a parked rover creeping. What is left, and the gap between the rigid-body
 model and Newton's articulation, is slip that the next substep removes
-(``benchmarks/skid_calibration.py`` measures what that leaves on slopes). The result is Coulomb friction: no
+(``benchmarks/physics/skid_calibration.py`` measures what that leaves on slopes). The result is Coulomb friction: no
 creep at rest on a slope below ``atan(mu)``, rolling without slip under traction below
 ``mu f_n``, and turning set by the directions of the sliding forces, not by their magnitude.
 With ``ContactConfig.friction_rise`` a sliding contact's disc grows with its slip speed at the substep's

@@ -1,0 +1,24 @@
+"""System identification: the simulator's physical parameters fitted to a drive recorded on a rover
+(``python -m atrv_warp.calibrate``).
+
+It replays the drive in the simulator and knows no task or trainer, so it lives beside the simulator. Before issue 62 it
+was ``atrv_warp.integrations.calibration``, which still imports (the same modules and objects).
+
+- :mod:`.log`: the drive read from a ROS 2 bag (MCAP): commands, wheel encoders, reference pose;
+- :mod:`.fit`: the fit of the physical parameters to replays of the drive in the simulator, and its report;
+- :mod:`.excitation`: the scripted drive a calibration bag records (seeded commands, no transport);
+- :mod:`.output`: the simulator-config TOML, the JSON report and the plot of the paths.
+"""
+
+from atrv_warp.sim.sysid.fit import (
+    DEFAULT_FIT,
+    FIT_PARAMETERS,
+    CalibrationConfig,
+    CalibrationError,
+    CalibrationResult,
+    calibrate,
+)
+from atrv_warp.sim.sysid.log import BagError, DriveLog, Topics, read_drive_log
+
+__all__ = ["DEFAULT_FIT", "FIT_PARAMETERS", "BagError", "CalibrationConfig", "CalibrationError", "CalibrationResult",
+           "DriveLog", "Topics", "calibrate", "read_drive_log"]
