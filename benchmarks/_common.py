@@ -1,10 +1,17 @@
-"""What the benchmark scripts share: pinning to one core, and writing the results file with its
-provenance.
+"""What the benchmark scripts share: pinning to one core, writing a results file or a figure (PNG) with its
+provenance, and reading results files back to draw the docs' tables.
 
-The scripts run as ``python benchmarks/<name>.py``, so this folder is on ``sys.path`` and they
-import it as ``_common``. Each script defines ``VERSION``, an integer bumped by hand when its
-method changes (what it measures or how), and passes it to :func:`write_results`; a refactor that
-measures the same thing leaves it alone.
+The scripts live in topic folders (``perf/``, ``physics/``, ``robots/``, ``calibration/``, ``transfer/``,
+``training/``) and run as ``python benchmarks/<topic>/<name>.py`` from anywhere; each puts this folder on
+``sys.path`` (one line before ``from _common import ...``) and imports it as ``_common``. Each script defines
+``VERSION``, an integer bumped by hand when its method changes (what it measures or how), and passes it to
+:func:`write_results` or :func:`save_figure`; a refactor that measures the same thing leaves it alone.
+
+A script owns its figures: a module-level ``TABLES = {"NAME": function}`` names the tables a page draws with
+``{{ results_table NAME }}``; each function takes no argument (or only defaulted ones), reads its results files with
+:func:`load_results` (so the docs hook knows which files a page cites) and returns Markdown (:func:`markdown_table`).
+The docs hook imports the scripts to find them, so a script's module-level imports stay light (the standard
+library, numpy at most); torch, warp and ``atrv_warp`` are imported inside the functions that run.
 """
 
 from __future__ import annotations
@@ -14,11 +21,16 @@ import hashlib
 import json
 import os
 import shlex
+import struct
 import subprocess
 import sys
+import zlib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+PNG_KEY = "atrv_warp:provenance"
+"""The PNG ``tEXt`` chunk's keyword under which a figure keeps its provenance (:func:`save_figure`)."""
 
 
 def pin_to_one_core() -> None:
@@ -123,3 +135,119 @@ def write_results(path: str | Path, result: dict, *, version: int, dynamics: boo
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")
     return out
+
+
+def figure_provenance(version: int, *, results: tuple[str | Path, ...] = (), **kwargs) -> dict:
+    """A picture's provenance: :func:`provenance` (``kwargs``: what a simulation it ran depends on), and the sha256
+    of each results file it is drawn from under ``"results"`` (a name under ``benchmarks/results/`` or a path), so
+    that the picture goes stale with them."""
+    record = provenance(version, **kwargs)
+    if results:
+        record["results"] = {_results_name(r): file_sha256(results_path(_results_name(r))) for r in results}
+    return record
+
+
+def _results_name(file: str | Path) -> str:
+    path = Path(file)
+    if not path.is_absolute():
+        return str(file)
+    path = path.resolve()
+    return str(path.relative_to(RESULTS)) if path.is_relative_to(RESULTS) else _relative(path)
+
+
+def save_figure(fig, path: str | Path, *, version: int, results: tuple[str | Path, ...] = (), dynamics: bool = False,
+                task: bool = False, policies: tuple[str | Path, ...] = (), driver: bool = False,
+                robots: tuple[str, ...] = (), script: str | Path | None = None, **savefig) -> Path:
+    """Save a matplotlib figure as a PNG that carries its :func:`figure_provenance` (a ``tEXt`` chunk,
+    :data:`PNG_KEY`), so that the docs build checks a picture as it checks a table; returns the path.
+
+    Args:
+        fig: the matplotlib figure.
+        path: the PNG.
+        version: the calling script's ``VERSION``.
+        results: the results files the figure is drawn from; the picture goes stale when one changes or is stale.
+        dynamics, task, policies, driver, robots, script: as :func:`provenance`, for a picture of a simulation run.
+        **savefig: passed to ``fig.savefig`` (``dpi``, ``bbox_inches``).
+    """
+    import io
+
+    record = figure_provenance(version, results=results, script=script, dynamics=dynamics, task=task,
+                               policies=tuple(policies), driver=driver, robots=tuple(robots))
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", **savefig)
+    return write_png_provenance(buffer.getvalue(), path, record)
+
+
+def write_png_provenance(png: bytes, path: str | Path, record: dict) -> Path:
+    """Write PNG bytes to ``path`` with ``record`` (a provenance dict, as JSON) in a ``tEXt`` chunk after ``IHDR``
+    (any earlier provenance chunk dropped); for pictures not drawn by matplotlib (a screenshot, a video frame)."""
+    chunks = [c for c in png_chunks(png) if not (c[0] == b"tEXt" and c[1].startswith(PNG_KEY.encode() + b"\0"))]
+    text = PNG_KEY.encode("latin-1") + b"\0" + json.dumps(record, sort_keys=True).encode("latin-1")
+    chunks.insert(1, (b"tEXt", text))
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_bytes(b"\x89PNG\r\n\x1a\n" + b"".join(
+        struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data)) for kind, data in chunks))
+    return out
+
+
+def png_chunks(png: bytes) -> list[tuple[bytes, bytes]]:
+    """A PNG's chunks, ``(type, data)`` in order (a tiny reader: no decoding, no checksum check)."""
+    if png[:8] != b"\x89PNG\r\n\x1a\n":
+        raise ValueError("not a PNG file")
+    chunks, at = [], 8
+    while at + 8 <= len(png):
+        (size,), kind = struct.unpack(">I", png[at:at + 4]), png[at + 4:at + 8]
+        chunks.append((kind, png[at + 8:at + 8 + size]))
+        at += 12 + size
+    return chunks
+
+
+def png_provenance(path: str | Path) -> dict | None:
+    """The provenance a PNG carries (:func:`save_figure`), or ``None`` when it has none."""
+    for kind, data in png_chunks(Path(path).read_bytes()):
+        key, _, text = data.partition(b"\0")
+        if kind == b"tEXt" and key == PNG_KEY.encode():
+            return json.loads(text.decode("latin-1"))
+    return None
+
+
+# --- reading results back: the docs' tables --------------------------------------------------------------------
+
+class FigureError(Exception):
+    """A page cites a figure that cannot be drawn (a missing file or key) or is stale."""
+
+
+CITED: list[str] | None = None
+"""While the docs hook renders a page, the results files its tables and values read (:func:`load_results`)."""
+
+
+def results_path(name: str) -> Path:
+    """A cited file's path: under ``benchmarks/results/``, or the repository's for ``docs/...``, ``benchmarks/...``."""
+    return ROOT / name if name.startswith(("docs/", "benchmarks/")) else RESULTS / name
+
+
+def load_results(name: str) -> dict:
+    """Results file ``name`` (:func:`results_path`), noted in :data:`CITED` while a page renders.
+
+    Raises:
+        FigureError: the file is not there.
+    """
+    if CITED is not None and name not in CITED:
+        CITED.append(name)
+    path = results_path(name)
+    if not path.is_file():
+        raise FigureError(f"results file {name} not found ({path})")
+    return json.loads(path.read_text())
+
+
+def markdown_table(header: list[str], align: list[str], rows: list[list[str]]) -> str:
+    """A Markdown table: a header row, an alignment row (``---``, ``---:``) and the rows."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(align) + "|"]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def markdown_cell(text: str) -> str:
+    """``text`` on one line, safe in a table cell (double backticks made single, pipes escaped)."""
+    return " ".join(str(text).split()).replace("``", "`").replace("|", "\\|")

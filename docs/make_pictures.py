@@ -18,6 +18,9 @@ draws, with matplotlib, from the chassis poses the simulator produced:
   the shipped navigation policy in its default layout, served on localhost and photographed in
   headless Chromium through the code path of ``tests/test_browser.py`` (needs Debian's
   ``chromium`` and the ``browser`` extra).
+
+Every PNG carries its provenance (``benchmarks/_common.save_figure``: the policies' sha256, the dynamics and task
+fingerprints), which the docs build checks as it checks a results file.
 """
 
 from __future__ import annotations
@@ -30,6 +33,10 @@ import numpy as np
 import torch
 
 DOCS = Path(__file__).resolve().parent
+sys.path.insert(0, str(DOCS.parent / "benchmarks"))
+
+import _common
+
 VERSION = 2
 """This script's method (which episodes, which drivers), bumped by hand when it changes; recorded with the caption."""
 
@@ -39,10 +46,11 @@ def rollout(num_episodes: int, seed: int) -> dict:
     from tensordict import TensorDict
 
     from atrv_warp import ATRVjrEnv, load_policy
+    from atrv_warp.policy import pretrained_policy_path
     from atrv_warp.task.spec import END_REASONS
 
     env = ATRVjrEnv(num_episodes, seed=seed)
-    policy = load_policy()
+    policy = load_policy(pretrained_policy_path())
     td = env.reset()
     target = env.target.clone().numpy()
     poses = [torch.cat([env.sim.root_pose[:, :2], env.sim.rpy[:, 2:3]], -1).clone()]
@@ -62,7 +70,7 @@ def rollout(num_episodes: int, seed: int) -> dict:
     return {"poses": torch.stack(poses).numpy(), "target": target, "length": length.numpy(),
             "reason": [END_REASONS[int(r)] for r in reason], "half_size": env.sim.arena_cfg.half_size,
             "reach": env.task_cfg.reach_radius, "footprint": 2 * chassis[1][:2] if chassis is not None else (0.6, 0.4),
-            "dt": env.sim.sim_cfg.step_dt}
+            "dt": env.sim.sim_cfg.step_dt, "policy": pretrained_policy_path()}
 
 
 def _arena(ax, h: float) -> None:
@@ -95,7 +103,7 @@ def draw_trajectories(run: dict, out: Path) -> None:
     ax.set_title(f"shipped policy, {len(run['length'])} evaluation episodes: {ok} reached their target\n"
                  "(o start, x target, disc = 1 m success radius)", fontsize=10)
     fig.tight_layout()
-    fig.savefig(out)
+    _common.save_figure(fig, out, version=VERSION, script=__file__, task=True, policies=(run["policy"],))
     plt.close(fig)
 
 
@@ -186,12 +194,15 @@ DEPLOY = "deployable policy (SAC, /cmd_vel)"
 
 def provenance(*policies: Path) -> dict:
     """The picture's provenance, as ``benchmarks/_common`` records a results file's (taken before anything is written)."""
-    import importlib.util
+    return _common.figure_provenance(VERSION, script=__file__, task=True, policies=policies)
 
-    spec = importlib.util.spec_from_file_location("benchmarks_common", DOCS.parent / "benchmarks" / "_common.py")
-    common = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(common)
-    return common.provenance(VERSION, script=__file__, task=True, policies=policies)
+
+def _png(fig) -> bytes:
+    import io
+
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png")
+    return buffer.getvalue()
 
 
 def write_caption(out: Path, outcomes: dict[str, list[str]], seed: int, record: dict) -> None:
@@ -246,7 +257,7 @@ def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
     fig.suptitle("navigation task: terrain (shaded by height), obstacles (dark), start (o), target (disc)",
                  fontsize=10)
     fig.tight_layout()
-    fig.savefig(out)
+    _common.write_png_provenance(_png(fig), out, record)
     plt.close(fig)
     write_caption(out.with_suffix(".json"), {name: run["reason"] for name, run in runs.items()}, seed, record)
     return [f"{name}: {', '.join(run['reason'])}" for name, run in runs.items()]
@@ -260,6 +271,7 @@ def viewer_screenshot(out: Path, seed: int, episodes: int = 4) -> None:
     from atrv_warp.policy import pretrained_nav_policy_path
     from atrv_warp.task.evaluation import evaluate
 
+    record = provenance(pretrained_nav_policy_path())
     env = ATRVjrEnv(episodes, task="nav")
     recorder = RerunRecorder(env.sim, serve=True, worlds=range(episodes))
     try:
@@ -271,11 +283,14 @@ def viewer_screenshot(out: Path, seed: int, episodes: int = 4) -> None:
         recorder.close()
     if not report.grpc_responses or report.errors:
         raise RuntimeError(f"the viewer did not load the recording: {report.errors or report.console[-5:]}")
+    _common.write_png_provenance(out.read_bytes(), out, record)
 
 
 def video_frame(out: Path, seed: int, episodes: int = 4, follow: float = 10.0, at: float = 0.3) -> str:
     """A frame of the evaluation video of four nav episodes of the shipped nav policy, each panel following
     its rover over ``follow`` metres, ``at`` of the way through the longest episode."""
+    import io
+
     from PIL import Image
 
     from atrv_warp import ATRVjrEnv, load_policy
@@ -283,12 +298,15 @@ def video_frame(out: Path, seed: int, episodes: int = 4, follow: float = 10.0, a
     from atrv_warp.policy import pretrained_nav_policy_path
     from atrv_warp.task.evaluation import evaluate
 
+    record = provenance(pretrained_nav_policy_path())
     env = ATRVjrEnv(episodes, task="nav")
     video = EvalVideo(env, episodes=episodes, panel=320, follow=follow)
     evaluate(load_policy(pretrained_nav_policy_path()), num_episodes=episodes, seed=seed, env=env,
              on_step=video.env_hook())
     frames = list(video.frames())
-    Image.fromarray(frames[int(at * (len(frames) - 1))]).save(out)
+    buffer = io.BytesIO()
+    Image.fromarray(frames[int(at * (len(frames) - 1))]).save(buffer, format="png")
+    _common.write_png_provenance(buffer.getvalue(), out, record)
     return ", ".join(video.reason)
 
 

@@ -1,6 +1,6 @@
 """Differentiable rollouts: tape gradients against central finite differences, the worked
 examples, and clear errors. Tolerances and horizons are those measured by
-benchmarks/diff_gradients.py (docs/differentiable.md)."""
+benchmarks/physics/diff_gradients.py (docs/differentiable.md)."""
 
 import importlib.util
 import math
@@ -61,7 +61,7 @@ def test_turning_gradient_over_one_second(roll20, left, right):
 
     This is the derivative that Newton's in-place wrench conversion corrupted (see
     ``diff.restore_external_wrench``: without it the error is tens of percent here);
-    ``benchmarks/diff_gradients.py`` measures under 0.5 % over 2 s."""
+    ``benchmarks/physics/diff_gradients.py`` measures under 0.5 % over 2 s."""
     roll, state = roll20
     a = torch.empty(20, 1, 2)
     a[..., 0], a[..., 1] = left, right

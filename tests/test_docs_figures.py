@@ -21,6 +21,7 @@ def hooks(tmp_path, monkeypatch):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     monkeypatch.setattr(module, "RESULTS", tmp_path)
+    monkeypatch.setattr(module._common, "RESULTS", tmp_path)  # noqa: SLF001 - where load_results reads
     monkeypatch.setattr(module, "current_dynamics", lambda: "now")
     monkeypatch.setattr(module, "current_task", lambda: "now")
     return module
@@ -75,7 +76,8 @@ def test_a_stale_fingerprint_fails_unless_the_page_marks_it_historical(hooks, tm
     out = hooks.render("x = {{ result old.json:x }}\n\n{{ historical old.json }}\n", "p.md")
     assert out.startswith("x = 0.5\n")
     assert '!!! note "Historical figures: `old.json`"' in out
-    assert "Measured 2026-11-20" in out and "`python benchmarks/physics_report.py` redraws them" in out
+    # the file recorded benchmarks/physics_report.py, which has moved into physics/: named where it is now
+    assert "Measured 2026-11-20" in out and "`python benchmarks/physics/physics_report.py` redraws them" in out
     _write(tmp_path, "new.json", {"x": 0.5})
     with pytest.raises(hooks.FigureError, match="p.md: marks new.json historical, but its figures match the code"):
         hooks.render("{{ result new.json:x }}\n{{ historical new.json }}\n", "p.md")
@@ -118,7 +120,8 @@ def test_the_stale_command_lists_each_figure_and_its_benchmark(hooks, tmp_path):
     (tmp_path / "page.md").write_text("{{ result sim_throughput_x.json:x }}\n")
     lines, unmarked = hooks.stale_report([tmp_path / "page.md"])
     assert unmarked == 1
-    assert "sim_throughput_x.json is stale" in lines[0] and "[NOT MARKED] -> python benchmarks/sim_throughput.py" in lines[0]
+    assert "sim_throughput_x.json is stale" in lines[0]
+    assert "[NOT MARKED] -> python benchmarks/perf/sim_throughput.py" in lines[0]
 
 
 def test_every_shipped_page_renders_and_a_current_file_matches_the_code():
@@ -126,8 +129,8 @@ def test_every_shipped_page_renders_and_a_current_file_matches_the_code():
     spec = importlib.util.spec_from_file_location("docs_hooks_real", ROOT / "docs" / "hooks.py")
     hooks = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(hooks)
-    for page in sorted((ROOT / "docs").glob("*.md")):
-        hooks.render(page.read_text(), page.name)
+    for page in sorted((ROOT / "docs").rglob("*.md")):
+        hooks.render(page.read_text(), str(page.relative_to(ROOT / "docs")))
     assert hooks.status("physics_report.json").current, hooks.status("physics_report.json").reasons
 
 
@@ -157,7 +160,7 @@ def test_the_command_table_comes_from_the_parsers():
     """Every installed command is in the table, and every argument of every argparse tool is listed."""
     import tomllib
 
-    spec = importlib.util.spec_from_file_location("docs_hooks_commands", ROOT / "docs" / "hooks.py")
+    spec = importlib.util.spec_from_file_location("docs_command_table", ROOT / "docs" / "command_table.py")
     hooks = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(hooks)
     overview = hooks.command_table()
@@ -168,7 +171,7 @@ def test_the_command_table_comes_from_the_parsers():
         if module in ("train", "ros"):
             continue
         table = hooks.command_table(module)
-        parser = importlib.import_module(f"atrv_warp.{module}").build_parser()
+        parser = hooks._command(module).build_parser()  # noqa: SLF001 - where the command's code is
         for action in parser._actions:  # noqa: SLF001
             for option in action.option_strings:
                 assert option in table or option in ("-h", "--help"), (module, option)
@@ -210,3 +213,116 @@ def test_mkdocs_build_fails_naming_the_page_file_and_key(tmp_path):
     run = subprocess.run([mkdocs, "build", "--strict", "-q"], cwd=tmp_path, capture_output=True, text=True, check=False)
     assert run.returncode != 0
     assert "index.md: results file physics_report.json has no key 'rows.0.no_such_key'" in run.stderr, run.stderr[-2000:]
+
+
+# --- the benchmarks own their tables; old script paths; the audit; pictures ------------------------------------
+
+def test_each_table_comes_from_the_benchmark_that_writes_its_file(hooks):
+    """``{{ results_table NAME }}`` is found in the module-level ``TABLES`` of a benchmark script; importing the
+    scripts to find them imports neither torch nor warp (the hook's import stays light)."""
+    import subprocess
+    import sys
+
+    assert hooks.TABLES["physics_report"].__module__ == "benchmarks_physics_physics_report"
+    assert hooks.TABLES["sim_throughput_cuda"].__module__ == "benchmarks_perf_sim_throughput"
+    code = ("import sys; sys.path.insert(0, 'docs'); import hooks; "
+            "assert len(hooks.TABLES) > 50; print(sorted(m for m in ('torch', 'warp') if m in sys.modules))")
+    run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    assert run.stdout.strip() == "[]", run.stdout + run.stderr
+
+
+def test_a_table_name_twice_is_an_error(hooks, tmp_path, monkeypatch):
+    for topic in ("a", "b"):
+        (tmp_path / topic).mkdir()
+        (tmp_path / topic / f"{topic}_script.py").write_text('TABLES = {"same": lambda: "x"}\n')
+    monkeypatch.setattr(hooks, "BENCHMARKS", tmp_path)
+    with pytest.raises(hooks.FigureError, match="results table 'same' is defined by both"):
+        hooks.benchmark_tables()
+    (tmp_path / "b" / "b_script.py").write_text('TABLES = {"other": lambda: "| y |"}\n')
+    assert {name: f() for name, f in hooks.benchmark_tables().items()} == {"same": "x", "other": "| y |"}
+
+
+def test_an_old_script_path_is_found_by_its_name(hooks, tmp_path):
+    """A results file written before the scripts moved into topic folders stays current: its script is found by
+    file name, and its recorded command names the script where it is now."""
+    assert hooks.script_path("benchmarks/sim_throughput.py") == "benchmarks/perf/sim_throughput.py"
+    assert hooks.script_path("benchmarks/perf/sim_throughput.py") == "benchmarks/perf/sim_throughput.py"
+    assert hooks.script_path("benchmarks/gone.py") == "benchmarks/gone.py"
+    version = hooks.script_version("benchmarks/sim_throughput.py")
+    assert version is not None and hooks.script_version("benchmarks/perf/sim_throughput.py") == version
+    _write(tmp_path, "s.json", {"x": 1}, script="benchmarks/sim_throughput.py", script_version=version,
+           command="python benchmarks/sim_throughput.py --seconds 2")
+    assert hooks.status("s.json").current
+    assert hooks.redraw_command("s.json") == "python benchmarks/perf/sim_throughput.py --seconds 2"
+
+
+def test_script_names_are_unique_across_topics():
+    """The old-path rule finds a script by its file name, so no two scripts under benchmarks/ share one."""
+    names = [p.name for p in (ROOT / "benchmarks").rglob("*.py") if "results" not in p.parts]
+    assert len(names) == len(set(names)), sorted(n for n in names if names.count(n) > 1)
+
+
+def test_the_audit_lists_unknown_superseded_and_uncited_files(hooks, tmp_path, monkeypatch):
+    docs = tmp_path / "site"
+    docs.mkdir()
+    _write(tmp_path, "cited.json", {"x": 1})
+    _write(tmp_path, "cited_before_fix.json", {"x": 1})
+    (tmp_path / "legacy.json").write_text(json.dumps({"x": 2}))
+    (docs / "page.md").write_text("{{ result cited.json:x }} and {{ result cited_before_fix.json:x }}\n")
+    monkeypatch.setattr(hooks, "DOCS", docs)
+    out = "\n".join(hooks.audit())
+    assert "== results files without provenance (3 files in all): 1\n  legacy.json\n" in out
+    assert "superseded snapshots (rule: a name with a before, old, without or earlier part): 1\n" \
+           "  cited_before_fix.json\n" in out
+    assert "== results files no page cites (docs/**/*.md): 1\n  legacy.json\n" in out
+
+
+def _figure_png(path: Path, common, **provenance) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(2, 1))
+    ax.plot([0, 1], [0, 1])
+    common.save_figure(fig, path, version=1, **provenance)
+    plt.close(fig)
+
+
+def test_a_picture_carries_its_provenance_and_goes_stale(hooks, tmp_path, monkeypatch):
+    """``save_figure`` writes the provenance into the PNG (a tEXt chunk), the hook reads it back: the picture is
+    current, then stale when the dynamics or a results file it was drawn from changes; a stale or bare picture
+    fails the page unless marked historical."""
+    common = hooks._common  # noqa: SLF001 - benchmarks/_common.py, as the hook imports it
+    monkeypatch.setattr(hooks, "ROOT", tmp_path)
+    monkeypatch.setattr(hooks, "DOCS", tmp_path / "docs")
+    monkeypatch.setattr(hooks, "script_version", lambda script: 1)
+    _write(tmp_path, "r.json", {"x": 1})
+    png = tmp_path / "docs" / "fig.png"
+    _figure_png(png, common, results=("r.json",))
+    record = common.png_provenance(png)
+    assert record["script_version"] == 1 and record["results"] == {
+        "r.json": hashlib.sha256((tmp_path / "r.json").read_bytes()).hexdigest()}
+    assert png.read_bytes().startswith(b"\x89PNG") and common.png_chunks(png.read_bytes())[0][0] == b"IHDR"
+    assert hooks.render("![a figure](fig.png)", "p.md") == "![a figure](fig.png)"
+    assert hooks.status("docs/fig.png").current
+    hooks.status.cache_clear()
+    _write(tmp_path, "r.json", {"x": 2})  # the figures it was drawn from changed
+    assert hooks.status("docs/fig.png").reasons == ["results file r.json has changed since the picture was drawn"]
+    with pytest.raises(hooks.FigureError, match=r"p\.md: cites fig\.png, whose figures are stale"):
+        hooks.render("![a figure](fig.png)", "p.md")
+    out = hooks.render("![a figure](../fig.png)\n{{ historical ../fig.png }}\n", "studies/p.md")
+    assert '!!! note "Historical figures: `../fig.png`"' in out
+    record["dynamics"] = "before"  # a picture of a simulation run goes stale with the dynamics
+    common.write_png_provenance(png.read_bytes(), png, record)
+    hooks.status.cache_clear()
+    assert "dynamics fingerprint before != now now" in hooks.status("docs/fig.png").reasons
+    bare = tmp_path / "docs" / "bare.png"
+    bare.write_bytes(b"\x89PNG\r\n\x1a\n" + png.read_bytes()[8:33])  # the IHDR chunk alone: no provenance
+    assert common.png_provenance(bare) is None and hooks.status("docs/bare.png").state == "unknown"
+    with pytest.raises(hooks.FigureError, match="cites bare.png, whose figures are unknown"):
+        hooks.render("![b](bare.png)", "p.md")
+    monkeypatch.setattr(hooks, "PICTURES_BEFORE_PROVENANCE", frozenset({"bare.png", "fig.png"}))
+    assert hooks.render("![b](bare.png)", "p.md") == "![b](bare.png)"  # transitional: shown unmarked
+    with pytest.raises(hooks.FigureError, match="fig.png now records its provenance: remove it"):
+        hooks.render("![a](fig.png)\n{{ historical fig.png }}\n", "p.md")

@@ -143,14 +143,14 @@ print(json.dumps([off, warp.config.enable_backward, loaded, listed]))
 
 @pytest.mark.slow  # compiles in a fresh cache, trains
 def test_the_gpu_check_runs_every_part(tmp_path):
-    """``benchmarks/gpu_check.py``, which a GPU machine runs blind, runs every part (small, on the CPU)
+    """``benchmarks/perf/gpu_check.py``, which a GPU machine runs blind, runs every part (small, on the CPU)
     and writes each part's figures with the results file's provenance."""
     import subprocess
     import sys
     from pathlib import Path
 
     out, root = tmp_path / "gpu_check.json", Path(__file__).resolve().parent.parent
-    proc = subprocess.run([sys.executable, "benchmarks/gpu_check.py", "--device", "cpu", "--quick", "--seeds", "0",
+    proc = subprocess.run([sys.executable, "benchmarks/perf/gpu_check.py", "--device", "cpu", "--quick", "--seeds", "0",
                            "--out", str(out), "--runs", str(tmp_path)], cwd=root, capture_output=True, text=True,
                           timeout=600, check=False)
     assert proc.returncode == 0, proc.stderr[-3000:]

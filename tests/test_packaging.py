@@ -23,19 +23,23 @@ ROOT = Path(__file__).resolve().parent.parent
 # Files that may import what an optional extra brings (they check for it and say how to install it).
 EXTRA_USERS = {
     "ros": ("atrv_warp/integrations/ros/", "atrv_warp/deploy/", "atrv_warp/core/ros_interfaces.py", "tests/test_ros.py", "tests/test_deploy.py", "tests/test_deploy_ros.py",
-            "benchmarks/deploy_closed_loop.py"),
+            "benchmarks/transfer/deploy_closed_loop.py"),
     "test": ("tests/",),
     "browser": ("atrv_warp/integrations/browser.py", "docs/make_pictures.py"),
     "onnx": ("atrv_warp/rl/export.py",),
     "track": ("atrv_warp/integrations/tracking.py", "atrv_warp/integrations/video.py"),
     "tensorboard": ("atrv_warp/integrations/video.py",),
-    "ray": ("atrv_warp/rl/collectors.py", "atrv_warp/rl/ray_collector.py", "tests/test_ray.py", "benchmarks/ray_collection.py"),
-    "mujoco": ("atrv_warp/integrations/mujoco/", "benchmarks/sim_vs_mujoco.py", "benchmarks/mujoco_twin/",
-               "benchmarks/mujoco_agreement.py", "benchmarks/mujoco_transfer.py", "benchmarks/mujoco_turning_study.py",
-               "benchmarks/mujoco_odometry.py", "benchmarks/robot_policies.py",
+    "ray": ("atrv_warp/rl/collectors.py", "atrv_warp/rl/ray_collector.py", "tests/test_ray.py", "benchmarks/perf/ray_collection.py"),
+    "mujoco": ("atrv_warp/integrations/mujoco/", "benchmarks/perf/sim_vs_mujoco.py", "benchmarks/perf/mujoco_twin/",
+               "benchmarks/transfer/mujoco_agreement.py", "benchmarks/transfer/mujoco_transfer.py",
+               "benchmarks/transfer/mujoco_turning_study.py", "benchmarks/transfer/mujoco_odometry.py",
+               "benchmarks/robots/robot_policies.py",
                "tests/test_mujoco_twin.py"),
 }
 SCANNED = ("atrv_warp", "tests", "benchmarks", "examples", "docs")
+LOCAL_ROOTS = ("benchmarks/", "docs/")
+"""Folders whose scripts import each other by module name: a benchmark in ``benchmarks/<topic>/`` imports
+``benchmarks/_common.py`` and its topic's siblings, and ``docs/hooks.py`` those and its own helpers."""
 
 
 FROM_A_ROS_INSTALL = {"launch", "launch_ros"}
@@ -79,6 +83,7 @@ def undeclared_imports(pyproject_text: str, files: dict[str, str]) -> list[str]:
     requirement provides."""
     core, extras = declared(pyproject_text)
     providers = md.packages_distributions()
+    local = {Path(r).stem for r in files if r.startswith(LOCAL_ROOTS) and r.endswith(".py")}
     problems = []
     for rel, source in sorted(files.items()):
         allowed, optional = set(core), set()
@@ -90,8 +95,8 @@ def undeclared_imports(pyproject_text: str, files: dict[str, str]) -> list[str]:
         for module in sorted(imported_modules(source)):
             if module in sys.stdlib_module_names or module in ("atrv_warp", "__future__"):
                 continue
-            if f"{folder}/{module}.py" in files:
-                continue  # a script's sibling module (benchmarks/_common.py): its folder is on sys.path
+            if f"{folder}/{module}.py" in files or (rel.startswith(LOCAL_ROOTS) and module in local):
+                continue  # a script's sibling, or a module of benchmarks/ or docs/, whose folders they put on sys.path
             dists = {_name(d) for d in providers.get(module, ())}
             if not dists and _name(module) in optional:
                 continue  # an extra this file may use, not installed here (e.g. [bench]'s mujoco in CI)
@@ -130,10 +135,10 @@ def test_the_check_catches_a_removed_dependency():
     assert leaky[0].endswith("not declared for this file")
     # an extra's module (installed or not) is allowed only in the files declared as its users
     bench = undeclared_imports(text, {"atrv_warp/sim/simulator.py": "import mujoco\n",
-                                      "benchmarks/sim_vs_mujoco.py": "import mujoco\n"})
+                                      "benchmarks/perf/sim_vs_mujoco.py": "import mujoco\n"})
     assert len(bench) == 1 and bench[0].startswith("atrv_warp/sim/simulator.py: imports 'mujoco'"), bench
-    # a script may import a module beside it, and only beside it
-    sibling = undeclared_imports(text, {"benchmarks/a.py": "from _common import write_results\n",
+    # a script may import a module beside it or of benchmarks/ (docs/), and only there
+    sibling = undeclared_imports(text, {"benchmarks/perf/a.py": "from _common import write_results\n",
                                         "benchmarks/_common.py": "import json\n",
                                         "examples/b.py": "import _common\n"})
     assert sibling == ["examples/b.py: imports '_common', which no installed distribution provides"], sibling
@@ -155,5 +160,5 @@ def test_wheel_carries_configs_urdf_and_policy(tmp_path):
                    "atrv_warp/rl/configs/nav.toml", "atrv_warp/py.typed"):
         assert needed in names, needed
     entry_points = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("entry_points.txt"))).decode()
-    assert "atrv-train = atrv_warp.train:main" in entry_points
+    assert "atrv-train = atrv_warp.cli.train:main" in entry_points
 

@@ -1,0 +1,153 @@
+"""Each shipped robot's deployable nav policy on its own robot: the test set in our simulator, and the MuJoCo twin.
+
+Run: ``python benchmarks/robots/robot_policies.py [--robots atrvjr jackal husky] [--episodes 1000] [--twin-episodes 200]``
+
+For each robot, its shipped ``nav_deploy_<robot>`` policy (trained at that robot's own limits, under ``wide``, by
+the command :data:`~atrv_warp.policy.SHIPPED_POLICIES` names) runs its recorded task, fitted to its robot, once on
+each of the first ``--episodes`` episodes of the test set (``EVAL_SEED``) under ``wide`` and on the nominal rover,
+and once on each of the first ``--twin-episodes`` in the MuJoCo twin of the nav world at the nominal µ, its base as
+the deploy docs advise (the task's velocity and acceleration limits, the robot's driver). Issue 59's targets:
+>= 90 % in ours under both, >= 80 % in the twin.
+
+Per robot: its limits and control period, and per run the success rate and how the other episodes ended. Prints
+one table and writes ``benchmarks/results/robot_policies.json`` with each policy's sha256. The time each took to
+train is its own results file's (``train_to_success_nav_deploy_<robot>.json``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "transfer"))  # mujoco_transfer.py
+
+from _common import load_results, markdown_table, write_results
+from mujoco_transfer import ENDS, rates
+
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
+RESULTS = Path(__file__).resolve().parents[1] / "results"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", nargs="+", default=None, help="shipped robots (default: every one)")
+    parser.add_argument("--episodes", type=int, default=1000, help="test-set episodes in our simulator")
+    parser.add_argument("--twin-episodes", type=int, default=200, help="episodes in the MuJoCo twin (0: none)")
+    parser.add_argument("--out", default=str(RESULTS / "robot_policies.json"))
+    args = parser.parse_args(argv)
+    if args.episodes < 1 or args.twin_episodes < 0:
+        parser.error("--episodes must be >= 1 and --twin-episodes >= 0")
+    from atrv_warp.core.robot import ROBOTS
+    from atrv_warp.evaluate import evaluate_policy
+    from atrv_warp.policy import SHIPPED_POLICIES, policy_path, policy_record
+
+    robots = args.robots or list(ROBOTS)
+    unknown = [r for r in robots if r not in ROBOTS]
+    if unknown:
+        parser.error(f"unknown robot(s) {unknown}; shipped: {', '.join(ROBOTS)}")
+    if args.twin_episodes:
+        try:
+            import mujoco  # noqa: F401
+        except ImportError:
+            print("MuJoCo is missing: pip install -e '.[mujoco]' (or --twin-episodes 0)", file=sys.stderr)
+            return 2
+    table, files = {}, []
+    for robot in robots:
+        name = f"nav_deploy_{robot}"
+        if name not in SHIPPED_POLICIES:
+            parser.error(f"no shipped policy {name!r} for robot {robot!r}")
+        try:
+            path = policy_path(name)
+        except (FileNotFoundError, ValueError) as err:
+            print(f"robot_policies.py: error: {' '.join(str(err).split())}", file=sys.stderr)
+            return 2
+        files.append(path)
+        task = policy_record(path).task
+        row = {"policy": name, "train": SHIPPED_POLICIES[name].train, "max_linear": task.config.max_linear,
+               "max_angular": task.config.max_angular, "linear_max_acceleration": task.config.linear_max_acceleration,
+               "control_period": task.config.control_period, "max_steps": task.config.max_steps}
+        runs = [("wide", {"randomization": "wide", "episodes": args.episodes}),
+                ("nominal", {"randomization": "none", "episodes": args.episodes})]
+        if args.twin_episodes:
+            runs.append(("mujoco", {"engine": "mujoco", "episodes": args.twin_episodes}))
+        for label, kw in runs:
+            t0 = time.perf_counter()
+            row[label] = r = rates(evaluate_policy(str(path), **kw).record)
+            r["seconds"] = round(time.perf_counter() - t0, 1)
+            print(f"{robot:8s} {label:8s} " + " ".join(f"{k} {100 * r[k]:5.1f}%" for k in ENDS)
+                  + f"  ({r['seconds']:.0f} s)", flush=True)
+        table[robot] = row
+    result = {"seed": "EVAL_SEED", "episodes": args.episodes, "twin_episodes": args.twin_episodes, "robots": table}
+    out = write_results(args.out, result, version=VERSION, task=True, driver=True, policies=tuple(files),
+                        robots=tuple(robots))
+    print(f"written to {out}")
+    return 0
+
+
+# --- the figures' tables, drawn from the results files at docs build time --------------------------
+
+def task_fit() -> str:
+    """The ``nav_deploy`` task fitted to each shipped robot (:mod:`atrv_warp.task.scaling`), computed from the code."""
+    from atrv_warp.core.robot import ROBOTS
+    from atrv_warp.sim.config import RoverConfig
+    from atrv_warp.task.registry import resolve_task
+    from atrv_warp.task.scaling import fit_task
+
+    declared = resolve_task("nav_deploy")
+    rows = []
+    for name in ROBOTS:
+        c = fit_task(declared, RoverConfig(robot=name)).config
+        period = c.control_period or 0.05
+        acc = "-" if c.linear_max_acceleration is None else f"{c.linear_max_acceleration:g}"
+        rows.append([f"`{name}`", f"{c.max_linear:g} / {c.max_angular:g}", acc, f"{period:g} s ({1 / period:g} Hz)",
+                     f"{c.max_steps * period:g} s", f"{c.max_steps * period * c.max_linear:g} m",
+                     f"{c.reach_radius:g} / {c.clearance_radius:g} m", f"{c.action_scale:g} N·m"])
+    c = declared.config
+    rows.append(["as declared (before robots had files)", f"{c.max_linear:g} / {c.max_angular:g}",
+                 f"{c.linear_max_acceleration:g}", "0.05 s (20 Hz)", f"{c.max_steps * 0.05:g} s",
+                 f"{c.max_steps * 0.05 * c.max_linear:g} m", f"{c.reach_radius:g} / {c.clearance_radius:g} m",
+                 f"{c.action_scale:g} N·m"])
+    return markdown_table(["robot", "action 1: m/s / rad/s", "a [m/s²]", "control period", "episode", "at full speed",
+                   "reach / clearance radius", "torque action 1"], ["---"] + ["---:"] * 7, rows)
+
+
+def robot_policies() -> str:
+    """``robot_policies.json``: each shipped robot's deployable nav policy on its own robot (the test set under
+    ``wide`` and nominal, and the MuJoCo twin), with the time it took to train from its own
+    ``train_to_success_nav_deploy_<robot>.json``."""
+    d = load_results("robot_policies.json")
+    rows = []
+    for name, r in d["robots"].items():
+        train = load_results(f"train_to_success_nav_deploy_{name}.json")
+        seeds = train["seeds"]
+        reached = [s for s in seeds if s["reached"]]
+        wall = train["median"]["wall_s_to_threshold"]
+        if len(seeds) > 1:
+            when = "not reached by every seed" if wall is None else f"{wall / 60:.1f} min (median of {len(seeds)})"
+        else:
+            when = f"{wall / 60:.1f} min" if wall is not None else "not reached"
+        frames = f"{sorted(s['frames_to_threshold'] for s in reached)[len(reached) // 2]:,}" if reached else "-"
+        twin = r.get("mujoco")
+        rows.append([f"`{name}`", f"{r['max_linear']:g} m/s, {r['max_angular']:g} rad/s",
+                     f"{r['control_period']:g} s", f"{100 * r['wide']['success']:.1f} %",
+                     f"{100 * r['nominal']['success']:.1f} %",
+                     f"{100 * twin['success']:.1f} % ({twin['episodes']})" if twin else "-", when, frames])
+    return markdown_table(["robot", "limits", "period", "`wide` (1,000)", "nominal (1,000)", "MuJoCo twin, nominal µ",
+                   "90 % after", "frames then"], ["---"] + ["---:"] * 7, rows)
+
+
+TABLES = {
+    "robot_policies": robot_policies,
+    "task_fit": task_fit,
+}
+"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
+(``docs/hooks.py``)."""
+
+
+if __name__ == "__main__":
+    sys.exit(main())

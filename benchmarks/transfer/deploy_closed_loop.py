@@ -1,0 +1,339 @@
+"""The deploy node in closed loop over ROS 2, paired with ``evaluate`` on the same episodes.
+
+Run: ``python benchmarks/transfer/deploy_closed_loop.py [POLICY] [--episodes 200] [--seed 2024] [--out FILE] [--trace FILE]``
+
+POLICY is a policy file (``best_policy.pt``) or a shipped policy's name (default: ``nav_deploy``). Two ways over
+the same seeded episodes of its task (the evaluation set of ``--seed``: each episode's world, start and goal):
+
+1. ``evaluate``: :func:`atrv_warp.task.evaluation.run_episodes`, one world per episode, the policy reading the
+   environment's observation;
+2. over ROS 2, as on a robot: the policy exported (``.pt2``) and run by ``python -m atrv_warp.deploy`` in its own
+   process, seeing only topics; the simulator node (``python -m atrv_warp.ros -p task:=nav_deploy``) plays the
+   robot, publishing ``/scan``, ``/odometry/filtered``, ``/imu`` and ``/clock`` at the policy's rate, with the
+   evaluation's sensors (no noise, 64 beams over 180 deg). For episode k this script sends the node episode k's
+   goal on ``/goal_pose`` in the odometry frame, then publishes ``reset_episode`` k (the simulator replays evaluation
+   episode k: :meth:`atrv_warp.task.env.ATRVjrEnv.reset_to_episodes`, and says so on ``episode`` with the goal,
+   checked against evaluate's); the simulator ends the episode as ``evaluate`` does (reached, wall, flip, obstacle,
+   timeout) and says how. The simulator steps in lockstep with the node (a step waits for the ``/cmd_vel`` that
+   answers the state before it), so the run goes as fast as both can on any machine, and each step's action is the
+   node's answer to the step's state, as each of ``evaluate``'s is the policy's answer to its observation: the node
+   acts first on the reset state (a reset advances ``/clock`` one period), and between episodes the simulator holds
+   (the last state goes out without ``/clock``), so the next goal reaches the node before it acts again. The node
+   never ends a goal itself (``goal_tolerance`` 0), as ``evaluate``'s policy drives until the environment ends the
+   episode on the true position.
+
+Prints both success rates, their paired difference (ROS 2 - evaluate) with its 95 % confidence interval (normal
+approximation of the per-episode differences), how many episodes ended identically (the same end after the same
+number of steps: the same computation), how the episodes ended each way, ``evaluate``'s success with a node's stop
+within 0.25 m of the goal on its odometry (as ``goal_tolerance`` 0.25 m would stop it), the steps the simulator took
+without the node's answer (``unanswered``: 0 unless the node stalled), and the node's compute time per step
+(observation + policy, from its goal status; p50, p99). Writes ``benchmarks/results/deploy_closed_loop.json``;
+``--trace FILE``: the node's trace (its observation and action at every step, JSON lines).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import random
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
+
+from _common import write_results
+
+VERSION = 2
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
+RESULTS = Path(__file__).resolve().parents[1] / "results"
+SIM_PARAMETERS = ("task:=nav_deploy", "real_time_factor:=0.0", "lockstep:=true", "lockstep_timeout:=10.0",
+                  "scan_beams:=64", "scan_noise:=0.0", "scan_dropout:=0.0",
+                  "imu_accel_noise:=0.0", "imu_gyro_noise:=0.0", "wheel_speed_noise:=0.0", "tf:=false")
+"""The simulator node's parameters: the evaluation's sensors (no noise, the task's 64-beam scan), in lockstep with the
+controller (at the policy's rate: :func:`world_parameters`): a step without the node's answer (``unanswered``, after
+10 s) would act on the held command and put the answers a step late for the rest of the episode."""
+DEPLOY_PARAMETERS = ("use_sim_time:=true", "odom_topic:=odometry/filtered", "goal_tolerance:=0.0",
+                     "odom_jump_margin:=1000.0")
+"""The deploy node's: the simulator's clock, the fused odometry (encoders + gyro, what the robot observation is
+trained on), a time limit past the episode's (the simulator ends each episode first), no odometry-jump check (each
+episode's reset restarts the odometry under the goal sent for it, on purpose; on a robot such a jump aborts the
+goal), and no goal tolerance:
+``evaluate`` ends an episode when the *true* position is within 1 m and its policy drives on until then, while a
+node judges the goal on its odometry, which wheel slip makes overshoot, and stops (at 0.25 m it stopped short in 35
+of 200 episodes, 15 of them reached by ``evaluate``: ``STOP_TOLERANCE``)."""
+STOP_TOLERANCE = 0.25
+"""A goal tolerance [m] on the odometry whose stops ``evaluate`` is also run with (``node_stop``): what a node on a
+robot judging the goal would do."""
+
+
+class StopWithin:
+    """``policy``, stopping each world for good (zero action) from the first observation whose ``goal_distance`` (on
+    the odometry) is within ``tolerance`` [m], as the deploy node ends a goal it judges reached."""
+
+    def __init__(self, policy, index: int, tolerance: float):
+        self.policy, self.index, self.tolerance = policy, index, tolerance
+        self.stopped = None
+
+    def __call__(self, td):
+        td = self.policy(td)
+        near = td["observation"][:, self.index] < self.tolerance
+        self.stopped = near if self.stopped is None else self.stopped | near
+        td["action"] = td["action"].masked_fill(self.stopped[:, None], 0.0)
+        return td
+
+
+def resolve_policy(name: str) -> Path:
+    """The policy file of ``name`` (a path or a shipped name); exits with the command that trains it if missing."""
+    from atrv_warp.policy import SHIPPED_POLICIES, policy_path
+
+    path = policy_path(name)
+    if not path.is_file():
+        how = (f"train it: {SHIPPED_POLICIES[name].train}, then copy its best_policy.pt to atrv_warp/assets/"
+               f"{SHIPPED_POLICIES[name].file}" if name in SHIPPED_POLICIES else "pass a policy file")
+        sys.exit(f"deploy_closed_loop: policy {name!r} not found ({path}); {how}")
+    return path
+
+
+def evaluate_episodes(path: Path, episodes: int, seed: int) -> tuple[list[dict], list[tuple[float, float]], float]:
+    """Each episode's ``end_reason`` and ``steps`` under ``evaluate``, its goal (x, y) [m] in the world (= the
+    odometry frame at its start), and the success rate with :class:`StopWithin` :data:`STOP_TOLERANCE`."""
+    from atrv_warp.policy import load_policy, policy_record
+    from atrv_warp.task.env import ATRVjrEnv
+    from atrv_warp.task.evaluation import run_episodes
+    from atrv_warp.task.spec import END_REASONS, observation_fields
+
+    record = policy_record(path)
+    task = record.task.name
+    env = ATRVjrEnv(episodes, task=record.task, robot=robot_of(record))  # the task as it trained, on its robot
+    env.set_seed(seed)
+    env.reset()  # the episodes run_episodes draws again (it seeds and resets the same way)
+    goals = [tuple(g) for g in env.target.tolist()]
+    policy = load_policy(path, task=task)
+    record = run_episodes(policy, env, seed=seed)
+    ends = [{"end_reason": END_REASONS[int(r)], "steps": int(n)} for r, n in zip(record.end_reason, record.steps)]
+    index = [f.name for f in observation_fields(env.task_cfg)].index("goal_distance")
+    stopping = run_episodes(StopWithin(policy, index, STOP_TOLERANCE), env, seed=seed)
+    return ends, goals, float(stopping.success.float().mean())
+
+
+class Driver:
+    """This script's rclpy node: resets the simulator to each episode, sends its goal, collects how it ends."""
+
+    def __init__(self):
+        import rclpy
+        from geometry_msgs.msg import PoseStamped
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from std_msgs.msg import Int32, String
+
+        self.rclpy, self.PoseStamped, self.Int32 = rclpy, PoseStamped, Int32
+        self.node = rclpy.create_node("deploy_closed_loop")
+        qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        self.events, self.status = [], []
+        self.node.create_subscription(String, "/episode", lambda m: self.events.append(json.loads(m.data)), qos)
+        self.node.create_subscription(String, "/goal_status", lambda m: self.status.append(json.loads(m.data)), qos)
+        self.reset = self.node.create_publisher(Int32, "/reset_episode", qos)
+        self.goal = self.node.create_publisher(PoseStamped, "/goal_pose", qos)
+
+    def wait(self, cond, timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and not cond():
+            self.rclpy.spin_once(self.node, timeout_sec=0.02)
+        return bool(cond())
+
+    def ready(self, timeout: float) -> bool:
+        """Both nodes are up: the simulator takes resets, the deploy node takes goals."""
+        return self.wait(lambda: self.reset.get_subscription_count() > 0 and self.goal.get_subscription_count() > 0,
+                         timeout)
+
+    def run(self, episode: int, goal: tuple[float, float], timeout: float) -> dict:
+        """One episode through ROS 2, its ``goal`` first (the node has it before the simulator's reset state, and the
+        simulator holds between episodes): ``end_reason``, ``steps``, the deploy node's last ``state`` and ``reason``,
+        ``stop_step`` (the first step at which its odometry was within :data:`STOP_TOLERANCE` of the goal, or None),
+        and its ``compute_ms`` per step."""
+        from rclpy.duration import Duration
+
+        self.events.clear()
+        self.status.clear()
+        msg = self.PoseStamped()
+        msg.header.frame_id = "odom"
+        msg.pose.position.x, msg.pose.position.y = goal
+        self.goal.publish(msg)
+        if not self.goal.wait_for_all_acked(Duration(seconds=30)):
+            raise RuntimeError(f"the deploy node did not take episode {episode}'s goal in 30 s")
+        self.reset.publish(self.Int32(data=episode))
+        started = lambda: any(e["event"] == "start" and e["episode"] == episode for e in self.events)
+        if not self.wait(started, 30.0):
+            raise RuntimeError(f"the simulator did not start episode {episode} in 30 s")
+        start = next(e for e in self.events if e["event"] == "start")
+        if max(abs(a - b) for a, b in zip(start["goal"], goal)) > 1e-4:
+            raise RuntimeError(f"the simulator's episode {episode} has goal {start['goal']}, evaluate's {list(goal)}: "
+                               "not the same episode (episode_seed, task or simulator config differ)")
+        ended = lambda: any(e["event"] == "end" and e["episode"] == episode for e in self.events)
+        if not self.wait(ended, timeout):
+            raise RuntimeError(f"episode {episode} did not end in {timeout:g} s")
+        end = next(e for e in self.events if e["event"] == "end")
+        self.wait(lambda: False, 0.05)  # the node's status of the last step
+        last = self.status[-1] if self.status else {}
+        stop = next((s["steps"] for s in self.status if s.get("goal") == list(goal) and s.get("distance") is not None
+                     and s["distance"] < STOP_TOLERANCE), None)
+        return {"episode": episode, "end_reason": end["end_reason"], "steps": end["steps"],
+                "unanswered": end.get("unanswered"),
+                "node_state": last.get("state"), "node_reason": last.get("reason"), "stop_step": stop,
+                "compute_ms": [s["compute_ms"] for s in self.status if s.get("state") == "active"
+                               and s.get("compute_ms") is not None]}
+
+
+def start(args: list[str], env: dict, log: Path) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, *args], env=env, stdout=log.open("w"), stderr=subprocess.STDOUT)
+
+
+def stop(proc: subprocess.Popen) -> int:
+    if proc.poll() is None:
+        proc.send_signal(2)  # Ctrl-C
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return proc.returncode
+
+
+def robot_of(record) -> str:
+    """The robot a policy's record names: a shipped robot's name, else its file's path."""
+    from atrv_warp.core.robot import robot_spec
+
+    return robot_spec(record.robot) or record.robot.path
+
+
+def world_parameters(path: Path) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(the simulator node's, the deploy node's) parameters that follow the policy at ``path``: the world runs the
+    task it records on its robot (``policy:=``), publishing at its control rate; the node's time limit is twice its
+    episode."""
+    from atrv_warp.policy import policy_record
+    from atrv_warp.sim.config import SimConfig
+
+    record = policy_record(path)
+    period = record.task.config.control_period or SimConfig().step_dt
+    episode = record.task.config.max_steps * period
+    return ((f"policy:={path}", f"robot:={robot_of(record)}", f"publish_rate:={float(1 / period)!r}"),
+            (f"time_limit:={float(2 * episode)!r}",))  # float literals: ROS reads "20" as an integer
+
+
+def ros_episodes(pt2: Path, goals: list[tuple[float, float]], seed: int, workdir: Path, timeout: float,
+                 trace: str | None = None, world: tuple[tuple[str, ...], tuple[str, ...]] = ((), ())) -> list[dict]:
+    """Each episode (of ``goals``) through ROS 2 (the simulator and the deploy node in their own processes, on
+    loopback); ``trace``: the node's trace file; ``world``: :func:`world_parameters`."""
+    import rclpy
+
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               ROS_DOMAIN_ID=os.environ.get("ROS_DOMAIN_ID", str(random.randint(101, 200))), PYTHONUNBUFFERED="1")
+    os.environ.update({k: env[k] for k in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID")})
+    params = lambda ps: [a for p in ps for a in ("-p", p)]
+    sim = start(["-m", "atrv_warp.ros", "--ros-args", *params((*SIM_PARAMETERS, *world[0], f"episode_seed:={seed}"))],
+                env, workdir / "sim.log")
+    deploy = (*DEPLOY_PARAMETERS, *world[1], *((f"trace:={Path(trace).resolve()}",) if trace else ()))
+    node = start(["-m", "atrv_warp.deploy", str(pt2), "--ros-args", *params(deploy)], env, workdir / "deploy.log")
+    rclpy.init()
+    driver = Driver()
+    rows = []
+    try:
+        if not driver.ready(180.0):
+            raise RuntimeError(f"the nodes did not come up in 180 s; see {workdir}/sim.log and deploy.log")
+        # a first run of episode 0, not counted, leaves the simulator holding as between episodes (before any, it
+        # steps on lockstep_timeout, and a goal could reach the node a step before the reset)
+        driver.run(0, goals[0], timeout)
+        for k, goal in enumerate(goals):
+            rows.append(driver.run(k, goal, timeout))
+            print(f"  episode {k}: {rows[-1]['end_reason']} in {rows[-1]['steps']} steps (node: "
+                  f"{rows[-1]['node_state']})", flush=True)
+    finally:
+        driver.node.destroy_node()
+        rclpy.try_shutdown()
+        codes = stop(node), stop(sim)
+        if codes != (0, 0):
+            print(f"  exit statuses (deploy, sim) {codes}; logs in {workdir}", file=sys.stderr)
+    return rows
+
+
+def paired(ros: list[bool], evaluate: list[bool]) -> dict:
+    """Success rates, their paired difference (ros - evaluate) and its 95 % confidence interval."""
+    n = len(ros)
+    d = [float(a) - float(b) for a, b in zip(ros, evaluate, strict=True)]
+    mean = sum(d) / n
+    sd = math.sqrt(sum((x - mean) ** 2 for x in d) / (n - 1)) if n > 1 else float("nan")
+    half = 1.96 * sd / math.sqrt(n)
+    return {"episodes": n, "ros_success": sum(ros) / n, "evaluate_success": sum(evaluate) / n,
+            "difference": mean, "ci95": [mean - half, mean + half],
+            "only_ros": sum(a and not b for a, b in zip(ros, evaluate)),
+            "only_evaluate": sum(b and not a for a, b in zip(ros, evaluate))}
+
+
+def percentile(values: list[float], q: float) -> float:
+    if not values:
+        return float("nan")
+    s = sorted(values)
+    return s[min(len(s) - 1, max(0, math.ceil(q / 100 * len(s)) - 1))]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("policy", nargs="?", default="nav_deploy", help="policy file or shipped name (nav_deploy)")
+    parser.add_argument("--episodes", type=int, default=200)
+    parser.add_argument("--seed", type=int, default=None, help="evaluation-set seed (default: the standard set)")
+    parser.add_argument("--timeout", type=float, default=300.0, help="wall seconds one ROS episode may take")
+    parser.add_argument("--out", default=str(RESULTS / "deploy_closed_loop.json"))
+    parser.add_argument("--trace", default=None, help="write the deploy node's trace here (JSON lines per step)")
+    args = parser.parse_args()
+    from atrv_warp.rl.export import export_policy
+    from atrv_warp.task.evaluation import EVAL_SEED
+
+    seed = EVAL_SEED if args.seed is None else args.seed
+    path = resolve_policy(args.policy)
+    workdir = Path(tempfile.mkdtemp(prefix="deploy_closed_loop_"))
+    pt2 = export_policy(path, workdir / "policy.pt2", force=True)
+    t0 = time.perf_counter()
+    print(f"evaluate: {args.episodes} episodes of seed {seed} ...", flush=True)
+    evaluated, goals, stopping = evaluate_episodes(path, args.episodes, seed)
+    t1 = time.perf_counter()
+    print(f"over ROS 2 (logs in {workdir}) ...", flush=True)
+    rows = ros_episodes(pt2, goals, seed, workdir, args.timeout, args.trace, world_parameters(path))
+    t2 = time.perf_counter()
+    for row, ev in zip(rows, evaluated, strict=True):
+        row["evaluate_end_reason"], row["evaluate_steps"] = ev["end_reason"], ev["steps"]
+    stats = paired([r["end_reason"] == "success" for r in rows], [r["evaluate_end_reason"] == "success" for r in rows])
+    stats["identical"] = sum(r["end_reason"] == r["evaluate_end_reason"] and r["steps"] == r["evaluate_steps"]
+                             for r in rows)
+    stats["node_stop"] = {"goal_tolerance": STOP_TOLERANCE, "evaluate_success": stopping}
+    stats["unanswered"] = sum(r["unanswered"] or 0 for r in rows)
+    compute = [ms for r in rows for ms in r.pop("compute_ms")]
+    ends = {"ros": {}, "evaluate": {}}
+    for r in rows:
+        ends["ros"][r["end_reason"]] = ends["ros"].get(r["end_reason"], 0) + 1
+        ends["evaluate"][r["evaluate_end_reason"]] = ends["evaluate"].get(r["evaluate_end_reason"], 0) + 1
+    result = {"benchmark": "deploy_closed_loop", "policy": str(path), "seed": seed, **stats, "end_reasons": ends,
+              "compute_ms": {"steps": len(compute), "p50": percentile(compute, 50), "p99": percentile(compute, 99)},
+              "wall_s": {"evaluate": round(t1 - t0, 1), "ros": round(t2 - t1, 1)}, "episodes_detail": rows}
+    print(f"success over ROS 2 {100 * stats['ros_success']:.1f} %, evaluate {100 * stats['evaluate_success']:.1f} % "
+          f"on the same {stats['episodes']} episodes: difference {100 * stats['difference']:+.1f} points "
+          f"(95 % CI {100 * stats['ci95'][0]:+.1f} … {100 * stats['ci95'][1]:+.1f}; {stats['only_ros']} only over ROS, "
+          f"{stats['only_evaluate']} only in evaluate)")
+    print(f"{stats['identical']} of {stats['episodes']} episodes ended identically (the same end after as many steps); "
+          f"{stats['unanswered']} steps went without the node's answer")
+    print(f"ends over ROS 2 {ends['ros']}; evaluate {ends['evaluate']}")
+    print(f"evaluate stopping within {STOP_TOLERANCE:g} m of the goal on its odometry (as a node judging the goal "
+          f"does): {100 * stopping:.1f} %")
+    print(f"node compute per step: p50 {result['compute_ms']['p50']:.3f} ms, p99 {result['compute_ms']['p99']:.3f} ms "
+          f"over {len(compute)} steps")
+    out = write_results(args.out, result, version=VERSION, task=True, driver=True, policies=(path,))
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
