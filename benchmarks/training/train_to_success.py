@@ -309,7 +309,6 @@ TABLES = {
     "train_to_success_nav_deploy": train_to_success_nav_deploy,
     "train_to_success_nav_deploy_shipped": train_to_success_nav_deploy_shipped,
     "train_to_success_parking": lambda: _train_to_success("train_to_success_parking.json"),
-    "train_to_success_nav_deploy_earlier": lambda: _train_to_success("train_to_success_nav_deploy_earlier.json"),
     "train_to_success_nav_deploy_batch512": lambda: _train_to_success("train_to_success_nav_deploy_batch512.json"),
     "train_to_success_nav_deploy_slip": lambda: _train_to_success("train_to_success_nav_deploy_slip.json"),
     "train_to_success_nav_deploy_slip_gain": lambda: _train_to_success("train_to_success_nav_deploy_slip_gain.json"),

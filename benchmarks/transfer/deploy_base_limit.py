@@ -130,7 +130,6 @@ def deploy_base_limit(name: str = "deploy_base_limit.json") -> str:
 
 TABLES = {
     "deploy_base_limit": deploy_base_limit,
-    "deploy_base_limit_old_policy": lambda: deploy_base_limit("deploy_base_limit_old_policy.json"),
 }
 """The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
 (``docs/hooks.py``)."""
