@@ -69,7 +69,7 @@ PICTURE = re.compile(r"!\[[^\]]*\]\((?P<file>[\w./-]+\.png)\)")
 VERSION_LINE = re.compile(r"^VERSION = (\d+)$", re.MULTILINE)
 SUPERSEDED = re.compile(r"(?:^|_)(?:before|old|without|earlier)(?:_|$)")
 """The audit's rule for a superseded snapshot: a results file whose name has a ``before``, ``old``, ``without`` or
-``earlier`` part (``calibration_sweep_before_rest_height.json``): kept beside the file that replaced it."""
+``earlier`` part (``X_before_Y.json``): kept beside the file that replaced it."""
 PICTURES_BEFORE_PROVENANCE = frozenset({
     "calibration_paths.png", "eval_video_frame.png", "learning_curve.png", "nav.png",
     "nav_deploy_slip_learning_curve.png", "nav_learning_curve.png", "nav_wide_learning_curve.png", "trajectories.png",

@@ -13,44 +13,13 @@ import hashlib
 import numpy as np
 import torch
 
+from atrv_warp.sim import protocols
 from atrv_warp.sim.config import ContactConfig, SimConfig
-from atrv_warp.sim.protocols import (
-    STEP_COMMANDS,
-    STEP_FRICTIONS,
-    ReferenceDrive,
-    WallImpacts,
-    coulomb_twist,
-    full_torque_acceleration,
-    parked_on_slope,
-    reference_drive,
-    rolling_acceleration,
-    slip_ratio,
-    step_response,
-    turning_response,
-    wall_impacts,
-    wheel_contact_xy,
-)
+from atrv_warp.sim.protocols import *
 from atrv_warp.sim.simulator import RoverSim
 
-__all__ = [
-    "FINGERPRINT_STEPS",
-    "STEP_COMMANDS",
-    "STEP_FRICTIONS",
-    "ReferenceDrive",
-    "WallImpacts",
-    "coulomb_twist",
-    "driver_fingerprint",
-    "dynamics_fingerprint",
-    "full_torque_acceleration",
-    "parked_on_slope",
-    "reference_drive",
-    "rolling_acceleration",
-    "slip_ratio",
-    "step_response",
-    "turning_response",
-    "wall_impacts",
-    "wheel_contact_xy",
-]
+__all__ = ["FINGERPRINT_STEPS", "driver_fingerprint", "dynamics_fingerprint"]
+__all__ += protocols.__all__
 
 
 FINGERPRINT_STEPS = 40

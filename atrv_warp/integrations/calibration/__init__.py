@@ -5,18 +5,5 @@
 ``atrv_warp.sim.sysid.fit``: each of those files puts the new module in its place.
 """
 
-from atrv_warp.sim.sysid import (
-    DEFAULT_FIT,
-    FIT_PARAMETERS,
-    BagError,
-    CalibrationConfig,
-    CalibrationError,
-    CalibrationResult,
-    DriveLog,
-    Topics,
-    calibrate,
-    read_drive_log,
-)
-
-__all__ = ["DEFAULT_FIT", "FIT_PARAMETERS", "BagError", "CalibrationConfig", "CalibrationError", "CalibrationResult",
-           "DriveLog", "Topics", "calibrate", "read_drive_log"]
+from atrv_warp.sim.sysid import *
+from atrv_warp.sim.sysid import __all__  # noqa: F401

@@ -81,7 +81,7 @@ the speed limit and the friction's rise, never fitted there, estimates), added i
 standard error. It is the replay's own limit: its start is rebuilt from 20 Hz samples, and a slipping wheel
 amplifies any difference. Measured
 before each segment's start took the recorded tilt, each wheel's speed and the driver's integral from the effort
-(``calibration_sweep_before_start_state.json``), which brought the fits closer: the intervals are now wider than
+(``git show 6c7c636:benchmarks/results/calibration_sweep_before_start_state.json``), which brought the fits closer: the intervals are now wider than
 the replay needs."""
 CONFOUNDED = 0.95
 """The correlation beyond which two fitted values are reported as confounded: the drive fixes a combination of them,
