@@ -71,9 +71,7 @@ SUPERSEDED = re.compile(r"(?:^|_)(?:before|old|without|earlier)(?:_|$)")
 """The audit's rule for a superseded snapshot: a results file whose name has a ``before``, ``old``, ``without`` or
 ``earlier`` part (``X_before_Y.json``): kept beside the file that replaced it."""
 PICTURES_BEFORE_PROVENANCE = frozenset({
-    "calibration_paths.png", "eval_video_frame.png", "learning_curve.png", "nav.png",
-    "nav_deploy_slip_learning_curve.png", "nav_learning_curve.png", "nav_wide_learning_curve.png", "trajectories.png",
-    "viewer.png"})
+    "calibration_paths.png", "eval_video_frame.png", "learning_curve.png", "nav.png", "trajectories.png", "viewer.png"})
 """TRANSITIONAL: ``docs/`` pictures drawn before pictures recorded their provenance (2026-11). A page may show them
 unmarked until they are redrawn (:data:`PICTURE_COMMANDS`) with ``_common.save_figure``; ``--stale`` lists each one.
 Remove a name once its picture is redrawn (the build fails on a listed picture that has provenance), and the list

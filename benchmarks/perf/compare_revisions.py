@@ -30,7 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
 
-from _common import load_results, markdown_table, write_results
+from _common import write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -148,24 +148,6 @@ def main() -> int:
     write_results(args.out, result, version=VERSION)
     print(f"wrote {args.out}")
     return 0
-
-
-# --- the figures' tables, drawn from the results files at docs build time --------------------------
-
-def coulomb_cost() -> str:
-    """``compare_revisions_coulomb.json``: this tree's step against 0.1.x's (viscous friction), interleaved."""
-    d = load_results("compare_revisions_coulomb.json")
-    return markdown_table(["N", "0.1.x (viscous) env-steps/s", "Coulomb env-steps/s", "Coulomb / 0.1.x"],
-                          ["---:"] * 4,
-                          [[str(r["num_worlds"]), f"{r['old_median']:,.0f}", f"{r['new_median']:,.0f}", f"{r['ratio']:.3f}"]
-                   for r in d["rows"] if r["kind"] == "sim"])
-
-
-TABLES = {
-    "coulomb_cost": coulomb_cost,
-}
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -180,17 +180,6 @@ def main() -> int:
 
 # --- the figures' tables, drawn from the results files at docs build time --------------------------
 
-def substep_speed() -> str:
-    """``substep_study_coulomb_1e7.json``: today's step (Coulomb friction) at five and three substeps."""
-    d = load_results("substep_study_coulomb_1e7.json")
-    rows = [[f"{r['substeps']} ({r['sim_dt']:.3g} s)" + (", the default" if r["substeps"] == 5 else ""),
-             f"**{r['env_steps_per_s']:,.0f}**", f"{r['speedup_vs_5']:.2f}", f"{r['world_steps']:,}", str(r["nonfinite_worlds"]),
-             f"{r['impact_max_speed']:.2f}"] for r in d["rows"]]
-    return markdown_table([f"substeps (sim_dt), {d['worlds']:,} worlds", "env-steps/s, one core", "vs 5",
-                   "random-torque world-steps", "non-finite worlds", "wall impacts: fastest [m/s]"],
-                          ["---", "---:", "---:", "---:", "---:", "---:"], rows)
-
-
 def substep_study() -> str:
     """``substep_study.json``: speed, accuracy and stability per substep count (viscous friction law)."""
     rows = []
@@ -208,7 +197,6 @@ def substep_study() -> str:
 
 
 TABLES = {
-    "substep_speed": substep_speed,
     "substep_study": substep_study,
 }
 """The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``

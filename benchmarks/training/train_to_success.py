@@ -255,11 +255,6 @@ def train_to_success() -> str:
     return _train_to_success("train_to_success.json")
 
 
-def train_to_success_nav() -> str:
-    """``train_to_success_nav.json``: the nav task's time to 90 % per seed."""
-    return _train_to_success("train_to_success_nav.json")
-
-
 PPO_VS_SAC = (("reach", "SAC", "train_to_success.json", "--seeds 0 1 2 --minutes 10"),
               ("reach", "PPO", "train_to_success_ppo.json", "--config ppo --seeds 0 1 2 --minutes 10 --eval-every 327680"),
               ("nav", "SAC", "train_to_success_nav.json", "--config nav --seeds 0 1 2 --minutes 12"),
@@ -269,12 +264,13 @@ PPO_VS_SAC = (("reach", "SAC", "train_to_success.json", "--seeds 0 1 2 --minutes
 
 
 def ppo_vs_sac() -> str:
-    """``train_to_success*.json``: SAC and PPO on both tasks, medians over seeds; a file not written yet
-    is a row saying which command writes it."""
+    """``train_to_success*.json``: SAC and PPO on both tasks, medians over seeds; a file not in the tree (not
+    measured yet, or measured before results files recorded their provenance and kept in git only) is a row saying
+    which command writes it."""
     rows = []
     for task, algo, name, args in PPO_VS_SAC:
         if not results_path(name).is_file():
-            rows.append([task, algo, "not measured yet", "", "", "", f"`python benchmarks/training/train_to_success.py {args}`"])
+            rows.append([task, algo, "no current measurement", "", "", "", f"`python benchmarks/training/train_to_success.py {args}`"])
             continue
         d = load_results(name)
         m, seeds = d["median"], d["seeds"]
@@ -285,11 +281,6 @@ def ppo_vs_sac() -> str:
                      f"`{name}` ({d['preset']}, {d.get('num_envs', 'n/a')} worlds, {d['minutes_per_seed']:g} min per seed)"])
     return markdown_table(["task", "algorithm", "90 % after (median)", "final success (median)", "updates/s", "frames/s",
                    "results file"], ["---", "---", "---:", "---:", "---:", "---:", "---"], rows)
-
-
-def train_to_success_nav_wide() -> str:
-    """``train_to_success_nav_wide.json``: the nav task's time to 90 % per seed under the ``wide`` randomization."""
-    return _train_to_success("train_to_success_nav_wide.json")
 
 
 def train_to_success_nav_deploy() -> str:
@@ -304,8 +295,6 @@ def train_to_success_nav_deploy_shipped() -> str:
 
 TABLES = {
     "train_to_success": train_to_success,
-    "train_to_success_nav": train_to_success_nav,
-    "train_to_success_nav_wide": train_to_success_nav_wide,
     "train_to_success_nav_deploy": train_to_success_nav_deploy,
     "train_to_success_nav_deploy_shipped": train_to_success_nav_deploy_shipped,
     "train_to_success_parking": lambda: _train_to_success("train_to_success_parking.json"),
