@@ -20,9 +20,8 @@ Every figure a page cites is checked against the code as it is now (:func:`statu
 and robot file it ran and, for a picture, of the results files it was drawn from (themselves current). A figure that
 no longer matches, or records no provenance, fails the build unless the page marks it historical with a line
 ``{{ historical FILE }}`` (a picture: ``NAME.png`` as its link writes it), which renders as a note with its date and
-the command that redraws it, or it is a picture on the transitional :data:`PICTURES_BEFORE_PROVENANCE`. A missing
-file or key, an unknown table, or a historical mark for a figure the page does not cite or that is current fails
-the build too, naming the page, the file and the key.
+the command that redraws it. A missing file or key, an unknown table, or a historical mark for a figure the page does
+not cite or that is current fails the build too, naming the page, the file and the key.
 
 Old script paths: where no script is at the path a file recorded (``benchmarks/x.py``, before the scripts moved into
 topic folders), the script is the one under ``benchmarks/`` with its file name (:func:`script_path`; names are
@@ -70,26 +69,17 @@ VERSION_LINE = re.compile(r"^VERSION = (\d+)$", re.MULTILINE)
 SUPERSEDED = re.compile(r"(?:^|_)(?:before|old|without|earlier)(?:_|$)")
 """The audit's rule for a superseded snapshot: a results file whose name has a ``before``, ``old``, ``without`` or
 ``earlier`` part (``X_before_Y.json``): kept beside the file that replaced it."""
-PICTURES_BEFORE_PROVENANCE = frozenset({
-    "calibration_paths.png", "eval_video_frame.png", "learning_curve.png", "nav.png", "trajectories.png", "viewer.png"})
-"""TRANSITIONAL: ``docs/`` pictures drawn before pictures recorded their provenance (2026-11). A page may show them
-unmarked until they are redrawn (:data:`PICTURE_COMMANDS`) with ``_common.save_figure``; ``--stale`` lists each one.
-Remove a name once its picture is redrawn (the build fails on a listed picture that has provenance), and the list
-with the last one."""
 _TRAIN = "python benchmarks/training/train_to_success.py --seeds 0 1 2"
 PICTURE_COMMANDS = {
-    "calibration_paths.png": "python benchmarks/calibration/calibration.py --figure docs/calibration_paths.png",
-    "learning_curve.png": f"{_TRAIN} --minutes 3 --figure docs/learning_curve.png",
     "nav_learning_curve.png": f"{_TRAIN} --config nav --minutes 12 --figure docs/nav_learning_curve.png",
     "nav_wide_learning_curve.png": f"{_TRAIN} --config nav --minutes 12 --out benchmarks/results/"
                                    "train_to_success_nav_wide.json --figure docs/nav_wide_learning_curve.png "
                                    "randomization=wide",
     "nav_deploy_slip_learning_curve.png": f"{_TRAIN} --config nav_deploy --minutes 20 --out benchmarks/results/"
                                           "train_to_success_nav_deploy_slip.json --figure "
-                                          "docs/nav_deploy_slip_learning_curve.png",
-    "trajectories.png": "python docs/make_pictures.py", "nav.png": "python docs/make_pictures.py --nav",
-    "eval_video_frame.png": "python docs/make_pictures.py --nav", "viewer.png": "python docs/make_pictures.py --viewer"}
-"""The command that draws a picture without provenance (one with provenance records its own)."""
+                                          "docs/nav_deploy_slip_learning_curve.png"}
+"""The command that draws each picture drawn before pictures recorded their provenance (one with provenance records
+its own); the studies show them as historical."""
 
 
 # --- the tables, owned by the benchmark scripts ---------------------------------------------------------------
@@ -292,13 +282,9 @@ def render(markdown: str, page: str = "<page>") -> str:
         except FigureError as err:
             problems.append(f"{page}: {err}")
             continue
-        listed = name not in cited and Path(figure).name in PICTURES_BEFORE_PROVENANCE
-        if listed and st.state != "unknown":
-            problems.append(f"{page}: {figure} now records its provenance: remove it from the hook's "
-                            "PICTURES_BEFORE_PROVENANCE")
         if st.current and name in marked:
             problems.append(f"{page}: marks {name} historical, but its figures match the code: remove the mark")
-        if not st.current and name not in marked and not listed:
+        if not st.current and name not in marked:
             problems.append(f"{page}: cites {name}, whose figures are {st.state} ({'; '.join(st.reasons)}); "
                             f"redraw them (`{redraw_command(figure)}`) or mark them with a line "
                             f"{{{{ historical {name} }}}}")
@@ -346,8 +332,7 @@ def stale_report(pages: list[Path]) -> tuple[list[str], int]:
             if st.current:
                 continue
             link = shown.get(name, name)
-            listed = name in shown and Path(name).name in PICTURES_BEFORE_PROVENANCE and st.state == "unknown"
-            label = "historical" if link in marked else "TRANSITIONAL LIST" if listed else "NOT MARKED"
+            label = "historical" if link in marked else "NOT MARKED"
             failing += label == "NOT MARKED" or (label == "historical" and is_user_page(page))
             lines.append(f"{where}: {name} is {st.state} ({'; '.join(st.reasons)}; {st.date}) "
                          f"[{label}] -> {redraw_command(name)}")

@@ -322,7 +322,4 @@ def test_a_picture_carries_its_provenance_and_goes_stale(hooks, tmp_path, monkey
     assert common.png_provenance(bare) is None and hooks.status("docs/bare.png").state == "unknown"
     with pytest.raises(hooks.FigureError, match="cites bare.png, whose figures are unknown"):
         hooks.render("![b](bare.png)", "p.md")
-    monkeypatch.setattr(hooks, "PICTURES_BEFORE_PROVENANCE", frozenset({"bare.png", "fig.png"}))
-    assert hooks.render("![b](bare.png)", "p.md") == "![b](bare.png)"  # transitional: shown unmarked
-    with pytest.raises(hooks.FigureError, match="fig.png now records its provenance: remove it"):
-        hooks.render("![a](fig.png)\n{{ historical fig.png }}\n", "p.md")
+    assert "Historical figures" in hooks.render("![b](bare.png)\n{{ historical bare.png }}\n", "p.md")

@@ -33,7 +33,14 @@ import newton
 import numpy as np
 import warp as wp
 
-OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # benchmarks/: _common.py
+
+from _common import RESULTS, write_results
+
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
+OUT = str(RESULTS)
 QUICK = "--quick" in sys.argv
 
 # ---------------------------------------------------------------- terrain
@@ -355,8 +362,8 @@ def main():
               f" err vs true {nt['max_abs_err_vs_true_mm']:.2f} mm")
         print(f"  analytic: max depth {an['max_depth_mm']:.2f} mm, max jump {an['max_jump_depth_mm']:.2f} mm,"
               f" normal {an['max_jump_normal_deg']:.2f} deg, err vs true {an['max_abs_err_vs_true_mm']:.2f} mm")
-    with open(os.path.join(OUT, "terrain_contact_choice.json"), "w") as f:
-        json.dump(results, f, indent=1)
+    # Newton's heightfield against our kernel on a synthetic terrain: neither the rover's dynamics nor a task
+    write_results(os.path.join(OUT, "terrain_contact_choice.json"), results, version=VERSION, dynamics=False)
 
 
 if __name__ == "__main__":
