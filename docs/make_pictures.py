@@ -37,7 +37,7 @@ sys.path.insert(0, str(DOCS.parent / "benchmarks"))
 
 import _common
 
-VERSION = 2
+VERSION = 3
 """This script's method (which episodes, which drivers), bumped by hand when it changes; recorded with the caption."""
 
 
@@ -144,15 +144,16 @@ def draw_episode(run: dict, world: int, out: Path, every: int = 2) -> None:
     plt.close(fig)
 
 
-def nav_paths(policy, episodes: int, seed: int, task: str = "nav") -> dict:
+def nav_paths(policy, episodes: int, seed: int, task="nav", robot=None) -> dict:
     """Chassis paths of the first episode of each world on the navigation task ``task`` (``nav``, or ``nav_deploy``,
-    which draws the same worlds, starts and targets for a seed), and the scene."""
+    which draws the same worlds, starts and targets for a seed; a name or a saved policy's recorded
+    :class:`~atrv_warp.task.definition.Task`) on ``robot`` (default: the ATRV-Jr), and the scene."""
     from tensordict import TensorDict
 
     from atrv_warp import ATRVjrEnv
     from atrv_warp.task.spec import END_REASONS
 
-    env = ATRVjrEnv(episodes, task=task, seed=seed)
+    env = ATRVjrEnv(episodes, task=task, seed=seed, robot=robot)
     td = env.reset()
     scene = {"target": env.target.clone().numpy(), "tile": env.sim.terrain.tile.clone().numpy(),
              "kind": env.sim.obstacles.kind.clone().numpy(), "pose": env.sim.obstacles.pose.clone().numpy(),
@@ -189,6 +190,8 @@ def nav_caption(outcomes: dict[str, list[str]], seed: int) -> str:
 
 
 DEPLOY = "deployable policy (SAC, /cmd_vel)"
+DEPLOY_POLICY = "nav_deploy_atrvjr"
+"""The shipped policy the nav picture draws as the deployable one: the ATRV-Jr's own, at its limits."""
 """The nav picture's label of the shipped ``nav_deploy`` policy."""
 
 
@@ -221,14 +224,17 @@ def draw_nav(out: Path, seed: int, episodes: int = 4) -> list[str]:
     from matplotlib.patches import Circle, Polygon
 
     from atrv_warp import load_policy
+    from atrv_warp.core.robot import robot_spec
     from atrv_warp.integrations.topdown import obstacle_shapes
-    from atrv_warp.policy import pretrained_nav_policy_path, shipped_policy_path
+    from atrv_warp.policy import policy_record, pretrained_nav_policy_path, shipped_policy_path
     from atrv_warp.task.baseline import scripted_policy
 
-    record = provenance(pretrained_nav_policy_path(), shipped_policy_path("nav_deploy"))
+    record = provenance(pretrained_nav_policy_path(), shipped_policy_path(DEPLOY_POLICY))
+    trained = policy_record(DEPLOY_POLICY)  # the task it trained on, at its robot's limits: not today's declaration
     runs = {"scripted driver": nav_paths(scripted_policy(), episodes, seed),
             "nav policy (SAC)": nav_paths(load_policy(pretrained_nav_policy_path()), episodes, seed),
-            DEPLOY: nav_paths(load_policy("nav_deploy"), episodes, seed, task="nav_deploy")}
+            DEPLOY: nav_paths(load_policy(DEPLOY_POLICY), episodes, seed, task=trained.task,
+                              robot=robot_spec(trained.robot))}
     fig, axes = plt.subplots(1, episodes, figsize=(4.0 * episodes, 4.3), dpi=90)
     base = runs["nav policy (SAC)"]
     for w, ax in enumerate(np.atleast_1d(axes)):
