@@ -22,7 +22,7 @@ import torch
 
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
-VERSION = 1
+VERSION = 2
 """This script's method (which episodes, which policies, how drawn), bumped by hand when it changes."""
 
 ROBOTS = ("atrvjr", "jackal", "husky")
@@ -137,9 +137,13 @@ def episode(task: str, robot: str, policy: str, seed: int) -> dict:
     from tensordict import TensorDict
 
     from atrv_warp import RoverEnv, load_policy
+    from atrv_warp.core.robot import robot_spec
+    from atrv_warp.policy import policy_record
     from atrv_warp.task.spec import END_REASONS
 
-    env = RoverEnv(1, task=task, robot=robot, seed=seed)
+    trained = policy_record(policy)  # the task it trained on, fitted to its robot: not today's declaration
+    assert trained.task.name == task and trained.robot.name == robot, (policy, trained.task.name, trained.robot.name)
+    env = RoverEnv(1, task=trained.task, robot=robot_spec(trained.robot), seed=seed)
     act = load_policy(policy)
     td = env.reset()
     path = [env.sim.root_pose[0, :2].clone()]
