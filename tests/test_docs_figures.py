@@ -194,7 +194,7 @@ def test_the_nav_caption_is_written_from_the_outcomes():
     assert "dotted) reaches it in 1 of the 3 and touches an obstacle in 1 of the 3" in caption
     shipped = json.loads((ROOT / "docs" / "nav.json").read_text())
     assert shipped["caption"] == pictures.nav_caption(shipped["outcomes"], shipped["seed"])
-    policies = [ROOT / "atrv_warp" / "assets" / name for name in ("nav_policy.pt", "nav_deploy_policy.pt")]
+    policies = [ROOT / "atrv_warp" / "assets" / name for name in ("nav_policy.pt", "nav_deploy_atrvjr_policy.pt")]
     assert shipped["provenance"]["policies"] == {str(p.relative_to(ROOT)): hashlib.sha256(p.read_bytes()).hexdigest()
                                                  for p in policies}
 
