@@ -91,7 +91,7 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=3, help="timed forward/backward passes per size (median)")
     parser.add_argument("--without-wrench-fix", action="store_true",
                         help="diagnostic: leave out atrv_warp.sim.diff's fix for Newton's in-place wrench "
-                             "conversion, to measure what it changes (default output: diff_gradients_without_fix.json)")
+                             "conversion, to measure what it changes (default output: diff_gradients_raw_wrench.json)")
     parser.add_argument("--twist", action="store_true",
                         help="the actions are /cmd_vel through the motor driver (default output: diff_gradients_twist.json)")
     parser.add_argument("--out", default=None)
@@ -106,7 +106,7 @@ def main() -> int:
     from atrv_warp.sim.diff import DiffRollout
 
     fix = not args.without_wrench_fix
-    default_name = ("diff_gradients_without_fix.json" if args.without_wrench_fix else
+    default_name = ("diff_gradients_raw_wrench.json" if args.without_wrench_fix else
                     "diff_gradients_twist.json" if args.twist else "diff_gradients.json")
     scenarios, kinds = (TWIST_SCENARIOS, TWIST_KINDS) if args.twist else (SCENARIOS, KINDS)
     args.out = args.out or str(RESULTS / default_name)
