@@ -119,7 +119,7 @@ def _fingerprint_now(module: str, function: str) -> Callable[[], str]:
 
 current_dynamics = _fingerprint_now("atrv_warp.sim.checks", "dynamics_fingerprint")  # a 2-s rollout
 current_driver = _fingerprint_now("atrv_warp.sim.checks", "driver_fingerprint")
-current_task = _fingerprint_now("atrv_warp.task.evaluation", "task_fingerprint")  # short rollouts of every task
+current_task = _fingerprint_now("atrv_warp.task.evaluation", "task_fingerprint")  # short rollouts of reach and nav
 
 
 def script_path(recorded: str) -> str:
