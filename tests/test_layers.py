@@ -170,3 +170,35 @@ def test_the_deploy_node_imports_only_torch_ros_and_the_light_core():
                 if not t.startswith(("atrv_warp.core", "atrv_warp.deploy"))} for m, p in deploy.items()}
     assert not any(ours.values()), ours
     assert imports("atrv_warp.runtime", (PACKAGE / "runtime.py").read_text(), False) == set()
+
+
+MAX_FUNCTION_LINES = 100
+"""A function a reader can hold: none in the package longer than this, but the Warp kernels and
+functions (one launch is one body, and splitting one costs a launch or a copy of its arguments)."""
+
+
+def long_functions(source: str) -> list[tuple[str, int]]:
+    """Each function or method in ``source`` longer than ``MAX_FUNCTION_LINES``, but Warp's."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            continue
+        warp = any(ast.unparse(d).split("(")[0] in ("wp.kernel", "wp.func", "warp.kernel", "warp.func")
+                   for d in node.decorator_list)
+        lines = node.end_lineno - node.lineno + 1
+        if not warp and lines > MAX_FUNCTION_LINES:
+            found.append((node.name, lines))
+    return found
+
+
+def test_no_function_outside_the_warp_kernels_exceeds_100_lines():
+    long = {f"{path.relative_to(ROOT)}:{name}": lines
+            for path in sorted(PACKAGE.rglob("*.py")) for name, lines in long_functions(path.read_text())}
+    assert not long, f"functions over {MAX_FUNCTION_LINES} lines (split them): {long}"
+
+
+def test_the_length_check_catches_a_long_function_and_spares_a_kernel():
+    body = "".join(f"    x{i} = {i}\n" for i in range(MAX_FUNCTION_LINES))
+    assert long_functions(f"def f():\n{body}") == [("f", MAX_FUNCTION_LINES + 1)]
+    assert long_functions(f"@wp.kernel\ndef k():\n{body}") == []
+    assert long_functions(f"@wp.kernel(enable_backward=False)\ndef k():\n{body}") == []

@@ -297,7 +297,17 @@ class RoverSim:
         if self.rover_cfg.payload_mass:
             self.apply_payload(wp.full(num_worlds, True, dtype=bool, device=self.device))
 
-        n, w = num_worlds, len(self.description.wheels)
+        self._allocate_outputs()
+        self.sim_time = 0.0
+        """Simulated time since construction [s] (the same in every world)."""
+        self._graph = None
+        self.reset()
+
+    # ------------------------------------------------------------------ build helpers
+    def _allocate_outputs(self) -> None:
+        """The per-world outputs the step writes (commands, velocities, attitude, wheels, flags), as Warp
+        arrays and the torch views over them, and the buffers a step kernel reads."""
+        n, w = self.num_worlds, len(self.description.wheels)
         dev = self.device
         self._commands = wp.zeros(n, dtype=wp.vec2, device=dev)
         self._lin_vel = wp.zeros(n, dtype=wp.vec3, device=dev)
@@ -328,12 +338,6 @@ class RoverSim:
             rpy=self._rpy, wheel_speed=self._wheel_speed, wheel_torque=self._wheel_torque,
             contact_flags=self._contact_flags, nonfinite=self._nonfinite)
 
-        self.sim_time = 0.0
-        """Simulated time since construction [s] (the same in every world)."""
-        self._graph = None
-        self.reset()
-
-    # ------------------------------------------------------------------ build helpers
     def _make_layout(self) -> None:
         rb = self.built.rover_builder
         q_start = list(rb.joint_q_start) + [rb.joint_coord_count]
