@@ -157,6 +157,11 @@ class Robot:
     effective_track_factor: float
     """Effective track / wheel track on our physics [-] (skid steering turns slower than the wheel track says)."""
     limits: RobotLimits
+    motor_per_side: bool = False
+    """One motor per side drives that side's wheels through a chain or gears (Clearpath's A200 and J100), so they
+    turn at one speed; ``False``: each wheel turns freely on its own joint under its side's torque (the reference's
+    ATRV-Jr model). Uncoupled, a wheel that lifts off spins up and the side's mean speed, which the driver holds, no
+    longer drives the wheels still on the ground."""
     sources: dict[str, str] = field(default_factory=dict, compare=False)
     """Where each value comes from, by dotted name (``"limits.linear_velocity"``)."""
 
@@ -183,7 +188,7 @@ _SCHEMA: dict[str, dict[str, tuple[type, bool]]] = {
     "links": {"chassis": (str, True), "left_wheels": (list, False), "right_wheels": (list, False),
               "imu": (str, True), "laser": (str, True), "frames": (list, False)},
     "wheels": {"radius": (float, True), "width": (float, True), "offset": (float, True)},
-    "motor": {"torque_limit": (float, True), "no_load_speed": (float, True)},
+    "motor": {"torque_limit": (float, True), "no_load_speed": (float, True), "per_side": (bool, False)},
     "driver": {"kp": (float, True), "ki": (float, True), "effective_track_factor": (float, True)},
     "limits": {"linear_velocity": (float, True), "angular_velocity": (float, True),
                "linear_acceleration": (float, False), "angular_acceleration": (float, False)},
@@ -283,6 +288,9 @@ def _from_table(path: str, data: dict, urdf_sha256: str | None = None) -> Robot:
                 if value < 0 or (value == 0 and name not in ("driver.ki", "wheels.offset")):
                     fail(f"{name} must be > 0, got {value!r}")
                 value = float(value)
+            elif kind is bool:
+                if not isinstance(value, bool):
+                    fail(f"{name} must be true or false, got {value!r}")
             elif kind is list:
                 if not (isinstance(value, list) and all(isinstance(v, str) and v for v in value)):
                     fail(f"{name} must be a list of link names, got {value!r}")
@@ -315,7 +323,7 @@ def _from_table(path: str, data: dict, urdf_sha256: str | None = None) -> Robot:
         effective_track_factor=values["driver.effective_track_factor"],
         limits=RobotLimits(values["limits.linear_velocity"], values["limits.angular_velocity"],
                            values.get("limits.linear_acceleration"), values.get("limits.angular_acceleration")),
-        sources=dict(sources))
+        motor_per_side=values.get("motor.per_side", False), sources=dict(sources))
 
 
 def robot_record(robot: Robot) -> dict:
@@ -328,10 +336,13 @@ def robot_record(robot: Robot) -> dict:
     links = {"chassis": robot.chassis, "imu": robot.imu_frame, "laser": robot.laser_frame, "frames": list(robot.frames)}
     if robot.left_wheels:
         links.update(left_wheels=list(robot.left_wheels), right_wheels=list(robot.right_wheels))
+    motor = {"torque_limit": robot.torque_limit, "no_load_speed": robot.no_load_speed}
+    if robot.motor_per_side:  # written only where set: a record made before the key reads the same
+        motor["per_side"] = True
     return {"name": robot.name, "title": robot.title, "urdf": robot.urdf, "urdf_sha256": robot.urdf_sha256,
             "links": links,
             "wheels": {"radius": robot.wheel_radius, "width": robot.wheel_width, "offset": robot.wheel_offset},
-            "motor": {"torque_limit": robot.torque_limit, "no_load_speed": robot.no_load_speed},
+            "motor": motor,
             "driver": {"kp": robot.kp, "ki": robot.ki, "effective_track_factor": robot.effective_track_factor},
             "limits": limits, "sources": dict(robot.sources)}
 

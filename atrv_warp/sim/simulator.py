@@ -360,6 +360,10 @@ class RoverSim:
         layout.wheel_dof = wp.array([qd_start[j] for j in self.built.wheel_joints], dtype=int, device=dev)
         layout.wheel_side = wp.array([w.side for w in wheels], dtype=int, device=dev)
         layout.wheel_sign = wp.array([w.drive_sign for w in wheels], dtype=float, device=dev)
+        inertia = self.model.body_inertia.numpy()
+        layout.wheel_inertia = wp.array([float(np.asarray(w.axis) @ inertia[b] @ np.asarray(w.axis))
+                                         for w, b in zip(wheels, self.built.wheel_bodies)], dtype=float, device=dev)
+        layout.sides_coupled = int(self.rover_cfg.robot_spec.motor_per_side)
         self._layout = layout
 
     def _chassis_mass_properties(self) -> MassProperties:

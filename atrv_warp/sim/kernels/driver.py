@@ -129,6 +129,26 @@ def side_speeds(layout: RoverLayout, joint_qd: wp.array(dtype=float), world: int
 
 
 @wp.func
+def geared_speeds(layout: RoverLayout, joint_qd: wp.array(dtype=float), world: int) -> wp.vec2:
+    """Each side's forward speed [rad/s] with its wheels geared together: their spin momentum over their spin
+    inertia (the inertia-weighted mean). A torque of ``J_k (geared - speed_k) / dt`` on each wheel brings them all
+    to it in one substep and sums to zero over the side: the chain moves momentum between the wheels, it adds none."""
+    momentum = wp.vec2(0.0, 0.0)
+    inertia = wp.vec2(0.0, 0.0)
+    for k in range(MAX_WHEELS):
+        if k < layout.wheel_count:
+            j = layout.wheel_inertia[k]
+            v = layout.wheel_sign[k] * joint_qd[world * layout.dofs_per_world + layout.wheel_dof[k]]
+            if layout.wheel_side[k] == 0:
+                momentum = wp.vec2(momentum[0] + j * v, momentum[1])
+                inertia = wp.vec2(inertia[0] + j, inertia[1])
+            else:
+                momentum = wp.vec2(momentum[0], momentum[1] + j * v)
+                inertia = wp.vec2(inertia[0], inertia[1] + j)
+    return wp.vec2(momentum[0] / wp.max(inertia[0], 1.0e-12), momentum[1] / wp.max(inertia[1], 1.0e-12))
+
+
+@wp.func
 def integrate_odometry(params: DriverParams, pose: wp.vec3, speeds: wp.vec2):
     """Wheel odometry over one substep (midpoint rule) from side speeds [rad/s], with the configured radius and
     effective track: the new pose and the twist (linear, angular)."""
@@ -231,11 +251,17 @@ def drive_wheels(
     state_out.age[world] = age + params.dt
     cmd = side * physics.torque_scale[world]
     speed_limit = physics.speed_limit[world]
+    geared = wp.vec2(0.0, 0.0)
+    if layout.sides_coupled != 0:
+        geared = geared_speeds(layout, joint_qd, world)
     for k in range(layout.wheel_count):
         dof = world * layout.dofs_per_world + layout.wheel_dof[k]
         sign = layout.wheel_sign[k]
         tau = motor_torque(cmd[layout.wheel_side[k]], sign * joint_qd[dof], speed_limit)
-        joint_f[dof] = sign * tau
+        gear = float(0.0)
+        if layout.sides_coupled != 0:  # the chain's torque: this substep ends with the side's wheels at one speed
+            gear = layout.wheel_inertia[k] * (geared[layout.wheel_side[k]] - sign * joint_qd[dof]) / params.dt
+        joint_f[dof] = sign * (tau + gear)
         wheel_torque[world, k] = tau
 
 

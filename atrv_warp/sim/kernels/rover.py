@@ -28,6 +28,8 @@ class RoverLayout:
     wheel_dof: wp.array(dtype=int)
     wheel_side: wp.array(dtype=int)  # 0 = left command, 1 = right command
     wheel_sign: wp.array(dtype=float)  # +1 if positive joint torque drives forward
+    wheel_inertia: wp.array(dtype=float)  # spin inertia about the axle [kg·m²]
+    sides_coupled: int  # 1: one motor per side, its wheels geared to one speed (Robot.motor_per_side)
 
 
 @wp.func
