@@ -109,6 +109,37 @@ def test_a_record_reads_back_as_the_robot():
         assert robot_from_record(robot_record(robot), "a checkpoint") == robot
 
 
+def test_a_record_keeps_a_per_side_motor_and_an_older_record_reads_without_one():
+    assert load_robot("husky").motor_per_side and load_robot("jackal").motor_per_side
+    assert not load_robot("atrvjr").motor_per_side
+    assert "per_side" not in robot_record(load_robot("atrvjr"))["motor"]  # the records made before the key
+    assert robot_record(load_robot("husky"))["motor"]["per_side"] is True
+
+
+def side_wheel_speeds(robot, seconds: float = 2.0) -> torch.Tensor:
+    """(2, 2) each side's [front, rear] wheel speed [rad/s] after ``seconds`` of a skid turn on flat ground."""
+    from atrv_warp.sim.simulator import RoverSim
+
+    sim = RoverSim(1, robot=robot)
+    sim.commands[:] = torch.tensor([[-0.3, 1.0]]) * sim.driver_cfg.torque_limit
+    for _ in range(round(seconds / sim.sim_cfg.step_dt)):
+        sim.step()
+    speeds = sim.wheel_speed[0]
+    sides = [[k for k, w in enumerate(sim.description.wheels) if w.side == side] for side in (0, 1)]
+    return torch.stack([speeds[s] for s in sides])
+
+
+def test_a_per_side_motor_turns_its_sides_wheels_at_one_speed(tmp_path):
+    """In a skid turn the front and rear wheels of a side slip differently: free, they part; geared (the Husky's
+    chain), they turn together."""
+    path = _copy(tmp_path, "husky")
+    path.write_text(path.read_text().replace("per_side = true", "per_side = false"))
+    free, geared = side_wheel_speeds(path), side_wheel_speeds("husky")
+    spread = lambda s: float((s[:, 0] - s[:, 1]).abs().max())  # noqa: E731
+    assert spread(free) > 1.0, free
+    assert spread(geared) < 0.1 * spread(free), (free, geared)
+
+
 def _copy(tmp_path: Path, name: str = "jackal") -> Path:
     for suffix in (".toml", ".urdf"):
         shutil.copy(ROBOTS_DIR / f"{name}{suffix}", tmp_path / f"{name}{suffix}")
@@ -121,6 +152,7 @@ def _copy(tmp_path: Path, name: str = "jackal") -> Path:
     (lambda t: t.replace("[motor]", "[motor]\npeak_torque = 3.0"), r"unknown field\(s\) \['motor.peak_torque'\]"),
     (lambda t: t.replace("linear_velocity = 2.0\n", ""), "missing limits.linear_velocity"),
     (lambda t: t.replace("kp = 0.369", "kp = -1.0"), "driver.kp must be > 0"),
+    (lambda t: t.replace("per_side = true", 'per_side = "yes"'), "motor.per_side must be true or false"),
     (lambda t: t.replace('chassis = "chassis_link"', 'chassis = "body"'), r"links.chassis \(body\).*not found"),
     (lambda t: t.replace('imu = "imu_0_link"', 'imu = "imu_link"'), r"links.imu \(imu_link\).*not found"),
     (lambda t: t.replace("radius = 0.098", "radius = 0.12"),

@@ -205,6 +205,7 @@ offset = 0.0
 [motor]
 torque_limit = {torque!r}   # set your motor's; this slips a wheel at µ 1.125 under a {len(wheels)}th of {mass:.1f} kg
 no_load_speed = 20.0        # [rad/s] set your motor's no-load wheel speed
+per_side = false            # true: one motor per side drives its wheels through a chain or gears
 
 [driver]
 kp = {kp!r}

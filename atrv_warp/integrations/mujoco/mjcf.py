@@ -224,6 +224,8 @@ def world_xml(desc: RoverDescription, rover: RoverConfig, *, arena: ArenaConfig,
     """The MJCF text of one episode's world: the rover (at the origin; its free joint places it), the arena, the
     ground (a plane, or ``terrain``'s ``tile`` as a height field), the ``obstacles`` (standing to ``obstacle_top``
     [m], absolute), one torque motor per wheel (``gear`` its drive sign, so that a positive control drives forward;
+    a robot with one motor per side (:attr:`~atrv_warp.core.robot.Robot.motor_per_side`) has its side's wheels held to
+    one forward speed by joint equalities;
     within ``torque_limit`` [N·m], times the rover's ``torque_scale`` where that exceeds 1), contact at Coulomb ``friction`` [-] with MuJoCo's settings ``contact``
     (default :class:`MujocoContact`: the tyre's compliance).
 
@@ -297,6 +299,14 @@ def world_xml(desc: RoverDescription, rover: RoverConfig, *, arena: ArenaConfig,
                          f'friction="{number(friction)} {number(friction)} 0 0 0" solref="{vector(c.solref)}" '
                          f'solimp="{vector(c.solimp)}" solreffriction="{vector(c.solreffriction)}"/>')
         lines.append("  </contact>")
+    if rover.robot_spec.motor_per_side:  # one motor per side: the side's wheels geared to one forward speed
+        lines.append("  <equality>")
+        for side in (0, 1):
+            first, *others = [w for w in desc.wheels if w.side == side]
+            for w in others:
+                lines.append(f'    <joint joint1="{w.joint}" joint2="{first.joint}" '
+                             f'polycoef="0 {number(w.drive_sign * first.drive_sign)} 0 0 0"/>')
+        lines.append("  </equality>")
     lines.append("  <actuator>")
     torque_limit *= max(1.0, rover.torque_scale)  # the driver's torque times the motor's strength
     for w in desc.wheels:

@@ -259,7 +259,7 @@ def drive_wheels(
         sign = layout.wheel_sign[k]
         tau = motor_torque(cmd[layout.wheel_side[k]], sign * joint_qd[dof], speed_limit)
         gear = float(0.0)
-        if layout.sides_coupled != 0:  # the chain's torque: this substep ends with the side's wheels at one speed
+        if layout.sides_coupled != 0:  # the chain's torque: the side's wheels at one speed over the substep, friction aside
             gear = layout.wheel_inertia[k] * (geared[layout.wheel_side[k]] - sign * joint_qd[dof]) / params.dt
         joint_f[dof] = sign * (tau + gear)
         wheel_torque[world, k] = tau
