@@ -341,3 +341,23 @@ def test_the_twins_accelerometer_aided_odometry_follows_its_chassis_where_the_wh
     assert encoders > 0.1
     assert aided < 0.6 * encoders, (encoders, aided)
     np.testing.assert_array_equal(odometry, aided_odometry)
+
+
+def test_a_robot_with_one_motor_per_side_turns_its_sides_wheels_together_in_the_twin():
+    """The Husky's file gears each side's wheels (``motor.per_side``): the twin holds them to one forward speed with
+    joint equalities, through a skid turn that parts the ATRV-Jr's free wheels."""
+    from atrv_warp.integrations.mujoco import MujocoTwin
+    from atrv_warp.sim.config import RoverConfig
+
+    def spread(robot: str) -> tuple[float, int]:
+        twin = MujocoTwin(rover=RoverConfig(robot=robot))
+        limit = twin.driver_cfg.torque_limit
+        for _ in range(40):
+            twin.step(torques=(-0.3 * limit, limit))
+        speed = twin.wheel_speed
+        return max(float(np.ptp(speed[twin.wheel_side == s])) for s in (0, 1)), twin.model.neq
+
+    geared, equalities = spread("husky")
+    free, none = spread("atrvjr")
+    assert equalities == 2 and none == 0
+    assert free > 0.5 and geared < 0.05 * free, (geared, free)

@@ -73,6 +73,8 @@ def format_check(report: dict) -> str:
                  f"{f['effective_track_factor']:g}{_agree(report['effective_track_factor'], f['effective_track_factor'])}")
     lines.append(f"  top speed under full torque ({f['torque_limit']:g} N·m, µ 0.8): {report['top_speed']:.2f} m/s "
                  f"(limit {f['limits']['linear_velocity']:g} m/s)")
+    lines.append("  drivetrain: " + ("one motor per side, its wheels geared to one speed (motor.per_side)"
+                                     if f.get("motor_per_side") else "each wheel free under its side's torque"))
     lines.append("  /cmd_vel steps from rest, settled (yaw rate within 10 % to the end) / overshoot:")
     cases = sorted({(s["linear"], s["angular"]) for s in report["steps"]}, key=lambda c: (c[0], -c[1]))
     mus = sorted({s["friction"] for s in report["steps"]})

@@ -218,5 +218,5 @@ def measure_robot(spec, *, frictions=TURN_FRICTIONS, turn_seconds: float = 15.0,
         effective_track_factor=factor, turns=turns, top_speed=top,
         steps=[{k: s[k] for k in ("linear", "angular", "friction", "settle", "overshoot")} for s in steps],
         file={"kp": robot.kp, "ki": robot.ki, "effective_track_factor": robot.effective_track_factor,
-              "torque_limit": robot.torque_limit, "limits": {"linear_velocity": lim.linear_velocity,
-                                                             "angular_velocity": lim.angular_velocity}})
+              "torque_limit": robot.torque_limit, "motor_per_side": robot.motor_per_side,
+              "limits": {"linear_velocity": lim.linear_velocity, "angular_velocity": lim.angular_velocity}})

@@ -10,10 +10,10 @@ distance its encoders read, and how far the fused odometry's position (the encod
 the deployable policies steer by) ended from the true one. The robot files' effective track factors were measured
 on the flat arena (``benchmarks/robots/robot_check.py``). One start, one command: a probe. Then the survey: the same
 command from the test set's first ``--starts`` starts at once, per robot and ground, the quartiles of the yaw each
-world turned over the yaw commanded, and the share of starts that turned less than half of it; and the survey on
-the nav world again with the ground contact 0.1 and 10 times as stiff, and on flat ground 10 times as stiff
-(``STIFFNESS_SCALES``), ten times as damped, and with a quarter of the substep (``CONTACT_VARIANTS``).
-Writes ``benchmarks/results/robot_arc.json``.
+world turned over the yaw commanded, and the share of starts that turned less than half of it; on the nav world
+again with the other drivetrain (``nav_other_drivetrain``: a robot file's ``motor.per_side`` flipped, so the
+Husky's and the Jackal's wheels turn freely and the ATRV-Jr's are geared per side), and with the ground contact 0.1
+and 10 times as stiff (``STIFFNESS_SCALES``). Writes ``benchmarks/results/robot_arc.json``.
 """
 
 from __future__ import annotations
@@ -21,25 +21,42 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
 
 from _common import write_results
 
-VERSION = 4
+VERSION = 5
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 GROUNDS = {"nav": None, "flat": "flat"}
 """Each ground the robots drive on: the nav world's own terrain (``nav_deploy``'s), and the same world made flat."""
-STIFFNESS_SCALES = {"nav_softer": 0.1, "nav_stiffer": 10.0, "flat_stiffer": 10.0}
+STIFFNESS_SCALES = {"nav_softer": 0.1, "nav_stiffer": 10.0}
 """The survey on the nav world again, with the ground contact this many times as stiff (the robot's own is 1): how
-the turn on uneven ground depends on the contact law (and on flat ground: ``flat_*``)."""
-CONTACT_VARIANTS = {"nav_damped": {"contact": {"damping": 2.0e5, "damping_limit": None}},
-                    "nav_quarter_substep": {"sim_dt": 0.0025}}
-"""The survey on the nav world with the contact ten times as damped and no damping ceiling, and with substeps a
-quarter as long: whether the turn depends on them."""
+the turn on uneven ground depends on the contact law."""
+
+
+def other_drivetrain(robot: str, folder: Path) -> Path:
+    """A copy of the shipped ``robot``'s file (and URDF) in ``folder`` with ``motor.per_side`` flipped."""
+    import shutil
+
+    from atrv_warp.core.robot import load_robot
+
+    spec = load_robot(robot)
+    urdf = Path(spec.urdf)
+    shutil.copy(urdf, folder / urdf.name)
+    text = Path(spec.path).read_text()
+    if spec.motor_per_side:
+        text = text.replace("per_side = true", "per_side = false")
+    else:
+        text = text.replace("[motor]\n", "[motor]\nper_side = true\n", 1)
+    out = folder / f"{robot}_other_drivetrain.toml"
+    out.write_text(text)
+    assert load_robot(out).motor_per_side != spec.motor_per_side
+    return out
 
 
 def drive(robot: str, linear: float, angular: float, seconds: float, terrain: str | None = None) -> dict:
@@ -76,7 +93,7 @@ def drive(robot: str, linear: float, angular: float, seconds: float, terrain: st
             "fused_position_error": float((fused[:2] - true_odom).norm())}
 
 
-def survey(robot: str, linear: float, angular: float, seconds: float, starts: int,
+def survey(robot: str | Path, linear: float, angular: float, seconds: float, starts: int,
            terrain: str | None = None, stiffness_scale: float = 1.0, contact: dict | None = None,
            sim_dt: float | None = None) -> dict:
     """:func:`drive`'s turn over the test set's first ``starts`` starts at once: how much of the commanded yaw each
@@ -130,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.seconds <= 0 or args.starts <= 0:
         parser.error("--seconds and --starts must be > 0")
-    from atrv_warp.core.robot import ROBOTS
+    from atrv_warp.core.robot import ROBOTS, load_robot
 
     rows = {}
     for robot in ROBOTS:
@@ -141,20 +158,21 @@ def main(argv: list[str] | None = None) -> int:
                   f"encoders read {r['distance_encoders']:.2f} m; fused odometry off by "
                   f"{r['fused_position_error']:.2f} m", flush=True)
     surveys = {}
-    for robot in ROBOTS:
-        surveys[robot] = {ground: survey(robot, args.linear, args.angular, args.seconds, args.starts, terrain)
-                          for ground, terrain in GROUNDS.items()}
-        for ground, scale in STIFFNESS_SCALES.items():
-            surveys[robot][ground] = survey(robot, args.linear, args.angular, args.seconds, args.starts,
-                                            GROUNDS[ground.split("_")[0]], scale)
-        for ground, options in CONTACT_VARIANTS.items():
-            surveys[robot][ground] = survey(robot, args.linear, args.angular, args.seconds, args.starts, None,
-                                            **options)
-        for ground, r in surveys[robot].items():
-            t = r["turned_over_commanded"]
-            print(f"{robot:8s} {ground:5s} over {r['starts']} starts: turned {t['median']:.2f} of the commanded yaw "
-                  f"(quartiles {t['q25']:.2f}, {t['q75']:.2f}); under half on {100 * r['under_half']:.0f} % of them",
-                  flush=True)
+    with tempfile.TemporaryDirectory() as folder:
+        for robot in ROBOTS:
+            surveys[robot] = {ground: survey(robot, args.linear, args.angular, args.seconds, args.starts, terrain)
+                              for ground, terrain in GROUNDS.items()}
+            surveys[robot]["nav_other_drivetrain"] = survey(other_drivetrain(robot, Path(folder)), args.linear,
+                                                            args.angular, args.seconds, args.starts)
+            surveys[robot]["nav_other_drivetrain"]["motor_per_side"] = not load_robot(robot).motor_per_side
+            for ground, scale in STIFFNESS_SCALES.items():
+                surveys[robot][ground] = survey(robot, args.linear, args.angular, args.seconds, args.starts,
+                                                GROUNDS[ground.split("_")[0]], scale)
+            for ground, r in surveys[robot].items():
+                t = r["turned_over_commanded"]
+                print(f"{robot:8s} {ground:5s} over {r['starts']} starts: turned {t['median']:.2f} of the commanded "
+                      f"yaw (quartiles {t['q25']:.2f}, {t['q75']:.2f}); under half on {100 * r['under_half']:.0f} % "
+                      "of them", flush=True)
     result = {"linear": args.linear, "angular": args.angular, "seconds": args.seconds, "robots": rows,
               "survey": surveys}
     out = write_results(args.out, result, version=VERSION, task=True, driver=True, robots=tuple(ROBOTS))

@@ -75,6 +75,9 @@ def robot_check() -> str:
         ["wheel radius", *(f"{r['wheel_radius']:.4g} m" for r in robots.values())],
         ["track / wheelbase", *(f"{r['track']:.3f} / {r['wheelbase']:.3f} m" for r in robots.values())],
         ["reach (centre of mass to farthest corner)", *(f"{r['reach']:.2f} m" for r in robots.values())],
+        ["drivetrain (file's motor.per_side)", *("one motor per side, wheels geared" if r["file"].get("motor_per_side")
+                                                  else "each wheel free under its side's torque"
+                                                  for r in robots.values())],
         ["limits (file)", *(f"{r['file']['limits']['linear_velocity']:g} m/s, "
                             f"{r['file']['limits']['angular_velocity']:g} rad/s" for r in robots.values())],
         ["driver gains kp / ki (rule)", *(f"{r['gains']['kp']:g} / {r['gains']['ki']:g}" for r in robots.values())],
