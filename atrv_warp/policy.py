@@ -63,7 +63,8 @@ SHIPPED_POLICIES: dict[str, ShippedPolicy] = {
     "nav_plain": ShippedPolicy("nav_policy_plain.pt", "nav", "python -m atrv_warp.train --config nav"),
     # each robot's deployable policy, at its own limits: seed 0 of benchmarks/training/train_to_success.py with the same
     # arguments (its results file: train_to_success_nav_deploy_<robot>.json; benchmarks/robots/robot_policies.py evaluates
-    # them). The Husky's validation still rose at nav_deploy's 1.4 M frames: it trained on 3 M.
+    # them). The Husky's command anneals over 3 M frames (its free-wheeled predecessor still improved at nav_deploy's
+    # 1.4 M); the 30-minute budget of the benchmark stops it first on 2 cores.
     "nav_deploy_atrvjr": ShippedPolicy("nav_deploy_atrvjr_policy.pt", "nav_deploy",
                                        "python -m atrv_warp.train --config nav_deploy env.robot=atrvjr"),
     "nav_deploy_jackal": ShippedPolicy("nav_deploy_jackal_policy.pt", "nav_deploy",

@@ -135,7 +135,7 @@ def test_a_per_side_motor_turns_its_sides_wheels_at_one_speed(tmp_path):
     path = _copy(tmp_path, "husky")
     path.write_text(path.read_text().replace("per_side = true", "per_side = false"))
     free, geared = side_wheel_speeds(path), side_wheel_speeds("husky")
-    spread = lambda s: float((s[:, 0] - s[:, 1]).abs().max())  # noqa: E731
+    spread = lambda s: float((s[:, 0] - s[:, 1]).abs().max())
     assert spread(free) > 1.0, free
     assert spread(geared) < 0.1 * spread(free), (free, geared)
 

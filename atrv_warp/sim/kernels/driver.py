@@ -129,21 +129,25 @@ def side_speeds(layout: RoverLayout, joint_qd: wp.array(dtype=float), world: int
 
 
 @wp.func
-def geared_speeds(layout: RoverLayout, joint_qd: wp.array(dtype=float), world: int) -> wp.vec2:
-    """Each side's forward speed [rad/s] with its wheels geared together: their spin momentum over their spin
-    inertia (the inertia-weighted mean). A torque of ``J_k (geared - speed_k) / dt`` on each wheel brings them all
-    to it in one substep and sums to zero over the side: the chain moves momentum between the wheels, it adds none."""
+def geared_speeds(layout: RoverLayout, joint_qd: wp.array(dtype=float), world: int, command: wp.vec2,
+                  speed_limit: float, dt: float) -> wp.vec2:
+    """Each side's forward speed [rad/s] at the end of a substep with its wheels geared together and driven by its
+    motor's torque: the side's spin momentum plus its motor's impulse (each wheel's share of ``command`` through the
+    taper), over the side's spin inertia. A torque of ``J_k (geared - speed_k) / dt`` on each wheel brings them all
+    to it; over the side it sums to the motor's torque (the chain moves momentum between the wheels and adds none)."""
     momentum = wp.vec2(0.0, 0.0)
     inertia = wp.vec2(0.0, 0.0)
     for k in range(MAX_WHEELS):
         if k < layout.wheel_count:
             j = layout.wheel_inertia[k]
+            side = layout.wheel_side[k]
             v = layout.wheel_sign[k] * joint_qd[world * layout.dofs_per_world + layout.wheel_dof[k]]
-            if layout.wheel_side[k] == 0:
-                momentum = wp.vec2(momentum[0] + j * v, momentum[1])
+            p = j * v + motor_torque(command[side], v, speed_limit) * dt
+            if side == 0:
+                momentum = wp.vec2(momentum[0] + p, momentum[1])
                 inertia = wp.vec2(inertia[0] + j, inertia[1])
             else:
-                momentum = wp.vec2(momentum[0], momentum[1] + j * v)
+                momentum = wp.vec2(momentum[0], momentum[1] + p)
                 inertia = wp.vec2(inertia[0], inertia[1] + j)
     return wp.vec2(momentum[0] / wp.max(inertia[0], 1.0e-12), momentum[1] / wp.max(inertia[1], 1.0e-12))
 
@@ -253,15 +257,15 @@ def drive_wheels(
     speed_limit = physics.speed_limit[world]
     geared = wp.vec2(0.0, 0.0)
     if layout.sides_coupled != 0:
-        geared = geared_speeds(layout, joint_qd, world)
+        geared = geared_speeds(layout, joint_qd, world, cmd, speed_limit, params.dt)
     for k in range(layout.wheel_count):
         dof = world * layout.dofs_per_world + layout.wheel_dof[k]
         sign = layout.wheel_sign[k]
         tau = motor_torque(cmd[layout.wheel_side[k]], sign * joint_qd[dof], speed_limit)
-        gear = float(0.0)
-        if layout.sides_coupled != 0:  # the chain's torque: the side's wheels at one speed over the substep, friction aside
-            gear = layout.wheel_inertia[k] * (geared[layout.wheel_side[k]] - sign * joint_qd[dof]) / params.dt
-        joint_f[dof] = sign * (tau + gear)
+        drive = tau
+        if layout.sides_coupled != 0:  # the side's motor torque through the chain: its wheels at one speed, friction aside
+            drive = layout.wheel_inertia[k] * (geared[layout.wheel_side[k]] - sign * joint_qd[dof]) / params.dt
+        joint_f[dof] = sign * drive
         wheel_torque[world, k] = tau
 
 
