@@ -94,26 +94,17 @@ def drive(robot: str, linear: float, angular: float, seconds: float, terrain: st
 
 
 def survey(robot: str | Path, linear: float, angular: float, seconds: float, starts: int,
-           terrain: str | None = None, stiffness_scale: float = 1.0, contact: dict | None = None,
-           sim_dt: float | None = None) -> dict:
+           terrain: str | None = None, stiffness_scale: float = 1.0) -> dict:
     """:func:`drive`'s turn over the test set's first ``starts`` starts at once: how much of the commanded yaw each
     world turned (its quartiles), and how many turned less than half of it. ``stiffness_scale`` multiplies every
-    world's contact stiffness after the reset, ``contact`` sets :class:`~atrv_warp.sim.config.ContactConfig` fields and
-    ``sim_dt`` the substep (studies of the ground contact, not shipped settings)."""
-    import dataclasses
-
+    world's contact stiffness after the reset (a study of the ground contact, not a shipped setting)."""
     import torch
     import warp as wp
 
-    from atrv_warp.sim.config import ContactConfig, SimConfig
     from atrv_warp.task.env import RoverEnv
     from atrv_warp.task.evaluation import EVAL_SEED
 
     options = {"terrain": terrain} if terrain else {}
-    if contact:
-        options["contact"] = dataclasses.replace(ContactConfig(), **contact)
-    if sim_dt:
-        options["sim"] = SimConfig(sim_dt=sim_dt)
     env = RoverEnv(starts, task="nav_deploy", robot=robot, **options)
     env.set_seed(EVAL_SEED)
     td = env.reset()
@@ -131,7 +122,7 @@ def survey(robot: str | Path, linear: float, angular: float, seconds: float, sta
         previous = now
     ratio = yaw / (angular * steps * sim.sim_cfg.step_dt)
     q = torch.quantile(ratio, torch.tensor([0.25, 0.5, 0.75], dtype=torch.float64)).tolist()
-    return {"starts": starts, "stiffness_scale": stiffness_scale, "contact": contact or {}, "sim_dt": sim.sim_cfg.sim_dt,
+    return {"starts": starts, "stiffness_scale": stiffness_scale, "sim_dt": sim.sim_cfg.sim_dt,
             "turned_over_commanded": {"q25": q[0], "median": q[1], "q75": q[2]},
             "under_half": float((ratio < 0.5).double().mean())}
 
