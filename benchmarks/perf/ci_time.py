@@ -1,0 +1,171 @@
+"""Where CI's time goes: ``.ci/run`` end to end on a clean clone of each revision, one after the other, on this host.
+
+    python benchmarks/perf/ci_time.py b2f1452 HEAD        # two revisions, in that order (the 2-core CI box: ~70 + ~40 min)
+    python benchmarks/perf/ci_time.py HEAD --logs /tmp/ci  # keep each run's whole log there
+    python benchmarks/perf/ci_time.py HEAD --append        # after the runs already in the results file
+
+For each revision, in turn: ``git clone`` this repository into a temporary folder, check the revision out, and run
+``bash .ci/run`` there as CI does (``CI=true``, its own fresh virtualenvs and empty Warp kernel cache; pip's download
+cache is reused), with ``PYTEST_ADDOPTS`` adding ``--durations=30`` (older revisions do not print them) and a JUnit
+report. The script timestamps every line of the output as it arrives, so a phase's seconds (Chromium, each install,
+ruff, the docs, pytest, the main command) are the time from its ``== NAME`` header to the next, the same rule for every
+revision whatever its ``.ci/run`` prints itself. From the JUnit report it keeps each test file's total and the test
+functions that ran (their parameters folded), so a later revision can show that nothing was dropped.
+
+Measure on an idle machine: two busy processes on two cores slow each other several times over. The figures do not
+depend on the dynamics (only on the code and the host), so the results file records no dynamics fingerprint.
+
+Prints each phase as it ends and writes ``benchmarks/results/ci_time.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
+
+from _common import load_results, markdown_table, write_results
+
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
+ROOT = Path(__file__).resolve().parents[2]
+RESULTS = ROOT / "benchmarks" / "results"
+HEADER = re.compile(r"^== (?P<name>.+?) \(\d\d:\d\d:\d\d\)\s*$")
+"""A phase's first line in ``.ci/run``'s output: ``== NAME (HH:MM:SS)``."""
+DURATION = re.compile(r"^\s*(?P<s>[\d.]+)s (?P<when>call|setup|teardown)\s+(?P<test>\S+)")
+SUMMARY = re.compile(r"^=+ (?P<counts>.*\d+ (passed|failed).*) in (?P<s>[\d.]+)s")
+
+
+def _git(*args: str, cwd: Path = ROOT) -> str:
+    return subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, check=True).stdout.strip()
+
+
+def phases(lines: list[tuple[float, str]], end: float) -> list[dict]:
+    """Each ``== NAME`` phase of a timestamped log (seconds since the start, line) and its seconds, to ``end``."""
+    heads = [(t, m["name"]) for t, line in lines if (m := HEADER.match(line))]
+    return [{"phase": name, "seconds": round((heads[i + 1][0] if i + 1 < len(heads) else end) - t, 1)}
+            for i, (t, name) in enumerate(heads)]
+
+
+def slowest(lines: list[str]) -> list[dict]:
+    """pytest's ``--durations`` rows (seconds, call/setup/teardown, test id), slowest first."""
+    rows = [m for line in lines if (m := DURATION.match(line))]
+    return [{"seconds": float(m["s"]), "when": m["when"], "test": m["test"]} for m in rows]
+
+
+def junit(path: Path) -> dict:
+    """From a JUnit report: items run, the test functions (module::name, parameters folded), seconds per file."""
+    if not path.is_file():
+        return {"items": 0, "functions": [], "files": []}
+    cases = ET.parse(path).getroot().iter("testcase")
+    items, functions, files = 0, set(), {}
+    for case in cases:
+        items += 1
+        module = case.get("classname", "").replace(".", "/")
+        file = module.split("/")[0] + "/" + module.split("/")[1] + ".py" if "/" in module else module
+        functions.add(f"{case.get('classname')}::{case.get('name', '').split('[')[0]}")
+        files[file] = files.get(file, 0.0) + float(case.get("time") or 0.0)
+    by_time = sorted(files.items(), key=lambda kv: -kv[1])
+    return {"items": items, "functions": sorted(functions),
+            "files": [{"file": f, "seconds": round(s, 1)} for f, s in by_time]}
+
+
+def run_ci(revision: str, tmp: Path, logs: Path | None) -> dict:
+    """``.ci/run`` on a clean clone of ``revision``: its phases, pytest's summary and slowest tests, the JUnit data."""
+    sha = _git("rev-parse", revision)
+    repo = tmp / f"repo-{sha[:8]}"
+    subprocess.run(["git", "clone", "-q", str(ROOT), str(repo)], check=True)
+    _git("checkout", "-q", sha, cwd=repo)
+    report = tmp / f"junit-{sha[:8]}.xml"
+    env = {**os.environ, "CI": "true", "PYTEST_ADDOPTS": f"--durations=30 --junitxml={report}"}
+    print(f"\n{revision} ({sha[:8]}): bash .ci/run", flush=True)
+    started = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    t0 = time.monotonic()
+    lines: list[tuple[float, str]] = []
+    with subprocess.Popen(["bash", ".ci/run"], cwd=repo, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                          text=True, errors="replace", stdin=subprocess.DEVNULL) as proc:
+        for line in proc.stdout:
+            lines.append((time.monotonic() - t0, line.rstrip("\n")))
+            if HEADER.match(line):
+                print(f"  {lines[-1][0]:7.0f} s  {line.strip()}", flush=True)
+    total = time.monotonic() - t0
+    if logs is not None:
+        logs.mkdir(parents=True, exist_ok=True)
+        (logs / f"ci-{sha[:8]}.log").write_text("".join(f"{t:8.1f} {line}\n" for t, line in lines))
+    text = [line for _, line in lines]
+    summary = next((m for line in reversed(text) if (m := SUMMARY.match(line))), None)
+    print(f"  {total:7.0f} s  exit {proc.returncode}: {summary['counts'] if summary else 'no pytest summary'}")
+    return {"revision": revision, "commit": sha, "started": started, "exit_code": proc.returncode, "total_s": round(total, 1),
+            "phases": phases(lines, total), "pytest_summary": summary["counts"] if summary else None,
+            "pytest_s": float(summary["s"]) if summary else None, "slowest": slowest(text), **junit(report)}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("revisions", nargs="+", help="revisions to run, in this order (e.g. the old main, then HEAD)")
+    parser.add_argument("--logs", type=Path, default=None, help="a folder to keep each run's timestamped log in")
+    parser.add_argument("--append", action="store_true", help="keep the runs already in --out and add these after them "
+                                                                "(the same host, one after the other)")
+    parser.add_argument("--out", default=str(RESULTS / "ci_time.json"))
+    args = parser.parse_args()
+    runs = json.loads(Path(args.out).read_text())["runs"] if args.append else []
+    with tempfile.TemporaryDirectory(prefix="atrv-ci-time-") as tmp:
+        runs += [run_ci(rev, Path(tmp), args.logs) for rev in args.revisions]
+    first, last = runs[0], runs[-1]
+    dropped = sorted(set(first["functions"]) - set(last["functions"]))
+    result = {"machine": {"cpus": os.cpu_count(), "platform": sys.platform}, "runs": runs,
+              "dropped_functions": dropped, "added_functions": sorted(set(last["functions"]) - set(first["functions"]))}
+    for run in runs:
+        print(f"{run['revision']}: {run['total_s']:.0f} s, {run['items']} items, {len(run['functions'])} functions")
+    if len(runs) > 1:
+        print(f"{last['total_s'] / first['total_s']:.0%} of {first['revision']}'s time; "
+              f"functions run before and not now: {dropped or 'none'}")
+    write_results(args.out, result, version=VERSION, dynamics=False)
+    print(f"wrote {args.out}")
+    return 0 if all(run["exit_code"] == 0 for run in runs) else 1
+
+
+# --- the tables the docs draw ---------------------------------------------------------------------------------------
+
+def ci_phases() -> str:
+    """Each phase's seconds for every revision measured, and the last against the first."""
+    runs = load_results("ci_time.json")["runs"]
+    names = list(dict.fromkeys(p["phase"] for run in runs for p in run["phases"]))
+    seconds = [{p["phase"]: p["seconds"] for p in run["phases"]} for run in runs]
+    rows = [[name, *(f"{s[name]:.0f}" if name in s else "—" for s in seconds)] for name in names]
+    rows.append(["**all of `.ci/run`**", *(f"**{run['total_s']:.0f}**" for run in runs)])
+    rows.append(["tests run (items / functions)", *(f"{run['items']} / {len(run['functions'])}" for run in runs)])
+    header = ["phase (seconds)", *(f"`{run['commit'][:7]}`" for run in runs)]
+    if len(runs) > 1:
+        header.append("last / first")
+        for row, name in zip(rows, [*names, None, None], strict=True):
+            a, b = (seconds[0].get(name), seconds[-1].get(name)) if name else (None, None)
+            row.append(f"{b / a:.2f}" if a and b is not None else "")
+        rows[-2][-1] = f"**{runs[-1]['total_s'] / runs[0]['total_s']:.2f}**"
+    return markdown_table(header, ["---", *["---:"] * (len(header) - 1)], rows)
+
+
+def ci_slowest() -> str:
+    """The 30 slowest test phases of the last revision measured (pytest's ``--durations=30``)."""
+    run = load_results("ci_time.json")["runs"][-1]
+    rows = [[f"{r['seconds']:.1f}", r["when"], f"`{r['test']}`"] for r in run["slowest"]]
+    return markdown_table(["seconds", "phase", "test"], ["---:", "---", "---"], rows)
+
+
+TABLES = {"ci_phases": ci_phases, "ci_slowest": ci_slowest}
+"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``."""
+
+
+if __name__ == "__main__":
+    sys.exit(main())
