@@ -16,7 +16,8 @@ A measured figure lives in its results file alone (``benchmarks/results/*.json``
   results file's record, plus the sha256 of the results files it is drawn from).
 
 Every figure a page cites is checked against the code as it is now (:func:`status`): the benchmark script's
-``VERSION``, the dynamics, driver and task fingerprints (each recomputed once per build), the sha256 of each policy
+``VERSION``, the dynamics, driver and task fingerprints (each computed once per build, and kept for the next process
+while the package's files are the same: :data:`FINGERPRINT_CACHE`), the sha256 of each policy
 and robot file it ran and, for a picture, of the results files it was drawn from (themselves current). A figure that
 no longer matches, or records no provenance, fails the build unless the page marks it historical with a line
 ``{{ historical FILE }}`` (a picture: ``NAME.png`` as its link writes it), which renders as a note with its date and
@@ -41,6 +42,7 @@ import hashlib
 import importlib
 import importlib.util
 import itertools
+import json
 import os
 import re
 import subprocess
@@ -108,12 +110,60 @@ TABLES = benchmark_tables()
 
 # --- provenance ---------------------------------------------------------------------------------
 
+FINGERPRINT_CACHE = "ATRV_WARP_FINGERPRINT_CACHE"
+"""The variable naming the file where the fingerprints of the code as it is are kept between processes (default
+``$XDG_CACHE_HOME/atrv_warp/fingerprints.json``, else ``~/.cache/...``): the docs build computes them, and the tests
+that render the pages read them instead of running the same rollouts again."""
+
+
+def code_digest() -> str:
+    """What the fingerprints are a function of: the sha256 of every file of the package (its code, robot files,
+    policies and configs), with the Python, Warp, Newton, torch and numpy versions and the machine."""
+    import platform
+    from importlib import metadata
+
+    digest = hashlib.sha256()
+    for path in sorted(p for p in (ROOT / "atrv_warp").rglob("*") if p.is_file() and "__pycache__" not in p.parts):
+        digest.update(str(path.relative_to(ROOT)).encode() + b"\0" + path.read_bytes() + b"\0")
+    versions = [platform.python_version(), platform.machine()]
+    versions += [metadata.version(name) for name in ("warp-lang", "newton", "torch", "numpy")]
+    digest.update(" ".join(versions).encode())
+    return digest.hexdigest()
+
+
+def fingerprint_cache() -> Path:
+    """The file of :data:`FINGERPRINT_CACHE`."""
+    named = os.environ.get(FINGERPRINT_CACHE)
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return Path(named) if named else base / "atrv_warp" / "fingerprints.json"
+
+
 def _fingerprint_now(module: str, function: str) -> Callable[[], str]:
+    key = f"{module}.{function}"
+
     @functools.cache
     def now() -> str:
-        return getattr(importlib.import_module(module), function)()
+        path, code = fingerprint_cache(), code_digest()
+        try:
+            kept = json.loads(path.read_text())
+        except (OSError, ValueError):
+            kept = {}
+        if not isinstance(kept, dict) or kept.get("code") != code:
+            kept = {"code": code, "values": {}}
+        if key not in kept["values"]:
+            kept["values"][key] = getattr(importlib.import_module(module), function)()
+            try:  # written whole, then renamed: another process reads the old file or the new one
+                path.parent.mkdir(parents=True, exist_ok=True)
+                tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+                tmp.write_text(json.dumps(kept))
+                tmp.replace(path)
+            except OSError:
+                pass  # a read-only home: computed, not kept
+        return kept["values"][key]
 
-    now.__doc__ = f"``{module}.{function}()`` of the code as it is now (computed once per process)."
+    now.__doc__ = (f"``{key}()`` of the code as it is now: computed once per process, and kept in "
+                   f"{FINGERPRINT_CACHE} for the next process while the package's files are the same "
+                   "(:func:`code_digest`).")
     return now
 
 

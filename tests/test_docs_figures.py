@@ -156,6 +156,24 @@ def test_the_dynamics_fingerprint_is_behaviour():
     assert dynamics_fingerprint(contact=ContactConfig(friction_law="viscous")) != now
 
 
+def test_a_fingerprint_is_read_from_the_build_while_the_code_is_the_same(hooks, tmp_path, monkeypatch):
+    """The docs build keeps its fingerprints (``ATRV_WARP_FINGERPRINT_CACHE``); a later process reads them while the
+    package's files are the same (:func:`code_digest`), and computes them again otherwise."""
+    cache = tmp_path / "fingerprints.json"
+    monkeypatch.setenv(hooks.FINGERPRINT_CACHE, str(cache))
+    code = hooks.code_digest()
+    assert code == hooks.code_digest() and len(code) == 64
+    cache.write_text(json.dumps({"code": code, "values": {"os.getcwd": "as the build computed it"}}))
+    assert hooks._fingerprint_now("os", "getcwd")() == "as the build computed it"  # noqa: SLF001 - the factory
+    cache.write_text(json.dumps({"code": "other code", "values": {"os.getcwd": "stale"}}))
+    import os
+
+    assert hooks._fingerprint_now("os", "getcwd")() == os.getcwd()  # noqa: SLF001
+    assert json.loads(cache.read_text()) == {"code": code, "values": {"os.getcwd": os.getcwd()}}
+    cache.write_text("{not json")  # a damaged file is computed again, not an error
+    assert hooks._fingerprint_now("os", "getcwd")() == os.getcwd()  # noqa: SLF001
+
+
 def test_the_command_table_comes_from_the_parsers():
     """Every installed command is in the table, and every argument of every argparse tool is listed."""
     import tomllib
