@@ -1,15 +1,28 @@
-"""Shared test helpers: subprocesses in the repository root, free ports, a tiny environment.
+"""Shared test helpers: commands run in this process or a fresh one, the shared smoke training run, free ports, a tiny
+environment, and the tiers.
 
-Tiers: ``python -m pytest -m "not slow"`` is the quick tier for contributors; tests marked ``slow``
-train, start Ray clusters or live ROS 2 nodes, or open the browser. ``python -m pytest`` runs all.
+Tiers: ``python -m pytest -m "not slow"`` is the quick tier for contributors; tests marked ``slow`` train, start Ray
+clusters or live ROS 2 nodes, or open the browser. ``python -m pytest`` runs all. The quick tier trains nothing and
+starts no Ray cluster and no ROS 2 node: a test that asks for a fixture that does (:data:`HEAVY_FIXTURES`) without the
+``slow`` mark stops the collection, naming it, and a quick test whose code reaches the training loop fails there
+(:func:`_no_training_in_the_quick_tier`).
+
+The budget (docs/contributing.md): CI within 45 minutes, the quick tier within 10; a new slow test says in its
+docstring or its mark's comment why it must be slow. ``python -m pytest --durations=30`` shows what a change costs.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import random
+import runpy
+import signal
 import subprocess
 import sys
+import traceback
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -19,6 +32,10 @@ from atrv_warp.integrations.viewer import free_port as _free_port
 from atrv_warp.integrations.viewer import port_open
 
 ROOT = Path(__file__).resolve().parent.parent
+SMOKE = "smoke"  # the preset shipped inside the package
+
+HEAVY_FIXTURES = {"smoke_run": "trains", "ros_env": "starts ROS 2 nodes", "no_ray_before": "starts a Ray cluster"}
+"""Fixtures a test may use only when it is marked ``slow`` (name -> what it does)."""
 
 
 def _run(cmd: list[str], *, check: bool = True, env: dict | None = None,
@@ -29,6 +46,65 @@ def _run(cmd: list[str], *, check: bool = True, env: dict | None = None,
     return proc
 
 
+@contextlib.contextmanager
+def _process_state_kept():
+    """What a command may change in its process and a fresh interpreter would have thrown away, put back after it:
+    the environment, the working folder, ``sys.argv`` and ``sys.path``, torch's thread count and random state, the
+    CPU affinity (a trainer pins itself), SIGINT/SIGTERM handlers, the warning filters and the global random states."""
+    import numpy as np
+    import torch
+
+    environ, cwd, argv, path = dict(os.environ), os.getcwd(), list(sys.argv), list(sys.path)
+    threads, torch_rng, np_rng, py_rng = torch.get_num_threads(), torch.get_rng_state(), np.random.get_state(), \
+        random.getstate()
+    cores = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with warnings.catch_warnings():
+            # runpy's note when the module was imported before (an earlier test did), harmless here
+            warnings.filterwarnings("ignore", "'.*' found in sys.modules after import of package", RuntimeWarning)
+            yield
+    finally:
+        os.environ.clear()
+        os.environ.update(environ)
+        os.chdir(cwd)
+        sys.argv[:], sys.path[:] = argv, path
+        torch.set_num_threads(threads)
+        torch.set_rng_state(torch_rng)
+        np.random.set_state(np_rng)
+        random.setstate(py_rng)
+        if cores is not None:
+            os.sched_setaffinity(0, cores)
+        for s, handler in handlers.items():
+            signal.signal(s, handler)
+
+
+def run_in_process(module: str, *args: str) -> subprocess.CompletedProcess:
+    """``python -m module args`` in this process, in the repository root, as the interpreter would run it: its
+    output captured, its exit status from ``SystemExit`` (a message exits 1 on stderr), an uncaught exception's
+    traceback on stderr with status 1; what it changed in the process put back (:func:`_process_state_kept`).
+    Saves the ~10 s a fresh interpreter spends importing torch, Warp and Newton."""
+    out, err = io.StringIO(), io.StringIO()
+    code = 0
+    with _process_state_kept(), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        os.chdir(ROOT)
+        sys.argv[:] = [module, *args]
+        try:
+            runpy.run_module(module, run_name="__main__", alter_sys=True)
+        except SystemExit as done:
+            if isinstance(done.code, int) or done.code is None:
+                code = done.code or 0
+            else:
+                print(done.code, file=sys.stderr)
+                code = 1
+        except KeyboardInterrupt:
+            raise
+        except Exception:  # noqa: BLE001 - as the interpreter does: the traceback, status 1
+            traceback.print_exc()
+            code = 1
+    return subprocess.CompletedProcess([sys.executable, "-m", module, *args], code, out.getvalue(), err.getvalue())
+
+
 @pytest.fixture(scope="session")
 def run_command() -> Callable[..., subprocess.CompletedProcess]:
     """``run_command(cmd, check=True, env=None, timeout=None)``: run ``cmd`` in the repository root,
@@ -36,14 +112,34 @@ def run_command() -> Callable[..., subprocess.CompletedProcess]:
     return _run
 
 
-@pytest.fixture(scope="session")
-def run_module() -> Callable[..., subprocess.CompletedProcess]:
-    """``run_module("atrv_warp.train", *args, check=True)``: ``python -m`` with this interpreter."""
+@pytest.fixture
+def run_module(request) -> Callable[..., subprocess.CompletedProcess]:
+    """``run_module("atrv_warp.evaluate", *args, check=True, env=None, timeout=None)``: ``python -m`` that module,
+    (``check``) failing with its last output unless it exits 0. A quick test runs it in this process
+    (:func:`run_in_process`); a slow one (training pins cores and starts workers), or one that passes ``env``, in a
+    fresh interpreter."""
+    fresh = request.node.get_closest_marker("slow") is not None
 
     def run_module(*args: str, check: bool = True, env: dict | None = None, timeout: float | None = None):
-        return _run([sys.executable, "-m", *args], check=check, env=env, timeout=timeout)
+        if fresh or env is not None:
+            return _run([sys.executable, "-m", *args], check=check, env=env, timeout=timeout)
+        proc = run_in_process(*args)
+        if check and proc.returncode != 0:
+            raise AssertionError(f"python -m {' '.join(args)} failed ({proc.returncode}):\n{proc.stdout[-3000:]}\n"
+                                 f"{proc.stderr[-3000:]}")
+        return proc
 
     return run_module
+
+
+@pytest.fixture(scope="session")
+def smoke_run(tmp_path_factory) -> tuple[Path, str]:
+    """One smoke training run (``--config smoke``, with progress) shared by every test that reads a trained run, in a
+    fresh interpreter: ``(its run folder, its stdout + stderr)``. Tests copy what they change."""
+    out = tmp_path_factory.mktemp("runs")
+    proc = _run([sys.executable, "-m", "atrv_warp.train", "--config", SMOKE, f"out_dir={out}",
+                 "--logging.progress", "True"])
+    return out / "smoke", proc.stdout + proc.stderr
 
 
 @pytest.fixture(scope="session")
@@ -61,9 +157,9 @@ def port_free() -> Callable[[int], bool]:
 @pytest.fixture
 def tiny_env():
     """A four-world reference-task environment, seeded 0, reset."""
-    from atrv_warp import ATRVjrEnv
+    from atrv_warp import RoverEnv
 
-    env = ATRVjrEnv(4, seed=0)
+    env = RoverEnv(4, seed=0)
     env.reset()
     return env
 
@@ -85,3 +181,40 @@ def ros_env():
             os.environ.pop(k, None)
         else:
             os.environ[k] = v
+
+
+# --- the tiers ---------------------------------------------------------------------------------------------------
+
+def heavy_without_slow(items) -> list[str]:
+    """The collected tests that use a :data:`HEAVY_FIXTURES` fixture without the ``slow`` mark, one line each."""
+    return [f"{item.nodeid} uses the fixture {name!r} ({why}) but is not marked slow"
+            for item in items if item.get_closest_marker("slow") is None
+            for name, why in HEAVY_FIXTURES.items() if name in getattr(item, "fixturenames", ())]
+
+
+def pytest_collection_modifyitems(config, items):
+    wrong = heavy_without_slow(items)
+    if wrong:
+        raise pytest.UsageError("the quick tier trains nothing and starts no node or cluster:\n  " + "\n  ".join(wrong))
+
+
+class TrainingInTheQuickTier(AssertionError):
+    """A test not marked ``slow`` reached the training loop."""
+
+
+@pytest.fixture(autouse=True)
+def _no_training_in_the_quick_tier(request, monkeypatch):
+    """In a test not marked ``slow``, the training loop (``TrainLoop.run``, in this process) raises
+    :class:`TrainingInTheQuickTier` instead of training; a refusal before any work still runs as it would."""
+    if request.node.get_closest_marker("slow") is not None:
+        yield
+        return
+    from atrv_warp.rl.loop import TrainLoop
+
+    def refuse(self, *args, **kwargs):
+        raise TrainingInTheQuickTier(f"{request.node.nodeid} trains but is not marked slow: mark it "
+                                     "@pytest.mark.slow (and say why it must train), or use the shared smoke_run")
+
+    monkeypatch.setattr(TrainLoop, "run", refuse)
+    yield
+

@@ -1,4 +1,4 @@
-"""Command-line tools: every ``[project.scripts]`` entry resolves to a function, and
+"""Command-line tools: every ``[project.scripts]`` entry is a function of ``atrv_warp.cli`` that answers ``--help``, and
 ``atrv-baseline`` is ``evaluate --baseline``."""
 
 from __future__ import annotations
@@ -13,13 +13,25 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_every_script_entry_point_resolves():
+def test_every_console_script_points_into_cli_or_deploy_and_answers_help(capsys):
+    """Every ``[project.scripts]`` entry is a function in ``atrv_warp.cli`` (or the robot-side ``atrv_warp.deploy``)
+    that answers ``--help``."""
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
     assert {"atrv-train", "atrv-evaluate", "atrv-baseline"} <= scripts.keys()
-    for name, target in scripts.items():
-        module, _, func = target.partition(":")
-        assert callable(getattr(importlib.import_module(module), func)), name
     assert scripts["atrv-baseline"] == "atrv_warp.cli.evaluate:baseline_main"
+    assert scripts["atrv-deploy"] == "atrv_warp.deploy:main"  # the robot-side package ships its own command
+    for script, target in scripts.items():
+        module, _, func = target.partition(":")
+        assert module.startswith("atrv_warp.cli.") or module == "atrv_warp.deploy", script
+        main = getattr(importlib.import_module(module), func)
+        assert callable(main), script
+        argv = [script, "--help"] if module.endswith(".ros") else ["--help"]  # the ROS tools take rclpy's argv
+        try:
+            code = main(argv)
+        except SystemExit as stop:  # argparse's --help
+            code = stop.code
+        assert code in (0, None), script
+        assert capsys.readouterr().out.strip(), f"{script} --help printed nothing"
 
 
 def test_atrv_baseline_is_evaluate_baseline(tmp_path, capsys):

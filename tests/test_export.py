@@ -55,9 +55,8 @@ def test_exported_policy_runs_with_torch_alone_and_matches(tmp_path):
     assert spec["action"]["scale"] == [20.0, 20.0] and spec["action"]["kind"] == "torque"
 
 
-def test_export_cli_and_bad_input(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "atrv_warp.export", str(tmp_path / "p.pt2")], capture_output=True,
-                          text=True, check=False)
+def test_export_cli_and_bad_input(tmp_path, run_module):
+    proc = run_module("atrv_warp.export", str(tmp_path / "p.pt2"), check=False)
     assert proc.returncode == 0 and (tmp_path / "p.pt2").is_file(), proc.stderr[-2000:]
     example = subprocess.run([sys.executable, str(ROOT / "examples" / "run_exported_policy.py"),
                               str(tmp_path / "p.pt2")], capture_output=True, text=True, check=False)
@@ -69,8 +68,7 @@ def test_export_cli_and_bad_input(tmp_path):
         export_policy(None, tmp_path / "x.onnx")
     assert not (tmp_path / "x.pt2").exists()
     before = (tmp_path / "p.pt2").read_bytes()  # an existing file is kept unless --force
-    again = subprocess.run([sys.executable, "-m", "atrv_warp.export", "nav", str(tmp_path / "p.pt2")],
-                           capture_output=True, text=True, check=False)
+    again = run_module("atrv_warp.export", "nav", str(tmp_path / "p.pt2"), check=False)
     assert again.returncode == 2 and "p.pt2 exists: pass --force to overwrite it" in again.stderr, again.stderr
     assert (tmp_path / "p.pt2").read_bytes() == before
     export_policy("nav", tmp_path / "p.pt2", force=True)
@@ -133,15 +131,14 @@ def test_the_shipped_nav_policy_exports_its_whole_contract_and_runs_from_the_fil
     assert ((obs >= low) & (obs <= high)).all() and (obs == high).any()  # the bounds the env clips to
 
 
-def test_export_refuses_a_policy_that_does_not_fit_its_task(tmp_path):
+def test_export_refuses_a_policy_that_does_not_fit_its_task(tmp_path, run_module):
     """A nav policy from before the task observed its last actions (26 values, the task 32): one line, exit 2,
     nothing written."""
     from atrv_warp.policy import make_actor, save_policy
 
     old = tmp_path / "old_nav.pt"
     save_policy(make_actor(16, 1, obs_dim=26), old, width=16, depth=1, meta={"task": "nav"})
-    proc = subprocess.run([sys.executable, "-m", "atrv_warp.export", str(old), str(tmp_path / "old.pt2")],
-                          capture_output=True, text=True, check=False)
+    proc = run_module("atrv_warp.export", str(old), str(tmp_path / "old.pt2"), check=False)
     assert proc.returncode == 2, proc.stderr[-2000:]
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "observes 26 values, task 'nav' observes 32" in lines[0], proc.stderr

@@ -1,8 +1,6 @@
 """URDF loading, validation, model building and inspection."""
 
 import dataclasses
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -111,9 +109,8 @@ def test_tree_and_table():
     assert "10 bodies, 10 degrees of freedom" in table
 
 
-def test_model_cli():
-    out = subprocess.run([sys.executable, "-m", "atrv_warp.model", "--variant", "reference"],
-                         capture_output=True, text=True, check=True).stdout
+def test_model_cli(run_module):
+    out = run_module("atrv_warp.model", "--variant", "reference").stdout
     assert "10 bodies, 10 degrees of freedom; mass 54.00 kg" in out
     assert "left_front_wheel_link" in out
 

@@ -293,11 +293,8 @@ def test_evaluate_refuses_before_any_step(tmp_path, capsys, monkeypatch):
     assert len(err) == 1 and "python -m atrv_warp.train --config nav_deploy" in err[0], err
 
 
-def test_train_refuses_to_start_from_a_checkpoint_of_another_kind(tmp_path):
+def test_train_refuses_to_start_from_a_checkpoint_of_another_kind(tmp_path, run_module):
     """``train --config nav init_from=<a nav_deploy checkpoint>``: exit 2 in one line, before any step."""
-    import subprocess
-    import sys
-
     from atrv_warp.policy import make_actor, policy_payload
     from atrv_warp.storage import atomic_save
 
@@ -305,8 +302,8 @@ def test_train_refuses_to_start_from_a_checkpoint_of_another_kind(tmp_path):
     ck = {"frames": 0, "updates": 0, "best_success": -1.0, "elapsed_s": 0.0, "next_eval": 0, "stats_ready": False,
           "rng": torch.get_rng_state(), "policy": policy_payload(actor, width=8, depth=1, meta={"task": "nav_deploy"})}
     atomic_save(ck, tmp_path / "checkpoint.pt")
-    proc = subprocess.run([sys.executable, "-m", "atrv_warp.train", "--config", "nav", f"out_dir={tmp_path / 'runs'}",
-                           f"init_from={tmp_path / 'checkpoint.pt'}"], capture_output=True, text=True, check=False)
+    proc = run_module("atrv_warp.train", "--config", "nav", f"out_dir={tmp_path / 'runs'}",
+                      f"init_from={tmp_path / 'checkpoint.pt'}", check=False)
     err = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(err) == 1 and "commands twist but task 'nav' takes torque" in err[0], err
     assert not (tmp_path / "runs").exists()

@@ -95,15 +95,14 @@ def no_ray_before():
     return shm_entries()
 
 
-def test_without_the_extra_collector_ray_stops_before_any_work(tmp_path, run_command):
+def test_without_the_extra_collector_ray_stops_before_any_work(tmp_path, capsys, monkeypatch):
     """With ``ray`` not importable, one line says how to install the extra, and nothing is written."""
-    code = ("import sys; sys.modules['ray'] = None\n"  # as if not installed: find_spec('ray') is None
-            "from atrv_warp.cli.train import main\n"
-            f"sys.exit(main(['--config', 'smoke', 'collector=ray', 'out_dir={tmp_path}']))")
-    proc = run_command([sys.executable, "-c", code], check=False)
-    assert proc.returncode == 2, proc.stderr
+    from atrv_warp.cli.train import main
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # as if not installed: find_spec('ray') is None
+    assert main(["--config", "smoke", "collector=ray", f"out_dir={tmp_path}"]) == 2
     expected = 'python -m atrv_warp.train: error: collector=ray needs Ray, the optional extra [ray]: pip install -e ".[ray]"'
-    assert proc.stderr.strip().splitlines() == [expected]
+    assert capsys.readouterr().err.strip().splitlines() == [expected]
     assert not any(tmp_path.iterdir())
 
 

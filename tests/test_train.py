@@ -83,13 +83,6 @@ def test_cli_rejects_bad_config_before_work(tmp_path, run_module, capsys):
     assert "(default: smoke)" in helped  # the fields' defaults are the preset's
 
 
-@pytest.fixture(scope="module")
-def smoke_run(tmp_path_factory, run_module):
-    out = tmp_path_factory.mktemp("runs")
-    proc = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={out}", "--logging.progress", "True")
-    return out / "smoke", proc.stdout + proc.stderr
-
-
 @pytest.mark.slow  # trains
 def test_smoke_training_end_to_end(smoke_run):
     run_dir, stdout = smoke_run
@@ -149,6 +142,7 @@ def test_resume_continues_step_counter(smoke_run, tmp_path, run_module):
     assert again.returncode != 0 and "already holds a run" in again.stderr
 
 
+@pytest.mark.slow  # trains: a fine-tune of the shared smoke run
 def test_init_from_fine_tunes_a_new_run_under_randomization(smoke_run, tmp_path, run_module):
     """``init_from=``: a new run starts from another run's networks (here continued under the ``wide``
     randomization): its first evaluation already drives like the source, and it counts its own frames."""

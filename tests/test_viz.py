@@ -1,7 +1,5 @@
 """Rerun recording: entities, row counts, logged poses equal to the simulator's; disabled = no work."""
 
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -106,12 +104,9 @@ def test_rerun_logger_scalars(tmp_path):
     assert sorted(values) == pytest.approx([0.1, 0.5, 0.9])
 
 
-def test_evaluate_cli_writes_rrd(tmp_path):
+def test_evaluate_cli_writes_rrd(tmp_path, run_module):
     path = tmp_path / "cli.rrd"
-    proc = subprocess.run([sys.executable, "-m", "atrv_warp.evaluate", "--baseline", "--episodes", "3",
-                           "--rerun", str(path), "--worlds", "0", "2"], check=False, capture_output=True,
-                          text=True)
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    run_module("atrv_warp.evaluate", "--baseline", "--episodes", "3", "--rerun", str(path), "--worlds", "0", "2")
     data = read_rrd(path)
     assert "/world_2/rover/center_link" in data and "/world_1/rover/center_link" not in data
 
@@ -219,10 +214,10 @@ def test_recording_opens_with_the_3d_view_leading(tmp_path):
 
 
 @pytest.mark.parametrize(("name", "message"), [("eval.txt", "must end in .rrd"), ("folder.rrd", "is a folder")])
-def test_unwritable_recording_fails_before_any_simulation(tmp_path, name, message):
+def test_unwritable_recording_fails_before_any_simulation(tmp_path, name, message, run_module):
     (tmp_path / "folder.rrd").mkdir()
-    proc = subprocess.run([sys.executable, "-m", "atrv_warp.evaluate", "--baseline", "--episodes", "2",
-                           "--rerun", str(tmp_path / name)], check=False, capture_output=True, text=True)
+    proc = run_module("atrv_warp.evaluate", "--baseline", "--episodes", "2", "--rerun", str(tmp_path / name),
+                      check=False)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert lines == [f"python -m atrv_warp.evaluate: error: --rerun: recording {tmp_path / name}: {message}"], lines
