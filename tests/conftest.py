@@ -112,15 +112,15 @@ def run_command() -> Callable[..., subprocess.CompletedProcess]:
     return _run
 
 
-@pytest.fixture
-def run_module(request) -> Callable[..., subprocess.CompletedProcess]:
-    """``run_module("atrv_warp.evaluate", *args, check=True, env=None, timeout=None)``: ``python -m`` that module,
-    (``check``) failing with its last output unless it exits 0. A quick test runs it in this process
-    (:func:`run_in_process`); a slow one (training pins cores and starts workers), or one that passes ``env``, in a
-    fresh interpreter."""
-    fresh = request.node.get_closest_marker("slow") is not None
+@pytest.fixture(scope="session")
+def run_module() -> Callable[..., subprocess.CompletedProcess]:
+    """``run_module("atrv_warp.evaluate", *args, check=True, env=None, timeout=None, fresh=False)``: ``python -m``
+    that module, (``check``) failing with its last output unless it exits 0: in this process
+    (:func:`run_in_process`), or in a fresh interpreter where the test passes ``env`` or ``fresh=True`` (a command
+    that must start from nothing: one killed from outside, one whose imports are the point)."""
 
-    def run_module(*args: str, check: bool = True, env: dict | None = None, timeout: float | None = None):
+    def run_module(*args: str, check: bool = True, env: dict | None = None, timeout: float | None = None,
+                   fresh: bool = False):
         if fresh or env is not None:
             return _run([sys.executable, "-m", *args], check=check, env=env, timeout=timeout)
         proc = run_in_process(*args)
