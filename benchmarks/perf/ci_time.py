@@ -144,16 +144,28 @@ def ci_phases() -> str:
     names = list(dict.fromkeys(p["phase"] for run in runs for p in run["phases"]))
     seconds = [{p["phase"]: p["seconds"] for p in run["phases"]} for run in runs]
     rows = [[name, *(f"{s[name]:.0f}" if name in s else "—" for s in seconds)] for name in names]
+    # through pytest: the phases every run reached (a run whose tests fail stops there, before the main command)
+    upto = [sum(p["seconds"] for p in run["phases"][:[q["phase"] for q in run["phases"]].index("pytest") + 1])
+            if "pytest" in s else None for run, s in zip(runs, seconds, strict=True)]
+    rows.append(["*through pytest*", *(f"{u:.0f}" if u is not None else "—" for u in upto)])
     rows.append(["**all of `.ci/run`**", *(f"**{run['total_s']:.0f}**" for run in runs)])
-    rows.append(["tests run (items / functions)", *(f"{run['items']} / {len(run['functions'])}" for run in runs)])
+    rows.append(["tests run (items / functions; failed)", *(f"{run['items']} / {len(run['functions'])}; "
+                                                              f"{_failed(run)}" for run in runs)])
     header = ["phase (seconds)", *(f"`{run['commit'][:7]}`" for run in runs)]
     if len(runs) > 1:
         header.append("last / first")
-        for row, name in zip(rows, [*names, None, None], strict=True):
-            a, b = (seconds[0].get(name), seconds[-1].get(name)) if name else (None, None)
+        for row, name in zip(rows, names, strict=False):
+            a, b = seconds[0].get(name), seconds[-1].get(name)
             row.append(f"{b / a:.2f}" if a and b is not None else "")
-        rows[-2][-1] = f"**{runs[-1]['total_s'] / runs[0]['total_s']:.2f}**"
+        rows[-3].append(f"{upto[-1] / upto[0]:.2f}" if upto[0] and upto[-1] else "")
+        rows[-2].append(f"**{runs[-1]['total_s'] / runs[0]['total_s']:.2f}**")
+        rows[-1].append("")
     return markdown_table(header, ["---", *["---:"] * (len(header) - 1)], rows)
+
+
+def _failed(run: dict) -> str:
+    found = re.search(r"(\d+) failed", run.get("pytest_summary") or "")
+    return found.group(1) if found else "0"
 
 
 def ci_slowest() -> str:
