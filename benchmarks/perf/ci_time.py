@@ -148,7 +148,9 @@ def ci_phases() -> str:
     upto = [sum(p["seconds"] for p in run["phases"][:[q["phase"] for q in run["phases"]].index("pytest") + 1])
             if "pytest" in s else None for run, s in zip(runs, seconds, strict=True)]
     rows.append(["*through pytest*", *(f"{u:.0f}" if u is not None else "—" for u in upto)])
-    rows.append(["**all of `.ci/run`**", *(f"**{run['total_s']:.0f}**" for run in runs)])
+    rows.append(["**all of `.ci/run`**", *(f"**{run['total_s']:.0f}**" if run["exit_code"] == 0 else
+                                           f"{run['total_s']:.0f} (stopped after {run['phases'][-1]['phase']})"
+                                           for run in runs)])
     rows.append(["tests run (items / functions; failed)", *(f"{run['items']} / {len(run['functions'])}; "
                                                               f"{_failed(run)}" for run in runs)])
     header = ["phase (seconds)", *(f"`{run['commit'][:7]}`" for run in runs)]
@@ -158,7 +160,8 @@ def ci_phases() -> str:
             a, b = seconds[0].get(name), seconds[-1].get(name)
             row.append(f"{b / a:.2f}" if a and b is not None else "")
         rows[-3].append(f"{upto[-1] / upto[0]:.2f}" if upto[0] and upto[-1] else "")
-        rows[-2].append(f"**{runs[-1]['total_s'] / runs[0]['total_s']:.2f}**")
+        whole = runs[0]["exit_code"] == 0 and runs[-1]["exit_code"] == 0  # else the totals cover other phases
+        rows[-2].append(f"**{runs[-1]['total_s'] / runs[0]['total_s']:.2f}**" if whole else "")
         rows[-1].append("")
     return markdown_table(header, ["---", *["---:"] * (len(header) - 1)], rows)
 
