@@ -49,8 +49,9 @@ def _run(cmd: list[str], *, check: bool = True, env: dict | None = None,
 @contextlib.contextmanager
 def _process_state_kept():
     """What a command may change in its process and a fresh interpreter would have thrown away, put back after it:
-    the environment, the working folder, ``sys.argv`` and ``sys.path``, torch's thread count and random state, the
-    CPU affinity (a trainer pins itself), SIGINT/SIGTERM handlers, the warning filters and the global random states."""
+    the environment, the working folder, ``sys.argv`` and ``sys.path``, torch's thread count, the CPU affinity (a
+    trainer pins itself), SIGINT/SIGTERM handlers, the warning filters and torch's, numpy's and Python's global random
+    states."""
     import numpy as np
     import torch
 
@@ -83,7 +84,8 @@ def run_in_process(module: str, *args: str) -> subprocess.CompletedProcess:
     """``python -m module args`` in this process, in the repository root, as the interpreter would run it: its
     output captured, its exit status from ``SystemExit`` (a message exits 1 on stderr), an uncaught exception's
     traceback on stderr with status 1; what it changed in the process put back (:func:`_process_state_kept`).
-    Saves the ~10 s a fresh interpreter spends importing torch, Warp and Newton."""
+    Saves what a fresh interpreter spends importing torch, Warp and Newton and loading the kernels (seconds a
+    command; test_train's slow tests took 102 s so, against ~270 s in fresh interpreters)."""
     out, err = io.StringIO(), io.StringIO()
     code = 0
     with _process_state_kept(), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
