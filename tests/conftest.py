@@ -34,7 +34,8 @@ from atrv_warp.integrations.viewer import port_open
 ROOT = Path(__file__).resolve().parent.parent
 SMOKE = "smoke"  # the preset shipped inside the package
 
-HEAVY_FIXTURES = {"smoke_run": "trains", "ros_env": "starts ROS 2 nodes", "no_ray_before": "starts a Ray cluster"}
+HEAVY_FIXTURES = {"smoke_run": "trains", "ros_env": "starts ROS 2 nodes",
+                  "no_ray_before": "guards a test that starts a Ray cluster"}
 """Fixtures a test may use only when it is marked ``slow`` (name -> what it does)."""
 
 

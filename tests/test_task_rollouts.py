@@ -125,33 +125,31 @@ def restore(env, golden, step: int) -> None:
     env.load_state_dict(state)
 
 
-def replay(env, golden, steps: range, td=None) -> tuple[dict[str, np.ndarray], object]:
-    """Drive ``env`` from where it stands through ``steps`` with the golden's recorded actions; the outputs, stacked."""
+def replay(env, golden, before_step=None) -> dict[str, np.ndarray]:
+    """Drive ``env`` from its reset through the golden's 200 recorded actions, calling ``before_step(t)`` (if given)
+    before each step; the outputs, stacked."""
     import torch
 
-    td = env.reset() if td is None else td
+    td = env.reset()
     out = {k: [] for k in OUTPUTS}
-    for t in steps:
+    for t in range(STEPS):
+        if before_step is not None:
+            before_step(t)
         td["action"] = torch.from_numpy(np.array(golden["action"][t]))
         step, td = env.step_and_maybe_reset(td)
         for k, v in _outputs(step).items():
             out[k].append(v)
-    return {k: np.stack(v) for k, v in out.items()}, td
+    return {k: np.stack(v) for k, v in out.items()}
 
 
 def replay_pinned(env, golden) -> dict[str, np.ndarray]:
     """Every step's outputs, each from the golden's snapshot before it and its recorded action."""
-    td, parts = env.reset(), []
-    for t in range(STEPS):
-        restore(env, golden, t)
-        part, td = replay(env, golden, range(t, t + 1), td)
-        parts.append(part)
-    return {k: np.concatenate([p[k] for p in parts]) for k in OUTPUTS}
+    return replay(env, golden, before_step=lambda t: restore(env, golden, t))
 
 
 def kernels_round_as_recorded() -> bool:
-    """Whether this CPU compiles Warp's kernels to the same float32 rounding as the files' writer: x86-64 with FMA
-    (what both hosts measured were; Warp compiles for the host with ``-march=native``)."""
+    """Whether this CPU compiles Warp's kernels to the same float32 rounding as the files' writer: x86-64 with FMA,
+    as both hosts measured are (Warp compiles for the host with ``-march=native``)."""
     if platform.machine() not in ("x86_64", "AMD64"):
         return False
     try:
@@ -184,7 +182,7 @@ def test_the_recorded_actions_replay_bit_for_bit(golden):
         pytest.skip(f"{platform.machine()} without FMA may round the compiled kernels otherwise: the per-step test "
                     "holds the files here")
     name, expected = golden
-    got, _ = replay(golden_env(*TASK_GOLDENS[name]), expected, range(STEPS))
+    got = replay(golden_env(*TASK_GOLDENS[name]), expected)
     for key in OUTPUTS:
         np.testing.assert_array_equal(got[key], expected[key], err_msg=f"{name}: {key}")
 

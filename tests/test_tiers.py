@@ -29,6 +29,8 @@ def test_a_heavy_fixture_outside_the_slow_tier_is_named():
         "t.py::quick_trains uses the fixture 'smoke_run' (trains) but is not marked slow",
         "t.py::quick_ros uses the fixture 'ros_env' (starts ROS 2 nodes) but is not marked slow"]
     assert set(HEAVY_FIXTURES) == {"smoke_run", "ros_env", "no_ray_before"}
+    assert heavy_without_slow([_Item("t.py::quick_ray", ("no_ray_before",), slow=False)]) == [
+        "t.py::quick_ray uses the fixture 'no_ray_before' (guards a test that starts a Ray cluster) but is not marked slow"]
 
 
 def test_the_training_loop_refuses_in_the_quick_tier(tmp_path):

@@ -15,7 +15,6 @@ from test_reference_task import DEFAULT_GOLDEN, reference_rollout  # beside this
 from test_task_rollouts import (
     DATA,
     OUTPUTS,
-    STEPS,
     TASK_GOLDENS,
     _pinned,
     _snapshot,
@@ -41,13 +40,10 @@ def replayed(name: str) -> dict[str, np.ndarray]:
         golden = {k: f[k] for k in (*OUTPUTS, "action") if k in f}
     env = golden_env(*TASK_GOLDENS[name])
     golden["action"] = recorded_actions(golden, env)
-    td, snapshots, parts = env.reset(), [], []
-    for t in range(STEPS):
-        snapshots.append(_snapshot(env))
-        part, td = replay(env, golden, range(t, t + 1), td)
-        parts.append(part)
+    snapshots = []
+    got = replay(env, golden, before_step=lambda _: snapshots.append(_snapshot(env)))
     for key in OUTPUTS:
-        if not np.array_equal(np.concatenate([p[key] for p in parts]), golden[key]):
+        if not np.array_equal(got[key], golden[key]):
             sys.exit(f"{name}: the replay of its actions differs from the file ({key}): the task changed, or this "
                      "CPU rounds the kernels otherwise; nothing written")
     return {**golden, **_pinned(snapshots)}

@@ -144,9 +144,7 @@ def ci_phases() -> str:
     names = list(dict.fromkeys(p["phase"] for run in runs for p in run["phases"]))
     seconds = [{p["phase"]: p["seconds"] for p in run["phases"]} for run in runs]
     rows = [[name, *(f"{s[name]:.0f}" if name in s else "—" for s in seconds)] for name in names]
-    # through pytest: the phases every run reached (a run whose tests fail stops there, before the main command)
-    upto = [sum(p["seconds"] for p in run["phases"][:[q["phase"] for q in run["phases"]].index("pytest") + 1])
-            if "pytest" in s else None for run, s in zip(runs, seconds, strict=True)]
+    upto = [_through_pytest(run) for run in runs]
     rows.append(["*through pytest*", *(f"{u:.0f}" if u is not None else "—" for u in upto)])
     rows.append(["**all of `.ci/run`**", *(f"**{run['total_s']:.0f}**" if run["exit_code"] == 0 else
                                            f"{run['total_s']:.0f} (stopped after {run['phases'][-1]['phase']})"
@@ -164,6 +162,12 @@ def ci_phases() -> str:
         rows[-2].append(f"**{runs[-1]['total_s'] / runs[0]['total_s']:.2f}**" if whole else "")
         rows[-1].append("")
     return markdown_table(header, ["---", *["---:"] * (len(header) - 1)], rows)
+
+
+def _through_pytest(run: dict) -> float | None:
+    """The seconds up to pytest's end: the phases every run reaches (one whose tests fail stops there)."""
+    names = [p["phase"] for p in run["phases"]]
+    return sum(p["seconds"] for p in run["phases"][:names.index("pytest") + 1]) if "pytest" in names else None
 
 
 def _failed(run: dict) -> str:
