@@ -28,7 +28,23 @@ def test_the_readme_is_a_door():
     text = (ROOT / "README.md").read_text()
     assert len(text.splitlines()) <= 200
     assert 'pip install -e . && python -m atrv_warp.train' in text
-    assert 'pip install -e ".[test,ros,ray,docs]" && mkdocs build --strict && python -m pytest' in text
+    assert TEST_COMMAND in text
+
+
+TEST_COMMAND = ('pip install -e ".[test,ros,ray,docs]" && mkdocs build --strict && python -m pytest -m "not slow" -n 2 '
+                '&& python -m pytest -m slow')
+"""The README's test command: the quick tier on two workers, then the slow tier one test at a time."""
+
+
+def test_ci_runs_the_readmes_test_command():
+    """``.ci/run`` runs each part of the README's test command, in its order (``pip install`` through its quiet
+    wrapper; the docs build and the pytest runs may add an output folder or a report)."""
+    ci = (ROOT / ".ci" / "run").read_text().splitlines()
+    parts = [part.strip().replace("pip install ", "quiet_pip ", 1) for part in TEST_COMMAND.split("&&")]
+    found = [next((i for i, line in enumerate(ci) if line.strip() == part or line.strip().startswith(part + " ")),
+                  None) for part in parts]
+    assert None not in found, dict(zip(parts, found, strict=True))
+    assert found == sorted(found), dict(zip(parts, found, strict=True))
 
 
 @pytest.mark.parametrize("page", [p for p in PAGES if python_blocks(p.read_text())], ids=lambda p: str(p.relative_to(ROOT)))

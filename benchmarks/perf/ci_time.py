@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _co
 
 from _common import load_results, markdown_table, write_results
 
-VERSION = 1
+VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -58,17 +58,30 @@ def phases(lines: list[tuple[float, str]], end: float) -> list[dict]:
             for i, (t, name) in enumerate(heads)]
 
 
-def slowest(lines: list[str]) -> list[dict]:
-    """pytest's ``--durations`` rows (seconds, call/setup/teardown, test id), slowest first."""
+def slowest(lines: list[str], count: int = 30) -> list[dict]:
+    """pytest's ``--durations`` rows (seconds, call/setup/teardown, test id) of every pytest run, the ``count``
+    slowest first."""
     rows = [m for line in lines if (m := DURATION.match(line))]
-    return [{"seconds": float(m["s"]), "when": m["when"], "test": m["test"]} for m in rows]
+    rows = [{"seconds": float(m["s"]), "when": m["when"], "test": m["test"]} for m in rows]
+    return sorted(rows, key=lambda r: -r["seconds"])[:count]
 
 
-def junit(path: Path) -> dict:
-    """From a JUnit report: items run, the test functions (module::name, parameters folded), seconds per file."""
-    if not path.is_file():
-        return {"items": 0, "functions": [], "files": []}
-    cases = ET.parse(path).getroot().iter("testcase")
+def pytest_summary(lines: list[str]) -> tuple[str, float] | None:
+    """The closing counts of every pytest run in the log, added up (``616 passed, 10 skipped``), and their seconds."""
+    found = [m for line in lines if (m := SUMMARY.match(line))]
+    if not found:
+        return None
+    counts: dict[str, int] = {}
+    for m in found:
+        for n, kind in re.findall(r"(\d+) (\w+)", m["counts"]):
+            counts[kind] = counts.get(kind, 0) + int(n)
+    return ", ".join(f"{n} {kind}" for kind, n in counts.items()), sum(float(m["s"]) for m in found)
+
+
+def junit(paths: list[Path]) -> dict:
+    """From JUnit reports (one per pytest run): items run, the test functions (module::name, parameters folded),
+    seconds per file."""
+    cases = [case for path in paths if path.is_file() for case in ET.parse(path).getroot().iter("testcase")]
     items, functions, files = 0, set(), {}
     for case in cases:
         items += 1
@@ -87,8 +100,11 @@ def run_ci(revision: str, tmp: Path, logs: Path | None) -> dict:
     repo = tmp / f"repo-{sha[:8]}"
     subprocess.run(["git", "clone", "-q", str(ROOT), str(repo)], check=True)
     _git("checkout", "-q", sha, cwd=repo)
-    report = tmp / f"junit-{sha[:8]}.xml"
-    env = {**os.environ, "CI": "true", "PYTEST_ADDOPTS": f"--durations=30 --junitxml={report}"}
+    report = tmp / f"junit-{sha[:8]}.xml"  # a .ci/run that runs pytest once; a later one writes one per tier in reports
+    reports = tmp / f"junit-{sha[:8]}"
+    reports.mkdir()
+    env = {**os.environ, "CI": "true", "PYTEST_ADDOPTS": f"--durations=30 --junitxml={report}",
+           "CI_JUNIT_DIR": str(reports)}
     print(f"\n{revision} ({sha[:8]}): bash .ci/run", flush=True)
     started = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
     t0 = time.monotonic()
@@ -104,11 +120,23 @@ def run_ci(revision: str, tmp: Path, logs: Path | None) -> dict:
         logs.mkdir(parents=True, exist_ok=True)
         (logs / f"ci-{sha[:8]}.log").write_text("".join(f"{t:8.1f} {line}\n" for t, line in lines))
     text = [line for _, line in lines]
-    summary = next((m for line in reversed(text) if (m := SUMMARY.match(line))), None)
-    print(f"  {total:7.0f} s  exit {proc.returncode}: {summary['counts'] if summary else 'no pytest summary'}")
+    summary = pytest_summary(text)
+    print(f"  {total:7.0f} s  exit {proc.returncode}: {summary[0] if summary else 'no pytest summary'}")
     return {"revision": revision, "commit": sha, "started": started, "exit_code": proc.returncode, "total_s": round(total, 1),
-            "phases": phases(lines, total), "pytest_summary": summary["counts"] if summary else None,
-            "pytest_s": float(summary["s"]) if summary else None, "slowest": slowest(text), **junit(report)}
+            "phases": phases(lines, total), "pytest_summary": summary[0] if summary else None,
+            "pytest_s": round(summary[1], 2) if summary else None, "slowest": slowest(text),
+            **junit([report, *sorted(reports.glob("*.xml"))])}
+
+
+def _cpu_model() -> str:
+    """The processor's name and its widest vector extension (the host the figures hold for)."""
+    try:
+        info = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return "unknown"
+    name = next((line.split(":", 1)[1].strip() for line in info.splitlines() if line.startswith("model name")), "?")
+    flags = next((line.split(":", 1)[1].split() for line in info.splitlines() if line.startswith("flags")), [])
+    return f"{name}, {'avx512f' if 'avx512f' in flags else 'avx2' if 'avx2' in flags else 'no avx2'}"
 
 
 def main() -> int:
@@ -124,7 +152,7 @@ def main() -> int:
         runs += [run_ci(rev, Path(tmp), args.logs) for rev in args.revisions]
     first, last = runs[0], runs[-1]
     dropped = sorted(set(first["functions"]) - set(last["functions"]))
-    result = {"machine": {"cpus": os.cpu_count(), "platform": sys.platform}, "runs": runs,
+    result = {"machine": {"cpus": os.cpu_count(), "platform": sys.platform, "cpu": _cpu_model()}, "runs": runs,
               "dropped_functions": dropped, "added_functions": sorted(set(last["functions"]) - set(first["functions"]))}
     for run in runs:
         print(f"{run['revision']}: {run['total_s']:.0f} s, {run['items']} items, {len(run['functions'])} functions")
@@ -144,6 +172,8 @@ def ci_phases() -> str:
     names = list(dict.fromkeys(p["phase"] for run in runs for p in run["phases"]))
     seconds = [{p["phase"]: p["seconds"] for p in run["phases"]} for run in runs]
     rows = [[name, *(f"{s[name]:.0f}" if name in s else "—" for s in seconds)] for name in names]
+    tests = [_pytest_s(run) for run in runs]
+    rows.append(["*pytest, every tier*", *(f"{t:.0f}" if t is not None else "—" for t in tests)])
     upto = [_through_pytest(run) for run in runs]
     rows.append(["*through pytest*", *(f"{u:.0f}" if u is not None else "—" for u in upto)])
     rows.append(["**all of `.ci/run`**", *(f"**{run['total_s']:.0f}**" if run["exit_code"] == 0 else
@@ -157,6 +187,7 @@ def ci_phases() -> str:
         for row, name in zip(rows, names, strict=False):
             a, b = seconds[0].get(name), seconds[-1].get(name)
             row.append(f"{b / a:.2f}" if a and b is not None else "")
+        rows[-4].append(f"{tests[-1] / tests[0]:.2f}" if tests[0] and tests[-1] else "")
         rows[-3].append(f"{upto[-1] / upto[0]:.2f}" if upto[0] and upto[-1] else "")
         whole = runs[0]["exit_code"] == 0 and runs[-1]["exit_code"] == 0  # else the totals cover other phases
         rows[-2].append(f"**{runs[-1]['total_s'] / runs[0]['total_s']:.2f}**" if whole else "")
@@ -164,10 +195,21 @@ def ci_phases() -> str:
     return markdown_table(header, ["---", *["---:"] * (len(header) - 1)], rows)
 
 
+def _pytest_phases(run: dict) -> list[int]:
+    """The indices of a run's pytest phases (``pytest``, or one per tier)."""
+    return [i for i, p in enumerate(run["phases"]) if p["phase"].startswith("pytest")]
+
+
+def _pytest_s(run: dict) -> float | None:
+    """The seconds of a run's pytest phases together."""
+    found = _pytest_phases(run)
+    return sum(run["phases"][i]["seconds"] for i in found) if found else None
+
+
 def _through_pytest(run: dict) -> float | None:
     """The seconds up to pytest's end: the phases every run reaches (one whose tests fail stops there)."""
-    names = [p["phase"] for p in run["phases"]]
-    return sum(p["seconds"] for p in run["phases"][:names.index("pytest") + 1]) if "pytest" in names else None
+    found = _pytest_phases(run)
+    return sum(p["seconds"] for p in run["phases"][:found[-1] + 1]) if found else None
 
 
 def _failed(run: dict) -> str:
