@@ -14,6 +14,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "atrv_warp"
 
@@ -141,15 +143,29 @@ LIGHT = ("atrv_warp", "atrv_warp.core", "atrv_warp.task.spec", "atrv_warp.integr
 
 
 def test_the_package_and_its_light_core_load_without_the_simulator():
-    """In a fresh interpreter: importing the light modules loads none of warp, newton, torchrl; the simulator then
-    configures Warp on its first import (the quiet console)."""
+    """In a fresh interpreter: importing the light modules loads none of warp, newton, torchrl; the simulator's
+    package then configures Warp on its first import (the quiet console), and its configs and driving modes load
+    without Newton (what the ROS node checks its parameters with), which its first name from the simulator brings."""
     code = (f"import sys\nimport {', '.join(LIGHT)}\n"
             "print(sorted(m for m in ('warp', 'newton', 'torchrl') if m in sys.modules))\n"
             "import atrv_warp.sim, atrv_warp.runtime as r\nprint(sorted(m for m in ('warp', 'newton') if m in "
-            "sys.modules), r.is_configured())\n")
+            "sys.modules), r.is_configured())\n"
+            "import atrv_warp.sim.config, atrv_warp.sim.modes\nprint('newton' in sys.modules)\n"
+            "from atrv_warp.sim import RoverSim\nprint('newton' in sys.modules)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
-    assert out.stdout.splitlines() == ["[]", "['newton', 'warp'] True"], out.stdout + out.stderr
+    assert out.stdout.splitlines() == ["[]", "['warp'] True", "False", "True"], out.stdout + out.stderr
     assert out.stderr == "", out.stderr  # quiet: no Warp banner, no CUDA-driver notice
+
+
+def test_the_ros_simulator_node_checks_its_parameters_before_it_imports_newton():
+    """``python -m atrv_warp.ros`` with a bad parameter is refused in seconds: its node module, and what its
+    parameter checks use, load without Newton; the simulator comes once the parameters are good."""
+    pytest.importorskip("rclpy", reason="ROS 2 extra not installed: pip install -e '.[ros]'")
+    code = ("import sys\nimport atrv_warp.integrations.ros.node, atrv_warp.integrations.ros.parameters\n"
+            "import atrv_warp.core.robot, atrv_warp.task.config, atrv_warp.sim.terrain, atrv_warp.core.files\n"
+            "print(sorted(m for m in ('newton', 'torchrl') if m in sys.modules))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.splitlines() == ["[]"], out.stdout + out.stderr
 
 
 ROS_RUNTIME = {"rclpy", "geometry_msgs", "nav_msgs", "sensor_msgs", "std_msgs", "rcl_interfaces", "launch",

@@ -15,31 +15,44 @@
 - :mod:`.robot_check`: a robot file's figures measured in the simulator.
 
 Importing this package configures Warp (:func:`atrv_warp.runtime.configure`: a quiet console) before any of
-its modules imports Newton, whose import initialises Warp.
+its modules imports Newton, whose import initialises Warp. Its names (``RoverSim``, ``SimConfig`` …) are imported on
+first use, so that ``atrv_warp.sim.config`` or ``.modes`` load without Newton.
 """
+
+from importlib import import_module
 
 from atrv_warp import runtime
 
 runtime.configure()
 
-from atrv_warp.sim.config import (
-    FAST_SIM_DT,
-    REFERENCE_SIM_DT,
-    VARIANTS,
-    ArenaConfig,
-    ContactConfig,
-    InertialOverride,
-    ObstacleConfig,
-    RoverConfig,
-    SimConfig,
-    get_variant,
-)
-from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
-from atrv_warp.sim.params import PARAMETERS, WorldParams
-from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
-from atrv_warp.sim.simulator import DRIVE_MODE_TORQUES, DriveMode, RoverSim, SimBuffers
-from atrv_warp.sim.terrain import TERRAIN_PRESETS, HeightGrid, TerrainConfig
-from atrv_warp.sim.urdf import URDFError, load_rover
+_EXPORTS = {
+    "config": ("FAST_SIM_DT", "REFERENCE_SIM_DT", "VARIANTS", "ArenaConfig", "ContactConfig", "InertialOverride",
+               "ObstacleConfig", "RoverConfig", "SimConfig", "get_variant"),
+    "contact": ("ContactModel", "Obstacles", "Terrain"),
+    "modes": ("DRIVE_MODE_TORQUES", "DriveMode"),
+    "params": ("PARAMETERS", "WorldParams"),
+    "scanner": ("LaserScanner", "ScannerConfig"),
+    "simulator": ("RoverSim", "SimBuffers"),
+    "terrain": ("TERRAIN_PRESETS", "HeightGrid", "TerrainConfig"),
+    "urdf": ("URDFError", "load_rover"),
+}
+"""Module -> the public names this package gives from it, each imported on first use (:func:`__getattr__`): a
+command that needs the configs or the driving modes (the ROS node's parameter checks) does not import Newton."""
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
+
+
+def __getattr__(name: str):
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module 'atrv_warp.sim' has no attribute {name!r}")
+    value = getattr(import_module(f"atrv_warp.sim.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
 
 __all__ = [
     "DRIVE_MODE_TORQUES",

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from enum import Enum
 from pathlib import Path
 
 import newton
@@ -39,6 +38,7 @@ from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics, apply_pay
 from atrv_warp.sim.kernels.rover import RoverLayout, compute_rover_state, reset_worlds
 from atrv_warp.sim.kernels.terrain import place_on_terrain
 from atrv_warp.sim.model import BuiltModel, build_model
+from atrv_warp.sim.modes import DRIVE_MODE_REFERENCE_TORQUE, DRIVE_MODE_TORQUES, DriveMode
 from atrv_warp.sim.params import (
     PARAMETER_KEYS,
     PARAMETERS,
@@ -52,29 +52,6 @@ from atrv_warp.sim.terrain import HeightGrid, TerrainConfig, get_terrain
 from atrv_warp.sim.urdf import load_rover
 
 __all__ = ["DRIVE_MODE_REFERENCE_TORQUE", "DRIVE_MODE_TORQUES", "DriveMode", "RoverSim", "SimBuffers"]
-
-
-class DriveMode(str, Enum):
-    """The reference ROS tutorial's fixed-torque driving modes."""
-
-    COAST = "coast"
-    FORWARD = "forward"
-    BACKWARD = "backward"
-    ROTATE_RIGHT = "rotate_right"
-    ROTATE_LEFT = "rotate_left"
-
-
-DRIVE_MODE_TORQUES: dict[DriveMode, tuple[float, float]] = {
-    DriveMode.COAST: (0.0, 0.0),
-    DriveMode.FORWARD: (4.0, 4.0),
-    DriveMode.BACKWARD: (-4.0, -4.0),
-    DriveMode.ROTATE_RIGHT: (5.0, -5.0),
-    DriveMode.ROTATE_LEFT: (-5.0, 5.0),
-}
-"""(left, right) wheel torque [N·m] of each mode, on the ATRV-Jr (the reference tutorial's): another robot's are the same
-share of its motors' torque limit (:data:`DRIVE_MODE_REFERENCE_TORQUE` is the ATRV-Jr's)."""
-DRIVE_MODE_REFERENCE_TORQUE = 20.0
-"""[N·m] The ATRV-Jr's torque limit, which :data:`DRIVE_MODE_TORQUES` are shares of."""
 
 
 def _as_world_mask(mask, num_worlds: int) -> np.ndarray:

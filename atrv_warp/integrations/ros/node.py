@@ -36,8 +36,7 @@ from atrv_warp.integrations.ros.base import imu_reading
 from atrv_warp.integrations.ros.frames import WORLD_FRAME, planar_matrix, pose_matrix, transform_dict, turn_matrix
 from atrv_warp.integrations.ros.markers import scene_of, world_markers
 from atrv_warp.integrations.ros.parameters import COMMANDS, GOAL, MAX_ROVERS, PARAMETERS, VELOCITY, driver_config
-from atrv_warp.sim.simulator import DRIVE_MODE_TORQUES, DriveMode
-from atrv_warp.task.env import ATRVjrEnv
+from atrv_warp.sim.modes import DRIVE_MODE_TORQUES, DriveMode
 from atrv_warp.task.spec import END_REASONS, action_to_torque, action_to_twist
 
 __all__ = ["NodeConfigError", "RoverIO", "RoverSimNode", "unknown_parameters"]
@@ -413,9 +412,11 @@ class RoverSimNode(Node):
                 self._fail(f"parameter policy: {err}")
             if task.name != p["task"]:
                 self._fail(f"parameter policy: {p['policy']} was trained on task {task.name!r}, not task={p['task']!r}")
+        from atrv_warp.task.env import RoverEnv  # the simulator (Newton), once the parameters are good
+
         # goal mode reads the policy's observation kernel
         try:
-            self.env = ATRVjrEnv(k, robot=p["robot"], variant=p["variant"], task=task, seed=int(p["seed"]),
+            self.env = RoverEnv(k, robot=p["robot"], variant=p["variant"], task=task, seed=int(p["seed"]),
                                  sim_config=p["sim_config"] or None, driver=self.driver,
                                  **({"terrain": p["terrain"]} if p["terrain"] else {}))
         except ValueError as err:

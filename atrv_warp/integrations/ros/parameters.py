@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from atrv_warp.sim.config import SENSOR_NOISE
 from atrv_warp.sim.driver import DriverConfig
-from atrv_warp.sim.simulator import DriveMode
+from atrv_warp.sim.modes import DriveMode
 
 __all__ = ["COMMANDS", "DRIVER_PARAMETERS", "GOAL", "MAX_ROVERS", "PARAMETERS", "ROBOTS_OWN", "VELOCITY",
            "driver_config", "parameter_help"]
