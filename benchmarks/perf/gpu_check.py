@@ -103,6 +103,11 @@ def _on_device(args) -> dict:
     return {"run.device": args.device, **({"optim.compile": "off"} if args.device == "cpu" else {})}
 
 
+QUICK_UPDATE = {"network.width": 32, "optim.batch_size": 64}
+"""``--quick``'s update: the networks and batch of ``tests/test_gpu_recipe.py``'s compiled update, so that the check's
+compile in CI loads what that test compiled (torch.compile's cache) instead of compiling a second graph."""
+
+
 def _recipe(args, overrides: dict | None = None):
     from atrv_warp.rl.config import load_train_config
 
@@ -165,12 +170,13 @@ def part_updates(args) -> dict:
     from atrv_warp.task.spec import observation_fields
 
     cfg = _recipe(args)
-    batch_size = args.batch or (256 if args.quick else cfg.optim.batch_size)
+    batch_size = args.batch or (QUICK_UPDATE["optim.batch_size"] if args.quick else cfg.optim.batch_size)
     forms = ["off", "compile"] + (["cudagraphs"] if args.device != "cpu" else [])
     rounds, per_round = (2, 5) if args.quick else (5, 200)
     learners = {}
     for form in forms:
-        c = _recipe(args, {"optim.compile": form, "optim.batch_size": batch_size})
+        c = _recipe(args, {"optim.compile": form, "optim.batch_size": batch_size,
+                           **({"network.width": QUICK_UPDATE["network.width"]} if args.quick else {})})
         torch.manual_seed(0)
         actor, normalize = make_run_actor(c)
         learners[form] = Learner(c, actor, normalize)
