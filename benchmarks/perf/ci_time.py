@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _co
 
 from _common import load_results, markdown_table, write_results
 
-VERSION = 2
+VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 ROOT = Path(__file__).resolve().parents[2]
