@@ -7,7 +7,7 @@
 For each revision, in turn: ``git clone`` this repository into a temporary folder, check the revision out, and run
 ``bash .ci/run`` there as CI does (``CI=true``, its own fresh virtualenvs and empty Warp kernel cache; pip's download
 cache is reused), with ``PYTEST_ADDOPTS`` adding ``--durations=30`` (older revisions do not print them) and a JUnit
-report. The script timestamps every line of the output as it arrives, so a phase's seconds (Chromium, each install,
+report (a ``.ci/run`` that runs the tiers apart writes one per tier into ``CI_JUNIT_DIR``). The script timestamps every line of the output as it arrives, so a phase's seconds (Chromium, each install,
 ruff, the docs, pytest, the main command) are the time from its ``== NAME`` header to the next, the same rule for every
 revision whatever its ``.ci/run`` prints itself. From the JUnit report it keeps each test file's total and the test
 functions that ran (their parameters folded), so a later revision can show that nothing was dropped.
@@ -100,11 +100,13 @@ def run_ci(revision: str, tmp: Path, logs: Path | None) -> dict:
     repo = tmp / f"repo-{sha[:8]}"
     subprocess.run(["git", "clone", "-q", str(ROOT), str(repo)], check=True)
     _git("checkout", "-q", sha, cwd=repo)
-    report = tmp / f"junit-{sha[:8]}.xml"  # a .ci/run that runs pytest once; a later one writes one per tier in reports
+    # A .ci/run that reads CI_JUNIT_DIR writes one report per tier there; an older one gets its report through
+    # PYTEST_ADDOPTS (which the tests' own nested pytest runs would inherit, and write over, in a newer one)
     reports = tmp / f"junit-{sha[:8]}"
     reports.mkdir()
-    env = {**os.environ, "CI": "true", "PYTEST_ADDOPTS": f"--durations=30 --junitxml={report}",
-           "CI_JUNIT_DIR": str(reports)}
+    tiered = "CI_JUNIT_DIR" in _git("show", f"{sha}:.ci/run")
+    addopts = "--durations=30" + ("" if tiered else f" --junitxml={reports / 'pytest.xml'}")
+    env = {**os.environ, "CI": "true", "PYTEST_ADDOPTS": addopts, "CI_JUNIT_DIR": str(reports)}
     print(f"\n{revision} ({sha[:8]}): bash .ci/run", flush=True)
     started = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
     t0 = time.monotonic()
@@ -125,7 +127,7 @@ def run_ci(revision: str, tmp: Path, logs: Path | None) -> dict:
     return {"revision": revision, "commit": sha, "started": started, "exit_code": proc.returncode, "total_s": round(total, 1),
             "phases": phases(lines, total), "pytest_summary": summary[0] if summary else None,
             "pytest_s": round(summary[1], 2) if summary else None, "slowest": slowest(text),
-            **junit([report, *sorted(reports.glob("*.xml"))])}
+            **junit(sorted(reports.glob("*.xml")))}
 
 
 def _cpu_model() -> str:
