@@ -24,6 +24,7 @@ import shlex
 import struct
 import subprocess
 import sys
+import time
 import zlib
 from pathlib import Path
 
@@ -38,6 +39,22 @@ def pin_to_one_core() -> None:
     allows it: one core for every measurement, so figures compare within a run."""
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+
+
+def rate(fn, per_call: int, seconds: float, *, sync=None) -> float:
+    """Items per second of ``fn`` (``per_call`` items a call): one warm-up call (compiles, graph captures,
+    allocations), then calls until ``seconds`` have passed. ``sync`` (e.g. ``warp.synchronize``) runs after each call,
+    so that a GPU's queued work counts where it was asked for."""
+    fn()
+    calls, t0 = 0, time.perf_counter()
+    while True:
+        fn()
+        calls += 1
+        if sync is not None:
+            sync()
+        elapsed = time.perf_counter() - t0
+        if elapsed >= seconds:
+            return calls * per_call / elapsed
 
 
 def labelled(spec: str) -> tuple[str, str]:

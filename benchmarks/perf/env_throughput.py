@@ -21,23 +21,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
 
-from _common import load_results, markdown_table, write_results
+from _common import load_results, markdown_table, rate, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 
-
-def _rate(fn, frames_per_call: int, seconds: float) -> float:
-    fn()  # warm-up (graph capture, allocations)
-    calls, t0 = 0, time.perf_counter()
-    while True:
-        fn()
-        calls += 1
-        elapsed = time.perf_counter() - t0
-        if elapsed >= seconds:
-            return calls * frames_per_call / elapsed
 
 
 def _collector_rate(collector, skip: int, measure: int) -> float:
@@ -47,9 +37,9 @@ def _collector_rate(collector, skip: int, measure: int) -> float:
     frames, t0 = 0, time.perf_counter()
     for _ in range(measure):
         frames += next(it).numel()
-    rate = frames / (time.perf_counter() - t0)
+    per_s = frames / (time.perf_counter() - t0)
     collector.shutdown()
-    return rate
+    return per_s
 
 
 def main() -> int:
@@ -85,8 +75,8 @@ def main() -> int:
         # between back-to-back runs than the overhead being measured.
         raw, rollout = 0.0, 0.0
         for _ in range(3):
-            raw = max(raw, _rate(raw_step, n, args.seconds / 3))
-            rollout = max(rollout, _rate(rollout_fn, n * horizon, args.seconds / 3))
+            raw = max(raw, rate(raw_step, n, args.seconds / 3))
+            rollout = max(rollout, rate(rollout_fn, n * horizon, args.seconds / 3))
         del sim
         fpb = n * 20
         coll = Collector(env, None, frames_per_batch=fpb, total_frames=-1)

@@ -21,26 +21,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
 
-from _common import load_results, markdown_table, pin_to_one_core, write_results
+from _common import load_results, markdown_table, pin_to_one_core, rate, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 
-
-def _rate(fn, per_call: int, seconds: float) -> float:
-    import warp as wp
-
-    fn()
-    calls, t0 = 0, time.perf_counter()
-    while True:
-        fn()
-        calls += 1
-        wp.synchronize()  # a GPU's queued work counts where it was asked for (a no-op on the CPU)
-        elapsed = time.perf_counter() - t0
-        if elapsed >= seconds:
-            return calls * per_call / elapsed
 
 
 def _stepper(env, tds: dict, task: str, gen):
@@ -87,12 +74,12 @@ def main() -> int:
 
         best = {"reach": 0.0, "nav": 0.0}
         for _ in range(args.rounds):  # interleaved: both tasks see the same machine load
-            for task, rate in best.items():
-                best[task] = max(rate, _rate(_stepper(envs[task], tds, task, gen), n, args.seconds))
+            for task, so_far in best.items():
+                best[task] = max(so_far, rate(_stepper(envs[task], tds, task, gen), n, args.seconds, sync=wp.synchronize))
         sims = {task: env.sim for task, env in envs.items()}
-        sim_rate = {task: _rate(sim.step, n, args.seconds) for task, sim in sims.items()}
+        sim_rate = {task: rate(sim.step, n, args.seconds, sync=wp.synchronize) for task, sim in sims.items()}
         scanner = envs["nav"].scanner
-        scan_rate = _rate(scanner.scan, n, args.seconds)
+        scan_rate = rate(scanner.scan, n, args.seconds, sync=wp.synchronize)
         # The scan's two kernel layouts (a thread per beam, the GPU's; a thread per world, the CPU's
         # default), for every world and for a reset's rescan of 5 % of them, alternately.
         few = wp.array(torch.rand(n, generator=gen).numpy() < 0.05, dtype=bool, device=args.device)
@@ -100,7 +87,8 @@ def main() -> int:
         for _ in range(args.rounds):
             for layout in ("beam", "world"):
                 for name, mask in (("all", None), ("reset_5pct", few)):
-                    ms = 1e3 * n / _rate(lambda m=mask, lay=layout, sc=scanner: sc.scan(m, layout=lay), n, args.seconds / 4)
+                    ms = 1e3 * n / rate(lambda m=mask, lay=layout, sc=scanner: sc.scan(m, layout=lay), n, args.seconds / 4,
+                                         sync=wp.synchronize)
                     key = f"{layout}_{name}_ms"
                     layouts[key] = min(layouts.get(key, ms), ms)
         row = {"num_envs": n, "reach_env_steps_per_s": best["reach"], "nav_env_steps_per_s": best["nav"],

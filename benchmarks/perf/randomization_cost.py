@@ -20,7 +20,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
 
-from _common import load_results, markdown_table, pin_to_one_core, write_results
+from _common import load_results, markdown_table, pin_to_one_core, rate, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -28,16 +28,6 @@ VERSION = 1
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 PRESETS = ("none", "wide")
 
-
-def _rate(step, per_call: int, seconds: float) -> float:
-    step()
-    calls, t0 = 0, time.perf_counter()
-    while True:
-        step()
-        calls += 1
-        elapsed = time.perf_counter() - t0
-        if elapsed >= seconds:
-            return calls * per_call / elapsed
 
 
 def _stepper(env, gen):
@@ -83,7 +73,7 @@ def main() -> int:
         best = dict.fromkeys(PRESETS, 0.0)
         for _ in range(args.rounds):  # interleaved: both see the same machine load
             for p in PRESETS:
-                best[p] = max(best[p], _rate(steppers[p], args.num_envs, args.seconds))
+                best[p] = max(best[p], rate(steppers[p], args.num_envs, args.seconds))
         ratio = best["wide"] / best["none"]
         row = {"task": task, "num_envs": args.num_envs, "none_env_steps_per_s": best["none"],
                "wide_env_steps_per_s": best["wide"], "wide_over_none": ratio, "slowdown_pct": 100 * (1 / ratio - 1)}
