@@ -1,4 +1,5 @@
-"""atrv_warp: many ATRV-Jr skid-steer rovers at once, on Newton physics and Warp kernels.
+"""atrv_warp: many skid-steer rovers at once (the ATRV-Jr, a Jackal, a Husky, or yours from its URDF), on Newton
+physics and Warp kernels.
 
 Layout: :mod:`atrv_warp.sim` (the simulator), :mod:`atrv_warp.task` (the drive-to-target task
 and its TorchRL environment), :mod:`atrv_warp.rl` (SAC training), :mod:`atrv_warp.integrations`

@@ -5,7 +5,7 @@ and the exporter load a policy from here without importing the trainer (:mod:`at
 
 Observation normalisation lives *inside* the networks (:class:`Normalize`, statistics as
 buffers): it is saved with the policy, frozen for evaluation, and a saved policy runs on raw
-``ATRVjrEnv`` observations with no transform to rebuild.
+``RoverEnv`` observations with no transform to rebuild.
 
 A saved policy records what it commands and observes (``action``: ``torque`` | ``twist``; ``observation``:
 ``arena`` | ``robot``; files from before mean ``torque`` and ``arena``), and :func:`load_policy` refuses, naming
@@ -329,7 +329,7 @@ def load_policy(path: str | Path | None = None, *, deterministic: bool = True, t
     (:data:`SHIPPED_POLICIES`: ``"reach"``, ``"nav"``, ``"nav_plain"``, ``"nav_deploy"``; ``None``: ``reach``; a file
     called like one is ``./nav``).
 
-    The module reads raw ``observation`` from :class:`~atrv_warp.task.env.ATRVjrEnv` and writes
+    The module reads raw ``observation`` from :class:`~atrv_warp.task.env.RoverEnv` and writes
     ``action``; with ``deterministic=True`` it returns the distribution's mode. ``task`` (a task name or
     :class:`~atrv_warp.task.config.TaskConfig`): the policy must command that task's action kind and observe its
     observation.
@@ -339,7 +339,7 @@ def load_policy(path: str | Path | None = None, *, deterministic: bool = True, t
     and the problem for anything that is not a complete policy (nothing is unpickled), or for a policy
     that observes another observation than ``task``'s (:class:`PolicyTaskMismatch` when it commands or observes
     another kind, naming both). ``device``: where the weights go; the env's
-    (``env.device``) for an :class:`~atrv_warp.task.env.ATRVjrEnv` on a GPU.
+    (``env.device``) for an :class:`~atrv_warp.task.env.RoverEnv` on a GPU.
     """
     label = path if isinstance(path, str) and path in SHIPPED_POLICIES else None
     path = policy_path(path)

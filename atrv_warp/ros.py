@@ -1,4 +1,4 @@
-"""ROS 2 base driver for simulated ATRV-Jr rovers: ``python -m atrv_warp.ros [--ros-args -p name:=value …]``.
+"""ROS 2 base driver for simulated rovers (any robot file): ``python -m atrv_warp.ros [--ros-args -p name:=value …]``.
 
 The command lives in :mod:`atrv_warp.cli.ros`; this module keeps ``python -m atrv_warp.ros`` and
 ``from atrv_warp.ros import main`` working.

@@ -8,7 +8,7 @@ by Levenberg-Marquardt on the replays' errors. The velocity commands go through 
 physical radius the fit finds. It writes:
 
 - ``--out`` (``calibrated.toml``): the fitted values, for ``--sim-config`` of ``python -m atrv_warp.train``,
-  ``RoverSim(sim_config=...)``, ``ATRVjrEnv(sim_config=...)`` and the ROS node (``-p sim_config:=...``);
+  ``RoverSim(sim_config=...)``, ``RoverEnv(sim_config=...)`` and the ROS node (``-p sim_config:=...``);
 - a report (``<out>.report.json``): each value with its spread over the starts, and each segment's position
   error before and after, on the training and the held-out segments;
 - a plot (``<out>.png``): recorded against simulated paths of held-out segments.

@@ -1,4 +1,4 @@
-"""ROS 2 base driver for simulated ATRV-Jr rovers: ``python -m atrv_warp.ros [--ros-args -p name:=value …]``.
+"""ROS 2 base driver for simulated rovers (any robot file): ``python -m atrv_warp.ros [--ros-args -p name:=value …]``.
 
 Run::
 
@@ -32,16 +32,18 @@ Topics (per rover; under ``/rover_<k>`` when ``num_rovers`` > 1):
     ``ground_truth/odom`` (nav_msgs/Odometry, out): the simulator's pose (frame ``world``) and
     body-frame twist.
     ``joint_states`` (sensor_msgs/JointState, out): wheel joint positions [rad] and velocities.
-    ``imu`` (sensor_msgs/Imu, out, frame ``cbimu_frame``): orientation, angular velocity and
+    ``imu`` (sensor_msgs/Imu, out, frame: the robot file's IMU link, the ATRV-Jr's ``cbimu_frame``): orientation, angular velocity and
     specific force (+9.81 m/s² up at rest) from the simulated motion, with Gaussian noise.
-    ``scan`` (sensor_msgs/LaserScan, out, frame ``lrf_frame``): the laser scanner, ``scan_beams``
+    ``scan`` (sensor_msgs/LaserScan, out, frame: its laser link, the ATRV-Jr's ``lrf_frame``): the laser scanner, ``scan_beams``
     beams over 180 deg (-90 to +90 deg, counter-clockwise), 0.1 … 20 m, ``scan_noise`` Gaussian
     noise; a beam without a return reads +inf (REP 117).
     ``pose`` (geometry_msgs/PoseStamped, out): the reference's chassis pose topic.
 Shared: ``/clock`` (rosgraph_msgs/Clock, every step, after its state topics: use ``use_sim_time``) and
 ``/robot_description`` (std_msgs/String, the URDF, transient local).
-State topics come at ``publish_rate`` Hz of sim time; stamps are sim time (plus a step per episode reset). No ``/tf``: tf2_msgs
-is not on the package index here.
+State topics come at ``publish_rate`` Hz of sim time; stamps are sim time (plus a step per episode reset). ``/tf``
+(``world`` -> ``odom`` -> ``base_link`` -> the chassis -> the wheels, REP 105 with the simulator as the localisation) and
+``/tf_static`` (the URDF's fixed frames), unless ``-p tf:=false``: tf2_msgs is not on the package index, so a ROS
+install's is used, or its type support is built from its definition on first use (gcc/g++) and cached.
 
 Parameters: see :data:`atrv_warp.integrations.ros.node.PARAMETERS` (each declared with its
 description: ``ros2 param describe /atrv_sim <name>``). An unknown parameter, or a bad value,

@@ -76,7 +76,7 @@ class EvalVideo:
     """The first episode of ``episodes`` worlds of an evaluation, drawn top down.
 
     Args:
-        env: The :class:`~atrv_warp.task.env.ATRVjrEnv` the evaluation steps (or a transformed env
+        env: The :class:`~atrv_warp.task.env.RoverEnv` the evaluation steps (or a transformed env
             around one).
         episodes: Worlds recorded: the first ones, drawn in a grid of two columns.
         panel: Side of one world's panel [px] (even).

@@ -13,7 +13,7 @@ Collection on Ray (``collector=ray``): :class:`~atrv_warp.rl.ray_collector.RayCo
 ``ray`` extra: ``pip install -e ".[ray]"``.
 
 What runs where: the learner (updates, replay buffer, evaluations) stays in the process that
-runs ``atrv_warp.train``; each collector is a Ray actor holding one :class:`ATRVjrEnv` and a copy of
+runs ``atrv_warp.train``; each collector is a Ray actor holding one :class:`RoverEnv` and a copy of
 the policy. The collectors deliver their batches first ready, first served; each request for a
 batch carries the learner's current weights through Ray's object store, so the collector that
 delivered a batch gets the weights of the moment the loop body that used it is done. A collector
@@ -40,7 +40,7 @@ from torchrl.collectors import Collector
 
 from atrv_warp.rl.config import TrainConfig
 from atrv_warp.runtime import TRAINER_CORE, WORKER_CORE, pin_to_core
-from atrv_warp.task.env import ATRVjrEnv, EnvFactory
+from atrv_warp.task.env import EnvFactory, RoverEnv
 
 __all__ = ["COLLECTORS", "INSTALL_HINT", "OBJECT_STORE_BYTES", "WORKER_KEY", "CollectorKind", "RayWorker",
            "StampWorker", "describe_placements", "make_collector", "make_ray_collector", "pin_to_core", "placements",
@@ -191,7 +191,7 @@ def worker_weights(collector) -> list[TensorDictBase]:
 def make_sync_collector(cfg: TrainConfig, actor, *, total_frames: int, init_random_frames: int, env_seed: int):
     """Collect in this process, stepping the learner's own ``actor``, on the run's device."""
     # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
-    env = ATRVjrEnv(cfg.env.num_envs, seed=env_seed, device=cfg.run.device, **dict(cfg.env.env_kwargs()))
+    env = RoverEnv(cfg.env.num_envs, seed=env_seed, device=cfg.run.device, **dict(cfg.env.env_kwargs()))
     return Collector(env, actor, frames_per_batch=cfg.frames_per_batch, total_frames=total_frames,
                      init_random_frames=init_random_frames, auto_register_policy_transforms=False)
 

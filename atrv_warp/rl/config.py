@@ -115,7 +115,7 @@ class EnvConfig:
     calibration ``atrv-calibrate`` fitted to a real rover's bag (docs/calibration.md); empty: the nominal rover."""
 
     def env_kwargs(self) -> tuple[tuple[str, object], ...]:
-        """:class:`~atrv_warp.task.env.ATRVjrEnv` keyword arguments of these environments, as
+        """:class:`~atrv_warp.task.env.RoverEnv` keyword arguments of these environments, as
         (name, value) pairs (:class:`~atrv_warp.task.env.EnvFactory` takes them so)."""
         from atrv_warp.sim.config import SimConfig
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from atrv_warp.rl.config import TrainConfig
 from atrv_warp.runtime import WORKER_CORE, pin_to_core
-from atrv_warp.task.env import ATRVjrEnv
+from atrv_warp.task.env import RoverEnv
 from atrv_warp.task.evaluation import VALIDATION_SEED, EvalResult, evaluate
 
 __all__ = ["BackgroundEvaluator", "EvalOutcome", "Evaluator", "make_evaluator"]
@@ -55,7 +55,7 @@ class Evaluator:
 
     def __init__(self, cfg: TrainConfig, actor, *, recording=None, video_dir: Path | None = None, gif: bool = False):
         self.cfg, self.actor = cfg, actor
-        self.env = ATRVjrEnv(cfg.logging.eval_episodes, seed=VALIDATION_SEED, device=cfg.run.device,
+        self.env = RoverEnv(cfg.logging.eval_episodes, seed=VALIDATION_SEED, device=cfg.run.device,
                              **dict(cfg.env.eval_env_kwargs()))
         self.recorder = None
         if recording is not None:

@@ -1,4 +1,5 @@
-"""The simulator: many ATRV-Jr rovers on Newton's Featherstone solver, with our contact kernel.
+"""The simulator: many skid-steer rovers (a robot file each: the ATRV-Jr, a Jackal, a Husky, yours) on Newton's
+Featherstone solver, with our contact kernel.
 
 - :mod:`.config`: rover (and variants), contact law, arena, integrator settings.
 - :mod:`.urdf` / :mod:`.model`: the checked URDF description and the Newton model of N worlds.

@@ -525,7 +525,7 @@ def load_sim_config(path, rover: RoverConfig | None = None,
     """``rover`` and ``contact`` (default: the realistic variant's and the default contact) with the
     ``[rover]`` and ``[contact]`` tables of the TOML file at ``path`` applied.
 
-    This is the ``--sim-config FILE`` of ``RoverSim(sim_config=...)``, ``ATRVjrEnv(sim_config=...)``,
+    This is the ``--sim-config FILE`` of ``RoverSim(sim_config=...)``, ``RoverEnv(sim_config=...)``,
     ``python -m atrv_warp.train --env.sim-config`` and the ROS node's ``sim_config`` parameter; the file
     ``atrv-calibrate`` writes is one. A missing file, bad TOML, an unknown key or a bad value is a
     ``ValueError`` naming the file and the key. Example::

@@ -1,6 +1,7 @@
-"""Configuration of the tasks (their contract is :mod:`atrv_warp.task.spec`) and the registered
-variants, ``reach`` (the reference drive-to-target task) and ``nav`` (over terrain, around
-obstacles, seen through the laser scanner)."""
+"""Configuration of the tasks (their contract is :mod:`atrv_warp.task.spec`). The registered tasks are
+:mod:`atrv_warp.task.registry`'s: the shipped ``reach`` (the reference drive-to-target task), ``nav`` (over terrain,
+around obstacles, seen through the laser scanner) and ``nav_deploy`` (nav as a robot runs it, ``/cmd_vel`` at its
+own limits), and any task module of yours."""
 
 from __future__ import annotations
 

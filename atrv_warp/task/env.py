@@ -1,4 +1,4 @@
-"""TorchRL environment: N ATRV-Jr rovers driving to targets, one batched ``EnvBase``.
+"""TorchRL environment: N rovers of one robot driving to targets, one batched ``EnvBase``.
 
 The task math (observations, rewards, terminations, reset sampling) runs in Warp kernels,
 one thread per world (``atrv_warp/task/kernels/``); TensorDicts carry zero-copy views
@@ -92,7 +92,7 @@ from atrv_warp.task.spec import (
 __all__ = ["END_REASONS", "OBSERVATION_NAMES", "SNAPSHOT_FORMAT", "ATRVjrEnv", "EnvFactory", "RoverEnv"]
 
 SNAPSHOT_FORMAT = 3
-"""Version of :meth:`ATRVjrEnv.state_dict`'s snapshot (3: everything the next step reads, restored bit for bit, the
+"""Version of :meth:`RoverEnv.state_dict`'s snapshot (3: everything the next step reads, restored bit for bit, the
 reward terms' memory of the last action and the goal's heading included)."""
 
 OBSERVE_KINDS = {"arena": 0, "robot": 1}
@@ -669,7 +669,7 @@ class RoverEnv(EnvBase):
         fmt = state_dict.get("snapshot.format")
         if fmt != SNAPSHOT_FORMAT:
             raise ValueError(f"not a snapshot this version restores: format {fmt!r}, expected {SNAPSHOT_FORMAT} (a "
-                             "state_dict of this package's ATRVjrEnv; older snapshots left out the friction solver's "
+                             "state_dict of this package's RoverEnv; older snapshots left out the friction solver's "
                              "warm start and cannot be restored exactly)")
         here = self._identity()
         saved = {k: state_dict.get(f"snapshot.{k}") for k in here}

@@ -162,15 +162,15 @@ def evaluate(policy, *, num_episodes: int = 1000, seed: int = EVAL_SEED, env=Non
             ``TensorDictModule`` or TorchRL actor; run under ``ExplorationType.DETERMINISTIC``.
         num_episodes: Number of episodes (= worlds).
         seed: Seed of the evaluation set; the same seed gives the same starts and targets.
-        env: An :class:`~atrv_warp.task.env.ATRVjrEnv` (possibly wrapped in transforms) with
+        env: An :class:`~atrv_warp.task.env.RoverEnv` (possibly wrapped in transforms) with
             ``num_episodes`` worlds to reuse; built if omitted.
         on_step: Optional callback ``on_step(env, tensordict)`` after every step (recording).
-        **env_kwargs: Passed to :class:`~atrv_warp.task.env.ATRVjrEnv` when it is built here.
+        **env_kwargs: Passed to :class:`~atrv_warp.task.env.RoverEnv` when it is built here.
     """
-    from atrv_warp.task.env import ATRVjrEnv
+    from atrv_warp.task.env import RoverEnv
 
     if env is None:
-        env = ATRVjrEnv(num_episodes, **env_kwargs)
+        env = RoverEnv(num_episodes, **env_kwargs)
     if env.batch_size != torch.Size([num_episodes]):
         raise ValueError(f"env batch size {tuple(env.batch_size)} != ({num_episodes},)")
     return run_episodes(policy, env, seed=seed, on_step=on_step).summary()
@@ -207,11 +207,11 @@ def task_fingerprint() -> str:
     Returns:
         16 hex digits.
     """
-    from atrv_warp.task.env import ATRVjrEnv
+    from atrv_warp.task.env import RoverEnv
 
     digest = hashlib.sha256()
     for task in ("reach", "nav"):
-        env = ATRVjrEnv(4, task=task, seed=0, randomization="wide")
+        env = RoverEnv(4, task=task, seed=0, randomization="wide")
         td = env.reset()
         # [left, right] in [-1, 1]: straight, a skid turn each way, and a stop
         action = torch.tensor([[0.8, 0.8], [-0.6, 0.9], [0.9, -0.6], [0.0, 0.0]])

@@ -281,7 +281,7 @@ def resolve_around(around: AroundConfig, sim_config: str | Path, *, rover: Rover
         around: What to draw, and how wide.
         sim_config: The simulator-config TOML file (``atrv-calibrate``'s output, or one written by hand).
         rover: The rover the file applies to (default: the realistic variant), as
-            :class:`~atrv_warp.task.env.ATRVjrEnv` builds it.
+            :class:`~atrv_warp.task.env.RoverEnv` builds it.
         contact: The contact law the file applies to (default: :class:`~atrv_warp.sim.config.ContactConfig`).
 
     Raises:

@@ -360,7 +360,7 @@ class RoverIO:
 
 
 class RoverSimNode(Node):
-    """Simulated ATRV-Jr rovers as a ROS 2 base driver.
+    """Simulated rovers of one robot as a ROS 2 base driver.
 
     Construction declares the parameters (with descriptions); :meth:`setup` checks them (a bad
     or unknown one is logged and raises :class:`NodeConfigError`), then builds the simulator
@@ -679,7 +679,7 @@ class RoverSimNode(Node):
 
     def start_episode(self, rover: RoverIO) -> None:
         """Put ``rover`` in evaluation episode ``rover.pending_episode`` of ``episode_seed`` (the world, start and
-        goal ``python -m atrv_warp.evaluate`` gives that episode: :meth:`ATRVjrEnv.reset_to_episodes`), its odometry
+        goal ``python -m atrv_warp.evaluate`` gives that episode: :meth:`RoverEnv.reset_to_episodes`), its odometry
         frame at the new start, still; publish ``episode`` ``{"event": "start", "episode", "seed", "start": [x, y,
         yaw], "goal": [x, y]}`` (world frame = the odometry frame at the start) and the state."""
         k, seed = rover.pending_episode, int(self.params["episode_seed"])

@@ -32,7 +32,7 @@ def write_sim_config(path, result: CalibrationResult, source: str) -> None:
     tables = sim_config_tables(result.values)
     summary = result.error_summary()
     lines = [f"# Simulator config fitted by atrv-calibrate to {source}.",
-             "# Use it with --sim-config FILE (train), sim_config=FILE (RoverSim, ATRVjrEnv), -p sim_config:=FILE (ROS).", ""]
+             "# Use it with --sim-config FILE (train), sim_config=FILE (RoverSim, RoverEnv), -p sim_config:=FILE (ROS).", ""]
     for table in ("rover", "contact"):
         if tables[table]:
             lines.append(f"[{table}]")
