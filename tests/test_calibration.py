@@ -4,7 +4,6 @@ parameters and controller, and a fit that recovers a rover it is not told, recor
 from __future__ import annotations
 
 import json
-import os
 import random
 import tomllib
 from pathlib import Path
@@ -493,7 +492,6 @@ def ros_env(monkeypatch):
     pytest.importorskip("rclpy", reason="ROS 2 extra not installed: pip install -e '.[ros]'")
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     monkeypatch.setenv("ROS_DOMAIN_ID", str(random.randint(101, 200)))
-    return dict(os.environ)
 
 
 @pytest.mark.slow  # a live ROS 2 node records the bag (about 30 s, in this process); the fit takes about 20 s

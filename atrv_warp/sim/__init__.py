@@ -27,32 +27,45 @@ from atrv_warp import runtime
 runtime.configure()
 
 _EXPORTS = {
-    "config": ("FAST_SIM_DT", "REFERENCE_SIM_DT", "VARIANTS", "ArenaConfig", "ContactConfig", "InertialOverride",
-               "ObstacleConfig", "RoverConfig", "SimConfig", "get_variant"),
-    "contact": ("ContactModel", "Obstacles", "Terrain"),
-    "modes": ("DRIVE_MODE_TORQUES", "DriveMode"),
-    "params": ("PARAMETERS", "WorldParams"),
-    "scanner": ("LaserScanner", "ScannerConfig"),
-    "simulator": ("RoverSim", "SimBuffers"),
-    "terrain": ("TERRAIN_PRESETS", "HeightGrid", "TerrainConfig"),
-    "urdf": ("URDFError", "load_rover"),
+    "FAST_SIM_DT": "config",
+    "REFERENCE_SIM_DT": "config",
+    "VARIANTS": "config",
+    "ArenaConfig": "config",
+    "ContactConfig": "config",
+    "InertialOverride": "config",
+    "ObstacleConfig": "config",
+    "RoverConfig": "config",
+    "SimConfig": "config",
+    "get_variant": "config",
+    "ContactModel": "contact",
+    "Obstacles": "contact",
+    "Terrain": "contact",
+    "DRIVE_MODE_TORQUES": "modes",
+    "DriveMode": "modes",
+    "PARAMETERS": "params",
+    "WorldParams": "params",
+    "LaserScanner": "scanner",
+    "ScannerConfig": "scanner",
+    "RoverSim": "simulator",
+    "SimBuffers": "simulator",
+    "TERRAIN_PRESETS": "terrain",
+    "HeightGrid": "terrain",
+    "TerrainConfig": "terrain",
+    "URDFError": "urdf",
+    "load_rover": "urdf",
 }
-"""Module -> the public names this package gives from it, each imported on first use (:func:`__getattr__`): a
-command that needs the configs or the driving modes (the ROS node's parameter checks) does not import Newton."""
-_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
+"""Each public name and the module it is imported from on first use (as the top-level package does): a command
+that needs the configs or the driving modes (the ROS node's parameter checks) does not import Newton."""
 
 
 def __getattr__(name: str):
-    module = _MODULE_OF.get(name)
-    if module is None:
-        raise AttributeError(f"module 'atrv_warp.sim' has no attribute {name!r}")
-    value = getattr(import_module(f"atrv_warp.sim.{module}"), name)
-    globals()[name] = value
-    return value
+    if name in _EXPORTS:
+        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+def __dir__():
+    return __all__
 
 
 __all__ = [

@@ -6,10 +6,11 @@
 
 For each revision, in turn: ``git clone`` this repository into a temporary folder, check the revision out, and run
 ``bash .ci/run`` there as CI does (``CI=true``, its own fresh virtualenvs and empty Warp kernel cache; pip's download
-cache is reused), with ``PYTEST_ADDOPTS`` adding ``--durations=30`` (older revisions do not print them) and a JUnit
-report (a ``.ci/run`` that runs the tiers apart writes one per tier into ``CI_JUNIT_DIR``). The script timestamps every line of the output as it arrives, so a phase's seconds (Chromium, each install,
-ruff, the docs, pytest, the main command) are the time from its ``== NAME`` header to the next, the same rule for every
-revision whatever its ``.ci/run`` prints itself. From the JUnit report it keeps each test file's total and the test
+cache is reused), with ``PYTEST_ADDOPTS`` adding ``--durations=30`` (older revisions do not print them) and JUnit
+reports (one per tier in ``CI_JUNIT_DIR`` where ``.ci/run`` runs the tiers apart). The script timestamps every line of
+the output as it arrives, so a phase's seconds (Chromium, each install, ruff, the docs, each pytest tier, the main
+command) are the time from its ``== NAME`` header to the next, the same rule for every revision whatever its
+``.ci/run`` prints itself. From the JUnit report it keeps each test file's total and the test
 functions that ran (their parameters folded), so a later revision can show that nothing was dropped.
 
 Measure on an idle machine: two busy processes on two cores slow each other several times over. The figures do not
