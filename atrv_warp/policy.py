@@ -263,8 +263,8 @@ def check_policy_task(payload: dict, task, *, source: str | Path) -> None:
     Raises:
         PolicyTaskMismatch: e.g. ``policy nav_deploy_policy.pt commands twist but task 'nav' takes torque``.
     """
-    from atrv_warp.task.config import get_task
     from atrv_warp.task.definition import Task
+    from atrv_warp.task.registry import get_task
 
     config = task.config if isinstance(task, Task) else get_task(task)
     action, observation = _kinds(payload)
@@ -368,7 +368,7 @@ def load_policy(path: str | Path | None = None, *, deterministic: bool = True, t
 
 
 def _check_observes(path: Path, obs_dim: int, task) -> None:
-    from atrv_warp.task.config import get_task
+    from atrv_warp.task.registry import get_task
 
     fields = observation_fields(get_task(task))
     if obs_dim != len(fields):

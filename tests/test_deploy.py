@@ -57,8 +57,8 @@ def write_policy(path: Path, contract: dict) -> Path:
 def task_contract(task: str = "nav_deploy") -> dict:
     """An exported contract of ``task`` without exporting a trained policy (needs the package's task spec)."""
     spec = pytest.importorskip("atrv_warp.task.spec")
-    config = pytest.importorskip("atrv_warp.task.config")
-    contract = spec.policy_contract(config.get_task(task))
+    registry = pytest.importorskip("atrv_warp.task.registry")
+    contract = spec.policy_contract(registry.get_task(task))
     return {"format": EXPORT_FORMAT, "task": task, **contract, "step_dt": 0.05, "rate_hz": 20.0}
 
 

@@ -260,7 +260,7 @@ def test_closed_loop_episodes_over_ros_end_as_evaluate_judges_them(tmp_path):
     """Ten seeded nav_deploy episodes through ROS 2 (an untrained policy: how they end is not the point; that they
     run, end by the environment's rules, and the node reports its compute time, is)."""
     from atrv_warp.policy import make_actor, save_policy
-    from atrv_warp.task.config import get_task
+    from atrv_warp.task.registry import get_task
     from atrv_warp.task.spec import END_REASONS, observation_fields
 
     task = get_task("nav_deploy")

@@ -364,7 +364,8 @@ def test_the_spec_bounds_clip_the_observation():
 
 def test_reward_terms_sum_to_the_reward_and_follow_the_spec():
     from atrv_warp.task.baseline import scripted_policy
-    from atrv_warp.task.spec import END_REASONS, OBS_DIM, REWARD_TERMS, EndReason
+    from atrv_warp.task.spec import END_REASONS, OBS_DIM, EndReason
+    from atrv_warp.task.terms import REWARD_TERMS
 
     env = ATRVjrEnv(32, seed=5)
     assert env.observation_spec["observation"].shape[-1] == OBS_DIM

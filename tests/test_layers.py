@@ -1,5 +1,5 @@
 """Layers point down only: read every module's imports (lazy ones inside functions included) and
-fail on one that reaches a higher layer.
+fail on one that reaches a higher layer, or on a circle of imports inside a layer.
 
 From the bottom: ``core`` (the light core: torch and the standard library only); ``runtime`` and ``storage``; ``sim/`` (the simulator knows no task); ``task/`` (the
 task knows no trainer); ``policy`` (a saved policy, loaded without the trainer); ``integrations/``
@@ -108,6 +108,53 @@ def test_the_check_catches_an_upward_import():
         "atrv_warp.task.env (task) imports atrv_warp.rl.config (rl)",
     ], found
     assert layer("atrv_warp.simulation") == TOP  # a prefix is a whole module name, not a string prefix
+
+
+def import_cycles(sources: dict[str, tuple[str, bool]]) -> list[list[str]]:
+    """Each circle of imports among ``sources`` (module -> (source, is_package)), lazy ones inside functions
+    included: the modules of each strongly connected component of two or more, sorted (Tarjan's algorithm)."""
+    graph = {m: sorted(imports(m, src, pkg) & sources.keys() - {m}) for m, (src, pkg) in sources.items()}
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    cycles = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = stack[stack.index(v):]
+            del stack[stack.index(v):]
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    return sorted(cycles)
+
+
+def test_no_circle_of_imports():
+    """Inside a layer too, imports point one way (issue 69: a circle of 13 modules in ``task/``, closed by imports
+    inside functions): a module that needs a higher one's fact takes it from below, or moves."""
+    cycles = import_cycles({m: (p.read_text(), pkg) for m, (p, pkg) in MODULES.items()})
+    assert not cycles, "\n".join(" <-> ".join(c) for c in cycles)
+
+
+def test_the_circle_check_catches_a_lazy_circle():
+    """Two of the edges that closed ``task/``'s circle, one of them inside a function, and a module apart."""
+    found = import_cycles({
+        "atrv_warp.task.definition": ("def f():\n    from atrv_warp.task.kernels.steps import PHASES\n", False),
+        "atrv_warp.task.kernels.steps": ("from atrv_warp.task import definition\n", False),
+        "atrv_warp.task.spec": ("from atrv_warp.task.definition import READS\n", False),
+    })
+    assert found == [["atrv_warp.task.definition", "atrv_warp.task.kernels.steps"]], found
 
 
 def third_party_imports(source: str) -> set[str]:

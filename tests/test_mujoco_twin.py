@@ -90,7 +90,7 @@ def test_a_deployable_policy_drives_twin_episodes(tmp_path, capsys):
 
     from atrv_warp.cli.evaluate import main
     from atrv_warp.policy import make_actor, save_policy
-    from atrv_warp.task.config import get_task
+    from atrv_warp.task.registry import get_task
     from atrv_warp.task.spec import observation_fields
 
     path = tmp_path / "deploy.pt"
@@ -284,7 +284,7 @@ def test_twin_episodes_go_through_the_tasks_base_and_can_see_the_true_pose():
     import torch
 
     from atrv_warp.integrations.mujoco import DeployablePolicy, draw_episodes, run_twin_episode
-    from atrv_warp.task.config import get_task
+    from atrv_warp.task.registry import get_task
     from atrv_warp.task.spec import policy_contract
 
     task = dataclasses.replace(get_task("nav_deploy"), max_steps=30)

@@ -13,7 +13,7 @@ import torch
 
 from atrv_warp.core.geometry import yaw_to_quat
 from atrv_warp.core.observation import RobotObservation, Scan
-from atrv_warp.task.config import get_task
+from atrv_warp.task.registry import get_task
 from atrv_warp.task.spec import observation_bounds, observation_fields, policy_contract
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -63,7 +63,7 @@ def golden_env(task: str, randomization: str | None):
 
 
 def _outputs(step) -> dict[str, np.ndarray]:
-    from atrv_warp.task.spec import REWARD_TERMS
+    from atrv_warp.task.terms import REWARD_TERMS
 
     nxt = step["next"]
     return {"observation": nxt["observation"].numpy().copy(), "reward": nxt["reward"].numpy().copy(),

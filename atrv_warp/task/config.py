@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from atrv_warp.sim.driver import DriverConfig
 
-__all__ = ["TaskConfig", "get_task"]  # and TASK_VARIANTS, the registry's (module __getattr__)
+__all__ = ["TaskConfig"]
 
 
 @dataclass(frozen=True)
@@ -154,19 +154,3 @@ class TaskConfig:
         limits = {name: getattr(self, name) for name, _ in BASE_LIMITS
                   if getattr(self, name) is not None and getattr(driver, name) is None}
         return dataclasses.replace(driver, **limits) if limits else driver
-
-
-def get_task(task) -> TaskConfig:
-    """The config of the registered task called ``task`` (``None``: ``reach``), or ``task`` itself (a config); the
-    tasks are :mod:`atrv_warp.task.registry`'s."""
-    from atrv_warp.task.registry import resolve_task
-
-    return task if isinstance(task, TaskConfig) else resolve_task(task).config
-
-
-def __getattr__(name: str):
-    if name == "TASK_VARIANTS":  # every registered task's config, by name (atrv_warp.task.registry declares them)
-        from atrv_warp.task.registry import TASK_VARIANTS
-
-        return TASK_VARIANTS
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -5,7 +5,7 @@ its reward terms. A task is declared in one module (``atrv_warp/task/tasks/nav.p
 A reward term is a row: a name, a ``@wp.func`` of ``(params, inputs, world) -> float`` (the task config's values,
 :class:`~atrv_warp.task.kernels.state.TermInputs`, the world), its weight (a config field's name, so that it is
 set like any other field: ``env.task.heading_weight=2``), when it counts (``running``, ``success`` or ``failure``),
-what it reads, and its torch twin (the same value from a rollout's tensors: :mod:`atrv_warp.task.reward`). The
+what it reads, and its torch twin (the same value from a rollout's tensors: :mod:`atrv_warp.task.twins`). The
 logged per-term rewards, the TensorDict's ``reward_terms`` and the docs' list come from the table.
 """
 
@@ -15,7 +15,12 @@ import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
-__all__ = ["READS", "RewardTerm", "Task"]
+__all__ = ["PHASES", "READS", "RewardTerm", "Task"]
+
+PHASES = {"running": 0, "success": 1, "failure": 2}
+"""When a reward term counts (its ``when``), and the number the step kernels give that phase: on a step that did not
+end the episode (a truncated one included), on the step that reached the goal, or on one that failed (a wall, the
+chassis, an obstacle, a flip)."""
 
 READS = ("state", "action", "previous action", "scan", "obstacles", "wheels", "events")
 """What a term may read: the chassis' state and the target, this step's action, the one before, the scan, the
@@ -39,14 +44,12 @@ class RewardTerm:
     reads: tuple[str, ...] = ("state",)
     """What it reads, of :data:`READS`."""
     torch: Callable | None = None
-    """Its torch twin, ``(rollout: TorchRollout) -> (steps, N)`` (:mod:`atrv_warp.task.reward`): the same value from
+    """Its torch twin, ``(rollout: TorchRollout) -> (steps, N)`` (:mod:`atrv_warp.task.twins`): the same value from
     a rollout's poses, actions and what else it reads; ``tests/test_task_terms.py`` holds every shipped term's twin to
     the environment's."""
     description: str = ""
 
     def __post_init__(self):
-        from atrv_warp.task.kernels.steps import PHASES
-
         if self.when not in PHASES:
             raise ValueError(f"reward term {self.name!r}: when={self.when!r}; known: {sorted(PHASES)}")
         unknown = sorted(set(self.reads) - set(READS))

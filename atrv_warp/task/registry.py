@@ -18,7 +18,7 @@ from atrv_warp.task.config import TaskConfig
 from atrv_warp.task.definition import Task
 from atrv_warp.task.tasks import nav, nav_deploy, reach
 
-__all__ = ["TASKS", "TASK_VARIANTS", "load_task_module", "register_task", "resolve_task", "task_names"]
+__all__ = ["TASKS", "TASK_VARIANTS", "get_task", "load_task_module", "register_task", "resolve_task", "task_names"]
 
 TASKS: dict[str, Task] = {}
 """Every registered task, by name."""
@@ -73,6 +73,11 @@ def resolve_task(task: Task | TaskConfig | str | None) -> Task:
     except (KeyError, TypeError):
         raise ValueError(f"unknown task {name!r}; known: {task_names()} (a task of your own: load its module with "
                          "--task-module FILE.py, or import it before)") from None
+
+
+def get_task(task) -> TaskConfig:
+    """The config of the registered task called ``task`` (``None``: ``reach``), or ``task`` itself (a config)."""
+    return task if isinstance(task, TaskConfig) else resolve_task(task).config
 
 
 def load_task_module(path: str | Path) -> list[str]:

@@ -10,8 +10,8 @@ baseline, the Gymnasium spaces, the ROS goal mode and :func:`atrv_warp.task.rewa
 - :data:`ACTIONS`: the action kinds (``torque``, ``twist``) and what each column means;
   :func:`action_to_torque` and :func:`action_to_twist` map an action in [-1, 1]² to the rover's input.
 - :class:`EndReason`: why an episode ended (the ``end_reason`` entry).
-- :data:`REWARD_TERMS`: the reward's terms; their sum is ``reward``, and each is reported per
-  step as ``("reward_terms", name)``.
+- the reward's terms are the task's table (:data:`atrv_warp.task.terms.REWARD_TERMS`: the shipped tasks'); their
+  sum is ``reward``, and each is reported per step as ``("reward_terms", name)``.
 - :func:`action_to_torque`: action in [-1, 1]² to wheel torques.
 - :func:`scan_sectors`: the observed scan sectors' angular edges (:class:`~atrv_warp.core.scan.ScanSectors`).
 - :func:`policy_contract`: what a policy of a task observes and commands, as plain values (the task's part of an
@@ -195,14 +195,6 @@ class EndReason(IntEnum):
 
 END_REASONS: tuple[str, ...] = tuple(r.name.lower() for r in EndReason)
 """``END_REASONS[end_reason]`` names an end reason."""
-
-def __getattr__(name: str):
-    if name == "REWARD_TERMS":  # the shipped tasks' reward table's names (atrv_warp.task.terms declares the rows)
-        from atrv_warp.task.terms import REFERENCE_TERMS
-
-        return tuple(t.name for t in REFERENCE_TERMS)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
 
 def observation_bounds(dtype: torch.dtype = torch.float32, task=None) -> tuple[torch.Tensor, torch.Tensor]:
     """(low, high) of the observation of ``task`` (default: the reference's, (OBS_DIM,) each)."""

@@ -6,33 +6,35 @@ a task of your own adds its own beside them (``docs/your-own-task.md``).
 
 from __future__ import annotations
 
-from atrv_warp.task import reward
+from atrv_warp.task import twins
 from atrv_warp.task.definition import RewardTerm
 from atrv_warp.task.kernels import terms as k
 
-__all__ = ["ACTION_RATE", "CLEARANCE", "ENERGY", "FAILURE", "HEADING", "PROGRESS", "REFERENCE_TERMS", "STEP_PENALTY",
-           "SUCCESS"]
+__all__ = ["ACTION_RATE", "CLEARANCE", "ENERGY", "FAILURE", "HEADING", "PROGRESS", "REFERENCE_TERMS", "REWARD_TERMS",
+           "STEP_PENALTY", "SUCCESS"]
 
-PROGRESS = RewardTerm("progress", k.progress, "progress_weight", torch=reward.progress,
+PROGRESS = RewardTerm("progress", k.progress, "progress_weight", torch=twins.progress,
                       description="the distance gained toward the target this step [m]")
-HEADING = RewardTerm("heading", k.heading, "heading_weight", torch=reward.heading,
+HEADING = RewardTerm("heading", k.heading, "heading_weight", torch=twins.heading,
                      description="the reduction of |heading error| this step [rad]")
-STEP_PENALTY = RewardTerm("step_penalty", k.step, "step_penalty", torch=reward.step,
+STEP_PENALTY = RewardTerm("step_penalty", k.step, "step_penalty", torch=twins.step,
                           description="-1 on every step that does not end the episode")
 SUCCESS = RewardTerm("success", k.event, "success_reward", when="success", reads=("events",),
-                     torch=reward.succeeded, description="1 on reaching the goal")
-FAILURE = RewardTerm("failure", k.event, "failure_reward", when="failure", reads=("events",), torch=reward.failed,
+                     torch=twins.succeeded, description="1 on reaching the goal")
+FAILURE = RewardTerm("failure", k.event, "failure_reward", when="failure", reads=("events",), torch=twins.failed,
                      description="1 on a wall, chassis or obstacle contact, or a flip")
 CLEARANCE = RewardTerm("clearance", k.clearance, "clearance_weight", reads=("state", "obstacles"),
-                       torch=reward.clearance,
+                       torch=twins.clearance,
                        description="minus how far the nearest obstacle reaches inside clearance_radius of the chassis "
                                    "origin [m]")
 ACTION_RATE = RewardTerm("action_rate", k.action_rate, "action_rate_weight", reads=("action", "previous action"),
-                         torch=reward.action_rate,
+                         torch=twins.action_rate,
                          description="minus the squared change of the action since the step before")
-ENERGY = RewardTerm("energy", k.energy, "energy_weight", reads=("wheels",), torch=reward.energy,
+ENERGY = RewardTerm("energy", k.energy, "energy_weight", reads=("wheels",), torch=twins.energy,
                     description="minus the motors' mechanical work this step [J]")
 
 REFERENCE_TERMS = (PROGRESS, HEADING, STEP_PENALTY, SUCCESS, FAILURE, CLEARANCE, ACTION_RATE, ENERGY)
 """The shipped tasks' table, in column order: the reference's progress, heading, step penalty, success and failure,
 then the clearance, the action rate and the energy (0 unless their weights are set)."""
+REWARD_TERMS: tuple[str, ...] = tuple(t.name for t in REFERENCE_TERMS)
+"""The shipped tasks' reward terms' names, in column order (their ``("reward_terms", name)`` entries)."""

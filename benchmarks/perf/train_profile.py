@@ -59,7 +59,7 @@ def main() -> int:
     from atrv_warp.rl.config import load_train_config
     from atrv_warp.rl.learner import Learner, make_buffer, replay_frames
     from atrv_warp.rl.loop import Evaluator
-    from atrv_warp.task.config import get_task
+    from atrv_warp.task.registry import get_task
     from atrv_warp.task.spec import observation_fields
 
     cfg = load_train_config(args.config)

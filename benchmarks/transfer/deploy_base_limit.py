@@ -77,9 +77,9 @@ def main() -> int:
 
     torch.set_num_threads(1)
     from atrv_warp.policy import load_policy, policy_path
-    from atrv_warp.task.config import get_task
     from atrv_warp.task.env import ATRVjrEnv
     from atrv_warp.task.evaluation import EVAL_SEED, format_result
+    from atrv_warp.task.registry import get_task
 
     task = get_task("nav_deploy")
     policy = load_policy(args.policy, task="nav_deploy")

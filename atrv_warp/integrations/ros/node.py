@@ -509,7 +509,7 @@ class RoverSimNode(Node):
             self.driver = driver_config(p)
         except ValueError as err:
             self._fail(str(err))
-        from atrv_warp.task.config import TASK_VARIANTS
+        from atrv_warp.task.registry import TASK_VARIANTS
 
         if p["task"] not in TASK_VARIANTS:
             self._fail(f"task={p['task']!r} is not a task; use one of {sorted(TASK_VARIANTS)}")

@@ -35,12 +35,9 @@ from atrv_warp.task.kernels.state import (
     TermInputs,
 )
 
-__all__ = ["PHASES", "advance_odometry_drift", "command_twist", "make_ends_kernel", "make_term_kernel", "sum_terms",
+__all__ = ["advance_odometry_drift", "command_twist", "make_ends_kernel", "make_term_kernel", "sum_terms",
            "twist_command"]
 
-PHASES = {"running": 0, "success": 1, "failure": 2}
-"""When a reward term counts: on a step that did not end the episode (a truncated one included), on the step that
-reached the goal, or on one that failed (a wall, the chassis, an obstacle, a flip)."""
 
 
 def make_ends_kernel(success):
@@ -105,7 +102,7 @@ def advance_odometry_drift(step_dt: float, task: TaskBuffers, rover: RoverState)
 
 def make_term_kernel(term, column: int, phase: int):
     """The kernel of one reward term ``term(params, inputs: TermInputs, world) -> float``: ``weight`` times its
-    value into ``column`` where the step's phase (:data:`PHASES`) is ``phase``, else 0."""
+    value into ``column`` where the step's phase (:data:`~atrv_warp.task.definition.PHASES`) is ``phase``, else 0."""
 
     @wp.kernel(module="unique")
     def write_term(params: Any, inputs: TermInputs, weight: float, terms: wp.array2d(dtype=float)):

@@ -9,8 +9,9 @@ from typing import Any
 
 import warp as wp
 
+from atrv_warp.task.definition import PHASES
 from atrv_warp.task.kernels.state import TermInputs
-from atrv_warp.task.kernels.steps import PHASES, make_ends_kernel, make_term_kernel
+from atrv_warp.task.kernels.steps import make_ends_kernel, make_term_kernel
 
 __all__ = ["ends_kernel", "field_kernel", "term_kernels"]
 
