@@ -81,25 +81,29 @@ def _relative(path: str | Path) -> str:
 
 
 def provenance(version: int, *, script: str | Path | None = None, dynamics: bool = True, task: bool = False,
-               policies: tuple[str | Path, ...] = (), driver: bool = False, robots: tuple[str, ...] = ()) -> dict:
+               policies: tuple[str | Path, ...] = (), driver: bool = False, robots: tuple[str, ...] = (),
+               tasks: tuple[tuple[str, str], ...] = ()) -> dict:
     """What a results file's figures depend on, recorded beside them (``docs/hooks.py`` checks it).
 
     Args:
         version: the script's ``VERSION``.
         script: the benchmark script; by default the one being run (``__main__``).
         dynamics: whether the figures depend on the simulator's dynamics; if so, the current
-            :func:`atrv_warp.sim.checks.dynamics_fingerprint` is recorded.
+            :func:`atrv_warp.sim.fingerprints.dynamics_fingerprint` is recorded.
         task: whether they depend on the tasks (observations, rewards, resets, randomization); if so, the
-            current :func:`atrv_warp.task.evaluation.task_fingerprint` is recorded.
+            current :func:`atrv_warp.task.fingerprints.task_fingerprint` is recorded.
         policies: the policy files the script ran; each one's sha256 is recorded.
         driver: whether they went through the base's motor driver (``/cmd_vel``, velocity actions); if so, the
-            current :func:`atrv_warp.sim.checks.driver_fingerprint` is recorded.
+            current :func:`atrv_warp.sim.fingerprints.driver_fingerprint` is recorded.
         robots: the robots the figures are of (names or robot files); each one's file and URDF sha256 is recorded.
+        tasks: the (task, robot) pairs the figures are of, beyond the ``policies``' (each policy's recorded pair
+            counts where ``task`` is set); each pair's current
+            :func:`atrv_warp.task.fingerprints.task_robot_fingerprint` is recorded under ``'task@robot'``.
 
     Returns:
         ``date`` (UTC), ``commit`` and ``dirty`` (uncommitted changes to tracked files), ``script``,
         ``script_version``, ``command`` (the command line that ran, when the script is the one being run),
-        and ``dynamics``, ``driver``, ``task``, ``policies`` and ``robots`` where they apply.
+        and ``dynamics``, ``driver``, ``task``, ``tasks``, ``policies`` and ``robots`` where they apply.
     """
     main = getattr(sys.modules["__main__"], "__file__", None) or sys.argv[0]
     script = script or main
@@ -110,17 +114,22 @@ def provenance(version: int, *, script: str | Path | None = None, dynamics: bool
     if Path(script).resolve() == Path(main).resolve():  # the command that wrote it, to run again
         record["command"] = shlex.join(["python", _relative(script), *sys.argv[1:]])
     if dynamics:
-        from atrv_warp.sim.checks import dynamics_fingerprint
+        from atrv_warp.sim.fingerprints import dynamics_fingerprint
 
         record["dynamics"] = dynamics_fingerprint()
     if driver:
-        from atrv_warp.sim.checks import driver_fingerprint
+        from atrv_warp.sim.fingerprints import driver_fingerprint
 
         record["driver"] = driver_fingerprint()
     if task:
-        from atrv_warp.task.evaluation import task_fingerprint
+        from atrv_warp.task.fingerprints import task_fingerprint
 
         record["task"] = task_fingerprint()
+    pairs = task_robot_pairs(policies if task else (), tasks)
+    if pairs:
+        from atrv_warp.task.fingerprints import task_robot_fingerprint, task_robot_key
+
+        record["tasks"] = {task_robot_key(t, r): task_robot_fingerprint(t, r) for t, r in pairs}
     if policies:
         record["policies"] = {_relative(p): file_sha256(p) for p in policies}
     if robots:
@@ -131,8 +140,21 @@ def provenance(version: int, *, script: str | Path | None = None, dynamics: bool
     return record
 
 
+def task_robot_pairs(policies: tuple[str | Path, ...] = (), tasks: tuple[tuple[str, str], ...] = ()) -> list:
+    """The (task, robot) pairs of ``tasks`` and of each policy file's record (what it trained on), each once, in
+    order."""
+    from atrv_warp.policy import policy_record
+
+    pairs = list(tasks)
+    for policy in policies:
+        record = policy_record(policy)
+        pairs.append((record.task.name, record.robot.name))
+    return list(dict.fromkeys((str(t), str(r)) for t, r in pairs))
+
+
 def write_results(path: str | Path, result: dict, *, version: int, dynamics: bool = True, task: bool = False,
-                  policies: tuple[str | Path, ...] = (), driver: bool = False, robots: tuple[str, ...] = ()) -> Path:
+                  policies: tuple[str | Path, ...] = (), driver: bool = False, robots: tuple[str, ...] = (),
+                  tasks: tuple[tuple[str, str], ...] = ()) -> Path:
     """Write ``result`` as indented JSON to ``path``, creating its folder, with its
     :func:`provenance` under the key ``"provenance"``; returns the path.
 
@@ -145,9 +167,10 @@ def write_results(path: str | Path, result: dict, *, version: int, dynamics: boo
         policies: the policy files the script ran.
         driver: whether they went through the base's motor driver.
         robots: the robots they are of (their files' and URDFs' sha256 are recorded).
+        tasks: the (task, robot) pairs they are of beyond the policies' (:func:`provenance`).
     """
     result = {**result, "provenance": provenance(version, dynamics=dynamics, task=task, policies=tuple(policies),
-                                                 driver=driver, robots=tuple(robots))}
+                                                 driver=driver, robots=tuple(robots), tasks=tuple(tasks))}
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")

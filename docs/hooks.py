@@ -17,7 +17,8 @@ A measured figure lives in its results file alone (``benchmarks/results/*.json``
 
 Every figure a page cites is checked against the code as it is now (:func:`status`): the benchmark script's
 ``VERSION``, the dynamics, driver and task fingerprints (each computed once per build, and kept for the next process
-while the package's files are the same: :data:`FINGERPRINT_CACHE`), the sha256 of each policy
+while the package's files are the same: :data:`FINGERPRINT_CACHE`), the fingerprint of each task on a robot it
+recorded (:func:`current_task_robot`), the sha256 of each policy
 and robot file it ran and, for a picture, of the results files it was drawn from (themselves current). A figure that
 no longer matches, or records no provenance, fails the build unless the page marks it historical with a line
 ``{{ historical FILE }}`` (a picture: ``NAME.png`` as its link writes it), which renders as a note with its date and
@@ -167,9 +168,22 @@ def _fingerprint_now(module: str, function: str) -> Callable[[], str]:
     return now
 
 
-current_dynamics = _fingerprint_now("atrv_warp.sim.checks", "dynamics_fingerprint")  # a 2-s rollout
-current_driver = _fingerprint_now("atrv_warp.sim.checks", "driver_fingerprint")
-current_task = _fingerprint_now("atrv_warp.task.evaluation", "task_fingerprint")  # short rollouts of reach and nav
+current_dynamics = _fingerprint_now("atrv_warp.sim.fingerprints", "dynamics_fingerprint")  # a 2-s rollout
+current_driver = _fingerprint_now("atrv_warp.sim.fingerprints", "driver_fingerprint")
+current_task = _fingerprint_now("atrv_warp.task.fingerprints", "task_fingerprint")  # short rollouts of reach and nav
+
+
+@functools.cache
+def current_task_robot(key: str) -> str:
+    """The current :func:`~atrv_warp.task.fingerprints.task_robot_fingerprint` of ``'task@robot'`` (a declaration,
+    not a rollout: cheap, computed here); ``'gone: ...'`` where the task or the robot no longer loads."""
+    from atrv_warp.task.fingerprints import task_robot_fingerprint
+
+    task, _, robot = key.partition("@")
+    try:
+        return task_robot_fingerprint(task, robot)
+    except ValueError as err:  # an unknown task; a robot file that does not load (RobotFileError)
+        return f"gone: {err}"
 
 
 def script_path(recorded: str) -> str:
@@ -256,6 +270,10 @@ def status(name: str) -> Status:
                            ("task", current_task, "task")):
         if key in p and p[key] != now():
             reasons.append(f"{what} fingerprint {p[key]} != {now()} now")
+    for key, digest in p.get("tasks", {}).items():
+        now = current_task_robot(key)
+        if digest != now:
+            reasons.append(f"{key} fingerprint {digest} != {now} now (its task or robot file changed)")
     for kind, files in (("policy", p.get("policies", {})), ("robot file", p.get("robots", {}))):
         for file, digest in files.items():
             path = ROOT / file

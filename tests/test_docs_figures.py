@@ -90,6 +90,21 @@ def test_a_changed_task_is_stale(hooks, tmp_path):
     assert hooks.status("u.json").current
 
 
+def test_a_changed_task_on_a_robot_is_stale(hooks, tmp_path):
+    """A file of ``nav_deploy`` on the Jackal (a pair the reach/nav rollouts cannot see) goes stale when that pair's
+    declaration changes, and names a task that is gone (issue 69, part 6)."""
+    from atrv_warp.task.fingerprints import task_robot_fingerprint
+
+    now = task_robot_fingerprint("nav_deploy", "jackal")
+    _write(tmp_path, "j.json", {"x": 1}, tasks={"nav_deploy@jackal": now})
+    assert hooks.status("j.json").current
+    _write(tmp_path, "k.json", {"x": 1}, tasks={"nav_deploy@jackal": "before", "nav@husky": "x"})
+    assert hooks.status("k.json").reasons[0] == (f"nav_deploy@jackal fingerprint before != {now} now (its task or "
+                                                 "robot file changed)")
+    _write(tmp_path, "g.json", {"x": 1}, tasks={"gone@jackal": "before"})
+    assert "gone@jackal fingerprint before != gone: unknown task 'gone'" in hooks.status("g.json").reasons[0]
+
+
 def test_a_changed_script_version_or_policy_is_stale(hooks, tmp_path, monkeypatch):
     _write(tmp_path, "v.json", {"x": 1}, script_version=0)
     assert hooks.status("v.json").state == "stale"
@@ -147,9 +162,26 @@ def test_write_results_records_provenance(tmp_path):
     assert p["policies"] == {"atrv_warp/assets/pretrained_policy.pt": digest}
 
 
+def test_a_results_file_records_its_policies_task_on_its_robot(tmp_path):
+    """With ``task=True``, each policy's recorded (task, robot) and the pairs named are recorded beside the reach/nav
+    fingerprint, each under ``task@robot``."""
+    from atrv_warp.policy import shipped_policy_path
+    from atrv_warp.task.fingerprints import task_robot_fingerprint
+
+    spec = importlib.util.spec_from_file_location("common_under_test", ROOT / "benchmarks" / "_common.py")
+    _common = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(_common)
+    p = _common.provenance(1, dynamics=False, policies=(shipped_policy_path("nav_deploy_jackal"),))
+    assert "tasks" not in p  # the figures do not depend on the tasks
+    p = _common.provenance(1, dynamics=False, task=True, policies=(shipped_policy_path("nav_deploy_jackal"),),
+                           tasks=(("reach", "husky"), ("nav_deploy", "jackal")))
+    assert p["tasks"] == {"reach@husky": task_robot_fingerprint("reach", "husky"),
+                          "nav_deploy@jackal": task_robot_fingerprint("nav_deploy", "jackal")}, p["tasks"]
+
+
 def test_the_dynamics_fingerprint_is_behaviour():
     from atrv_warp.sim import ContactConfig
-    from atrv_warp.sim.checks import dynamics_fingerprint
+    from atrv_warp.sim.fingerprints import dynamics_fingerprint
 
     now = dynamics_fingerprint()
     assert now == dynamics_fingerprint() and len(now) == 16

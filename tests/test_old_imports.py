@@ -1,8 +1,10 @@
-"""Old import paths keep working after issue 62 moved the modules (CHANGELOG.md says so): the command-line modules
-into ``atrv_warp/cli/``, system identification from ``atrv_warp.integrations.calibration`` to
-``atrv_warp.sim.sysid``, and the measurement protocols from ``atrv_warp.sim.checks`` to ``atrv_warp.sim.protocols``.
-Each old path gives the very objects of the new one (every installed command answering ``--help``:
-``tests/test_cli.py``)."""
+"""Old import paths keep working after issues 62 and 69 moved the modules (CHANGELOG.md says so): the command-line
+modules into ``atrv_warp/cli/`` (``python -m atrv_warp.train`` and the like stay), and until 0.3.0, each with a
+``DeprecationWarning`` that names the new path: system identification from ``atrv_warp.integrations.calibration`` to
+``atrv_warp.sim.sysid``, the measurement protocols and fingerprints from ``atrv_warp.sim.checks`` to
+``atrv_warp.sim.protocols`` and ``atrv_warp.sim.fingerprints``, ``task_fingerprint`` from ``atrv_warp.task.evaluation``
+to ``atrv_warp.task.fingerprints``. Each old path gives the very objects of the new one (every installed command
+answering ``--help``: ``tests/test_cli.py``)."""
 
 from __future__ import annotations
 
@@ -39,17 +41,24 @@ def test_python_m_atrv_warp_train_help(run_module):
     assert "--resume" in out and "--config" in out
 
 
+def fresh_import(name: str, new: str):
+    """Import ``name`` as a first import would (its old modules dropped from ``sys.modules``), expecting the
+    ``DeprecationWarning`` that names ``new``."""
+    for module in [m for m in sys.modules if m == name or m.startswith(name + ".")]:
+        del sys.modules[module]
+    with pytest.warns(DeprecationWarning, match=f"{name} is deprecated and goes in 0.3.0: .*{new}"):
+        return importlib.import_module(name)
+
+
 def test_the_old_calibration_package_is_sysid():
-    import atrv_warp.integrations.calibration as old_package
-    import atrv_warp.integrations.calibration.fit
     from atrv_warp.sim import sysid
 
-    assert atrv_warp.integrations.calibration.fit is sysid.fit
+    old_package = fresh_import("atrv_warp.integrations.calibration", "atrv_warp.sim.sysid")
     assert old_package.__all__ == sysid.__all__
     for name in sysid.__all__:
         assert getattr(old_package, name) is getattr(sysid, name), name
     for module in SYSID:
-        old = importlib.import_module(f"atrv_warp.integrations.calibration.{module}")
+        old = fresh_import(f"atrv_warp.integrations.calibration.{module}", f"atrv_warp.sim.sysid.{module}")
         assert old is importlib.import_module(f"atrv_warp.sim.sysid.{module}") is sys.modules[old.__name__], module
         assert getattr(old_package, module) is old  # `from atrv_warp.integrations.calibration import fit`
     from atrv_warp.integrations.calibration.fit import _model_check  # private names too: it is the same module
@@ -58,12 +67,21 @@ def test_the_old_calibration_package_is_sysid():
     assert _model_check is sysid.fit._model_check and DriveLog is sysid.DriveLog  # noqa: SLF001
 
 
-def test_checks_re_exports_the_protocols_and_keeps_the_fingerprints():
-    from atrv_warp.sim import checks, protocols
+def test_checks_gives_the_protocols_and_the_fingerprints():
+    from atrv_warp.sim import fingerprints, protocols
 
-    assert set(protocols.__all__) < set(checks.__all__)
-    for name in protocols.__all__:
-        assert getattr(checks, name) is getattr(protocols, name), name
-    for name in ("dynamics_fingerprint", "driver_fingerprint", "FINGERPRINT_STEPS"):
-        assert name in checks.__all__ and not hasattr(protocols, name), name
-    assert checks.dynamics_fingerprint.__module__ == "atrv_warp.sim.checks"
+    checks = fresh_import("atrv_warp.sim.checks", "atrv_warp.sim.fingerprints")
+    assert set(checks.__all__) == set(protocols.__all__) | set(fingerprints.__all__)
+    for module in (protocols, fingerprints):
+        for name in module.__all__:
+            assert getattr(checks, name) is getattr(module, name), name
+    assert checks.dynamics_fingerprint.__module__ == "atrv_warp.sim.fingerprints"
+
+
+def test_the_task_fingerprint_from_evaluation():
+    from atrv_warp.task import evaluation, fingerprints
+
+    with pytest.warns(DeprecationWarning, match="moved to atrv_warp.task.fingerprints; this old path goes in 0.3.0"):
+        assert evaluation.task_fingerprint is fingerprints.task_fingerprint
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        _ = evaluation.nothing

@@ -380,3 +380,27 @@ def test_a_recorded_robot_is_found_again_by_its_shipped_name_or_not_at_all(tmp_p
     urdf.write_text(urdf.read_text().replace('<mass value="16.523"/>', '<mass value="17.0"/>'))
     assert robot_spec(load_robot(tmp_path / "jackal.toml")) is None  # its URDF edited since: a robot of one's own
     assert robot_spec(dataclasses.replace(load_robot("husky"), torque_limit=30.0)) is None
+
+
+def test_a_task_on_a_robot_has_a_fingerprint_that_moves_with_its_declaration(tmp_path, monkeypatch):
+    """:func:`~atrv_warp.task.fingerprints.task_robot_fingerprint`: the same for the same task and robot, different
+    for another task or robot; it moves with a task field and a robot file's value, and not with the task module's
+    description (issue 69, part 6)."""
+    import dataclasses
+
+    from atrv_warp.task import registry
+    from atrv_warp.task.fingerprints import task_robot_fingerprint
+
+    now = task_robot_fingerprint("nav_deploy", "jackal")
+    assert now == task_robot_fingerprint("nav_deploy", "jackal") and len(now) == 16
+    assert len({now, task_robot_fingerprint("nav", "jackal"), task_robot_fingerprint("nav_deploy", "husky")}) == 3
+    copied = _copy(tmp_path)
+    assert task_robot_fingerprint("nav_deploy", copied) == now  # the same file elsewhere
+    copied.write_text(copied.read_text().replace("linear_velocity = 2.0\n", "linear_velocity = 1.9\n"))
+    assert task_robot_fingerprint("nav_deploy", copied) != now
+    shipped = registry.resolve_task("nav_deploy")
+    monkeypatch.setitem(registry.TASKS, "nav_deploy", dataclasses.replace(shipped, description="said otherwise"))
+    assert task_robot_fingerprint("nav_deploy", "jackal") == now
+    changed = dataclasses.replace(shipped, config=dataclasses.replace(shipped.config, max_steps=shipped.config.max_steps + 1))
+    monkeypatch.setitem(registry.TASKS, "nav_deploy", changed)
+    assert task_robot_fingerprint("nav_deploy", "jackal") != now

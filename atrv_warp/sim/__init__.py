@@ -11,7 +11,7 @@ Featherstone solver, with our contact kernel.
 - :mod:`.scanner`: :class:`LaserScanner`, the 2-D laser range finder.
 - :mod:`.diff`: :class:`DiffRollout`, gradients through the simulator.
 - :mod:`.protocols`: measurement protocols (the reference drive, wall impacts, slip, slopes, the driver's step and
-  turning responses), shared by benchmarks and tests; :mod:`.checks`: the fingerprints results files record.
+  turning responses), shared by benchmarks and tests; :mod:`.fingerprints`: the hashes results files record.
 - :mod:`.sysid`: system identification, the simulator's parameters fitted to a drive recorded on a rover.
 - :mod:`.robot_check`: a robot file's figures measured in the simulator.
 

@@ -3,7 +3,7 @@ assert on them): the reference tutorial's drop–settle–drive run, rovers driv
 ratio, a rover parked on a slope, the motor driver's step and turning responses, and the analytic figures they are held
 to (rolling without slip, a rigid rover's twist under pure Coulomb friction).
 
-The simulator's fingerprints, hashes of fixed rollouts that results files record, are in :mod:`atrv_warp.sim.checks`.
+The simulator's fingerprints, hashes of fixed rollouts that results files record, are in :mod:`atrv_warp.sim.fingerprints`.
 """
 
 from __future__ import annotations

@@ -55,12 +55,7 @@ from atrv_warp.task.kernels.observe import (
     write_action_observation,
     write_scan_observation,
 )
-from atrv_warp.task.kernels.sampling import locate_goals, sample_episodes, sample_nav_episodes
-from atrv_warp.task.kernels.state import RoverState, StepOutputs, TaskBuffers, TermInputs, params_of
-from atrv_warp.task.kernels.steps import advance_odometry_drift, command_twist, sum_terms
-from atrv_warp.task.kernels.tables import ends_kernel, field_kernel, term_kernels
-from atrv_warp.task.randomization import PHYSICS_DRAWS, AroundConfig, RandomizationConfig, get_randomization
-from atrv_warp.task.randomization_kernels import (
+from atrv_warp.task.kernels.randomization import (
     DRAW_COUNT,
     HISTORY,
     MODE_CODES,
@@ -75,6 +70,11 @@ from atrv_warp.task.randomization_kernels import (
     delay_twist,
     draw_physics,
 )
+from atrv_warp.task.kernels.sampling import locate_goals, sample_episodes, sample_nav_episodes
+from atrv_warp.task.kernels.state import RoverState, StepOutputs, TaskBuffers, TermInputs, params_of
+from atrv_warp.task.kernels.steps import advance_odometry_drift, command_twist, sum_terms
+from atrv_warp.task.kernels.tables import ends_kernel, field_kernel, term_kernels
+from atrv_warp.task.randomization import PHYSICS_DRAWS, AroundConfig, RandomizationConfig, get_randomization
 from atrv_warp.task.registry import load_task_module, resolve_task
 from atrv_warp.task.scaling import fit_task
 from atrv_warp.task.spec import (

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import itertools
 import json
 from dataclasses import asdict, dataclass
@@ -14,7 +13,7 @@ from tensordict import TensorDictBase
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 __all__ = ["EVAL_SEED", "SHIFT_BINS", "VALIDATION_SEED", "EpisodeRecord", "EvalResult", "evaluate", "format_bins",
-           "format_result", "range_bins", "run_episodes", "success_by_bin", "task_fingerprint", "write_result"]
+           "format_result", "range_bins", "run_episodes", "success_by_bin", "write_result"]
 
 EVAL_SEED = 2024
 """Seed of the standard evaluation set, the test set (training never uses it, nor picks its best policy on it)."""
@@ -190,36 +189,13 @@ def write_result(path: str | Path, name: str, task: str, seed: int, r: EvalResul
         json.dump({"policy": name, "task": task, "seed": seed, **r.as_dict(), **extra}, fh, indent=2)
 
 
-FINGERPRINT_STEPS = 30
-"""Env-steps of :func:`task_fingerprint`'s rollouts."""
+def __getattr__(name: str):
+    if name in ("task_fingerprint", "FINGERPRINT_STEPS"):  # moved to atrv_warp.task.fingerprints (issue 69)
+        import warnings
 
+        from atrv_warp.task import fingerprints
 
-@torch.no_grad()
-def task_fingerprint() -> str:
-    """A short hash of what the tasks do, not of their source: each task (``reach``, ``nav``) with 4 worlds under
-    the ``wide`` randomization, seed 0, driven by fixed actions for :data:`FINGERPRINT_STEPS` env-steps; every
-    step's observations and rewards rounded to 1e-3 and its end reasons, hashed.
-
-    It moves with the observation, reward, resets, randomization, sensors and the simulator under them, and not
-    with a refactor. Benchmarks that run the environment record it (``benchmarks/_common.write_results``);
-    the docs build recomputes it once to flag their figures when it changes (``docs/hooks.py``).
-
-    Returns:
-        16 hex digits.
-    """
-    from atrv_warp.task.env import RoverEnv
-
-    digest = hashlib.sha256()
-    for task in ("reach", "nav"):
-        env = RoverEnv(4, task=task, seed=0, randomization="wide")
-        td = env.reset()
-        # [left, right] in [-1, 1]: straight, a skid turn each way, and a stop
-        action = torch.tensor([[0.8, 0.8], [-0.6, 0.9], [0.9, -0.6], [0.0, 0.0]])
-        for _ in range(FINGERPRINT_STEPS):
-            td = env.step(td.set("action", action))
-            nxt = td["next"]
-            for value in (nxt["observation"], nxt["reward"]):
-                digest.update(" ".join(f"{v:.3f}" for v in (value.double().round(decimals=3) + 0.0).flatten().tolist()).encode())
-            digest.update(str(nxt["end_reason"].flatten().tolist()).encode())
-            td = step_mdp(td)
-    return digest.hexdigest()[:16]
+        warnings.warn(f"atrv_warp.task.evaluation.{name} moved to atrv_warp.task.fingerprints; this old path goes in "
+                      "0.3.0", DeprecationWarning, stacklevel=2)
+        return getattr(fingerprints, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -206,7 +206,8 @@ def main() -> int:
               "minutes_per_seed": minutes, "overrides": extra, "compile_s": compile_s,
               "summarized_from_kept_runs": args.summarize, "seeds": runs,
               "median": median, "time": time.strftime("%Y-%m-%d %H:%M:%S")}
-    write_results(out, result, version=VERSION, task=True, robots=(cfg.env.robot,))
+    write_results(out, result, version=VERSION, task=True, robots=(cfg.env.robot,),
+                  tasks=((cfg.env.task, cfg.env.robot),))
     print(f"\n| seed | {100 * args.threshold:.0f} % after [s] | frames then | final success of the best policy | updates/s | frames/s |"
           "\n|---:|---:|---:|---:|---:|---:|")
     for r in runs:

@@ -1,7 +1,11 @@
-"""Moved to :mod:`atrv_warp.sim.sysid.log`; importing this old path gives that module itself."""
+"""Moved to :mod:`atrv_warp.sim.sysid.log`; importing this old path gives that module itself, with a
+``DeprecationWarning``, until 0.3.0 removes it."""
 
 import sys
+import warnings
 
 from atrv_warp.sim.sysid import log
 
+warnings.warn("atrv_warp.integrations.calibration.log is deprecated and goes in 0.3.0: import atrv_warp.sim.sysid.log",
+              DeprecationWarning, stacklevel=2)
 sys.modules[__name__] = log

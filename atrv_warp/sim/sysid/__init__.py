@@ -2,7 +2,8 @@
 (``python -m atrv_warp.calibrate``).
 
 It replays the drive in the simulator and knows no task or trainer, so it lives beside the simulator. Before issue 62 it
-was ``atrv_warp.integrations.calibration``, which still imports (the same modules and objects).
+was ``atrv_warp.integrations.calibration``, which still imports (the same modules and objects, with a
+``DeprecationWarning``) until 0.3.0.
 
 - :mod:`.log`: the drive read from a ROS 2 bag (MCAP): commands, wheel encoders, reference pose;
 - :mod:`.fit`: the fit of the physical parameters to replays of the drive in the simulator, and its report;

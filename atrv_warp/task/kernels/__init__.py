@@ -4,7 +4,8 @@
 - :mod:`.sampling`: reset sampling (the reference's and the nav tasks');
 - :mod:`.observe`: the observation (the arena's or the robot's leading fields, the scan's sectors, the last actions);
 - :mod:`.steps`: a step's outcome (its ends, the odometry's drift, each reward term, the reward);
-- :mod:`.terms`: the shipped reward terms and success test, as ``@wp.func``.
+- :mod:`.terms`: the shipped reward terms and success test, as ``@wp.func``;
+- :mod:`.randomization`: the domain randomization's draws, the action latency and motor lag, the observation noise.
 """
 
 from atrv_warp.task.kernels.observe import (

@@ -193,7 +193,7 @@ def draw_physics(
         delay.latency[world] = wp.int32(wp.min(int(v), int(spec.high[DRAW_LATENCY]) - 1))
     if due(spec, DRAW_MOTOR_LAG, phase, episode, steps):
         tau = sample(spec, DRAW_MOTOR_LAG, stream, 0)
-        alpha = float(1.0)  # noqa: UP018 - a variable (Warp), not a constant
+        alpha = float(1.0)
         if tau > 0.0:
             alpha = 1.0 - wp.exp(-step_dt / tau)
         delay.alpha[world] = alpha
