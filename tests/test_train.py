@@ -63,6 +63,46 @@ def test_substeps_reach_the_training_and_evaluation_envs():
         load_train_config(None, {"substeps": "0"})
 
 
+def test_a_run_is_resolved_once_per_process(tmp_path, monkeypatch):
+    """Loading the config, the actor, the in-process collector's and validation's envs and the saves' record share
+    one resolution: the task is fitted to the robot once and its URDF parsed once (issue 69, part 1; a robot copied
+    to a new folder, so that nothing earlier in this process resolved it)."""
+    import shutil
+
+    import yourdfpy
+
+    from atrv_warp.rl.collectors import make_collector
+    from atrv_warp.rl.evaluators import make_evaluator
+    from atrv_warp.rl.learner import make_run_actor
+    from atrv_warp.rl.run import resolve_run
+    from atrv_warp.task.definition import Task
+
+    for suffix in (".toml", ".urdf"):
+        shutil.copy(ROOT / "atrv_warp" / "robots" / f"atrvjr{suffix}", tmp_path / f"atrvjr{suffix}")
+    counts = {"fitted": 0, "parsed": 0}
+    fit, load = Task.for_robot, yourdfpy.URDF.load
+
+    def counted(key, function):
+        def wrapper(*args, **kwargs):
+            counts[key] += 1
+            return function(*args, **kwargs)
+        return wrapper
+
+    monkeypatch.setattr(Task, "for_robot", counted("fitted", fit))
+    monkeypatch.setattr(yourdfpy.URDF, "load", counted("parsed", load))
+    cfg = load_train_config(SMOKE, {"robot": str(tmp_path / "atrvjr.toml"), "num_envs": "4", "eval_episodes": "2",
+                                    "env.task.max_steps": "150"})
+    run = resolve_run(cfg)
+    assert resolve_run(cfg) is run and run.task.config.max_steps == 150 and run.robot.path == str(tmp_path / "atrvjr.toml")
+    actor, _ = make_run_actor(cfg, run)
+    collector = make_collector(cfg, actor, 0, run=run)
+    evaluator = make_evaluator(cfg, actor, run=run)
+    assert evaluator.env.task is run.task and collector.env.task is run.task  # the resolved task itself
+    assert run.record()["task_record"]["config"]["max_steps"] == 150
+    assert counts == {"fitted": 1, "parsed": 1}, counts
+    collector.shutdown()
+
+
 def test_cli_rejects_bad_config_before_work(tmp_path, run_module, capsys):
     proc = run_module("atrv_warp.train", "--config", SMOKE, f"out_dir={tmp_path}", "num_envs=-3", check=False)
     assert proc.returncode == 2 and "num_envs must be > 0" in proc.stderr

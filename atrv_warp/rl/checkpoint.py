@@ -25,6 +25,7 @@ import torch
 from atrv_warp.policy import Normalize, check_policy_task, policy_payload
 from atrv_warp.rl.config import TrainConfig
 from atrv_warp.rl.learner import make_learner
+from atrv_warp.rl.run import RunSpec, resolve_run
 from atrv_warp.storage import FileFormatError, atomic_save, file_sha256, load_weights, sync_folder
 
 __all__ = ["BUFFER_FORMAT", "CHECKPOINT_KEYS", "Checkpoint", "RunState", "buffer_state", "load_buffer_state",
@@ -135,9 +136,11 @@ class Checkpoint:
         """Lines for the console from :meth:`restore` (what it could not read, and why)."""
 
     # ---------------------------------------------------------------- saving
-    def save(self, cfg: TrainConfig, state: RunState, actor, learner, buffer) -> None:
+    def save(self, cfg: TrainConfig, state: RunState, actor, learner, buffer, *, run: RunSpec | None = None) -> None:
         """Write a new save and make it current (``learner``: SAC's :class:`~atrv_warp.rl.learner.Learner`, PPO's
-        :class:`~atrv_warp.rl.ppo.PPOLearner`, or ``None`` before learning starts)."""
+        :class:`~atrv_warp.rl.ppo.PPOLearner`, or ``None`` before learning starts; ``run``: ``cfg`` resolved, whose
+        task and robot the save records)."""
+        run = run or resolve_run(cfg)
         generation, files = self.generation + 1, dict(self.files)
         self.folder.mkdir(parents=True, exist_ok=True)
         if learner is not None and len(buffer):
@@ -147,8 +150,8 @@ class Checkpoint:
         sync_folder(self.folder)
         payload = {**dataclasses.asdict(state), "rng": torch.get_rng_state(), "config": dataclasses.asdict(cfg),
                    "policy": policy_payload(actor, width=cfg.network.width, depth=cfg.network.depth,
-                                          meta={"frames": state.frames, "task": cfg.env.task}, task=cfg.task(),
-                                          record=cfg.run_record()),
+                                          meta={"frames": state.frames, "task": cfg.env.task}, task=run.task,
+                                          record=run.record()),
                    "save": {"generation": generation, "files": files, "logs": self._log_lengths()}}
         if learner is not None:
             learned = learner.state_dict()
@@ -200,7 +203,8 @@ class Checkpoint:
                 path.unlink()
 
     # ---------------------------------------------------------------- restoring
-    def restore(self, ck: dict, cfg: TrainConfig, actor, normalize: Normalize, buffer) -> tuple[RunState, object]:
+    def restore(self, ck: dict, cfg: TrainConfig, actor, normalize: Normalize, buffer, *,
+                run: RunSpec | None = None) -> tuple[RunState, object]:
         """Load a checkpoint read by :func:`load_checkpoint` into fresh networks and buffer, check and read the files
         its save names, cut the logs back to the save and put ``best_policy.pt`` back to the save's.
 
@@ -211,7 +215,7 @@ class Checkpoint:
         # keys added after a checkpoint was written take their defaults
         state = RunState(**{f.name: ck[f.name] for f in dataclasses.fields(RunState) if f.name in ck})
         learner = None
-        check_policy_task(ck["policy"], cfg.task(), source=self.path)  # a policy that cannot drive the task
+        check_policy_task(ck["policy"], (run or resolve_run(cfg)).task, source=self.path)  # a policy that cannot drive the task
         try:
             actor.load_state_dict(ck["policy"]["state_dict"])
             if state.stats_ready:
@@ -260,13 +264,14 @@ class Checkpoint:
                     f.truncate(keep)
 
 
-def warm_start(path: str | Path, cfg: TrainConfig, actor, normalize: Normalize) -> object | None:
+def warm_start(path: str | Path, cfg: TrainConfig, actor, normalize: Normalize, *,
+               run: RunSpec | None = None) -> object | None:
     """Load the actor (with its observation statistics) and the learner of the checkpoint at ``path`` into a
     new run's networks (``run.init_from``); ``None`` when that run had not started learning. A checkpoint whose
     policy commands or observes another kind than ``cfg.env.task``'s is refused
     (:class:`~atrv_warp.policy.PolicyTaskMismatch`), before anything is loaded."""
     ck = load_checkpoint(Path(path))
-    check_policy_task(ck["policy"], cfg.task(), source=path)
+    check_policy_task(ck["policy"], (run or resolve_run(cfg)).task, source=path)
     try:
         actor.load_state_dict(ck["policy"]["state_dict"])
         if not ck["stats_ready"]:

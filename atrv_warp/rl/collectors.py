@@ -39,6 +39,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.collectors import Collector
 
 from atrv_warp.rl.config import TrainConfig
+from atrv_warp.rl.run import RunSpec, resolve_run
 from atrv_warp.runtime import TRAINER_CORE, WORKER_CORE, pin_to_core
 from atrv_warp.task.env import EnvFactory, RoverEnv
 
@@ -118,7 +119,8 @@ class RayWorker(Collector):
         return self.next()
 
 
-def make_ray_collector(cfg: TrainConfig, actor, *, total_frames: int, init_random_frames: int, env_seed: int):
+def make_ray_collector(cfg: TrainConfig, actor, *, total_frames: int, init_random_frames: int, env_seed: int,
+                       run: RunSpec | None = None):
     """A :class:`~atrv_warp.rl.ray_collector.RayCollection` of ``cfg.collector.num_collectors`` :class:`RayWorker`
     actors, on the Ray ``cfg.collector.ray_address`` names (started or joined here unless one is running).
 
@@ -134,6 +136,7 @@ def make_ray_collector(cfg: TrainConfig, actor, *, total_frames: int, init_rando
             (a replacement collector acts with the policy from its first frame).
         env_seed: Seed of collector 0's worlds; collector ``i`` adds ``i * 1_000_003``, its ``k``-th
             replacement ``k * 7_919``.
+        run: Not used: each actor resolves the config's names in its own process.
 
     Returns:
         The collection; its ``shutdown()`` stops the actors, and Ray if it started it.
@@ -188,16 +191,21 @@ def worker_weights(collector) -> list[TensorDictBase]:
     return collector.map_fn("policy_weights")
 
 
-def make_sync_collector(cfg: TrainConfig, actor, *, total_frames: int, init_random_frames: int, env_seed: int):
-    """Collect in this process, stepping the learner's own ``actor``, on the run's device."""
+def make_sync_collector(cfg: TrainConfig, actor, *, total_frames: int, init_random_frames: int, env_seed: int,
+                        run: RunSpec | None = None):
+    """Collect in this process, stepping the learner's own ``actor``, on the run's device (``run``: ``cfg`` resolved,
+    where the caller has it)."""
     # the MLP policy is stateless: it needs no env transform (InitTracker) appended for it
-    env = RoverEnv(cfg.env.num_envs, seed=env_seed, device=cfg.run.device, **dict(cfg.env.env_kwargs()))
+    env = RoverEnv(cfg.env.num_envs, seed=env_seed, device=cfg.run.device,
+                   **(run or resolve_run(cfg)).env_kwargs(cfg))
     return Collector(env, actor, frames_per_batch=cfg.frames_per_batch, total_frames=total_frames,
                      init_random_frames=init_random_frames, auto_register_policy_transforms=False)
 
 
-def make_async_collector(cfg: TrainConfig, actor, *, total_frames: int, init_random_frames: int, env_seed: int):
-    """One worker process, pinned to the second core, with a copy of ``actor``."""
+def make_async_collector(cfg: TrainConfig, actor, *, total_frames: int, init_random_frames: int, env_seed: int,
+                         run: RunSpec | None = None):
+    """One worker process, pinned to the second core, with a copy of ``actor`` (it resolves the run's names itself:
+    ``run`` is not used)."""
     from torchrl.collectors import MultiAsyncCollector
 
     factory = EnvFactory(cfg.env.num_envs, seed=env_seed, core=WORKER_CORE, env_kwargs=cfg.env.env_kwargs())
@@ -229,7 +237,8 @@ class CollectorKind:
     """What differs between the ways of collecting; the trainer asks this, never the kind's name."""
 
     make: Callable
-    """``make(cfg, actor, *, total_frames, init_random_frames, env_seed)``: the TorchRL collector."""
+    """``make(cfg, actor, *, total_frames, init_random_frames, env_seed, run)``: the TorchRL collector (``run``: ``cfg``
+    resolved in this process, for the envs it builds here; processes of its own resolve the names themselves)."""
     describe: Callable[[TrainConfig], str]
     """One line for the console: ``'async collector, 256 worlds'``, ``'2 ray collectors x 64 worlds (local Ray)'``."""
     push_weights: bool = False
@@ -243,7 +252,7 @@ class CollectorKind:
     """``placements(collector)``: one line saying where the collectors run, printed at the start."""
 
 
-def make_collector(cfg: TrainConfig, actor, frames_done: int):
+def make_collector(cfg: TrainConfig, actor, frames_done: int, *, run: RunSpec | None = None):
     """The collector ``cfg.collector.kind`` names (:data:`COLLECTORS`), for the frames still to collect.
 
     A resumed run (``frames_done`` > 0) collects only what is left, random frames included, and
@@ -255,7 +264,7 @@ def make_collector(cfg: TrainConfig, actor, frames_done: int):
     env_seed = cfg.run.seed + 7919 * (frames_done // fpb + 1)  # a resumed run draws new episodes
     whole_batches = max(math.ceil(remaining / fpb), 1) * fpb  # the loop stops at total_frames itself
     return COLLECTORS[cfg.collector.kind].make(cfg, actor, total_frames=whole_batches, init_random_frames=random_left,
-                                               env_seed=env_seed)
+                                               env_seed=env_seed, run=run)
 
 
 COLLECTORS: dict[str, CollectorKind] = {

@@ -23,6 +23,8 @@ from typing import Annotated, Literal
 
 import tyro
 
+from atrv_warp.rl.run import resolve_run, task_field_values, toml_value
+
 __all__ = [
     "BOOLEAN_SPELLINGS",
     "DEFAULT_PRESET",
@@ -133,54 +135,10 @@ class EnvConfig:
                      for k, v in self.env_kwargs())
 
 
-def _toml_value(text: str):
-    """A value written as TOML (``0.5``, ``[5.0, 8.0]``, ``"rolling"``, ``true``), or the text itself where it is no
-    TOML value (a bare word on the command line: ``rolling``)."""
-    try:
-        return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        return text
-
-
 def _toml_text(value) -> str:
     import json
 
     return str(value).lower() if isinstance(value, bool) else json.dumps(value)
-
-
-def task_field_values(env: EnvConfig) -> dict[str, object]:
-    """``env.task_fields`` as the task config's values, each of its field's type (a whole number for a float field
-    is a float; a list for a pair is a tuple).
-
-    Raises:
-        ValueError: A field the task's config does not have (the known ones named), or a value of another type.
-    """
-    from atrv_warp.task.registry import load_task_module, resolve_task
-
-    if not env.task_fields:
-        return {}
-    if env.task_module:
-        load_task_module(env.task_module)
-    config = resolve_task(env.task).config
-    hints, fields = typing.get_type_hints(type(config)), {f.name for f in dataclasses.fields(config)}
-    out = {}
-    for name, text in env.task_fields:
-        if name not in fields:
-            raise ValueError(f"env.task.{name}: task {env.task!r} ({type(config).__name__}) has no field {name!r}; "
-                             f"its fields: {sorted(fields)}")
-        value, kind = _toml_value(text), hints[name]
-        optional = type(None) in typing.get_args(kind)
-        base = next((k for k in typing.get_args(kind) if k is not type(None)), kind) if optional else kind
-        origin = typing.get_origin(base) or base
-        if origin is float and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
-        elif origin is tuple and isinstance(value, list):
-            value = tuple(float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value)
-        ok = isinstance(value, origin) and not (origin in (int, float) and isinstance(value, bool))
-        if not ok:
-            raise ValueError(f"env.task.{name} must be {getattr(origin, '__name__', origin)}, got {text!r}")
-        out[name] = value
-    return out
 
 
 @dataclass(frozen=True)
@@ -382,15 +340,7 @@ class TrainConfig:
         out_dir = Path(self.run.out_dir)
         if out_dir.exists() and not out_dir.is_dir():
             raise ValueError(f"train config: out_dir {out_dir} is a file, not a folder")
-        try:
-            self.task()  # loads task_module, names the known tasks if this one is not, checks every task field
-        except (ValueError, FileNotFoundError) as err:
-            raise ValueError(f"train config: {' '.join(str(err).split())}") from None
-        if self.env.sim_config:
-            from atrv_warp.sim.config import load_sim_config
-
-            load_sim_config(self.env.sim_config)  # names the file and the key that is wrong
-        self.randomization()
+        resolve_run(self)  # the task, its fields, the sim config file and the randomizations: named where they fail
         return self
 
     def _validate_device(self) -> None:
@@ -422,54 +372,6 @@ class TrainConfig:
         if self.optim.compile != "off" and self.optim.algo != "sac":
             raise ValueError(f"train config: compile={self.optim.compile} builds SAC's update; PPO runs eager "
                              "(compile=off)")
-
-    def task(self):
-        """The run's task (:class:`~atrv_warp.task.definition.Task`): ``env.task`` (from ``env.task_module`` where
-        set) fitted to ``env.robot``, its config with ``env.task_fields`` applied.
-
-        Raises:
-            ValueError: An unknown task, a field its config lacks, a bad value (named).
-            FileNotFoundError: A missing ``task_module``.
-        """
-        from atrv_warp.sim.config import nominal_rover_config
-        from atrv_warp.task.registry import load_task_module, resolve_task
-        from atrv_warp.task.scaling import fit_task
-
-        if self.env.task_module:
-            load_task_module(self.env.task_module)
-        rover = nominal_rover_config(self.env.robot)
-        return fit_task(resolve_task(self.env.task), rover).with_config(**task_field_values(self.env))
-
-    def run_record(self) -> dict:
-        """The task and the robot this run trains with, every field (:func:`atrv_warp.policy.run_record`): what its
-        saved policies and checkpoints keep, so that an export or an evaluation reads them, not today's code."""
-        from atrv_warp.core.robot import load_robot
-        from atrv_warp.policy import run_record
-
-        return run_record(self.task(), load_robot(self.env.robot))
-
-    def randomization(self):
-        """The training envs' randomization in absolute ranges
-        (:class:`~atrv_warp.task.randomization.RandomizationConfig`; ``around`` resolved against ``sim_config``).
-
-        Raises:
-            ValueError: One line naming the key (``randomization`` or ``eval_randomization``): an unknown preset, or
-                one centred on a ``sim_config`` that is missing or does not set a parameter it draws.
-        """
-        from atrv_warp.sim.config import nominal_rover_config
-        from atrv_warp.task.randomization import get_randomization
-
-        def resolve(key: str):
-            try:
-                return get_randomization(getattr(self.env, key), sim_config=self.env.sim_config or None,
-                                         rover=nominal_rover_config(self.env.robot))
-            except ValueError as err:
-                raise ValueError(f"train config: {key}: {err}") from None
-
-        shift = resolve("randomization")
-        if self.env.eval_randomization:  # empty: the training's
-            resolve("eval_randomization")
-        return shift
 
 
 _GROUP_TYPES = typing.get_type_hints(TrainConfig)
@@ -551,7 +453,7 @@ def _task_tokens(tokens: list[str]) -> tuple[list[str], tuple[tuple[str, str], .
         elif key[len(prefix):] == "name":
             rest.append(f"env.task={value}")
         else:
-            fields.append((key[len(prefix):], _toml_text(_toml_value(value))))
+            fields.append((key[len(prefix):], _toml_text(toml_value(value))))
     return rest, tuple(fields)
 
 
@@ -700,7 +602,7 @@ def to_toml(cfg: TrainConfig) -> str:
             lines.append(f"{f.name} = {str(v).lower() if isinstance(v, bool) else json.dumps(v)}")
         if group == "env":
             lines += ["", "[env.task]", f"name = {json.dumps(cfg.env.task)}",
-                      *(f"{name} = {text if _toml_value(text) is not text else json.dumps(text)}"
+                      *(f"{name} = {text if toml_value(text) is not text else json.dumps(text)}"
                         for name, text in cfg.env.task_fields)]
         lines.append("")
     return "\n".join(lines)

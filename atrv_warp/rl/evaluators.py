@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from atrv_warp.rl.config import TrainConfig
+from atrv_warp.rl.run import RunSpec, resolve_run
 from atrv_warp.runtime import WORKER_CORE, pin_to_core
 from atrv_warp.task.env import RoverEnv
 from atrv_warp.task.evaluation import VALIDATION_SEED, EvalResult, evaluate
@@ -53,10 +54,11 @@ class Evaluator:
     in_background = False
     """The training waits for it."""
 
-    def __init__(self, cfg: TrainConfig, actor, *, recording=None, video_dir: Path | None = None, gif: bool = False):
+    def __init__(self, cfg: TrainConfig, actor, *, recording=None, video_dir: Path | None = None, gif: bool = False,
+                 run: RunSpec | None = None):
         self.cfg, self.actor = cfg, actor
         self.env = RoverEnv(cfg.logging.eval_episodes, seed=VALIDATION_SEED, device=cfg.run.device,
-                             **dict(cfg.env.eval_env_kwargs()))
+                             **(run or resolve_run(cfg)).env_kwargs(cfg, judged=True))
         self.recorder = None
         if recording is not None:
             from atrv_warp.integrations.recorder import RerunRecorder
@@ -182,8 +184,9 @@ def _serve(conn, cfg: TrainConfig, video_dir: Path | None, gif: bool, core: int)
     try:
         pin_to_core(core)
         torch.set_num_threads(1)
-        actor, _ = make_run_actor(cfg)
-        evaluator = Evaluator(cfg, actor, video_dir=video_dir, gif=gif)
+        run = resolve_run(cfg)  # this process's, once
+        actor, _ = make_run_actor(cfg, run)
+        evaluator = Evaluator(cfg, actor, video_dir=video_dir, gif=gif, run=run)
     except BaseException as err:  # noqa: BLE001 - sent to the trainer, which raises it
         conn.send(("error", f"{type(err).__name__}: {err}"))
         return
@@ -200,13 +203,15 @@ def _serve(conn, cfg: TrainConfig, video_dir: Path | None, gif: bool, core: int)
             return
 
 
-def make_evaluator(cfg: TrainConfig, actor, *, recording=None, video_dir: Path | None = None, gif: bool = False):
+def make_evaluator(cfg: TrainConfig, actor, *, recording=None, video_dir: Path | None = None, gif: bool = False,
+                   run: RunSpec | None = None):
     """The run's periodic validation: in the background (``logging.eval_in_background``), except where a Rerun
     recording of the training (``logger=rerun``) takes the validation's worlds, which only the trainer holds, and
-    on a GPU (``run.device``), where it takes a second or two in the trainer."""
+    on a GPU (``run.device``), where it takes a second or two in the trainer. ``run``: ``cfg`` resolved, for the
+    validation in this process (one in the background resolves the names in its own)."""
     if cfg.logging.eval_in_background and recording is None and cfg.run.device == "cpu":
         return BackgroundEvaluator(cfg, video_dir=video_dir, gif=gif)
-    return Evaluator(cfg, actor, recording=recording, video_dir=video_dir, gif=gif)
+    return Evaluator(cfg, actor, recording=recording, video_dir=video_dir, gif=gif, run=run)
 
 
 def _each(hooks: list):

@@ -15,6 +15,7 @@ from torchrl.modules import MLP, ValueOperator
 from atrv_warp.policy import Normalize, make_actor
 from atrv_warp.rl.config import TrainConfig
 from atrv_warp.rl.ppo import PPO_LOSS_KEYS, PPOLearner
+from atrv_warp.rl.run import RunSpec, resolve_run
 from atrv_warp.runtime import is_verbose
 from atrv_warp.task.spec import ACTION_DIM
 
@@ -226,12 +227,13 @@ def set_lr(learner, lr: float) -> None:
                 group["lr"] = lr
 
 
-def make_run_actor(cfg: TrainConfig):
+def make_run_actor(cfg: TrainConfig, run: RunSpec | None = None):
     """The actor a run trains, and its observation statistics (not yet set): the task's observation size, the
-    network's width and depth, and log-probabilities where the algorithm collects with them (PPO)."""
+    network's width and depth, and log-probabilities where the algorithm collects with them (PPO). ``run``: ``cfg``
+    resolved (:func:`~atrv_warp.rl.run.resolve_run`, where not given)."""
     from atrv_warp.task.spec import observation_fields
 
-    obs_dim = len(observation_fields(cfg.task().config))
+    obs_dim = len(observation_fields((run or resolve_run(cfg)).task.config))
     normalize = Normalize(obs_dim)
     actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize, obs_dim=obs_dim,
                        return_log_prob=ALGOS[cfg.optim.algo].on_policy)

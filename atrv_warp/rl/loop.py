@@ -21,6 +21,7 @@ from atrv_warp.rl.evaluators import EvalOutcome, Evaluator, make_evaluator
 from atrv_warp.rl.exploration import collection_policy
 from atrv_warp.rl.learner import ALGOS, annealed_lr, make_buffer, make_learner, make_run_actor, replay_frames, set_lr
 from atrv_warp.rl.reporting import Loggers, LossMeans, Progress, Stats, make_loggers, pct, plot_curve
+from atrv_warp.rl.run import RunSpec, resolve_run
 from atrv_warp.runtime import device_summary
 from atrv_warp.sim.config import SimConfig
 from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result
@@ -31,17 +32,18 @@ __all__ = ["Evaluator", "TrainLoop", "train"]
 def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     """Train with ``cfg`` (SAC or PPO, ``cfg.optim.algo``); returns the run folder."""
     run_dir, ck = _prepare_run(cfg, resume)
+    run = resolve_run(cfg)  # the robot, the task fitted to it, the randomizations: once, passed down
     torch.manual_seed(cfg.run.seed)
     torch.set_num_threads(cfg.run.threads)
     kind = COLLECTORS[cfg.collector.kind]
     if kind.trainer_core is not None:
         pin_to_core(kind.trainer_core)
-    actor, normalize = make_run_actor(cfg)
+    actor, normalize = make_run_actor(cfg, run)
     buffer = make_buffer(cfg)
     checkpoint = Checkpoint(run_dir)
     state, learner = RunState(next_eval=cfg.logging.eval_every_frames), None
     if ck is not None:
-        state, learner = checkpoint.restore(ck, cfg, actor, normalize, buffer)
+        state, learner = checkpoint.restore(ck, cfg, actor, normalize, buffer, run=run)
         print(f"resumed {run_dir} at {state.frames:,} frames, {state.updates:,} updates, "
               f"best success {100 * state.best_success:.1f}% (save {checkpoint.generation})")
         for line in checkpoint.notes:
@@ -49,7 +51,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     else:
         checkpoint.start_over()  # what a run killed before its first save left (its logs, a half-written file)
         if cfg.run.init_from:
-            learner = warm_start(cfg.run.init_from, cfg, actor, normalize)
+            learner = warm_start(cfg.run.init_from, cfg, actor, normalize, run=run)
             state.stats_ready = learner is not None
             print(f"starting from the networks of {cfg.run.init_from}")
     if state.frames >= cfg.run.total_frames:
@@ -59,34 +61,34 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.toml").write_text(to_toml(cfg))
     # the task resolved: every field of its config and its reward table, as this run trains it
-    (run_dir / "task.json").write_text(json.dumps(cfg.task().record(), indent=1, default=str) + "\n")
+    (run_dir / "task.json").write_text(json.dumps(run.task.record(), indent=1, default=str) + "\n")
     # the robot resolved: every field of its file, as this run trains on it (its saved policies keep the same)
-    (run_dir / "robot.json").write_text(json.dumps(cfg.run_record()["robot"], indent=1) + "\n")
+    (run_dir / "robot.json").write_text(json.dumps(run.record()["robot"], indent=1) + "\n")
     # what the envs draw, in absolute ranges: `around` resolved against the sim config, so a run says what it trained on
     (run_dir / "randomization.json").write_text(json.dumps(
         {"randomization": cfg.env.randomization, "eval_randomization": cfg.env.eval_randomization or None,
          "sim_config": cfg.env.sim_config,
-         "resolved": cfg.randomization().describe()}, indent=1) + "\n")
+         "resolved": run.randomization.describe()}, indent=1) + "\n")
     loggers = make_loggers(cfg, run_dir, resume, state.tracking_id)
     state.tracking_id = loggers.tracking_id
     loggers.log_hparams(flat_config(cfg))
     # what the collectors step: the actor, or the actor with correlated exploration noise (SAC)
     policy = collection_policy(actor, cfg.collector.noise_correlation, seed=cfg.run.seed + 104_729 * state.frames)
-    collector = make_collector(cfg, policy, state.frames)
-    evaluator = make_evaluator(cfg, actor, recording=loggers.recording,
+    collector = make_collector(cfg, policy, state.frames, run=run)
+    evaluator = make_evaluator(cfg, actor, run=run, recording=loggers.recording,
                                video_dir=run_dir / "videos" if cfg.logging.video_episodes else None,
                                gif=loggers.wants_gif)
     budget = (f"{cfg.run.total_frames:,} frames or {cfg.run.max_minutes:g} min, whichever ends first"
               if cfg.run.max_minutes else f"{cfg.run.total_frames:,} frames, no time limit")
     print(f"run folder: {run_dir}  ({cfg.optim.algo}, {kind.describe(cfg)}, batch {cfg.frames_per_batch} frames, "
           f"solver substep {SimConfig().step_dt / cfg.env.substeps:.4g} s; budget {budget})")
-    task_cfg = cfg.task().config
+    task_cfg = run.task.config
     speeds = f" at {task_cfg.max_linear:g} m/s, {task_cfg.max_angular:g} rad/s" if task_cfg.action == "twist" else ""
     period = task_cfg.control_period or 0.05
     print(f"robot {cfg.env.robot}, task {cfg.env.task}{speeds}, controlled every {period:g} s")
     print(device_summary(cfg.run.device))
     loop = TrainLoop(cfg, state, actor, normalize, buffer, learner, loggers, evaluator, checkpoint, run_dir,
-                     policy=policy)
+                     policy=policy, run=run)
     try:
         if kind.placements is not None:
             print(f"{cfg.collector.kind} collectors on: {kind.placements(collector)}")
@@ -105,7 +107,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
           f"{state.elapsed_s / 60:.1f} min")
     if loop.frames_by_collector:
         print(f"frames per collector: {', '.join(f'{n:,}' for n in loop.frames_by_collector)}")
-    _finish(cfg, state, run_dir, loggers)
+    _finish(cfg, state, run_dir, loggers, run)
     return run_dir
 
 
@@ -138,15 +140,18 @@ class TrainLoop:
     """Collect, learn, evaluate and checkpoint until a budget ends the run."""
 
     def __init__(self, cfg: TrainConfig, state: RunState, actor, normalize: Normalize, buffer, learner,
-                 loggers: Loggers, evaluator, checkpoint: Checkpoint, run_dir: Path, *, policy=None):
+                 loggers: Loggers, evaluator, checkpoint: Checkpoint, run_dir: Path, *, policy=None,
+                 run: RunSpec | None = None):
         self.cfg, self.state, self.actor, self.normalize, self.buffer = cfg, state, actor, normalize, buffer
         self.policy = actor if policy is None else policy
         """What the collectors step (``actor``, or it inside :class:`~atrv_warp.rl.exploration.CorrelatedExploration`);
         its weights are the actor's."""
         self.learner, self.loggers, self.evaluator, self.checkpoint = learner, loggers, evaluator, checkpoint
         self.run_dir = run_dir
+        self.spec = run or resolve_run(cfg)
+        """The run resolved (:class:`~atrv_warp.rl.run.RunSpec`): its task and robot, which the saves record."""
         self.algo = ALGOS[cfg.optim.algo]
-        self.stats, self.losses = Stats(cfg.task().term_names), LossMeans(self.algo.loss_keys)
+        self.stats, self.losses = Stats(self.spec.task.term_names), LossMeans(self.algo.loss_keys)
         self.push_weights = COLLECTORS[cfg.collector.kind].push_weights
         self.frames_by_collector: list[int] = []
         """Frames from each Ray collector (their batches carry the collector's index); empty otherwise."""
@@ -247,7 +252,7 @@ class TrainLoop:
             self.evaluator.submit(st.frames, policy_payload(self.actor, width=cfg.network.width,
                                                             depth=cfg.network.depth,
                                                             meta={"frames": st.frames, "task": cfg.env.task},
-                                                            task=cfg.task(), record=cfg.run_record()))
+                                                            task=self.spec.task, record=self.spec.record()))
             self.record(self.evaluator.poll())  # in the trainer, ready now; in the background, later
         else:
             self.progress.log(self.point.format(pct(math.nan)))
@@ -283,17 +288,17 @@ class TrainLoop:
 
     def save_checkpoint(self) -> None:
         self.state.elapsed_s = self.elapsed()
-        self.checkpoint.save(self.cfg, self.state, self.actor, self.learner, self.buffer)
+        self.checkpoint.save(self.cfg, self.state, self.actor, self.learner, self.buffer, run=self.spec)
 
 
-def _finish(cfg: TrainConfig, state: RunState, run_dir: Path, loggers: Loggers) -> None:
+def _finish(cfg: TrainConfig, state: RunState, run_dir: Path, loggers: Loggers, run: RunSpec) -> None:
     """Final evaluation of the best policy on the full set, results file, learning curve, summary."""
     result = {"frames": state.frames, "updates": state.updates, "train_minutes": state.elapsed_s / 60,
               "best_periodic_success": state.best_success}
     best_path = run_dir / "best_policy.pt"
     if best_path.is_file():
         final = evaluate(load_policy(best_path, device=cfg.run.device), num_episodes=cfg.logging.final_eval_episodes,
-                         seed=EVAL_SEED, device=cfg.run.device, **dict(cfg.env.eval_env_kwargs()))
+                         seed=EVAL_SEED, device=cfg.run.device, **run.env_kwargs(cfg, judged=True))
         print(format_result("best policy, final evaluation", final))
         result["final_eval"] = final.as_dict()
         for k, v in final.as_dict().items():

@@ -8,6 +8,8 @@ the geometry needed to replace the URDF's collision meshes by wheel cylinders.
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import os
 from dataclasses import dataclass
 
@@ -165,12 +167,21 @@ def _check_inertial(path: str, name: str, inertial: Inertial) -> None:
 
 
 def _parse(path: str):
-    """The URDF's robot, or a URDFError naming the file and what is wrong with it."""
+    """The URDF's robot, or a URDFError naming the file and what is wrong with it. A process parses each file once
+    while its bytes stay the same (the robot is read, never changed, by its callers)."""
+    if not os.path.isfile(path):
+        raise URDFError(f"URDF file not found: {path}")
+    with open(path, "rb") as fh:
+        digest = hashlib.sha256(fh.read()).hexdigest()
+    return _parse_file(path, digest)
+
+
+@functools.lru_cache(maxsize=16)
+def _parse_file(path: str, digest: str):
+    """:func:`_parse` of the file at ``path`` whose bytes hash to ``digest`` (the cache's key)."""
     import yourdfpy
     from lxml import etree
 
-    if not os.path.isfile(path):
-        raise URDFError(f"URDF file not found: {path}")
     try:  # yourdfpy silently recovers from broken XML; refuse it instead
         etree.parse(path, etree.XMLParser(recover=False))
     except etree.XMLSyntaxError as err:

@@ -87,4 +87,6 @@ def fit_task(task, rover):
     <atrv_warp.task.definition.Task.for_robot>` with its footprint."""
     from atrv_warp.sim.urdf import load_rover
 
+    if task.robot is not None:  # fitted already (a resolved run's task): as it is
+        return task
     return task.for_robot(rover.robot_spec, footprint_radius(load_rover(rover), rover))

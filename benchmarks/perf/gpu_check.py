@@ -167,6 +167,7 @@ def part_updates(args) -> dict:
     from tensordict import TensorDict
 
     from atrv_warp.rl.learner import Learner, make_run_actor
+    from atrv_warp.rl.run import resolve_run
     from atrv_warp.task.spec import observation_fields
 
     cfg = _recipe(args)
@@ -180,7 +181,7 @@ def part_updates(args) -> dict:
         torch.manual_seed(0)
         actor, normalize = make_run_actor(c)
         learners[form] = Learner(c, actor, normalize)
-    dim = len(observation_fields(cfg.task().config))
+    dim = len(observation_fields(resolve_run(cfg).task.config))
     g = torch.Generator(device=args.device).manual_seed(0)
     flags = torch.zeros(batch_size, 1, dtype=torch.bool, device=args.device)
 
