@@ -449,6 +449,27 @@ def test_parameters_are_checked_by_type_and_range_in_one_line():
         check_parameters({"max_speed": 1.0})
 
 
+def test_the_robot_is_a_name_or_a_robot_file(tmp_path):
+    """``robot:=`` takes a robot file's path as the simulator node and every command do: the node runs with the name
+    its file gives (and compares that with the policy's); a file that does not load is named in one line."""
+    import shutil
+
+    from atrv_warp.core.robot import robot_file
+    from atrv_warp.deploy.parameters import ParameterError, check_parameters
+
+    shipped = robot_file("jackal")  # the installed package's (the slim install runs these tests too)
+    for suffix in (".toml", ".urdf"):
+        shutil.copy(shipped.with_suffix(suffix), tmp_path / f"jackal{suffix}")
+    assert check_parameters({"robot": str(tmp_path / "jackal.toml")})["robot"] == "jackal"
+    assert check_parameters({"robot": "my_rover-2"})["robot"] == "my_rover-2"  # a robot of yours, by name
+    for value, message in ((str(tmp_path / "gone.toml"), "robot file not found"),
+                           ("jackal v2", "a name of letters, digits, '_' and '-', or a robot file's path")):
+        with pytest.raises(ParameterError) as err:
+            check_parameters({"robot": value})
+        assert str(err.value).startswith("parameter robot must be") and message in str(err.value), str(err.value)
+        assert "\n" not in str(err.value)
+
+
 def test_a_new_file_never_overwrites_one_and_a_bad_path_is_named(tmp_path):
     from atrv_warp.core.files import OutputPathError, fresh_path
 

@@ -16,7 +16,7 @@ __all__ = ["PARAMETERS", "PARAMETER_BY_NAME", "Parameter", "ParameterError", "ch
            "params_files",
            "unknown_parameters"]
 
-KINDS = ("topic", "frame", "file", "name", "switch", "number")
+KINDS = ("topic", "frame", "file", "name", "robot", "switch", "number")
 
 
 class ParameterError(ValueError):
@@ -33,7 +33,8 @@ class Parameter:
     """What it does (the ``--help`` line)."""
     kind: str
     """:data:`KINDS`: ``topic`` (a ROS topic name, relative or absolute), ``frame`` (a tf frame id), ``file`` (a path
-    to write, ``''`` = off), ``name`` (a word, ``''`` = none), ``switch`` (``true`` | ``false``) or ``number``."""
+    to write, ``''`` = off), ``name`` (a word, ``''`` = none), ``robot`` (a robot's name or its robot file's path,
+    ``''`` = none: the node runs with the name), ``switch`` (``true`` | ``false``) or ``number``."""
     unit: str = ""
     """The unit of a number (``m/s``)."""
     positive: bool = False
@@ -67,8 +68,16 @@ class Parameter:
             raise self._error(f"a {self.kind} name (it is empty)", value)
         if self.kind == "frame" and (value.strip() != value or " " in value or value.startswith("/")):
             raise self._error("a tf frame id without spaces or a leading '/' (e.g. odom)", value)
-        if self.kind == "name" and value and not value.replace("_", "").replace("-", "").isalnum():
-            raise self._error("a name of letters, digits, '_' and '-'", value)
+        if self.kind == "robot" and value and (value.endswith(".toml") or "/" in value):
+            from atrv_warp.core.robot import RobotFileError, load_robot  # the light core: TOML and the standard library
+
+            try:
+                return load_robot(value).name  # a robot file, as the simulator node and every command take one
+            except RobotFileError as err:
+                raise self._error(f"a robot's name or a robot file that loads ({err})", value) from None
+        if self.kind in ("name", "robot") and value and not value.replace("_", "").replace("-", "").isalnum():
+            raise self._error("a name of letters, digits, '_' and '-'" + (", or a robot file's path (.toml)"
+                                                                           if self.kind == "robot" else ""), value)
         return value
 
     def _error(self, needs: str, value) -> ParameterError:
@@ -106,9 +115,9 @@ PARAMETERS = (
               "number", "s", positive=True),
     Parameter("time_limit", 60.0, "abort a goal not reached in this long, in ROS time [s]; 0 = no limit", "number",
               "s"),
-    Parameter("robot", "", "this robot's name, as its robot file names it (atrvjr, jackal, husky, or yours): a policy "
-              "trained on another robot is refused at start, naming both; '' = no check (the node logs the policy's "
-              "robot either way)", "name"),
+    Parameter("robot", "", "this robot: its name, as its robot file names it (atrvjr, jackal, husky, or yours), or "
+              "its robot file's path (.toml): a policy trained on another robot is refused at start, naming both; '' "
+              "= no check (the node logs the policy's robot either way)", "robot"),
     Parameter("allow_other_robot", False, "run a policy trained on another robot than robot:= on purpose (a study)",
               "switch"),
     Parameter("trace", "", "write every control period here as a JSON line (time, state, sensor stamps, observation, "
