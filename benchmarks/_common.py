@@ -133,10 +133,11 @@ def provenance(version: int, *, script: str | Path | None = None, dynamics: bool
     if policies:
         record["policies"] = {_relative(p): file_sha256(p) for p in policies}
     if robots:
-        from atrv_warp.core.robot import load_robot
+        from atrv_warp.core.robot import load_robot, robot_file_sha256
 
-        files = [f for r in robots for f in (load_robot(r).path, load_robot(r).urdf)]
-        record["robots"] = {_relative(f): file_sha256(f) for f in files}
+        for robot in map(load_robot, robots):  # a robot file's identity: its bytes less its [deploy] table
+            record.setdefault("robots", {}).update({_relative(robot.path): robot_file_sha256(robot.path),
+                                                    _relative(robot.urdf): file_sha256(robot.urdf)})
     return record
 
 

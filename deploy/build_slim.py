@@ -22,7 +22,7 @@ else:  # Python 3.10 (ROS 2 Humble's): the same parser, which pyproject.toml's b
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE.parent / "atrv_warp"
-FILES = ("__init__.py", "runtime.py", "py.typed", "core/*.py", "deploy/*.py", "deploy/launch/*.launch.py", "deploy/config/*.yaml",
+FILES = ("__init__.py", "runtime.py", "py.typed", "core/*.py", "deploy/*.py", "deploy/launch/*.launch.py",
          "robots/*.toml", "robots/*.urdf")
 """What the wheel holds, relative to ``atrv_warp/``."""
 TAG = "py3-none-any"

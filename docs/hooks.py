@@ -252,6 +252,15 @@ def _git_date(path: Path) -> str:
     return out or "unknown date"
 
 
+def _sha256(path: Path) -> str:
+    """A file's SHA-256; a robot file's, of its identity (its bytes less its ``[deploy]`` table)."""
+    if path.suffix == ".toml":
+        from atrv_warp.core.robot import robot_file_sha256
+
+        return robot_file_sha256(path)
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
 @functools.cache
 def status(name: str) -> Status:
     """Check figure ``name`` (a results file, or a picture ``docs/NAME.png``) against the script's ``VERSION``, the
@@ -279,7 +288,7 @@ def status(name: str) -> Status:
             path = ROOT / file
             if not path.is_file():
                 reasons.append(f"{kind} {file} is gone")
-            elif hashlib.sha256(path.read_bytes()).hexdigest() != digest:
+            elif _sha256(path) != digest:
                 reasons.append(f"{kind} {file} has changed")
     for file, digest in p.get("results", {}).items():
         path = results_path(file)

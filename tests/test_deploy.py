@@ -666,16 +666,26 @@ def test_the_node_carries_a_scanner_mounted_elsewhere_on_tf_to_the_trained_mount
     assert blind.mount_source.startswith("read as mounted where the policy's was (no /tf from 'chassis'")
 
 
-def test_launch_files_are_found_by_robot_and_an_unknown_robot_is_named(capsys):
-    """``atrv-deploy --launch-files <robot>`` prints the robot's shipped launch file (its parameters file beside);
-    an unknown robot is one line naming the shipped ones, exit 2."""
+def test_the_launch_file_is_one_for_every_robot_and_an_unknown_robot_is_named(capsys, tmp_path):
+    """``atrv-deploy --launch-files <robot>`` checks the robot (a name or a file with a ``[deploy]`` table) and prints
+    the one launch file; an unknown robot, or a file that says nothing of its topics, is one line, exit 2."""
+    import shutil
+
+    from atrv_warp.core.robot import robot_file
     from atrv_warp.deploy.cli import main
 
     assert main(["--launch-files", "jackal"]) == 0
     path = Path(capsys.readouterr().out.strip())
-    assert path.name == "jackal.launch.py" and path.is_file()
-    assert (path.parent.parent / "config" / "jackal.yaml").is_file()
-    with pytest.raises(SystemExit) as ended:
-        main(["--launch-files", "warthog"])
-    assert ended.value.code == 2
-    assert "no launch configuration for robot 'warthog'; shipped: atrvjr, husky, jackal" in capsys.readouterr().err
+    assert path.name == "rover.launch.py" and path.is_file()
+    assert "robot:=" in path.read_text() and "launch_description()" in path.read_text()
+    for suffix in (".toml", ".urdf"):
+        shutil.copy(robot_file("jackal").with_suffix(suffix), tmp_path / f"jackal{suffix}")
+    mine = tmp_path / "jackal.toml"
+    assert main(["--launch-files", str(mine)]) == 0 and Path(capsys.readouterr().out.strip()) == path
+    mine.write_text(mine.read_text().split("\n[deploy]\n")[0] + "\n")  # the file without its [deploy] table
+    for robot, message in (("warthog", "unknown robot 'warthog'; shipped robots: atrvjr, husky, jackal"),
+                           (str(mine), "has no [deploy] table: its file says nothing of its topics and frames")):
+        with pytest.raises(SystemExit) as ended:
+            main(["--launch-files", robot])
+        err = capsys.readouterr().err
+        assert ended.value.code == 2 and message in err.strip().splitlines()[-1], err  # after argparse's usage

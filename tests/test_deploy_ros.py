@@ -422,20 +422,23 @@ def test_navigate_to_pose_in_map_drives_feeds_back_cancels_and_is_replaced(ros_e
 
 
 @pytest.mark.slow  # live ROS 2 contexts
-def test_each_shipped_robot_has_a_launch_file_and_a_parameters_file_the_node_runs_with(tmp_path):
-    """Every shipped robot: a launch file that launches it, a parameters file the node takes (every key known, every
-    value valid, the robot named), its topics resolved in the robot's namespace, and an RViz view of those topics."""
+def test_each_shipped_robot_has_deploy_parameters_the_node_runs_with(tmp_path):
+    """Every shipped robot: its file's ``[deploy]`` table gives parameters the node takes (every key known, every
+    value valid, the robot named), written as the launch writes them; its topics resolved in the robot's namespace,
+    and an RViz view of those topics. One launch file serves them all."""
     import yaml
 
-    from atrv_warp.core.robot import ROBOTS
+    from atrv_warp.core.robot import ROBOTS, load_robot
     from atrv_warp.deploy.controller import load_deployable
-    from atrv_warp.deploy.launching import LAUNCH, params_file, robot_parameters, rviz_config
+    from atrv_warp.deploy.launching import LAUNCH_FILE, deploy_robots, params_file, robot_parameters, rviz_config
     from atrv_warp.deploy.node import DeployNode
 
     policy = load_deployable(write_policy(tmp_path / "tiny.pt2", task_contract()))
+    assert deploy_robots() == ROBOTS  # every shipped robot says how it deploys
+    assert "def generate_launch_description():" in LAUNCH_FILE.read_text()
+    assert {r: load_robot(r).deploy.get("tf_in_namespace", False) for r in ROBOTS} == {
+        "atrvjr": False, "husky": True, "jackal": True}  # Clearpath's stack keeps /tf in the robot's namespace
     for robot in ROBOTS:
-        launch = (LAUNCH / f"{robot}.launch.py").read_text()
-        assert "def generate_launch_description():" in launch and f'launch_description("{robot}")' in launch
         params = robot_parameters(robot)
         assert params["robot"] == robot
         view = yaml.safe_load(rviz_config(robot))["Visualization Manager"]
@@ -443,7 +446,7 @@ def test_each_shipped_robot_has_a_launch_file_and_a_parameters_file_the_node_run
         assert topics["Scan"] == params["scan_topic"] and topics["Path driven"] == params["odom_topic"]
         assert topics["Command"] == "command_path"
         assert view["Global Options"]["Fixed Frame"] == params["odom_frame"]
-        args = ["--ros-args", "-r", "__ns:=/robot_7", "--params-file", str(params_file(robot)),
+        args = ["--ros-args", "-r", "__ns:=/robot_7", "--params-file", str(params_file(robot, tmp_path)),
                 "-p", "allow_other_robot:=true"]  # the test's policy was trained on the ATRV-Jr
         ctx = rclpy.Context()
         rclpy.init(args=["atrv-deploy", *args], context=ctx)

@@ -3,6 +3,7 @@ joint, a URDF in the ROS conventions becomes a robot file with ``python -m atrv_
 
 from __future__ import annotations
 
+import hashlib
 import math
 import shutil
 from pathlib import Path
@@ -404,3 +405,42 @@ def test_a_task_on_a_robot_has_a_fingerprint_that_moves_with_its_declaration(tmp
     changed = dataclasses.replace(shipped, config=dataclasses.replace(shipped.config, max_steps=shipped.config.max_steps + 1))
     monkeypatch.setitem(registry.TASKS, "nav_deploy", changed)
     assert task_robot_fingerprint("nav_deploy", "jackal") != now
+
+
+def test_the_deploy_table_is_where_the_robot_runs_not_what_it_is(tmp_path):
+    """A robot file's ``[deploy]`` table (issue 69, part 3) is read and checked like every table, and is no part of
+    the robot's identity: equality, a saved policy's record and the file's identity hash leave it out, so every
+    shipped and golden policy still finds its robot equal."""
+    from atrv_warp.core.robot import robot_file_sha256
+    from atrv_warp.policy import SHIPPED_POLICIES, policy_record, shipped_policy_path
+
+    path = _copy(tmp_path)
+    text = path.read_text()
+    jackal = load_robot(path)
+    assert jackal.deploy["scan_topic"] == "sensors/lidar2d_0/scan" and jackal.deploy["tf_in_namespace"] is True
+    bare = tmp_path / "bare" / "jackal.toml"
+    bare.parent.mkdir()
+    shutil.copy(tmp_path / "jackal.urdf", bare.parent / "jackal.urdf")
+    bare.write_text(text.split("\n[deploy]\n")[0])  # the file as it was before its [deploy] table
+    without = load_robot(bare)
+    assert without.deploy == {} and without == jackal
+
+    def record(robot):
+        return {k: v for k, v in robot_record(robot).items() if k != "urdf"}  # (the URDF's path: where it lies)
+
+    assert record(without) == record(jackal)
+    assert robot_file_sha256(path) == robot_file_sha256(bare) == hashlib.sha256(bare.read_bytes()).hexdigest()
+    path.write_text(text.replace('cmd_vel_topic = "cmd_vel"', 'cmd_vel_topic = "cmd_vel_policy"'))
+    assert robot_file_sha256(path) == robot_file_sha256(bare)  # where it runs changed, not what it is
+    for edit, message in ((lambda t: t + "colour = 'yellow'\n", r"unknown field\(s\) \['deploy.colour'\]"),
+                          (lambda t: t.replace("tf_in_namespace = true", 'tf_in_namespace = "yes"'),
+                           "deploy.tf_in_namespace must be true or false")):
+        path.write_text(edit(text))
+        with pytest.raises(RobotFileError, match=message):
+            load_robot(path)
+    golden = sorted((ROBOTS_DIR.parent.parent / "tests" / "data").glob("golden_*.pt"))
+    shipped = [shipped_policy_path(name) for name in SHIPPED_POLICIES]
+    assert len(golden) == 2 and len(shipped) == len(SHIPPED_POLICIES)
+    for policy in (*shipped, *golden):
+        record = policy_record(policy)
+        assert record.robot == load_robot(record.robot.name), policy

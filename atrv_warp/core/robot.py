@@ -39,7 +39,12 @@ The package ships one per robot in ``atrv_warp/robots/`` (:data:`ROBOTS`: ``atrv
     [sources]                            # where each value comes from, by its dotted name
     "limits.linear_velocity" = "owner/repo@commit:path L12"
 
-Any other key is refused by name. This module reads only the TOML file (standard library), so code on a robot's
+    [deploy]                             # how atrv-deploy runs on it (optional; the file's last table)
+    scan_topic = "sensors/lidar2d_0/scan"  # any of the node's topic, frame and command-type parameters
+    tf_in_namespace = true               # its stack keeps /tf and /tf_static in the robot's namespace
+
+Any other key is refused by name. The ``[deploy]`` table says where the robot runs, not what it is: it is no part of
+the robot's identity (:class:`Robot` equality, a saved policy's record, :func:`robot_file_sha256`). This module reads only the TOML file (standard library), so code on a robot's
 computer can load it; :mod:`atrv_warp.sim` checks it against its URDF (``python -m atrv_warp.robot check``).
 """
 
@@ -69,6 +74,7 @@ __all__ = [
     "RobotLimits",
     "load_robot",
     "robot_file",
+    "robot_file_sha256",
     "robot_from_record",
     "robot_record",
     "robot_spec",
@@ -164,6 +170,10 @@ class Robot:
     longer drives the wheels still on the ground."""
     sources: dict[str, str] = field(default_factory=dict, compare=False)
     """Where each value comes from, by dotted name (``"limits.linear_velocity"``)."""
+    deploy: dict[str, str | bool] = field(default_factory=dict, compare=False)
+    """The file's ``[deploy]`` table: the deploy node's parameters on this robot's stack (its topics, frames and
+    command type, relative to the robot's namespace) and ``tf_in_namespace``; empty where the file has none. Not the
+    robot's identity: where it runs, not what it is."""
 
     @property
     def sensor_frames(self) -> tuple[str, ...]:
@@ -192,6 +202,9 @@ _SCHEMA: dict[str, dict[str, tuple[type, bool]]] = {
     "driver": {"kp": (float, True), "ki": (float, True), "effective_track_factor": (float, True)},
     "limits": {"linear_velocity": (float, True), "angular_velocity": (float, True),
                "linear_acceleration": (float, False), "angular_acceleration": (float, False)},
+    "deploy": {"scan_topic": (str, False), "odom_topic": (str, False), "imu_topic": (str, False),
+               "goal_topic": (str, False), "cmd_vel_topic": (str, False), "enable_stamped_cmd_vel": (bool, False),
+               "odom_frame": (str, False), "base_frame": (str, False), "tf_in_namespace": (bool, False)},
 }
 """Each table's keys: (type, required). ``[sources]`` maps any of their dotted names to text."""
 
@@ -323,7 +336,8 @@ def _from_table(path: str, data: dict, urdf_sha256: str | None = None) -> Robot:
         effective_track_factor=values["driver.effective_track_factor"],
         limits=RobotLimits(values["limits.linear_velocity"], values["limits.angular_velocity"],
                            values.get("limits.linear_acceleration"), values.get("limits.angular_acceleration")),
-        motor_per_side=values.get("motor.per_side", False), sources=dict(sources))
+        motor_per_side=values.get("motor.per_side", False), sources=dict(sources),
+        deploy={k.removeprefix("deploy."): v for k, v in values.items() if k.startswith("deploy.")})
 
 
 def robot_record(robot: Robot) -> dict:
@@ -351,6 +365,21 @@ def robot_spec(robot: Robot) -> str | None:
     """The shipped robot's name that loads ``robot`` (a recorded one) again, or ``None``: a robot of one's own (a
     record keeps its values, not where its file was), or a shipped one whose file has changed since."""
     return robot.name if robot.name in ROBOTS and load_robot(robot.name) == robot else None
+
+
+def robot_file_sha256(path: str | os.PathLike) -> str:
+    """The SHA-256 of a robot file's identity: its bytes less its ``[deploy]`` table (from its header to the next
+    table or the end, with the blank lines before it), which says where the robot runs, not what it is. A file
+    without one hashes as its bytes. Results files record it (``benchmarks/_common.provenance``)."""
+    text = Path(path).read_bytes()
+    lines = text.splitlines(keepends=True)
+    start = next((i for i, line in enumerate(lines) if line.strip() == b"[deploy]"), None)
+    if start is None:
+        return hashlib.sha256(text).hexdigest()
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith(b"[")), len(lines))
+    while start > 0 and not lines[start - 1].strip():
+        start -= 1
+    return hashlib.sha256(b"".join(lines[:start] + lines[end:])).hexdigest()
 
 
 def robot_from_record(record: dict, where: str) -> Robot:

@@ -22,13 +22,15 @@ Topics (relative: --ros-args -r __ns:=/rover_1 runs it for one rover of several)
        command_path (nav_msgs/Path: the command's next second in base_frame, for RViz)
   action: navigate_to_pose (nav2_msgs/action/NavigateToPose: RViz's "Nav2 Goal", Nav2's clients)
 
-Launch files and parameters per shipped robot (atrvjr, husky, jackal): python -m atrv_warp.deploy --launch-files
+One launch file for every robot, its parameters from the robot file's [deploy] table (robot:=NAME|PATH):
+  python -m atrv_warp.deploy --launch-files jackal
 
 Examples:
   python -m atrv_warp.export nav_deploy nav_deploy.pt2        # on the workstation
   atrv-deploy nav_deploy.pt2                                   # on the rover
   atrv-deploy nav_deploy.pt2 --ros-args -p use_sim_time:=true -p max_linear:=0.5
-  ros2 launch $(python -m atrv_warp.deploy --launch-files jackal) policy:=$PWD/jackal.pt2 namespace:=j100_0123
+  ros2 launch $(python -m atrv_warp.deploy --launch-files jackal) robot:=jackal policy:=$PWD/jackal.pt2 \\
+      namespace:=j100_0123
   ros2 topic pub --once -w 1 /goal_pose geometry_msgs/msg/PoseStamped \\
       "{header: {frame_id: odom}, pose: {position: {x: 4.0, y: 2.0}}}"
 
@@ -45,8 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
                                      epilog=EPILOG + parameter_help())
     parser.add_argument("policy", metavar="POLICY.pt2", help="an exported twist policy (python -m atrv_warp.export)")
     parser.add_argument("--launch-files", action="store_true",
-                        help="print the shipped launch file of the robot named instead of POLICY.pt2 (its parameters "
-                             "file: config/<robot>.yaml beside launch/), and exit")
+                        help="check the robot named instead of POLICY.pt2 (a shipped robot's name or a robot file "
+                             "whose [deploy] table gives its topics and frames), print the launch file (pass it the "
+                             "same robot:=), and exit")
     return parser
 
 
@@ -58,13 +61,13 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv[:ros_at])
     if args.launch_files:
-        from atrv_warp.deploy.launching import LAUNCH, params_file
+        from atrv_warp.deploy.launching import LAUNCH_FILE, robot_parameters
 
         try:
-            params_file(args.policy)
+            robot_parameters(args.policy)
         except ValueError as err:
-            parser.error(str(err))
-        print(LAUNCH / f"{args.policy}.launch.py")
+            parser.error(" ".join(str(err).split()))
+        print(LAUNCH_FILE)
         return 0
     from atrv_warp.deploy.controller import PolicyRefused, load_deployable
 

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-from pathlib import Path
 
 import torch
 from torchrl.envs.utils import step_mdp
@@ -64,7 +63,7 @@ def task_robot_fingerprint(task: str, robot) -> str:
     """A short hash of what the registered task ``task`` is on ``robot`` (a name, a robot file or a
     :class:`~atrv_warp.core.robot.Robot`), as declared: the task fitted to the robot (every config field, each reward
     term's row: its weight field and value, when it counts, what it reads, its kernel's name; the success test's
-    name; not the module's path or its description), the robot file's bytes and its URDF's SHA-256.
+    name; not the module's path or its description), the robot file (less its ``[deploy]`` table) and its URDF.
 
     It moves when a task's field, weight or term changes, or when the robot's file or URDF does, for any task and
     robot (``nav_deploy``, a task of your own, the Jackal); :func:`task_fingerprint` moves with the kernels' behaviour
@@ -77,7 +76,7 @@ def task_robot_fingerprint(task: str, robot) -> str:
     Returns:
         16 hex digits.
     """
-    from atrv_warp.core.robot import Robot, load_robot
+    from atrv_warp.core.robot import Robot, load_robot, robot_file_sha256
     from atrv_warp.sim.config import nominal_rover_config
     from atrv_warp.task.registry import resolve_task
     from atrv_warp.task.scaling import fit_task
@@ -86,6 +85,6 @@ def task_robot_fingerprint(task: str, robot) -> str:
     fitted = fit_task(resolve_task(task), nominal_rover_config(spec.path))
     record = {k: v for k, v in fitted.record().items() if k not in ("source", "description")}
     digest = hashlib.sha256(json.dumps(record, sort_keys=True, default=str).encode())
-    digest.update(Path(spec.path).read_bytes())
+    digest.update(robot_file_sha256(spec.path).encode())  # the file less its [deploy] table: what the robot is
     digest.update(str(spec.urdf_sha256).encode())
     return digest.hexdigest()[:16]
