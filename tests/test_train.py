@@ -2,6 +2,7 @@
 
 import json
 import math
+import os
 from pathlib import Path
 
 import pytest
@@ -101,6 +102,12 @@ def test_a_run_is_resolved_once_per_process(tmp_path, monkeypatch):
     assert run.record()["task_record"]["config"]["max_steps"] == 150
     assert counts == {"fitted": 1, "parsed": 1}, counts
     collector.shutdown()
+    robot_file = tmp_path / "atrvjr.toml"  # a file the resolution read changes: it is read again
+    robot_file.write_text(robot_file.read_text().replace("linear_velocity = 0.5", "linear_velocity = 0.4"))
+    stat = robot_file.stat()
+    os.utime(robot_file, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000))
+    again = resolve_run(cfg)
+    assert again is not run and again.robot.limits.linear_velocity == 0.4 and counts["fitted"] == 2
 
 
 def test_cli_rejects_bad_config_before_work(tmp_path, run_module, capsys):

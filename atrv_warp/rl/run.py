@@ -13,6 +13,7 @@ import functools
 import tomllib
 import typing
 from dataclasses import dataclass
+from pathlib import Path
 
 __all__ = ["RunSpec", "resolve_run", "task_field_values", "toml_value"]
 
@@ -54,18 +55,33 @@ class RunSpec:
 def resolve_run(cfg) -> RunSpec:
     """The run ``cfg`` (a :class:`~atrv_warp.rl.config.TrainConfig`) names, resolved: the robot file and its URDF read,
     the task module loaded, the task fitted and its fields checked, the randomizations resolved. A process resolves
-    each env config once (the answer is kept for the next call with the same ``cfg.env``).
+    each env config once (the answer is kept for the next call with the same ``cfg.env``, while the files it read
+    are unchanged: the robot file and its URDF, the sim config, the task module).
 
     Raises:
         ValueError: One line, ``train config: ...``: an unknown task or field, a bad value, a randomization that does
             not resolve (its key named), a sim config file that does not read.
         FileNotFoundError: A missing ``task_module`` (as a ValueError, named).
     """
-    return _resolve(cfg.env)
+    return _resolve(cfg.env, _files_read(cfg.env))
+
+
+def _files_read(env) -> tuple:
+    """Each file a resolution of ``env`` reads, with its modification time (``None``: not there, or not found yet; the
+    resolution names what is wrong): a file changed since the last call is read again."""
+    from atrv_warp.core.robot import load_robot
+
+    paths = [Path(p) for p in (env.sim_config, env.task_module) if p]
+    try:
+        robot = load_robot(env.robot)
+        paths += [Path(robot.path), Path(robot.urdf)]
+    except ValueError:  # an unknown robot or a bad file (RobotFileError): the resolution raises it, named
+        pass
+    return tuple((str(p), p.stat().st_mtime_ns if p.is_file() else None) for p in paths)
 
 
 @functools.lru_cache(maxsize=8)
-def _resolve(env) -> RunSpec:
+def _resolve(env, _files: tuple) -> RunSpec:
     from atrv_warp.sim.config import load_sim_config, nominal_rover_config
     from atrv_warp.task.randomization import get_randomization
     from atrv_warp.task.registry import load_task_module, resolve_task
