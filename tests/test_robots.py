@@ -432,12 +432,19 @@ def test_the_deploy_table_is_where_the_robot_runs_not_what_it_is(tmp_path):
     assert robot_file_sha256(path) == robot_file_sha256(bare) == hashlib.sha256(bare.read_bytes()).hexdigest()
     path.write_text(text.replace('cmd_vel_topic = "cmd_vel"', 'cmd_vel_topic = "cmd_vel_policy"'))
     assert robot_file_sha256(path) == robot_file_sha256(bare)  # where it runs changed, not what it is
-    for edit, message in ((lambda t: t + "colour = 'yellow'\n", r"unknown field\(s\) \['deploy.colour'\]"),
+    path.write_text(text + "max_linear = 1.5\n")  # a number: not a name or a switch
+    with pytest.raises(RobotFileError, match=r"\[deploy\] must be a table of names \(non-empty text\) and switches"):
+        load_robot(path)
+    from atrv_warp.deploy.launching import robot_parameters  # the node's parameters: the deploy layer checks them
+
+    for edit, message in ((lambda t: t + "colour = 'yellow'\n", r"\[deploy\]: unknown parameter\(s\) \['colour'\]"),
                           (lambda t: t.replace("tf_in_namespace = true", 'tf_in_namespace = "yes"'),
-                           "deploy.tf_in_namespace must be true or false")):
+                           r"\[deploy\]: tf_in_namespace must be true or false"),
+                          (lambda t: t.replace('odom_frame = "odom"', 'odom_frame = "/odom"'),
+                           r"\[deploy\]: parameter odom_frame must be a tf frame id")):
         path.write_text(edit(text))
-        with pytest.raises(RobotFileError, match=message):
-            load_robot(path)
+        with pytest.raises(ValueError, match=message):
+            robot_parameters(str(path))
     golden = sorted((ROBOTS_DIR.parent.parent / "tests" / "data").glob("golden_*.pt"))
     shipped = [shipped_policy_path(name) for name in SHIPPED_POLICIES]
     assert len(golden) == 2 and len(shipped) == len(SHIPPED_POLICIES)

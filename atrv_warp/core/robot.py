@@ -172,8 +172,8 @@ class Robot:
     """Where each value comes from, by dotted name (``"limits.linear_velocity"``)."""
     deploy: dict[str, str | bool] = field(default_factory=dict, compare=False)
     """The file's ``[deploy]`` table: the deploy node's parameters on this robot's stack (its topics, frames and
-    command type, relative to the robot's namespace) and ``tf_in_namespace``; empty where the file has none. Not the
-    robot's identity: where it runs, not what it is."""
+    command type, relative to the robot's namespace; :mod:`atrv_warp.deploy.parameters` declares and checks them) and
+    ``tf_in_namespace``; empty where the file has none. Not the robot's identity: where it runs, not what it is."""
 
     @property
     def sensor_frames(self) -> tuple[str, ...]:
@@ -202,9 +202,6 @@ _SCHEMA: dict[str, dict[str, tuple[type, bool]]] = {
     "driver": {"kp": (float, True), "ki": (float, True), "effective_track_factor": (float, True)},
     "limits": {"linear_velocity": (float, True), "angular_velocity": (float, True),
                "linear_acceleration": (float, False), "angular_acceleration": (float, False)},
-    "deploy": {"scan_topic": (str, False), "odom_topic": (str, False), "imu_topic": (str, False),
-               "goal_topic": (str, False), "cmd_vel_topic": (str, False), "enable_stamped_cmd_vel": (bool, False),
-               "odom_frame": (str, False), "base_frame": (str, False), "tf_in_namespace": (bool, False)},
 }
 """Each table's keys: (type, required). ``[sources]`` maps any of their dotted names to text."""
 
@@ -277,6 +274,10 @@ def _from_table(path: str, data: dict, urdf_sha256: str | None = None) -> Robot:
     def fail(message: str):
         raise RobotFileError(f"{path}: {message}")
 
+    deploy = data.pop("deploy", {})  # its keys are the deploy node's parameters: atrv_warp.deploy checks their names
+    if not isinstance(deploy, dict) or not all(isinstance(v, bool) or (isinstance(v, str) and v)
+                                               for v in deploy.values()):
+        fail(f"[deploy] must be a table of names (non-empty text) and switches (true or false), got {deploy!r}")
     sources = data.pop("sources", {})
     if not isinstance(sources, dict) or not all(isinstance(v, str) for v in sources.values()):
         fail("[sources] must map dotted field names to text")
@@ -337,7 +338,7 @@ def _from_table(path: str, data: dict, urdf_sha256: str | None = None) -> Robot:
         limits=RobotLimits(values["limits.linear_velocity"], values["limits.angular_velocity"],
                            values.get("limits.linear_acceleration"), values.get("limits.angular_acceleration")),
         motor_per_side=values.get("motor.per_side", False), sources=dict(sources),
-        deploy={k.removeprefix("deploy."): v for k, v in values.items() if k.startswith("deploy.")})
+        deploy=dict(deploy))
 
 
 def robot_record(robot: Robot) -> dict:

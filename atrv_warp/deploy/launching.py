@@ -18,13 +18,16 @@ import sys
 import tempfile
 from pathlib import Path
 
-__all__ = ["LAUNCH", "LAUNCH_FILE", "deploy_robots", "launch_description", "params_file", "robot_parameters",
+__all__ = ["LAUNCH", "LAUNCH_FILE", "TF_IN_NAMESPACE", "deploy_robots", "launch_description", "params_file", "robot_parameters",
            "rviz_config"]
 
 LAUNCH = Path(__file__).resolve().parent / "launch"
 """The launch files' folder."""
 LAUNCH_FILE = LAUNCH / "rover.launch.py"
 """The one launch file, for every robot (``robot:=NAME|PATH``)."""
+TF_IN_NAMESPACE = "tf_in_namespace"
+"""The ``[deploy]`` key beside the node's parameters: ``true`` where the robot's stack keeps ``/tf`` and
+``/tf_static`` in its namespace (Clearpath's ROS 2 remaps ``/tf`` to ``tf``): the node's and RViz's follow."""
 
 
 def deploy_robots() -> tuple[str, ...]:
@@ -54,11 +57,16 @@ def robot_parameters(robot: str) -> dict:
     Raises:
         ValueError: An unknown robot or a file without a ``[deploy]`` table (named); a value the node refuses.
     """
-    from atrv_warp.deploy.parameters import check_parameters
+    from atrv_warp.deploy.parameters import ParameterError, check_parameters
 
     found = _robot(robot)
-    given = {"robot": found.name, **{k: v for k, v in found.deploy.items() if k != "tf_in_namespace"}}
-    checked = check_parameters(given)
+    given = {"robot": found.name, **{k: v for k, v in found.deploy.items() if k != TF_IN_NAMESPACE}}
+    try:
+        checked = check_parameters(given)
+    except ParameterError as err:
+        raise ValueError(f"{found.path}: [deploy]: {err}") from None
+    if found.deploy.get(TF_IN_NAMESPACE, False) not in (True, False):  # a robot file error, named: a ValueError
+        raise ValueError(f"{found.path}: [deploy]: {TF_IN_NAMESPACE} must be true or false")
     return {name: checked[name] for name in given}
 
 
@@ -146,7 +154,7 @@ def _nodes(context) -> list:
     view.write_text(rviz_config(robot))
     namespace = LaunchConfiguration("namespace").perform(context).strip("/")
     sim_time, rviz = LaunchConfiguration("use_sim_time"), LaunchConfiguration("rviz")
-    tf = ["-r", "/tf:=tf", "-r", "/tf_static:=tf_static"] if _robot(robot).deploy.get("tf_in_namespace") else []
+    tf = ["-r", "/tf:=tf", "-r", "/tf_static:=tf_static"] if _robot(robot).deploy.get(TF_IN_NAMESPACE) else []
     files = [arg for path in params for arg in ("--params-file", path)]
     return [
         ExecuteProcess(cmd=[sys.executable, "-m", "atrv_warp.deploy", LaunchConfiguration("policy"), "--ros-args",
