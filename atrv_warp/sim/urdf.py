@@ -9,13 +9,13 @@ the geometry needed to replace the URDF's collision meshes by wheel cylinders.
 from __future__ import annotations
 
 import functools
-import hashlib
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
 from atrv_warp.sim.config import InertialOverride, RoverConfig, default_urdf_path
+from atrv_warp.storage import file_sha256
 
 __all__ = ["Frame", "Inertial", "RoverDescription", "URDFError", "Wheel", "load_rover", "read_urdf", "rigid_group"]
 
@@ -171,9 +171,7 @@ def _parse(path: str):
     while its bytes stay the same (the robot is read, never changed, by its callers)."""
     if not os.path.isfile(path):
         raise URDFError(f"URDF file not found: {path}")
-    with open(path, "rb") as fh:
-        digest = hashlib.sha256(fh.read()).hexdigest()
-    return _parse_file(path, digest)
+    return _parse_file(path, file_sha256(path))
 
 
 @functools.lru_cache(maxsize=16)
