@@ -349,7 +349,7 @@ def load_policy(path: str | Path | None = None, *, deterministic: bool = True, t
                               f"expected one of {list(READ_FORMATS)})")
     if task is not None:
         check_policy_task(payload, task, source=label or path)
-        _check_observes(path, int(payload.get("obs_dim", OBS_DIM)), task)
+        _check_observes(path, int(payload.get("obs_dim", OBS_DIM)), task, payload.get("robot"))
     try:
         actor = make_actor(int(payload["width"]), int(payload["depth"]), obs_dim=int(payload.get("obs_dim", OBS_DIM)))
         actor.load_state_dict(payload["state_dict"])
@@ -367,10 +367,21 @@ def load_policy(path: str | Path | None = None, *, deterministic: bool = True, t
     return _Deterministic(actor, ExplorationType.DETERMINISTIC)
 
 
-def _check_observes(path: Path, obs_dim: int, task) -> None:
+def _check_observes(path: Path, obs_dim: int, task, robot_record=None) -> None:
+    """``robot_record``: the policy's, whose ``[[sensors]]`` it observed beside the task's scan."""
     from atrv_warp.task.registry import get_task
 
-    fields = observation_fields(get_task(task))
+    config = get_task(task)
+    sensors = None
+    if isinstance(robot_record, dict) and robot_record.get("sensors"):
+        from atrv_warp.core.robot import RobotFileError, robot_from_record
+        from atrv_warp.task.sensors import sensor_fields
+
+        try:
+            sensors = sensor_fields(config, robot_from_record(robot_record, f"{path} (its robot record)"))
+        except (RobotFileError, ValueError) as err:
+            raise FileFormatError(f"{path}: its robot's sensors do not read back ({err})") from None
+    fields = observation_fields(config, sensors)
     if obs_dim != len(fields):
         name = f"task {task!r}" if isinstance(task, str) else "the task"
         raise FileFormatError(

@@ -248,8 +248,9 @@ def _check(args) -> int:
     try:
         if args.static:
             robot, description = check_robot(args.robot)
+            more = "".join(f", {s['kind']} {s['name']} at {s['frame']}" for s in robot.sensors)
             print(f"{robot.path}: ok ({robot.name}: chassis {robot.chassis}, {len(description.wheels)} wheels, IMU "
-                  f"{robot.imu_frame}, laser {robot.laser_frame})")
+                  f"{robot.imu_frame}, laser {robot.laser_frame}{more})")
             return 0
         report = measure_robot(args.robot, progress=lambda line: print(f"... {line}", flush=True)).as_dict()
     except RobotFileError as err:

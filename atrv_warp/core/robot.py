@@ -39,12 +39,17 @@ The package ships one per robot in ``atrv_warp/robots/`` (:data:`ROBOTS`: ``atrv
     [sources]                            # where each value comes from, by its dotted name
     "limits.linear_velocity" = "owner/repo@commit:path L12"
 
+    [[sensors]]                          # more sensors than links.laser's scanner (optional, any number)
+    kind = "laser"                       # a kind atrv_warp.task.sensors knows (it checks the other keys)
+    name = "rear_scan"                   # its step entry and its observed fields' prefix
+    frame = "rear_laser"                 # fixed to the chassis
+
     [deploy]                             # how atrv-deploy runs on it (optional; the file's last table)
     scan_topic = "sensors/lidar2d_0/scan"  # any of the node's topic, frame and command-type parameters
     tf_in_namespace = true               # its stack keeps /tf and /tf_static in the robot's namespace
 
-Any other key is refused by name. The ``[deploy]`` table says where the robot runs, not what it is: it is no part of
-the robot's identity (:class:`Robot` equality, a saved policy's record, :func:`robot_file_sha256`). This module reads only the TOML file (standard library), so code on a robot's
+Any other key is refused by name. The ``[[sensors]]`` list and the ``[deploy]`` table say what the robot carries and
+where it runs, not what it is: they are no part of the robot's identity (:class:`Robot` equality, a saved policy's record, :func:`robot_file_sha256`). This module reads only the TOML file (standard library), so code on a robot's
 computer can load it; :mod:`atrv_warp.sim` checks it against its URDF (``python -m atrv_warp.robot check``).
 """
 
@@ -69,6 +74,7 @@ __all__ = [
     "DEFAULT_ROBOT",
     "FIELDS",
     "ROBOTS",
+    "SENSOR_KEYS",
     "Robot",
     "RobotFileError",
     "RobotLimits",
@@ -174,11 +180,16 @@ class Robot:
     """The file's ``[deploy]`` table: the deploy node's parameters on this robot's stack (its topics, frames and
     command type, relative to the robot's namespace; :mod:`atrv_warp.deploy.parameters` declares and checks them) and
     ``tf_in_namespace``; empty where the file has none. Not the robot's identity: where it runs, not what it is."""
+    sensors: tuple[dict, ...] = field(default=(), compare=False)
+    """The file's ``[[sensors]]``: the sensors it carries beside :attr:`laser_frame`'s scanner, each a table with
+    ``kind``, ``name`` and ``frame`` (and its kind's own keys, which :mod:`atrv_warp.task.sensors` checks). Not the
+    robot's identity (a saved policy records them beside it)."""
 
     @property
     def sensor_frames(self) -> tuple[str, ...]:
-        """The IMU's, the laser's and the other frames: every link the robot needs fixed to its chassis."""
-        return tuple(dict.fromkeys((self.imu_frame, self.laser_frame, *self.frames)))
+        """The IMU's, the laser's, the other frames and the sensors': every link the robot needs fixed to its chassis."""
+        return tuple(dict.fromkeys((self.imu_frame, self.laser_frame, *self.frames,
+                                    *(s["frame"] for s in self.sensors))))
 
     @property
     def top_speed(self) -> float:
@@ -278,6 +289,7 @@ def _from_table(path: str, data: dict, urdf_sha256: str | None = None) -> Robot:
     if not isinstance(deploy, dict) or not all(isinstance(v, bool) or (isinstance(v, str) and v)
                                                for v in deploy.values()):
         fail(f"[deploy] must be a table of names (non-empty text) and switches (true or false), got {deploy!r}")
+    sensors = _sensors(data.pop("sensors", []), fail)
     sources = data.pop("sources", {})
     if not isinstance(sources, dict) or not all(isinstance(v, str) for v in sources.values()):
         fail("[sources] must map dotted field names to text")
@@ -338,7 +350,32 @@ def _from_table(path: str, data: dict, urdf_sha256: str | None = None) -> Robot:
         limits=RobotLimits(values["limits.linear_velocity"], values["limits.angular_velocity"],
                            values.get("limits.linear_acceleration"), values.get("limits.angular_acceleration")),
         motor_per_side=values.get("motor.per_side", False), sources=dict(sources),
-        deploy=dict(deploy))
+        deploy=dict(deploy), sensors=sensors)
+
+
+SENSOR_KEYS = ("kind", "name", "frame")
+"""The keys every ``[[sensors]]`` entry has (text each); the rest are its kind's (:mod:`atrv_warp.task.sensors`)."""
+
+
+def _sensors(entries, fail) -> tuple[dict, ...]:
+    """The ``[[sensors]]`` list, checked for what every sensor has: a kind, a name (a Python identifier, unique,
+    not ``scan``: the laser of ``links.laser``) and a frame; its other keys must be text, numbers or switches."""
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        fail(f"[[sensors]] must be a list of tables, got {entries!r:.80}")
+    names = {"scan"}
+    for i, entry in enumerate(entries):
+        for key in SENSOR_KEYS:
+            if not (isinstance(entry.get(key), str) and entry[key]):
+                fail(f"[[sensors]] entry {i + 1}: {key} must be a non-empty string, got {entry.get(key)!r}")
+        name = entry["name"]
+        if not name.isidentifier() or name in names:
+            fail(f"[[sensors]] entry {i + 1}: name {name!r} must be a Python identifier used once (scan is "
+                 "links.laser's)")
+        names.add(name)
+        bad = sorted(k for k, v in entry.items() if not isinstance(v, str | bool | int | float))
+        if bad:
+            fail(f"[[sensors]] {name}: {', '.join(bad)} must be text, a number or a switch")
+    return tuple(dict(e) for e in entries)
 
 
 def robot_record(robot: Robot) -> dict:
@@ -354,12 +391,15 @@ def robot_record(robot: Robot) -> dict:
     motor = {"torque_limit": robot.torque_limit, "no_load_speed": robot.no_load_speed}
     if robot.motor_per_side:  # written only where set: a record made before the key reads the same
         motor["per_side"] = True
-    return {"name": robot.name, "title": robot.title, "urdf": robot.urdf, "urdf_sha256": robot.urdf_sha256,
-            "links": links,
-            "wheels": {"radius": robot.wheel_radius, "width": robot.wheel_width, "offset": robot.wheel_offset},
-            "motor": motor,
-            "driver": {"kp": robot.kp, "ki": robot.ki, "effective_track_factor": robot.effective_track_factor},
-            "limits": limits, "sources": dict(robot.sources)}
+    record = {"name": robot.name, "title": robot.title, "urdf": robot.urdf, "urdf_sha256": robot.urdf_sha256,
+              "links": links,
+              "wheels": {"radius": robot.wheel_radius, "width": robot.wheel_width, "offset": robot.wheel_offset},
+              "motor": motor,
+              "driver": {"kp": robot.kp, "ki": robot.ki, "effective_track_factor": robot.effective_track_factor},
+              "limits": limits, "sources": dict(robot.sources)}
+    if robot.sensors:  # written only where there are some: a record made before the list reads the same
+        record["sensors"] = [dict(s) for s in robot.sensors]
+    return record
 
 
 def robot_spec(robot: Robot) -> str | None:
@@ -388,6 +428,8 @@ def robot_from_record(record: dict, where: str) -> Robot:
     if not isinstance(record, dict):
         raise RobotFileError(f"{where}: a robot record is a table, got {type(record).__name__}")
     copy = {k: dict(v) if isinstance(v, dict) else v for k, v in record.items()}
+    if isinstance(copy.get("sensors"), list):
+        copy["sensors"] = [dict(s) if isinstance(s, dict) else s for s in copy["sensors"]]
     digest = copy.pop("urdf_sha256", "")  # a record from before it was kept: never the same as a file's robot
     if not isinstance(digest, str):
         raise RobotFileError(f"{where}: urdf_sha256 must be text, got {digest!r}")

@@ -112,6 +112,10 @@ def contract(source: Path, payload: dict, sim: SimConfig | None = None) -> dict:
     record = policy_record(payload)
     meta = payload.get("meta", {})
     task, robot, sim = record.task.config, record.robot, sim or SimConfig()
+    if robot.sensors:  # the robot side reads one scan (/scan): the contract has no place for another sensor yet
+        names = ", ".join(s["name"] for s in robot.sensors)
+        raise ValueError(f"{source}: the policy observes its robot file's [[sensors]] ({names}) beside the scan; "
+                         "an exported policy and atrv-deploy read links.laser's scan only, so it cannot be exported")
     spec = policy_contract(task)
     if task.scan_beams:
         sc = ScannerConfig(beams=task.scan_beams, fov=task.scan_fov)

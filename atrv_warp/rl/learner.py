@@ -231,9 +231,11 @@ def make_run_actor(cfg: TrainConfig, run: RunSpec | None = None):
     """The actor a run trains, and its observation statistics (not yet set): the task's observation size, the
     network's width and depth, and log-probabilities where the algorithm collects with them (PPO). ``run``: ``cfg``
     resolved (:func:`~atrv_warp.rl.run.resolve_run`, where not given)."""
+    from atrv_warp.task.sensors import sensor_fields
     from atrv_warp.task.spec import observation_fields
 
-    obs_dim = len(observation_fields((run or resolve_run(cfg)).task.config))
+    run = run or resolve_run(cfg)
+    obs_dim = len(observation_fields(run.task.config, sensor_fields(run.task.config, run.robot)))
     normalize = Normalize(obs_dim)
     actor = make_actor(cfg.network.width, cfg.network.depth, normalize=normalize, obs_dim=obs_dim,
                        return_log_prob=ALGOS[cfg.optim.algo].on_policy)

@@ -63,7 +63,10 @@ def _field_of(robot: Robot, err: URDFError) -> str:
     if err.field == "sensor_frames":
         if err.subject == robot.imu_frame:
             return "links.imu"
-        return "links.laser" if err.subject == robot.laser_frame else "links.frames"
+        if err.subject == robot.laser_frame:
+            return "links.laser"
+        sensor = next((s for s in robot.sensors if s["frame"] == err.subject), None)
+        return "links.frames" if sensor is None else f"[[sensors]] {sensor['name']}.frame"
     return {"chassis_link": "links.chassis", "left_wheels": "links.left_wheels", "right_wheels": "links.right_wheels",
             "urdf": "urdf"}.get(err.field, err.field)
 
@@ -72,7 +75,8 @@ def check_robot(spec) -> tuple[Robot, RoverDescription]:
     """Read the robot file ``spec`` (a shipped robot's name or a path) and its URDF, and check them against each
     other: every named link exists, the wheels hang on lateral joints on both sides with positive masses and
     inertias, the IMU and the laser are fixed to the chassis with their axes the chassis' (the observation reads
-    the IMU in the chassis' axes; the scan is a horizontal plane), and the file's wheel size is the URDF's cylinder.
+    the IMU in the chassis' axes; the scan is a horizontal plane; another laser of ``[[sensors]]`` may be turned about
+    z only), and the file's wheel size is the URDF's cylinder.
 
     Raises:
         RobotFileError: the first problem, naming the file's field and the link or joint.
@@ -92,6 +96,14 @@ def check_robot(spec) -> tuple[Robot, RoverDescription]:
                 f"{robot.path}: {field} ({name}): the frame is turned {math.degrees(angle):.1f} deg from the chassis "
                 f"{robot.chassis!r}; the {'IMU is read in the chassis axes' if field == 'links.imu' else 'scan is a horizontal plane looking forward'}: "
                 "mount a frame with the chassis' axes (a fixed joint with rpy 0 0 0) and name it")
+    for sensor in robot.sensors:  # another laser may look any way, but its scan too is a horizontal plane
+        if sensor["kind"] == "laser":
+            tilt = math.acos(max(-1.0, min(1.0, float(np.asarray(frames[sensor["frame"]])[2, 2]))))
+            if tilt > LEVEL_TOLERANCE:
+                raise RobotFileError(
+                    f"{robot.path}: [[sensors]] {sensor['name']}.frame ({sensor['frame']}): the frame's z is tilted "
+                    f"{math.degrees(tilt):.1f} deg from the chassis' and the scan is a horizontal plane: mount it "
+                    "level (a fixed joint with rpy 0 0 yaw)")
     for wheel in description.wheels:
         for field, mine, urdf in (("wheels.radius", robot.wheel_radius, wheel.radius),
                                   ("wheels.width", robot.wheel_width, wheel.width)):

@@ -12,7 +12,9 @@ Keys produced (the contract is declared in :mod:`atrv_warp.task.spec`):
     ``observation`` (N, obs_dim) float32: target x, y; rover x, y; vx, vy (world); roll; yaw rate;
     sin and cos of the heading error (``OBSERVATION``), or with ``observation="robot"`` the goal's distance and
     bearing from wheel odometry, the odometry's twist and the IMU's roll, pitch and yaw rate
-    (``ROBOT_OBSERVATION``); then a task's scan sectors and last actions (``observation_fields``). ``scan`` (N, beams) [m] with a scanner. ``reward`` (N, 1);
+    (``ROBOT_OBSERVATION``); then the sensors' fields (a task's scan sectors) and its last actions
+    (``observation_fields``). Each sensor's full reading under its name (:mod:`atrv_warp.task.sensors`): ``scan``
+    (N, beams) [m] with a scanner. ``reward`` (N, 1);
     ``("reward_terms", name)`` (N, 1) for each of the task's reward terms (``env.task.term_names``), which sum to the
     reward;
     ``done`` / ``terminated`` / ``truncated`` (N, 1) bool; ``end_reason`` (N, 1) int64
@@ -42,18 +44,15 @@ from atrv_warp.sim.config import (
 )
 from atrv_warp.sim.driver import DRIVE_TWIST, DriverConfig
 from atrv_warp.sim.kernel_cache import precompile
-from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
 from atrv_warp.sim.simulator import RoverSim
 from atrv_warp.task.config import TaskConfig
 from atrv_warp.task.definition import Task
 from atrv_warp.task.kernels.observe import (
-    ScanReading,
     clear_actions,
     observe_reset,
     observe_step,
     record_actions,
     write_action_observation,
-    write_scan_observation,
 )
 from atrv_warp.task.kernels.randomization import (
     DRAW_COUNT,
@@ -77,6 +76,7 @@ from atrv_warp.task.kernels.tables import ends_kernel, field_kernel, term_kernel
 from atrv_warp.task.randomization import PHYSICS_DRAWS, AroundConfig, RandomizationConfig, get_randomization
 from atrv_warp.task.registry import load_task_module, resolve_task
 from atrv_warp.task.scaling import fit_task
+from atrv_warp.task.sensors import LaserSensor, build_sensors
 from atrv_warp.task.spec import (
     ACTION_DIM,
     ACTIONS,
@@ -111,7 +111,7 @@ class RoverEnv(EnvBase):
     Args:
         num_envs: Number of worlds (the batch size).
         device: ``"cpu"`` (default) or a CUDA device; the simulator runs there.
-        seed: Seed of the per-world reset streams (and the scanner's noise); ``None`` leaves seed 0.
+        seed: Seed of the per-world reset streams (and the sensors' noise); ``None`` leaves seed 0.
         robot: A shipped robot's name (``"atrvjr"``, ``"jackal"``, ``"husky"``) or a robot file's path; ``None``:
             ``rover``'s robot, else the ATRV-Jr. The task is fitted to it (:meth:`Task.for_robot
             <atrv_warp.task.definition.Task.for_robot>`: its limits, a control period for its speed, radii for its
@@ -179,20 +179,20 @@ class RoverEnv(EnvBase):
         self.sim = RoverSim(num_envs, rover=rover, contact=contact, arena=arena, sim=sim,
                             terrain=c.terrain, obstacles=ObstacleConfig(slots=c.obstacles) if c.obstacles else None,
                             device=device, sim_config=sim_config, driver=c.driver(driver))
-        self.scanner = None
-        if c.scan_beams:
-            noise = self.randomization.noise
-            self.scanner = LaserScanner(self.sim, ScannerConfig(beams=c.scan_beams, fov=c.scan_fov) if noise is None else
-                                        ScannerConfig(beams=c.scan_beams, fov=c.scan_fov, noise_std=noise.scan_range,
-                                                      dropout=noise.scan_dropout))
-        """The rovers' laser scanner (:class:`~atrv_warp.sim.scanner.LaserScanner`), if the task has one."""
+        self.sensors = build_sensors(self.sim, c, self.robot, self.randomization.noise)
+        """The rovers' sensors that the task uses (:mod:`atrv_warp.task.sensors`), in the order they are observed."""
+        laser = next((s for s in self.sensors if isinstance(s, LaserSensor) and s.name == "scan"), None)
+        self.scanner = laser.scanner if laser is not None else None
+        """The robot's laser scanner (``links.laser``; :class:`~atrv_warp.sim.scanner.LaserScanner`), if the task has
+        one: the scan its reward terms read."""
         super().__init__(device=_torch_device(self.sim.device), batch_size=torch.Size([num_envs]))
         self.num_envs = num_envs
-        self.obs_dim = len(observation_fields(c))
+        self._sensor_fields = tuple(f for sensor in self.sensors for f in sensor.fields)
+        self.obs_dim = len(observation_fields(c, self._sensor_fields))
         self._robot = c.observation == "robot"
         self._twist = c.action == "twist"
         self._observe_kind = OBSERVE_KINDS.get(c.observation, -1)  # -1: the task's own fields
-        self._lead_dim = len(OBSERVATION_KINDS[c.observation])  # the columns before the scan sectors
+        self._lead_dim = len(OBSERVATION_KINDS[c.observation])  # the columns before the sensors' fields
         self._nav = c.target_distance is not None or c.obstacles > 0 or self.sim.terrain.enabled
         self._wp_device = self.sim.device
         self._make_task_buffers()
@@ -234,7 +234,7 @@ class RoverEnv(EnvBase):
         self._out = out
         self._mask = wp.zeros(n, dtype=bool, device=dev)
         self._reset_poses = wp.zeros(n, dtype=wp.vec3, device=dev)  # the sampler's starts (x, y, yaw)
-        # the last actions, newest first ([left, right] in [-1, 1]), observed after the scan sectors
+        # the last actions, newest first ([left, right] in [-1, 1]), observed after the sensors' fields
         self._actions = wp.zeros((n, c.action_history), dtype=wp.vec2, device=dev) if c.action_history else None
         self._action = wp.zeros((n, 2), dtype=float, device=dev)  # this step's action, as the reward terms read it
         if self._twist:  # every world drives by velocity, through the driver
@@ -271,14 +271,6 @@ class RoverEnv(EnvBase):
         self._tiles = self.sim.terrain.grid.tiles if self.sim.terrain.enabled else 1
         self.scan_sectors = scan_sectors(c)
         """The observed scan's sectors (:class:`~atrv_warp.core.scan.ScanSectors`; ``None`` without them)."""
-        if self.scan_sectors is not None:
-            sc = self.scanner.cfg
-            bounds = self.scan_sectors.beam_bounds(torch.as_tensor(sc.angles)).to(torch.int32)
-            reading = ScanReading()
-            reading.first = wp.array(bounds[:, 0].numpy(), dtype=wp.int32, device=self._wp_device)
-            reading.end = wp.array(bounds[:, 1].numpy(), dtype=wp.int32, device=self._wp_device)
-            reading.clip, reading.range_min, reading.range_max = c.scan_clip, sc.min_range, sc.max_range
-            self._scan_reading = reading
 
     def _make_views(self) -> None:
         """Torch views of the buffers (no copies), and the task's state a snapshot holds."""
@@ -406,7 +398,7 @@ class RoverEnv(EnvBase):
 
     def _make_spec(self) -> None:
         n, dev, dim = self.num_envs, self.device, self.obs_dim
-        low, high = observation_bounds(task=self.task_cfg)
+        low, high = observation_bounds(task=self.task_cfg, sensors=self._sensor_fields)
         bounds = (low.expand(n, dim), high.expand(n, dim))
         terms = Composite({name: Unbounded(shape=(n, 1), dtype=torch.float32, device=dev)
                            for name in self.task.term_names},
@@ -418,10 +410,10 @@ class RoverEnv(EnvBase):
             reward_terms=terms,
             shape=(n,), device=dev,
         )
-        if self.scanner is not None:
-            sc = self.scanner.cfg
-            self.observation_spec["scan"] = Bounded(sc.min_range, sc.max_range, shape=(n, sc.beams),
-                                                    dtype=torch.float32, device=dev)
+        for sensor in self.sensors:
+            spec = sensor.spec(n, dev)
+            if spec is not None:
+                self.observation_spec[sensor.name] = spec
         self.action_spec = Bounded(-1.0, 1.0, shape=(n, ACTION_DIM), dtype=torch.float32, device=dev)
         self.reward_spec = Unbounded(shape=(n, 1), dtype=torch.float32, device=dev)
         self.done_spec = Composite(
@@ -436,8 +428,11 @@ class RoverEnv(EnvBase):
         """Seed every world's reset stream; episode k of world w draws from (seed, w, k)."""
         self._seed = 0 if seed is None else int(seed) % (2**31)
         self._episode_t.zero_()
-        if self.scanner is not None:
-            self.scanner.reseed(self._seed)
+        self._reseed_sensors()
+
+    def _reseed_sensors(self) -> None:
+        for sensor in self.sensors:
+            sensor.reseed(self._seed)
 
     def reset_to_episodes(self, worlds: Sequence[int], episodes: Sequence[int], *, seed: int) -> TensorDictBase:
         """Reset ``worlds`` to episodes of a seeded evaluation set: world ``worlds[i]`` draws what world
@@ -445,7 +440,7 @@ class RoverEnv(EnvBase):
         obstacles), as :func:`atrv_warp.task.evaluation.run_episodes` (``evaluate --seed seed``) runs it; e.g. the
         ROS node's ``reset_episode``, which replays evaluation episode k in a one-world simulator.
 
-        The other worlds keep their state. The seed becomes the environment's (its scanner's noise is reseeded); the
+        The other worlds keep their state. The seed becomes the environment's (its sensors' noise is reseeded); the
         replayed worlds keep drawing from their episodes' streams on later resets. Domain randomization's
         per-world draws (physics, noise, latency) are not remapped: replay episodes without randomization.
 
@@ -462,8 +457,7 @@ class RoverEnv(EnvBase):
         seed = int(seed) % (2**31)
         if seed != self._seed:
             self._seed = seed
-            if self.scanner is not None:
-                self.scanner.reseed(seed)
+            self._reseed_sensors()
         self._stream_t[worlds] = episodes
         self._episode_t[worlds] = 0
         mask = torch.zeros(self.num_envs, 1, dtype=torch.bool, device=self.device)
@@ -502,9 +496,15 @@ class RoverEnv(EnvBase):
         out = {"observation": self._obs_t.clone(), "end_reason": self._end_reason_t.long(),
                "distance": self._distance_t.clone(), "done": zeros, "terminated": zeros.clone(),
                "truncated": zeros.clone(), "reward_terms": self._terms_td(torch.zeros_like(self._reward_terms_t))}
-        if self.scanner is not None:
-            out["scan"] = self.scanner.ranges.clone()
+        self._report_sensors(out)
         return TensorDict(out, batch_size=self.batch_size, device=self.device)
+
+    def _report_sensors(self, out: dict) -> None:
+        """Each sensor's full reading under its name (a copy)."""
+        for sensor in self.sensors:
+            reading = sensor.reading()
+            if reading is not None:
+                out[sensor.name] = reading.clone()
 
     def _terms_td(self, terms: torch.Tensor) -> TensorDict:
         """``("reward_terms", name)`` entries as (N, 1) views of one (N, K) tensor."""
@@ -523,8 +523,8 @@ class RoverEnv(EnvBase):
         return self._obs_t.clone()
 
     def _launch_observe(self) -> None:
-        if self.scanner is not None:  # only the reset worlds moved
-            self.scanner.scan(self._mask)
+        for sensor in self.sensors:  # only the reset worlds moved
+            sensor.read(self._mask)
         if self._robot:
             wp.launch(locate_goals, dim=self.num_envs, inputs=[self._mask, self._reset_poses], outputs=[self._task],
                       device=self._wp_device)
@@ -545,16 +545,14 @@ class RoverEnv(EnvBase):
 
     def _launch_observation_tail(self) -> None:
         """The observation's columns after its leading fields (:data:`OBSERVATION` or :data:`ROBOT_OBSERVATION`):
-        the scan sectors, then the last actions."""
-        c = self.task_cfg
-        if c.scan_sectors:
-            wp.launch(write_scan_observation, dim=(self.num_envs, c.scan_sectors),
-                      inputs=[self.scanner.buffer, self.sim.buffers.nonfinite, self._lead_dim, self._scan_reading],
-                      outputs=[self._obs], device=self._wp_device)
+        each sensor's fields, then the last actions."""
+        column = self._lead_dim
+        for sensor in self.sensors:
+            sensor.observe(self._obs, column, self.sim.buffers.nonfinite)
+            column += len(sensor.fields)
         if self._actions is not None:
-            wp.launch(write_action_observation, dim=(self.num_envs, c.action_history),
-                      inputs=[self._actions, self._lead_dim + c.scan_sectors], outputs=[self._obs],
-                      device=self._wp_device)
+            wp.launch(write_action_observation, dim=(self.num_envs, self.task_cfg.action_history),
+                      inputs=[self._actions, column], outputs=[self._obs], device=self._wp_device)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
         action = self._check_action(tensordict.get("action"))
@@ -570,8 +568,8 @@ class RoverEnv(EnvBase):
             action_to_torque(action, self.task_cfg.action_scale, out=sim.commands)
         self.record_actions(action)
         sim.step()
-        if self.scanner is not None:
-            self.scanner.scan()
+        for sensor in self.sensors:
+            sensor.read()
         self._launch_outcome()
         self._launch_observation_tail()
         self._add_noise(self._all, advance=True)
@@ -583,8 +581,7 @@ class RoverEnv(EnvBase):
                "done": self._terminated_t | self._truncated_t, "terminated": self._terminated_t.clone(),
                "truncated": self._truncated_t.clone(), "end_reason": self._end_reason_t.long(),
                "distance": self._distance_t.clone(), "reward_terms": self._terms_td(self._reward_terms_t.clone())}
-        if self.scanner is not None:
-            out["scan"] = self.scanner.ranges.clone()
+        self._report_sensors(out)
         return TensorDict(out, batch_size=self.batch_size, device=self.device)
 
     def _launch_outcome(self) -> None:
@@ -648,7 +645,8 @@ class RoverEnv(EnvBase):
     def state_dict(self, *args, **kwargs):
         """A snapshot of everything the next step reads: the simulator's :meth:`~RoverSim.get_state`, the task's
         buffers (targets, progress, counters, the episode's layout, the observation, the action history), the
-        randomization's delay, the seed and the scanner's draw count. :meth:`load_state_dict` then steps on bit for
+        randomization's delay, the seed and each sensor's noise stream (:meth:`Sensor.state
+        <atrv_warp.task.sensors.Sensor.state>`). :meth:`load_state_dict` then steps on bit for
         bit as this env would have (on the CPU)."""
         sd = super().state_dict(*args, **kwargs)
         sd["snapshot.format"] = SNAPSHOT_FORMAT
@@ -659,8 +657,8 @@ class RoverEnv(EnvBase):
             sd[f"task.{k}"] = v.clone()
         sd["task.seed"] = torch.tensor(self._seed)
         sd["task.nonfinite_count"] = torch.tensor(self.nonfinite_count)
-        if self.scanner is not None:
-            sd["task.scan_count"] = torch.tensor(self.scanner.count)
+        for sensor in self.sensors:
+            sd.update({f"task.{k}": v for k, v in sensor.state().items()})
         return sd
 
     def check_state_dict(self, state_dict: Mapping) -> None:
@@ -683,8 +681,8 @@ class RoverEnv(EnvBase):
                 raise ValueError(f"the snapshot's {what} differs from this env's: {', '.join(diff)}")
         self.sim.check_state({k[4:]: v for k, v in state_dict.items() if k.startswith("sim.")})
         need = {**self._task_views, "seed": None, "nonfinite_count": None}
-        if self.scanner is not None:
-            need["scan_count"] = None
+        for sensor in self.sensors:
+            need.update(dict.fromkeys(sensor.state()))
         missing = sorted(k for k in need if f"task.{k}" not in state_dict)
         if missing:
             raise ValueError(f"the snapshot lacks task entries {missing}")
@@ -708,9 +706,9 @@ class RoverEnv(EnvBase):
         self.sim.set_state(sim_state)
         self._seed = int(task_state["seed"])
         self.nonfinite_count = int(task_state["nonfinite_count"])
-        if self.scanner is not None:
-            self.scanner.reseed(self._seed)
-            self.scanner.count = int(task_state["scan_count"])
+        self._reseed_sensors()
+        for sensor in self.sensors:
+            sensor.load_state(task_state)
         return super().load_state_dict(state_dict, strict=strict, assign=assign)
 
     def __repr__(self) -> str:

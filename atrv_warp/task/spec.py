@@ -6,7 +6,8 @@ baseline, the Gymnasium spaces, the ROS goal mode and :func:`atrv_warp.task.rewa
 
 - :data:`OBSERVATION`: the arena observation's fields in order, each with its clip bound;
   :data:`ROBOT_OBSERVATION`: the robot observation's (what a robot's own stack publishes);
-  :func:`observation_fields` picks the task's and adds its scan sectors, then its last actions, after them.
+  :func:`observation_fields` picks the task's and adds its sensors' fields (its scan sectors: :func:`laser_fields`),
+  then its last actions, after them.
 - :data:`ACTIONS`: the action kinds (``torque``, ``twist``) and what each column means;
   :func:`action_to_torque` and :func:`action_to_twist` map an action in [-1, 1]² to the rover's input.
 - :class:`EndReason`: why an episode ended (the ``end_reason`` entry).
@@ -43,6 +44,7 @@ __all__ = [
     "ObservationField",
     "action_to_torque",
     "action_to_twist",
+    "laser_fields",
     "observation_bounds",
     "observation_fields",
     "policy_contract",
@@ -57,7 +59,7 @@ class ObservationField:
 
     name: str
     bound: float
-    """The value is clipped to [-bound, bound] ([0, bound] for a scan sector), in :attr:`unit`."""
+    """The value is clipped to [-bound, bound] (or [:attr:`low`, bound]), in :attr:`unit`."""
     description: str
     unit: str
     """SI unit of the value (``-``: dimensionless)."""
@@ -67,6 +69,8 @@ class ObservationField:
     """For an observation kind of a task's own (:func:`register_observation`): the value's ``@wp.func``
     ``(params: Any, inputs: TermInputs, world: int) -> float``, clipped to the bound. None for the shipped kinds,
     whose kernels write them (:mod:`atrv_warp.task.kernels.observe`)."""
+    low: float | None = None
+    """The lower clip bound where it is not ``-bound`` (0 for a scan sector)."""
 
 
 OBSERVATION: tuple[ObservationField, ...] = (
@@ -151,16 +155,25 @@ ACTIONS: dict[str, ActionKind] = {
 """``TaskConfig.action`` -> what the action means."""
 
 
-def observation_fields(task=None) -> tuple[ObservationField, ...]:
+def laser_fields(task, name: str = "scan", frame: str = "scanner (the URDF's lrf_frame)") -> tuple[ObservationField, ...]:
+    """The observed sectors of a laser called ``name`` (its robot's ``links.laser`` is ``scan``; a robot file's
+    ``[[sensors]]`` names the others): ``<name>_0 … <name>_{S-1}`` for ``task``'s ``scan_sectors`` (right to left),
+    each in [0, 1]."""
+    sectors = getattr(task, "scan_sectors", 0)
+    return tuple(ObservationField(f"{name}_{i}", 1.0, f"nearest return in scan sector {i} of {sectors} (right to "
+                                  "left, edges: scan_sectors(task)), min(range, scan_clip) / scan_clip; no return 1, "
+                                  "too close 0", "-", frame, low=0.0) for i in range(sectors))
+
+
+def observation_fields(task=None, sensors: tuple[ObservationField, ...] | None = None) -> tuple[ObservationField, ...]:
     """The observation of ``task`` (a :class:`~atrv_warp.task.config.TaskConfig`): :data:`OBSERVATION` (or
-    :data:`ROBOT_OBSERVATION` for ``observation="robot"``), then ``scan_0 … scan_{S-1}`` for its ``scan_sectors`` (right to left), in [0, 1], then
+    :data:`ROBOT_OBSERVATION` for ``observation="robot"``), then the sensors' fields: ``sensors`` (every sensor's of the
+    rover, in order: :func:`atrv_warp.task.sensors.sensor_fields`), or where ``None`` the scanner's alone,
+    ``scan_0 … scan_{S-1}`` for its ``scan_sectors`` (:func:`laser_fields`), then
     ``last_action_1_left``, ``last_action_1_right`` … ``last_action_K_right`` for its ``action_history``
     (the actions chosen 1 … K steps before, newest first, in [-1, 1])."""
-    sectors = getattr(task, "scan_sectors", 0)
     history = getattr(task, "action_history", 0)
-    scan = tuple(ObservationField(f"scan_{i}", 1.0, f"nearest return in scan sector {i} of {sectors} (right to left, "
-                                  "edges: scan_sectors(task)), min(range, scan_clip) / scan_clip; no return 1, too "
-                                  "close 0", "-", "scanner (the URDF's lrf_frame)") for i in range(sectors))
+    scan = laser_fields(task) if sensors is None else tuple(sensors)
     columns = ACTIONS[getattr(task, "action", "torque")].columns
     actions = tuple(ObservationField(f"last_action_{k}_{side}", 1.0, f"the {side} action chosen {k} step(s) before "
                                      "(what a delayed rover has yet to apply), in [-1, 1]", "-", "-")
@@ -196,11 +209,13 @@ class EndReason(IntEnum):
 END_REASONS: tuple[str, ...] = tuple(r.name.lower() for r in EndReason)
 """``END_REASONS[end_reason]`` names an end reason."""
 
-def observation_bounds(dtype: torch.dtype = torch.float32, task=None) -> tuple[torch.Tensor, torch.Tensor]:
-    """(low, high) of the observation of ``task`` (default: the reference's, (OBS_DIM,) each)."""
-    fields = observation_fields(task)
+def observation_bounds(dtype: torch.dtype = torch.float32, task=None,
+                       sensors: tuple[ObservationField, ...] | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """(low, high) of the observation of ``task`` (default: the reference's, (OBS_DIM,) each; ``sensors``: as for
+    :func:`observation_fields`)."""
+    fields = observation_fields(task, sensors)
     high = torch.tensor([f.bound for f in fields], dtype=dtype)
-    low = torch.tensor([0.0 if f.name.startswith("scan_") else -f.bound for f in fields], dtype=dtype)
+    low = torch.tensor([-f.bound if f.low is None else f.low for f in fields], dtype=dtype)
     return low, high
 
 

@@ -154,6 +154,10 @@ class DeployablePolicy:
 
         task = policy_task(path)
         record = policy_record(path)
+        if record.robot.sensors:  # the twin casts links.laser's scan only
+            raise ValueError(f"{path}: the policy observes its robot file's [[sensors]] "
+                             f"({', '.join(s['name'] for s in record.robot.sensors)}); the MuJoCo twin simulates "
+                             "links.laser's scan only")
         action, observation = policy_kinds(path)
         contract = policy_contract(record.task.config)
         if (action, observation) != ("twist", "robot"):  # refused before its network is built
