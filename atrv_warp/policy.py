@@ -27,7 +27,7 @@ from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
 from atrv_warp.storage import FileFormatError, atomic_save, load_weights
 from atrv_warp.task.spec import ACTION_DIM, OBS_DIM, observation_fields
 
-__all__ = ["OLD_KINDS", "POLICY_FORMAT", "READ_FORMATS", "SHIPPED_POLICIES", "Normalize", "PolicyRecord",
+__all__ = ["OLD_KINDS", "POLICY_FORMAT", "READ_FORMATS", "ROBOT_POLICY_ARGUMENTS", "SHIPPED_POLICIES", "Normalize", "PolicyRecord",
            "PolicyRobotMismatch", "PolicyTaskMismatch", "ShippedPolicy", "check_policy_robot", "check_policy_task",
            "load_policy", "make_actor", "policy_kinds", "policy_path", "policy_payload", "policy_record",
            "policy_task", "pretrained_nav_policy_path", "pretrained_policy_path", "run_record", "save_policy",
@@ -57,21 +57,30 @@ class ShippedPolicy:
     """The command that trains it (its ``best_policy.pt`` is then copied to ``atrv_warp/assets/<file>``)."""
 
 
+ROBOT_POLICY_ARGUMENTS: dict[str, str] = {"husky": "run.total_frames=3000000"}
+"""Training arguments beyond ``--config nav_deploy env.robot=<robot>`` that a shipped robot's policy needed, by robot
+(none for most): the Husky's command anneals over 3 M frames (its free-wheeled predecessor still improved at
+nav_deploy's 1.4 M); the 30-minute budget of the benchmark stops it first on 2 cores."""
+
+
+def _robot_policies() -> dict[str, ShippedPolicy]:
+    """Each shipped robot's deployable policy, ``nav_deploy_<robot>``, from the robots folder: at its own limits, seed
+    0 of ``benchmarks/training/train_to_success.py`` with the same arguments (its results file:
+    ``train_to_success_nav_deploy_<robot>.json``; ``benchmarks/robots/robot_policies.py`` evaluates them)."""
+    from atrv_warp.core.robot import ROBOTS
+
+    return {f"nav_deploy_{robot}": ShippedPolicy(
+        f"nav_deploy_{robot}_policy.pt", "nav_deploy",
+        " ".join(("python -m atrv_warp.train --config nav_deploy", f"env.robot={robot}",
+                  *filter(None, [ROBOT_POLICY_ARGUMENTS.get(robot)]))))
+        for robot in ROBOTS}
+
+
 SHIPPED_POLICIES: dict[str, ShippedPolicy] = {
     "reach": ShippedPolicy("pretrained_policy.pt", "reach", "python -m atrv_warp.train"),
     "nav": ShippedPolicy("nav_policy.pt", "nav", "python -m atrv_warp.train --config nav randomization=wide"),
     "nav_plain": ShippedPolicy("nav_policy_plain.pt", "nav", "python -m atrv_warp.train --config nav"),
-    # each robot's deployable policy, at its own limits: seed 0 of benchmarks/training/train_to_success.py with the same
-    # arguments (its results file: train_to_success_nav_deploy_<robot>.json; benchmarks/robots/robot_policies.py evaluates
-    # them). The Husky's command anneals over 3 M frames (its free-wheeled predecessor still improved at nav_deploy's
-    # 1.4 M); the 30-minute budget of the benchmark stops it first on 2 cores.
-    "nav_deploy_atrvjr": ShippedPolicy("nav_deploy_atrvjr_policy.pt", "nav_deploy",
-                                       "python -m atrv_warp.train --config nav_deploy env.robot=atrvjr"),
-    "nav_deploy_jackal": ShippedPolicy("nav_deploy_jackal_policy.pt", "nav_deploy",
-                                       "python -m atrv_warp.train --config nav_deploy env.robot=jackal"),
-    "nav_deploy_husky": ShippedPolicy("nav_deploy_husky_policy.pt", "nav_deploy",
-                                      "python -m atrv_warp.train --config nav_deploy env.robot=husky "
-                                      "run.total_frames=3000000"),
+    **_robot_policies(),  # a robot shipped in the robots folder ships its policy under this name
     # the two 2 m/s studies: trained before robots had files (the ATRV-Jr's body at the Jackal's speed, a 1 m/s² base)
     # and before nav_deploy.toml's batch went from 512 to 256; the deploy and MuJoCo figures of the docs cite them
     "nav_deploy": ShippedPolicy("nav_deploy_policy.pt", "nav_deploy",
@@ -81,10 +90,11 @@ SHIPPED_POLICIES: dict[str, ShippedPolicy] = {
 }
 """The shipped policies by name: ``reach`` (the reference task), ``nav`` (navigation, trained under the ``wide``
 domain randomization), ``nav_plain`` (navigation on the nominal rover with perfect sensors),
-``nav_deploy_<robot>`` (each shipped robot's navigation policy: ``/cmd_vel`` commands at its own limits from the robot
-observation, trained under ``wide``), ``nav_deploy`` (the 2 m/s study it grew from: the ATRV-Jr at the Jackal's speed,
-the task as declared), ``nav_deploy_plain`` (the same study trained on the nominal rover, without randomization: the
-MuJoCo twin's comparison)."""
+``nav_deploy_<robot>`` for every robot of the robots folder (its navigation policy: ``/cmd_vel`` commands at its own
+limits from the robot observation, trained under ``wide``; a robot shipped without it names the command that trains
+it), ``nav_deploy`` (the 2 m/s study it grew from: the ATRV-Jr at the Jackal's speed, the task as declared),
+``nav_deploy_plain`` (the same study trained on the nominal rover, without randomization: the MuJoCo twin's
+comparison)."""
 
 
 class PolicyTaskMismatch(FileFormatError):

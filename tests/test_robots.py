@@ -360,6 +360,9 @@ def test_each_robot_has_its_shipped_nav_policy_and_commands_default_to_it():
         assert record.recorded and record.robot == load_robot(robot)
         assert record.task.config == RoverEnv(1, robot=robot, task="nav_deploy").task_cfg, robot
     assert shipped_policy_for("nav_deploy") == "nav_deploy"  # the 2 m/s study, where no robot is named
+    # the robots folder names them: no robot's policy is listed by hand, none is missing
+    assert {n for n in SHIPPED_POLICIES if n.startswith("nav_deploy_")} - {"nav_deploy_plain"} == {
+        f"nav_deploy_{robot}" for robot in ROBOTS}
     assert shipped_policy_for("nav", "husky") == "nav" and shipped_policy_for("mine", "husky") == "reach"
 
 
