@@ -13,7 +13,8 @@ import pytest
 import torch
 
 from atrv_warp.integrations.ros.bag import BagWriter
-from atrv_warp.sim.config import SimConfig, load_sim_config
+from atrv_warp.sim.config import SimConfig
+from atrv_warp.sim.config_file import load_sim_config
 from atrv_warp.sim.driver import DriverConfig
 from atrv_warp.sim.sysid import (
     DEFAULT_FIT,
@@ -408,7 +409,7 @@ def test_segments_replay_the_configured_driver_and_the_outputs_record_it(tmp_pat
     rover, _ = load_sim_config(tmp_path / "cal.toml")
     assert rover.wheel_radius == 0.121
     # a randomization centred on the file reads the standard errors the calibration wrote: 0.121 +- 2 x 1e-4
-    from atrv_warp.sim.config import read_sim_config
+    from atrv_warp.sim.config_file import read_sim_config
     from atrv_warp.task.randomization import AroundConfig, resolve_around
 
     assert read_sim_config(tmp_path / "cal.toml").standard_error == {"wheel_radius": 1e-4}

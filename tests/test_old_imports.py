@@ -85,3 +85,4 @@ def test_the_task_fingerprint_from_evaluation():
         assert evaluation.task_fingerprint is fingerprints.task_fingerprint
     with pytest.raises(AttributeError, match="no attribute 'nothing'"):
         _ = evaluation.nothing
+

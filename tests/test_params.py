@@ -155,7 +155,7 @@ def test_gradients_reach_each_worlds_mu_and_mass():
 # ------------------------------------------------------------------ configs that cannot run, refused by name
 
 def test_a_sim_config_of_the_wrong_shape_is_named_with_its_file_and_key(tmp_path):
-    from atrv_warp.sim.config import read_sim_config
+    from atrv_warp.sim.config_file import read_sim_config
 
     cases = {"[rover]\ninertial_overrides = [1, 2]\n": "[rover] inertial_overrides: entry 0 must be a table",
              "[robot]\nmass = 3\n": "unknown table(s) ['robot']; known: [rover], [contact]",

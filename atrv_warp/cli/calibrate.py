@@ -164,7 +164,7 @@ def _record(args) -> int:
         return 2
     params.update(extra)
     if args.truth:
-        from atrv_warp.sim.config import load_sim_config
+        from atrv_warp.sim.config_file import load_sim_config
 
         try:
             load_sim_config(args.truth)
@@ -192,7 +192,8 @@ def _record_twin(args) -> int:
     except ImportError as err:
         print(f"error: --engine mujoco needs MuJoCo ({err.name} is not installed): {MUJOCO_EXTRA}", file=sys.stderr)
         return 2
-    from atrv_warp.sim.config import ContactConfig, load_sim_config
+    from atrv_warp.sim.config import ContactConfig
+    from atrv_warp.sim.config_file import load_sim_config
     from atrv_warp.sim.driver import DriverConfig
 
     rover, friction = None, None
@@ -244,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
         return _record(args)
     if not args.bag:
         build_parser().error("give a BAG to fit to (or --record-example OUT.mcap)")
-    from atrv_warp.sim.config import load_sim_config
+    from atrv_warp.sim.config_file import load_sim_config
     from atrv_warp.sim.sysid import (
         BagError,
         CalibrationConfig,

@@ -207,7 +207,7 @@ def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim
     from atrv_warp.task.randomization import AROUND_PRESETS, get_randomization
 
     if sim_config:
-        from atrv_warp.sim.config import load_sim_config
+        from atrv_warp.sim.config_file import load_sim_config
 
         load_sim_config(sim_config)  # a bad file stops here, before the simulator is built
     if baseline:

@@ -82,7 +82,8 @@ def _files_read(env) -> tuple:
 
 @functools.lru_cache(maxsize=8)
 def _resolve(env, _files: tuple) -> RunSpec:
-    from atrv_warp.sim.config import load_sim_config, nominal_rover_config
+    from atrv_warp.sim.config import nominal_rover_config
+    from atrv_warp.sim.config_file import load_sim_config
     from atrv_warp.task.randomization import get_randomization
     from atrv_warp.task.registry import load_task_module, resolve_task
     from atrv_warp.task.scaling import fit_task

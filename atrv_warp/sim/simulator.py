@@ -27,8 +27,8 @@ from atrv_warp.sim.config import (
     RoverConfig,
     SimConfig,
     nominal_rover_config,
-    read_sim_config,
 )
+from atrv_warp.sim.config_file import read_sim_config
 from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
 from atrv_warp.sim.driver import DRIVE_TORQUE, DRIVE_TWIST, SNAPSHOT_ADDED, Driver, DriverConfig
 from atrv_warp.sim.kernel_cache import precompile
@@ -173,7 +173,7 @@ class RoverSim:
         device: Warp device (``"cpu"`` default, ``"cuda:0"`` …).
         requires_grad: Build the model for gradients (what :class:`~atrv_warp.sim.diff.DiffRollout` does).
         sim_config: A TOML file whose ``[rover]`` and ``[contact]`` tables change ``rover`` and
-            ``contact`` (:func:`~atrv_warp.sim.config.load_sim_config`), e.g. the calibration that
+            ``contact`` (:func:`~atrv_warp.sim.config_file.load_sim_config`), e.g. the calibration that
             ``atrv-calibrate`` wrote from a recorded bag.
         driver: The base's motor driver (:class:`~atrv_warp.sim.driver.DriverConfig`; default: its defaults).
             Its radius and track default to the nominal rover's: ``rover`` before ``sim_config`` changes it; its

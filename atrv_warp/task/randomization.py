@@ -21,7 +21,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from atrv_warp.sim.config import SENSOR_NOISE, ContactConfig, RoverConfig, SensorNoise, read_sim_config
+from atrv_warp.sim.config import SENSOR_NOISE, ContactConfig, RoverConfig, SensorNoise
+from atrv_warp.sim.config_file import read_sim_config
 from atrv_warp.sim.params import PARAMETER_KEYS, PARAMETERS, check_parameter, parameter_values
 
 __all__ = [
@@ -285,7 +286,7 @@ def resolve_around(around: AroundConfig, sim_config: str | Path, *, rover: Rover
         contact: The contact law the file applies to (default: :class:`~atrv_warp.sim.config.ContactConfig`).
 
     Raises:
-        ValueError: One line naming the file: one it cannot read (:func:`~atrv_warp.sim.config.read_sim_config`), or
+        ValueError: One line naming the file: one it cannot read (:func:`~atrv_warp.sim.config_file.read_sim_config`), or
             a parameter ``around`` draws that the file does not set.
     """
     read = read_sim_config(sim_config, rover, contact)
