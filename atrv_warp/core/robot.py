@@ -48,8 +48,10 @@ The package ships one per robot in ``atrv_warp/robots/`` (:data:`ROBOTS`: ``atrv
     scan_topic = "sensors/lidar2d_0/scan"  # any of the node's topic, frame and command-type parameters
     tf_in_namespace = true               # its stack keeps /tf and /tf_static in the robot's namespace
 
-Any other key is refused by name. The ``[[sensors]]`` list and the ``[deploy]`` table say what the robot carries and
-where it runs, not what it is: they are no part of the robot's identity (:class:`Robot` equality, a saved policy's record, :func:`robot_file_sha256`). This module reads only the TOML file (standard library), so code on a robot's
+Any other key is refused by name. The ``[deploy]`` table says where the robot runs, not what it is: it is no part of
+the robot's identity (:class:`Robot` equality, a saved policy's record, :func:`robot_file_sha256`). The
+``[[sensors]]`` list says what it carries: no part of :class:`Robot` equality either, but a saved policy's record
+keeps it and the file's hash covers it (it changes what a policy observes). This module reads only the TOML file (standard library), so code on a robot's
 computer can load it; :mod:`atrv_warp.sim` checks it against its URDF (``python -m atrv_warp.robot check``).
 """
 
