@@ -23,7 +23,7 @@ from atrv_warp.sim.sysid import (
     CalibrationError,
     read_drive_log,
 )
-from atrv_warp.sim.sysid.fit import make_segments
+from atrv_warp.sim.sysid.segments import make_segments
 from atrv_warp.sim.urdf import load_rover
 
 WHEELS = {w.joint: (w.side, w.drive_sign) for w in load_rover().wheels}
@@ -443,7 +443,7 @@ def test_a_fitted_friction_rise_reaches_the_sim_config_and_the_simulator(tmp_pat
     under [contact], and a simulator built from that file has it in every world."""
     from atrv_warp import RoverSim
     from atrv_warp.sim.sysid import calibrate
-    from atrv_warp.sim.sysid.fit import DEFAULT_FIT, FIT_PARAMETERS
+    from atrv_warp.sim.sysid.config import DEFAULT_FIT, FIT_PARAMETERS
     from atrv_warp.sim.sysid.output import write_sim_config
 
     assert "friction_rise" not in DEFAULT_FIT
@@ -559,7 +559,8 @@ def test_a_latency_delays_the_replayed_commands_by_whole_steps():
 def test_the_model_check_flags_a_misfit_in_one_line():
     """Held-out errors at the recording's noise pass; a channel over twice its noise (or its floor) is named in one
     line, and so is a fit that made the held-out path worse."""
-    from atrv_warp.sim.sysid.fit import MISFIT_FLOOR, _model_check
+    from atrv_warp.sim.sysid.config import MISFIT_FLOOR
+    from atrv_warp.sim.sysid.fit import _model_check
 
     noise = {"position": 0.01, "wheel_speed": 0.04, "effort": 0.01}  # a fine effort sensor: its floor counts
 
@@ -603,15 +604,16 @@ def test_a_fit_finds_a_latency_and_flags_what_it_cannot_model(tmp_path, run_modu
 def test_the_standard_error_adds_the_replays_fidelity_and_names_confounded_pairs():
     """Two parameters the residuals move almost alike are reported as confounded; each standard error is at least the
     replay's fidelity (issue 42, part 3)."""
-    from atrv_warp.sim.sysid.fit import CONFOUNDED, FIT_FIDELITY, _standard_error, _Start
+    from atrv_warp.sim.sysid.config import CONFOUNDED, FIT_FIDELITY
+    from atrv_warp.sim.sysid.solver import Start, sandwich_error
 
     rng = np.random.default_rng(0)
     base = rng.normal(size=(40, 30))
     jac = np.stack([base, base + 0.05 * rng.normal(size=(40, 30)), rng.normal(size=(40, 30))], -1)  # (S, R, P)
-    start = _Start(unit=np.full(3, 0.5), residuals=0.1 * rng.normal(size=(40, 30)), jacobian=jac, damping=0.0,
+    start = Start(unit=np.full(3, 0.5), residuals=0.1 * rng.normal(size=(40, 30)), jacobian=jac, damping=0.0,
                    robust=None)
     names = ["torque_scale", "payload_mass", "friction"]
-    statistical, correlation = _standard_error(start, names, np.ones(3))
+    statistical, correlation = sandwich_error(start, names, np.ones(3))
     assert abs(correlation[0, 1]) > CONFOUNDED > abs(correlation[0, 2])
     assert all(np.isfinite(v) and v > 0 for v in statistical.values())
     assert set(FIT_FIDELITY) >= set(DEFAULT_FIT) and all(v > 0 for v in FIT_FIDELITY.values())
@@ -708,7 +710,7 @@ def test_a_pause_in_a_bag_splits_it_and_costs_no_memory():
     import time
     import tracemalloc
 
-    from atrv_warp.sim.sysid.fit import drive_spans, make_segments
+    from atrv_warp.sim.sysid.segments import drive_spans, make_segments
 
     cfg = CalibrationConfig()
     whole = _drive_log(60.0, pose_noise=0.0, wheel_noise=0.0)

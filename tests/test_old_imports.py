@@ -67,6 +67,20 @@ def test_the_old_calibration_package_is_sysid():
     assert _model_check is sysid.fit._model_check and DriveLog is sysid.DriveLog  # noqa: SLF001
 
 
+def test_the_split_fit_module_keeps_its_old_names():
+    """``sim.sysid.fit`` split into config, segments, replay, solver and fit (issue 69): every public name it held
+    still imports from it until 0.3.0, as the very object in its new home."""
+    from atrv_warp.sim.sysid import config, fit, segments
+
+    old = {"COMMAND_SOURCES": config, "CONFOUNDED": config, "DEFAULT_FIT": config, "FIT_FIDELITY": config,
+           "FIT_PARAMETERS": config, "MISFIT_FLOOR": config, "MOTOR_PARAMETERS": config, "CalibrationConfig": config,
+           "CalibrationError": config, "sim_config_tables": config, "Segments": segments,
+           "integral_from_effort": segments, "make_segments": segments, "CalibrationResult": fit, "calibrate": fit,
+           "recording_noise": fit, "replay_errors": fit}
+    for name, home in old.items():
+        assert getattr(fit, name) is getattr(home, name), name
+
+
 def test_checks_gives_the_protocols_and_the_fingerprints():
     from atrv_warp.sim import fingerprints, protocols
 

@@ -236,7 +236,7 @@ def calibrated(tmp_path):
 
 
 def test_around_resolves_to_ranges_centred_on_the_file(calibrated, tmp_path):
-    from atrv_warp.sim.sysid.fit import DEFAULT_FIT
+    from atrv_warp.sim.sysid.config import DEFAULT_FIT
 
     assert set(AroundConfig().parameters) == set(DEFAULT_FIT)  # what atrv-calibrate fits by default, as documented
     r = get_randomization("around", sim_config=calibrated)

@@ -36,7 +36,7 @@ __all__ = ["build_parser", "main"]
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line's parser (the docs' command table reads it too)."""
-    from atrv_warp.sim.sysid.fit import COMMAND_SOURCES, DEFAULT_FIT, FIT_PARAMETERS, CalibrationConfig
+    from atrv_warp.sim.sysid.config import COMMAND_SOURCES, DEFAULT_FIT, FIT_PARAMETERS, CalibrationConfig
     from atrv_warp.sim.sysid.log import Topics
 
     d = CalibrationConfig()

@@ -89,7 +89,8 @@ def main() -> int:
 
     from atrv_warp.sim.config import ContactConfig, get_variant
     from atrv_warp.sim.sysid import CalibrationConfig, calibrate
-    from atrv_warp.sim.sysid.fit import integral_from_effort, make_segments, replay_errors
+    from atrv_warp.sim.sysid.fit import replay_errors
+    from atrv_warp.sim.sysid.segments import integral_from_effort, make_segments
 
     t0 = time.perf_counter()
     log, true_integral = record(args.seconds, args.seed)

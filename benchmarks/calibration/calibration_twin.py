@@ -75,7 +75,7 @@ def configs(values: dict[str, float]):
     """The :class:`~atrv_warp.sim.config.RoverConfig` and :class:`~atrv_warp.sim.config.ContactConfig` of fit
     parameters' ``values`` (a truth, or a truth with fitted values over it), the others nominal."""
     from atrv_warp.sim.config import ContactConfig, RoverConfig
-    from atrv_warp.sim.sysid.fit import sim_config_tables
+    from atrv_warp.sim.sysid.config import sim_config_tables
 
     tables = sim_config_tables(values)
     return RoverConfig(**tables["rover"]), ContactConfig(**tables["contact"])
@@ -111,7 +111,7 @@ def run_rover(label: str, truth: dict[str, float], drive_seed: int, *, minutes: 
               env: dict, contact: str = "tyre", params: tuple[str, ...] | None = None) -> dict:
     """Record rover ``label`` in the twin and fit ``params`` to it (default: the CLI's, ``DEFAULT_FIT``; or read what an
     earlier run left in ``work``): its row."""
-    from atrv_warp.sim.sysid.fit import DEFAULT_FIT
+    from atrv_warp.sim.sysid.config import DEFAULT_FIT
 
     params = params or DEFAULT_FIT
     folder = work / label
@@ -224,7 +224,7 @@ def draw(rows: list[dict], path: Path, params: tuple[str, ...], default: tuple[s
 
 
 def main() -> int:
-    from atrv_warp.sim.sysid.fit import DEFAULT_FIT, FIT_PARAMETERS
+    from atrv_warp.sim.sysid.config import DEFAULT_FIT, FIT_PARAMETERS
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rovers", type=int, default=4, help="drawn rovers after the nominal one (%(default)s)")

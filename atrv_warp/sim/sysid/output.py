@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from atrv_warp.sim.sysid.fit import FIT_PARAMETERS, CalibrationResult, sim_config_tables
+from atrv_warp.sim.sysid.config import FIT_PARAMETERS, sim_config_tables
+from atrv_warp.sim.sysid.fit import CalibrationResult
 
 __all__ = ["format_report", "plot_paths", "write_report", "write_sim_config"]
 
