@@ -46,7 +46,8 @@ def _train_rows() -> list[list[str]]:
     import dataclasses
     import typing
 
-    from atrv_warp.rl.config import TrainCommand, TrainConfig
+    from atrv_warp.rl.command_line import TrainCommand
+    from atrv_warp.rl.config import TrainConfig
 
     rows = []
     docs = _attribute_docs(TrainCommand)

@@ -103,7 +103,7 @@ def test_sim_config_file_is_read_by_the_simulator_and_checked(tmp_path):
 
 
 def test_train_and_env_accept_sim_config(tmp_path):
-    from atrv_warp.rl.config import parse_command
+    from atrv_warp.rl.command_line import parse_command
     from atrv_warp.task.env import ATRVjrEnv
 
     path = tmp_path / "cal.toml"

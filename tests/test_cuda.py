@@ -148,7 +148,7 @@ def test_training_runs_on_cuda(tmp_path, build):
     import json
 
     from atrv_warp.policy import load_policy
-    from atrv_warp.rl.config import load_train_config
+    from atrv_warp.rl.command_line import load_train_config
     from atrv_warp.rl.learner import make_buffer
     from atrv_warp.rl.loop import train
 

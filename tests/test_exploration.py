@@ -11,7 +11,7 @@ from tensordict import TensorDict
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from atrv_warp.policy import make_actor
-from atrv_warp.rl.config import load_train_config
+from atrv_warp.rl.command_line import load_train_config
 from atrv_warp.rl.exploration import CorrelatedExploration, collection_policy
 
 

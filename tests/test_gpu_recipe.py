@@ -7,7 +7,7 @@ import json
 import pytest
 import torch
 
-from atrv_warp.rl.config import load_train_config
+from atrv_warp.rl.command_line import load_train_config
 
 GPU_PRESET = "nav_deploy_gpu"
 

@@ -8,7 +8,7 @@ import math
 import pytest
 import torch
 
-from atrv_warp.rl.config import load_train_config
+from atrv_warp.rl.command_line import load_train_config
 from atrv_warp.sim.config import SENSOR_NOISE
 from atrv_warp.task.env import ATRVjrEnv
 from atrv_warp.task.randomization import (

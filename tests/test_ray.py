@@ -132,7 +132,7 @@ def test_collector_weights_follow_the_learner(no_ray_before):
 
     from atrv_warp.policy import Normalize, make_actor
     from atrv_warp.rl.collectors import WORKER_KEY, make_ray_collector, worker_weights
-    from atrv_warp.rl.config import load_train_config
+    from atrv_warp.rl.command_line import load_train_config
 
     cfg = load_train_config("smoke", {"collector": "ray", "envs_per_collector": "16"})
     normalize = Normalize()
@@ -207,7 +207,7 @@ def test_ctrl_c_and_errors_leave_no_ray_behind(tmp_path, no_ray_before):
 
     failing = ("import sys, ray\n"
                "from atrv_warp.rl import learner, loop\n"
-               "from atrv_warp.rl.config import load_train_config\n"
+               "from atrv_warp.rl.command_line import load_train_config\n"
                "def broken(self, batch, phase=None):\n"
                "    raise RuntimeError('injected failure')\n"
                "learner.Learner.update = broken  # the first gradient step fails\n"

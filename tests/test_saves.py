@@ -18,7 +18,7 @@ from tensordict import TensorDict
 
 from atrv_warp.policy import policy_payload
 from atrv_warp.rl.checkpoint import Checkpoint, RunState, buffer_state, load_checkpoint
-from atrv_warp.rl.config import load_train_config
+from atrv_warp.rl.command_line import load_train_config
 from atrv_warp.rl.learner import make_buffer, make_learner, make_run_actor
 from atrv_warp.storage import FileFormatError
 

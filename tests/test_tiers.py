@@ -35,7 +35,7 @@ def test_a_heavy_fixture_outside_the_slow_tier_is_named():
 
 def test_the_training_loop_refuses_in_the_quick_tier(tmp_path):
     """A quick test that reaches the training loop fails there, before the first batch, naming itself."""
-    from atrv_warp.rl.config import load_train_config
+    from atrv_warp.rl.command_line import load_train_config
     from atrv_warp.rl.loop import train
 
     with pytest.raises(AssertionError, match=r"test_tiers\.py::test_the_training_loop_refuses_in_the_quick_tier "

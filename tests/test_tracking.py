@@ -18,7 +18,8 @@ import pytest
 import torch
 
 from atrv_warp.integrations.video import EvalVideo, read_video
-from atrv_warp.rl.config import flat_config, load_train_config
+from atrv_warp.rl.command_line import load_train_config
+from atrv_warp.rl.config import flat_config
 from atrv_warp.task.terms import REWARD_TERMS
 
 needs = {name: pytest.mark.skipif(importlib.util.find_spec(name) is None, reason=f"needs {name}: pip install -e '.[test]'")

@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from atrv_warp.rl.config import TrainConfig, load_train_config, preset_names
+from atrv_warp.rl.command_line import load_train_config, preset_names
+from atrv_warp.rl.config import TrainConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 SMOKE = "smoke"  # a preset shipped inside the package

@@ -21,7 +21,7 @@ from __future__ import annotations
 import sys
 
 from atrv_warp.core.files import OutputPathError
-from atrv_warp.rl.config import PROG, parse_command
+from atrv_warp.rl.command_line import PROG, parse_command
 from atrv_warp.rl.loop import train
 from atrv_warp.runtime import error_line, set_verbose
 from atrv_warp.storage import FileFormatError

@@ -1,6 +1,7 @@
 """Learning to drive with TorchRL SAC.
 
-- :mod:`.config`: :class:`TrainConfig`, presets (``configs/*.toml``) and the command-line reader.
+- :mod:`.config`: :class:`TrainConfig` and its groups, and :func:`to_toml`.
+- :mod:`.command_line`: the command line and the presets (``configs/*.toml``) and files it reads.
 - :mod:`.loop`: :func:`train`, which reads top to bottom, and the loop it runs.
 - :mod:`.collectors`: the collectors (``async``, ``sync``, ``ray``) behind one table.
 - :mod:`.learner`: critics, the SAC-family loss, optimisers and the replay buffer.

@@ -109,7 +109,7 @@ compile in CI loads what that test compiled (torch.compile's cache) instead of c
 
 
 def _recipe(args, overrides: dict | None = None):
-    from atrv_warp.rl.config import load_train_config
+    from atrv_warp.rl.command_line import load_train_config
 
     return load_train_config(PRESET, {**_on_device(args), **(overrides or {})})
 

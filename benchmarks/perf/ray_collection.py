@@ -67,7 +67,7 @@ def main() -> int:
 
     from atrv_warp.policy import make_actor
     from atrv_warp.rl.collectors import OBJECT_STORE_BYTES, make_ray_collector, placements
-    from atrv_warp.rl.config import load_train_config
+    from atrv_warp.rl.command_line import load_train_config
     from atrv_warp.task.env import EnvFactory
 
     torch.set_num_threads(1)

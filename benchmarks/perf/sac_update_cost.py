@@ -57,7 +57,7 @@ def variants(skip_compile: bool) -> list[dict]:
     import torch
 
     from atrv_warp.policy import Normalize, make_actor
-    from atrv_warp.rl.config import load_train_config
+    from atrv_warp.rl.command_line import load_train_config
     from atrv_warp.rl.learner import Learner
 
     torch.set_num_threads(1)

@@ -42,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     from tensordict import TensorDict
 
     from atrv_warp.rl.checkpoint import Checkpoint, RunState, load_checkpoint
-    from atrv_warp.rl.config import load_train_config
+    from atrv_warp.rl.command_line import load_train_config
     from atrv_warp.rl.learner import make_buffer, make_learner, make_run_actor
 
     n = args.transitions

@@ -56,7 +56,7 @@ def main() -> int:
 
     from atrv_warp.policy import Normalize, make_actor
     from atrv_warp.rl.collectors import make_collector, pin_to_core
-    from atrv_warp.rl.config import load_train_config
+    from atrv_warp.rl.command_line import load_train_config
     from atrv_warp.rl.learner import Learner, make_buffer, replay_frames
     from atrv_warp.rl.loop import Evaluator
     from atrv_warp.task.registry import get_task

@@ -47,7 +47,7 @@ def _series(path: Path) -> list[tuple[int, float]]:
 
 
 def _one_seed(config: str, overrides: dict, threshold: float) -> dict:
-    from atrv_warp.rl.config import load_train_config
+    from atrv_warp.rl.command_line import load_train_config
     from atrv_warp.rl.loop import train
 
     cfg = load_train_config(config, overrides)
@@ -158,7 +158,7 @@ def main() -> int:
     out = Path(args.out or RESULTS / f"train_to_success{suffix}.json")
     extra = dict(item.split("=", 1) for item in args.overrides)
 
-    from atrv_warp.rl.config import load_train_config
+    from atrv_warp.rl.command_line import load_train_config
     from atrv_warp.task.env import RoverEnv
 
     if args.figure_only:
