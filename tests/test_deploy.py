@@ -23,13 +23,9 @@ from types import SimpleNamespace as NS
 import pytest
 import torch
 
-from atrv_warp.deploy.controller import (
-    EXPORT_FORMAT,
-    Controller,
-    PolicyRefused,
-    Settings,
-    load_deployable,
-)
+from atrv_warp.core.contract import EXPORT_FORMAT
+from atrv_warp.deploy.contract import PolicyRefused, load_deployable
+from atrv_warp.deploy.controller import Controller, Settings
 
 ROOT = Path(__file__).resolve().parent.parent
 HEAVY = ("warp", "newton", "torchrl", "tensordict", "rerun")
@@ -315,7 +311,8 @@ def test_the_command_line_refuses_a_bad_policy_before_ros_starts(tmp_path):
 def test_the_deploy_node_loads_nothing_of_the_simulator():
     """In a fresh interpreter: the command line, the controller and (where rclpy is) the node import none of
     Warp, Newton, TorchRL, TensorDict or Rerun."""
-    modules = ["atrv_warp.deploy", "atrv_warp.deploy.cli", "atrv_warp.deploy.controller"]
+    modules = ["atrv_warp.deploy", "atrv_warp.deploy.cli", "atrv_warp.deploy.contract", "atrv_warp.deploy.messages",
+               "atrv_warp.deploy.controller"]
     try:
         import rclpy  # noqa: F401
 
@@ -327,9 +324,27 @@ def test_the_deploy_node_loads_nothing_of_the_simulator():
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
 
 
-def test_the_contract_format_is_the_exporters():
-    export = pytest.importorskip("atrv_warp.rl.export")
-    assert export.EXPORT_FORMAT == EXPORT_FORMAT
+def test_every_reader_of_an_exported_policy_refuses_another_format_alike(tmp_path, policy_file):
+    """The deploy node, the exporter's loader and the MuJoCo twin read a ``.pt2`` through one reader
+    (:func:`atrv_warp.core.contract.read_exported`): each refuses a contract of another format in the same line, and
+    each reads the good file's contract as the same dict."""
+    contract = load_deployable(policy_file).contract
+    old = write_policy(tmp_path / "old.pt2", dict(contract, format="atrv_warp.exported_policy/2"))
+    line = (f"{old}: contract format 'atrv_warp.exported_policy/2', this version reads {EXPORT_FORMAT!r}: export the "
+            "policy again (python -m atrv_warp.export POLICY OUT.pt2)")
+    readers = {"deploy": lambda p: load_deployable(p).contract}
+    try:  # the full package (the robot's slim install has the node alone)
+        from atrv_warp.integrations.mujoco.episodes import DeployablePolicy
+        from atrv_warp.rl.export import load_exported
+    except ImportError:
+        pass
+    else:
+        readers.update(export=lambda p: load_exported(p)[1], twin=lambda p: DeployablePolicy.load(p).contract)
+    for name, read in readers.items():
+        with pytest.raises(ValueError) as refused:
+            read(old)
+        assert str(refused.value) == line, name
+        assert read(policy_file) == contract, name
 
 
 def test_the_node_names_the_base_limits_its_policy_was_trained_with(policy):
@@ -505,7 +520,7 @@ def test_a_policy_whose_contract_does_not_fit_its_program_or_rate_is_refused(tmp
 def test_a_malformed_robot_entry_in_a_contract_is_read_as_no_robot():
     """A contract's ``robot`` entry comes from a file: any shape reads without an exception, a name only if it is
     text."""
-    from atrv_warp.deploy.controller import Deployable
+    from atrv_warp.deploy.contract import Deployable
 
     for entry, name in (({"name": ["x"], "limits": [1, 2]}, None), ("husky", None), (None, None),
                         ({"name": "husky", "title": "Husky", "limits": {"linear_velocity": 1.0}}, "husky")):

@@ -211,7 +211,7 @@ def test_no_input_ends_the_node_each_fault_stops_the_rover_and_good_input_drives
 def test_every_parameter_type_and_unknown_keys_are_named_in_one_line(ros_env, tmp_path):
     """Each bad parameter (its type, a value, a topic, a file, an unknown key in a --params-file) is one error line
     naming it and exit 2 (here: the node's NodeConfigError, in this process, with the same rclpy)."""
-    from atrv_warp.deploy.controller import load_deployable
+    from atrv_warp.deploy.contract import load_deployable
     from atrv_warp.deploy.node import DeployNode, NodeConfigError
 
     policy = load_deployable(write_policy(tmp_path / "tiny.pt2", task_contract()))
@@ -429,7 +429,7 @@ def test_each_shipped_robot_has_deploy_parameters_the_node_runs_with(tmp_path):
     import yaml
 
     from atrv_warp.core.robot import ROBOTS, load_robot
-    from atrv_warp.deploy.controller import load_deployable
+    from atrv_warp.deploy.contract import load_deployable
     from atrv_warp.deploy.launching import LAUNCH_FILE, deploy_robots, params_file, robot_parameters, rviz_config
     from atrv_warp.deploy.node import DeployNode
 

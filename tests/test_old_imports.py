@@ -67,6 +67,20 @@ def test_the_old_calibration_package_is_sysid():
     assert _model_check is sysid.fit._model_check and DriveLog is sysid.DriveLog  # noqa: SLF001
 
 
+def test_the_split_deploy_controller_keeps_its_old_names():
+    """``deploy.controller`` split into contract, messages and controller (issue 69): every public name it held still
+    imports from it until 0.3.0, as the very object in its new home."""
+    from atrv_warp.core import contract as core_contract
+    from atrv_warp.deploy import contract, controller, messages
+
+    old = {"EXPORT_FORMAT": core_contract, "RATE_RANGE_HZ": contract, "Deployable": contract,
+           "PolicyRefused": contract, "load_deployable": contract, "read_imu": messages, "read_odometry": messages,
+           "read_scan": messages, "scan_geometry": messages, "STATES": controller, "TIME_LIMIT": controller,
+           "Controller": controller, "Settings": controller, "Tick": controller}
+    for name, home in old.items():
+        assert getattr(controller, name) is getattr(home, name), name
+
+
 def test_the_split_fit_module_keeps_its_old_names():
     """``sim.sysid.fit`` split into config, segments, replay, solver and fit (issue 69): every public name it held
     still imports from it until 0.3.0, as the very object in its new home."""

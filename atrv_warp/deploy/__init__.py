@@ -4,9 +4,9 @@ At run time it needs torch, rclpy and the message packages only: no Warp, Newton
 simulator (``tests/test_deploy.py`` imports it in a fresh interpreter and checks), so it installs on a robot alone
 (``deploy/pyproject.toml``, the ``atrv-deploy`` distribution; docs/deploy.md).
 
-- :mod:`.controller`: the policy file and its contract (:func:`~.controller.load_deployable`), reading the robot's
-  messages, and each control period's decision (:class:`~.controller.Controller`); torch and :mod:`atrv_warp.core`
-  only;
+- :mod:`.contract`: the policy file and its contract (:func:`~.contract.load_deployable`); :mod:`.messages`: the robot's
+  messages read; :mod:`.controller`: each control period's decision (:class:`~.controller.Controller`); torch and
+  :mod:`atrv_warp.core` only;
 - :mod:`.parameters`: the node's parameters; :mod:`.node`: the rclpy node; :mod:`.cli`: the command line.
 """
 

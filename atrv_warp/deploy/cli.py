@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(" ".join(str(err).split()))
         print(LAUNCH_FILE)
         return 0
-    from atrv_warp.deploy.controller import PolicyRefused, load_deployable
+    from atrv_warp.deploy.contract import PolicyRefused, load_deployable
 
     try:
         policy = load_deployable(args.policy)

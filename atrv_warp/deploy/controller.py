@@ -1,13 +1,10 @@
-"""The deploy node's logic, without ROS: load an exported policy, read a robot's messages, decide each command.
+"""The deploy node's logic, without ROS: decide each command from the robot's latest messages.
 
-:func:`load_deployable` opens a ``.pt2`` (``python -m atrv_warp.export``) and refuses, in one line, a file or a
-contract the node cannot serve: a missing or garbage file, no contract, another contract format, a ``torque``
-policy (it commands wheel torques, not ``/cmd_vel``) or an ``arena`` observation (it observes what only the
-simulator knows). :class:`Controller` holds the latest ``/odom``, ``/imu``, ``/scan`` and goal, and
-:meth:`Controller.tick` decides, once per control period, what the rover does: drive by the policy, hold still
-(a stale, non-finite or unusable sensor; it resumes when they are valid again), or end the goal (reached, time
-limit). Messages are read by their fields alone (``msg.pose.pose.position.x``, ``msg.ranges``), so the tests and
-a robot without this package's simulator use the same code; :mod:`atrv_warp.deploy.node` is the rclpy shell.
+:class:`Controller` holds the latest ``/odom``, ``/imu``, ``/scan`` and goal (read by :mod:`atrv_warp.deploy.messages`),
+and :meth:`Controller.tick` decides, once per control period, what the rover does with the exported policy
+(:mod:`atrv_warp.deploy.contract`): drive by the policy, hold still (a stale, non-finite or unusable sensor; it
+resumes when they are valid again), or end the goal (reached, time limit). :mod:`atrv_warp.deploy.node` is the rclpy
+shell.
 
 Only torch and :mod:`atrv_warp.core` are imported here (``tests/test_layers.py`` holds it).
 """
@@ -15,26 +12,28 @@ Only torch and :mod:`atrv_warp.core` are imported here (``tests/test_layers.py``
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import torch
 
-from atrv_warp.core.files import ExportedFileError, load_exported_program
-from atrv_warp.core.observation import RobotObservation, Scan
 from atrv_warp.core.tf import TransformBuffer, frame_id
+
+# The names this module held before its split (issue 69) import from here as they did, until 0.3.0; their homes are
+# atrv_warp.deploy.contract and atrv_warp.deploy.messages (EXPORT_FORMAT, RATE_RANGE_HZ, PolicyRefused, load_deployable and
+# scan_geometry are imported for that alone).
+from atrv_warp.deploy.contract import EXPORT_FORMAT, RATE_RANGE_HZ, Deployable, PolicyRefused, load_deployable  # noqa: F401
+from atrv_warp.deploy.messages import (
+    read_imu,
+    read_odometry,
+    read_scan,
+    scan_geometry,  # noqa: F401
+)
 from atrv_warp.deploy.parameters import PARAMETER_BY_NAME
 
-__all__ = ["EXPORT_FORMAT", "RATE_RANGE_HZ", "STATES", "TIME_LIMIT", "Controller", "Deployable", "PolicyRefused", "Settings", "Tick",
-           "load_deployable", "read_imu", "read_odometry", "read_scan", "scan_geometry"]
-
-EXPORT_FORMAT = "atrv_warp.exported_policy/3"
-"""The contract format this node reads (``atrv_warp.rl.export.EXPORT_FORMAT``; ``tests/test_deploy.py`` holds the
-two equal without importing the exporter here)."""
+__all__ = ["STATES", "TIME_LIMIT", "Controller", "Settings", "Tick"]
 
 TIME_LIMIT = "time limit"
 """How an aborted status's ``reason`` starts when the goal ran out of ``time_limit`` (the node's ``NavigateToPose``
@@ -42,231 +41,6 @@ result reports it as Nav2's ``TIMEOUT``)."""
 STATES = ("active", "holding", "reached", "aborted")
 """The goal status's ``state``: driving by the policy; held still for a ``reason`` (resumes by itself); the goal
 reached (within ``goal_tolerance``); given up for a ``reason`` (time limit, shutdown, a new goal)."""
-
-
-class PolicyRefused(ValueError):
-    """A policy file or contract the node cannot serve; the message is one line naming the file and the problem."""
-
-
-@dataclass(frozen=True)
-class Deployable:
-    """An exported policy the node can run: a ``twist`` action from the ``robot`` observation."""
-
-    path: str
-    """The ``.pt2`` file."""
-    module: torch.nn.Module
-    """The exported program's module: observation (B, D) float32 -> action (B, 2) in [-1, 1]."""
-    contract: dict
-    """Its ``atrv_warp.json`` (:func:`atrv_warp.rl.export.contract`)."""
-    observation: RobotObservation
-    """Builds its input from the robot's messages (the contract's fields, sectors and action history)."""
-    scale: tuple[float, float]
-    """What an action of 1.0 commands: linear.x [m/s], angular.z [rad/s] (the trained limits)."""
-    rate_hz: float
-    """The control rate it was trained at [Hz] (1 / the simulator's ``step_dt``)."""
-
-    @property
-    def period(self) -> float:
-        """The control period [s]."""
-        return 1.0 / self.rate_hz
-
-    @property
-    def reach_radius(self) -> float | None:
-        """The distance from the goal within which the policy's task counted it reached [m] (its contract's
-        ``reach_radius_m``; ``None`` for a file exported before it was kept)."""
-        radius = self.contract.get("reach_radius_m")
-        ok = isinstance(radius, int | float) and not isinstance(radius, bool) and math.isfinite(radius) and radius > 0
-        return float(radius) if ok else None
-
-    @property
-    def robot(self) -> str | None:
-        """The robot it was trained on (its contract's ``robot.name``; ``None`` for a policy exported before robots had
-        files, which trained on the ATRV-Jr)."""
-        robot = self.contract.get("robot")
-        name = robot.get("name") if isinstance(robot, dict) else None
-        return name if isinstance(name, str) and name else None
-
-    def describe_robot(self) -> str:
-        """One line: the robot it was trained on, and that robot's published limits."""
-        robot = self.contract.get("robot")
-        if not isinstance(robot, dict):
-            return "trained on the ATRV-Jr (exported before policies recorded their robot)"
-        lim = robot.get("limits") if isinstance(robot.get("limits"), dict) else {}  # a file's contract: any shape
-        parts = [f"{lim[k]:g} {u}" for k, u in (("linear_velocity", "m/s"), ("angular_velocity", "rad/s"),
-                                                ("linear_acceleration", "m/s²"), ("angular_acceleration", "rad/s²"))
-                 if isinstance(lim.get(k), (int, float))]
-        return f"trained on {self.robot} ({robot.get('title')!s}), whose limits are {', '.join(parts) or 'not recorded'}"
-
-    def describe(self) -> str:
-        """One line: what the policy observes and commands, at what rate."""
-        s = self.observation.sectors
-        scan = f", {s.count} scan sectors over [{s.edges[0]:.3f}, {s.edges[-1]:.3f}] rad" if s else ""
-        return (f"{self.path}: task {self.contract.get('task', '?')}, robot observation "
-                f"({len(self.observation.fields)},){scan}, twist action x ({self.scale[0]:g} m/s, {self.scale[1]:g} "
-                f"rad/s) at {self.rate_hz:g} Hz{self.base_limits()}")
-
-    def base_limits(self) -> str:
-        """The limits its training's base applied to /cmd_vel (the contract's ``base_limits``), for the robot's
-        ``diff_drive_controller`` to apply too: ``""`` where none, else e.g. ``"; trained on a base with
-        linear.x.max_acceleration 1 m/s²"``."""
-        limits = (self.contract.get("action") or {}).get("base_limits") or {}
-        names = {"linear_max_acceleration": "linear.x.max_acceleration",
-                 "angular_max_acceleration": "angular.z.max_acceleration"}
-        cells = [f"{names.get(k, k)} {v['value']:g} {v['unit']}" for k, v in limits.items()]
-        return f"; trained on a base with {', '.join(cells)}" if cells else ""
-
-
-RATE_RANGE_HZ = (1.0, 200.0)
-"""The control rates [Hz] the node serves: a contract outside them is refused (a robot's base takes commands at
-tens of Hz; 10⁻⁶ Hz would never command, 10⁹ Hz would flood the bus)."""
-
-
-def load_deployable(path: str | Path) -> Deployable:
-    """Open an exported policy and check that the node can serve its contract.
-
-    The file is checked before torch loads it (:func:`atrv_warp.core.files.load_exported_program`: nothing in it
-    can run code), and the program is run once on a zero observation of the contract's width.
-
-    Raises:
-        PolicyRefused: One line naming the file and the problem: missing, not a ``torch.export`` archive, refused
-            by the check, no or another contract format, a ``torque`` action, an ``arena`` observation (its fields
-            named), a contract the observation builder cannot read, a rate outside :data:`RATE_RANGE_HZ`, or a
-            program that does not take the contract's observation to a (1, 2) action.
-    """
-    path = str(path)
-    if not Path(path).is_file():
-        raise PolicyRefused(f"{path}: no such policy file (export one: python -m atrv_warp.export POLICY OUT.pt2)")
-    try:
-        program, extra = load_exported_program(path)
-    except ExportedFileError as err:
-        raise PolicyRefused(str(err)) from None
-    try:
-        contract = json.loads(extra.get("atrv_warp.json", ""))
-    except json.JSONDecodeError:
-        raise PolicyRefused(f"{path}: no atrv_warp.json contract in the file (export it with "
-                            "python -m atrv_warp.export)") from None
-    if not isinstance(contract, dict) or contract.get("format") != EXPORT_FORMAT:
-        got = contract.get("format") if isinstance(contract, dict) else None
-        raise PolicyRefused(f"{path}: contract format {got!r}, this node reads {EXPORT_FORMAT!r}: export the policy "
-                            "again (python -m atrv_warp.export POLICY OUT.pt2)")
-    action = contract.get("action") or {}
-    if action.get("kind") != "twist":
-        raise PolicyRefused(f"{path}: a {action.get('kind')!r} policy ({', '.join(map(str, action.get('names', [])))} "
-                            f"[{', '.join(map(str, action.get('units', [])))}]); the node commands /cmd_vel and serves "
-                            "'twist' policies only (task nav_deploy)")
-    kind = contract.get("observation_kind", "arena")
-    if kind != "robot":
-        names = [f.get("name") if isinstance(f, dict) else f for f in contract.get("observation", [])]
-        raise PolicyRefused(f"{path}: the policy observes the {kind!r} observation ({', '.join(map(str, names[:8]))}"
-                            f"{', …' if len(names) > 8 else ''}), which a robot does not publish; the node serves "
-                            "'robot' observations (task nav_deploy)")
-    try:
-        observation = RobotObservation.from_contract(contract)
-        scale = tuple(float(v) for v in action["scale"])
-        rate = float(contract["rate_hz"])
-    except (ValueError, KeyError, TypeError, AttributeError) as err:
-        raise PolicyRefused(f"{path}: a contract the node cannot read ({type(err).__name__}: {err})") from None
-    if len(scale) != 2 or not all(math.isfinite(v) and v > 0 for v in scale):
-        raise PolicyRefused(f"{path}: action scale {list(scale)} must be two finite numbers > 0")
-    low, high = RATE_RANGE_HZ
-    if not (math.isfinite(rate) and low <= rate <= high):
-        raise PolicyRefused(f"{path}: control rate {rate:g} Hz is outside the {low:g}-{high:g} Hz the node serves")
-    step_dt = contract.get("step_dt")
-    if step_dt is not None and not (isinstance(step_dt, (int, float)) and math.isclose(rate * step_dt, 1.0,
-                                                                                         rel_tol=1e-6)):
-        raise PolicyRefused(f"{path}: rate_hz {rate:g} disagrees with step_dt {step_dt!r} s (the period, 1 / rate_hz)")
-    module = program.module()
-    width = len(observation.fields)
-    try:
-        with torch.no_grad():
-            out = module(torch.zeros(1, width))
-    except Exception as err:  # noqa: BLE001 - any failure here is a program that does not fit its contract
-        raise PolicyRefused(f"{path}: the contract lists {width} observation fields, but the program refuses a "
-                            f"(1, {width}) input ({type(err).__name__}: {' '.join(str(err).split())[:120]})") from None
-    if not isinstance(out, torch.Tensor) or tuple(out.shape) != (1, 2) or not bool(torch.isfinite(out).all()):
-        got = tuple(out.shape) if isinstance(out, torch.Tensor) else type(out).__name__
-        raise PolicyRefused(f"{path}: the program maps a (1, {width}) observation to {got}, not a finite (1, 2) "
-                            "action")
-    return Deployable(path, module, contract, observation, scale, rate)
-
-
-# ------------------------------------------------------------------ reading messages
-
-def read_odometry(msg) -> tuple[list[float], list[float]]:
-    """A ``nav_msgs/Odometry``'s pose (x, y, z, qx, qy, qz, qw) and twist (linear x, y, z, angular x, y, z).
-
-    Raises:
-        ValueError: A non-finite value or a zero orientation quaternion (named).
-    """
-    p, q = msg.pose.pose.position, msg.pose.pose.orientation
-    t = msg.twist.twist
-    pose = [p.x, p.y, p.z, q.x, q.y, q.z, q.w]
-    twist = [t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z]
-    if not all(math.isfinite(v) for v in pose + twist):
-        raise ValueError(f"non-finite odometry (pose {_short(pose)}, twist {_short(twist)})")
-    if math.hypot(*pose[3:]) < 1e-6:
-        raise ValueError("odometry orientation is a zero quaternion")
-    return pose, twist
-
-
-def read_imu(msg) -> tuple[list[float], list[float]]:
-    """A ``sensor_msgs/Imu``'s orientation (x, y, z, w) and angular velocity (x, y, z) [rad/s].
-
-    Raises:
-        ValueError: A non-finite value or a zero orientation quaternion (named).
-    """
-    q, w = msg.orientation, msg.angular_velocity
-    orientation, omega = [q.x, q.y, q.z, q.w], [w.x, w.y, w.z]
-    if not all(math.isfinite(v) for v in orientation + omega):
-        raise ValueError(f"non-finite IMU (orientation {_short(orientation)}, angular velocity {_short(omega)})")
-    if math.hypot(*orientation) < 1e-6:
-        raise ValueError("IMU orientation is a zero quaternion (an IMU without orientation cannot serve the policy)")
-    return orientation, omega
-
-
-def scan_geometry(msg) -> str:
-    """A ``LaserScan``'s geometry in words: beams, angles [rad] and field of view [deg]."""
-    beams = len(msg.ranges)
-    last = msg.angle_min + msg.angle_increment * max(beams - 1, 0)
-    return (f"{beams} beams from {msg.angle_min:.3f} to {last:.3f} rad "
-            f"({math.degrees(last - msg.angle_min):.0f} deg)")
-
-
-def read_scan(msg, observation: RobotObservation) -> Scan:
-    """A ``sensor_msgs/LaserScan`` as the observation builder reads it (REP 117: ``+inf`` no return, ``-inf`` too
-    close, ``NaN`` invalid).
-
-    Raises:
-        ValueError: A geometry the policy's sectors cannot use (no beams, a non-finite or non-positive
-            ``angle_increment``, a field of view that does not reach every sector: both geometries named), or no
-            valid beam.
-    """
-    geometry = [msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max]
-    if not msg.ranges or not all(math.isfinite(v) for v in geometry) or not msg.angle_increment > 0:
-        raise ValueError(f"unusable scan geometry: {len(msg.ranges)} beams, angle_min {msg.angle_min}, "
-                         f"angle_increment {msg.angle_increment} (need > 0: counter-clockwise beams), range "
-                         f"[{msg.range_min}, {msg.range_max}] m")
-    if not 0 <= msg.range_min < msg.range_max:
-        raise ValueError(f"impossible scan: range_min {msg.range_min} m, range_max {msg.range_max} m (need 0 <= "
-                         "range_min < range_max)")
-    sectors = observation.sectors
-    last = msg.angle_min + msg.angle_increment * (len(msg.ranges) - 1)
-    if sectors is not None and not sectors.covered_by(msg.angle_min, last):
-        raise ValueError(f"scan refused: its field of view ({scan_geometry(msg)}) does not cover the policy's "
-                         f"{sectors.count} sectors from {sectors.edges[0]:.3f} to {sectors.edges[-1]:.3f} rad "
-                         f"({math.degrees(sectors.edges[-1] - sectors.edges[0]):.0f} deg)")
-    ranges = torch.as_tensor(list(msg.ranges), dtype=torch.float64)
-    if bool(torch.isnan(ranges).all()):
-        raise ValueError(f"scan with no valid beam (all {len(msg.ranges)} ranges NaN)")
-    return Scan(ranges, float(msg.angle_min), float(msg.angle_increment), float(msg.range_min), float(msg.range_max))
-
-
-def _short(values: Sequence[float]) -> str:
-    return "[" + ", ".join(f"{v:.3g}" for v in values) + "]"
-
-
-# ------------------------------------------------------------------ deciding
-
 
 @dataclass(frozen=True)
 class Settings:

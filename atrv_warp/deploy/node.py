@@ -33,7 +33,8 @@ from sensor_msgs.msg import Imu, LaserScan
 from std_msgs.msg import String
 
 from atrv_warp.core.files import OutputPathError, fresh_path
-from atrv_warp.deploy.controller import TIME_LIMIT, Controller, Deployable, Settings, Tick
+from atrv_warp.deploy.contract import Deployable
+from atrv_warp.deploy.controller import TIME_LIMIT, Controller, Settings, Tick
 from atrv_warp.deploy.parameters import (
     PARAMETERS,
     ParameterError,

@@ -9,14 +9,13 @@ also carries ``atrv_warp.json``, the whole contract a robot stack needs to run i
 limits, the sectors' angular edges and clip) and how a missing or too-close return reads; and what the
 action history means. The exporter checks the policy against its task first, as ``load_policy`` does.
 
-Load it anywhere torch runs, with no Warp, Newton or TorchRL, through the light core's checked loader (a plain
-``torch.export.load`` can unpickle what a crafted file holds; :func:`atrv_warp.core.files.load_exported_program`
-refuses such a file before torch reads it)::
+Load it anywhere torch runs, with no Warp, Newton or TorchRL, through the light core's checked reader (a plain
+``torch.export.load`` can unpickle what a crafted file holds; :func:`atrv_warp.core.contract.read_exported` refuses
+such a file before torch reads it, and a contract of another format)::
 
-    import json, torch
-    from atrv_warp.core.files import load_exported_program
-    program, extra = load_exported_program("policy.pt2")
-    spec = json.loads(extra["atrv_warp.json"])
+    import torch
+    from atrv_warp.core.contract import read_exported
+    program, spec = read_exported("policy.pt2")
     action = program.module()(observation)          # (B, D) float32 -> (B, 2)
     command = action * torch.tensor(spec["action"]["scale"])   # torque: [left, right] N·m; twist: [m/s, rad/s]
 
@@ -37,7 +36,8 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from atrv_warp.core.files import ExportedFileError, load_exported_program
+from atrv_warp.core.contract import CONTRACT_FILE, EXPORT_FORMAT, read_exported
+from atrv_warp.core.files import ExportedFileError
 from atrv_warp.policy import load_policy, policy_path, policy_record
 from atrv_warp.sim.config import SimConfig
 from atrv_warp.sim.scanner import ScannerConfig
@@ -45,11 +45,6 @@ from atrv_warp.storage import FileFormatError
 from atrv_warp.task.spec import ACTION_DIM, observation_fields, policy_contract
 
 __all__ = ["EXPORT_FORMAT", "PolicyNet", "contract", "export_onnx", "export_policy", "load_exported"]
-
-EXPORT_FORMAT = "atrv_warp.exported_policy/3"
-"""Format tag of an exported policy's ``atrv_warp.json`` (:func:`contract`; 3: the action's kind, ``twist`` or
-``torque``, with its scale and units per column, and the observation's kind; 2 had torque only)."""
-
 
 class PolicyNet(nn.Module):
     """Raw observation (B, obs_dim) -> deterministic action (B, ACTION_DIM) in [-1, 1]."""
@@ -173,7 +168,7 @@ def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = Fa
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.stem}.tmp.pt2")  # atomic: written beside, then renamed
     spec = json.dumps(contract(source, payload), default=str)
-    torch.export.save(program, tmp, extra_files={"atrv_warp.json": spec})
+    torch.export.save(program, tmp, extra_files={CONTRACT_FILE: spec})
     tmp.replace(out)
     if onnx:
         export_onnx(net, out.with_suffix(".onnx"), spec, policy_record(payload).task.config)
@@ -205,7 +200,7 @@ def export_onnx(net: PolicyNet, out: Path, spec: str, task=None, checks: int = 1
     finally:
         onnx_log.setLevel(level)
     model = onnx.load(str(tmp))
-    onnx.helper.set_model_props(model, {"atrv_warp.json": spec})
+    onnx.helper.set_model_props(model, {CONTRACT_FILE: spec})
     onnx.save(model, str(tmp))
     bound = np.array([f.bound for f in observation_fields(task)], dtype=np.float32)
     obs = np.random.default_rng(0).uniform(-1.1, 1.1, (checks, net.obs_dim)).astype(np.float32) * bound
@@ -222,8 +217,8 @@ def export_onnx(net: PolicyNet, out: Path, spec: str, task=None, checks: int = 1
 
 
 def load_exported(path: str | Path) -> tuple[nn.Module, dict]:
-    """The exported program's module and its ``atrv_warp.json`` description, the file checked before torch loads it
-    (:func:`atrv_warp.core.files.load_exported_program`).
+    """The exported program's module and its ``atrv_warp.json`` description, read by
+    :func:`atrv_warp.core.contract.read_exported` (the file checked before torch loads it).
 
     Raises:
         FileNotFoundError: No such file.
@@ -231,14 +226,7 @@ def load_exported(path: str | Path) -> tuple[nn.Module, dict]:
             a format this version does not read (named, with the one expected: export the policy again).
     """
     try:
-        program, extra = load_exported_program(path)
+        program, spec = read_exported(path)
     except ExportedFileError as err:
         raise FileFormatError(str(err)) from None
-    try:
-        spec = json.loads(extra.get("atrv_warp.json", ""))
-    except json.JSONDecodeError:
-        raise FileFormatError(f"{path}: no atrv_warp.json contract in the exported file") from None
-    if not isinstance(spec, dict) or spec.get("format") != EXPORT_FORMAT:
-        raise FileFormatError(f"{path}: exported contract format {spec.get('format') if isinstance(spec, dict) else None!r}, this version reads "
-                              f"{EXPORT_FORMAT!r}: export the policy again (python -m atrv_warp.export POLICY OUT)")
     return program.module(), spec

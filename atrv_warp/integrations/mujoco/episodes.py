@@ -11,7 +11,6 @@ builder a robot runs (:class:`~atrv_warp.core.observation.RobotObservation`).
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -20,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from atrv_warp.core.files import load_exported_program
+from atrv_warp.core.contract import read_exported
 from atrv_warp.core.observation import RobotObservation, Scan
 from atrv_warp.sim.config import RoverConfig, SimConfig
 from atrv_warp.sim.driver import DriverConfig
@@ -138,11 +137,7 @@ class DeployablePolicy:
         if str(path).endswith(".pt2"):
             if not Path(path).is_file():
                 raise FileNotFoundError(f"exported policy not found: {path}")
-            program, extra = load_exported_program(path)  # checked first: nothing in the file can run code
-            try:
-                contract = json.loads(extra.get("atrv_warp.json", ""))
-            except json.JSONDecodeError:
-                raise ValueError(f"{path}: no atrv_warp.json contract in the exported file") from None
+            program, contract = read_exported(path)  # checked first: nothing in the file can run code
             module = program.module()
             robot = contract.get("robot", {}).get("name", "atrvjr")
             return cls(lambda obs: module(obs[None])[0], contract, contract.get("task", "reach"), str(path), robot)
