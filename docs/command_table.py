@@ -81,7 +81,7 @@ def _attribute_docs(cls) -> dict[str, str]:
 def _ros_rows() -> list[list[str]]:
     from atrv_warp.integrations.ros.parameters import PARAMETERS
 
-    return [[f"`-p {name}:=…`", f"`{default!r}`", _cell(text)] for name, default, text in PARAMETERS]
+    return [[f"`-p {p.name}:=…`", f"`{p.default!r}`", _cell(p.text)] for p in PARAMETERS]
 
 
 def _deploy_rows() -> list[list[str]]:

@@ -477,7 +477,7 @@ def test_record_example_drives_a_worn_truth_with_the_nominal_driver(tmp_path, mo
         Path(path).write_bytes(b"bag")
 
     monkeypatch.setattr(drive, "record_drive_bag", record)
-    defaults = {name: default for name, default, _ in PARAMETERS}
+    defaults = {p.name: p.default for p in PARAMETERS}
     for extra, configured in (([], 0.125), (["--driver-wheel-radius", "0.13"], 0.13)):
         assert main(["--record-example", str(tmp_path / "x.mcap"), "--truth", str(truth), "--force", *extra]) == 0
         params = {**defaults, **seen[-1]}

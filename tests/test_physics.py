@@ -347,7 +347,7 @@ def test_the_accelerometer_aided_odometry_follows_the_chassis_where_the_wheels_s
     # the simulator node's parameter of the same name: 0 is off, a bad value is named as the node's
     from atrv_warp.integrations.ros.parameters import PARAMETERS, driver_config
 
-    params = {name: default for name, default, _ in PARAMETERS}
+    params = {p.name: p.default for p in PARAMETERS}
     assert driver_config(params).odometry_accel_time is None
     assert driver_config({**params, "odometry_accel_time": 3.0}).odometry_accel_time == 3.0
     with pytest.raises(ValueError, match="parameter odometry_accel_time: must be a finite number > 0"):

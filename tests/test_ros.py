@@ -46,9 +46,10 @@ class Client:
 
 
 def start_node(env, *params):
+    """The simulator node with ``params`` (``name:=value`` each, or ``--params-file``, ``FILE``)."""
     args = [sys.executable, "-m", "atrv_warp.ros", "--ros-args"]
     for p in params:
-        args += ["-p", p]
+        args += [p] if p.startswith("-") or p.endswith(".yaml") else ["-p", p]
     return subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
@@ -464,16 +465,56 @@ def test_base_driver_two_rovers_cmd_vel_odometry_imu_watchdog(ros_env):
     assert proc.returncode == 0, out[-2000:]
 
 
+def test_the_simulator_nodes_parameters_are_checked_in_the_deploy_nodes_style():
+    """Every parameter of ``python -m atrv_warp.ros`` has its type and range (:mod:`atrv_warp.core.parameters`, as
+    the deploy node's): a number takes an integer, an integer an integral float, -1 means the robot's where it may;
+    anything else is one line naming the parameter, what it needs and what it got."""
+    from atrv_warp.core.parameters import ParameterError, check_parameters
+    from atrv_warp.integrations.ros.parameters import PARAMETERS, unknown_parameters
+
+    ok = check_parameters(PARAMETERS, {"real_time_factor": 1, "num_rovers": 2.0, "wheel_kp": -1, "x": -3})
+    assert ok["real_time_factor"] == 1.0 and ok["wheel_kp"] == -1.0 and ok["x"] == -3.0
+    assert ok["num_rovers"] == 2 and isinstance(ok["num_rovers"], int) and ok["mode"] == "coast"
+    cases = [("num_rovers", "abc", "parameter num_rovers must be an integer, got 'abc' (str)"),
+             ("num_rovers", 2.5, "parameter num_rovers must be a whole number in [1, 64], got 2.5 (float)"),
+             ("num_rovers", 65, "parameter num_rovers must be an integer in [1, 64], got 65 (an integer)"),
+             ("tf", "maybe", "parameter tf must be true or false, got 'maybe' (str)"),
+             ("lockstep", 1, "parameter lockstep must be true or false, got 1 (an integer)"),
+             ("mode", "goal", ("parameter mode must be one of ['coast', 'forward', 'backward', 'rotate_right', "
+                               "'rotate_left'], got 'goal'")),
+             ("variant", "fast", "parameter variant must be one of ['realistic', 'reference']"),
+             ("scan_dropout", 1.5, "parameter scan_dropout must be a finite number in [0, 1], got 1.5"),
+             ("publish_rate", 0.0, "parameter publish_rate must be a finite number > 0 [Hz], got 0.0"),
+             ("wheel_ki", -2.0, "parameter wheel_ki must be a finite number >= 0 [N·m/rad], or -1 (the robot's)"),
+             ("effective_track_factor", 0.0, ("parameter effective_track_factor must be a finite number > 0, or -1 "
+                                              "(the robot's), got 0.0")),
+             ("x", math.nan, "parameter x must be a finite number [m], got nan (float)"),
+             ("seed", -1, "parameter seed must be an integer >= 0, got -1"),
+             ("odom_frame", "/odom", "parameter odom_frame must be a tf frame id without spaces or a leading '/'"),
+             ("sim_config", "a\x00b.toml", "parameter sim_config must be text without control characters")]
+    for name, value, message in cases:
+        with pytest.raises(ParameterError) as err:
+            check_parameters(PARAMETERS, {name: value})
+        assert str(err.value).startswith(message) and "\n" not in str(err.value), (name, str(err.value))
+    assert unknown_parameters(["-p", "num_rovrs:=2", "-p", "seed:=1"], {"p.yaml": ["tf", "lock_step"]}) == [
+        "num_rovrs", "lock_step (in p.yaml)"]
+
+
 @pytest.mark.slow  # a live ROS 2 node
 def test_bad_parameters_are_refused_at_start(ros_env, tmp_path):
     from atrv_warp.policy import make_actor, save_policy
 
     old = tmp_path / "old_nav.pt"  # a nav policy from before the nav task observed its last actions
     save_policy(make_actor(16, 1, obs_dim=26), old, width=16, depth=1, meta={"task": "nav"})
-    for params, message in ((["bogus_param:=1"], "unknown parameter(s) ['bogus_param']"),
-                            (["num_rovers:=0"], "num_rovers must be in 1"),
+    params_file = tmp_path / "params.yaml"
+    params_file.write_text("atrv_sim:\n  ros__parameters:\n    num_rovrs: 2\n")
+    for params, message in ((["bogus_param:=1"], "unknown parameter(s) bogus_param; known: "),
+                            (["num_rovers:=0"], "parameter num_rovers must be an integer in [1, 64], got 0"),
+                            (["num_rovers:=abc"], "parameter num_rovers must be an integer, got 'abc' (str)"),
+                            (["tf:=maybe"], "parameter tf must be true or false, got 'maybe' (str)"),
+                            (["--params-file", str(params_file)], f"unknown parameter(s) num_rovrs (in {params_file})"),
                             (["task:=maze"], "task='maze' is not a task"),
-                            (["cmd_vel_delay:=-0.1"], "['cmd_vel_delay'] must be finite and >= 0"),
+                            (["cmd_vel_delay:=-0.1"], "parameter cmd_vel_delay must be a finite number >= 0 [s], got -0.1"),
                             (["terrain:=moon"], "terrain='moon' is not a terrain"),
                             (["task:=nav", f"policy:={old}"], "observes 26 values, task 'nav' observes 32"),
                             ([f"policy:={tmp_path / 'none.pt'}"], "parameter policy: policy file not found"),

@@ -107,21 +107,29 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _node_params(items: list[str]) -> dict[str, float | int | bool | str] | str:
-    """``-p NAME:=VALUE`` options as node parameters, each of its default's type, or an error line."""
-    from atrv_warp.integrations.ros.parameters import PARAMETERS
+    """``-p NAME:=VALUE`` options as node parameters, each checked as the node checks it, or an error line."""
+    from atrv_warp.core.parameters import ParameterError
+    from atrv_warp.integrations.ros.parameters import PARAMETER_BY_NAME
 
-    known = {name: default for name, default, _ in PARAMETERS}
     out = {}
     for item in items:
-        name, sep, value = item.partition(":=")
-        if not sep or name not in known:
-            return f"error: -p {item!r}: not NAME:=VALUE with a simulator-node parameter; known: {sorted(known)}"
-        default = known[name]
+        name, sep, text = item.partition(":=")
+        if not sep or name not in PARAMETER_BY_NAME:
+            return (f"error: -p {item!r}: not NAME:=VALUE with a simulator-node parameter; known: "
+                    f"{sorted(PARAMETER_BY_NAME)}")
+        parameter = PARAMETER_BY_NAME[name]
+        value: object = text
+        if parameter.kind == "switch":
+            value = {"true": True, "false": False}.get(text.lower(), text)
+        elif parameter.kind in ("number", "integer"):
+            try:
+                value = float(text)
+            except ValueError:
+                pass  # the check names it
         try:
-            out[name] = (value if isinstance(default, str) else value.lower() in ("true", "1")
-                         if isinstance(default, bool) else type(default)(float(value)))
-        except ValueError:
-            return f"error: -p {item!r}: {name} takes a number"
+            out[name] = parameter.check(value)
+        except ParameterError as err:
+            return f"error: -p {item!r}: {err}"
     return out
 
 

@@ -45,7 +45,7 @@ State topics come at ``publish_rate`` Hz of sim time; stamps are sim time (plus 
 ``/tf_static`` (the URDF's fixed frames), unless ``-p tf:=false``: tf2_msgs is not on the package index, so a ROS
 install's is used, or its type support is built from its definition on first use (gcc/g++) and cached.
 
-Parameters: see :data:`atrv_warp.integrations.ros.node.PARAMETERS` (each declared with its
+Parameters: see :data:`atrv_warp.integrations.ros.parameters.PARAMETERS` (each declared with its
 description: ``ros2 param describe /atrv_sim <name>``). An unknown parameter, or a bad value,
 is refused at start-up with a message naming it.
 """

@@ -33,13 +33,13 @@ from sensor_msgs.msg import Imu, LaserScan
 from std_msgs.msg import String
 
 from atrv_warp.core.files import OutputPathError, fresh_path
+from atrv_warp.core.parameters import params_file_names
 from atrv_warp.deploy.contract import Deployable
 from atrv_warp.deploy.controller import TIME_LIMIT, Controller, Settings, Tick
 from atrv_warp.deploy.parameters import (
     PARAMETERS,
     ParameterError,
     check_parameters,
-    params_files,
     unknown_parameters,
 )
 
@@ -153,18 +153,7 @@ class DeployNode(Node):
     # ---------------------------------------------------------------- parameters
     def _params_file_names(self, args: list[str] | None) -> dict[str, list[str]]:
         """Each ``--params-file``'s parameter names for this node (its name, namespace or ``/**``)."""
-        found = {}
-        for file in params_files(args):
-            try:
-                found[file] = list(parameter_dict_from_yaml_file(file, use_wildcard=True,
-                                                                 target_nodes=[self.get_fully_qualified_name()]))
-            except RuntimeError as err:
-                if "does not contain any valid parameters" not in str(err):
-                    raise ParameterError(f"--params-file {file}: {err}") from None
-                found[file] = []  # a file for other nodes
-            except (OSError, ValueError, AttributeError, TypeError) as err:  # unreadable, or YAML of another shape
-                raise ParameterError(f"--params-file {file}: not a ROS parameter file ({err})") from None
-        return found
+        return params_file_names(args, self.get_fully_qualified_name(), parameter_dict_from_yaml_file)
 
     def _check_topic(self, name: str, topic: str) -> None:
         try:

@@ -1,8 +1,10 @@
 """ROS 2 bridge: the simulator node behind ``python -m atrv_warp.ros`` (topics and parameters there).
 
 - this package: :func:`run`, which starts the node, and :data:`MISSING_ROS_MESSAGE`;
-- :mod:`.parameters`: the node's parameters and driving commands;
-- :mod:`.node`: the rclpy node; :mod:`.base`: the base driver (velocity control, odometry, IMU);
+- :mod:`.parameters`: the node's parameters (in the deploy node's style, :mod:`atrv_warp.core.parameters`) and
+  driving commands;
+- :mod:`.node`: the rclpy node; :mod:`.rover_io`: one rover's topics and messages; :mod:`.base`: the base driver
+  (velocity control, odometry, IMU);
 - :mod:`.bag`: the MCAP bag writer; :mod:`.drive`: the calibration's scripted excitation driver;
 - :mod:`.frames`: the frame tree the node publishes and records as /tf (tf2_msgs's type support, where no
   ROS install has it, from :mod:`atrv_warp.core.ros_interfaces`); :mod:`.markers`: the world as ``visualization_msgs/MarkerArray``.
