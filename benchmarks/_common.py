@@ -1,17 +1,18 @@
-"""What the benchmark scripts share: pinning to one core, writing a results file or a figure (PNG) with its
-provenance, and reading results files back to draw the docs' tables.
+"""What the benchmark scripts share: pinning to one core, a timing loop, writing a results file or a figure (PNG)
+with its provenance, and reading results files back to draw the docs' tables.
 
 The scripts live in topic folders (``perf/``, ``physics/``, ``robots/``, ``calibration/``, ``transfer/``,
-``training/``) and run as ``python benchmarks/<topic>/<name>.py`` from anywhere; each puts this folder on
-``sys.path`` (one line before ``from _common import ...``) and imports it as ``_common``. Each script defines
-``VERSION``, an integer bumped by hand when its method changes (what it measures or how), and passes it to
-:func:`write_results` or :func:`save_figure`; a refactor that measures the same thing leaves it alone.
+``training/``) of the ``benchmarks`` package and run from the repository's root as modules:
+``python -m benchmarks.<topic>.<name>`` (no script edits ``sys.path``; one imports another by its module name). Each
+script defines ``VERSION``, an integer bumped by hand when its method changes (what it measures or how), and passes
+it to :func:`write_results` or :func:`save_figure`; a refactor that measures the same thing leaves it alone.
 
 A script owns its figures: a module-level ``TABLES = {"NAME": function}`` names the tables a page draws with
-``{{ results_table NAME }}``; each function takes no argument (or only defaulted ones), reads its results files with
-:func:`load_results` (so the docs hook knows which files a page cites) and returns Markdown (:func:`markdown_table`).
-The docs hook imports the scripts to find them, so a script's module-level imports stay light (the standard
-library, numpy at most); torch, warp and ``atrv_warp`` are imported inside the functions that run.
+``{{ results_table NAME }}`` (``docs/hooks.py`` renders ``TABLES[NAME]()``); each function takes no argument (or
+only defaulted ones), reads its results files with :func:`load_results` (so the docs hook knows which files a page
+cites) and returns Markdown (:func:`markdown_table`). The docs hook imports the scripts to find them, so a script's
+module-level imports stay light (the standard library, numpy at most); torch, warp and ``atrv_warp`` are imported
+inside the functions that run.
 """
 
 from __future__ import annotations
@@ -80,6 +81,16 @@ def _relative(path: str | Path) -> str:
     return str(p.relative_to(ROOT)) if p.is_relative_to(ROOT) else str(p)
 
 
+def run_command(script: str | Path) -> list[str]:
+    """How a benchmark script runs, from the repository's root: ``python -m benchmarks.<topic>.<name>`` for a script
+    in the ``benchmarks`` package, ``python PATH`` for any other."""
+    path = _relative(script)
+    parts = Path(path).with_suffix("").parts
+    if len(parts) == 3 and parts[0] == "benchmarks" and path.endswith(".py"):
+        return ["python", "-m", ".".join(parts)]
+    return ["python", path]
+
+
 def provenance(version: int, *, script: str | Path | None = None, dynamics: bool = True, task: bool = False,
                policies: tuple[str | Path, ...] = (), driver: bool = False, robots: tuple[str, ...] = (),
                tasks: tuple[tuple[str, str], ...] = ()) -> dict:
@@ -112,7 +123,7 @@ def provenance(version: int, *, script: str | Path | None = None, dynamics: bool
               "dirty": bool(_git("status", "--porcelain", "--untracked-files=no")),
               "script": _relative(script), "script_version": int(version)}
     if Path(script).resolve() == Path(main).resolve():  # the command that wrote it, to run again
-        record["command"] = shlex.join(["python", _relative(script), *sys.argv[1:]])
+        record["command"] = shlex.join([*run_command(script), *sys.argv[1:]])
     if dynamics:
         from atrv_warp.sim.fingerprints import dynamics_fingerprint
 

@@ -9,10 +9,10 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(ROOT))  # the benchmarks package
 
-from _common import markdown_cell as _cell
-from _common import markdown_table
+from benchmarks._common import markdown_cell as _cell
+from benchmarks._common import markdown_table
 
 COMMANDS = (("train", "atrv-train"), ("evaluate", "atrv-evaluate"), ("demo", "atrv-demo"), ("model", "atrv-model"),
             ("export", "atrv-export"), ("calibrate", "atrv-calibrate"), ("ros", "atrv-ros"), ("deploy", "atrv-deploy"),

@@ -54,12 +54,13 @@ from pathlib import Path
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
 BENCHMARKS = ROOT / "benchmarks"
-sys.path[:0] = [str(BENCHMARKS), str(DOCS)]
+sys.path[:0] = [str(ROOT), str(DOCS)]  # the benchmarks package (as `python -m benchmarks...` from the root has it)
 
-import _common
-from _common import FigureError, load_results, results_path
 from command_table import COMMANDS_LINE, command_table
 from result_values import lookup, result, verdict  # noqa: F401 - the values, for the tests and the pages
+
+from benchmarks import _common
+from benchmarks._common import FigureError, load_results, results_path
 
 RESULTS = _common.RESULTS
 PLACEHOLDER = re.compile(r"^\{\{ results_table (\w+) \}\}$", re.MULTILINE)
@@ -72,7 +73,7 @@ VERSION_LINE = re.compile(r"^VERSION = (\d+)$", re.MULTILINE)
 SUPERSEDED = re.compile(r"(?:^|_)(?:before|old|without|earlier)(?:_|$)")
 """The audit's rule for a superseded snapshot: a results file whose name has a ``before``, ``old``, ``without`` or
 ``earlier`` part (``X_before_Y.json``): kept beside the file that replaced it."""
-_TRAIN = "python benchmarks/training/train_to_success.py --seeds 0 1 2"
+_TRAIN = "python -m benchmarks.training.train_to_success --seeds 0 1 2"
 PICTURE_COMMANDS = {
     "nav_learning_curve.png": f"{_TRAIN} --config nav --minutes 12 --figure docs/nav_learning_curve.png",
     "nav_wide_learning_curve.png": f"{_TRAIN} --config nav --minutes 12 --out benchmarks/results/"
@@ -94,11 +95,7 @@ def benchmark_tables() -> dict[str, Callable[[], str]]:
     for path in sorted(BENCHMARKS.glob("*/*.py")):
         if not re.search(r"^TABLES = ", path.read_text(), re.MULTILINE):
             continue
-        if str(path.parent) not in sys.path:  # its siblings, as when it runs (script names are unique)
-            sys.path.append(str(path.parent))
-        spec = importlib.util.spec_from_file_location(f"benchmarks_{path.parent.name}_{path.stem}", path)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
+        module = importlib.import_module(".".join(path.relative_to(BENCHMARKS.parent).with_suffix("").parts))
         for name, function in module.TABLES.items():
             if name in tables:
                 raise FigureError(f"results table {name!r} is defined by both {owner[name]} and {path}")
@@ -221,7 +218,8 @@ def redraw_command(name: str) -> str:
     except FigureError:
         p = {}
     if "command" in p:
-        return re.sub(r"benchmarks/[\w/]+\.py", lambda m: script_path(m[0]), p["command"], count=1)
+        return re.sub(r"python (benchmarks/[\w/]+\.py)", lambda m: " ".join(_common.run_command(ROOT / script_path(m[1]))),
+                      p["command"], count=1)
     script = p.get("script")
     if script is None and Path(name).name in PICTURE_COMMANDS:
         return PICTURE_COMMANDS[Path(name).name]
@@ -231,7 +229,7 @@ def redraw_command(name: str) -> str:
         stem = Path(name).parent.name if "/" in name else Path(name).stem
         scripts = sorted((p for p in BENCHMARKS.glob("*/*.py") if stem.startswith(p.stem)), key=lambda p: -len(p.stem))
         script = str(scripts[0].relative_to(ROOT)) if scripts else "?"
-    return f"python {script_path(script)}"
+    return " ".join(_common.run_command(ROOT / script_path(script)))
 
 
 class Status:

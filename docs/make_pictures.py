@@ -33,9 +33,9 @@ import numpy as np
 import torch
 
 DOCS = Path(__file__).resolve().parent
-sys.path.insert(0, str(DOCS.parent / "benchmarks"))
+sys.path.insert(0, str(DOCS.parent))  # the benchmarks package
 
-import _common
+from benchmarks import _common
 
 VERSION = 3
 """This script's method (which episodes, which drivers), bumped by hand when it changes; recorded with the caption."""

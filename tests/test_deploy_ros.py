@@ -268,9 +268,9 @@ def test_closed_loop_episodes_over_ros_end_as_evaluate_judges_them(tmp_path):
     save_policy(actor, tmp_path / "random.pt", width=32, depth=1, meta={"task": "nav_deploy"})
     out = tmp_path / "closed_loop.json"
     env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(101, 200)))
-    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "transfer" / "deploy_closed_loop.py"), str(tmp_path /
+    proc = subprocess.run([sys.executable, "-m", "benchmarks.transfer.deploy_closed_loop", str(tmp_path /
                           "random.pt"), "--episodes", "10", "--out", str(out)], capture_output=True, text=True,
-                          timeout=900, env=env, check=False)
+                          timeout=900, env=env, check=False, cwd=ROOT)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     result = json.loads(out.read_text())
     rows = result["episodes_detail"]
@@ -301,9 +301,9 @@ def test_over_ros_each_step_is_the_nodes_answer_to_the_state_evaluate_would_obse
     out, trace = tmp_path / "closed_loop.json", tmp_path / "trace.jsonl"
     env = dict(os.environ)
     env.setdefault("ROS_DOMAIN_ID", str(random.randint(101, 200)))
-    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "transfer" / "deploy_closed_loop.py"), "--episodes", "2",
+    proc = subprocess.run([sys.executable, "-m", "benchmarks.transfer.deploy_closed_loop", "--episodes", "2",
                            "--out", str(out), "--trace", str(trace)], capture_output=True, text=True, timeout=900,
-                          env=env, check=False)
+                          env=env, check=False, cwd=ROOT)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     rows = json.loads(out.read_text())["episodes_detail"]
     assert [r["unanswered"] for r in rows] == [0, 0], rows  # every step waited for the node's answer

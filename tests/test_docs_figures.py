@@ -77,7 +77,7 @@ def test_a_stale_fingerprint_fails_unless_the_page_marks_it_historical(hooks, tm
     assert out.startswith("x = 0.5\n")
     assert '!!! note "Historical figures: `old.json`"' in out
     # the file recorded benchmarks/physics_report.py, which has moved into physics/: named where it is now
-    assert "Measured 2026-11-20" in out and "`python benchmarks/physics/physics_report.py` redraws them" in out
+    assert "Measured 2026-11-20" in out and "`python -m benchmarks.physics.physics_report` redraws them" in out
     _write(tmp_path, "new.json", {"x": 0.5})
     with pytest.raises(hooks.FigureError, match="p.md: marks new.json historical, but its figures match the code"):
         hooks.render("{{ result new.json:x }}\n{{ historical new.json }}\n", "p.md")
@@ -136,7 +136,7 @@ def test_the_stale_command_lists_each_figure_and_its_benchmark(hooks, tmp_path):
     lines, unmarked = hooks.stale_report([tmp_path / "page.md"])
     assert unmarked == 1
     assert "sim_throughput_x.json is stale" in lines[0]
-    assert "[NOT MARKED] -> python benchmarks/perf/sim_throughput.py" in lines[0]
+    assert "[NOT MARKED] -> python -m benchmarks.perf.sim_throughput" in lines[0]
 
 
 def test_every_shipped_page_renders_and_a_current_file_matches_the_code():
@@ -273,8 +273,8 @@ def test_each_table_comes_from_the_benchmark_that_writes_its_file(hooks):
     import subprocess
     import sys
 
-    assert hooks.TABLES["physics_report"].__module__ == "benchmarks_physics_physics_report"
-    assert hooks.TABLES["sim_throughput_cuda"].__module__ == "benchmarks_perf_sim_throughput"
+    assert hooks.TABLES["physics_report"].__module__ == "benchmarks.physics.physics_report"
+    assert hooks.TABLES["sim_throughput_cuda"].__module__ == "benchmarks.perf.sim_throughput"
     code = ("import sys; sys.path.insert(0, 'docs'); import hooks; "
             "assert len(hooks.TABLES) > 50; print(sorted(m for m in ('torch', 'warp') if m in sys.modules))")
     run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
@@ -282,13 +282,18 @@ def test_each_table_comes_from_the_benchmark_that_writes_its_file(hooks):
 
 
 def test_a_table_name_twice_is_an_error(hooks, tmp_path, monkeypatch):
+    import sys
+
+    package = tmp_path / "twice_benchmarks"  # imported as the package's modules are: by module name
     for topic in ("a", "b"):
-        (tmp_path / topic).mkdir()
-        (tmp_path / topic / f"{topic}_script.py").write_text('TABLES = {"same": lambda: "x"}\n')
-    monkeypatch.setattr(hooks, "BENCHMARKS", tmp_path)
+        (package / topic).mkdir(parents=True)
+        (package / topic / f"{topic}_script.py").write_text('TABLES = {"same": lambda: "x"}\n')
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(hooks, "BENCHMARKS", package)
     with pytest.raises(hooks.FigureError, match="results table 'same' is defined by both"):
         hooks.benchmark_tables()
-    (tmp_path / "b" / "b_script.py").write_text('TABLES = {"other": lambda: "| y |"}\n')
+    (package / "b" / "b_script.py").write_text('TABLES = {"other": lambda: "| y |"}\n')
+    monkeypatch.delitem(sys.modules, "twice_benchmarks.b.b_script")
     assert {name: f() for name, f in hooks.benchmark_tables().items()} == {"same": "x", "other": "| y |"}
 
 
@@ -303,12 +308,12 @@ def test_an_old_script_path_is_found_by_its_name(hooks, tmp_path):
     _write(tmp_path, "s.json", {"x": 1}, script="benchmarks/sim_throughput.py", script_version=version,
            command="python benchmarks/sim_throughput.py --seconds 2")
     assert hooks.status("s.json").current
-    assert hooks.redraw_command("s.json") == "python benchmarks/perf/sim_throughput.py --seconds 2"
+    assert hooks.redraw_command("s.json") == "python -m benchmarks.perf.sim_throughput --seconds 2"
 
 
 def test_script_names_are_unique_across_topics():
     """The old-path rule finds a script by its file name, so no two scripts under benchmarks/ share one."""
-    names = [p.name for p in (ROOT / "benchmarks").rglob("*.py") if "results" not in p.parts]
+    names = [p.name for p in (ROOT / "benchmarks").rglob("*.py") if "results" not in p.parts and p.name != "__init__.py"]
     assert len(names) == len(set(names)), sorted(n for n in names if names.count(n) > 1)
 
 

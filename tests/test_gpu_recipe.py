@@ -150,7 +150,7 @@ def test_the_gpu_check_runs_every_part(tmp_path):
     from pathlib import Path
 
     out, root = tmp_path / "gpu_check.json", Path(__file__).resolve().parent.parent
-    proc = subprocess.run([sys.executable, "benchmarks/perf/gpu_check.py", "--device", "cpu", "--quick", "--seeds", "0",
+    proc = subprocess.run([sys.executable, "-m", "benchmarks.perf.gpu_check", "--device", "cpu", "--quick", "--seeds", "0",
                            "--out", str(out), "--runs", str(tmp_path)], cwd=root, capture_output=True, text=True,
                           timeout=600, check=False)
     assert proc.returncode == 0, proc.stderr[-3000:]

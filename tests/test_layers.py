@@ -265,3 +265,23 @@ def test_the_length_check_catches_a_long_function_and_spares_a_kernel():
     assert long_functions(f"def f():\n{body}") == [("f", MAX_FUNCTION_LINES + 1)]
     assert long_functions(f"@wp.kernel\ndef k():\n{body}") == []
     assert long_functions(f"@wp.kernel(enable_backward=False)\ndef k():\n{body}") == []
+
+
+BENCHMARKS = ROOT / "benchmarks"
+
+
+def test_the_benchmarks_are_a_package_that_edits_no_import_path():
+    """``python -m benchmarks.<topic>.<name>`` from the root: every topic is a package, no script touches
+    ``sys.path``, and a script imports another by its module name (issue 69, part 7)."""
+    edits, bare = [], []
+    for path in sorted(BENCHMARKS.rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        name = str(path.relative_to(ROOT))
+        edits += [f"{name}:{n.lineno}" for n in ast.walk(tree) if isinstance(n, ast.Attribute) and n.attr == "path"
+                  and isinstance(n.value, ast.Name) and n.value.id == "sys"]
+        bare += [f"{name}:{n.lineno} from {n.module}" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
+                 and n.level == 0 and n.module and (BENCHMARKS / f"{n.module}.py").exists()]
+    assert not edits, f"sys.path edited in {edits}"
+    assert not bare, f"imported by a bare name (use benchmarks.<topic>.<name>): {bare}"
+    topics = [p for p in BENCHMARKS.iterdir() if p.is_dir() and any(p.glob("*.py"))]
+    assert (BENCHMARKS / "__init__.py").is_file() and all((p / "__init__.py").is_file() for p in topics), topics

@@ -1,6 +1,6 @@
 """Calibration from a recorded bag with a hidden truth: how close, how much better, how long.
 
-    python benchmarks/calibration/calibration.py [--minutes 3] [--seed 1] [--figure docs/calibration_paths.png] [--old REV]
+    python -m benchmarks.calibration.calibration [--minutes 3] [--seed 1] [--figure docs/calibration_paths.png] [--old REV]
 
 1. Records a bag as a user would on a real rover, with the simulator standing in for it:
    ``python -m atrv_warp.calibrate --record-example`` (the ROS 2 node driven over ROS 2 by a scripted
@@ -34,9 +34,7 @@ import time
 import tomllib
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import figure_provenance, load_results, markdown_table, write_png_provenance, write_results
+from benchmarks._common import figure_provenance, load_results, markdown_table, write_png_provenance, write_results
 
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -189,8 +187,6 @@ def calibration() -> str:
 TABLES = {
     "calibration": calibration,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """How much driving the calibration needs: the fit's errors against the seconds of a bag it is given.
 
-    python benchmarks/calibration/calibration_data.py [--minutes 3] [--seconds 30 60 120 180] [--figure docs/calibration_data.png]
+    python -m benchmarks.calibration.calibration_data [--minutes 3] [--seconds 30 60 120 180] [--figure docs/calibration_data.png]
 
 1. Records one bag per rover of :data:`ROVERS` (``examples/calibration_truth.toml`` and two more), each
    ``--minutes`` long, as ``benchmarks/calibration/calibration.py`` does: ``python -m atrv_warp.calibrate --record-example``
@@ -27,9 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, save_figure, write_results
+from benchmarks._common import load_results, markdown_table, save_figure, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -177,8 +175,6 @@ def calibration_data() -> str:
 TABLES = {
     "calibration_data": calibration_data,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

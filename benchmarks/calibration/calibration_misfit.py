@@ -1,6 +1,6 @@
 """What the calibration does when the recorded rover has something its model lacks (issue 42, part 4).
 
-    python benchmarks/calibration/calibration_misfit.py [--minutes 3] [--seed 5] [--only latency_1,slope] [--work DIR]
+    python -m benchmarks.calibration.calibration_misfit [--minutes 3] [--seed 5] [--only latency_1,slope] [--work DIR]
 
 One rover (µ 0.6, motor torque x0.9, a 10 kg payload, the nominal wheel), recorded as the calibration sweep records
 (``python -m atrv_warp.calibrate --record-example``, 1 cm of reference-pose noise) once as modelled and once with each
@@ -29,10 +29,8 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, write_results
-from calibration_sweep import fit_bag, judge, record_bag, truth_toml
+from benchmarks._common import load_results, markdown_table, write_results
+from benchmarks.calibration.calibration_sweep import fit_bag, judge, record_bag, truth_toml
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -159,8 +157,6 @@ def calibration_misfit() -> str:
 TABLES = {
     "calibration_misfit": calibration_misfit,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """What a replayed segment's start needs: a drive of our own simulator, replayed at its true values from starts built
 with and without each recorded signal (issue 42 part 2, the fitted radius that came out small).
 
-    python benchmarks/calibration/calibration_start_state.py [--seconds 90] [--seed 3]
+    python -m benchmarks.calibration.calibration_start_state [--seconds 90] [--seed 3]
 
 1. Drives one rover (µ 0.6, motor torque x0.9, a 10 kg payload, the nominal wheel) for ``--seconds`` under smooth
    random ``/cmd_vel`` commands and records, after every 0.05 s step, what a bag gives (the reference pose with its
@@ -28,9 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import write_results
+from benchmarks._common import write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""

@@ -1,6 +1,6 @@
 """The calibration's acceptance test: rovers drawn across the fit's ranges, each recorded and fitted as a user would.
 
-    python benchmarks/calibration/calibration_sweep.py [--rovers 12] [--seed 0] [--minutes 3] [--only 0,1,2]
+    python -m benchmarks.calibration.calibration_sweep [--rovers 12] [--seed 0] [--minutes 3] [--only 0,1,2]
                                            [--work DIR] [--figure docs/calibration_sweep.png] [--record-only]
 
 1. Draws ``--rovers`` truths from ``--seed`` (no rover is picked by hand): Coulomb µ 0.2–1.0, motor torque scale
@@ -39,9 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, save_figure, write_results
+from benchmarks._common import load_results, markdown_table, save_figure, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -348,8 +346,6 @@ TABLES = {
     "calibration_sweep": calibration_sweep,
     "calibration_sweep_seed1": lambda: calibration_sweep("calibration_sweep_seed1.json"),
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

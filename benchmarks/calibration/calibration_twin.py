@@ -1,6 +1,6 @@
 """Calibration across engines: our simulator fitted to bags recorded from the MuJoCo twin (issue 42 part 7).
 
-    python benchmarks/calibration/calibration_twin.py [--rovers 4] [--seed 0] [--minutes 3] [--work DIR]
+    python -m benchmarks.calibration.calibration_twin [--rovers 4] [--seed 0] [--minutes 3] [--work DIR]
                                           [--figure docs/calibration_twin.png] [--contact friction_pair --out FILE]
                                           [--params friction,torque_scale,payload_mass,wheel_radius,friction_rise]
 
@@ -40,10 +40,18 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, write_results
-from calibration_sweep import RANGES, RESULTS, ROOT, draw_truths, fit_bag, judge, plot, record_bag, truth_toml
+from benchmarks._common import load_results, markdown_table, write_results
+from benchmarks.calibration.calibration_sweep import (
+    RANGES,
+    RESULTS,
+    ROOT,
+    draw_truths,
+    fit_bag,
+    judge,
+    plot,
+    record_bag,
+    truth_toml,
+)
 
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -399,8 +407,6 @@ TABLES = {
     "calibration_twin_friction_rise": calibration_twin_friction_rise,
     "calibration_twin_validation": calibration_twin_validation,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,8 +1,8 @@
 """Where CI's time goes: ``.ci/run`` end to end on a clean clone of each revision, one after the other, on this host.
 
-    python benchmarks/perf/ci_time.py b2f1452 HEAD        # two revisions, in that order (the 2-core CI box: ~70 + ~40 min)
-    python benchmarks/perf/ci_time.py HEAD --logs /tmp/ci  # keep each run's whole log there
-    python benchmarks/perf/ci_time.py HEAD --append        # after the runs already in the results file
+    python -m benchmarks.perf.ci_time b2f1452 HEAD        # two revisions, in that order (the 2-core CI box: ~70 + ~40 min)
+    python -m benchmarks.perf.ci_time HEAD --logs /tmp/ci  # keep each run's whole log there
+    python -m benchmarks.perf.ci_time HEAD --append        # after the runs already in the results file
 
 For each revision, in turn: ``git clone`` this repository into a temporary folder, check the revision out, and run
 ``bash .ci/run`` there as CI does (``CI=true``, its own fresh virtualenvs and empty Warp kernel cache; pip's download
@@ -33,9 +33,7 @@ import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, write_results
+from benchmarks._common import load_results, markdown_table, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -228,7 +226,6 @@ def ci_slowest() -> str:
 
 
 TABLES = {"ci_phases": ci_phases, "ci_slowest": ci_slowest}
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``."""
 
 
 if __name__ == "__main__":

@@ -1,8 +1,8 @@
 """Speed of this tree against an earlier revision, measured in one run, interleaved.
 
-    python benchmarks/perf/compare_revisions.py --old 98b8398            # sim and env throughput
-    python benchmarks/perf/compare_revisions.py --old HEAD~3 --sizes 64 1024 --rounds 5
-    python benchmarks/perf/compare_revisions.py --old 2d88b0e --new-substeps 3   # this tree on 3 substeps
+    python -m benchmarks.perf.compare_revisions --old 98b8398            # sim and env throughput
+    python -m benchmarks.perf.compare_revisions --old HEAD~3 --sizes 64 1024 --rounds 5
+    python -m benchmarks.perf.compare_revisions --old 2d88b0e --new-substeps 3   # this tree on 3 substeps
 
 Absolute figures on a shared machine drift by tens of percent between runs, so this script
 checks out ``--old`` into a temporary git worktree and measures both trees alternately
@@ -28,9 +28,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import write_results
+from benchmarks._common import write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""

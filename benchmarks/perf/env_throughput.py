@@ -1,6 +1,6 @@
 """TorchRL overhead and multi-process scaling of ATRVjrEnv.
 
-Run: ``python benchmarks/perf/env_throughput.py [--sizes 64 256 1024] [--seconds 3]``
+Run: ``python -m benchmarks.perf.env_throughput [--sizes 64 256 1024] [--seconds 3]``
 
 For each N: frames/s of the raw simulator (``RoverSim.step`` with random commands) and of
 ``env.rollout`` (random actions from the action spec), measured alternately, best of three each, and of a single-process ``Collector``,
@@ -19,9 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, rate, write_results
+from benchmarks._common import load_results, markdown_table, rate, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -147,8 +145,6 @@ TABLES = {
     "env_throughput": env_throughput,
     "env_scaling": env_scaling,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """What a new user waits for: install time in a fresh virtualenv, and Warp's cold kernel compile.
 
-    python benchmarks/perf/fresh_install.py                 # pip's download cache as it is
-    python benchmarks/perf/fresh_install.py --no-pip-cache  # downloads included (needs the network)
+    python -m benchmarks.perf.fresh_install                 # pip's download cache as it is
+    python -m benchmarks.perf.fresh_install --no-pip-cache  # downloads included (needs the network)
 
 1. Creates a virtualenv in a temporary folder and times the README's install,
    ``pip install -e .`` (core dependencies only; ``--extras test,ros`` for the test command's).
@@ -24,9 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import write_results
+from benchmarks._common import write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""

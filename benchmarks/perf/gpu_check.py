@@ -1,6 +1,6 @@
 """The GPU check: on a machine with a GPU, what docs/gpu.md should say about it, compile included.
 
-Run: ``python benchmarks/perf/gpu_check.py [--device cuda:0] [--parts compile tiers updates train] [--seeds 0 1 2]
+Run: ``python -m benchmarks.perf.gpu_check [--device cuda:0] [--parts compile tiers updates train] [--seeds 0 1 2]
 [--minutes 1.5] [--with-adjoints] [--batch N] [--threads N]``
 
 Four parts, each written to the results file as it ends (so a run cut short keeps what it measured, and a later
@@ -34,9 +34,7 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import write_results
+from benchmarks._common import write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -223,8 +221,7 @@ def part_updates(args) -> dict:
 
 def part_train(args) -> dict:
     """Time to 90 % per seed with the GPU preset, as train_to_success.py counts it."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "training"))
-    from train_to_success import _one_seed
+    from benchmarks.training.train_to_success import _one_seed
 
     seeds = []
     for seed in args.seeds:
@@ -263,7 +260,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=str(RESULTS / "gpu_check.json"))
     parser.add_argument("--runs", default=str(ROOT / "runs"), help="where the train part's run folders go")
     args = parser.parse_args(argv)
-    sys.path.insert(0, str(ROOT))
     import torch
 
     if args.threads:

@@ -1,6 +1,6 @@
 """Throughput of the navigation task against the flat reference task, measured in one run.
 
-Run: ``python benchmarks/perf/nav_throughput.py [--sizes 64 1024] [--seconds 3] [--rounds 3] [--device cuda:0]``
+Run: ``python -m benchmarks.perf.nav_throughput [--sizes 64 1024] [--seconds 3] [--rounds 3] [--device cuda:0]``
 
 For each N, in this process (pinned to one core on the CPU) with one torch thread: env-steps/s of
 ``ATRVjrEnv`` stepping random actions (with resets) for the ``reach`` task (flat, no obstacles,
@@ -19,9 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, pin_to_one_core, rate, write_results
+from benchmarks._common import load_results, markdown_table, pin_to_one_core, rate, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -136,8 +134,6 @@ TABLES = {
     "nav_throughput": nav_throughput,
     "nav_throughput_cuda": nav_throughput_cuda,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

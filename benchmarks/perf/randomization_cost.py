@@ -1,6 +1,6 @@
 """What domain randomization costs per env step: the ``wide`` preset against ``none``, interleaved.
 
-Run: ``python benchmarks/perf/randomization_cost.py [--num-envs 1024] [--tasks nav reach] [--seconds 3] [--rounds 5]``
+Run: ``python -m benchmarks.perf.randomization_cost [--num-envs 1024] [--tasks nav reach] [--seconds 3] [--rounds 5]``
 
 In this process pinned to one core with one torch thread, for each task: env-steps/s of ``ATRVjrEnv`` stepping
 random actions with resets (``step_and_maybe_reset``, as a collector does) under ``randomization="none"`` and
@@ -18,9 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, pin_to_one_core, rate, write_results
+from benchmarks._common import load_results, markdown_table, pin_to_one_core, rate, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -103,8 +101,6 @@ def randomization_cost() -> str:
 TABLES = {
     "randomization_cost": randomization_cost,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Ray collection against local multi-process collection, on this machine.
 
-Run: ``flock /tmp/atrv_bench.lock python benchmarks/perf/ray_collection.py [--worlds 512] [--steps 8] [--rounds 3]``
+Run: ``flock /tmp/atrv_bench.lock python -m benchmarks.perf.ray_collection [--worlds 512] [--steps 8] [--rounds 3]``
 (needs the ``ray`` extra).
 
 Frames/s of the training path's :class:`RayCollector` (:func:`make_ray_collector`: asynchronous, the
@@ -28,9 +28,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, write_results
+from benchmarks._common import load_results, markdown_table, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -147,8 +145,6 @@ def ray_collection() -> str:
 TABLES = {
     "ray_collection": ray_collection,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Cost of one TorchRL SAC gradient step on this CPU, by network width, batch size and threads.
 
-Run: ``python benchmarks/perf/sac_update_cost.py [--skip-compile]``
+Run: ``python -m benchmarks.perf.sac_update_cost [--skip-compile]``
 
 The training defaults (width 128, batch 256, 1 trainer thread, collection in a second process)
 were chosen with these figures: a step has a fixed cost of about 5 ms of per-call overhead, so
@@ -20,9 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, write_results
+from benchmarks._common import load_results, markdown_table, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -191,8 +189,6 @@ def sac_update_cost() -> str:
 TABLES = {
     "sac_update_cost": sac_update_cost,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """What a training save costs: seconds and disk per million transitions, and its share of a run's time.
 
-Run: ``python benchmarks/perf/save_cost.py [--transitions 1000000] [--repeats 3]``
+Run: ``python -m benchmarks.perf.save_cost [--transitions 1000000] [--repeats 3]``
 
 A save (:class:`atrv_warp.rl.checkpoint.Checkpoint`) writes the replay buffer, the networks and optimisers, and
 the best policy, each flushed to the disk, then commits with one rename. Here a ``nav_deploy`` run's parts (its
@@ -21,9 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import write_results
+from benchmarks._common import write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""

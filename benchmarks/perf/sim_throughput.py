@@ -1,6 +1,6 @@
 """Raw simulator throughput: env-steps/s (one step = 0.05 s of one rover) versus world count.
 
-Run: ``python benchmarks/perf/sim_throughput.py [--sizes 1 16 64 256 1024 4096] [--warm-cache]``
+Run: ``python -m benchmarks.perf.sim_throughput [--sizes 1 16 64 256 1024 4096] [--warm-cache]``
 
 Before timing, the physics is checked (reference variant drives 3 s within 10 % of the
 reference's 1.72 m; random commands leave no NaN). Kernel compilation is timed separately:
@@ -18,9 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, pin_to_one_core, write_results
+from benchmarks._common import load_results, markdown_table, pin_to_one_core, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -182,8 +180,6 @@ TABLES = {
     "sim_throughput_cuda": sim_throughput_cuda,
     "sim_choices": sim_choices,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Our simulator against MuJoCo's C rollout of the MJCF twin, in one run, on one core (issue #17).
 
 Run: ``pip install -e .[bench]`` once, then
-``python benchmarks/perf/sim_vs_mujoco.py [--sizes 64 1024 4096] [--rounds 3] [--work 65536]``
+``python -m benchmarks.perf.sim_vs_mujoco [--sizes 64 1024 4096] [--rounds 3] [--work 65536]``
 
 Both simulators do the same work: N rovers (N = 64, 1,024, 4,096), random wheel torques
 uniform in ±20 N·m, drawn once per 0.05 s env step (left and right side, the same numbers for
@@ -32,9 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, pin_to_one_core, write_results
+from benchmarks._common import load_results, markdown_table, pin_to_one_core, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -312,8 +310,6 @@ def sim_vs_mujoco() -> str:
 TABLES = {
     "sim_vs_mujoco": sim_vs_mujoco,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
-"""Where one ``RoverSim.step`` spends its time, kernel by kernel: ``python benchmarks/perf/step_profile.py``.
+"""Where one ``RoverSim.step`` spends its time, kernel by kernel: ``python -m benchmarks.perf.step_profile``.
 
-Run: ``python benchmarks/perf/step_profile.py [--worlds 1024] [--steps 20] [--substeps 5]``
+Run: ``python -m benchmarks.perf.step_profile [--worlds 1024] [--steps 20] [--substeps 5]``
 
 The step runs eagerly (no graph replay), pinned to one core, and every Warp launch, copy and
 clear is timed on the host (CPU launches return when the kernel is done). The Python cost of a
@@ -20,9 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, pin_to_one_core, write_results
+from benchmarks._common import load_results, markdown_table, pin_to_one_core, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -152,8 +150,6 @@ def step_profile() -> str:
 TABLES = {
     "step_profile": step_profile,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

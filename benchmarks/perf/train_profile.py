@@ -1,4 +1,4 @@
-"""Where a SAC training step's time goes, per phase: ``python benchmarks/perf/train_profile.py``.
+"""Where a SAC training step's time goes, per phase: ``python -m benchmarks.perf.train_profile``.
 
 Builds the default run's parts from the trainer's own factories (``make_collector``,
 ``make_buffer``, :class:`Learner`; collector, width, batch and update ratio from the ``default``
@@ -19,9 +19,7 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import write_results
+from benchmarks._common import write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""

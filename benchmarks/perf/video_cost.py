@@ -1,4 +1,4 @@
-"""What an evaluation video costs a training run: ``python benchmarks/perf/video_cost.py [--rounds 3]``.
+"""What an evaluation video costs a training run: ``python -m benchmarks.perf.video_cost [--rounds 3]``.
 
 For each task, with its shipped policy on the periodic evaluation's set (256 episodes, seed 2024,
 the trainer's ``Evaluator`` environment): the evaluation alone, the evaluation while
@@ -18,9 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, pin_to_one_core, write_results
+from benchmarks._common import load_results, markdown_table, pin_to_one_core, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -72,7 +70,6 @@ def main() -> int:
     parser.add_argument("--tasks", nargs="+", default=["reach", "nav"])
     parser.add_argument("--out", default=str(RESULTS / "video_cost.json"))
     args = parser.parse_args()
-    sys.path.insert(0, str(ROOT))
     pin_to_one_core()
     with tempfile.TemporaryDirectory() as tmp:
         rows = [measure(task, args.rounds, args.episodes, args.video_episodes, Path(tmp)) for task in args.tasks]
@@ -105,8 +102,6 @@ def video_cost() -> str:
 TABLES = {
     "video_cost": video_cost,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

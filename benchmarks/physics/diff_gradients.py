@@ -1,6 +1,6 @@
 """Differentiable rollouts: gradient agreement with finite differences, and forward/backward cost.
 
-Run: ``python benchmarks/physics/diff_gradients.py [--horizons 1 2 5 10 20 40 100] [--sizes 1 64 1024]
+Run: ``python -m benchmarks.physics.diff_gradients [--horizons 1 2 5 10 20 40 100] [--sizes 1 64 1024]
 [--without-wrench-fix] [--twist]``
 
 Agreement: for each driving scenario and horizon T (env steps of 0.05 s), the tape gradient of
@@ -36,9 +36,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, pin_to_one_core, write_results
+from benchmarks._common import load_results, markdown_table, pin_to_one_core, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -304,8 +302,6 @@ TABLES = {
     "diff_gradients_twist_angular": diff_gradients_twist_angular,
     "diff_cost": diff_cost,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

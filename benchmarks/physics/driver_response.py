@@ -1,6 +1,6 @@
 """The base's motor driver: how fast a ``/cmd_vel`` step takes hold, at four frictions.
 
-    python benchmarks/physics/driver_response.py [--figure docs/driver_response.png] [--sweep]
+    python -m benchmarks.physics.driver_response [--figure docs/driver_response.png] [--sweep]
 
 One world per (command, µ): in place (0, 0.5), and on two arcs (0.5, 0.5) and (1.0, 0.2) [m/s, rad/s], at µ 0.2,
 0.3, 0.8 and 1.0, from rest, the command re-sent every 0.05 s step (a 20 Hz controller), through the driver's
@@ -24,9 +24,7 @@ import argparse
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, save_figure, write_results
+from benchmarks._common import load_results, save_figure, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""

@@ -1,6 +1,6 @@
 """Physics figures against the reference: rest height, straight-line drive, acceleration, turning.
 
-Run: ``python benchmarks/physics/physics_report.py``; prints a table and writes
+Run: ``python -m benchmarks.physics.physics_report``; prints a table and writes
 ``benchmarks/results/physics_report.json``, which the docs' physics page shows.
 """
 
@@ -13,9 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, write_results
+from benchmarks._common import load_results, markdown_table, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -120,8 +118,6 @@ def physics_report() -> str:
 TABLES = {
     "physics_report": physics_report,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Skid-steer physics against Coulomb friction: turning, rolling, traction and slopes.
 
-    python benchmarks/physics/skid_calibration.py
+    python -m benchmarks.physics.skid_calibration
 
 1. **Turning.** One world per (linear, angular) command, driven for 15 s by the base's motor driver
    (:func:`atrv_warp.sim.protocols.turning_response`, factor 1, so the wheel targets are a differential drive's). Over the last 4 s: the effective track ratio
@@ -26,9 +26,7 @@ import statistics
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, write_results
+from benchmarks._common import load_results, markdown_table, write_results
 
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -209,8 +207,6 @@ TABLES = {
     "skid_turning": skid_turning,
     "skid_checks": skid_checks,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Newton and Warp options that might cut the simulator's step, measured in one run, interleaved.
 
-    python benchmarks/physics/solver_options.py                       # N = 1024, 3 rounds
-    python benchmarks/physics/solver_options.py --sizes 64 1024 --rounds 5
+    python -m benchmarks.physics.solver_options                       # N = 1024, 3 rounds
+    python -m benchmarks.physics.solver_options --sizes 64 1024 --rounds 5
 
 Issue 17 asked for Newton options that make the step cheaper without patching Newton. Each
 variant below is a setting a user can choose; none changes Newton's code:
@@ -34,9 +34,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import write_results
+from benchmarks._common import write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""

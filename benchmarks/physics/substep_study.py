@@ -1,6 +1,6 @@
 """Fewer, longer substeps: what they buy in speed and cost in accuracy and stability.
 
-Run: ``python benchmarks/physics/substep_study.py [--substeps 5 4 3] [--plain-law 3] [--nan-steps 1000]
+Run: ``python -m benchmarks.physics.substep_study [--substeps 5 4 3] [--plain-law 3] [--nan-steps 1000]
 [--held-steps 2000] [--worlds 1024]``
 
 For each substep count (solver step ``sim_dt = 0.05 s / substeps``), in one run and on one core:
@@ -25,9 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, pin_to_one_core, write_results
+from benchmarks._common import load_results, markdown_table, pin_to_one_core, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -199,8 +197,6 @@ def substep_study() -> str:
 TABLES = {
     "substep_study": substep_study,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Terrain contact: Newton's HFIELD collision pipeline vs an analytic per-world Warp kernel (CPU).
 
-Run: ``python benchmarks/physics/terrain_contact_choice.py [--quick] [--cold]``
+Run: ``python -m benchmarks.physics.terrain_contact_choice [--quick] [--cold]``
 
 Why atrv_warp samples its own heightfield under each wheel instead of running Newton's collision
 pipeline (docs/tasks.md, "Navigation"): per-call time at N = 256 and 1024 worlds of four wheel
@@ -33,9 +33,7 @@ import newton
 import numpy as np
 import warp as wp
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # benchmarks/: _common.py
-
-from _common import RESULTS, write_results
+from benchmarks._common import RESULTS, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""

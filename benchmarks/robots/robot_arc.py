@@ -1,6 +1,6 @@
 """How far each robot turns on the nav world's ground when told to, and what its odometry makes of it.
 
-Run: ``python benchmarks/robots/robot_arc.py [--linear 0.5] [--angular 0.5] [--seconds 6] [--starts 64]``
+Run: ``python -m benchmarks.robots.robot_arc [--linear 0.5] [--angular 0.5] [--seconds 6] [--starts 64]``
 
 Each shipped robot, in the ``nav_deploy`` environment fitted to it (one world, the test set's first episode, the
 nominal rover, no randomization), is sent one ``/cmd_vel`` (``--linear`` m/s, ``--angular`` rad/s) through its
@@ -24,9 +24,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import write_results
+from benchmarks._common import write_results
 
 VERSION = 5
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""

@@ -1,6 +1,6 @@
 """Every shipped robot checked and measured: ``python -m atrv_warp.robot check`` for each, in one results file.
 
-    python benchmarks/robots/robot_check.py [--robots atrvjr,jackal,husky]
+    python -m benchmarks.robots.robot_check [--robots atrvjr,jackal,husky]
 
 Per robot (:func:`atrv_warp.sim.robot_check.measure_robot`): mass, wheel radius, track, wheelbase and reach; the
 driver gains by the rule for its wheel's inertia; the effective track factor (the median chi over 7 steady turns at
@@ -21,9 +21,7 @@ import math
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_cell, markdown_table, pin_to_one_core, write_results
+from benchmarks._common import load_results, markdown_cell, markdown_table, pin_to_one_core, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -115,8 +113,6 @@ TABLES = {
     "robot_check": robot_check,
     "robot_limits": robot_limits,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

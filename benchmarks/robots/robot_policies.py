@@ -1,6 +1,6 @@
 """Each shipped robot's deployable nav policy on its own robot: the test set in our simulator, and the MuJoCo twin.
 
-Run: ``python benchmarks/robots/robot_policies.py [--robots atrvjr jackal husky] [--episodes 1000] [--twin-episodes 200]``
+Run: ``python -m benchmarks.robots.robot_policies [--robots atrvjr jackal husky] [--episodes 1000] [--twin-episodes 200]``
 
 For each robot, its shipped ``nav_deploy_<robot>`` policy (trained at that robot's own limits, under ``wide``, by
 the command :data:`~atrv_warp.policy.SHIPPED_POLICIES` names) runs its recorded task, fitted to its robot, once on
@@ -21,11 +21,8 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "transfer"))  # mujoco_transfer.py
-
-from _common import load_results, markdown_table, write_results
-from mujoco_transfer import ENDS, rates
+from benchmarks._common import load_results, markdown_table, write_results
+from benchmarks.transfer.mujoco_transfer import ENDS, rates
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -145,8 +142,6 @@ TABLES = {
     "robot_policies": robot_policies,
     "task_fit": task_fit,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

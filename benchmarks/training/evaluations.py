@@ -1,6 +1,6 @@
 """The shipped policies and the scripted drivers on the test set: the evaluations table of the docs' tasks page.
 
-Run: ``python benchmarks/training/evaluations.py`` (about a minute once the kernels are compiled). Each driver runs one
+Run: ``python -m benchmarks.training.evaluations`` (about a minute once the kernels are compiled). Each driver runs one
 deterministic episode in each of 1,000 worlds of its task, seeded with the test set's seed (``EVAL_SEED``),
 exactly as ``python -m atrv_warp.evaluate [--task nav] [--baseline]`` does, and the figures go to
 ``benchmarks/results/evaluations.json`` with the sha256 of each policy file.
@@ -13,9 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, write_results
+from benchmarks._common import load_results, markdown_table, write_results
 
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -72,8 +70,6 @@ def evaluations() -> str:
 TABLES = {
     "evaluations": evaluations,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """The nav policies under shift: the randomized and the plain policy on the nominal rover and on the ``wide``
 test distribution, with success by parameter bin.
 
-Run: ``python benchmarks/training/randomization_eval.py [--episodes 1000] [--figure docs/randomization_eval.png]
+Run: ``python -m benchmarks.training.randomization_eval [--episodes 1000] [--figure docs/randomization_eval.png]
 [--randomized PATH] [--plain PATH]``
 
 Each policy runs one deterministic episode in each of ``--episodes`` worlds of the nav task, from the
@@ -22,9 +22,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, save_figure, write_results
+from benchmarks._common import load_results, markdown_table, save_figure, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -152,8 +150,6 @@ TABLES = {
     "randomization_eval": randomization_eval,
     "randomization_bins": randomization_bins,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

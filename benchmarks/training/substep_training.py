@@ -1,6 +1,6 @@
-"""Does SAC learn as fast on three substeps as on five? ``python benchmarks/training/substep_training.py``.
+"""Does SAC learn as fast on three substeps as on five? ``python -m benchmarks.training.substep_training``.
 
-Run: ``python benchmarks/training/substep_training.py [--seeds 0 1 2 3 4 5 6 7] [--frames 250000] [--every 50000]``,
+Run: ``python -m benchmarks.training.substep_training [--seeds 0 1 2 3 4 5 6 7] [--frames 250000] [--every 50000]``,
 or ``--summarize`` to print the table from the results already in ``benchmarks/results/substep_training/``.
 
 Issue 17 made three substeps (``SimConfig.sim_dt = FAST_SIM_DT``) about 1.4x cheaper per step. This

@@ -1,6 +1,6 @@
 """Wall time and environment steps until the evaluation success first reaches 90 %, per seed.
 
-Run: ``python benchmarks/training/train_to_success.py [--config default|nav|ppo|nav_ppo] [--seeds 0 1 2] [--minutes 10]
+Run: ``python -m benchmarks.training.train_to_success [--config default|nav|ppo|nav_ppo] [--seeds 0 1 2] [--minutes 10]
 [--threshold 0.9] [--figure docs/learning_curve.png [--figure-only]] [key=value ...]``
 
 Trains with a preset (``configs/default.toml`` by default, ``--config nav`` for the navigation
@@ -29,9 +29,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, results_path, save_figure, write_results
+from benchmarks._common import load_results, markdown_table, results_path, save_figure, write_results
 
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -150,7 +148,6 @@ def main() -> int:
     parser.add_argument("overrides", nargs="*", help="key=value TrainConfig overrides")
     args = parser.parse_args()
 
-    sys.path.insert(0, str(ROOT))
     bad = [item for item in args.overrides if "=" not in item]
     if bad:
         parser.error(f"overrides must look like key=value, got {bad}")
@@ -271,7 +268,7 @@ def ppo_vs_sac() -> str:
     rows = []
     for task, algo, name, args in PPO_VS_SAC:
         if not results_path(name).is_file():
-            rows.append([task, algo, "no current measurement", "", "", "", f"`python benchmarks/training/train_to_success.py {args}`"])
+            rows.append([task, algo, "no current measurement", "", "", "", f"`python -m benchmarks.training.train_to_success {args}`"])
             continue
         d = load_results(name)
         m, seeds = d["median"], d["seeds"]
@@ -304,8 +301,6 @@ TABLES = {
     "train_to_success_nav_deploy_slip_gain": lambda: _train_to_success("train_to_success_nav_deploy_slip_gain.json"),
     "ppo_vs_sac": ppo_vs_sac,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

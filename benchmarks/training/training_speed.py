@@ -1,6 +1,6 @@
 """A training run's wall time against an earlier revision's, measured in one run, interleaved.
 
-    python benchmarks/training/training_speed.py --old c56dbf4 [--config nav_deploy] [--frames 300000] [--rounds 3]
+    python -m benchmarks.training.training_speed --old c56dbf4 [--config nav_deploy] [--frames 300000] [--rounds 3]
 
 Checks ``--old`` out into a temporary git worktree and trains the same preset in both trees alternately (old,
 new, old, new, ...), each a fresh ``python -m atrv_warp.train`` process on the machine's cores, for ``--frames``
@@ -24,9 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import write_results
+from benchmarks._common import write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""

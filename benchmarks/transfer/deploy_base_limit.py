@@ -1,6 +1,6 @@
 """What the deployable task's base acceleration limit does: the deployable nav policy with and without it.
 
-Run: ``python benchmarks/transfer/deploy_base_limit.py [--policy nav_deploy] [--episodes 1000]``
+Run: ``python -m benchmarks.transfer.deploy_base_limit [--policy nav_deploy] [--episodes 1000]``
 
 The policy runs one deterministic episode in each of ``--episodes`` worlds of the test set (``EVAL_SEED``), on the
 nominal rover (``none``) and under ``wide``, twice: through a base without acceleration limits (the
@@ -22,9 +22,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, write_results
+from benchmarks._common import load_results, markdown_table, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -131,8 +129,6 @@ def deploy_base_limit(name: str = "deploy_base_limit.json") -> str:
 TABLES = {
     "deploy_base_limit": deploy_base_limit,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """The deploy node in closed loop over ROS 2, paired with ``evaluate`` on the same episodes.
 
-Run: ``python benchmarks/transfer/deploy_closed_loop.py [POLICY] [--episodes 200] [--seed 2024] [--out FILE] [--trace FILE]``
+Run: ``python -m benchmarks.transfer.deploy_closed_loop [POLICY] [--episodes 200] [--seed 2024] [--out FILE] [--trace FILE]``
 
 POLICY is a policy file (``best_policy.pt``) or a shipped policy's name (default: ``nav_deploy``). Two ways over
 the same seeded episodes of its task (the evaluation set of ``--seed``: each episode's world, start and goal):
@@ -44,9 +44,7 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import write_results
+from benchmarks._common import write_results
 
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""

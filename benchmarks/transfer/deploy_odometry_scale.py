@@ -1,6 +1,6 @@
 """Deployable nav policies on a base whose wheel odometry over-reads: success against the odometry's scale.
 
-Run: ``python benchmarks/transfer/deploy_odometry_scale.py [--policy nav_deploy] [--policy before=OLD.pt] [--episodes 1000]``
+Run: ``python -m benchmarks.transfer.deploy_odometry_scale [--policy nav_deploy] [--policy before=OLD.pt] [--episodes 1000]``
 
 Wheels that creep or slip turn further than the rover moves, so a base's encoders over-read the distance driven
 (``benchmarks/transfer/mujoco_odometry.py`` measures it in our simulator and in the MuJoCo twin). A policy that sees its goal
@@ -20,9 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import labelled, load_results, markdown_table, write_results
+from benchmarks._common import labelled, load_results, markdown_table, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -95,8 +93,6 @@ def deploy_odometry_scale(name: str = "deploy_odometry_scale.json") -> str:
 TABLES = {
     "deploy_odometry_scale": deploy_odometry_scale,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

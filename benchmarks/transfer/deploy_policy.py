@@ -1,6 +1,6 @@
 """The deployable nav policy beside the torque nav policy: success on the test set, and how each drives.
 
-Run: ``python benchmarks/transfer/deploy_policy.py [--episodes 1000]``
+Run: ``python -m benchmarks.transfer.deploy_policy [--episodes 1000]``
 
 Both shipped nav policies run one deterministic episode in each of 1,000 worlds of the test set
 (``EVAL_SEED``), under ``wide`` and on the nominal rover (no randomization): the torque policy
@@ -23,9 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, write_results
+from benchmarks._common import load_results, markdown_table, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -142,8 +140,6 @@ def deploy_policy() -> str:
 TABLES = {
     "deploy_policy": deploy_policy,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

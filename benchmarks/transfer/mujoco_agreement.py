@@ -1,6 +1,6 @@
 """Physical agreement of the MuJoCo twin with our simulator, side by side (issue #41).
 
-    pip install -e ".[mujoco]"; python benchmarks/transfer/mujoco_agreement.py
+    pip install -e ".[mujoco]"; python -m benchmarks.transfer.mujoco_agreement
 
 One rover in each engine (ours: :class:`atrv_warp.sim.RoverSim`; MuJoCo: :class:`atrv_warp.integrations.mujoco.
 MujocoTwin`, built from the same URDF, configs and driver, its soft contact given the tyre's compliance), the same
@@ -30,9 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, write_results
+from benchmarks._common import load_results, markdown_table, write_results
 
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -322,8 +320,6 @@ def mujoco_agreement() -> str:
 TABLES = {
     "mujoco_agreement": mujoco_agreement,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """How far each engine's wheel odometry runs from the truth when the deployable policy drives the nav episodes.
 
     pip install -e ".[mujoco]"
-    python benchmarks/transfer/mujoco_odometry.py [--policy nav_deploy] [--episodes 40] [--frictions 0.3 0.8]
+    python -m benchmarks.transfer.mujoco_odometry [--policy nav_deploy] [--episodes 40] [--frictions 0.3 0.8]
                                          [--contacts noslip sphere]
 
 The policy drives the first ``--episodes`` episodes of the evaluation set in the MuJoCo twin at each µ, and in our
@@ -30,9 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, write_results
+from benchmarks._common import load_results, markdown_table, write_results
 
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -242,8 +240,6 @@ def mujoco_odometry_drives() -> str:
 TABLES = {
     "mujoco_odometry_drives": mujoco_odometry_drives,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

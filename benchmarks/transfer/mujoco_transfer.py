@@ -1,7 +1,7 @@
 """Sim-to-sim transfer, measured: deployable nav policies in the MuJoCo twin of the nav world (issue #41).
 
     pip install -e ".[mujoco]"
-    python benchmarks/transfer/mujoco_transfer.py [POLICY ...] [--episodes 200] [--frictions 0.3 0.5 0.8] [--out FILE]
+    python -m benchmarks.transfer.mujoco_transfer [POLICY ...] [--episodes 200] [--frictions 0.3 0.5 0.8] [--out FILE]
 
 Each POLICY (a ``.pt`` file, a shipped name, or an exported ``.pt2``; default: the shipped ``nav_deploy``) runs
 deterministically on the first ``--episodes`` episodes of the evaluation set (:data:`~atrv_warp.task.evaluation.
@@ -26,9 +26,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import labelled, load_results, markdown_table, write_results
+from benchmarks._common import labelled, load_results, markdown_table, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -151,8 +149,6 @@ TABLES = {
     "mujoco_transfer_wide_slip": lambda: mujoco_transfer("mujoco_transfer_wide_slip.json"),
     "mujoco_transfer_wide_slip_gain": lambda: mujoco_transfer("mujoco_transfer_wide_slip_gain.json"),
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

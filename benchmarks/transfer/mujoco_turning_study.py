@@ -1,6 +1,6 @@
 """Why the MuJoCo twin turned so much worse than ours, and what MuJoCo's contact settings do to it (issue #41).
 
-    pip install -e ".[mujoco]"; python benchmarks/transfer/mujoco_turning_study.py
+    pip install -e ".[mujoco]"; python -m benchmarks.transfer.mujoco_turning_study
 
 For each of MuJoCo's contact settings in :func:`settings` (a ``MujocoContact``: solref/solimp, cone, impratio,
 noslip, integrator, the wheel's shape, MuJoCo steps per 0.01 s driver substep):
@@ -35,10 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: _common.py
-
-from _common import load_results, markdown_table, pin_to_one_core, write_results
-from mujoco_agreement import TURN_FRICTIONS, TURNS, ours_turn, steps, twin_turn
+from benchmarks._common import load_results, markdown_table, pin_to_one_core, write_results
+from benchmarks.transfer.mujoco_agreement import TURN_FRICTIONS, TURNS, ours_turn, steps, twin_turn
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -338,8 +336,6 @@ def mujoco_turning_study() -> str:
 TABLES = {
     "mujoco_turning_study": mujoco_turning_study,
 }
-"""The tables docs pages draw from this script's results: ``{{ results_table NAME }}`` renders ``TABLES[NAME]()``
-(``docs/hooks.py``)."""
 
 
 if __name__ == "__main__":

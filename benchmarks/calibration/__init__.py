@@ -1,0 +1,1 @@
+"""The calibration benchmarks (``python -m benchmarks.calibration.NAME --help``)."""

@@ -1,0 +1,1 @@
+"""The perf benchmarks (``python -m benchmarks.perf.NAME --help``)."""

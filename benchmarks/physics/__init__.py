@@ -1,0 +1,1 @@
+"""The physics benchmarks (``python -m benchmarks.physics.NAME --help``)."""

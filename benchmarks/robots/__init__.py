@@ -1,0 +1,1 @@
+"""The robots benchmarks (``python -m benchmarks.robots.NAME --help``)."""

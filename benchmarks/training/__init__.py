@@ -1,0 +1,1 @@
+"""The training benchmarks (``python -m benchmarks.training.NAME --help``)."""

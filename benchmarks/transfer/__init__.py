@@ -1,0 +1,1 @@
+"""The transfer benchmarks (``python -m benchmarks.transfer.NAME --help``)."""
