@@ -214,3 +214,45 @@ def test_a_crafted_replay_buffer_or_checkpoint_is_refused_unread(tmp_path):
     fresh.checkpoint.restore(legacy, fresh.cfg, fresh.actor, fresh.normalize, fresh.buffer)
     assert len(fresh.buffer) == 0 and "is not read" in fresh.checkpoint.notes[0]
     assert not marker.exists()
+
+
+def _module(path: Path, marker: Path, body: str = "") -> Path:
+    """A task module that leaves ``marker`` when imported, then runs ``body``."""
+    path.write_text(f"from pathlib import Path\nPath({str(marker)!r}).write_text('ran')\n{body}")
+    return path
+
+
+def test_a_run_folder_names_no_code_that_resume_imports(tmp_path, capsys):
+    """``--resume`` reads a run folder's ``config.toml`` as data: the task module it names is not imported (the
+    command line must name it), a module other than the one the run recorded is refused, and a module that exits or
+    raises is one line naming it, exit 2 (issue 70)."""
+    from atrv_warp.cli.train import main
+    from atrv_warp.rl.command_line import load_train_config, parse_command
+    from atrv_warp.rl.config import to_toml
+    from atrv_warp.rl.run import TASK_MODULE_RECORD, task_module_record
+
+    marker = tmp_path / "ran"
+    evil = _module(tmp_path / "evil.py", marker, "raise SystemExit(0)\n")
+    run = tmp_path / "runs" / "sent"  # a run folder someone sent: its config names their module
+    run.mkdir(parents=True)
+    text = to_toml(load_train_config("smoke")).replace('task_module = ""', f"task_module = {json.dumps(str(evil))}")
+    (run / "config.toml").write_text(text)
+    assert main(["--resume", str(run)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"the run used the task module {evil}" in err[0] and "env.task_module=" in err[0], err
+    assert not marker.exists()
+    other = tmp_path / "other.py"  # named on the command line, but not the module the run recorded
+    other.write_text("# another module\n")
+    (run / TASK_MODULE_RECORD).write_text(json.dumps(task_module_record(evil)))
+    assert main(["--resume", str(run), f"env.task_module={other}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"the task module {other} is not the one the run trained with" in err[0], err
+    assert not marker.exists()
+    (run / TASK_MODULE_RECORD).write_text(json.dumps(task_module_record(other)))  # the recorded module: resumes
+    assert parse_command(["--resume", str(run), f"env.task_module={other}"]).train.env.task_module == str(other)
+    for body, name in (("raise SystemExit(0)\n", "SystemExit: 0"), ("raise KeyboardInterrupt\n", "KeyboardInterrupt"),
+                       ("import no_such_module_here\n", "ModuleNotFoundError")):
+        module = _module(tmp_path / f"{name.split(':')[0].lower()}.py", tmp_path / "asked", body)
+        assert main([f"task_module={module}", "--config", "smoke"]) == 2  # a module the user names runs, and says so
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"task module {module}: {name}" in err[0], err

@@ -22,7 +22,7 @@ from typing import Annotated
 import tyro
 
 from atrv_warp.rl.config import GROUP_TYPES, TrainConfig, toml_text
-from atrv_warp.rl.run import toml_value
+from atrv_warp.rl.run import check_resumed_task_module, toml_value
 
 __all__ = [
     "BOOLEAN_SPELLINGS",
@@ -226,7 +226,10 @@ def load_train_config(source: str | None = None, overrides: dict | None = None) 
 
 def parse_command(tokens: list[str]) -> TrainCommand:
     r"""The training command line: ``--config`` (or the ``--resume``\ d run's ``config.toml``), then
-    every field given. ``ValueError`` or ``FileNotFoundError`` in one line on a bad one."""
+    every field given. ``ValueError`` or ``FileNotFoundError`` in one line on a bad one.
+
+    A resumed run's ``config.toml`` is read as data: the task module it names is not imported, and the command line
+    must name it (``env.task_module=``), the same file the run recorded (:func:`~atrv_warp.rl.run.check_resumed_task_module`)."""
     tokens, fields = _task_tokens(tokens)
     args = cli_args(tokens)
     first = _tyro([a for a in args if a not in ("-h", "--help")], None)  # which file to start from
@@ -235,11 +238,15 @@ def parse_command(tokens: list[str]) -> TrainCommand:
         if not (run_dir / "config.toml").is_file():
             raise FileNotFoundError(f"--resume: {run_dir / 'config.toml'} not found")
         saved = _file_config(str(run_dir / "config.toml"))
+        # the run folder's task module is never imported: the command line names it (checked below)
         base = dataclasses.replace(saved, run=dataclasses.replace(saved.run, out_dir=str(run_dir.parent),
-                                                                  name=run_dir.name))
+                                                                  name=run_dir.name),
+                                   env=dataclasses.replace(saved.env, task_module=""))
     else:
         base = _file_config(first.config)
     cmd = _tyro(args, dataclasses.replace(first, train=base))
     cmd = dataclasses.replace(cmd, train=_with_task_fields(cmd.train, fields))
+    if first.resume and saved.env.task_module:
+        check_resumed_task_module(run_dir, saved.env.task_module, cmd.train.env.task_module)
     cmd.train.validate()
     return cmd

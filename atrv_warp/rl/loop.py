@@ -21,7 +21,7 @@ from atrv_warp.rl.evaluators import EvalOutcome, Evaluator, make_evaluator
 from atrv_warp.rl.exploration import collection_policy
 from atrv_warp.rl.learner import ALGOS, annealed_lr, make_buffer, make_learner, make_run_actor, replay_frames, set_lr
 from atrv_warp.rl.reporting import Loggers, LossMeans, Progress, Stats, make_loggers, pct, plot_curve
-from atrv_warp.rl.run import RunSpec, resolve_run
+from atrv_warp.rl.run import TASK_MODULE_RECORD, RunSpec, resolve_run, task_module_record
 from atrv_warp.runtime import device_summary
 from atrv_warp.sim.config import SimConfig
 from atrv_warp.task.evaluation import EVAL_SEED, evaluate, format_result
@@ -60,6 +60,8 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
         return run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.toml").write_text(to_toml(cfg))
+    if cfg.env.task_module:  # the module's path and sha256: a resume names the module, and must name this one
+        (run_dir / TASK_MODULE_RECORD).write_text(json.dumps(task_module_record(cfg.env.task_module), indent=1) + "\n")
     # the task resolved: every field of its config and its reward table, as this run trains it
     (run_dir / "task.json").write_text(json.dumps(run.task.record(), indent=1, default=str) + "\n")
     # the robot resolved: every field of its file, as this run trains on it (its saved policies keep the same)

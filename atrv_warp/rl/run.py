@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import tomllib
 import typing
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["RunSpec", "resolve_run", "task_field_values", "toml_value"]
+__all__ = ["TASK_MODULE_RECORD", "RunSpec", "check_resumed_task_module", "resolve_run", "task_field_values",
+           "task_module_record", "toml_value"]
 
 
 @dataclass(frozen=True)
@@ -107,6 +109,43 @@ def _resolve(env, _files: tuple) -> RunSpec:
     shift = randomization("randomization")
     judged = randomization("eval_randomization") if env.eval_randomization else shift
     return RunSpec(robot=rover.robot_spec, rover=rover, task=task, randomization=shift, eval_randomization=judged)
+
+
+TASK_MODULE_RECORD = "task_module.json"
+"""The run folder's record of the task module a run used: its ``path`` and its ``sha256``."""
+
+
+def task_module_record(path: str | Path) -> dict[str, str]:
+    """What a run folder records of its task module ``path`` (:data:`TASK_MODULE_RECORD`)."""
+    from atrv_warp.storage import file_sha256
+
+    return {"path": str(Path(path).resolve()), "sha256": file_sha256(path)}
+
+
+def check_resumed_task_module(run_dir: Path, used: str, given: str) -> None:
+    """A resume names the task module itself: a run folder never makes a command import code. ``used``: the module
+    the run's ``config.toml`` names (not imported); ``given``: ``env.task_module`` on the command line.
+
+    Raises:
+        ValueError: One line: no module given for a run that used one, a missing file, or a file whose sha256 is not
+            the one the run recorded (both named).
+    """
+    from atrv_warp.storage import file_sha256
+
+    if not given:
+        raise ValueError(f"--resume {run_dir}: the run used the task module {used}; a run folder runs no code, so name "
+                         f"it on the command line: env.task_module={used}")
+    if not Path(given).is_file():
+        raise ValueError(f"--resume {run_dir}: task module not found: {given}")
+    try:
+        recorded = json.loads((run_dir / TASK_MODULE_RECORD).read_text())["sha256"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return  # a run folder from before the record: the module named on the command line is taken as it is
+    now = file_sha256(given)
+    if now != recorded:
+        raise ValueError(f"--resume {run_dir}: the task module {given} is not the one the run trained with (sha256 "
+                         f"{now[:12]}…, the run recorded {recorded[:12]}… for {used}): resume with that file, or "
+                         "train a new run")
 
 
 def task_field_values(env) -> dict[str, object]:

@@ -86,7 +86,8 @@ def load_task_module(path: str | Path) -> list[str]:
 
     Raises:
         FileNotFoundError: No such file.
-        ValueError: Not a ``.py`` file, or importing it failed (its error named, in one line).
+        ValueError: Not a ``.py`` file, or importing it failed (its error named, in one line): any exception,
+            ``SystemExit`` and ``KeyboardInterrupt`` included (a module that exits ends no command but with this).
     """
     path = Path(path).resolve()
     if not path.is_file():
@@ -102,7 +103,7 @@ def load_task_module(path: str | Path) -> list[str]:
     before = dict(TASKS)
     try:
         spec.loader.exec_module(module)
-    except Exception as err:  # noqa: BLE001 - the user's module may fail in any way; say how, in one line
+    except BaseException as err:  # noqa: BLE001 - the user's module may fail or exit in any way; say how, in one line
         sys.modules.pop(name, None)
         raise ValueError(f"task module {path}: {type(err).__name__}: {' '.join(str(err).split())[:300]}") from None
     added = [n for n in TASKS if TASKS[n] is not before.get(n)]
