@@ -231,8 +231,9 @@ def draw(rows: list[dict], path: Path, params: tuple[str, ...], default: tuple[s
          results=(results,), version=VERSION)
 
 
-def main() -> int:
-    from atrv_warp.sim.sysid.config import DEFAULT_FIT, FIT_PARAMETERS
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's options."""
+    from atrv_warp.sim.sysid.config import DEFAULT_FIT
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rovers", type=int, default=4, help="drawn rovers after the nominal one (%(default)s)")
@@ -249,6 +250,46 @@ def main() -> int:
     parser.add_argument("--out", default=str(RESULTS / "calibration_twin.json"), help="results file (%(default)s)")
     parser.add_argument("--figure-only", action="store_true",
                         help="record and fit nothing: draw --figure from the results file an earlier run wrote")
+    return parser
+
+
+def summarise(rows: list[dict]) -> dict:
+    """The results file's summary of the rovers' ``rows``."""
+    held = [r for r in rows if r["held_out"]["passes"] is not None]
+    return {"rovers_run": len(rows), "held_to_the_cut": len(held),
+            "cut_passes": sum(r["held_out"]["passes"] for r in held),
+            "cut_min": min((r["held_out"]["cut"] for r in held), default=math.nan),
+            "after_m_median": sorted(r["held_out"]["after_m"] for r in rows)[len(rows) // 2],
+            "converged": sum(bool(r["converged"]) for r in rows),
+            "misfit_flagged": sum(bool((r.get("misfit") or {}).get("flagged")) for r in rows),
+            "within_by_parameter": {p: sum(r["params"][p]["within"] for r in rows) for p in RANGES},
+            "interval_coverage": (sum(v["covered"] for r in rows for v in r["params"].values())
+                                  / sum(len(r["params"]) for r in rows)),
+            "wheel_radius_vs_geometric_mm": [1000 * r["params"]["wheel_radius"]["error"] for r in rows],
+            "wheel_radius_vs_rolling_mm": [1000 * r["wheel_radius_vs_rolling"] for r in rows],
+            # the ranges the docs cite: [smallest, largest]
+            "after_cm_median": 100 * sorted(r["held_out"]["after_m"] for r in rows)[len(rows) // 2],
+            "ours_after_cm": span([100 * r["ours"]["held_out"]["after_m"] for r in rows if r.get("ours")]),
+            "under_geometric_mm": span([-1000 * r["params"]["wheel_radius"]["error"] for r in rows]),
+            "off_rolling_mm": span([abs(1000 * r["wheel_radius_vs_rolling"]) for r in rows]),
+            "turn_ours": span([r["in_place_turn"]["ours"] for r in rows]),
+            "turn_ours_fitted_high_mu": span([r["in_place_turn"]["ours_fitted"] for r in rows
+                                              if r["truth"]["friction"] > HIGH_MU]),
+            "friction_rise": span([r["fitted"]["friction_rise"] for r in rows if "friction_rise" in r["fitted"]]),
+            "friction_error_high_mu": span([r["params"]["friction"]["error"] for r in rows
+                                            if r["truth"]["friction"] > HIGH_MU]),
+            "turn_twin_low_mu": span([r["in_place_turn"]["twin"] for r in rows if r["truth"]["friction"] <= HIGH_MU]),
+            "turn_twin_high_mu": span([r["in_place_turn"]["twin"] for r in rows if r["truth"]["friction"] > HIGH_MU]),
+            "high_mu": span([r["truth"]["friction"] for r in rows if r["truth"]["friction"] > HIGH_MU]),
+            "airborne_high_mu_percent": span([100 * r["in_place_turn"]["twin_airborne"] for r in rows
+                                              if r["truth"]["friction"] > HIGH_MU]),
+            "target": f"held-out error cut >= {CUT_TARGET:g}x where the nominal model misses by > {100 * MISSES:g} cm"}
+
+
+def main() -> int:
+    from atrv_warp.sim.sysid.config import DEFAULT_FIT, FIT_PARAMETERS
+
+    parser = build_parser()
     args = parser.parse_args()
     if args.figure_only:
         if not args.figure:
@@ -298,35 +339,7 @@ def main() -> int:
     if not rows:
         print("no rover finished: nothing to write", file=sys.stderr)
         return 1
-    held = [r for r in rows if r["held_out"]["passes"] is not None]
-    summary = {"rovers_run": len(rows), "held_to_the_cut": len(held),
-               "cut_passes": sum(r["held_out"]["passes"] for r in held),
-               "cut_min": min((r["held_out"]["cut"] for r in held), default=math.nan),
-               "after_m_median": sorted(r["held_out"]["after_m"] for r in rows)[len(rows) // 2],
-               "converged": sum(bool(r["converged"]) for r in rows),
-               "misfit_flagged": sum(bool((r.get("misfit") or {}).get("flagged")) for r in rows),
-               "within_by_parameter": {p: sum(r["params"][p]["within"] for r in rows) for p in RANGES},
-               "interval_coverage": (sum(v["covered"] for r in rows for v in r["params"].values())
-                                     / sum(len(r["params"]) for r in rows)),
-               "wheel_radius_vs_geometric_mm": [1000 * r["params"]["wheel_radius"]["error"] for r in rows],
-               "wheel_radius_vs_rolling_mm": [1000 * r["wheel_radius_vs_rolling"] for r in rows],
-               # the ranges the docs cite: [smallest, largest]
-               "after_cm_median": 100 * sorted(r["held_out"]["after_m"] for r in rows)[len(rows) // 2],
-               "ours_after_cm": span([100 * r["ours"]["held_out"]["after_m"] for r in rows if r.get("ours")]),
-               "under_geometric_mm": span([-1000 * r["params"]["wheel_radius"]["error"] for r in rows]),
-               "off_rolling_mm": span([abs(1000 * r["wheel_radius_vs_rolling"]) for r in rows]),
-               "turn_ours": span([r["in_place_turn"]["ours"] for r in rows]),
-               "turn_ours_fitted_high_mu": span([r["in_place_turn"]["ours_fitted"] for r in rows
-                                                 if r["truth"]["friction"] > HIGH_MU]),
-               "friction_rise": span([r["fitted"]["friction_rise"] for r in rows if "friction_rise" in r["fitted"]]),
-               "friction_error_high_mu": span([r["params"]["friction"]["error"] for r in rows
-                                               if r["truth"]["friction"] > HIGH_MU]),
-               "turn_twin_low_mu": span([r["in_place_turn"]["twin"] for r in rows if r["truth"]["friction"] <= HIGH_MU]),
-               "turn_twin_high_mu": span([r["in_place_turn"]["twin"] for r in rows if r["truth"]["friction"] > HIGH_MU]),
-               "high_mu": span([r["truth"]["friction"] for r in rows if r["truth"]["friction"] > HIGH_MU]),
-               "airborne_high_mu_percent": span([100 * r["in_place_turn"]["twin_airborne"] for r in rows
-                                                 if r["truth"]["friction"] > HIGH_MU]),
-               "target": f"held-out error cut >= {CUT_TARGET:g}x where the nominal model misses by > {100 * MISSES:g} cm"}
+    summary = summarise(rows)
     print(f"\ncut >= {CUT_TARGET:g}x on {summary['cut_passes']} of the {summary['held_to_the_cut']} rovers the nominal "
           f"model misses by > {100 * MISSES:g} cm (smallest cut {summary['cut_min']:.1f}x); median held-out error after "
           f"the fit {100 * summary['after_m_median']:.1f} cm; converged {summary['converged']} of {len(rows)}; "

@@ -26,7 +26,8 @@ VERSION = 1
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 
 
-def main() -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's options."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[1, 16, 64, 256, 1024, 4096])
     parser.add_argument("--seconds", type=float, default=3.0, help="timed wall time per size [s]")
@@ -34,7 +35,60 @@ def main() -> int:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--skip-choices", action="store_true", help="skip the graph/tile on-off comparison")
     parser.add_argument("--out", default=str(RESULTS / "sim_throughput.json"))
-    args = parser.parse_args()
+    return parser
+
+
+def measure(n: int, sim_cfg, args: argparse.Namespace, gen) -> dict | None:
+    """One row: ``n`` worlds with ``sim_cfg`` (a ``SimConfig``) stepped for ``args.seconds``; None if not finite."""
+    import torch
+    import warp as wp
+
+    from atrv_warp import RoverSim
+
+    t0 = time.perf_counter()
+    sim = RoverSim(n, device=args.device, sim=sim_cfg)
+    poses = (torch.rand(n, 3, generator=gen) * 2 - 1) * torch.tensor([12.0, 12.0, 3.14159])
+    sim.reset(poses=poses)
+    cmds = ((torch.rand(n, 2, generator=gen) * 2 - 1) * 20).to(sim.commands.device)
+    sim.commands.copy_(cmds)
+    sim.step()  # records the graph
+    wp.synchronize()
+    build_s = time.perf_counter() - t0
+    for _ in range(3):
+        sim.step()
+    wp.synchronize()
+    steps = 0
+    t0 = time.perf_counter()
+    while True:
+        for _ in range(5):
+            sim.step()
+        steps += 5
+        wp.synchronize()
+        elapsed = time.perf_counter() - t0
+        if elapsed >= args.seconds or steps >= 20000:
+            break
+    if not torch.isfinite(sim.root_pose).all() or sim.nonfinite.any():
+        print(f"N={n}: non-finite state after the timed run", file=sys.stderr)
+        return None
+    rate = steps * n / elapsed
+    return {"num_worlds": n, "use_graph": sim_cfg.use_graph, "use_tile_gemm": sim_cfg.use_tile_gemm,
+            "env_steps_per_s": rate, "ms_per_step": 1e3 * elapsed / steps, "steps_timed": steps,
+            "build_s": build_s}
+
+
+def print_tables(rows: list[dict], choices: list[dict]) -> None:
+    """Print the rows, and the choices where measured, as Markdown tables."""
+    print("\n| worlds | env-steps/s | ms/step |\n|---:|---:|---:|")
+    for r in rows:
+        print(f"| {r['num_worlds']} | {r['env_steps_per_s']:,.0f} | {r['ms_per_step']:.3f} |")
+    if choices:
+        print("\n| worlds | graph replay | tile GEMM | env-steps/s |\n|---:|---|---|---:|")
+        for r in choices:
+            print(f"| {r['num_worlds']} | {r['use_graph']} | {r['use_tile_gemm']} | {r['env_steps_per_s']:,.0f} |")
+
+
+def main() -> int:
+    args = build_parser().parse_args()
 
     if args.device == "cpu":
         pin_to_one_core()
@@ -72,40 +126,9 @@ def main() -> int:
 
     gen = torch.Generator().manual_seed(0)
 
-    def measure(n: int, sim_cfg: SimConfig) -> dict | None:
-        t0 = time.perf_counter()
-        sim = RoverSim(n, device=args.device, sim=sim_cfg)
-        poses = (torch.rand(n, 3, generator=gen) * 2 - 1) * torch.tensor([12.0, 12.0, 3.14159])
-        sim.reset(poses=poses)
-        cmds = ((torch.rand(n, 2, generator=gen) * 2 - 1) * 20).to(sim.commands.device)
-        sim.commands.copy_(cmds)
-        sim.step()  # records the graph
-        wp.synchronize()
-        build_s = time.perf_counter() - t0
-        for _ in range(3):
-            sim.step()
-        wp.synchronize()
-        steps = 0
-        t0 = time.perf_counter()
-        while True:
-            for _ in range(5):
-                sim.step()
-            steps += 5
-            wp.synchronize()
-            elapsed = time.perf_counter() - t0
-            if elapsed >= args.seconds or steps >= 20000:
-                break
-        if not torch.isfinite(sim.root_pose).all() or sim.nonfinite.any():
-            print(f"N={n}: non-finite state after the timed run", file=sys.stderr)
-            return None
-        rate = steps * n / elapsed
-        return {"num_worlds": n, "use_graph": sim_cfg.use_graph, "use_tile_gemm": sim_cfg.use_tile_gemm,
-                "env_steps_per_s": rate, "ms_per_step": 1e3 * elapsed / steps, "steps_timed": steps,
-                "build_s": build_s}
-
     rows = []
     for n in args.sizes:
-        row = measure(n, SimConfig())
+        row = measure(n, SimConfig(), args, gen)
         if row is None:
             return 1
         rows.append(row)
@@ -119,7 +142,7 @@ def main() -> int:
         for n in (1, 1024):
             for graph in (True, False):
                 for tile in (True, False):
-                    row = measure(n, SimConfig(use_graph=graph, use_tile_gemm=tile))
+                    row = measure(n, SimConfig(use_graph=graph, use_tile_gemm=tile), args, gen)
                     if row is None:
                         return 1
                     choices.append(row)
@@ -139,13 +162,7 @@ def main() -> int:
         "time": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
     out = write_results(args.out, result, version=VERSION)
-    print("\n| worlds | env-steps/s | ms/step |\n|---:|---:|---:|")
-    for r in rows:
-        print(f"| {r['num_worlds']} | {r['env_steps_per_s']:,.0f} | {r['ms_per_step']:.3f} |")
-    if choices:
-        print("\n| worlds | graph replay | tile GEMM | env-steps/s |\n|---:|---|---|---:|")
-        for r in choices:
-            print(f"| {r['num_worlds']} | {r['use_graph']} | {r['use_tile_gemm']} | {r['env_steps_per_s']:,.0f} |")
+    print_tables(rows, choices)
     print(f"\nwritten to {out}")
     if tmp_cache is not None:
         tmp_cache.cleanup()

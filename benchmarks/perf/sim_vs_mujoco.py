@@ -159,14 +159,97 @@ def validate(twin: MujocoTwin) -> dict:
                        "ok": plausible(mj_z, mj_dx, mj_dy, mj_ok)}}
 
 
-def main() -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's options."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[64, 1024, 4096])
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--work", type=int, default=65536, help="env-steps (N x T) per measurement")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default=str(RESULTS / "sim_vs_mujoco.json"))
-    args = parser.parse_args()
+    return parser
+
+
+def measure(n: int, twin: MujocoTwin, rng: np.random.Generator, args: argparse.Namespace) -> dict | None:
+    """One row: ``n`` rovers in ours and in MuJoCo, interleaved for ``args.rounds``; None if a state is not finite."""
+    import torch
+    import warp as wp
+
+    from atrv_warp.sim import RoverSim
+
+    steps = max(8, args.work // n)  # env steps per measurement
+    poses = np.column_stack([rng.uniform(-12, 12, n), rng.uniform(-12, 12, n), rng.uniform(-np.pi, np.pi, n)])
+    commands = rng.uniform(-TORQUE, TORQUE, (steps, n, 2)).astype(np.float32)
+
+    t0 = time.perf_counter()
+    sim = RoverSim(n)
+    sim.reset(poses=torch.as_tensor(poses, dtype=torch.float32))
+    sim.step()  # records the graph
+    wp.synchronize()
+    build_s = time.perf_counter() - t0
+    for _ in range(19):  # settle 1 s
+        sim.step()
+    cmd_t = torch.as_tensor(commands)
+
+    # MuJoCo: settle 1 s at zero torque (untimed), then time from the settled states
+    control = twin.controls(commands)
+    state = twin.run(twin.initial_states(poses), np.zeros((n, 20 * twin.substeps, twin.model.nu)))
+    mj_state0 = np.ascontiguousarray(state[:, -1])
+    out = np.empty((n, steps * twin.substeps, twin.nstate))
+
+    ours_rates, mj_rates = [], []
+    mj_reset: dict[int, list[float]] = {}  # world -> chassis x, y, z [m] before MuJoCo reset it
+    for _ in range(args.rounds):
+        t0 = time.perf_counter()
+        for t in range(steps):
+            sim.commands.copy_(cmd_t[t])
+            sim.step()
+        wp.synchronize()
+        ours_rates.append(n * steps / (time.perf_counter() - t0))
+
+        t0 = time.perf_counter()
+        twin.run(mj_state0, control, out)
+        mj_rates.append(n * steps / (time.perf_counter() - t0))
+        for w, k in twin.resets(mj_state0, out):
+            mj_reset.setdefault(w, twin.unpack(out[w, k - 1] if k else mj_state0[w])[0][:3].tolist())
+        mj_state0 = np.ascontiguousarray(out[:, -1])
+
+    ours_finite = bool(torch.isfinite(sim.root_pose).all() and not sim.nonfinite.any())
+    mj_finite = bool(np.isfinite(out).all())
+    if not (ours_finite and mj_finite):
+        print(f"N={n}: non-finite state (ours finite {ours_finite}, MuJoCo finite {mj_finite})", file=sys.stderr)
+        return None
+    qpos, qvel = twin.unpack(mj_state0)
+    row = {
+        "num_worlds": n, "env_steps_per_measurement": steps, "sim_time_per_measurement_s": steps * STEP_DT,
+        "ours_env_steps_per_s": statistics.median(ours_rates), "mujoco_env_steps_per_s": statistics.median(mj_rates),
+        "ours_rounds": ours_rates, "mujoco_rounds": mj_rates, "ours_build_s": build_s,
+        # after the timed runs: how hard the rovers were driven (our motor tapers to 0 at 50 rad/s)
+        "ours_mean_abs_wheel_speed_rad_s": sim.wheel_speed.abs().mean().item(),
+        "mujoco_mean_abs_wheel_speed_rad_s": float(np.abs(qvel[:, twin.wheel_qvel]).mean()),
+        # worlds MuJoCo found diverging and restarted at its origin (timed runs; their state before)
+        "mujoco_reset_worlds": len(mj_reset), "mujoco_reset_chassis_xyz_m": mj_reset,
+        "ours_mean_chassis_z_m": sim.root_pose[:, 2].mean().item(),
+        "mujoco_mean_chassis_z_m": float(qpos[:, 2].mean()),
+    }
+    row["ratio_ours_over_mujoco"] = row["ours_env_steps_per_s"] / row["mujoco_env_steps_per_s"]
+    print(f"N={n:5d} ({steps} env steps, build {build_s:.1f} s): ours {row['ours_env_steps_per_s']:10,.0f}  "
+          f"MuJoCo {row['mujoco_env_steps_per_s']:10,.0f} env-steps/s  ratio {row['ratio_ours_over_mujoco']:.2f}  "
+          f"(MuJoCo reset {len(mj_reset)} diverging world(s))",
+          flush=True)
+    return row
+
+
+def print_table(rows: list[dict]) -> None:
+    """Print the rows as a Markdown table."""
+    print("\n| worlds | ours env-steps/s | MuJoCo env-steps/s | ours / MuJoCo |\n|---:|---:|---:|---:|")
+    for r in rows:
+        print(f"| {r['num_worlds']} | {r['ours_env_steps_per_s']:,.0f} | {r['mujoco_env_steps_per_s']:,.0f} | "
+              f"{r['ratio_ours_over_mujoco']:.2f} |")
+
+
+def main() -> int:
+    args = build_parser().parse_args()
 
     pin_to_one_core()
     try:
@@ -210,68 +293,10 @@ def main() -> int:
     rng = np.random.default_rng(args.seed)
     rows = []
     for n in args.sizes:
-        steps = max(8, args.work // n)  # env steps per measurement
-        poses = np.column_stack([rng.uniform(-12, 12, n), rng.uniform(-12, 12, n), rng.uniform(-np.pi, np.pi, n)])
-        commands = rng.uniform(-TORQUE, TORQUE, (steps, n, 2)).astype(np.float32)
-
-        t0 = time.perf_counter()
-        sim = RoverSim(n)
-        sim.reset(poses=torch.as_tensor(poses, dtype=torch.float32))
-        sim.step()  # records the graph
-        wp.synchronize()
-        build_s = time.perf_counter() - t0
-        for _ in range(19):  # settle 1 s
-            sim.step()
-        cmd_t = torch.as_tensor(commands)
-
-        # MuJoCo: settle 1 s at zero torque (untimed), then time from the settled states
-        control = twin.controls(commands)
-        state = twin.run(twin.initial_states(poses), np.zeros((n, 20 * twin.substeps, twin.model.nu)))
-        mj_state0 = np.ascontiguousarray(state[:, -1])
-        out = np.empty((n, steps * twin.substeps, twin.nstate))
-
-        ours_rates, mj_rates = [], []
-        mj_reset: dict[int, list[float]] = {}  # world -> chassis x, y, z [m] before MuJoCo reset it
-        for _ in range(args.rounds):
-            t0 = time.perf_counter()
-            for t in range(steps):
-                sim.commands.copy_(cmd_t[t])
-                sim.step()
-            wp.synchronize()
-            ours_rates.append(n * steps / (time.perf_counter() - t0))
-
-            t0 = time.perf_counter()
-            twin.run(mj_state0, control, out)
-            mj_rates.append(n * steps / (time.perf_counter() - t0))
-            for w, k in twin.resets(mj_state0, out):
-                mj_reset.setdefault(w, twin.unpack(out[w, k - 1] if k else mj_state0[w])[0][:3].tolist())
-            mj_state0 = np.ascontiguousarray(out[:, -1])
-
-        ours_finite = bool(torch.isfinite(sim.root_pose).all() and not sim.nonfinite.any())
-        mj_finite = bool(np.isfinite(out).all())
-        if not (ours_finite and mj_finite):
-            print(f"N={n}: non-finite state (ours finite {ours_finite}, MuJoCo finite {mj_finite})", file=sys.stderr)
+        row = measure(n, twin, rng, args)
+        if row is None:
             return 1
-        qpos, qvel = twin.unpack(mj_state0)
-        row = {
-            "num_worlds": n, "env_steps_per_measurement": steps, "sim_time_per_measurement_s": steps * STEP_DT,
-            "ours_env_steps_per_s": statistics.median(ours_rates), "mujoco_env_steps_per_s": statistics.median(mj_rates),
-            "ours_rounds": ours_rates, "mujoco_rounds": mj_rates, "ours_build_s": build_s,
-            # after the timed runs: how hard the rovers were driven (our motor tapers to 0 at 50 rad/s)
-            "ours_mean_abs_wheel_speed_rad_s": sim.wheel_speed.abs().mean().item(),
-            "mujoco_mean_abs_wheel_speed_rad_s": float(np.abs(qvel[:, twin.wheel_qvel]).mean()),
-            # worlds MuJoCo found diverging and restarted at its origin (timed runs; their state before)
-            "mujoco_reset_worlds": len(mj_reset), "mujoco_reset_chassis_xyz_m": mj_reset,
-            "ours_mean_chassis_z_m": sim.root_pose[:, 2].mean().item(),
-            "mujoco_mean_chassis_z_m": float(qpos[:, 2].mean()),
-        }
-        row["ratio_ours_over_mujoco"] = row["ours_env_steps_per_s"] / row["mujoco_env_steps_per_s"]
         rows.append(row)
-        print(f"N={n:5d} ({steps} env steps, build {build_s:.1f} s): ours {row['ours_env_steps_per_s']:10,.0f}  "
-              f"MuJoCo {row['mujoco_env_steps_per_s']:10,.0f} env-steps/s  ratio {row['ratio_ours_over_mujoco']:.2f}  "
-              f"(MuJoCo reset {len(mj_reset)} diverging world(s))",
-              flush=True)
-        del sim
 
     result = {
         "benchmark": "sim_vs_mujoco",
@@ -289,10 +314,7 @@ def main() -> int:
         "time": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
     out_path = write_results(args.out, result, version=VERSION)
-    print("\n| worlds | ours env-steps/s | MuJoCo env-steps/s | ours / MuJoCo |\n|---:|---:|---:|---:|")
-    for r in rows:
-        print(f"| {r['num_worlds']} | {r['ours_env_steps_per_s']:,.0f} | {r['mujoco_env_steps_per_s']:,.0f} | "
-              f"{r['ratio_ours_over_mujoco']:.2f} |")
+    print_table(rows)
     print(f"\nwritten to {out_path}")
     return 0
 

@@ -41,13 +41,45 @@ class Phases:
         self.calls[name] += 1
 
 
-def main() -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's options."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0, help="timed training loop [s]")
     parser.add_argument("--isolated-updates", type=int, default=300)
     parser.add_argument("--config", default="default", help="training preset whose parts are profiled")
     parser.add_argument("--out", default=str(RESULTS / "train_profile.json"))
-    args = parser.parse_args()
+    return parser
+
+
+def isolated_phases(learner, buffer, n: int) -> Phases:
+    """The phases of ``n`` updates with the collector's worker idle."""
+    iso = Phases()
+    for _ in range(n):
+        with iso("sample"):
+            batch = buffer.sample()
+        learner.update(batch, phase=iso)
+    return iso
+
+
+def update_ms(learner, buffer, n: int) -> float:
+    """Milliseconds per update over ``n`` updates."""
+    t = time.perf_counter()
+    for _ in range(n):
+        learner.update(buffer.sample())
+    return 1e3 * (time.perf_counter() - t) / n
+
+
+def print_phases(rows: list[dict], loop_s: float) -> None:
+    """Print each phase's share of the loop's ``loop_s`` seconds, then the loop's own overhead."""
+    print(f"{'phase':<16}{'share':>8}{'ms/call':>10}{'calls':>8}")
+    for r in rows:
+        print(f"{r['phase']:<16}{100 * r['share']:>7.1f}%{r['ms_per_call']:>10.2f}{r['calls']:>8}")
+    other = loop_s - sum(r["seconds"] for r in rows)
+    print(f"{'(loop overhead)':<16}{100 * other / loop_s:>7.1f}%")
+
+
+def main() -> int:
+    args = build_parser().parse_args()
 
     import torch
     from tensordict import TensorDict
@@ -97,11 +129,7 @@ def main() -> int:
         with phases("weight sync"):
             collector.update_policy_weights_(TensorDict.from_module(actor))
     loop_s = time.perf_counter() - t0
-    iso = Phases()
-    for _ in range(args.isolated_updates):
-        with iso("sample"):
-            batch = buffer.sample()
-        learner.update(batch, phase=iso)
+    iso = isolated_phases(learner, buffer, args.isolated_updates)
     evaluator = Evaluator(cfg, actor)  # the periodic evaluation in the trainer (logging.eval_in_background=false)
     evaluator(frames)  # warm: its environment's first steps
     t_eval = time.perf_counter()
@@ -110,16 +138,9 @@ def main() -> int:
     threads_before = torch.get_num_threads()
     collector.shutdown()
     threads_after = torch.get_num_threads()  # TorchRL's shutdown resets it; train() sets it back
-
-    def update_ms(n: int) -> float:
-        t = time.perf_counter()
-        for _ in range(n):
-            learner.update(buffer.sample())
-        return 1e3 * (time.perf_counter() - t) / n
-
-    after_shutdown = update_ms(10)
+    after_shutdown = update_ms(learner, buffer, 10)
     torch.set_num_threads(cfg.run.threads)
-    restored = update_ms(50)
+    restored = update_ms(learner, buffer, 50)
     print(f"torch threads: {threads_before} in the loop, {threads_after} after collector.shutdown(); one update "
           f"then {after_shutdown:.1f} ms on this process's one pinned core, {restored:.1f} ms with "
           f"{cfg.run.threads} thread(s) again (train() restores it before the final evaluation)")
@@ -131,11 +152,7 @@ def main() -> int:
             for p in sorted(phases.total, key=phases.total.get, reverse=True)]
     print(f"\n{args.seconds:g} s of the default loop: {frames:,} frames, {updates:,} updates "
           f"({updates / loop_s:.1f} updates/s, {(frames - cfg.collector.init_random_frames) / loop_s:,.0f} frames/s)")
-    print(f"{'phase':<16}{'share':>8}{'ms/call':>10}{'calls':>8}")
-    for r in rows:
-        print(f"{r['phase']:<16}{100 * r['share']:>7.1f}%{r['ms_per_call']:>10.2f}{r['calls']:>8}")
-    other = loop_s - sum(r["seconds"] for r in rows)
-    print(f"{'(loop overhead)':<16}{100 * other / loop_s:>7.1f}%")
+    print_phases(rows, loop_s)
     print(f"\none update: {1e3 * in_loop:.2f} ms in the loop, {1e3 * isolated:.2f} ms in isolation "
           f"(ratio {in_loop / isolated:.2f})")
     between_evals_s = cfg.logging.eval_every_frames / ((frames - cfg.collector.init_random_frames) / loop_s)

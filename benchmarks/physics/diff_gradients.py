@@ -81,7 +81,8 @@ def cell(row, key):
     return f"{100 * row[key + '_rel_err']:.1f} %" + ("†" if row[key + "_fd_rough"] else "")
 
 
-def main() -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's options."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--horizons", type=int, nargs="+", default=[1, 2, 5, 10, 20, 40, 100])
     parser.add_argument("--sizes", type=int, nargs="*", default=[1, 64, 1024])
@@ -94,7 +95,84 @@ def main() -> int:
                         help="the actions are /cmd_vel through the motor driver (default output: diff_gradients_twist.json)")
     parser.add_argument("--out", default=None)
     parser.add_argument("--report", metavar="JSON", help="print the tables of an existing results file and exit")
-    args = parser.parse_args()
+    return parser
+
+
+def agreement_row(roll, state, T: int, name: str, left: float, right: float, kinds: dict, directions: int,
+                  gen) -> dict:
+    """Scenario ``name`` at horizon ``T``: the tape gradient of each kind, mu and mass against finite differences."""
+    import torch
+
+    a = torch.empty(T, 1, 2)
+    a[..., 0], a[..., 1] = left, right
+    mu = torch.tensor(0.3)
+    aa = a.clone().requires_grad_(True)
+    mm = mu.clone().requires_grad_(True)
+    mass = torch.tensor(roll.nominal_chassis_mass, requires_grad=True)
+    poses = roll(aa, state, mm, mass)
+    objective(poses).backward()
+
+    # where the rover ends up (the arena's walls are 15 m from the start)
+    row = {"scenario": name, "horizon_steps": T, "horizon_s": 0.05 * T,
+           "final_xy": poses[-1, 0, :2].tolist(), "path_max_x": poses[:, 0, 0].max().item()}
+    for kind, (c0, c1) in kinds.items():
+        worst, rough, tapes, fds = 0.0, False, [], []
+        for _ in range(directions):
+            w = torch.rand(T, 1, 1, generator=gen)  # random weights over time
+            d = torch.cat([c0 * w, c1 * w], dim=-1)
+            d /= d.norm()
+            fd = central(roll, state, a, mu, d, 0.0, 3e-3)
+            fd_coarse = central(roll, state, a, mu, d, 0.0, 1e-2)
+            tape = (aa.grad * d).sum().item()
+            err = abs(tape - fd) / max(abs(fd), 1e-3)
+            if err >= worst:
+                worst, rough = err, abs(fd_coarse - fd) > 0.05 * max(abs(fd), 1e-3)
+            tapes.append(tape)
+            fds.append(fd)
+        row[f"{kind}_rel_err"], row[f"{kind}_fd_rough"] = worst, rough
+        row[f"{kind}_tape"], row[f"{kind}_fd"] = tapes, fds
+    fd_mu = central(roll, state, a, mu, 0.0, 1.0, 1e-3)
+    fd_mu_coarse = central(roll, state, a, mu, 0.0, 1.0, 3.3e-3)
+    row["friction_rel_err"] = abs(mm.grad.item() - fd_mu) / max(abs(fd_mu), 1e-3)
+    row["friction_fd_rough"] = abs(fd_mu_coarse - fd_mu) > 0.05 * max(abs(fd_mu), 1e-3)
+    row["friction_tape"], row["friction_fd"] = mm.grad.item(), fd_mu
+    # chassis mass: steps of 0.2 % and 0.66 % of it; derivative reported per unit relative change
+    m0 = roll.nominal_chassis_mass
+    fd_m = m0 * central(roll, state, a, mu, 0.0, 0.0, 0.002 * m0, d_mass=1.0)
+    fd_m_coarse = m0 * central(roll, state, a, mu, 0.0, 0.0, 0.0066 * m0, d_mass=1.0)
+    tape_m = m0 * mass.grad.item()
+    row["mass_rel_err"] = abs(tape_m - fd_m) / max(abs(fd_m), 1e-3)
+    row["mass_fd_rough"] = abs(fd_m_coarse - fd_m) > 0.05 * max(abs(fd_m), 1e-3)
+    row["mass_tape"], row["mass_fd"] = tape_m, fd_m
+    return row
+
+
+def cost_row(n: int, args: argparse.Namespace, gen) -> dict:
+    """Forward and backward wall time per world-step of the taped rollout at ``n`` worlds (T = 20)."""
+    import torch
+
+    from atrv_warp.sim.diff import DiffRollout
+
+    T = 20
+    roll = DiffRollout(n, steps=T, wrench_fix=not args.without_wrench_fix, twist=args.twist)
+    state = roll.initial_state()
+    a = (torch.rand(T, n, 2, generator=gen) * 2 - 1).requires_grad_(True)  # torques, or m/s and rad/s
+    roll(a, state)  # warm-up
+    t_fwd, t_bwd = [], []
+    for _ in range(args.repeats):  # median of repeats: one short run on a shared core is noisy
+        t0 = time.perf_counter()
+        poses = roll(a, state)
+        t_fwd.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        poses[-1, :, :2].sum().backward()
+        t_bwd.append(time.perf_counter() - t0)
+    t_fwd, t_bwd = statistics.median(t_fwd), statistics.median(t_bwd)
+    return {"num_worlds": n, "steps": T, "forward_us_per_world_step": 1e6 * t_fwd / (n * T),
+            "backward_us_per_world_step": 1e6 * t_bwd / (n * T), "backward_over_forward": t_bwd / t_fwd}
+
+
+def main() -> int:
+    args = build_parser().parse_args()
     if args.report:
         report(json.loads(Path(args.report).read_text()))
         return 0
@@ -115,75 +193,21 @@ def main() -> int:
         roll = DiffRollout(1, steps=T, wrench_fix=fix, twist=args.twist)
         state = roll.initial_state()
         for name, (left, right) in scenarios.items():
-            a = torch.empty(T, 1, 2)
-            a[..., 0], a[..., 1] = left, right
-            mu = torch.tensor(0.3)
-            aa = a.clone().requires_grad_(True)
-            mm = mu.clone().requires_grad_(True)
-            mass = torch.tensor(roll.nominal_chassis_mass, requires_grad=True)
-            poses = roll(aa, state, mm, mass)
-            objective(poses).backward()
-
-            # where the rover ends up (the arena's walls are 15 m from the start)
-            row = {"scenario": name, "horizon_steps": T, "horizon_s": 0.05 * T,
-                   "final_xy": poses[-1, 0, :2].tolist(), "path_max_x": poses[:, 0, 0].max().item()}
-            for kind, (c0, c1) in kinds.items():
-                worst, rough, tapes, fds = 0.0, False, [], []
-                for _ in range(args.directions):
-                    w = torch.rand(T, 1, 1, generator=gen)  # random weights over time
-                    d = torch.cat([c0 * w, c1 * w], dim=-1)
-                    d /= d.norm()
-                    fd = central(roll, state, a, mu, d, 0.0, 3e-3)
-                    fd_coarse = central(roll, state, a, mu, d, 0.0, 1e-2)
-                    tape = (aa.grad * d).sum().item()
-                    err = abs(tape - fd) / max(abs(fd), 1e-3)
-                    if err >= worst:
-                        worst, rough = err, abs(fd_coarse - fd) > 0.05 * max(abs(fd), 1e-3)
-                    tapes.append(tape)
-                    fds.append(fd)
-                row[f"{kind}_rel_err"], row[f"{kind}_fd_rough"] = worst, rough
-                row[f"{kind}_tape"], row[f"{kind}_fd"] = tapes, fds
-            fd_mu = central(roll, state, a, mu, 0.0, 1.0, 1e-3)
-            fd_mu_coarse = central(roll, state, a, mu, 0.0, 1.0, 3.3e-3)
-            row["friction_rel_err"] = abs(mm.grad.item() - fd_mu) / max(abs(fd_mu), 1e-3)
-            row["friction_fd_rough"] = abs(fd_mu_coarse - fd_mu) > 0.05 * max(abs(fd_mu), 1e-3)
-            row["friction_tape"], row["friction_fd"] = mm.grad.item(), fd_mu
-            # chassis mass: steps of 0.2 % and 0.66 % of it; derivative reported per unit relative change
-            m0 = roll.nominal_chassis_mass
-            fd_m = m0 * central(roll, state, a, mu, 0.0, 0.0, 0.002 * m0, d_mass=1.0)
-            fd_m_coarse = m0 * central(roll, state, a, mu, 0.0, 0.0, 0.0066 * m0, d_mass=1.0)
-            tape_m = m0 * mass.grad.item()
-            row["mass_rel_err"] = abs(tape_m - fd_m) / max(abs(fd_m), 1e-3)
-            row["mass_fd_rough"] = abs(fd_m_coarse - fd_m) > 0.05 * max(abs(fd_m), 1e-3)
-            row["mass_tape"], row["mass_fd"] = tape_m, fd_m
+            row = agreement_row(roll, state, T, name, left, right, kinds, args.directions, gen)
             agreement.append(row)
             k0, k1 = kinds
             print(f"T={T:3d} ({0.05 * T:4.2f} s) {name:8s} {k0} {100 * row[k0 + '_rel_err']:7.2f}%"
                   f"{'†' if row[k0 + '_fd_rough'] else ' '} {k1} {100 * row[k1 + '_rel_err']:7.2f}%"
                   f"{'†' if row[k1 + '_fd_rough'] else ' '} friction {100 * row['friction_rel_err']:7.2f}%"
-                  f"{'†' if row['friction_fd_rough'] else ' '} (tape {mm.grad.item():+.4f}, fd {fd_mu:+.4f}) "
+                  f"{'†' if row['friction_fd_rough'] else ' '} (tape {row['friction_tape']:+.4f}, "
+                  f"fd {row['friction_fd']:+.4f}) "
                   f"chassis mass {100 * row['mass_rel_err']:7.2f}%{'†' if row['mass_fd_rough'] else ' '}; "
                   f"max x {row['path_max_x']:.2f} m",
                   flush=True)
 
     cost = []
     for n in args.sizes:
-        T = 20
-        roll = DiffRollout(n, steps=T, wrench_fix=fix, twist=args.twist)
-        state = roll.initial_state()
-        a = (torch.rand(T, n, 2, generator=gen) * 2 - 1).requires_grad_(True)  # torques, or m/s and rad/s
-        roll(a, state)  # warm-up
-        t_fwd, t_bwd = [], []
-        for _ in range(args.repeats):  # median of repeats: one short run on a shared core is noisy
-            t0 = time.perf_counter()
-            poses = roll(a, state)
-            t_fwd.append(time.perf_counter() - t0)
-            t0 = time.perf_counter()
-            poses[-1, :, :2].sum().backward()
-            t_bwd.append(time.perf_counter() - t0)
-        t_fwd, t_bwd = statistics.median(t_fwd), statistics.median(t_bwd)
-        row = {"num_worlds": n, "steps": T, "forward_us_per_world_step": 1e6 * t_fwd / (n * T),
-               "backward_us_per_world_step": 1e6 * t_bwd / (n * T), "backward_over_forward": t_bwd / t_fwd}
+        row = cost_row(n, args, gen)
         cost.append(row)
         print(f"N={n:5d}: forward {row['forward_us_per_world_step']:9.1f} us, backward "
               f"{row['backward_us_per_world_step']:9.1f} us per world-step; backward/forward "
