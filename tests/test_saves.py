@@ -242,3 +242,55 @@ def test_training_killed_with_sigkill_resumes_and_logs_no_row_twice(tmp_path):
         assert steps == sorted(set(steps)), (csv.name, steps)
     ck = load_checkpoint(out / "smoke" / "checkpoint.pt")
     assert ck["frames"] >= 16384
+
+
+def test_a_resume_that_is_another_run_is_refused_naming_what_differs(tmp_path):
+    """A resume continues its run as it was (issue 70): another seed, robot or network shape is refused naming the
+    setting, and another run's save put in the folder is refused naming both runs; the folder's own save resumes."""
+    import dataclasses
+
+    from atrv_warp.rl.checkpoint import RunMismatch
+
+    runs = {}
+    for name, run_id in (("a", "a" * 32), ("b", "b" * 32)):
+        run = runs[name] = Run(tmp_path / name)
+        run.state.run_id = run_id
+        run.checkpoint.claim(run_id)
+        run.advance(1)
+        run.save()
+    fresh = Run(tmp_path / "a")
+    ck = load_checkpoint(fresh.checkpoint.path)
+    cfg = fresh.cfg
+    changes = {"run.seed=1": dataclasses.replace(cfg, run=dataclasses.replace(cfg.run, seed=1)),
+               "env.robot='jackal'": dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, robot="jackal")),
+               "network.width=64": dataclasses.replace(cfg, network=dataclasses.replace(cfg.network, width=64))}
+    for named, changed in changes.items():
+        with pytest.raises(RunMismatch, match=f"{named.replace('(', '[(]')}, but the run trained with"):
+            fresh.checkpoint.restore(ck, changed, fresh.actor, fresh.normalize, fresh.buffer)
+    assert fresh.checkpoint.restore(ck, cfg, fresh.actor, fresh.normalize, fresh.buffer)[0].run_id == "a" * 32
+    b = tmp_path / "b"  # run b's whole save copied into run a's folder
+    shutil.copy(b / "checkpoint.pt", tmp_path / "a" / "checkpoint.pt")
+    shutil.copytree(b / "save", tmp_path / "a" / "save", dirs_exist_ok=True)
+    with pytest.raises(RunMismatch, match=f"belongs to run {'b' * 32}, but the folder .* holds run {'a' * 32}"):
+        _resume(tmp_path / "a")
+
+
+def test_one_training_per_run_folder_and_a_dead_ones_lock_is_free(tmp_path):
+    """A second training on a folder in use stops before it writes, naming the holder's pid; the lock goes with its
+    process, killed with SIGKILL included (issue 70)."""
+    from atrv_warp.rl.checkpoint import RunLock, RunMismatch
+    from atrv_warp.rl.loop import _prepare_run  # what train() does first (the quick tier trains nothing)
+
+    cfg = load_train_config("smoke", {"out_dir": str(tmp_path), "name": "busy"})
+    code = ("import pathlib, time; from atrv_warp.rl.checkpoint import RunLock; "
+            f"lock = RunLock(pathlib.Path({str(tmp_path / 'busy')!r})); print('held', flush=True); time.sleep(600)")
+    holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(RunMismatch, match=rf"is in use by another training \(pid {holder.pid}\)"):
+            _prepare_run(cfg, resume=False)
+        assert sorted(p.name for p in (tmp_path / "busy").iterdir()) == ["training.lock"]  # nothing written
+    finally:
+        holder.send_signal(signal.SIGKILL)
+        holder.wait()
+    RunLock(tmp_path / "busy").release()  # the dead process's lock is free

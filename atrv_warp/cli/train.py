@@ -21,6 +21,7 @@ from __future__ import annotations
 import sys
 
 from atrv_warp.core.files import OutputPathError
+from atrv_warp.rl.checkpoint import RunMismatch
 from atrv_warp.rl.command_line import PROG, parse_command
 from atrv_warp.rl.loop import train
 from atrv_warp.runtime import error_line, set_verbose
@@ -38,7 +39,8 @@ def main(argv: list[str] | None = None) -> int:
         set_verbose()
     try:
         train(cmd.train, resume=cmd.resume is not None)
-    except (FileExistsError, FileNotFoundError, ModuleNotFoundError, FileFormatError, OutputPathError) as err:
+    except (FileExistsError, FileNotFoundError, ModuleNotFoundError, FileFormatError, OutputPathError,
+            RunMismatch) as err:
         return error_line(PROG, str(err))
     return 0
 

@@ -15,7 +15,9 @@ by the file.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,8 +30,51 @@ from atrv_warp.rl.learner import make_learner
 from atrv_warp.rl.run import RunSpec, resolve_run
 from atrv_warp.storage import FileFormatError, atomic_save, file_sha256, load_weights, sync_folder
 
-__all__ = ["BUFFER_FORMAT", "CHECKPOINT_KEYS", "Checkpoint", "RunState", "buffer_state", "load_buffer_state",
-           "load_checkpoint"]
+__all__ = ["BUFFER_FORMAT", "CHECKPOINT_KEYS", "RESUME_IDENTITY", "Checkpoint", "RunLock", "RunMismatch", "RunState",
+           "buffer_state", "load_buffer_state", "load_checkpoint"]
+
+RESUME_IDENTITY = (("env", "robot"), ("env", "task"), ("network", "width"), ("network", "depth"),
+                   ("optim", "algo"), ("optim", "loss"), ("run", "seed"))
+"""The settings that make a run the run it is: a resume that changes one is another run, and is refused naming it
+(``init_from=`` starts a new run from its networks, on purpose)."""
+
+
+class RunMismatch(ValueError):
+    """A resume that would continue a run as another one (one line naming what differs), or a run folder in use."""
+
+
+class RunLock:
+    """One training per run folder: an exclusive lock on its ``training.lock``, taken before anything is written and
+    held until :meth:`release` (or the process ends: the system frees a dead process's lock, kill -9 included).
+
+    Raises:
+        RunMismatch: Another process holds the folder (its pid named, as it wrote it in the file).
+    """
+
+    def __init__(self, run_dir: Path):
+        import fcntl
+
+        run_dir.mkdir(parents=True, exist_ok=True)
+        self.path = run_dir / "training.lock"
+        self._file = open(self.path, "a+")  # noqa: SIM115 - held open for the run: the lock lives with the descriptor
+        try:
+            fcntl.flock(self._file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            self._file.seek(0)
+            holder = self._file.read().strip() or "?"
+            self._file.close()
+            raise RunMismatch(f"{run_dir} is in use by another training (pid {holder}): two runs in one folder would "
+                              "mix their saves and logs; wait for it, or train under another name=") from None
+        self._file.seek(0)
+        self._file.truncate()
+        self._file.write(f"{os.getpid()}\n")
+        self._file.flush()
+
+    def release(self) -> None:
+        """Let the folder go (the file stays; the lock is the descriptor's)."""
+        if not self._file.closed:
+            self._file.close()
+
 
 CHECKPOINT_KEYS = ("frames", "updates", "best_success", "elapsed_s", "next_eval", "stats_ready", "rng", "policy")
 """Entries every training checkpoint holds (``loss`` and ``opts`` too once learning has started)."""
@@ -54,6 +99,9 @@ class RunState:
     """Observation statistics are frozen and the learner exists (after ``init_random_frames``)."""
     tracking_id: str = ""
     """The W&B or MLflow run the scalars go to (``logger=wandb|mlflow``): a resumed run continues it."""
+    run_id: str = ""
+    """The run's identity, drawn when it starts, kept in every save and in the run folder's ``run.json``: a save is
+    resumed only in the folder of the run that wrote it (``""``: a save from before runs had one)."""
 
 
 def load_checkpoint(path: Path) -> dict:
@@ -134,6 +182,8 @@ class Checkpoint:
         """A best policy (its payload) not yet saved."""
         self.notes: list[str] = []
         """Lines for the console from :meth:`restore` (what it could not read, and why)."""
+        self.identity = run_dir / "run.json"
+        """The run folder's identity: the ``run_id`` of the run it holds."""
 
     # ---------------------------------------------------------------- saving
     def save(self, cfg: TrainConfig, state: RunState, actor, learner, buffer, *, run: RunSpec | None = None) -> None:
@@ -189,6 +239,19 @@ class Checkpoint:
             if path not in keep and path.is_file():
                 path.unlink()
 
+    def claim(self, run_id: str) -> None:
+        """Record ``run_id`` as the folder's run (``run.json``), before its first save."""
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self.identity.write_text(json.dumps({"run_id": run_id}) + "\n")
+
+    def folder_run_id(self) -> str:
+        """The ``run_id`` the folder's ``run.json`` holds (``""``: none, or one that does not read)."""
+        try:
+            value = json.loads(self.identity.read_text()).get("run_id", "")
+        except (OSError, ValueError, AttributeError):
+            return ""
+        return value if isinstance(value, str) else ""
+
     def start_over(self) -> None:
         """Remove what a run that never completed a save left in its folder: its scalars' CSV files (a new run would
         append to them), ``save/`` and half-written files. Nothing of a completed save is touched.
@@ -215,7 +278,9 @@ class Checkpoint:
         # keys added after a checkpoint was written take their defaults
         state = RunState(**{f.name: ck[f.name] for f in dataclasses.fields(RunState) if f.name in ck})
         learner = None
-        check_policy_task(ck["policy"], (run or resolve_run(cfg)).task, source=self.path)  # a policy that cannot drive the task
+        run = run or resolve_run(cfg)
+        self._check_same_run(ck, cfg, run, state)
+        check_policy_task(ck["policy"], run.task, source=self.path)  # a policy that cannot drive the task
         try:
             actor.load_state_dict(ck["policy"]["state_dict"])
             if state.stats_ready:
@@ -242,6 +307,31 @@ class Checkpoint:
         if self.folder.is_dir():
             self._remove_others()
         return state, learner
+
+    def _check_same_run(self, ck: dict, cfg: TrainConfig, run: RunSpec, state: RunState) -> None:
+        """Refuse a resume that is another run: a save another run's (its ``run_id`` is not the folder's), a setting
+        of :data:`RESUME_IDENTITY` changed, or a robot file that changed since the save (each named). A folder
+        without ``run.json`` (from before) takes the save's identity."""
+        from atrv_warp.policy import PolicyRobotMismatch, check_policy_robot, policy_record
+
+        folder = self.folder_run_id()
+        if state.run_id and folder and state.run_id != folder:
+            raise RunMismatch(f"{self.path}: this save belongs to run {state.run_id}, but the folder {self.run_dir} "
+                              f"holds run {folder} (run.json): a save is resumed in its own run's folder only")
+        saved = ck.get("config") if isinstance(ck.get("config"), dict) else {}
+        for group, name in RESUME_IDENTITY:
+            before, now = (saved.get(group) or {}).get(name), getattr(getattr(cfg, group), name)
+            if before is not None and before != now:
+                raise RunMismatch(f"--resume {self.run_dir}: {group}.{name}={now!r}, but the run trained with "
+                                  f"{group}.{name}={before!r}: a resume continues its run as it was; start a new run "
+                                  f"from its networks on purpose with init_from={self.path} (another name=)")
+        try:
+            check_policy_robot(policy_record(ck["policy"]), run.robot, source=self.path)
+        except PolicyRobotMismatch:
+            raise RunMismatch(f"--resume {self.run_dir}: the robot {cfg.env.robot} is not the one the run trained on "
+                              "(its robot file or URDF changed since the save: robot.json holds the run's): a resume "
+                              f"continues its run as it was; start a new run with init_from={self.path}") from None
+        state.run_id = state.run_id or folder
 
     def _verify(self, name: str, entry: dict) -> None:
         path = self.run_dir / entry["path"]

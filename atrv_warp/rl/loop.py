@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import math
 import time
+import uuid
 from pathlib import Path
 
 import torch
@@ -14,7 +15,7 @@ from tensordict import TensorDict
 
 from atrv_warp.core.files import check_output_path
 from atrv_warp.policy import Normalize, load_policy, policy_payload
-from atrv_warp.rl.checkpoint import Checkpoint, RunState, load_checkpoint, warm_start
+from atrv_warp.rl.checkpoint import Checkpoint, RunLock, RunState, load_checkpoint, warm_start
 from atrv_warp.rl.collectors import COLLECTORS, WORKER_KEY, make_collector, pin_to_core
 from atrv_warp.rl.config import TrainConfig, flat_config, to_toml
 from atrv_warp.rl.evaluators import EvalOutcome, Evaluator, make_evaluator
@@ -31,7 +32,15 @@ __all__ = ["Evaluator", "TrainLoop", "train"]
 
 def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     """Train with ``cfg`` (SAC or PPO, ``cfg.optim.algo``); returns the run folder."""
-    run_dir, ck = _prepare_run(cfg, resume)
+    run_dir, ck, lock = _prepare_run(cfg, resume)
+    try:
+        return _train(cfg, run_dir, ck, resume)
+    finally:
+        lock.release()
+
+
+def _train(cfg: TrainConfig, run_dir: Path, ck: dict | None, resume: bool) -> Path:
+    """:func:`train` in the run folder ``run_dir``, which this process holds (``ck``: the save to resume from)."""
     run = resolve_run(cfg)  # the robot, the task fitted to it, the randomizations: once, passed down
     torch.manual_seed(cfg.run.seed)
     torch.set_num_threads(cfg.run.threads)
@@ -48,8 +57,13 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
               f"best success {100 * state.best_success:.1f}% (save {checkpoint.generation})")
         for line in checkpoint.notes:
             print(line)
+        if not checkpoint.folder_run_id():  # a folder from before runs had an identity takes its save's
+            state.run_id = state.run_id or uuid.uuid4().hex
+            checkpoint.claim(state.run_id)
     else:
         checkpoint.start_over()  # what a run killed before its first save left (its logs, a half-written file)
+        state.run_id = uuid.uuid4().hex
+        checkpoint.claim(state.run_id)
         if cfg.run.init_from:
             learner = warm_start(cfg.run.init_from, cfg, actor, normalize, run=run)
             state.stats_ready = learner is not None
@@ -113,8 +127,9 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     return run_dir
 
 
-def _prepare_run(cfg: TrainConfig, resume: bool) -> tuple[Path, dict | None]:
-    """Check the run folder, and read the checkpoint to resume from before anything is written."""
+def _prepare_run(cfg: TrainConfig, resume: bool) -> tuple[Path, dict | None, RunLock]:
+    """Check the run folder and take it (:class:`~atrv_warp.rl.checkpoint.RunLock`: one training per folder), and read the
+    checkpoint to resume from, before anything is written."""
     if cfg.logging.logger == "tensorboard":
         import importlib.util
 
@@ -129,13 +144,18 @@ def _prepare_run(cfg: TrainConfig, resume: bool) -> tuple[Path, dict | None]:
         require()
     run_dir = Path(cfg.run.out_dir) / cfg.run.name
     check_output_path(run_dir / "config.toml", "run folder", new_folders=True)  # fails before any work
-    ckpt_path = Checkpoint(run_dir).path
-    if resume and not ckpt_path.is_file():
-        print(f"--resume: {run_dir} holds no save yet (stopped before its first): starting it from the beginning")
-        resume = False
-    if not resume and ckpt_path.exists():
-        raise FileExistsError(f"{run_dir} already holds a run; use --resume to continue it or another name=")
-    return run_dir, (load_checkpoint(ckpt_path) if resume else None)  # a bad file loses nothing
+    lock = RunLock(run_dir)  # a second training on this folder stops here, before it writes
+    try:
+        ckpt_path = Checkpoint(run_dir).path
+        if resume and not ckpt_path.is_file():
+            print(f"--resume: {run_dir} holds no save yet (stopped before its first): starting it from the beginning")
+            resume = False
+        if not resume and ckpt_path.exists():
+            raise FileExistsError(f"{run_dir} already holds a run; use --resume to continue it or another name=")
+        return run_dir, (load_checkpoint(ckpt_path) if resume else None), lock  # a bad file loses nothing
+    except BaseException:
+        lock.release()
+        raise
 
 
 class TrainLoop:
