@@ -518,6 +518,27 @@ def test_fit_recovers_a_hidden_rover_from_a_recorded_bag(tmp_path, run_module, r
     load_sim_config(out)  # what it wrote is a simulator config
 
 
+@pytest.mark.slow  # a live ROS 2 node records a 90 s Jackal drive (about 15 s, in this process); the fit about 20 s
+def test_another_robot_calibrates_from_its_own_bag(tmp_path, run_module, ros_env):
+    """Every robot calibrates (issue 70): the fit's bounds are the robot's own (the Jackal's 0.098 m wheel was outside
+    the ATRV-Jr's 0.10-0.16 m), the example bag is recorded on the robot named, and the hidden rover is found."""
+    from atrv_warp.sim.sysid.config import FIT_PARAMETERS
+
+    low, high = FIT_PARAMETERS["wheel_radius"].bounds("jackal")
+    assert low < 0.098 < high and FIT_PARAMETERS["wheel_radius"].bounds("atrvjr") == (0.10, 0.16)
+    bag, out = tmp_path / "jackal.mcap", tmp_path / "jackal.toml"
+    run_module("atrv_warp.calibrate", "--record-example", str(bag), "--robot", "jackal", "--minutes", "1.5", "--truth",
+               "examples/calibration_truth.toml", "--seed", "0")
+    proc = run_module("atrv_warp.calibrate", str(bag), "--robot", "jackal", "--out", str(out), timeout=1500)
+    report = json.loads(out.with_suffix(".report.json").read_text())
+    assert report["converged"], report["reason"]
+    fitted = tomllib.loads(out.read_text())
+    values = {**fitted["rover"], **fitted["contact"]}
+    for name, truth in {**TRUTH, "wheel_radius": 0.098}.items():  # the Jackal's own wheel; the rest the truth file's
+        rel = 0.25 if name == "payload_mass" else 0.05
+        assert values[name] == pytest.approx(truth, rel=rel), (name, values, proc.stdout[-3000:])
+
+
 # ------------------------------------------------------------------ latency and the model check (issue 42, part 4)
 def _drive_log(seconds: float, *, pose_noise: float, wheel_noise: float, seed: int = 0, commands=None):
     """A DriveLog of a smooth drive at 20 Hz with white noise on the reference position and the wheel speeds."""

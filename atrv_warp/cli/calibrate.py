@@ -147,6 +147,11 @@ def _unwritable(paths, force: bool) -> str | None:
     return None
 
 
+def _robot_argument(robot: str) -> str:
+    """``--robot`` as the simulator node takes it: a shipped robot's name as it is, a robot file's path absolute."""
+    return str(Path(robot).resolve()) if robot.endswith(".toml") or "/" in robot else robot
+
+
 def _record(args) -> int:
     bad = _unwritable([args.record_example], args.force)
     if bad:
@@ -164,7 +169,7 @@ def _record(args) -> int:
         return 2
     # the node's driver is configured as the nominal rover unless told otherwise, whatever --truth's wheel: a base
     # whose tyre wore still runs the radius it was set up with
-    params = {"truth_noise": args.noise, "truth_yaw_noise": args.noise / 0.5,
+    params = {"robot": _robot_argument(args.robot), "truth_noise": args.noise, "truth_yaw_noise": args.noise / 0.5,
               "wheel_radius": args.driver_wheel_radius or 0.0, "track_width": args.driver_track_width or 0.0}
     extra = _node_params(args.node_param)
     if isinstance(extra, str):
@@ -200,14 +205,14 @@ def _record_twin(args) -> int:
     except ImportError as err:
         print(f"error: --engine mujoco needs MuJoCo ({err.name} is not installed): {MUJOCO_EXTRA}", file=sys.stderr)
         return 2
-    from atrv_warp.sim.config import ContactConfig
+    from atrv_warp.sim.config import ContactConfig, nominal_rover_config
     from atrv_warp.sim.config_file import load_sim_config
     from atrv_warp.sim.driver import DriverConfig
 
-    rover, friction = None, None
+    rover, friction = nominal_rover_config(args.robot), None  # the robot the bag is of, as the fit will read it
     if args.truth:
         try:
-            rover, contact = load_sim_config(args.truth)
+            rover, contact = load_sim_config(args.truth, rover=rover)
         except ValueError as err:
             print(f"error: --truth: {err}", file=sys.stderr)
             return 2

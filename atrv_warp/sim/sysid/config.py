@@ -6,6 +6,7 @@ simulator, :mod:`.solver` moves the parameters and :mod:`.fit` runs the whole ca
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -26,22 +27,47 @@ class FitParameter:
     key: str
     """... and key the fitted value is written to."""
     low: float
+    """The least value the fit tries, on the reference robot (the ATRV-Jr); :meth:`bounds` gives another robot's."""
     high: float
     unit: str
+    scale: str = ""
+    """What the bounds grow with from robot to robot: the nominal rover's ``wheel_radius`` or ``wheel_speed_limit``,
+    or ``mass`` (its URDF's total); ``""``: the same on every robot (a friction, a share of the motor's torque)."""
+
+    def bounds(self, robot: str = DEFAULT_ROBOT) -> tuple[float, float]:
+        """``(low, high)`` on ``robot`` (a shipped robot's name or a robot file): the reference's, times the robot's
+        :attr:`scale` over the reference's (on the reference itself, exactly :attr:`low` and :attr:`high`)."""
+        if not self.scale:
+            return self.low, self.high
+        ratio = robot_scale(robot, self.scale) / robot_scale(DEFAULT_ROBOT, self.scale)
+        return self.low * ratio, self.high * ratio
+
+
+@functools.lru_cache(maxsize=16)
+def robot_scale(robot: str, scale: str) -> float:
+    """The size of ``robot`` that a :attr:`FitParameter.scale` names: its nominal rover's wheel radius [m] or motor
+    no-load speed [rad/s], or its total mass [kg]."""
+    rover = nominal_rover_config(robot)
+    if scale == "mass":
+        from atrv_warp.sim.urdf import load_rover
+
+        return float(load_rover(rover).total_mass)
+    return float(getattr(rover, scale))
 
 
 FIT_PARAMETERS: dict[str, FitParameter] = {
     "friction": FitParameter("contact", "friction", 0.05, 1.5, "-"),
     "torque_scale": FitParameter("rover", "torque_scale", 0.3, 1.5, "-"),
-    "payload_mass": FitParameter("rover", "payload_mass", 0.0, 60.0, "kg"),
-    "speed_limit": FitParameter("rover", "wheel_speed_limit", 10.0, 120.0, "rad/s"),
-    "wheel_radius": FitParameter("rover", "wheel_radius", 0.10, 0.16, "m"),
+    "payload_mass": FitParameter("rover", "payload_mass", 0.0, 60.0, "kg", scale="mass"),
+    "speed_limit": FitParameter("rover", "wheel_speed_limit", 10.0, 120.0, "rad/s", scale="wheel_speed_limit"),
+    "wheel_radius": FitParameter("rover", "wheel_radius", 0.10, 0.16, "m", scale="wheel_radius"),
     "friction_rise": FitParameter("contact", "friction_rise", 0.0, 1.0, "s/m"),
 }
-"""What the fit can adjust, with its bounds: Coulomb mu, motor torque scale, payload at the chassis' centre of
-mass, motor no-load speed, wheel rolling radius, and the sliding friction's rise with slip speed
+"""What the fit can adjust, with its bounds on the ATRV-Jr: Coulomb mu, motor torque scale, payload at the chassis'
+centre of mass, motor no-load speed, wheel rolling radius, and the sliding friction's rise with slip speed
 (:attr:`~atrv_warp.sim.config.ContactConfig.friction_rise`: not in :data:`DEFAULT_FIT`; for a rover whose brisk
-turns the model check flags, ``docs/calibration.md``)."""
+turns the model check flags, ``docs/calibration.md``). On another robot the payload's, the no-load speed's and the
+radius's bounds scale with its mass, no-load speed and radius (:meth:`FitParameter.bounds`)."""
 DEFAULT_FIT = ("friction", "torque_scale", "payload_mass", "wheel_radius")
 COMMAND_SOURCES = ("auto", "cmd_vel", "effort")
 """``cmd_vel``: replay the velocity commands through the base's PI controller (and match the recorded wheel

@@ -153,9 +153,10 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
     names = [p for p in cfg.params if seg.command == "cmd_vel" or p not in MOTOR_PARAMETERS]
     nominal = _nominal(rover, contact)
     for p in names:
-        if not FIT_PARAMETERS[p].low <= nominal[p] <= FIT_PARAMETERS[p].high:
-            raise CalibrationError(f"the rover's {p} {nominal[p]:g} is outside the fit's bounds "
-                                   f"[{FIT_PARAMETERS[p].low:g}, {FIT_PARAMETERS[p].high:g}]")
+        low, high = FIT_PARAMETERS[p].bounds(cfg.robot)
+        if not low <= nominal[p] <= high:
+            raise CalibrationError(f"the rover's {p} {nominal[p]:g} is outside the fit's bounds [{low:g}, {high:g}] "
+                                   f"on robot {cfg.robot} (its nominal rover's, scaled: FIT_PARAMETERS)")
     through = (f" through a driver configured with wheel radius {driver.wheel_radius:g} m, track "
                f"{driver.track_width:g} m" if seg.command == "cmd_vel" else "")
     train, held = np.flatnonzero(~seg.held_out), np.flatnonzero(seg.held_out)
@@ -178,7 +179,7 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
         candidates = [round(0.05 * k, 6) for k in range(round(cfg.max_latency / 0.05) + 1)]
         current, tried = 0.0, {0.0}
         for _ in range(len(candidates)):
-            fitted = {**nominal, **_values(ends, names)}
+            fitted = {**nominal, **_values(ends, names, cfg)}
             losses = {}
             for value in candidates:
                 replay.segments = make_segments(log, cfg, driver, latency=value, like=seg)
@@ -203,18 +204,25 @@ def calibrate(log: DriveLog, cfg: CalibrationConfig = CalibrationConfig(), *,
                    compile_seconds=compile_s, driver=_driver_record(driver) if seg.command == "cmd_vel" else None)
 
 
-def _values(ends: list[Start], names: list[str]) -> dict[str, float]:
+def _box(names: list[str], cfg: CalibrationConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Each parameter's least value and range on ``cfg.robot`` (:meth:`~.config.FitParameter.bounds`): the unit box's
+    corner and sides."""
+    bounds = [FIT_PARAMETERS[p].bounds(cfg.robot) for p in names]
+    low = np.array([lo for lo, _ in bounds])
+    return low, np.array([hi for _, hi in bounds]) - low
+
+
+def _values(ends: list[Start], names: list[str], cfg: CalibrationConfig) -> dict[str, float]:
     """The best start's values."""
     best = min(ends, key=lambda s: s.objective)
-    return {p: float(FIT_PARAMETERS[p].low + (FIT_PARAMETERS[p].high - FIT_PARAMETERS[p].low) * best.unit[j])
-            for j, p in enumerate(names)}
+    low, span = _box(names, cfg)
+    return {p: float(low[j] + span[j] * best.unit[j]) for j, p in enumerate(names)}
 
 
 def _fit(replay: Replay, train: np.ndarray, names: list[str], nominal: dict[str, float], cfg: CalibrationConfig,
          say: Callable[[str], None]) -> list[Start]:
     """Levenberg-Marquardt from the rover's values and ``cfg.starts - 1`` random points within the bounds."""
-    low = np.array([FIT_PARAMETERS[p].low for p in names])
-    span = np.array([FIT_PARAMETERS[p].high for p in names]) - low
+    low, span = _box(names, cfg)
     rng = np.random.default_rng(cfg.seed)
     start = (np.array([nominal[p] for p in names]) - low) / span
     units = np.concatenate([start[None], rng.uniform(0.1, 0.9, (cfg.starts - 1, len(names)))])
@@ -271,8 +279,7 @@ def _result(replay: Replay, seg: Segments, ends: list[Start], names: list[str], 
     """The fit's result: the best start, the starts' agreement, the standard errors, and every split's errors
     before and after, replayed in one batch."""
     train, held = np.flatnonzero(~seg.held_out), np.flatnonzero(seg.held_out)
-    low = np.array([FIT_PARAMETERS[p].low for p in names])
-    span = np.array([FIT_PARAMETERS[p].high for p in names]) - low
+    low, span = _box(names, cfg)
     starts = [{"values": {p: float(low[j] + span[j] * s.unit[j]) for j, p in enumerate(names)}, "train_loss": s.loss,
                "objective": s.objective,
                "evaluations": s.evaluations, "settled": s.settled, "losses": s.history} for s in ends]
