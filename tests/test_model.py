@@ -210,3 +210,34 @@ def test_wheels_on_one_side_or_none_are_named(tmp_path):
     none.write_text(ROS_URDF.replace("WHEELS", ""))
     with pytest.raises(URDFError, match="found 0 wheel joint"):
         load_rover(dataclasses.replace(rover, urdf=str(none)))
+
+
+def test_a_urdf_that_is_no_tree_or_no_regular_file_is_refused_before_anything_walks_it(tmp_path):
+    """Issue 70: a joint loop (through the chassis' parent: it hung every reader), a second root, a link with two
+    parents, a device, a pipe or an oversized file are each one URDFError naming the problem, at once."""
+    import os
+    import time
+
+    ros = _ros_urdf(tmp_path).read_text()
+    rover = RoverConfig(chassis_link="chassis_link", left_wheels=(), right_wheels=(), sensor_frames=())
+    loop = ('<joint name="back_up" type="fixed"><parent link="chassis_link"/><child link="base_footprint"/>'
+            "</joint></robot>")
+    cases = {"loop": (loop, r"has one root link .* has 0: \[\] \(a loop of joints leaves none\)"),
+             "orphan": ('<link name="orphan"/></robot>', r"has one root link .* has 2: \['base_footprint', 'orphan'\]"),
+             "two_parents": ('<joint name="again" type="fixed"><parent link="laser"/><child link="chassis_link"/>'
+                             "</joint></robot>", r"link 'chassis_link' is the child of two joints")}
+    for name, (tail, message) in cases.items():
+        path = tmp_path / f"{name}.urdf"
+        path.write_text(ros.replace("</robot>", tail))
+        t0 = time.perf_counter()
+        with pytest.raises(URDFError, match=message):
+            load_rover(dataclasses.replace(rover, urdf=str(path)))
+        assert time.perf_counter() - t0 < 5.0, name
+    pipe = tmp_path / "pipe.urdf"
+    os.mkfifo(pipe)
+    big = tmp_path / "big.urdf"
+    big.write_bytes(b" " * (11 << 20))
+    for path, message in ((Path("/dev/zero"), "the URDF is not a regular file"), (pipe, "the URDF is not a regular file"),
+                          (big, r"the URDF is 11.0 MiB, over the 10 MiB")):
+        with pytest.raises(URDFError, match=message):
+            load_rover(dataclasses.replace(rover, urdf=str(path)))

@@ -9,21 +9,21 @@ each conversion, and the tests hold each to its torch twin here.
 - :mod:`.scan`: a laser scan's sectors (:class:`~.scan.ScanSectors`), declared by their angular edges,
   and REP 117's reading of a ``LaserScan``'s ranges;
 - :mod:`.observation`: the robot observation built from a robot's messages (:class:`~.observation.RobotObservation`,
-  from an exported policy's contract).
+  from an exported policy's contract);
+- :mod:`.inputs`: an input file read only from a regular file of bounded size (the standard library alone).
 """
 
-from atrv_warp.core.geometry import (
-    matrix_to_quat,
-    quat_to_matrix,
-    quat_to_rpy,
-    quat_to_yaw,
-    rpy_to_quat,
-    wrap_angle,
-    yaw_to_quat,
-)
-from atrv_warp.core.kinematics import EFFECTIVE_TRACK_FACTOR, SkidSteer, side_speeds, track_width
-from atrv_warp.core.observation import RobotObservation, Scan
-from atrv_warp.core.scan import ScanSectors, remount, sector_readings
+from importlib import import_module
+
+_EXPORTS = {
+    **dict.fromkeys(("matrix_to_quat", "quat_to_matrix", "quat_to_rpy", "quat_to_yaw", "rpy_to_quat", "wrap_angle",
+                     "yaw_to_quat"), "geometry"),
+    **dict.fromkeys(("EFFECTIVE_TRACK_FACTOR", "SkidSteer", "side_speeds", "track_width"), "kinematics"),
+    **dict.fromkeys(("RobotObservation", "Scan"), "observation"),
+    **dict.fromkeys(("ScanSectors", "remount", "sector_readings"), "scan"),
+}
+"""Each name this package gives, and its module: imported on first use, so that the standard-library modules here
+(:mod:`.robot`, :mod:`.inputs`) load without torch (the robot-side install reads robot files before torch)."""
 
 __all__ = [
     "EFFECTIVE_TRACK_FACTOR",
@@ -43,3 +43,13 @@ __all__ = [
     "wrap_angle",
     "yaw_to_quat",
 ]
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__

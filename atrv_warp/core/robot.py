@@ -67,6 +67,8 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
+from atrv_warp.core.inputs import InputFileError, read_input
+
 if sys.version_info >= (3, 11):  # noqa: UP036 (the slim install runs on 3.10)
     import tomllib
 else:  # Python 3.10 (ROS 2 Humble's): the same parser from PyPI, which the slim install requires there
@@ -232,7 +234,7 @@ def robot_file(spec: str | os.PathLike) -> Path:
         return _shipped_folder() / f"{text}.toml"
     path = Path(text).expanduser()
     if path.suffix == ".toml" or os.sep in text or "/" in text:
-        if not path.is_file():
+        if not path.exists():
             raise RobotFileError(f"robot file not found: {path}")
         return path.resolve()
     raise RobotFileError(f"unknown robot {text!r}; shipped robots: {', '.join(ROBOTS)} (or give the path of a robot "
@@ -258,10 +260,14 @@ def load_robot(spec: str | os.PathLike | Robot = DEFAULT_ROBOT) -> Robot:
 @functools.lru_cache(maxsize=32)
 def _load(path: str, _mtime: int) -> Robot:
     try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
+        data = tomllib.loads(read_input(path, "robot file").decode("utf-8"))
     except tomllib.TOMLDecodeError as err:
         raise RobotFileError(f"{path}: not valid TOML: {err}") from None
+    except UnicodeDecodeError as err:
+        raise RobotFileError(f"{path}: not UTF-8 text (a TOML file must be): byte {err.start} is "
+                             f"{err.object[err.start:err.start + 1]!r}") from None
+    except InputFileError as err:
+        raise RobotFileError(str(err)) from None
     except OSError as err:
         raise RobotFileError(f"{path}: cannot read: {err}") from None
     return _from_table(path, data)
@@ -269,15 +275,15 @@ def _load(path: str, _mtime: int) -> Robot:
 
 @functools.lru_cache(maxsize=32)
 def _cached_digest(path: str, _mtime: int) -> str:
-    with open(path, "rb") as f:
-        return hashlib.sha256(f.read()).hexdigest()
+    return hashlib.sha256(read_input(path, "URDF")).hexdigest()
 
 
 def _file_digest(path: str | os.PathLike) -> str:
-    """The SHA-256 of the file at ``path`` (a URDF), or "" where it cannot be read."""
+    """The SHA-256 of the file at ``path`` (a URDF), or "" where it cannot be read (a missing file, or one that is not
+    a regular file of bounded size: its reader names why)."""
     try:
         return _cached_digest(os.fspath(path), os.stat(path).st_mtime_ns)
-    except OSError:
+    except (OSError, InputFileError):
         return ""
 
 
@@ -414,7 +420,7 @@ def robot_file_sha256(path: str | os.PathLike) -> str:
     """The SHA-256 of a robot file's identity: its bytes less its ``[deploy]`` table (from its header to the next
     table or the end, with the blank lines before it), which says where the robot runs, not what it is. A file
     without one hashes as its bytes. Results files record it (``benchmarks/_common.provenance``)."""
-    text = Path(path).read_bytes()
+    text = read_input(path, "robot file")
     lines = text.splitlines(keepends=True)
     start = next((i for i, line in enumerate(lines) if line.strip() == b"[deploy]"), None)
     if start is None:

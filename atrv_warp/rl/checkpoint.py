@@ -54,6 +54,8 @@ class RunLock:
     def __init__(self, run_dir: Path):
         import fcntl
 
+        self.made = [p for p in (run_dir, *run_dir.parents) if not p.exists()]
+        """The folders this lock made (none existed): a run that writes nothing leaves none of them behind."""
         run_dir.mkdir(parents=True, exist_ok=True)
         self.path = run_dir / "training.lock"
         self._file = open(self.path, "a+")  # noqa: SIM115 - held open for the run: the lock lives with the descriptor
@@ -71,9 +73,16 @@ class RunLock:
         self._file.flush()
 
     def release(self) -> None:
-        """Let the folder go (the file stays; the lock is the descriptor's)."""
-        if not self._file.closed:
-            self._file.close()
+        """Let the folder go (the file stays; the lock is the descriptor's). A folder this lock made, in which nothing
+        but the lock was written (a run refused before its first file), is removed with the folders made for it."""
+        if self._file.closed:
+            return
+        if self.made and [p.name for p in self.path.parent.iterdir()] == [self.path.name]:
+            self.path.unlink()
+            for folder in self.made:  # the run folder first, then each one made above it, while empty
+                if folder.exists() and not any(folder.iterdir()):
+                    folder.rmdir()
+        self._file.close()
 
 
 CHECKPOINT_KEYS = ("frames", "updates", "best_success", "elapsed_s", "next_eval", "stats_ready", "rng", "policy")

@@ -62,12 +62,12 @@ def _train(cfg: TrainConfig, run_dir: Path, ck: dict | None, resume: bool) -> Pa
             checkpoint.claim(state.run_id)
     else:
         checkpoint.start_over()  # what a run killed before its first save left (its logs, a half-written file)
-        state.run_id = uuid.uuid4().hex
-        checkpoint.claim(state.run_id)
         if cfg.run.init_from:
             learner = warm_start(cfg.run.init_from, cfg, actor, normalize, run=run)
             state.stats_ready = learner is not None
             print(f"starting from the networks of {cfg.run.init_from}")
+        state.run_id = uuid.uuid4().hex
+        checkpoint.claim(state.run_id)
     if state.frames >= cfg.run.total_frames:
         print(f"nothing to do: {state.frames:,} frames already collected (total_frames={cfg.run.total_frames:,}); "
               "raise total_frames= to train further")

@@ -8,6 +8,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from atrv_warp.core.inputs import InputFileError, read_input
 from atrv_warp.sim.config import ContactConfig, InertialOverride, RoverConfig, get_variant, replace_checked
 
 __all__ = ["SIM_CONFIG_TABLES", "STANDARD_ERROR_TABLE", "SimConfigFile", "load_sim_config", "read_sim_config"]
@@ -95,7 +96,11 @@ def read_sim_config(path, rover: RoverConfig | None = None, contact: ContactConf
     contact = contact or ContactConfig()
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_input(path, "simulator config").decode("utf-8")
+    except FileNotFoundError:
+        raise ValueError(f"sim config {path}: cannot read it (no such file)") from None
+    except InputFileError as err:
+        raise ValueError(f"sim config {err}") from None
     except OSError as err:
         raise ValueError(f"sim config {path}: cannot read it ({err.strerror or err})") from None
     except UnicodeDecodeError:

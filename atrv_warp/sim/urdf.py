@@ -9,15 +9,17 @@ the geometry needed to replace the URDF's collision meshes by wheel cylinders.
 from __future__ import annotations
 
 import functools
+import hashlib
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
+from atrv_warp.core.inputs import InputFileError, read_input
 from atrv_warp.sim.config import InertialOverride, RoverConfig, default_urdf_path
-from atrv_warp.storage import file_sha256
 
-__all__ = ["Frame", "Inertial", "RoverDescription", "URDFError", "Wheel", "load_rover", "read_urdf", "rigid_group"]
+__all__ = ["Frame", "Inertial", "RoverDescription", "URDFError", "Wheel", "check_tree", "load_rover", "read_urdf",
+           "rigid_group"]
 
 
 class URDFError(ValueError):
@@ -169,9 +171,13 @@ def _check_inertial(path: str, name: str, inertial: Inertial) -> None:
 def _parse(path: str):
     """The URDF's robot, or a URDFError naming the file and what is wrong with it. A process parses each file once
     while its bytes stay the same (the robot is read, never changed, by its callers)."""
-    if not os.path.isfile(path):
-        raise URDFError(f"URDF file not found: {path}")
-    return _parse_file(path, file_sha256(path))
+    try:
+        data = read_input(path, "URDF")  # a regular file of bounded size, before any parser sees it
+    except FileNotFoundError:
+        raise URDFError(f"URDF file not found: {path}") from None
+    except InputFileError as err:
+        raise URDFError(str(err)) from None
+    return _parse_file(path, hashlib.sha256(data).hexdigest())
 
 
 @functools.lru_cache(maxsize=16)
@@ -198,9 +204,50 @@ def _parse_file(path: str, digest: str):
 
 
 def read_urdf(path) -> tuple[dict, list]:
-    """The URDF's links by name and its joints (yourdfpy's objects), or a :class:`URDFError` naming the file."""
-    robot = _parse(os.fspath(path))
-    return {link.name: link for link in robot.links}, list(robot.joints)
+    """The URDF's links by name and its joints (yourdfpy's objects), checked to be one tree (:func:`check_tree`), or a
+    :class:`URDFError` naming the file."""
+    path = os.fspath(path)
+    robot = _parse(path)
+    links, joints = {link.name: link for link in robot.links}, list(robot.joints)
+    check_tree(path, links, joints)
+    return links, joints
+
+
+def check_tree(path: str, links: dict, joints) -> None:
+    """The links and joints make one tree, before anything walks them (a walk up a loop would never end): every joint's
+    ends exist, no link is the child of two joints, one link is no joint's child (the root), and every link hangs from
+    it (a link in a loop of joints does not).
+
+    Raises:
+        URDFError: the first problem, named with its links or joints.
+    """
+    parent: dict[str, str] = {}
+    for j in joints:
+        for end in (j.parent, j.child):
+            if end not in links:
+                raise URDFError(f"{path}: joint {j.name!r} refers to missing link {end!r}", subject=j.name)
+        if j.child in parent:
+            raise URDFError(f"{path}: link {j.child!r} is the child of two joints ({parent[j.child]!r} and {j.name!r}); "
+                            "a URDF is a tree", subject=j.child)
+        parent[j.child] = j.name
+    roots = [name for name in links if name not in parent]
+    if len(roots) != 1:
+        raise URDFError(f"{path}: a URDF has one root link (no joint's child), this one has "
+                        f"{len(roots)}: {roots[:8]}" + (" (a loop of joints leaves none)" if not roots else ""),
+                        subject=roots[0] if roots else None)
+    children: dict[str, list[str]] = {}
+    for j in joints:
+        children.setdefault(j.parent, []).append(j.child)
+    reached, todo = {roots[0]}, [roots[0]]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            if child not in reached:
+                reached.add(child)
+                todo.append(child)
+    lost = [name for name in links if name not in reached]
+    if lost:
+        raise URDFError(f"{path}: link(s) {lost[:8]} do not hang from the root {roots[0]!r}: a loop of joints",
+                        subject=lost[0])
 
 
 def rigid_group(chassis: str, links: dict, joints) -> dict[str, np.ndarray]:
@@ -235,13 +282,17 @@ def _origin(j) -> np.ndarray:
 
 def _rigid_group(chassis: str, links: dict, joints) -> dict[str, np.ndarray]:
     """Every link joined to ``chassis`` by fixed joints alone (above it in the tree or below), with its pose in the
-    chassis frame (4x4), in the URDF's link order: the one body they make."""
+    chassis frame (4x4), in the URDF's link order: the one body they make. Time linear in the joints (each link's
+    fixed joints gathered once), so a URDF of many fixed frames merges in seconds."""
+    fixed: dict[str, list] = {}
+    for j in joints:
+        if j.type == "fixed":
+            fixed.setdefault(j.parent, []).append(j)
+            fixed.setdefault(j.child, []).append(j)
     poses, todo = {chassis: np.eye(4)}, [chassis]
     while todo:
         name = todo.pop()
-        for j in joints:
-            if j.type != "fixed":
-                continue
+        for j in fixed.get(name, []):  # in the URDF's joint order, as a scan of every joint finds them
             if j.parent == name and j.child not in poses:  # down the tree
                 poses[j.child] = poses[name] @ _origin(j)
                 todo.append(j.child)
@@ -357,6 +408,7 @@ def load_rover(rover: RoverConfig | None = None) -> RoverDescription:
     path = os.fspath(rover.urdf or default_urdf_path())
     robot = _parse(path)
     links = {link.name: link for link in robot.links}
+    check_tree(path, links, robot.joints)
     _check_links(path, rover, links, robot.joints)
     overrides = {ov.link: ov for ov in rover.inertial_overrides}
 
