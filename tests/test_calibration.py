@@ -147,12 +147,13 @@ def test_reader_reads_a_drive(tmp_path):
 
 
 @pytest.mark.parametrize("case", ["not_mcap", "truncated", "no_joint_states", "wrong_type", "backwards",
-                                  "missing_wheel", "too_short"])
+                                  "missing_wheel", "too_short", "zeroed"])
 def test_bad_bags_are_one_line_errors_naming_the_file(tmp_path, case):
     path = tmp_path / f"{case}.mcap"
     expect = {"not_mcap": "not an MCAP file", "truncated": "truncated", "no_joint_states": "no topic /joint_states",
               "wrong_type": "expected nav_msgs/msg/Odometry", "backwards": "timestamps go backwards",
-              "missing_wheel": "lacks wheel joint", "too_short": "too short to fit"}[case]
+              "missing_wheel": "lacks wheel joint", "too_short": "too short to fit",
+              "zeroed": "corrupt near byte"}[case]
     if case == "not_mcap":
         path.write_text("this is a CSV file, not a bag\n1,2,3\n")
     elif case == "truncated":
@@ -166,6 +167,10 @@ def test_bad_bags_are_one_line_errors_naming_the_file(tmp_path, case):
         _bag(path, backwards_at=100)
     elif case == "missing_wheel":
         _bag(path, names=tuple(WHEELS)[:3])
+    elif case == "zeroed":  # 64 bytes zeroed in the (one) chunk: it does not decompress (it was a zstandard traceback)
+        data = bytearray(_bag(tmp_path / "full.mcap").read_bytes())
+        data[len(data) // 6:len(data) // 6 + 64] = bytes(64)
+        path.write_bytes(bytes(data))
     else:
         _bag(path, seconds=3.0)
     with pytest.raises((BagError, CalibrationError)) as err:

@@ -454,3 +454,35 @@ def test_the_deploy_table_is_where_the_robot_runs_not_what_it_is(tmp_path):
     for policy in (*shipped, *golden):
         record = policy_record(policy)
         assert record.robot == load_robot(record.robot.name), policy
+
+
+def test_robot_new_and_check_refuse_bad_input_in_one_line_before_any_work(tmp_path, capsys):
+    """Issue 70: ``robot new`` refuses a name that is not a name (a path, a quote: it wrote a file), an ``--out``
+    folder that does not exist and wheels without ``<inertial>`` (a traceback before); a robot file's name follows the
+    same rule; ``check --json`` into a missing folder is refused before the measured drive."""
+    import re
+
+    from atrv_warp.cli.robot import main
+
+    urdf = ros_urdf(tmp_path)
+    for args, message in ((["--name", "../evil"], "--name must be letters, digits, '_' and '-'"),
+                          (["--name", 'a"b'], "--name must be letters, digits, '_' and '-'"),
+                          (["--name", "ok", "--out", str(tmp_path / "none" / "ok.toml")], "does not exist")):
+        assert main(["new", str(urdf), *args]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [urdf.name]  # nothing written
+    bare = tmp_path / "bare.urdf"
+    bare.write_text(re.sub(r'(<link name="\w+_wheel">)\s*<inertial>.*?</inertial>', r"\1", urdf.read_text(),
+                           flags=re.S))
+    assert main(["new", str(bare), "--name", "bare"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "have no <inertial>" in err[0], err
+    assert main(["new", str(urdf), "--name", "rosbot"]) == 0
+    path = tmp_path / "rosbot.toml"
+    path.write_text(path.read_text().replace('name = "rosbot"', 'name = "ros bot"'))
+    with pytest.raises(RobotFileError, match="name must be letters, digits, '_' and '-'"):
+        load_robot(path)
+    assert main(["check", "jackal", "--json", str(tmp_path / "none" / "r.json")]) == 2
+    captured = capsys.readouterr()
+    assert "--json" in captured.err and "does not exist" in captured.err and "..." not in captured.out

@@ -177,9 +177,12 @@ def starter_file(urdf: str | Path, name: str) -> str:
     if radius is None:
         raise RobotFileError(f"{urdf}: the wheels have no cylinder geometry; write wheels.radius and wheels.width "
                              "by hand")
+    weighed = [j for j in wheels if links[j.child].inertial is not None and links[j.child].inertial.inertia is not None]
+    if not weighed:
+        raise RobotFileError(f"{urdf}: the wheel links ({', '.join(j.child for j in wheels)}) have no <inertial>: the "
+                             "driver's gains come from a wheel's inertia; give each wheel link its mass and inertia")
     inertia = min(float(np.asarray(j.axis, dtype=float) @ np.asarray(links[j.child].inertial.inertia, dtype=float)
-                        @ np.asarray(j.axis, dtype=float)) / float(np.dot(j.axis, j.axis))
-                  for j in wheels if links[j.child].inertial is not None)
+                        @ np.asarray(j.axis, dtype=float)) / float(np.dot(j.axis, j.axis)) for j in weighed)
     from atrv_warp.sim.robot_check import GAIN_RATIO, INTEGRAL_RATIO
 
     kp = float(f"{GAIN_RATIO * inertia / 0.01:.3g}")
@@ -221,12 +224,22 @@ angular_velocity = 1.0
 
 
 def _new(args) -> int:
-    from atrv_warp.core.robot import RobotFileError
+    from atrv_warp.core.files import OutputPathError, check_output_path
+    from atrv_warp.core.robot import ROBOT_NAME, RobotFileError
     from atrv_warp.sim.urdf import URDFError
 
+    if not ROBOT_NAME.fullmatch(args.name):
+        print(f"error: --name must be letters, digits, '_' and '-' (it names the robot's policies and files), got "
+              f"{args.name!r}", file=sys.stderr)
+        return 2
     out = Path(args.out) if args.out else Path(args.urdf).resolve().with_name(f"{args.name}.toml")
     if out.exists() and not args.force:
         print(f"error: {out} exists (--force overwrites it)", file=sys.stderr)
+        return 2
+    try:
+        check_output_path(out, "robot file")
+    except OutputPathError as err:
+        print(f"error: --out {err}", file=sys.stderr)
         return 2
     try:
         text = starter_file(args.urdf, args.name)
@@ -242,9 +255,16 @@ def _new(args) -> int:
 
 
 def _check(args) -> int:
+    from atrv_warp.core.files import OutputPathError, check_output_path
     from atrv_warp.core.robot import RobotFileError
     from atrv_warp.sim.robot_check import check_robot, measure_robot
 
+    if args.json:  # before the measured drive, which takes minutes
+        try:
+            check_output_path(args.json, "report")
+        except OutputPathError as err:
+            print(f"error: --json {err}", file=sys.stderr)
+            return 2
     try:
         if args.static:
             robot, description = check_robot(args.robot)

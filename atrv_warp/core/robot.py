@@ -62,6 +62,7 @@ import functools
 import hashlib
 import math
 import os
+import re
 import sys
 from dataclasses import dataclass, field
 from importlib import resources
@@ -78,6 +79,7 @@ __all__ = [
     "DEFAULT_ROBOT",
     "FIELDS",
     "ROBOTS",
+    "ROBOT_NAME",
     "SENSOR_KEYS",
     "Robot",
     "RobotFileError",
@@ -344,6 +346,9 @@ def _from_table(path: str, data: dict, urdf_sha256: str | None = None) -> Robot:
              "them)")
     if set(left) & set(right):
         fail(f"links: wheel(s) {sorted(set(left) & set(right))} on both sides")
+    if not ROBOT_NAME.fullmatch(values["name"]):
+        fail(f"name must be letters, digits, '_' and '-' (it names the robot's policies and files), got "
+             f"{values['name']!r}")
     urdf = Path(values["urdf"]).expanduser()
     urdf = urdf if urdf.is_absolute() else Path(path).parent / urdf
     return Robot(
@@ -361,6 +366,8 @@ def _from_table(path: str, data: dict, urdf_sha256: str | None = None) -> Robot:
         deploy=dict(deploy), sensors=sensors)
 
 
+ROBOT_NAME = re.compile(r"[A-Za-z0-9_-]+")
+"""What a robot's ``name`` may be: it names the robot's policies (``nav_deploy_<name>``), files and ROS parameters."""
 SENSOR_KEYS = ("kind", "name", "frame")
 """The keys every ``[[sensors]]`` entry has (text each); the rest are its kind's (:mod:`atrv_warp.task.sensors`)."""
 

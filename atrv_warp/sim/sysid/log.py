@@ -134,7 +134,7 @@ def read_drive_log(path, wheels: dict[str, tuple[int, float]], topics: Topics = 
                            "`ros2 bag record -s mcap`)")
         fh.seek(0)
         try:
-            reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+            reader = make_reader(fh, validate_crcs=True, decoder_factories=[DecoderFactory()])  # a damaged chunk is named
             summary = reader.get_summary()
             if summary is not None:
                 seen = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()
@@ -155,7 +155,10 @@ def read_drive_log(path, wheels: dict[str, tuple[int, float]], topics: Topics = 
             raise
         except (McapError, EOFError, OSError, ValueError, KeyError, IndexError, struct.error) as err:
             what = "not an MCAP file" if "magic" in f"{type(err).__name__} {err}".lower() else "truncated or corrupt"
-            raise BagError(f"{path}: {what} ({type(err).__name__}: {err})") from None
+            raise BagError(f"{path}: {what} near byte {fh.tell():,} ({type(err).__name__}: {err})") from None
+        except Exception as err:  # noqa: BLE001 - a damaged chunk fails in its decompressor (zstandard, lz4), any type
+            raise BagError(f"{path}: corrupt near byte {fh.tell():,}: a chunk does not decompress "
+                           f"({type(err).__name__}: {' '.join(str(err).split())[:160]})") from None
     if summary is None:  # a bag without a summary section (cut short while recording): check what was read
         _check_topics(path, seen, needed, topics)
     return _arrays(path, rows, wheels, topics, seen)
