@@ -224,8 +224,8 @@ def test_a_urdf_that_is_no_tree_or_no_regular_file_is_refused_before_anything_wa
             "</joint></robot>")
     cases = {"loop": (loop, r"has one root link .* has 0: \[\] \(a loop of joints leaves none\)"),
              "orphan": ('<link name="orphan"/></robot>', r"has one root link .* has 2: \['base_footprint', 'orphan'\]"),
-             "two_parents": ('<joint name="again" type="fixed"><parent link="laser"/><child link="chassis_link"/>'
-                             "</joint></robot>", r"link 'chassis_link' is the child of two joints")}
+             "two_parents": (('<joint name="again" type="fixed"><parent link="laser"/><child link="chassis_link"/>'
+                              "</joint></robot>"), r"link 'chassis_link' is the child of two joints")}
     for name, (tail, message) in cases.items():
         path = tmp_path / f"{name}.urdf"
         path.write_text(ros.replace("</robot>", tail))

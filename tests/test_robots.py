@@ -474,7 +474,7 @@ def test_robot_new_and_check_refuse_bad_input_in_one_line_before_any_work(tmp_pa
     assert sorted(p.name for p in tmp_path.iterdir()) == [urdf.name]  # nothing written
     bare = tmp_path / "bare.urdf"
     bare.write_text(re.sub(r'(<link name="\w+_wheel">)\s*<inertial>.*?</inertial>', r"\1", urdf.read_text(),
-                           flags=re.S))
+                           flags=re.DOTALL))
     assert main(["new", str(bare), "--name", "bare"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "have no <inertial>" in err[0], err
