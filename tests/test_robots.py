@@ -486,3 +486,71 @@ def test_robot_new_and_check_refuse_bad_input_in_one_line_before_any_work(tmp_pa
     assert main(["check", "jackal", "--json", str(tmp_path / "none" / "r.json")]) == 2
     captured = capsys.readouterr()
     assert "--json" in captured.err and "does not exist" in captured.err and "..." not in captured.out
+
+
+BAD_NUMBERS = ("nan", "inf", "-inf", "0", "-1", "1e30")
+"""What a careless or hostile robot file or URDF puts in a number (issue 70, part 5)."""
+
+
+def _finite_rollout(robot_path: Path) -> None:
+    """The robot drives 20 steps of a turning twist and every pose stays finite."""
+    from atrv_warp.sim import RoverSim
+
+    sim = RoverSim(1, robot=str(robot_path))
+    for _ in range(20):
+        sim.set_twist(torch.tensor([[0.5, 0.5]]))
+        sim.step()
+    assert torch.isfinite(sim.root_pose).all() and not sim.nonfinite.any(), robot_path
+
+
+def test_no_bad_number_in_a_robot_file_or_its_urdf_reaches_the_physics(tmp_path):
+    """Every number of a robot file, and a URDF's masses, inertias, origins and axes, swept with NaN, ±inf, 0, -1 and
+    1e30: each is refused, naming its field (or link or joint), or the robot drives with every pose finite."""
+    import re
+
+    from atrv_warp.core.robot import PHYSICAL_RANGE, robot_file
+    from atrv_warp.sim.urdf import URDFError
+
+    shipped = robot_file("jackal")
+    text, urdf = shipped.read_text(), shipped.with_suffix(".urdf").read_text()
+    (tmp_path / "jackal.urdf").write_text(urdf)
+    driven = []
+    for field in PHYSICAL_RANGE:
+        table, key = field.split(".")
+        for value in BAD_NUMBERS:
+            path = tmp_path / f"{table}_{key}_{value}.toml"
+            pattern = rf"(\[{table}\][^\[]*?\n){key} = [^\n]*"
+            changed = re.sub(pattern, rf"\g<1>{key} = {value}", text, count=1, flags=re.DOTALL)
+            if changed == text:  # an optional field the Jackal's file leaves out: add it to its table
+                changed = text.replace(f"[{table}]\n", f"[{table}]\n{key} = {value}\n", 1)
+            path.write_text(changed)
+            try:
+                load_robot(path)
+            except RobotFileError as err:
+                assert field in str(err) and "\n" not in str(err), (field, value, str(err))
+                continue
+            driven.append(path)
+    urdf_cases = {"wheel mass": ('<mass value="0.477"/>', '<mass value="{}"/>'),
+                  "chassis inertia": ('ixx="0.3136"', 'ixx="{}"'),
+                  "wheel origin": ('<origin xyz="0.131 0.187795 0.0345"', '<origin xyz="{} 0.187795 0.0345"'),
+                  "wheel axis": ('<axis xyz="0 1 0"/>', '<axis xyz="0 {} 0"/>')}
+    for case, (old, new) in urdf_cases.items():
+        for value in BAD_NUMBERS:
+            name = f"{case.replace(' ', '_')}_{value}"
+            (tmp_path / f"{name}.urdf").write_text(urdf.replace(old, new.format(value), 1))
+            path = tmp_path / f"{name}.toml"
+            path.write_text(text.replace('urdf = "jackal.urdf"', f'urdf = "{name}.urdf"'))
+            try:
+                from atrv_warp.sim.config import nominal_rover_config
+                from atrv_warp.sim.urdf import load_rover
+
+                load_rover(nominal_rover_config(str(path)))
+            except URDFError as err:
+                assert str(err).count(str(tmp_path)) >= 1 and "\n" not in str(err), (case, value, str(err))
+                assert re.search(r"link '|joint '|wheel '", str(err)), (case, value, str(err))  # named
+                continue
+            driven.append(path)
+    assert {p.stem for p in driven} == {"wheels_offset_0", "driver_ki_0", "wheel_origin_0", "wheel_origin_-1",
+                                        "wheel_axis_-1", "wheel_axis_1e30"}, sorted(p.stem for p in driven)
+    for path in driven:
+        _finite_rollout(path)

@@ -78,6 +78,7 @@ else:  # Python 3.10 (ROS 2 Humble's): the same parser from PyPI, which the slim
 __all__ = [
     "DEFAULT_ROBOT",
     "FIELDS",
+    "PHYSICAL_RANGE",
     "ROBOTS",
     "ROBOT_NAME",
     "SENSOR_KEYS",
@@ -222,6 +223,18 @@ _SCHEMA: dict[str, dict[str, tuple[type, bool]]] = {
 }
 """Each table's keys: (type, required). ``[sources]`` maps any of their dotted names to text."""
 
+PHYSICAL_RANGE: dict[str, tuple[float, float]] = {
+    "wheels.radius": (0.01, 2.0), "wheels.width": (0.005, 2.0), "wheels.offset": (0.0, 2.0),
+    "motor.torque_limit": (0.01, 1e4), "motor.no_load_speed": (0.1, 1e3),
+    "driver.kp": (1e-6, 1e4), "driver.ki": (0.0, 1e5), "driver.effective_track_factor": (0.5, 20.0),
+    "limits.linear_velocity": (0.01, 50.0), "limits.angular_velocity": (0.01, 50.0),
+    "limits.linear_acceleration": (0.01, 1e3), "limits.angular_acceleration": (0.01, 1e3),
+}
+"""Each number's range [its unit], beyond which no skid-steer rover lies: a wheel of 1 cm to 2 m, a motor of up to
+10 kN·m and 1,000 rad/s, a track factor of 0.5-20 (MuJoCo's turn needs 2.6, PhysX's up to 13.6), limits up to
+50 m/s. It keeps a mistyped value (``torque_limit = 1e30`` stepped the physics to NaN) out of the simulator, named;
+a value inside it is the robot's to set."""
+
 FIELDS: tuple[str, ...] = tuple(f"{t}.{k}" if t else k for t, keys in _SCHEMA.items() for k in keys)
 """Every key of a robot file, dotted (``"limits.linear_velocity"``)."""
 
@@ -323,6 +336,10 @@ def _from_table(path: str, data: dict, urdf_sha256: str | None = None) -> Robot:
                     fail(f"{name} must be a finite number, got {value!r}")
                 if value < 0 or (value == 0 and name not in ("driver.ki", "wheels.offset")):
                     fail(f"{name} must be > 0, got {value!r}")
+                low, high = PHYSICAL_RANGE[name]
+                if not low <= value <= high:
+                    fail(f"{name} = {value!r} is outside the range a skid-steer rover's lies in, [{low:g}, {high:g}] "
+                         f"(PHYSICAL_RANGE): a mistyped value?")
                 value = float(value)
             elif kind is bool:
                 if not isinstance(value, bool):

@@ -18,8 +18,8 @@ import numpy as np
 from atrv_warp.core.inputs import InputFileError, read_input
 from atrv_warp.sim.config import InertialOverride, RoverConfig, default_urdf_path
 
-__all__ = ["Frame", "Inertial", "RoverDescription", "URDFError", "Wheel", "check_tree", "load_rover", "read_urdf",
-           "rigid_group"]
+__all__ = ["URDF_RANGE", "Frame", "Inertial", "RoverDescription", "URDFError", "Wheel", "check_numbers", "check_tree",
+           "load_rover", "read_urdf", "rigid_group"]
 
 
 class URDFError(ValueError):
@@ -210,7 +210,51 @@ def read_urdf(path) -> tuple[dict, list]:
     robot = _parse(path)
     links, joints = {link.name: link for link in robot.links}, list(robot.joints)
     check_tree(path, links, joints)
+    check_numbers(path, links, joints)
     return links, joints
+
+
+URDF_RANGE = {"mass": 1e4, "inertia": 1e4, "distance": 100.0}
+"""The largest link mass [kg], inertia tensor entry [kg·m²] and origin offset [m] a rover's URDF may hold: a value past
+them (a ``1e400`` that XML reads as inf, a mistyped exponent) is refused, named, before it reaches the physics."""
+
+
+def check_numbers(path: str, links: dict, joints) -> None:
+    """Every number the simulator takes from the URDF is finite and within :data:`URDF_RANGE`: each link's mass (>= 0),
+    inertia tensor and inertial origin, each joint's origin, and each joint's axis (not zero).
+
+    Raises:
+        URDFError: the first bad number, named with its link or joint.
+    """
+    def bad(values, limit: float) -> bool:
+        array = np.asarray(values, dtype=float)
+        return not (np.isfinite(array).all() and (np.abs(array) <= limit).all())
+
+    for name, link in links.items():
+        inertial = link.inertial
+        if inertial is None:
+            continue
+        mass = inertial.mass if inertial.mass is not None else 0.0
+        if bad(mass, URDF_RANGE["mass"]) or mass < 0:
+            raise URDFError(f"{path}: link {name!r}: <mass> {mass!r} must be a finite number in [0, "
+                            f"{URDF_RANGE['mass']:g}] kg", subject=name)
+        if inertial.inertia is not None and bad(inertial.inertia, URDF_RANGE["inertia"]):
+            raise URDFError(f"{path}: link {name!r}: <inertia> must be finite numbers of at most "
+                            f"{URDF_RANGE['inertia']:g} kg·m², got {np.asarray(inertial.inertia).tolist()}",
+                            subject=name)
+        if inertial.origin is not None and bad(np.asarray(inertial.origin)[:3, 3], URDF_RANGE["distance"]):
+            raise URDFError(f"{path}: link {name!r}: the <inertial> <origin> must be finite and within "
+                            f"{URDF_RANGE['distance']:g} m", subject=name)
+    for j in joints:
+        origin = _origin(j)
+        if not np.isfinite(origin).all() or bad(origin[:3, 3], URDF_RANGE["distance"]):
+            raise URDFError(f"{path}: joint {j.name!r}: its <origin> must be finite and within "
+                            f"{URDF_RANGE['distance']:g} m, got xyz {origin[:3, 3].tolist()}", subject=j.name)
+        if j.axis is not None:
+            axis = np.asarray(j.axis, dtype=float)
+            if not np.isfinite(axis).all() or np.linalg.norm(axis) < 1e-9:
+                raise URDFError(f"{path}: joint {j.name!r}: its <axis> {axis.tolist()} must be a finite, non-zero "
+                                "vector", subject=j.name)
 
 
 def check_tree(path: str, links: dict, joints) -> None:
@@ -409,6 +453,7 @@ def load_rover(rover: RoverConfig | None = None) -> RoverDescription:
     robot = _parse(path)
     links = {link.name: link for link in robot.links}
     check_tree(path, links, robot.joints)
+    check_numbers(path, links, robot.joints)
     _check_links(path, rover, links, robot.joints)
     overrides = {ov.link: ov for ov in rover.inertial_overrides}
 
