@@ -535,3 +535,36 @@ def test_train_around_a_calibrated_rover_from_the_command_line(tmp_path, run_mod
                      str(lacking), "randomization=around", check=False)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
     assert str(lacking) in bad.stderr and "payload_mass" in bad.stderr and not (tmp_path / "bad").exists()
+
+
+@pytest.mark.parametrize(("token", "message"), [
+    ("max_minutes=nan", "run.max_minutes must be a finite number, got nan"),
+    ("lr=inf", "optim.lr must be a finite number, got inf"),
+    ("env.task.max_steps=-3", "TaskConfig.max_steps must be >= 0, got -3"),
+    ("env.task.reach_radius=0", "TaskConfig.reach_radius must be > 0"),
+    ("total_frames=1e30", "run.total_frames must be a whole number, got 1e30"),
+    ("total_frames=2.5", "run.total_frames must be a whole number, got 2.5"),
+    ("run.device=cpu:1", "device must be cpu (one device, whatever its cores)"),
+    ("num_envs=10_000_000", "(env.num_envs alone"),
+    ("buffer_size=2_000_000_000", "(optim.buffer_size alone"),
+    ("steps_per_batch=100_000_000", "lower env.num_envs or env.steps_per_batch"),
+])
+def test_a_bad_number_or_size_is_refused_by_name_before_any_work(token, message):
+    """Issue 70: numbers that are not finite, counts below zero or not whole, a CPU index, and a run that would not
+    fit in memory (estimated before anything is allocated) are one line naming the field; 1e6 is a whole number."""
+    from atrv_warp.rl.command_line import parse_command
+
+    with pytest.raises(ValueError) as err:
+        parse_command(["--config", "smoke", token])
+    assert message in str(err.value) and "\n" not in str(err.value), str(err.value)
+
+
+def test_whole_numbers_in_float_form_and_text_without_control_characters(tmp_path):
+    from atrv_warp.rl.command_line import load_train_config, parse_command
+
+    assert parse_command(["--config", "smoke", "total_frames=1e6"]).train.run.total_frames == 1_000_000
+    assert load_train_config("smoke", {"total_frames": "2.0e4"}).run.total_frames == 20_000
+    config = tmp_path / "nul.toml"
+    config.write_text('[run]\nname = "a\\u0000b"\n')
+    with pytest.raises(ValueError, match=r"run.name holds a control character: 'a\\x00b'"):
+        load_train_config(str(config))

@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import io
+import math
 import tomllib
 import typing
 from dataclasses import dataclass, field
@@ -73,11 +74,33 @@ def _field_type(dotted: str):
 
 
 def _token(dotted: str, value) -> list[str]:
-    """``--group.field VALUE`` for tyro, true/false spelt as tyro spells them."""
+    """``--group.field VALUE`` for tyro, true/false spelt as tyro spells them, and a whole number written as a float
+    (``total_frames=1e6``, a TOML's ``5e5``) as an integer for an integer field.
+
+    Raises:
+        ValueError: A number for an integer field that is not whole, or past 2^63 (named).
+    """
     text = str(value)
-    if _field_type(dotted) is bool:
+    kind = _field_type(dotted)
+    if kind is bool:
         text = BOOLEAN_SPELLINGS.get(text.strip().lower(), text)
+    elif kind is int and not isinstance(value, bool):
+        text = _whole(dotted, value, text)
     return [f"--{dotted.replace('_', '-')}", text]
+
+
+def _whole(dotted: str, value, text: str) -> str:
+    """``text`` of an integer field as an integer: ``1e6`` and ``5e5.0`` are whole numbers; ``2.5``, ``1e30`` and
+    ``nan`` are refused by name (tyro said "invalid literal for int()")."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return text  # not a number: tyro names it
+    if text.strip().lstrip("+-").isdigit():
+        return text
+    if not (math.isfinite(number) and number.is_integer() and abs(number) < 2**63):
+        raise ValueError(f"train config: {dotted} must be a whole number, got {text}")
+    return str(int(number))
 
 
 def _unknown(keys: list[str], where: str = "") -> ValueError:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -319,14 +320,61 @@ class TrainConfig:
         self._validate_device()
         if self.optim.batch_size > self.optim.buffer_size:
             raise ValueError("train config: batch_size must not exceed buffer_size")
+        self._validate_values()
         name = self.run.name
         if not name or name in (".", "..") or "/" in name or "\\" in name or name != name.strip():
             raise ValueError(f"train config: name must be a folder name inside out_dir (no '/', not '..'), got {name!r}")
         out_dir = Path(self.run.out_dir)
         if out_dir.exists() and not out_dir.is_dir():
             raise ValueError(f"train config: out_dir {out_dir} is a file, not a folder")
-        resolve_run(self)  # the task, its fields, the sim config file and the randomizations: named where they fail
+        # the task, its fields, the sim config file and the randomizations: named where they fail
+        self._validate_memory(resolve_run(self))
         return self
+
+    def _validate_values(self) -> None:
+        """Every number is finite and every text free of control characters (a NaN ``max_minutes`` trained for ever,
+        a NUL in ``name`` made a folder no tool could open), named."""
+        for group in dataclasses.fields(self):
+            for f in dataclasses.fields(getattr(self, group.name)):
+                value = getattr(getattr(self, group.name), f.name)
+                for item in (value if isinstance(value, tuple) else (value,)):
+                    for part in (item if isinstance(item, tuple) else (item,)):
+                        if isinstance(part, float) and not math.isfinite(part):
+                            raise ValueError(f"train config: {group.name}.{f.name} must be a finite number, got "
+                                             f"{value!r}")
+                        if isinstance(part, str) and any(ord(c) < 32 or ord(c) == 127 for c in part):
+                            raise ValueError(f"train config: {group.name}.{f.name} holds a control character: "
+                                             f"{part!r}")
+
+    def _validate_memory(self, run) -> None:
+        """Refuse, before anything is allocated, a run whose replay buffer, batches and worlds would not fit in the
+        machine's memory (the host's; the GPU's for the buffer on a CUDA device), naming the largest."""
+        import os
+
+        from atrv_warp.task.sensors import sensor_fields
+        from atrv_warp.task.spec import observation_fields
+
+        obs = len(observation_fields(run.task.config, sensor_fields(run.task.config, run.robot)))
+        frame = 4 * (2 * obs + 8) + 8  # observation and next observation, action, reward, flags [bytes]
+        needs = {"optim.buffer_size": self.optim.buffer_size * frame,
+                 "env.num_envs x env.steps_per_batch": 2 * self.frames_per_batch * self.collector.num_collectors * frame,
+                 "env.num_envs": (self.env.num_envs * self.collector.num_collectors + self.logging.eval_episodes)
+                 * WORLD_BYTES}
+        if self.run.device != "cpu":
+            import torch
+
+            gpu = torch.cuda.get_device_properties(torch.device(self.run.device)).total_memory
+            if needs["optim.buffer_size"] > gpu:
+                raise ValueError(f"train config: buffer_size={self.optim.buffer_size:,} needs about "
+                                 f"{needs['optim.buffer_size'] / 2**30:.1f} GiB on {self.run.device}, which has "
+                                 f"{gpu / 2**30:.1f} GiB")
+            needs.pop("optim.buffer_size")
+        ram = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        if sum(needs.values()) > ram:
+            largest = max(needs, key=needs.get)
+            raise ValueError(f"train config: this run needs about {sum(needs.values()) / 2**30:,.1f} GiB of memory "
+                             f"({largest} alone {needs[largest] / 2**30:,.1f} GiB), and the machine has "
+                             f"{ram / 2**30:.1f} GiB: lower {largest.replace(' x ', ' or ')}")
 
     def _validate_device(self) -> None:
         import torch
@@ -337,8 +385,9 @@ class TrainConfig:
         except (RuntimeError, TypeError) as err:
             raise ValueError(f"train config: device must be cpu or a CUDA device (cuda, cuda:0), got {device!r}: "
                              f"{err}") from None
-        if parsed.type not in ("cpu", "cuda"):
-            raise ValueError(f"train config: device must be cpu or a CUDA device (cuda, cuda:0), got {device!r}")
+        if parsed.type not in ("cpu", "cuda") or (parsed.type == "cpu" and parsed.index not in (None, 0)):
+            raise ValueError(f"train config: device must be cpu (one device, whatever its cores) or a CUDA device "
+                             f"(cuda, cuda:0), got {device!r}")
         if parsed.type == "cuda":
             if not torch.cuda.is_available():
                 raise ValueError(f"train config: device={device} but this torch ({torch.__version__}) sees no CUDA "
@@ -358,6 +407,10 @@ class TrainConfig:
             raise ValueError(f"train config: compile={self.optim.compile} builds SAC's update; PPO runs eager "
                              "(compile=off)")
 
+
+WORLD_BYTES = 64 << 10
+"""Memory one simulated world takes, at most [bytes] (``nav_deploy``'s measured 26 KB a world at 1,024 worlds, with a
+margin): what :meth:`TrainConfig.validate` counts the worlds at before any is built."""
 
 GROUP_TYPES: dict[str, type] = typing.get_type_hints(TrainConfig)
 """Each group's name and its config class, in :class:`TrainConfig`'s order (``run``, ``env``, ...)."""

@@ -118,6 +118,16 @@ class TaskConfig:
         if self.observation not in OBSERVATION_KINDS:
             raise ValueError(f"TaskConfig.observation={self.observation!r} is not an observation kind; known: "
                              f"{sorted(OBSERVATION_KINDS)}")
+        for f in dataclasses.fields(self):  # every number finite, every count whole and not negative
+            value = getattr(self, f.name)
+            for part in value if isinstance(value, tuple) else (value,):
+                if isinstance(part, float) and not math.isfinite(part):
+                    raise ValueError(f"TaskConfig.{f.name} must be finite, got {value!r}")
+                if isinstance(part, int) and not isinstance(part, bool) and part < 0:
+                    raise ValueError(f"TaskConfig.{f.name} must be >= 0, got {value!r}")
+        for name in ("spawn_bound", "reach_radius", "flip_roll", "max_steps", "scan_fov", "scan_clip"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"TaskConfig.{name} must be > 0, got {getattr(self, name)!r}")
         limits = [name for name, _ in BASE_LIMITS if getattr(self, name) is not None]
         for name in ("max_linear", "max_angular", "action_scale", *limits):
             value = getattr(self, name)
