@@ -508,10 +508,17 @@ def test_bad_parameters_are_refused_at_start(ros_env, tmp_path):
     save_policy(make_actor(16, 1, obs_dim=26), old, width=16, depth=1, meta={"task": "nav"})
     params_file = tmp_path / "params.yaml"
     params_file.write_text("atrv_sim:\n  ros__parameters:\n    num_rovrs: 2\n")
+    from atrv_warp.core.robot import robot_file
+
+    shipped = robot_file("jackal")  # a robot whose URDF loops through the chassis' parent: it hung the node for 90 s
+    (tmp_path / "loop.urdf").write_text(shipped.with_suffix(".urdf").read_text().replace(
+        "</robot>", '<joint name="back" type="fixed"><parent link="chassis_link"/><child link="base_link"/></joint></robot>'))
+    (tmp_path / "loop.toml").write_text(shipped.read_text().replace('urdf = "jackal.urdf"', 'urdf = "loop.urdf"'))
     for params, message in ((["bogus_param:=1"], "unknown parameter(s) bogus_param; known: "),
                             (["num_rovers:=0"], "parameter num_rovers must be an integer in [1, 64], got 0"),
                             (["num_rovers:=abc"], "parameter num_rovers must be an integer, got 'abc' (str)"),
                             (["tf:=maybe"], "parameter tf must be true or false, got 'maybe' (str)"),
+                            ([f"robot:={tmp_path / 'loop.toml'}"], "parameter robot: " + str(tmp_path / "loop.urdf")),
                             (["--params-file", str(params_file)], f"unknown parameter(s) num_rovrs (in {params_file})"),
                             (["task:=maze"], "task='maze' is not a task"),
                             (["cmd_vel_delay:=-0.1"], "parameter cmd_vel_delay must be a finite number >= 0 [s], got -0.1"),

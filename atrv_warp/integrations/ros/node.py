@@ -202,10 +202,11 @@ class RoverSimNode(Node):
         except ParameterError as err:
             self._fail(str(err))
         from atrv_warp.core.robot import RobotFileError, load_robot
+        from atrv_warp.sim.urdf import URDFError, read_urdf
 
-        try:
-            load_robot(p["robot"])
-        except RobotFileError as err:
+        try:  # the robot file and its URDF's tree and numbers, before the simulator (Newton) is imported
+            read_urdf(load_robot(p["robot"]).urdf)
+        except (RobotFileError, URDFError) as err:
             self._fail(f"parameter robot: {err}")
         try:
             self.driver = driver_config(p)
