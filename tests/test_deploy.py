@@ -704,3 +704,54 @@ def test_the_launch_file_is_one_for_every_robot_and_an_unknown_robot_is_named(ca
             main(["--launch-files", robot])
         err = capsys.readouterr().err
         assert ended.value.code == 2 and message in err.strip().splitlines()[-1], err  # after argparse's usage
+
+
+def test_a_tf_flood_is_bounded_and_its_frames_age_out():
+    """Issue 70: a /tf flood of new frame names neither grows the buffer past MAX_FRAMES nor drops the frames it holds;
+    a message past MAX_PER_MESSAGE is cut; /tf frames unheard for STALE_AFTER_S go, /tf_static ones stay; a lookup
+    after the flood costs what it cost before it (the tree's adjacency is built once per change, not per lookup)."""
+    import time
+
+    from atrv_warp.core.tf import MAX_FRAMES, MAX_PER_MESSAGE, STALE_AFTER_S, TransformBuffer
+
+    buf = TransformBuffer()
+    buf.add(tf_msg(("map", "odom", 1.0, 0.0, 0.0)), 0.0)
+    buf.add(tf_msg(("base_link", "laser", 0.2, 0.0, 0.0)), 0.0, static=True)
+    for k in range(100):  # 100 messages of 50 new names each, at 100 Hz: 5,000 frames
+        buf.add(tf_msg(*((f"flood_{k}_{i}", f"flood_{k}_{i}_child", 0.0, 0.0, 0.0) for i in range(50))), 0.01 * k)
+        buf.add(tf_msg(("map", "odom", 1.0, 0.0, 0.0)), 0.01 * k)  # the localisation keeps publishing
+    assert len(buf.edges) == MAX_FRAMES and buf.skipped > 0
+    assert buf.transform_point((0.0, 0.0, 0.0), "map", "odom") == (1.0, 0.0, 0.0)
+    t0 = time.perf_counter()
+    for _ in range(1000):
+        buf.transform_point((0.0, 0.0, 0.0), "map", "odom")
+    assert time.perf_counter() - t0 < 2.0  # ~ms per thousand lookups: no rebuild of a 1,000-frame tree each time
+    buf.add(tf_msg(*((f"big_{i}", f"big_{i}_child", 0.0, 0.0, 0.0) for i in range(MAX_PER_MESSAGE + 50))),
+            STALE_AFTER_S + 0.5)  # the flood's names unheard for more than STALE_AFTER_S: gone; odom heard at 0.99 s
+    assert set(buf.edges) == {"odom", "laser"} | {f"big_{i}_child" for i in range(MAX_PER_MESSAGE)}
+    buf.add(tf_msg(), 3 * STALE_AFTER_S)
+    assert set(buf.edges) == {"laser"}  # the static frame stays
+
+
+def test_non_finite_goals_after_tf_and_far_scanner_mounts_are_refused_and_the_status_is_standard_json(policy, tmp_path):
+    """Issue 70: a goal carried into odom as -inf (x = -1.7e308 in map, map -> odom at +1.7e308) is refused, and the
+    status stays standard JSON; a /tf that puts the scanner 1,000 m from the trained mount is refused and the rover
+    held."""
+    contract = json.loads(json.dumps(policy.contract))
+    contract["scan"] = {**contract["scan"], "mount": {"parent": "chassis", "x": 0.3, "y": 0.0, "z": 0.2, "yaw": 0.0}}
+    mounted = load_deployable(write_policy(tmp_path / "mounted.pt2", contract))
+    c = Controller(mounted, tf=True)
+    c.on_tf(tf_msg(("map", "odom", 1.7e308, 0.0, 0.0), ("chassis", "laser", 1000.3, 0.0, 0.0)), 0.0)
+    line = c.on_goal(goal_msg(-1.7e308, 0.0, frame="map"), 0.0)
+    assert "goal refused" in line and "is not finite in 'odom'" in line, line
+    json.loads(json.dumps(c.status("aborted")), parse_constant=lambda name: pytest.fail(f"status holds {name}"))
+    edges = contract["scan"]["sectors"]["edges_rad"]
+    msg = scan_msg([2.0] * 181, edges[0], (edges[-1] - edges[0]) / 180, 0.05, 30.0)
+    msg.header = NS(frame_id="laser")
+    line = c.on_scan(msg, 0.0)
+    assert "scan refused: /tf puts its scanner ('laser') 1000.00 m from where the policy's was" in line, line
+    c.on_odom(odom_msg(), 0.0)
+    c.on_imu(imu_msg(), 0.0)
+    c.on_goal(goal_msg(3.0, 1.0), 0.0)
+    tick = c.tick(0.05)
+    assert tick.command == (0.0, 0.0) and tick.status["state"] == "holding", tick

@@ -10,11 +10,21 @@ localisation, or ``base_link -> laser`` from a robot's description). Lookups use
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import deque
 from dataclasses import dataclass
 
-__all__ = ["Transform", "TransformBuffer", "frame_id"]
+__all__ = ["MAX_FRAMES", "MAX_PER_MESSAGE", "STALE_AFTER_S", "Transform", "TransformBuffer", "frame_id"]
+
+MAX_FRAMES = 1000
+"""The most frames a buffer keeps: a robot's tree has tens; a new frame past them is skipped (frames it holds still
+update), so a flood of new names cannot grow it or slow a lookup."""
+MAX_PER_MESSAGE = 200
+"""The most transforms one message may add or update; the rest of a larger message is skipped."""
+STALE_AFTER_S = 10.0
+"""A ``/tf`` frame not updated for this long [s] is dropped (``/tf_static`` frames are kept): a flood's names age
+out and free their places."""
 
 
 @dataclass(frozen=True)
@@ -58,14 +68,28 @@ class TransformBuffer:
     def __init__(self):
         self.edges: dict[str, tuple[str, Transform]] = {}
         """Each child frame's parent and its pose in it (tf: one parent per frame)."""
+        self.updated: dict[str, float | None] = {}
+        """When each child frame was last updated (``None``: static, never stale)."""
+        self.skipped = 0
+        """Transforms skipped because the buffer was full (:data:`MAX_FRAMES`) or a message too long."""
+        self._links: dict[str, list[tuple[str, bool]]] | None = None
+        """The tree's adjacency, built on the first lookup after the tree's shape changed."""
 
-    def add(self, msg) -> int:
+    def add(self, msg, now: float | None = None, *, static: bool = False) -> int:
         """Take a ``tf2_msgs/TFMessage``'s transforms (a later one replaces an earlier one of the same child);
         returns how many were taken. A transform with a non-finite value, a zero rotation, an empty frame name or a
-        frame that is its own parent is skipped.
+        frame that is its own parent is skipped, as is a new frame past :data:`MAX_FRAMES` and any transform past
+        :data:`MAX_PER_MESSAGE` of one message. ``now`` [s]: the time of a ``/tf`` message, whose frames go stale
+        after :data:`STALE_AFTER_S` (``static``: ``/tf_static``'s, kept).
         """
+        if now is not None:
+            self._drop_stale(now)
         taken = 0
-        for t in msg.transforms:
+        transforms = list(itertools.islice(msg.transforms, MAX_PER_MESSAGE + 1))
+        if len(transforms) > MAX_PER_MESSAGE:
+            self.skipped += 1
+            transforms = transforms[:MAX_PER_MESSAGE]
+        for t in transforms:
             parent, child = frame_id(t.header.frame_id), frame_id(t.child_frame_id)
             tr, rot = t.transform.translation, t.transform.rotation
             values = (tr.x, tr.y, tr.z, rot.x, rot.y, rot.z, rot.w)
@@ -75,16 +99,32 @@ class TransformBuffer:
             if norm < 1e-9:
                 continue
             q = (rot.x / norm, rot.y / norm, rot.z / norm, rot.w / norm)
+            known = self.edges.get(child)
+            if known is None and len(self.edges) >= MAX_FRAMES:
+                self.skipped += 1
+                continue
+            if known is None or known[0] != parent:
+                self._links = None  # the tree's shape changed
             self.edges[child] = (parent, Transform((float(tr.x), float(tr.y), float(tr.z)), q))
+            self.updated[child] = None if static or now is None else now
             taken += 1
         return taken
 
+    def _drop_stale(self, now: float) -> None:
+        stale = [c for c, t in self.updated.items() if t is not None and now - t > STALE_AFTER_S]
+        for child in stale:
+            del self.edges[child], self.updated[child]
+        if stale:
+            self._links = None
+
     def _path(self, target: str, source: str) -> list[tuple[str, str, bool]] | None:
         """The edges from ``source`` to ``target``: (from, to, up) where ``up`` walks child to parent."""
-        links: dict[str, list[tuple[str, bool]]] = {}
-        for child, (parent, _) in self.edges.items():
-            links.setdefault(child, []).append((parent, True))
-            links.setdefault(parent, []).append((child, False))
+        if self._links is None:
+            self._links = {}
+            for child, (parent, _) in self.edges.items():
+                self._links.setdefault(child, []).append((parent, True))
+                self._links.setdefault(parent, []).append((child, False))
+        links = self._links
         seen, todo = {source: None}, deque([source])
         while todo:
             here = todo.popleft()

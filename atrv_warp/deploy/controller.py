@@ -33,11 +33,14 @@ from atrv_warp.deploy.messages import (
 )
 from atrv_warp.deploy.parameters import PARAMETER_BY_NAME
 
-__all__ = ["STATES", "TIME_LIMIT", "Controller", "Settings", "Tick"]
+__all__ = ["MOUNT_LIMIT_M", "STATES", "TIME_LIMIT", "Controller", "Settings", "Tick"]
 
 TIME_LIMIT = "time limit"
 """How an aborted status's ``reason`` starts when the goal ran out of ``time_limit`` (the node's ``NavigateToPose``
 result reports it as Nav2's ``TIMEOUT``)."""
+MOUNT_LIMIT_M = 1.0
+"""How far from the trained mount [m] a scanner's ``/tf`` mount may be: past it the transform is taken to be wrong
+(every shipped robot is under 1 m long: a scanner moved farther is off the robot) and the scan refused."""
 STATES = ("active", "holding", "reached", "aborted")
 """The goal status's ``state``: driving by the policy; held still for a ``reason`` (resumes by itself); the goal
 reached (within ``goal_tolerance``); given up for a ``reason`` (time limit, shutdown, a new goal)."""
@@ -202,9 +205,9 @@ class Controller:
             return None
         try:
             scan = read_scan(msg, self.policy.observation)
+            mount, source = self.scan_mount(frame_id(getattr(getattr(msg, "header", None), "frame_id", "") or ""))
         except ValueError as err:
             return self._store("scan", None, now, str(err), msg)
-        mount, source = self.scan_mount(frame_id(getattr(getattr(msg, "header", None), "frame_id", "") or ""))
         if mount is not None:
             scan = dataclasses.replace(scan, mount=mount)
         line = self._store("scan", scan, now, None, msg)
@@ -216,7 +219,12 @@ class Controller:
     def scan_mount(self, frame: str) -> tuple[tuple[float, float, float] | None, str]:
         """Where the scanner of frame ``frame`` sits relative to the one the policy was trained with (the contract's
         ``scan.mount`` on the chassis), from ``/tf``: ((x [m], y [m], yaw [rad]), how it was found), or (None, why
-        the scan is read as it is: no mount recorded, no transform, or the trained mount)."""
+        the scan is read as it is: no mount recorded, no transform, or the trained mount).
+
+        Raises:
+            ValueError: ``/tf`` puts the scanner farther than :data:`MOUNT_LIMIT_M` from the trained mount (or not
+                finitely anywhere): the scan is refused and the rover held until the transform is plausible.
+        """
         trained = (self.policy.contract.get("scan") or {}).get("mount")
         if not isinstance(trained, dict):
             return None, "read as trained (the policy records no scanner mount)"
@@ -237,6 +245,10 @@ class Controller:
         mount = (c * dx + s * dy, -s * dx + c * dy, math.remainder(yaw, 2 * math.pi))
         if math.hypot(mount[0], mount[1]) < 1e-3 and abs(mount[2]) < 1e-3:
             return None, f"mounted where the policy's was (from /tf: {frame!r} in {parent!r})"
+        if not (all(map(math.isfinite, mount)) and math.hypot(mount[0], mount[1]) <= MOUNT_LIMIT_M):
+            raise ValueError(f"scan refused: /tf puts its scanner ({frame!r}) {math.hypot(mount[0], mount[1]):.2f} m "
+                             f"from where the policy's was, more than {MOUNT_LIMIT_M:g} m (MOUNT_LIMIT_M): a wrong "
+                             "transform would read a wall ahead as open ground")
         return mount, (f"its scanner ({frame!r}) is {mount[0]:+.3f} m, {mount[1]:+.3f} m and "
                        f"{math.degrees(mount[2]):+.1f} deg from where the policy's was (from /tf); its returns are "
                        "carried to the trained mount")
@@ -265,10 +277,12 @@ class Controller:
         self.steps = self.clipped_steps = 0
         self.hold_reason, self.pending = None, None
         self.history.zero_()
-        at = f"goal ({p.x:.2f}, {p.y:.2f}) in {frame}"
+        at = f"goal ({_coordinate(p.x)}, {_coordinate(p.y)}) in {frame}"
         if self._locate() is None:
             return f"{at}: waiting for the transform from {frame!r} to {odom!r} on /tf, holding still"
-        there = f" = ({self.goal[0]:.2f}, {self.goal[1]:.2f}) in {odom}" if frame != odom else ""
+        if not all(map(math.isfinite, self.goal)):
+            return self._cancel(f"goal refused: {at} is not finite in {odom!r} through /tf's transforms")
+        there = f" = ({_coordinate(self.goal[0])}, {_coordinate(self.goal[1])}) in {odom}" if frame != odom else ""
         return f"{at}{there}: driving"
 
     def goal_problem(self, msg) -> str | None:
@@ -286,10 +300,12 @@ class Controller:
                     f"robot's ROS 2); send it in the odometry frame {odom!r}")
         return None
 
-    def on_tf(self, msg, now: float) -> None:
-        """A ``tf2_msgs/TFMessage`` from ``/tf`` or ``/tf_static``: its transforms replace the ones they follow; an
-        active goal in another frame moves with them from the next period."""
-        self.frames.add(msg)
+    def on_tf(self, msg, now: float, *, static: bool = False) -> None:
+        """A ``tf2_msgs/TFMessage`` from ``/tf`` or (``static``) ``/tf_static``: its transforms replace the ones they
+        follow; an active goal in another frame moves with them from the next period. The work is bounded
+        (:class:`~atrv_warp.core.tf.TransformBuffer`: frames capped, ``/tf`` frames unheard for a while dropped), so a
+        flood of frames cannot stretch the control period."""
+        self.frames.add(msg, now, static=static)
 
     def _locate(self) -> tuple[float, float] | None:
         """The active goal in the odometry frame now (:attr:`goal`), through the latest transforms."""
@@ -317,11 +333,12 @@ class Controller:
         odometry [m], ``steps`` driven by the policy, ``clipped_steps`` (steps a speed clamp clipped),
         ``compute_ms`` (the last step's observation and policy [ms])."""
         odom = self.sensors["odom"].value
-        distance = math.hypot(self.goal[0] - odom[0][0], self.goal[1] - odom[0][1]) if odom and self.goal else None
-        return {"state": state, "reason": reason, "goal": list(self.goal) if self.goal else None,
-                "distance": None if distance is None else round(distance, 4), "steps": self.steps,
-                "clipped_steps": self.clipped_steps, "compute_ms": None if math.isnan(self.compute_ms)
-                else round(self.compute_ms, 4)}
+        goal = self.goal if self.goal and all(map(math.isfinite, self.goal)) else None  # standard JSON: no NaN, no inf
+        distance = math.hypot(goal[0] - odom[0][0], goal[1] - odom[0][1]) if odom and goal else None
+        return {"state": state, "reason": reason, "goal": list(goal) if goal else None,
+                "distance": None if distance is None or not math.isfinite(distance) else round(distance, 4),
+                "steps": self.steps, "clipped_steps": self.clipped_steps,
+                "compute_ms": None if not math.isfinite(self.compute_ms) else round(self.compute_ms, 4)}
 
     def tick(self, now: float) -> Tick:
         """Decide this control period's command at ROS time ``now`` [s]."""
@@ -340,6 +357,9 @@ class Controller:
         if self._locate() is None:
             frame, odom = self.goal_given[0], self.settings.odom_frame
             return self._hold(f"no transform from {frame!r} to {odom!r} on /tf", "no transform")
+        if not all(map(math.isfinite, self.goal)):
+            return self._end("aborted", f"the goal is not finite in {self.settings.odom_frame!r} through /tf's "
+                                        f"transforms from {self.goal_given[0]!r}")
         reasons, keys, quiet = [], [], True  # quiet: every reason was logged when its message came
         for s in self.sensors.values():
             if s.received is None:
@@ -444,3 +464,8 @@ class Controller:
         self.goal, self.goal_given, self.hold_reason = None, None, None
         line = f"goal {state}: {reason} ({status['steps']} steps, {status['clipped_steps']} clipped)"
         return Tick((0.0, 0.0), status, (line,) if log else ())
+
+
+def _coordinate(value: float) -> str:
+    """A coordinate for a log line: to the centimetre, or in three figures where it is huge (a goal at 1e308)."""
+    return f"{value:.2f}" if abs(value) < 1e9 else f"{value:.3g}"

@@ -17,6 +17,7 @@ aborts the goal and stays up. rclpy ties a logging call site to one severity, so
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 
@@ -123,7 +124,8 @@ class DeployNode(Node):
         self._start_action_server()
         if tf_message is not None:  # goals in any frame: the tree from /tf and /tf_static, as tf2_ros's listener reads it
             self.create_subscription(tf_message, "/tf", guard("tf", self.controller.on_tf), QoSProfile(depth=100))
-            self.create_subscription(tf_message, "/tf_static", guard("tf", self.controller.on_tf),
+            static = functools.partial(self.controller.on_tf, static=True)  # kept: never stale
+            self.create_subscription(tf_message, "/tf_static", guard("tf", static),
                                      QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         else:
             self.log.warning(f"no /tf ({tf_from}; tf2_msgs comes with a ROS 2 install): this node takes goals in "
