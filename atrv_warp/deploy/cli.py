@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import gc
 import sys
 
 from atrv_warp.deploy.parameters import parameter_help
@@ -102,6 +103,9 @@ def main(argv: list[str] | None = None) -> int:
     node = None
     try:
         node = DeployNode(policy, argv[ros_at:])
+        # everything loaded so far (torch, rclpy, the policy) lives as long as the node: out of the collector's full
+        # passes, which otherwise walk it all and, under a flood of messages, stalled a control period by ~0.1 s
+        gc.freeze()
         while rclpy.ok() and not stop_requested:
             try:
                 rclpy.spin_once(node, timeout_sec=0.1)  # returns often, so a signal is taken within 0.1 s
