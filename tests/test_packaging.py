@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parent.parent
 # Files that may import what an optional extra brings (they check for it and say how to install it).
 EXTRA_USERS = {
     "ros": ("atrv_warp/integrations/ros/", "atrv_warp/deploy/", "atrv_warp/core/ros_interfaces.py", "tests/test_ros.py", "tests/test_deploy.py", "tests/test_deploy_ros.py",
-            "benchmarks/transfer/deploy_closed_loop.py"),
+            "benchmarks/transfer/deploy_closed_loop.py", "benchmarks/transfer/deploy_tf_flood.py"),
     "test": ("tests/",),
     "browser": ("atrv_warp/integrations/browser.py", "docs/make_pictures.py"),
     "onnx": ("atrv_warp/rl/export.py",),
