@@ -100,6 +100,11 @@ def test_sim_config_file_is_read_by_the_simulator_and_checked(tmp_path):
         assert str(bad) in str(err.value) and all(w in str(err.value) for w in words), str(err.value)
     with pytest.raises(ValueError, match="cannot read"):
         load_sim_config(tmp_path / "missing.toml")
+    big = tmp_path / "big.toml"
+    big.write_bytes(b"#" * (2 << 20))
+    for path, message in ((Path("/dev/zero"), "not a regular file"), (big, "over the 1 MiB")):  # issue 70: read till
+        with pytest.raises(ValueError, match=message):  # the kernel killed it at 3 GB
+            load_sim_config(path)
 
 
 def test_train_and_env_accept_sim_config(tmp_path):

@@ -256,3 +256,36 @@ def test_a_run_folder_names_no_code_that_resume_imports(tmp_path, capsys):
         assert main([f"task_module={module}", "--config", "smoke"]) == 2  # a module the user names runs, and says so
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and f"task module {module}: {name}" in err[0], err
+
+
+def test_a_crafted_run_folder_runs_no_code_through_evaluate_or_export(tmp_path):
+    """Issue 70: a run folder someone sent, its policy of a task their module registers (the policy's record names the
+    module): ``evaluate`` and ``export`` read the policy as data. The task is unknown here and named, with the option
+    that gives its module; the module, which leaves a marker when imported, never runs."""
+    from atrv_warp.policy import make_actor, save_policy
+    from atrv_warp.task.registry import TASKS, load_task_module
+
+    marker = tmp_path / "ran"
+    module = tmp_path / "their_task.py"  # the parking example, renamed, leaving a marker when ATRV_CRAFTED is set
+    module.write_text((ROOT / "examples" / "custom_task.py").read_text().replace('Task("parking"', 'Task("their_parking"')
+                      + "\nimport os, pathlib\nif os.environ.get('ATRV_CRAFTED'):\n"
+                      "    pathlib.Path(os.environ['ATRV_CRAFTED']).write_text('ran')\n")
+    load_task_module(module)  # here, to write their policy (its record names the module as the task's source)
+    try:
+        run = tmp_path / "runs" / "sent"
+        run.mkdir(parents=True)
+        from atrv_warp.task.spec import observation_fields
+
+        obs = len(observation_fields(TASKS["their_parking"].config))
+        save_policy(make_actor(8, 1, obs_dim=obs), run / "best_policy.pt", width=8, depth=1,
+                    meta={"task": "their_parking"}, task=TASKS["their_parking"].config)
+    finally:
+        TASKS.pop("their_parking", None)
+    env = dict(os.environ, ATRV_CRAFTED=str(marker))
+    for cmd in (["-m", "atrv_warp.evaluate", str(run / "best_policy.pt"), "--episodes", "1"],
+                ["-m", "atrv_warp.export", str(run / "best_policy.pt"), str(tmp_path / "out.pt2")]):
+        proc = subprocess.run([sys.executable, *cmd], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300,
+                              check=False)
+        assert proc.returncode == 2 and "Traceback" not in proc.stderr, (cmd, proc.stderr[-2000:])
+        assert "their_parking" in proc.stderr and "--task-module" in proc.stderr, (cmd, proc.stderr[-2000:])
+        assert not marker.exists(), cmd

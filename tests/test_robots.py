@@ -483,6 +483,16 @@ def test_robot_new_and_check_refuse_bad_input_in_one_line_before_any_work(tmp_pa
     path.write_text(path.read_text().replace('name = "rosbot"', 'name = "ros bot"'))
     with pytest.raises(RobotFileError, match="name must be letters, digits, '_' and '-'"):
         load_robot(path)
+    latin = tmp_path / "latin.toml"  # a robot file saved as latin-1: one line naming the byte (a UnicodeDecodeError)
+    latin.write_bytes(path.read_bytes().replace(b'title = "rosbot"', 'title = "rosbot à"'.encode("latin-1")))
+    with pytest.raises(RobotFileError, match=r"not UTF-8 text .*: byte \d+ is b'\\xe0'"):
+        load_robot(latin)
+    import os
+
+    os.mkfifo(tmp_path / "pipe.toml")  # it hung robot check and RoverSim until killed
+    for special in (tmp_path / "pipe.toml", Path("/dev/zero")):
+        with pytest.raises(RobotFileError, match="the robot file is not a regular file"):
+            load_robot(special)
     assert main(["check", "jackal", "--json", str(tmp_path / "none" / "r.json")]) == 2
     captured = capsys.readouterr()
     assert "--json" in captured.err and "does not exist" in captured.err and "..." not in captured.out
