@@ -12,7 +12,7 @@ the tool needs: importing the package loads neither Warp, Newton nor TorchRL, an
 (the rover's geometry and kinematics in torch) runs with torch alone.
 """
 
-from importlib import import_module
+from atrv_warp.core.lazy import lazy_names
 
 from . import runtime as _runtime
 
@@ -71,12 +71,4 @@ __all__ = [
     "load_rover",
 ]
 
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return __all__
+__getattr__, __dir__ = lazy_names(__name__, _EXPORTS, __all__)

@@ -13,7 +13,7 @@ each conversion, and the tests hold each to its torch twin here.
 - :mod:`.inputs`: an input file read only from a regular file of bounded size (the standard library alone).
 """
 
-from importlib import import_module
+from atrv_warp.core.lazy import lazy_names
 
 _EXPORTS = {
     **dict.fromkeys(("matrix_to_quat", "quat_to_matrix", "quat_to_rpy", "quat_to_yaw", "rpy_to_quat", "wrap_angle",
@@ -44,12 +44,4 @@ __all__ = [
     "yaw_to_quat",
 ]
 
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return __all__
+__getattr__, __dir__ = lazy_names(__name__, _EXPORTS, __all__)

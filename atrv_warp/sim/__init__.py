@@ -20,9 +20,8 @@ its modules imports Newton, whose import initialises Warp. Its names (``RoverSim
 first use, so that ``atrv_warp.sim.config`` or ``.modes`` load without Newton.
 """
 
-from importlib import import_module
-
 from atrv_warp import runtime
+from atrv_warp.core.lazy import lazy_names
 
 runtime.configure()
 
@@ -58,15 +57,6 @@ _EXPORTS = {
 that needs the configs or the driving modes (the ROS node's parameter checks) does not import Newton."""
 
 
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return __all__
-
 
 __all__ = [
     "DRIVE_MODE_TORQUES",
@@ -96,3 +86,5 @@ __all__ = [
     "get_variant",
     "load_rover",
 ]
+
+__getattr__, __dir__ = lazy_names(__name__, _EXPORTS, __all__)
