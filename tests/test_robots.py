@@ -15,6 +15,7 @@ from atrv_warp.core.robot import ROBOTS, RobotFileError, load_robot, robot_from_
 from atrv_warp.sim.config import RoverConfig, replace_checked
 
 ROBOTS_DIR = Path(__file__).resolve().parent.parent / "atrv_warp" / "robots"
+DATA = Path(__file__).resolve().parent / "data"
 
 ROS_URDF = """<?xml version="1.0"?>
 <robot name="rosbot">
@@ -224,6 +225,58 @@ def test_a_ros_urdf_becomes_a_robot_that_drives(tmp_path, capsys):
     assert sim.lin_vel[0, :2].norm() == pytest.approx(0.8, rel=0.1)
     assert sim.ang_vel[1, 2] == pytest.approx(1.0, rel=0.15)
     assert {f.name for f in sim.description.frames} >= {"base_footprint", "imu_link", "laser"}
+
+
+@pytest.mark.parametrize(("name", "wheels"), [("sixwheel", 6), ("eightwheel", 8)])
+def test_six_and_eight_wheel_robots_check_and_drive_their_limits(name, wheels):
+    """Test robots in ``tests/data`` (written by ``robot new``, measured by ``check --write``) with three and four
+    wheels a side: every wheel is in the friction solve, and ``/cmd_vel`` at the robot's limits is met."""
+    from atrv_warp.sim import RoverSim
+    from atrv_warp.sim.robot_check import check_robot
+
+    robot, description = check_robot(DATA / f"{name}.toml")
+    assert len(description.wheels) == wheels and sum(w.side == 0 for w in description.wheels) == wheels // 2
+    sim = RoverSim(2, robot=robot.path)
+    sim.reset(poses=[[-5.0, 0.0, 0.0], [5.0, 0.0, 0.0]])
+    lim = robot.limits
+    twist = torch.tensor([[lim.linear_velocity, 0.0], [0.0, lim.angular_velocity]])
+    for _ in range(round(3.0 / sim.sim_cfg.step_dt)):
+        sim.set_twist(twist)
+        sim.step()
+    assert sim.lin_vel[0, :2].norm() == pytest.approx(lim.linear_velocity, rel=0.05)
+    assert sim.ang_vel[1, 2] == pytest.approx(lim.angular_velocity, rel=0.15)
+    impulses = sim.contact.impulses.numpy().reshape(2, wheels, 3)
+    assert (abs(impulses[1]).sum(-1) > 0).all(), "a wheel of the turning rover carries no friction"
+
+
+def test_unpaired_or_too_many_wheels_are_refused_naming_the_count(tmp_path):
+    from atrv_warp.sim.robot_check import check_robot
+
+    def urdf_with(extra: list[tuple[str, float, float]]) -> Path:
+        path = ros_urdf(tmp_path)
+        wheels = "".join(WHEEL.format(name=n, x=x, y=y) for n, x, y in extra)
+        path.write_text(path.read_text().replace("</robot>", wheels + "\n</robot>"))
+        return path
+
+    path = tmp_path / "rosbot.toml"
+    path.write_text(starter_file_for(urdf_with([("middle_left", 0.0, 0.2)])))
+    with pytest.raises(RobotFileError, match=r"3 left and 2 right wheels .*as many on each side, 8 at most"):
+        check_robot(path)
+    path.write_text(starter_file_for(urdf_with([(f"m{i}_{side}", 0.1 * i - 0.1, y)
+                                                for i in range(3) for side, y in (("left", 0.2), ("right", -0.2))])))
+    with pytest.raises(RobotFileError, match=r"5 left and 5 right wheels .*8 at most"):
+        check_robot(path)
+    text = starter_file_for(ros_urdf(tmp_path)).replace(
+        "[links]", '[links]\nleft_wheels = ["front_left_wheel", "rear_left_wheel"]\nright_wheels = ["rear_right_wheel"]')
+    path.write_text(text)
+    with pytest.raises(RobotFileError, match=r"links: 2 left and 1 right wheels; .*as many on each side"):
+        load_robot(path)
+
+
+def starter_file_for(urdf: Path) -> str:
+    from atrv_warp.cli.robot import starter_file
+
+    return starter_file(urdf, "rosbot")
 
 
 def test_a_turned_laser_or_imu_is_refused(tmp_path):

@@ -94,6 +94,9 @@ __all__ = [
 ]
 
 DEFAULT_ROBOT = "atrvjr"
+MAX_WHEELS = 8
+"""Driven wheels a skid-steer rover may have: 2 to 8, as many on the left as on the right (the simulator's per-wheel
+loops have this fixed length)."""
 """The robot everything uses unless told otherwise."""
 
 
@@ -363,6 +366,9 @@ def _from_table(path: str, data: dict, urdf_sha256: str | None = None) -> Robot:
              "them)")
     if set(left) & set(right):
         fail(f"links: wheel(s) {sorted(set(left) & set(right))} on both sides")
+    if left and (len(left) != len(right) or len(left) + len(right) > MAX_WHEELS):
+        fail(f"links: {len(left)} left and {len(right)} right wheels; a skid-steer rover has as many on each side, "
+             f"{MAX_WHEELS} at most")
     if not ROBOT_NAME.fullmatch(values["name"]):
         fail(f"name must be letters, digits, '_' and '-' (it names the robot's policies and files), got "
              f"{values['name']!r}")

@@ -28,7 +28,6 @@ from atrv_warp.sim.kernels.contact import (
     compute_contact_forces,
 )
 from atrv_warp.sim.kernels.friction import (
-    WHEEL_SLOTS,
     RoverInertia,
     WheelSlots,
     clear_impulses,
@@ -242,9 +241,6 @@ def rover_inertia(model: newton.Model, bodies_per_world: int, chassis: int) -> t
 def _wheel_slots(built: BuiltModel, wheel_dofs: list[int], dofs_per_world: int, device) -> WheelSlots:
     """The wheels' cylinders, joints and spin inertias, in the description's wheel order."""
     rb, desc = built.rover_builder, built.description
-    if len(desc.wheels) != WHEEL_SLOTS:
-        raise ValueError(f"ContactConfig.friction_law='coulomb' solves {int(WHEEL_SLOTS)} wheels together; this rover "
-                         f"has {len(desc.wheels)}. Use friction_law='viscous' for other rovers.")
     shape, axis, inv_spin = [], [], []
     inertia = built.model.body_inertia.numpy()
     for body, wheel in zip(built.wheel_bodies, desc.wheels):
@@ -257,6 +253,7 @@ def _wheel_slots(built: BuiltModel, wheel_dofs: list[int], dofs_per_world: int, 
         axis.append(wp.vec3(*a))
         inv_spin.append(1.0 / float(a @ inertia[body] @ a))
     slots = WheelSlots()
+    slots.count = len(desc.wheels)
     slots.chassis = built.chassis_body
     slots.dofs_per_world = dofs_per_world
     slots.shape = wp.array(shape, dtype=int, device=device)
@@ -318,8 +315,9 @@ class ContactModel:
         nominal.inv_mass = inertia.inv_mass.numpy()[0]
         nominal.inv_inertia = wp.mat33(*inertia.inv_inertia.numpy()[0].flatten())
         self.nominal_rover = nominal
-        self.impulses = wp.zeros(self.num_worlds * WHEEL_SLOTS, dtype=wp.vec3, device=device)
-        """(N x 4) each wheel's last friction impulse [N·s], world frame: where the next substep's
+        self.wheel_count = len(desc.wheels)
+        self.impulses = wp.zeros(self.num_worlds * self.wheel_count, dtype=wp.vec3, device=device)
+        """(N x wheels) each wheel's last friction impulse [N·s], world frame: where the next substep's
         sweeps start (the Coulomb law's warm start)."""
 
     def apply(self, state: newton.State, body_com: wp.array, joint_f: wp.array, flags: wp.array,
@@ -329,7 +327,7 @@ class ContactModel:
         ``joint_f`` holds this substep's drive torques (the friction solver predicts the wheels'
         spin with them); ``physics`` each world's mu, stiffness and wheel radius
         (:class:`~atrv_warp.sim.params.WorldParams`, or a tape's own with differentiable arrays).
-        ``warm_start`` and ``impulses`` (N x 4 ``wp.vec3``) replace :attr:`impulses` as the previous
+        ``warm_start`` and ``impulses`` (N x wheels ``wp.vec3``) replace :attr:`impulses` as the previous
         substep's friction impulses and this one's (a tape needs one array per substep).
         """
         wp.launch(compute_contact_forces, dim=self.num_worlds,
@@ -345,4 +343,4 @@ class ContactModel:
 
     def reset(self, mask: wp.array) -> None:
         """Forget the masked worlds' friction impulses (a reset rover starts unloaded)."""
-        wp.launch(clear_impulses, dim=self.num_worlds, inputs=[mask], outputs=[self.impulses], device=self.device)
+        wp.launch(clear_impulses, dim=self.num_worlds, inputs=[mask, self.wheel_count], outputs=[self.impulses], device=self.device)

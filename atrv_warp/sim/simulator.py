@@ -33,7 +33,7 @@ from atrv_warp.sim.contact import ContactModel, Obstacles, Terrain
 from atrv_warp.sim.driver import DRIVE_TORQUE, DRIVE_TWIST, SNAPSHOT_ADDED, Driver, DriverConfig
 from atrv_warp.sim.kernel_cache import precompile
 from atrv_warp.sim.kernels.contact import FLAG_BODY_GROUND, FLAG_OBSTACLE, FLAG_WALL
-from atrv_warp.sim.kernels.driver import MAX_WHEELS, DriverState, drive_wheels
+from atrv_warp.sim.kernels.driver import DriverState, drive_wheels
 from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics, apply_payload
 from atrv_warp.sim.kernels.rover import RoverLayout, compute_rover_state, reset_worlds
 from atrv_warp.sim.kernels.terrain import place_on_terrain
@@ -328,9 +328,6 @@ class RoverSim:
         layout.chassis_coord = q_start[root]
         layout.chassis_dof = qd_start[root]
         wheels = self.description.wheels
-        if len(wheels) > MAX_WHEELS:
-            raise ValueError(f"{self.description.path}: {len(wheels)} driven wheels; the motor driver reads at most "
-                             f"{MAX_WHEELS} encoders")
         layout.wheel_count = len(wheels)
         dev = self.device
         layout.wheel_coord = wp.array([q_start[j] for j in self.built.wheel_joints], dtype=int, device=dev)
@@ -474,7 +471,7 @@ class RoverSim:
         (``driver_in``, ``driver_out``), ``physics`` (:class:`~atrv_warp.sim.kernels.params.WorldPhysics`, with a
         differentiable mu), ``flags`` (N,) and ``torque`` (N, W) outputs, ``solver_in``: a view of ``s_in`` with
         its own ``body_q`` for the solver to write, and the wheels' friction impulses of the previous substep
-        (``warm_start``) and of this one (``impulses``), N x 4 ``wp.vec3`` each.
+        (``warm_start``) and of this one (``impulses``), N x wheels ``wp.vec3`` each.
         """
         physics = self.params.physics if physics is None else physics
         d = self.driver

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from atrv_warp.core.inputs import InputFileError, read_input
+from atrv_warp.core.robot import MAX_WHEELS
 from atrv_warp.sim.config import InertialOverride, RoverConfig, default_urdf_path
 
 __all__ = ["URDF_RANGE", "Frame", "Inertial", "RoverDescription", "URDFError", "Wheel", "check_numbers", "check_tree",
@@ -469,6 +470,11 @@ def load_rover(rover: RoverConfig | None = None) -> RoverDescription:
     if {w.side for w in wheels} != {0, 1}:
         raise URDFError(f"{path}: wheels on one side only ({', '.join(w.link for w in wheels)}); a skid-steer rover "
                         "drives a left and a right side", field="left_wheels" if wheels[0].side else "right_wheels")
+    left = sum(w.side == 0 for w in wheels)
+    if left != len(wheels) - left or len(wheels) > MAX_WHEELS:
+        raise URDFError(f"{path}: {left} left and {len(wheels) - left} right wheels "
+                        f"({', '.join(w.link for w in wheels)}); a skid-steer rover has as many on each side, "
+                        f"{MAX_WHEELS} at most", field="left_wheels")
     frames = _frames(path, rover, group, {w.link for w in wheels})
     parts = [(inertial(rover.chassis_link), np.eye(4))] + [(inertial(f.name), f.transform) for f in frames]
     chassis_inertial = _lump(parts)

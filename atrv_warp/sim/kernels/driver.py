@@ -13,7 +13,7 @@ from __future__ import annotations
 import warp as wp
 
 from atrv_warp.sim.kernels.params import WorldPhysics
-from atrv_warp.sim.kernels.rover import RoverLayout, motor_torque
+from atrv_warp.sim.kernels.rover import MAX_WHEELS, RoverLayout, motor_torque
 
 DRIVE_TORQUE = wp.constant(0)
 """A world whose ``commands`` are wheel torques [N·m]."""
@@ -103,10 +103,6 @@ def driver_torques(params: DriverParams, command: wp.vec2, fresh: bool, speeds: 
     out = wp.vec2(left, right)
     new_applied = applied + lag_factor(lag, params.dt) * (out - applied)
     return ref, wp.vec2(i_left, i_right), new_applied
-
-
-MAX_WHEELS = wp.constant(8)
-"""Wheels a rover may have: the encoders' loop has this fixed length, so Warp unrolls it and differentiates it."""
 
 
 @wp.func

@@ -6,14 +6,15 @@ grows slowly with slip. Such a viscous law never reaches ``mu f_n`` in a turn, a
 rover then turns as the ratio of its viscous slopes dictates (8.3x slower than its wheels command,
 whatever mu), not as Coulomb friction does (about 1.6x).
 
-What this kernel does instead, for the four wheels of one world at once (one thread per world):
+What this kernel does instead, for all the wheels of one world at once (one thread per world; 2 to
+``MAX_WHEELS``, each in a slot of fixed-size per-wheel values, the unused slots skipped):
 
 1. each wheel's deepest rim point on the ground (plane 0 or the terrain's tangent plane), its
    Hunt–Crossley normal force and the contact point's velocity;
 2. the velocity each contact point would have at the end of the substep without friction, from the
    forces already known for it: gravity, the normal forces and the wheels' drive torques, applied to
-   a model of the rover as one rigid body plus four free-spinning wheels;
-3. friction impulses by projected Gauss–Seidel over the four contacts, starting from the previous
+   a model of the rover as one rigid body plus its free-spinning wheels;
+3. friction impulses by projected Gauss–Seidel over the wheels' contacts, starting from the previous
    substep's impulses: each contact in turn either sticks (its end-of-substep slip is zero, with an
    impulse inside the Coulomb disc ``mu f_n dt``) or slides (impulse ``mu f_n dt`` against its
    end-of-substep slip), given the others' impulses;
@@ -49,16 +50,17 @@ from atrv_warp.sim.kernels.contact import (
     wheel_size,
 )
 from atrv_warp.sim.kernels.params import WorldPhysics
+from atrv_warp.sim.kernels.rover import MAX_WHEELS
 
-WHEEL_SLOTS = wp.constant(4)
-"""Wheels the solver handles (the ATRV-Jr's four; :class:`~atrv_warp.sim.contact.ContactModel` checks)."""
 FRICTION_SWEEPS = wp.constant(1)
 """Gauss–Seidel sweeps over the wheels per substep, each starting where the previous substep ended."""
 SLIDE_ITERATIONS = wp.constant(3)
 """Newton iterations for a sliding contact's slip speed (relative error under 1e-4 after three)."""
 
-mat43 = wp.types.matrix(shape=(4, 3), dtype=float)
-mat42 = wp.types.matrix(shape=(4, 2), dtype=float)
+mat83 = wp.types.matrix(shape=(8, 3), dtype=float)
+mat82 = wp.types.matrix(shape=(8, 2), dtype=float)
+vec8 = wp.types.vector(length=8, dtype=float)
+# one row (entry) per wheel slot: MAX_WHEELS of them (a Warp type's shape is a literal)
 
 
 # Per-wheel values live in the rows of small matrices (and entries of vectors). A row is replaced by
@@ -67,11 +69,15 @@ mat42 = wp.types.matrix(shape=(4, 2), dtype=float)
 # disagree with finite differences), while a rebuilt value is plain SSA and differentiates exactly.
 @wp.func
 def with_row(m: Any, i: int, row: Any):
-    """``m`` (4 rows) with row ``i`` replaced by ``row``."""
+    """``m`` (8 rows) with row ``i`` replaced by ``row``."""
     r0 = m[0]
     r1 = m[1]
     r2 = m[2]
     r3 = m[3]
+    r4 = m[4]
+    r5 = m[5]
+    r6 = m[6]
+    r7 = m[7]
     if i == 0:
         r0 = row
     if i == 1:
@@ -80,7 +86,15 @@ def with_row(m: Any, i: int, row: Any):
         r2 = row
     if i == 3:
         r3 = row
-    return wp.matrix_from_rows(r0, r1, r2, r3)
+    if i == 4:
+        r4 = row
+    if i == 5:
+        r5 = row
+    if i == 6:
+        r6 = row
+    if i == 7:
+        r7 = row
+    return wp.matrix_from_rows(r0, r1, r2, r3, r4, r5, r6, r7)
 
 
 @wp.struct
@@ -97,19 +111,21 @@ class RoverInertia:
 class WheelSlots:
     """The wheels the solver handles, in :class:`~atrv_warp.sim.kernels.rover.RoverLayout` wheel order."""
 
+    count: int  # wheels (2 to MAX_WHEELS): the slots in use, and the stride of the impulse arrays
     chassis: int  # chassis body index within a world
     dofs_per_world: int
-    shape: wp.array(dtype=int)  # (WHEEL_SLOTS,) the wheel's cylinder in RoverShapes
+    shape: wp.array(dtype=int)  # (count,) the wheel's cylinder in RoverShapes
     dof: wp.array(dtype=int)  # the wheel joint's joint_f entry within a world
     axis: wp.array(dtype=wp.vec3)  # the joint axis in the wheel body frame (positive joint_f spins about it)
     inv_spin_inertia: wp.array(dtype=float)  # 1 / inertia about the axle [1/(kg·m²)]
 
 
 @wp.func
-def with_entry(v: wp.vec4, i: int, x: float):
+def with_entry(v: vec8, i: int, x: float):
     """``v`` with entry ``i`` replaced by ``x``."""
-    return wp.vec4(wp.where(i == 0, x, v[0]), wp.where(i == 1, x, v[1]), wp.where(i == 2, x, v[2]),
-                   wp.where(i == 3, x, v[3]))
+    return vec8(wp.where(i == 0, x, v[0]), wp.where(i == 1, x, v[1]), wp.where(i == 2, x, v[2]),
+                wp.where(i == 3, x, v[3]), wp.where(i == 4, x, v[4]), wp.where(i == 5, x, v[5]),
+                wp.where(i == 6, x, v[6]), wp.where(i == 7, x, v[7]))
 
 
 @wp.func
@@ -150,7 +166,7 @@ def effective_inverse_mass(t: wp.vec3, r: wp.vec3, inv_mass: float, inv_inertia:
 
 
 @wp.func
-def relax_contact(impulse: mat42, k: int, t1: wp.vec3, t2: wp.vec3, r: wp.vec3, spin: wp.vec3, free: wp.vec3,
+def relax_contact(impulse: mat82, k: int, t1: wp.vec3, t2: wp.vec3, r: wp.vec3, spin: wp.vec3, free: wp.vec3,
                   d: wp.vec2, inv_d: wp.vec2, inv_spin_inertia: float, limit: float, dv: wp.vec3, dw: wp.vec3,
                   inv_mass: float, inv_inertia: wp.mat33):
     """One Gauss–Seidel update of contact ``k``: its impulse given the others' (carried by the rigid
@@ -186,7 +202,7 @@ def solve_wheel_friction(
     ``body_f``. ``joint_f`` holds this substep's drive torques; ``physics`` each world's mu (and its rise with
     slip), stiffness and wheel radius.
 
-    ``warm_start`` (N x WHEEL_SLOTS) holds the previous substep's friction impulses [N·s], where the
+    ``warm_start`` (N x ``slots.count``) holds the previous substep's friction impulses [N·s], where the
     sweeps start; ``impulses`` receives this substep's (the simulator passes one array as both; a tape
     passes one per substep)."""
     world = wp.tid()
@@ -206,93 +222,98 @@ def solve_wheel_friction(
 
     # 1. Contacts, and the known forces' wrench about the rover's COM (gravity, normal forces, the
     # drive torques' reaction on the body).
-    lever = mat43()  # contact point - wheel COM [m]
-    arm = mat43()  # contact point - rover COM [m]
-    lon = mat43()  # rolling direction in the contact plane
-    lat = mat43()  # axle direction in the contact plane
-    spin = mat43()  # contact point velocity per unit wheel spin rate [m/s per rad/s]
-    free = mat43()  # contact point velocity without friction at the end of the substep (spin part) [m/s]
-    normal = mat43()  # normal force [N]
-    limit = wp.vec4()  # Coulomb disc radius mu f_n dt [N·s]
+    lever = mat83()  # contact point - wheel COM [m]
+    arm = mat83()  # contact point - rover COM [m]
+    lon = mat83()  # rolling direction in the contact plane
+    lat = mat83()  # axle direction in the contact plane
+    spin = mat83()  # contact point velocity per unit wheel spin rate [m/s per rad/s]
+    free = mat83()  # contact point velocity without friction at the end of the substep (spin part) [m/s]
+    normal = mat83()  # normal force [N]
+    limit = vec8()  # Coulomb disc radius mu f_n dt [N·s]
     force = gravity / inv_mass
     torque = wp.vec3()
-    for k in range(WHEEL_SLOTS):
-        s = slots.shape[k]
-        b = base + shapes.body[s]
-        X = body_q[b]
-        p, n, depth = wheel_ground_point(scene, tile, X * shapes.xform[s], wheel_size(shapes.size[s], physics, world))
-        hub = wp.transform_point(X, body_com[b])
-        qd = body_qd[b]
-        lever = with_row(lever, k, p - hub)
-        v = wp.spatial_top(qd) + wp.cross(wp.spatial_bottom(qd), p - hub)
-        fn = float(0.0)
-        if depth > 0.0:
-            fn = hunt_crossley(depth, -wp.dot(v, n), params, kp)
-        u = wp.transform_vector(X, slots.axis[k])
-        tau = joint_f[world * slots.dofs_per_world + slots.dof[k]]
-        w = wp.cross(u, p - hub)
-        a = u - wp.dot(u, n) * n
-        al = wp.length(a)
-        if al > 1.0e-6:
-            a = a / al
-        else:  # axle along the normal (a wheel on its side): any tangent pair will do
-            a = wp.normalize(wp.cross(n, wp.vec3(1.0, 0.0, 0.0)) + wp.vec3(0.0, 1.0e-3, 0.0))
-        arm = with_row(arm, k, p - centre)
-        lat = with_row(lat, k, a)
-        lon = with_row(lon, k, wp.cross(n, a))
-        spin = with_row(spin, k, w)
-        free = with_row(free, k, v + w * (tau * slots.inv_spin_inertia[k] * dt))
-        normal = with_row(normal, k, fn * n)
-        mu_k = mu
-        if rise > 0.0:  # friction rising with the slip speed at the substep's start (ContactConfig.friction_rise)
-            vt = v - wp.dot(v, n) * n
-            mu_k = mu * (1.0 + rise * wp.sqrt(wp.dot(vt, vt) + 1.0e-12))
-        limit = with_entry(limit, k, mu_k * fn * dt)
-        force += fn * n
-        torque += wp.cross(p - centre, fn * n) - tau * u
+    for k in range(MAX_WHEELS):
+        if k < slots.count:
+            s = slots.shape[k]
+            b = base + shapes.body[s]
+            X = body_q[b]
+            p, n, depth = wheel_ground_point(scene, tile, X * shapes.xform[s],
+                                             wheel_size(shapes.size[s], physics, world))
+            hub = wp.transform_point(X, body_com[b])
+            qd = body_qd[b]
+            lever = with_row(lever, k, p - hub)
+            v = wp.spatial_top(qd) + wp.cross(wp.spatial_bottom(qd), p - hub)
+            fn = float(0.0)
+            if depth > 0.0:
+                fn = hunt_crossley(depth, -wp.dot(v, n), params, kp)
+            u = wp.transform_vector(X, slots.axis[k])
+            tau = joint_f[world * slots.dofs_per_world + slots.dof[k]]
+            w = wp.cross(u, p - hub)
+            a = u - wp.dot(u, n) * n
+            al = wp.length(a)
+            if al > 1.0e-6:
+                a = a / al
+            else:  # axle along the normal (a wheel on its side): any tangent pair will do
+                a = wp.normalize(wp.cross(n, wp.vec3(1.0, 0.0, 0.0)) + wp.vec3(0.0, 1.0e-3, 0.0))
+            arm = with_row(arm, k, p - centre)
+            lat = with_row(lat, k, a)
+            lon = with_row(lon, k, wp.cross(n, a))
+            spin = with_row(spin, k, w)
+            free = with_row(free, k, v + w * (tau * slots.inv_spin_inertia[k] * dt))
+            normal = with_row(normal, k, fn * n)
+            mu_k = mu
+            if rise > 0.0:  # friction rising with the slip speed at the substep's start (ContactConfig.friction_rise)
+                vt = v - wp.dot(v, n) * n
+                mu_k = mu * (1.0 + rise * wp.sqrt(wp.dot(vt, vt) + 1.0e-12))
+            limit = with_entry(limit, k, mu_k * fn * dt)
+            force += fn * n
+            torque += wp.cross(p - centre, fn * n) - tau * u
     dv = force * (inv_mass * dt)
     dw = inv_inertia * torque * dt
 
     # 2. Projected Gauss-Seidel on the friction impulses, from the previous substep's (clamped to this
     # one's Coulomb discs); dv, dw carry the rigid body's velocity change.
-    impulse = mat42()
-    d = mat42()
-    inv_d = mat42()
-    for k in range(WHEEL_SLOTS):
-        ispin = slots.inv_spin_inertia[k]
-        dk = wp.vec2(effective_inverse_mass(lon[k], arm[k], inv_mass, inv_inertia, spin[k], ispin),
-                     effective_inverse_mass(lat[k], arm[k], inv_mass, inv_inertia, spin[k], ispin))
-        d = with_row(d, k, dk)
-        inv_d = with_row(inv_d, k, wp.vec2(1.0 / dk[0], 1.0 / dk[1]))
-        prev = warm_start[world * WHEEL_SLOTS + k]
-        pk = wp.vec2(wp.dot(prev, lon[k]), wp.dot(prev, lat[k]))
-        size = wp.length(pk)
-        if size > limit[k]:
-            pk = pk * (limit[k] / size)
-        impulse = with_row(impulse, k, pk)
-        p3 = lon[k] * pk[0] + lat[k] * pk[1]
-        dv += p3 * inv_mass
-        dw += inv_inertia * wp.cross(arm[k], p3)
+    impulse = mat82()
+    d = mat82()
+    inv_d = mat82()
+    for k in range(MAX_WHEELS):
+        if k < slots.count:
+            ispin = slots.inv_spin_inertia[k]
+            dk = wp.vec2(effective_inverse_mass(lon[k], arm[k], inv_mass, inv_inertia, spin[k], ispin),
+                         effective_inverse_mass(lat[k], arm[k], inv_mass, inv_inertia, spin[k], ispin))
+            d = with_row(d, k, dk)
+            inv_d = with_row(inv_d, k, wp.vec2(1.0 / dk[0], 1.0 / dk[1]))
+            prev = warm_start[world * slots.count + k]
+            pk = wp.vec2(wp.dot(prev, lon[k]), wp.dot(prev, lat[k]))
+            size = wp.length(pk)
+            if size > limit[k]:
+                pk = pk * (limit[k] / size)
+            impulse = with_row(impulse, k, pk)
+            p3 = lon[k] * pk[0] + lat[k] * pk[1]
+            dv += p3 * inv_mass
+            dw += inv_inertia * wp.cross(arm[k], p3)
     for _sweep in range(FRICTION_SWEEPS):
-        for k in range(WHEEL_SLOTS):
-            impulse, dv, dw = relax_contact(impulse, k, lon[k], lat[k], arm[k], spin[k], free[k], d[k], inv_d[k],
-                                            slots.inv_spin_inertia[k], limit[k], dv, dw, inv_mass, inv_inertia)
+        for k in range(MAX_WHEELS):
+            if k < slots.count:
+                impulse, dv, dw = relax_contact(impulse, k, lon[k], lat[k], arm[k], spin[k], free[k], d[k], inv_d[k],
+                                                slots.inv_spin_inertia[k], limit[k], dv, dw, inv_mass, inv_inertia)
 
     # 3. Normal plus friction force on each wheel, as a wrench about its COM.
-    for k in range(WHEEL_SLOTS):
-        pk = impulse[k]
-        p3 = lon[k] * pk[0] + lat[k] * pk[1]
-        impulses[world * WHEEL_SLOTS + k] = p3
-        f = normal[k] + p3 / dt
-        wp.atomic_add(body_f, base + shapes.body[slots.shape[k]], wp.spatial_vector(f, wp.cross(lever[k], f)))
+    for k in range(MAX_WHEELS):
+        if k < slots.count:
+            pk = impulse[k]
+            p3 = lon[k] * pk[0] + lat[k] * pk[1]
+            impulses[world * slots.count + k] = p3
+            f = normal[k] + p3 / dt
+            wp.atomic_add(body_f, base + shapes.body[slots.shape[k]], wp.spatial_vector(f, wp.cross(lever[k], f)))
 
 
 @wp.kernel
-def clear_impulses(mask: wp.array(dtype=bool), impulses: wp.array(dtype=wp.vec3)):
-    """Zero the masked worlds' friction impulses (on reset)."""
+def clear_impulses(mask: wp.array(dtype=bool), count: int, impulses: wp.array(dtype=wp.vec3)):
+    """Zero the masked worlds' friction impulses (on reset; ``count`` wheels per world)."""
     world = wp.tid()
     if not mask[world]:
         return
-    for k in range(WHEEL_SLOTS):
-        impulses[world * WHEEL_SLOTS + k] = wp.vec3(0.0)
+    for k in range(count):
+        impulses[world * count + k] = wp.vec3(0.0)
 

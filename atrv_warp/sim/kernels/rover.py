@@ -9,6 +9,11 @@ from __future__ import annotations
 
 import warp as wp
 
+from atrv_warp.core import robot
+
+MAX_WHEELS = wp.constant(robot.MAX_WHEELS)
+"""The per-wheel loops of the encoders and the friction solve have this fixed length (the most wheels a rover may
+have), so Warp unrolls them and differentiates them."""
 MOTOR_TAPER_START = wp.constant(0.8)
 """Fraction of the no-load speed at which drive torque starts to taper to zero."""
 
