@@ -27,11 +27,11 @@ from torchrl.modules import MLP, ProbabilisticActor, TanhNormal
 from atrv_warp.storage import FileFormatError, atomic_save, load_weights
 from atrv_warp.task.spec import ACTION_DIM, OBS_DIM, observation_fields
 
-__all__ = ["OLD_KINDS", "POLICY_FORMAT", "READ_FORMATS", "ROBOT_POLICY_ARGUMENTS", "SHIPPED_POLICIES", "Normalize", "PolicyRecord",
-           "PolicyRobotMismatch", "PolicyTaskMismatch", "ShippedPolicy", "check_policy_robot", "check_policy_task",
-           "load_policy", "make_actor", "policy_kinds", "policy_path", "policy_payload", "policy_record",
-           "policy_task", "pretrained_nav_policy_path", "pretrained_policy_path", "run_record", "save_policy",
-           "shipped_policy_for", "shipped_policy_path"]
+__all__ = ["OLD_KINDS", "POLICY_FORMAT", "READ_FORMATS", "ROBOT_POLICY_ARGUMENTS", "SHIPPED_POLICIES", "Normalize",
+           "PolicyRecord", "PolicyRobotMismatch", "PolicyTaskMismatch", "ShippedPolicy", "check_policy_robot",
+           "check_policy_task", "exported_policy_record", "load_policy", "make_actor", "policy_kinds", "policy_path",
+           "policy_payload", "policy_record", "policy_task", "pretrained_nav_policy_path", "pretrained_policy_path",
+           "run_record", "save_policy", "shipped_policy_for", "shipped_policy_path"]
 
 POLICY_FORMAT = "atrv_warp.policy/2"
 """Format tag of a saved policy (``save_policy``, and the ``policy`` entry of a training checkpoint). 2: it records
@@ -201,9 +201,10 @@ def policy_task(path: str | Path) -> str:
     return str(_read(policy_path(path)).get("meta", {}).get("task", "reach"))
 
 
-def policy_record(path_or_payload) -> PolicyRecord:
-    """The task and robot a saved policy (a file, a shipped name, or a loaded payload) was trained with: as it records
-    them (format 2), or for a format-1 file what it meant (its task as the module declares it, on the ATRV-Jr).
+def policy_record(path_or_payload, *, where: str = "the policy") -> PolicyRecord:
+    """The task and robot a saved policy (a file, a shipped name, or a loaded payload: ``where`` names it in errors)
+    was trained with: as it records them (format 2), or for a format-1 file what it meant (its task as the module
+    declares it, on the ATRV-Jr).
 
     Raises:
         FileFormatError: a record that does not read back (named), or a task no longer registered.
@@ -212,7 +213,7 @@ def policy_record(path_or_payload) -> PolicyRecord:
     from atrv_warp.task.registry import resolve_task
 
     if isinstance(path_or_payload, dict):
-        payload, where = path_or_payload, "the policy"
+        payload = path_or_payload
     else:
         where = str(policy_path(path_or_payload))
         payload = _read(Path(where))
@@ -234,6 +235,25 @@ def policy_record(path_or_payload) -> PolicyRecord:
 
     task = dataclasses.replace(registered, config=config, robot=payload["task_record"].get("robot") or robot.name)
     return PolicyRecord(task, robot, True)
+
+
+def exported_policy_record(path: str | Path, contract: dict) -> PolicyRecord:
+    """The task and robot an exported policy (``path``, its ``contract``) was trained with: its ``trained_with``
+    entry, read as :func:`policy_record` reads a policy file's.
+
+    Raises:
+        FileFormatError: a file exported before the contract kept them (naming the policy file it came from and the
+            command that exports it again), or a record that does not read back.
+    """
+    entry = contract.get("trained_with")
+    if not isinstance(entry, dict):
+        raise FileFormatError(f"{path}: exported before exported policies kept the task and robot they were trained "
+                              f"with: evaluate the policy file it came from ({contract.get('source')}), or export it "
+                              "again (python -m atrv_warp.export POLICY OUT.pt2)")
+    try:
+        return policy_record(entry, where=str(path))
+    except ValueError as err:  # an unknown task
+        raise FileFormatError(f"{path}: {err}") from None
 
 
 def check_policy_robot(record: PolicyRecord, robot, *, source, allow: bool = False) -> str | None:

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+import torch
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -361,3 +362,49 @@ def test_a_robot_with_one_motor_per_side_turns_its_sides_wheels_together_in_the_
     free, none = spread("atrvjr")
     assert equalities == 2 and none == 0
     assert free > 0.5 and geared < 0.05 * free, (geared, free)
+
+
+def test_a_robot_files_policy_runs_in_the_twin_and_ours_as_pt_and_pt2_by_the_documented_commands(tmp_path, capsys):
+    """A policy trained on a robot file of one's own (here the six-wheel test robot, in a temporary folder) runs in
+    the twin and in our simulator, from its ``.pt`` and from its exported ``.pt2``, with ``--robot FILE``; its robot
+    is needed and another robot is refused, naming both. The exported program in our simulator is the policy."""
+    import json
+    import shutil
+    from pathlib import Path
+
+    from atrv_warp.cli.evaluate import main
+    from atrv_warp.policy import make_actor, policy_payload, run_record
+    from atrv_warp.rl.export import export_policy
+    from atrv_warp.storage import atomic_save
+    from atrv_warp.task.env import RoverEnv
+
+    data = Path(__file__).parent / "data"
+    for name in ("sixwheel.toml", "sixwheel.urdf"):
+        shutil.copy(data / name, tmp_path / name)
+    robot = str(tmp_path / "sixwheel.toml")
+    env = RoverEnv(1, robot=robot, task="nav_deploy")
+    torch.manual_seed(0)
+    payload = policy_payload(make_actor(16, 1, obs_dim=env.obs_dim), width=16, depth=1, meta={"task": "nav_deploy"},
+                             task=env.task, record=run_record(env.task, env.robot))
+    pt = tmp_path / "run" / "best_policy.pt"
+    pt.parent.mkdir()
+    atomic_save(payload, pt)
+    pt2 = export_policy(pt, tmp_path / "sixwheel.pt2")
+    capsys.readouterr()
+
+    def run(*args) -> dict:
+        out = tmp_path / "result.json"
+        assert main([*map(str, args), "--episodes", "2", "--json", str(out)]) == 0, capsys.readouterr().err
+        return json.loads(out.read_text())
+
+    for policy in (pt, pt2):
+        twin = run(policy, "--engine", "mujoco", "--robot", robot)
+        assert twin["engine"] == "mujoco" and twin["robot"] == robot and twin["episodes"] == 2
+        assert main([str(policy), "--engine", "mujoco", "--episodes", "1"]) == 2
+        err = capsys.readouterr().err
+        assert "which is not a shipped robot" in err and "--robot FILE" in err
+        assert main([str(policy), "--engine", "mujoco", "--robot", "husky", "--episodes", "1"]) == 2
+        assert "trained on sixwheel (Six-wheel test UGV) but this is husky" in capsys.readouterr().err
+    ours_pt, ours_pt2 = run(pt, "--robot", robot), run(pt2, "--robot", robot)
+    assert ours_pt2["mean_return"] == pytest.approx(ours_pt["mean_return"], rel=1e-4)
+    assert ours_pt2["success_rate"] == ours_pt["success_rate"]

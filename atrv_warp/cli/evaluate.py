@@ -76,7 +76,7 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
     """Run a policy once on each of the first ``episodes`` episodes of evaluation set ``seed``.
 
     Args:
-        policy: A policy file (``.pt``, a training ``checkpoint.pt``; ``.pt2`` on ``mujoco``) or a shipped policy's
+        policy: A policy file (``.pt``, a training ``checkpoint.pt``, an exported ``.pt2``) or a shipped policy's
             name; ``None``: ``robot``'s shipped policy for the task where one ships (``nav_deploy_husky``), else the
             task's (``reach``; ``nav_deploy`` on ``mujoco``).
         engine: One of :data:`ENGINES`.
@@ -164,10 +164,12 @@ def evaluate_around(policy: str | None = None, *, sim_config: str, randomization
 
 
 def _load(path: str, task: str | None):
-    """(policy module, trained-on task name, :class:`~atrv_warp.policy.PolicyRecord`) of a saved policy, refused
-    when it does not fit ``task``."""
+    """(policy module, trained-on task name, :class:`~atrv_warp.policy.PolicyRecord`) of a saved policy, or of an
+    exported one (its program: what a robot runs), refused when it does not fit ``task``."""
     from atrv_warp.policy import load_policy, policy_record, policy_task
 
+    if str(path).endswith(".pt2"):
+        return _load_exported(path, task)
     try:
         trained_on = policy_task(path)
         # a policy that commands or observes another kind than the task's is refused first, naming both
@@ -178,6 +180,41 @@ def _load(path: str, task: str | None):
     if task is not None and task != trained_on:
         raise ValueError(f"{path} was trained on task {trained_on!r}, not {task!r}")
     return module, trained_on, record
+
+
+def _load_exported(path: str, task: str | None):
+    """:func:`_load` for an exported program (``.pt2``), with the task and robot its contract keeps."""
+    from tensordict.nn import TensorDictModule
+
+    from atrv_warp.core.contract import read_exported
+    from atrv_warp.policy import exported_policy_record
+
+    try:
+        program, contract = read_exported(path)  # checked first: nothing in the file can run code
+        record = exported_policy_record(path, contract)
+    except (FileNotFoundError, ValueError) as err:  # ExportedFileError and FileFormatError are ValueErrors
+        raise ValueError(f"cannot load policy: {err}") from None
+    trained_on = record.task.name
+    if task is not None and task != trained_on:
+        raise ValueError(f"{path} was trained on task {trained_on!r}, not {task!r}")
+    return TensorDictModule(program.module(), in_keys=["observation"], out_keys=["action"]), trained_on, record
+
+
+def _robot_of_old_export(name: str, robot: str | None, allow: bool, source) -> tuple[str, str | None]:
+    """:func:`_robot_to_run` for a file exported before exported files kept their records: its robot's ``name``
+    alone, which must be a shipped robot's."""
+    from atrv_warp.core.robot import ROBOTS, load_robot
+
+    if name not in ROBOTS:
+        raise ValueError(f"{source} was exported before exported policies kept their robot, and {name!r} is not a "
+                         "shipped robot: export it again (python -m atrv_warp.export POLICY OUT.pt2)")
+    if robot is None or load_robot(robot) == load_robot(name):
+        return robot or name, None
+    line = f"policy {source} was trained on {name} but this is {load_robot(robot).name}"
+    if not allow:
+        raise ValueError(f"{line}: evaluate or deploy it on its own robot, or pass the flag that allows another on "
+                         "purpose (--allow-other-robot)")
+    return robot, line
 
 
 def _robot_to_run(record, robot: str | None, allow: bool, source) -> tuple[str, str | None]:
@@ -261,20 +298,17 @@ def _evaluate_twin(policy, *, task, episodes, seed, friction, baseline, randomiz
     trained_on = getattr(deployable.task, "name", deployable.task)
     if task is not None and task != trained_on:
         raise ValueError(f"{name} was trained on task {trained_on!r}, not {task!r}")
-    if robot is not None and robot != deployable.robot:
-        from atrv_warp.core.robot import load_robot
-
-        if load_robot(robot) != load_robot(deployable.robot):
-            line = f"policy {name} was trained on {deployable.robot} but this is {robot}"
-            if not allow_other_robot:
-                raise ValueError(f"{line}: evaluate it on its own robot, or pass --allow-other-robot")
-            print(f"warning: {line} (--allow-other-robot)", file=sys.stderr)
-    record = run_twin_episodes(deployable, draw_episodes(deployable.task, episodes, seed=seed,
-                                                         robot=robot or deployable.robot),
+    if deployable.record is not None:
+        robot, warning = _robot_to_run(deployable.record, robot, allow_other_robot, name)
+    else:
+        robot, warning = _robot_of_old_export(deployable.robot, robot, allow_other_robot, name)
+    if warning:
+        print(f"warning: {warning} (--allow-other-robot)", file=sys.stderr)
+    record = run_twin_episodes(deployable, draw_episodes(deployable.task, episodes, seed=seed, robot=robot),
                                friction=friction, driver=driver)
     mu = float(record.params["friction"][0])
     return Evaluation(str(name), trained_on, seed, "mujoco", record, {"engine": "mujoco", "friction": mu,
-                                                                     "robot": robot or deployable.robot})
+                                                                     "robot": robot})
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -94,7 +94,9 @@ def contract(source: Path, payload: dict, sim: SimConfig | None = None) -> dict:
     source file, the policy's metadata, the ``robot`` it was trained on (name, title, limits, IMU and laser frames),
     the control period (``step_dt`` [s], ``rate_hz``), the radius within which its task counts a goal reached
     (``reach_radius_m``: the deploy node's default ``goal_tolerance``) and the scanner's geometry (``beams``,
-    ``fov_rad``, ``range_min_m``, ``range_max_m``, ``frame``, and its ``mount`` on the chassis: :func:`scanner_mount`). All of it from the task and robot the policy records
+    ``fov_rad``, ``range_min_m``, ``range_max_m``, ``frame``, and its ``mount`` on the chassis: :func:`scanner_mount`),
+    and ``trained_with``, the task and robot records themselves (what ``evaluate`` runs an exported file on, in our
+    simulator or the twin; a format-1 policy file has none). All of it from the task and robot the policy records
     (:func:`atrv_warp.policy.policy_record`), never from today's code: a task's limits changed since do not enter an
     old policy's contract. :class:`atrv_warp.core.observation.RobotObservation` builds a robot policy's input from it.
 
@@ -126,9 +128,13 @@ def contract(source: Path, payload: dict, sim: SimConfig | None = None) -> dict:
                   "limits": {"linear_velocity": lim.linear_velocity, "angular_velocity": lim.angular_velocity,
                              "linear_acceleration": lim.linear_acceleration,
                              "angular_acceleration": lim.angular_acceleration}}
-    return {"format": EXPORT_FORMAT, "source": str(source), "policy_meta": meta, "task": record.task.name,
-            "robot": robot_part, **spec, "step_dt": step_dt, "rate_hz": 1.0 / step_dt,
-            "reach_radius_m": task.reach_radius}
+    contract = {"format": EXPORT_FORMAT, "source": str(source), "policy_meta": meta, "task": record.task.name,
+                "robot": robot_part, **spec, "step_dt": step_dt, "rate_hz": 1.0 / step_dt,
+                "reach_radius_m": task.reach_radius}
+    if record.recorded:  # the task and robot as trained, as the policy file keeps them: what evaluate runs it on
+        contract["trained_with"] = {"meta": {"task": record.task.name}, "task_record": payload["task_record"],
+                                    "robot": payload["robot"]}
+    return contract
 
 
 def export_policy(policy: str | Path | None, out: str | Path, *, onnx: bool = False, force: bool = False) -> Path:

@@ -115,7 +115,7 @@ class DeployablePolicy:
     """
 
     def __init__(self, act: Callable[[torch.Tensor], torch.Tensor], contract: dict, task, name: str,
-                 robot: str = "atrvjr"):
+                 robot: str | None = "atrvjr", record=None):
         action, observation = contract["action"]["kind"], contract.get("observation_kind", "arena")
         if (action, observation) != ("twist", "robot"):
             raise ValueError(f"{name} is not a deployable policy: it commands {action} and observes the {observation} "
@@ -125,7 +125,10 @@ class DeployablePolicy:
         self.task = task
         """The task it was trained on: a name, or the :class:`~atrv_warp.task.definition.Task` its file records."""
         self.robot = robot
-        """The robot it was trained on (a shipped robot's name, or a robot file's path)."""
+        """The shipped robot it was trained on (its name), or ``None``: a robot of one's own (in :attr:`record`)."""
+        self.record = record
+        """The task and robot it was trained with (:class:`~atrv_warp.policy.PolicyRecord`; ``None`` for a file
+        exported before exported files kept them)."""
         self.build = RobotObservation.from_contract(contract)
         """The torch-only observation builder a robot runs (:class:`~atrv_warp.core.observation.RobotObservation`)."""
 
@@ -134,18 +137,22 @@ class DeployablePolicy:
         """A policy file (``.pt``, or a shipped policy's name) or an exported program (``.pt2``, its contract
         inside). Raises ``ValueError`` naming why a policy is not deployable, ``FileNotFoundError`` for a missing
         file (a shipped policy not trained yet: naming the command that trains it)."""
+        from atrv_warp.core.robot import robot_spec
+        from atrv_warp.policy import exported_policy_record, load_policy, policy_kinds, policy_record, policy_task
+
         if str(path).endswith(".pt2"):
             if not Path(path).is_file():
                 raise FileNotFoundError(f"exported policy not found: {path}")
             program, contract = read_exported(path)  # checked first: nothing in the file can run code
             module = program.module()
-            robot = contract.get("robot", {}).get("name", "atrvjr")
+            if "trained_with" in contract:
+                record = exported_policy_record(path, contract)
+                return cls(lambda obs: module(obs[None])[0], contract, record.task, str(path),
+                           robot_spec(record.robot), record)
+            robot = contract.get("robot", {}).get("name", "atrvjr")  # exported before files kept their records
             return cls(lambda obs: module(obs[None])[0], contract, contract.get("task", "reach"), str(path), robot)
         from tensordict import TensorDict
         from torchrl.envs.utils import ExplorationType, set_exploration_type
-
-        from atrv_warp.core.robot import robot_spec
-        from atrv_warp.policy import load_policy, policy_kinds, policy_record, policy_task
 
         task = policy_task(path)
         record = policy_record(path)
@@ -164,7 +171,7 @@ class DeployablePolicy:
             with set_exploration_type(ExplorationType.DETERMINISTIC):
                 return module(TensorDict({"observation": obs[None]}, batch_size=[1]))["action"][0]
 
-        return cls(act, contract, record.task, str(path), robot_spec(record.robot) or record.robot.path)
+        return cls(act, contract, record.task, str(path), robot_spec(record.robot), record)
 
     @torch.no_grad()
     def __call__(self, observation: torch.Tensor) -> torch.Tensor:
