@@ -256,9 +256,11 @@ def exported_policy_record(path: str | Path, contract: dict) -> PolicyRecord:
         raise FileFormatError(f"{path}: {err}") from None
 
 
-def check_policy_robot(record: PolicyRecord, robot, *, source, allow: bool = False) -> str | None:
-    """Refuse a policy trained on another robot than ``robot`` (a :class:`~atrv_warp.core.robot.Robot`), naming both;
-    with ``allow``, return the line to warn with instead. ``None`` where they are the same.
+def check_policy_robot(record: PolicyRecord, robot, *, source, allow: bool = False,
+                       allow_with: str = "--allow-other-robot") -> str | None:
+    """Refuse a policy trained on another robot than ``robot`` (a :class:`~atrv_warp.core.robot.Robot`), naming both
+    and how to allow it (``allow_with``: the command's flag, or a node's parameter); with ``allow``, return the line to
+    warn with instead. ``None`` where they are the same.
 
     Raises:
         PolicyRobotMismatch: e.g. ``policy nav_deploy_husky was trained on husky (Clearpath Husky A200) but this is
@@ -270,8 +272,8 @@ def check_policy_robot(record: PolicyRecord, robot, *, source, allow: bool = Fal
             f"({robot.title})")
     if allow:
         return line
-    raise PolicyRobotMismatch(f"{line}: evaluate or deploy it on its own robot, or pass the flag that allows another "
-                              "on purpose (--allow-other-robot)")
+    raise PolicyRobotMismatch(f"{line}: evaluate or deploy it on its own robot, or allow another on purpose "
+                              f"({allow_with})")
 
 
 def policy_kinds(path: str | Path) -> tuple[str, str]:

@@ -41,7 +41,10 @@ def test_atrv_baseline_is_evaluate_baseline(tmp_path, capsys):
     assert main(["--baseline", "--episodes", "4", "--json", str(tmp_path / "b.json")]) == 0
     a, b = (json.loads((tmp_path / f"{n}.json").read_text()) for n in "ab")
     assert a == b and a["episodes"] == 4 and a["policy"] == "scripted baseline (reach)"
-    assert "scripted baseline (reach)" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    # every end the help names, obstacles among them even at 0, and that the physics was nominal
+    assert "scripted baseline (reach)" in printed and " obstacle 0.0% " in printed and printed.rstrip().endswith(
+        "| nominal")
 
 
 def test_evaluate_under_randomization_reports_success_by_bin(tmp_path, capsys):

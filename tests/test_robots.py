@@ -388,8 +388,11 @@ def test_a_saved_policy_records_its_task_and_robot_and_export_reads_them(tmp_pat
     assert spec["robot"]["name"] == "husky" and spec["robot"]["limits"]["linear_velocity"] == 1.0
     assert spec["action"]["scale"] == [1.0, 1.0] and spec["rate_hz"] == pytest.approx(10.0)
     assert check_policy_robot(record, load_robot("husky"), source=path) is None
-    with pytest.raises(PolicyRobotMismatch, match=r"trained on husky \(Clearpath Husky A200\) but this is jackal"):
+    with pytest.raises(PolicyRobotMismatch, match=r"trained on husky \(Clearpath Husky A200\) but this is jackal"
+                       r".*allow another on purpose \(--allow-other-robot\)$"):
         check_policy_robot(record, load_robot("jackal"), source=path)
+    with pytest.raises(PolicyRobotMismatch, match=r"on purpose \(-p allow_other_robot:=true\)$"):  # a node's way
+        check_policy_robot(record, load_robot("jackal"), source=path, allow_with="-p allow_other_robot:=true")
     assert "trained on husky" in check_policy_robot(record, load_robot("jackal"), source=path, allow=True)
     # a task whose declared limits change later does not move the record
     changed = dataclasses.replace(record.task.config, max_linear=9.0)

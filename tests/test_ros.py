@@ -500,6 +500,16 @@ def test_the_simulator_nodes_parameters_are_checked_in_the_deploy_nodes_style():
         "num_rovrs", "lock_step (in p.yaml)"]
 
 
+def test_a_publish_rate_the_steps_cannot_give_is_said_with_the_rate_it_gets():
+    from atrv_warp.integrations.ros.parameters import publish_every
+
+    assert publish_every(20.0, 0.05) == (1, None) and publish_every(10.0, 0.05) == (2, None)
+    every, line = publish_every(20.0, 0.09)  # the ATRV-Jr's 11.1 Hz steps
+    assert every == 1 and line == ("publish_rate 20 Hz: state topics every 1 step(s) of 0.09 s, 11.1 Hz (the "
+                                   "simulator's step rate, the most there is)")
+    assert publish_every(4.0, 0.09)[1] == "publish_rate 4 Hz: state topics every 3 step(s) of 0.09 s, 3.7 Hz"
+
+
 @pytest.mark.slow  # a live ROS 2 node
 def test_bad_parameters_are_refused_at_start(ros_env, tmp_path):
     from atrv_warp.policy import make_actor, save_policy

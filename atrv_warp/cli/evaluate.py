@@ -462,8 +462,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         viewers.close()
     result, extra = run.result, run.extra
-    tail = f" | randomization {extra['randomization']}" if "randomization" in extra else ""
-    tail += f" | MuJoCo twin, µ {extra['friction']:g}" if run.engine == "mujoco" else ""
+    tail = f" | randomization {extra['randomization']}" if "randomization" in extra else " | nominal"
+    tail += f" MuJoCo twin, µ {extra['friction']:g}" if run.engine == "mujoco" else ""
     if on is not None:
         print(format_result(f"{run.name} on {args.sim_config}", on.result))
         print(format_result(f"{run.name} around {args.sim_config}", result) + tail)

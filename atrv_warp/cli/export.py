@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     if robot:
         lim = robot["limits"]
         print(f"trained on {robot['name']} ({robot['title']}), whose limits are {lim['linear_velocity']:g} m/s and "
-              f"{lim['angular_velocity']:g} rad/s; it controls at {spec['rate_hz']:g} Hz")
+              f"{lim['angular_velocity']:g} rad/s; it controls at {spec['rate_hz']:.3g} Hz")
     if args.onnx:
         print(f"wrote {path.with_suffix('.onnx')}: checked with onnxruntime against the torch policy (< 1e-5)")
     return 0

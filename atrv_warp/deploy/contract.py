@@ -80,7 +80,7 @@ class Deployable:
         scan = f", {s.count} scan sectors over [{s.edges[0]:.3f}, {s.edges[-1]:.3f}] rad" if s else ""
         return (f"{self.path}: task {self.contract.get('task', '?')}, robot observation "
                 f"({len(self.observation.fields)},){scan}, twist action x ({self.scale[0]:g} m/s, {self.scale[1]:g} "
-                f"rad/s) at {self.rate_hz:g} Hz{self.base_limits()}")
+                f"rad/s) at {self.rate_hz:.3g} Hz{self.base_limits()}")
 
     def base_limits(self) -> str:
         """The limits its training's base applied to /cmd_vel (the contract's ``base_limits``), for the robot's
@@ -137,7 +137,7 @@ def load_deployable(path: str | Path) -> Deployable:
         raise PolicyRefused(f"{path}: action scale {list(scale)} must be two finite numbers > 0")
     low, high = RATE_RANGE_HZ
     if not (math.isfinite(rate) and low <= rate <= high):
-        raise PolicyRefused(f"{path}: control rate {rate:g} Hz is outside the {low:g}-{high:g} Hz the node serves")
+        raise PolicyRefused(f"{path}: control rate {rate:.3g} Hz is outside the {low:g}-{high:g} Hz the node serves")
     step_dt = contract.get("step_dt")
     if step_dt is not None and not (isinstance(step_dt, (int, float)) and math.isclose(rate * step_dt, 1.0,
                                                                                          rel_tol=1e-6)):

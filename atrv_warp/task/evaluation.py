@@ -178,8 +178,8 @@ def evaluate(policy, *, num_episodes: int = 1000, seed: int = EVAL_SEED, env=Non
 def format_result(name: str, r: EvalResult) -> str:
     return (f"{name}: success {100 * r.success_rate:.1f}% over {r.episodes} episodes | return {r.mean_return:.2f} | "
             f"steps {r.mean_steps:.1f} | wall {100 * r.wall_rate:.1f}% flip {100 * r.flip_rate:.1f}% "
-            f"timeout {100 * r.timeout_rate:.1f}% nonfinite {100 * r.nonfinite_rate:.1f}%"
-            + (f" obstacle {100 * r.obstacle_rate:.1f}%" if r.obstacle_rate else ""))
+            f"obstacle {100 * r.obstacle_rate:.1f}% timeout {100 * r.timeout_rate:.1f}% "
+            f"nonfinite {100 * r.nonfinite_rate:.1f}%")
 
 
 def write_result(path: str | Path, name: str, task: str, seed: int, r: EvalResult, **extra) -> None:

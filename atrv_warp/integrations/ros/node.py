@@ -36,6 +36,7 @@ from atrv_warp.integrations.ros.parameters import (
     PARAMETERS,
     VELOCITY,
     driver_config,
+    publish_every,
     unknown_parameters,
 )
 from atrv_warp.integrations.ros.rover_io import RoverIO, ros_time
@@ -86,6 +87,7 @@ class RoverSimNode(Node):
         self.goal_refusal: str | None = None
         """Why goal mode cannot drive this robot (:meth:`goal_policy_refusal`), once decided."""
         self._goal_decided = False
+        self._warned_other_robot = False
         self.commanded = False
         """A /cmd_vel came since the last state publication (``lockstep``)."""
         self.published_at = 0.0
@@ -134,7 +136,7 @@ class RoverSimNode(Node):
             self.env.reset()
             starts = self.sim.root_pose[:, :2].tolist()
             starts = [[x, y, float(yaw)] for (x, y), yaw in zip(starts, self.sim.rpy[:, 2].tolist())]
-            self.log.info("task nav: rovers start at their first episodes' starts "
+            self.log.info(f"task {p['task']}: rovers start at their first episodes' starts "
                           + ", ".join(f"({x:.1f}, {y:.1f})" for x, y, _ in starts))
         try:
             self.sim.reset(poses=starts)
@@ -151,7 +153,9 @@ class RoverSimNode(Node):
             scan = ScannerConfig(beams=p["scan_beams"], noise_std=p["scan_noise"], dropout=p["scan_dropout"])
             self.scanner = LaserScanner(self.sim, scan, seed=int(p["seed"]))
         desc = self.sim.description
-        self.every = max(1, round(1.0 / (p["publish_rate"] * self.sim.sim_cfg.step_dt)))
+        self.every, rate_line = publish_every(p["publish_rate"], self.sim.sim_cfg.step_dt)
+        if rate_line:  # topics come on steps: the rate they get is said
+            self.log.warning(rate_line)
         self.frame_id = p["frame_id"] or desc.chassis
         self.odom_frame, self.base_frame, self.imu_frame = (p["odom_frame"], p["base_frame"],
                                                            self.sim.rover_cfg.robot_spec.imu_frame)
@@ -249,7 +253,7 @@ class RoverSimNode(Node):
             try:
                 self._check_policy_robot(shipped_policy_for(self.params["task"], self.params["robot"]))
             except PolicyRobotMismatch as err:
-                self.goal_refusal = f"{err} (give one trained on it: -p policy:=FILE)"
+                self.goal_refusal = f"{err}; or give one trained on it: -p policy:=FILE"
             self._goal_decided = True
         return self.goal_refusal
 
@@ -258,7 +262,11 @@ class RoverSimNode(Node):
         from atrv_warp.core.robot import load_robot
         from atrv_warp.policy import check_policy_robot, policy_record
 
-        check_policy_robot(policy_record(policy), load_robot(self.params["robot"]), source=policy)
+        warning = check_policy_robot(policy_record(policy), load_robot(self.params["robot"]), source=policy,
+                                     allow=self.params["allow_other_robot"], allow_with="-p allow_other_robot:=true")
+        if warning and not self._warned_other_robot:
+            self.log.warning(f"{warning} (allow_other_robot:=true)")
+            self._warned_other_robot = True
 
     def _start_tf(self, latched: QoSProfile) -> None:
         """Live /tf and /tf_static, where tf2_msgs loads (a ROS install's, or built from its definition on

@@ -11,7 +11,7 @@ from atrv_warp.sim.driver import DriverConfig
 from atrv_warp.sim.modes import DriveMode
 
 __all__ = ["COMMANDS", "DRIVER_PARAMETERS", "GOAL", "MAX_ROVERS", "PARAMETERS", "PARAMETER_BY_NAME", "ROBOTS_OWN",
-           "VELOCITY", "driver_config", "parameter_help", "unknown_parameters"]
+           "VELOCITY", "driver_config", "parameter_help", "publish_every", "unknown_parameters"]
 
 GOAL = "goal"
 COMMANDS = tuple(m.value for m in DriveMode) + (GOAL,)
@@ -26,7 +26,8 @@ MAX_ROVERS = 64
 PARAMETERS = (
     Parameter("real_time_factor", 1.0, "simulated seconds per wall second; 0 = as fast as possible", "number"),
     Parameter("publish_rate", 10.0, "rate of /pose, /odom, /ground_truth/odom, /joint_states, /imu and /scan [Hz of "
-              "sim time]", "number", "Hz", positive=True),
+              "sim time]: every step or every few (the nearest; the log says the rate it runs at)", "number", "Hz",
+              positive=True),
     Parameter("duration", 0.0, "stop after this much sim time [s]; 0 = until Ctrl-C", "number", "s"),
     Parameter("mode", "coast", "initial driving mode: coast | forward | backward | rotate_left | rotate_right",
               "choice", choices=tuple(m.value for m in DriveMode)),
@@ -51,6 +52,8 @@ PARAMETERS = (
     Parameter("base_frame", "base_link", "child frame of /odom", "frame"),
     Parameter("policy", "", "policy file for goal mode (default: the shipped one); the world then runs the task it "
               "records, as it trained (its limits and control period)", "text"),
+    Parameter("allow_other_robot", False, "goal mode: drive with a policy trained on another robot than robot:= on "
+              "purpose (a study); without it, that is refused naming both", "switch"),
     Parameter("bag", "", "write an MCAP ROS 2 bag here: /cmd_vel, /joint_states, /odom, /ground_truth/odom, /pose, "
               "/command, /goal, /goal_status (what atrv-calibrate reads), /tf, /tf_static and /robot_description "
               "(what a 3D view draws the rover from); not /imu or /scan", "file"),
@@ -150,3 +153,15 @@ def unknown_parameters(args: list[str] | None, params_files: dict[str, list[str]
 def parameter_help() -> str:
     """The node's parameters as ``name (default): description`` lines."""
     return core_parameters.parameter_help(PARAMETERS)
+
+
+def publish_every(publish_rate: float, step_dt: float) -> tuple[int, str | None]:
+    """(steps between state publications, a line saying the rate they come at where it is not ``publish_rate`` [Hz]
+    within 1 %, else ``None``) for a simulator stepping every ``step_dt`` [s]: the nearest whole number of steps."""
+    every = max(1, round(1.0 / (publish_rate * step_dt)))
+    rate = 1.0 / (every * step_dt)
+    if abs(rate - publish_rate) <= 0.01 * publish_rate:
+        return every, None
+    most = " (the simulator's step rate, the most there is)" if every == 1 and publish_rate > rate else ""
+    return every, (f"publish_rate {publish_rate:g} Hz: state topics every {every} step(s) of {step_dt:.3g} s, "
+                   f"{rate:.3g} Hz{most}")
