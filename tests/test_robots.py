@@ -211,6 +211,12 @@ def test_a_ros_urdf_becomes_a_robot_that_drives(tmp_path, capsys):
     path = tmp_path / "rosbot.toml"
     text = path.read_text()
     assert 'chassis = "base_link"' in text and 'imu = "imu_link"' in text and 'laser = "laser"' in text
+    from atrv_warp.core.robot import FIELDS
+
+    for field in FIELDS:  # every field a robot file has, the optional ones as comments
+        assert f"\n{field.split('.')[-1]} = " in text or f"\n# {field.split('.')[-1]} = " in text, field
+    for field in ("motor.torque_limit", "motor.no_load_speed", "limits.linear_velocity", "limits.angular_acceleration"):
+        assert load_robot(path).sources[field].startswith("not published")
     path.write_text(text.replace("linear_velocity = 1.0", "linear_velocity = 0.8"))
     assert main(["check", str(path), "--static"]) == 0
     assert "ok (rosbot: chassis base_link, 4 wheels" in capsys.readouterr().out
@@ -247,6 +253,50 @@ def test_six_and_eight_wheel_robots_check_and_drive_their_limits(name, wheels):
     assert sim.ang_vel[1, 2] == pytest.approx(lim.angular_velocity, rel=0.15)
     impulses = sim.contact.impulses.numpy().reshape(2, wheels, 3)
     assert (abs(impulses[1]).sum(-1) > 0).all(), "a wheel of the turning rover carries no friction"
+
+
+def test_the_check_turns_to_the_robots_limits_fits_the_factor_within_the_grip_and_judges_settling():
+    from atrv_warp.sim.robot_check import (
+        SETTLE_TARGET,
+        settle_misses,
+        track_factor_rule,
+        turn_commands,
+        within_grip,
+    )
+
+    jackal = load_robot("jackal")  # 2 m/s, 4 rad/s
+    assert turn_commands(jackal) == ((0.0, 0.5), (0.0, 1.0), (0.0, 2.0), (0.0, 4.0), (1.0, 1.0), (1.0, -2.0),
+                                     (2.0, 1.0), (2.0, 2.0))
+    turns = [{"linear": 0.0, "angular": 4.0, "friction": 0.3, "chi": 1.5},
+             {"linear": 1.0, "angular": 1.0, "friction": 0.3, "chi": 1.2},
+             {"linear": 2.0, "angular": 2.0, "friction": 0.3, "chi": 0.5}]  # 4 m/s² > 0.5 x 0.3 g: sliding
+    assert [within_grip(t) for t in turns] == [True, True, False]
+    f = track_factor_rule(turns)  # least squares of f / chi - 1 over the first two
+    assert f == pytest.approx((1 / 1.5 + 1 / 1.2) / (1 / 1.5**2 + 1 / 1.2**2))
+    assert f / 1.5 - 1 == pytest.approx(-(f / 1.2 - 1), rel=0.3)  # errors of both signs, neither side favoured
+    steps = [{"linear": 0.0, "angular": 0.5, "friction": 0.3, "settle": 0.4},
+             {"linear": 0.3, "angular": 0.3, "friction": 0.8, "settle": 0.75},
+             {"linear": 0.0, "angular": 0.5, "friction": 0.8, "settle": math.inf},
+             {"linear": 1.0, "angular": 0.2, "friction": 0.8, "settle": 2.0}]  # reported, not judged
+    assert settle_misses(steps) == ["arc 0.3 m/s, 0.3 rad/s at µ 0.8: 0.75 s", "in place 0.5 rad/s at µ 0.8: never"]
+    assert SETTLE_TARGET == 0.5
+
+
+def test_check_of_a_six_wheel_robot_prints_each_turns_error_and_its_verdict(tmp_path, capsys):
+    import json
+
+    from atrv_warp.cli.robot import main
+
+    for name in ("sixwheel.toml", "sixwheel.urdf"):
+        shutil.copy(DATA / name, tmp_path / name)
+    out = tmp_path / "report.json"
+    assert main(["check", str(tmp_path / "sixwheel.toml"), "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "in place 2 rad/s" in printed and "arc 1.5 m/s, 1 rad/s" in printed  # turns to its limits, 1.5 and 2
+    assert "settling (in place and the 0.3 m/s arc, target 0.5 s): met" in printed
+    report = json.loads(out.read_text())
+    assert len(report["turns"]) == 16 and all(abs(t["yaw_error"]) < 0.25 for t in report["turns"])
+    assert report["settle_misses"] == [] and report["top_speed"] <= 20.0 * 0.15
 
 
 def test_unpaired_or_too_many_wheels_are_refused_naming_the_count(tmp_path):

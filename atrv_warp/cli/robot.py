@@ -6,7 +6,8 @@
 
 ``check`` reads the file and its URDF (one named error per problem: the file's field and the link or joint), then
 drives the robot in the simulator and prints its mass, wheel radius, track, wheelbase, effective track factor (steady
-turns at µ 0.3 and 0.8), top speed under full torque and the ``/cmd_vel`` step response through its driver.
+turns to the robot's limits at µ 0.3 and 0.8, and each one's ``/cmd_vel`` yaw error with it), top speed under full
+torque and the ``/cmd_vel`` step response through its driver, judged: exit 1 where it does not settle within 0.5 s.
 ``--write`` puts the measured factor and the rule's driver gains into the file. The robot file's format is
 :mod:`atrv_warp.core.robot`'s; docs/your-own-robot.md walks through it.
 """
@@ -57,6 +58,8 @@ def _list() -> int:
 
 def format_check(report: dict) -> str:
     """The check's report (:meth:`~atrv_warp.sim.robot_check.RobotCheck.as_dict`) as the command prints it."""
+    from atrv_warp.sim.robot_check import SETTLE_TARGET
+
     f, g = report["file"], report["gains"]
     lines = [
         f"{report['robot']} ({report['title']})",
@@ -69,10 +72,14 @@ def format_check(report: dict) -> str:
     for t in report["turns"]:
         by_mu.setdefault(t["friction"], []).append(t["chi"])
     spread = ", ".join(f"µ {mu:g}: {min(c):.2f}-{max(c):.2f}" for mu, c in by_mu.items())
-    lines.append(f"  effective track factor {report['effective_track_factor']:.3f} ({spread})   file: "
+    lines.append(f"  effective track factor {report['effective_track_factor']:.3f} (chi {spread}; least squared "
+                 f"/cmd_vel yaw error within the grip)   file: "
                  f"{f['effective_track_factor']:g}{_agree(report['effective_track_factor'], f['effective_track_factor'])}")
-    lines.append(f"  top speed under full torque ({f['torque_limit']:g} N·m, µ 0.8): {report['top_speed']:.2f} m/s "
-                 f"(limit {f['limits']['linear_velocity']:g} m/s)")
+    lines += _turn_table(report["turns"])
+    capped = report["top_speed"] < report.get("top_speed_measured", report["top_speed"])
+    lines.append(f"  top speed under full torque ({f['torque_limit']:g} N·m, µ 0.8): {report['top_speed']:.2f} m/s"
+                 + (f" (the motor's no-load speed at the rim; measured {report['top_speed_measured']:.2f})" if capped
+                    else "") + f" (limit {f['limits']['linear_velocity']:g} m/s)")
     lines.append("  drivetrain: " + ("one motor per side, its wheels geared to one speed (motor.per_side)"
                                      if f.get("motor_per_side") else "each wheel free under its side's torque"))
     lines.append("  /cmd_vel steps from rest, settled (yaw rate within 10 % to the end) / overshoot:")
@@ -87,7 +94,29 @@ def format_check(report: dict) -> str:
             settle = "never" if not math.isfinite(s["settle"]) else f"{s['settle']:.2f} s"
             cells.append(f"{settle} / {100 * s['overshoot']:+.0f} %")
         lines.append("    " + f"{label:<26}" + "".join(f"{c:>18}" for c in cells))
+    misses = report.get("settle_misses", [])
+    lines.append(f"  settling (in place and the 0.3 m/s arc, target {SETTLE_TARGET:g} s): "
+                 + ("met" if not misses else "MISSED: " + "; ".join(misses)))
     return "\n".join(lines)
+
+
+def _turn_table(turns: list[dict]) -> list[str]:
+    """Each steady turn's /cmd_vel yaw error and odometry error through the driver with the chosen factor."""
+    if not turns or "yaw_error" not in turns[0]:
+        return []
+    mus = sorted({t["friction"] for t in turns})
+    from atrv_warp.sim.robot_check import within_grip
+
+    lines = [("  steady turns through the driver: yaw rate / command - 1, odometry's yaw / true - 1 (* at the grip "
+              "limit, not fitted):"),
+             "    " + f"{'command':<26}" + "".join(f"{f'µ {mu:g}':>18}" for mu in mus)]
+    for v, w in dict.fromkeys((t["linear"], t["angular"]) for t in turns):
+        label = f"in place {w:g} rad/s" if v == 0 else f"arc {v:g} m/s, {w:g} rad/s"
+        cells = [f"{'*' if not within_grip(t) else ''}{100 * t['yaw_error']:+.0f} %, {100 * t['odometry_error']:+.0f} %"
+                 for mu in mus
+                 for t in turns if (t["linear"], t["angular"], t["friction"]) == (v, w, mu)]
+        lines.append("    " + f"{label:<26}" + "".join(f"{c:>18}" for c in cells))
+    return lines
 
 
 def _agree(measured: float, declared: float) -> str:
@@ -107,8 +136,10 @@ def write_measured(path: str | Path, report: dict) -> list[str]:
     source = {"kp": "the rule of `python -m atrv_warp.robot check` (kp x sim_dt / J = 1.536, the ATRV-Jr's tuned "
                     f"ratio, for the wheel's axial inertia {report['wheel_inertia']:.4g} kg m²), {day}",
               "ki": f"the rule: ki = 10 kp, {day}",
-              "effective_track_factor": "measured by `python -m atrv_warp.robot check`: the median chi over "
-                                        f"{len(report['turns'])} steady turns at µ 0.3 and 0.8, {day}"}
+              "effective_track_factor": "measured by `python -m atrv_warp.robot check`: the least squared "
+                                        "/cmd_vel yaw error over the turns within the grip of "
+                                        f"{len(report['turns'])} steady turns to the robot's limits at µ 0.3 and "
+                                        f"0.8, {day}"}
     changed = [k for k, v in values.items() if report["file"].get(k) != v]
     for key, value in values.items():
         text = _set_key(text, "driver", key, repr(float(value)))
@@ -123,7 +154,7 @@ def _set_key(text: str, table: str, key: str, value: str) -> str:
     """``text`` with ``key = value`` in ``[table]``: the existing line replaced, else added at the table's end (the
     table appended where there is none)."""
     lines = text.splitlines()
-    start = next((i for i, line in enumerate(lines) if line.strip() == f"[{table}]"), None)
+    start = next((i for i, line in enumerate(lines) if line.split("#")[0].strip() == f"[{table}]"), None)
     if start is None:
         return text.rstrip("\n") + f"\n\n[{table}]\n{key} = {value}\n"
     end = next((i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith("[")), len(lines))
@@ -145,7 +176,8 @@ _LASER = re.compile(r"laser|lidar|lrf|scan|hokuyo|sick|lms", re.IGNORECASE)
 def starter_file(urdf: str | Path, name: str) -> str:
     """A robot file for ``urdf`` as far as the URDF tells: the chassis (the wheels' parent), the wheels found by the
     rule, an IMU and a laser frame fixed to the chassis (by their names), the wheel cylinder, the rule's gains, and a
-    torque limit by the shipped robots' rule. The limits are placeholders: set your robot's."""
+    torque limit by the shipped robots' rule. Every field a robot file has is written (the optional ones as comments);
+    the motor's and the limits are placeholders, their ``[sources]`` say so: set your robot's."""
     import numpy as np
 
     from atrv_warp.core.robot import RobotFileError
@@ -201,6 +233,9 @@ urdf = "{urdf.name}"
 chassis = "{chassis}"
 imu = "{imu[0]}"
 laser = "{laser[0]}"
+# left_wheels = [...]          # name the wheels (both lists) where the rule would take a joint that is not one
+# right_wheels = [...]
+# frames = [...]               # other frames that must exist, fixed to the chassis
 
 [wheels]
 radius = {radius!r}
@@ -218,8 +253,22 @@ ki = {float(f"{INTEGRAL_RATIO * kp:.3g}")!r}
 effective_track_factor = 1.5   # `check --write` measures it
 
 [limits]                       # set your robot's diff_drive_controller limits
-linear_velocity = 1.0
-angular_velocity = 1.0
+linear_velocity = 1.0          # [m/s] linear.x.max_velocity
+angular_velocity = 1.0         # [rad/s] angular.z.max_velocity
+linear_acceleration = 1.0      # [m/s²] linear.x.max_acceleration (optional: leave it out for none)
+angular_acceleration = 1.0     # [rad/s²] angular.z.max_acceleration (optional)
+
+[sources]                      # where each value comes from: a datasheet, a config file at its commit, or "not published"
+"links.chassis" = "{urdf.name}: the wheels' parent"
+"wheels.radius" = "{urdf.name}: the wheel cylinder"
+"wheels.width" = "{urdf.name}: the wheel cylinder"
+"motor.torque_limit" = "not published: the starter's rule, the torque that slips a wheel at µ 1.125 under its share"
+"motor.no_load_speed" = "not published: the starter's placeholder"
+"motor.per_side" = "not published: the starter's placeholder"
+"limits.linear_velocity" = "not published: the starter's placeholder"
+"limits.angular_velocity" = "not published: the starter's placeholder"
+"limits.linear_acceleration" = "not published: the starter's placeholder"
+"limits.angular_acceleration" = "not published: the starter's placeholder"
 """
 
 
@@ -257,7 +306,7 @@ def _new(args) -> int:
 def _check(args) -> int:
     from atrv_warp.core.files import OutputPathError, check_output_path
     from atrv_warp.core.robot import RobotFileError
-    from atrv_warp.sim.robot_check import check_robot, measure_robot
+    from atrv_warp.sim.robot_check import SETTLE_TARGET, check_robot, measure_robot
 
     if args.json:  # before the measured drive, which takes minutes
         try:
@@ -288,6 +337,10 @@ def _check(args) -> int:
         path = load_robot(args.robot).path
         changed = write_measured(path, report)
         print(f"wrote {path}: " + (", ".join(changed) if changed else "its values already agreed"))
+    if report["settle_misses"]:
+        print(f"error: {args.robot}: the driver does not settle within {SETTLE_TARGET:g} s: "
+              + "; ".join(report["settle_misses"]), file=sys.stderr)
+        return 1
     return 0
 
 
