@@ -324,3 +324,24 @@ def test_turning_gradient_through_a_geared_drivetrain():
         d[t, 0] = torch.tensor([1.0, -1.0]) / math.sqrt(2.0)
         fd = ((objective(roll(a + 1e-3 * d, state)) - objective(roll(a - 1e-3 * d, state))) / 2e-3).item()
         assert (aa.grad * d).sum().item() == pytest.approx(fd, rel=0.02, abs=1e-4), t
+
+
+def test_twist_gradient_through_an_implicit_speed_loop():
+    """With the driver's loop implicit (``DriverConfig.implicit_speed_loop``: its damping in the friction solve,
+    one array per substep on the tape), steering's gradient through ``/cmd_vel`` agrees with finite differences."""
+    from atrv_warp.sim.config import RoverConfig
+    from atrv_warp.sim.driver import DriverConfig
+
+    roll = DiffRollout(1, steps=10, rover=RoverConfig(robot="husky"), twist=True,
+                       driver=DriverConfig(implicit_speed_loop=True))
+    state = roll.initial_state()
+    a = torch.empty(10, 1, 2)
+    a[..., 0], a[..., 1] = 0.3, 0.4
+    aa = a.clone().requires_grad_(True)
+    objective = lambda poses: poses[-1, 0, 0] + poses[-1, 0, 1] + 2.0 * poses[-1, 0, 5]
+    objective(roll(aa, state)).backward()
+    for t in (0, 5):
+        d = torch.zeros(10, 1, 2)
+        d[t, 0] = torch.tensor([1.0, -1.0]) / math.sqrt(2.0)
+        fd = ((objective(roll(a + 1e-3 * d, state)) - objective(roll(a - 1e-3 * d, state))) / 2e-3).item()
+        assert (aa.grad * d).sum().item() == pytest.approx(fd, rel=0.03, abs=1e-4), t

@@ -3,6 +3,7 @@ joint, a URDF in the ROS conventions becomes a robot file with ``python -m atrv_
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import shutil
@@ -103,6 +104,19 @@ def test_the_gain_rule_gives_the_atrvjrs_tuned_gains():
     for name in ("jackal", "husky"):
         robot, description = check_robot(name)
         assert driver_gains(description) == (robot.kp, robot.ki)
+
+
+def test_the_implicit_loops_gain_rule_answers_every_loaded_wheel_alike_within_its_cap():
+    """``kp = (J + mass / wheels x r²) / LOOP_TIME``: the ATRV-Jr's 58 kg on 0.125 m wheels give 4.92, the Jackal's
+    light wheels 0.933 (``kp x dt / J`` 3.9, under the cap of 4); a light wheel under a heavy robot is capped."""
+    from atrv_warp.sim.robot_check import IMPLICIT_GAIN_CAP, check_robot, driver_gains, wheel_inertia
+
+    assert driver_gains(check_robot("atrvjr")[1], implicit=True) == (4.92, 49.2)
+    _, jackal = check_robot("jackal")
+    assert driver_gains(jackal, implicit=True) == (0.933, 9.33)
+    heavy = dataclasses.replace(jackal, chassis_inertial=dataclasses.replace(jackal.chassis_inertial, mass=200.0))
+    kp, _ = driver_gains(heavy, implicit=True)
+    assert kp == pytest.approx(IMPLICIT_GAIN_CAP * wheel_inertia(jackal) / 0.01, rel=0.01)
 
 
 def test_a_record_reads_back_as_the_robot():

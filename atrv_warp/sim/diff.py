@@ -241,6 +241,8 @@ class DiffRollout:
         # substep boundary, so the tape differentiates through that chain too.
         self._impulses = [wp.zeros_like(self.sim.contact.impulses, requires_grad=True) for _ in range(n_sub + 1)]
         self._torque = wp.zeros((num_worlds, len(wheels)), dtype=float, device=dev)
+        # an implicit driver's slope, written by each substep's drive and read by its friction solve: one per substep
+        self._damping = [wp.zeros((num_worlds, len(wheels)), dtype=float, device=dev) for _ in range(n_sub)]
         # Featherstone keeps its mass-matrix scratch (M, J, P, H, L) on the solver, shared by every
         # step. Under a tape each step must own them, or the adjoints of all steps mix in one buffer
         # (gradients explode with the horizon); so each substep gets its own set, swapped in below.
@@ -304,7 +306,8 @@ class DiffRollout:
                 sim.substep(s_in, s_out, self.controls[k], self._commands[t], physics=self._physics,
                             flags=self._flags, torque=self._torque, solver_in=self._solver_in[k],
                             warm_start=self._impulses[k], impulses=self._impulses[k + 1], twist=self._commands[t],
-                            driver_in=self._driver[k], driver_out=self._driver[k + 1], mode=self._mode)
+                            driver_in=self._driver[k], driver_out=self._driver[k + 1], mode=self._mode,
+                            damping=self._damping[k])
                 if self._tape is not None and self.wrench_fix:
                     self._tape.record_func(backward=restore_external_wrench(s_out, s_in), arrays=[])
                 k += 1

@@ -75,6 +75,11 @@ class DriverConfig:
     """``angular.z.max_acceleration`` [rad/s²] (``None``: no limit)."""
     cmd_vel_timeout: float = 0.5
     """Without a command for this long [s], the target drops to zero (``diff_drive_controller``'s default)."""
+    implicit_speed_loop: bool = False
+    """The loop's proportional term acts on each wheel's speed at the substep's end, solved with its ground contact
+    (:func:`~atrv_warp.sim.kernels.friction.solve_wheel_friction`): no gain is bounded by the substep, where the
+    explicit loop (``False``) goes unstable once a slipping wheel's ``kp x sim_dt / J`` reaches 2. Coulomb friction
+    only (the viscous law has no solve to put it in)."""
     odometry_accel_time: float | None = None
     """The fused odometry's velocity from the encoders and the IMU's accelerometer: a complementary filter with this
     time constant [s], which follows the integrated accelerometer over shorter spans and the encoders (their speed
@@ -127,6 +132,7 @@ class DriverConfig:
         p.max_linear, p.max_linear_accel = limit["linear_max_velocity"], limit["linear_max_acceleration"]
         p.max_angular, p.max_angular_accel = limit["angular_max_velocity"], limit["angular_max_acceleration"]
         p.timeout, p.dt = self.cmd_vel_timeout, dt
+        p.implicit = int(bool(self.implicit_speed_loop))
         p.accel_time = 0.0 if self.odometry_accel_time is None else float(self.odometry_accel_time)
         if p.accel_time and p.accel_time < 2.0 * dt:
             raise ValueError(f"DriverConfig.odometry_accel_time must be at least two substeps ({2.0 * dt:g} s), got "

@@ -25,8 +25,10 @@ __all__ = [
     "FACTOR_RULE",
     "GAIN_RATIO",
     "GRIP_SHARE",
+    "IMPLICIT_GAIN_CAP",
     "INTEGRAL_RATIO",
     "IN_PLACE_SHARES",
+    "LOOP_TIME",
     "SETTLE_TARGET",
     "STEP_CASES",
     "TURN_FRICTIONS",
@@ -48,6 +50,15 @@ the fastest pair whose yaw rate overshoots by at most 10 % at µ 0.2-1.0). The l
 slipping wheel (its own inertia alone) goes unstable where the ratio reaches 2."""
 INTEGRAL_RATIO = 10.0
 """The rule's ``ki / kp`` [1/s] (the ATRV-Jr's 30 / 3)."""
+LOOP_TIME = 0.05
+"""The implicit loop's rule (:attr:`~atrv_warp.sim.driver.DriverConfig.implicit_speed_loop`): ``kp = J_loaded /
+LOOP_TIME`` [s] for a wheel loaded with its share of the robot, ``J_loaded = J + (mass / wheels) r²``, so that every
+robot's loaded wheel answers as fast (the ATRV-Jr's tuned 3.0 is 0.082 s, the Jackal's bounded 0.369 is 0.126 s;
+``benchmarks/robots/implicit_driver.py`` measures every robot's settling under both loops), at most
+:data:`IMPLICIT_GAIN_CAP`."""
+IMPLICIT_GAIN_CAP = 4.0
+"""The implicit rule's ``kp x sim_dt / J`` at most: above about 6, the loop's damping, on inside the torque limit and
+off at it, switches every substep on a slipping light wheel (the Jackal at µ 0.3) and the turn oscillates."""
 IN_PLACE_SHARES: tuple[float, ...] = (0.125, 0.25, 0.5, 1.0)
 """Steady turns in place at these shares of the robot's angular limit."""
 ARC_SHARES: tuple[tuple[float, float], ...] = ((0.5, 0.25), (0.5, -0.5), (1.0, 0.25), (1.0, 0.5))
@@ -166,12 +177,22 @@ def wheel_inertia(description: RoverDescription) -> float:
     return min(float(w.axis @ w.inertial.inertia @ w.axis) for w in description.wheels)
 
 
-def driver_gains(description: RoverDescription, sim_dt: float | None = None) -> tuple[float, float]:
+def driver_gains(description: RoverDescription, sim_dt: float | None = None, *, implicit: bool = False,
+                 wheel_radius: float | None = None) -> tuple[float, float]:
     """(kp [N·m per rad/s], ki [N·m per rad]) by the rule: :data:`GAIN_RATIO` for the wheel's axial inertia at the
-    substep ``sim_dt`` (default :class:`~atrv_warp.sim.config.SimConfig`'s), ``ki = INTEGRAL_RATIO x kp``; three
-    significant figures."""
+    substep ``sim_dt`` (default :class:`~atrv_warp.sim.config.SimConfig`'s), or for an ``implicit`` loop
+    :data:`LOOP_TIME` for the wheel loaded with its share of the robot at ``wheel_radius`` [m] (default: the URDF's;
+    within :data:`IMPLICIT_GAIN_CAP`); ``ki = INTEGRAL_RATIO x kp``; three significant figures."""
     dt = SimConfig().sim_dt if sim_dt is None else sim_dt
-    kp = float(f"{GAIN_RATIO * wheel_inertia(description) / dt:.3g}")
+    inertia = wheel_inertia(description)
+    kp = GAIN_RATIO * inertia / dt
+    if implicit:
+        radius = description.wheel_radius if wheel_radius is None else wheel_radius
+        if radius is None:
+            raise ValueError("the implicit rule needs the wheel radius: the URDF gives none, pass wheel_radius")
+        loaded = inertia + description.total_mass / len(description.wheels) * radius ** 2
+        kp = min(loaded / LOOP_TIME, IMPLICIT_GAIN_CAP * inertia / dt)
+    kp = float(f"{kp:.3g}")
     return kp, float(f"{INTEGRAL_RATIO * kp:.3g}")
 
 

@@ -208,9 +208,23 @@ class MujocoTwin:
                                                           c.torque_limit, dt)
             self.applied = out  # the nominal motor has no lag
             torques = self.applied
+            if c.implicit_speed_loop:  # ``proportional_slope``: the gain where the loop is inside its torque limit
+                slope = np.where(np.abs(out) < c.torque_limit, c.kp, 0.0)
         self.age += dt
         command = torques[self.wheel_side] * self.rover_cfg.torque_scale
-        self.data.ctrl[:] = _motor_torque(command, wheel, self.rover_cfg.wheel_speed_limit)
+        limit = self.rover_cfg.wheel_speed_limit
+        self.data.ctrl[:] = _motor_torque(command, wheel, limit)
+        if torques is self.applied and c.implicit_speed_loop:
+            # the implicit loop's damping (``drive_wheels``' ``damping``, through the motor's scale and taper):
+            # MuJoCo's Euler integrates a joint's damping implicitly; the applied force makes it act on the speed's
+            # change over the substep, not on the speed
+            taper = np.where(command < 0.0, -_motor_torque(-1.0, wheel, limit), _motor_torque(1.0, wheel, limit))
+            damping = slope[self.wheel_side] * self.rover_cfg.torque_scale * taper
+            self.model.dof_damping[self.wheel_dof] = damping
+            self.data.qfrc_applied[self.wheel_dof] = damping * self.data.qvel[self.wheel_dof]
+        else:
+            self.model.dof_damping[self.wheel_dof] = 0.0
+            self.data.qfrc_applied[self.wheel_dof] = 0.0
 
     def _limit_twist(self, target: np.ndarray, dt: float) -> np.ndarray:
         """``diff_drive_controller``'s speed and acceleration limits (off by default)."""

@@ -37,6 +37,7 @@ class DriverParams:
     timeout: float  # [s] without a command, the target drops to zero
     accel_time: float  # the fused odometry's complementary filter time constant [s] (0: the encoders' speed alone)
     dt: float  # the substep [s]
+    implicit: int  # 1: the loop's proportional term acts on the wheel's speed at the substep's end (DriverConfig)
 
 
 @wp.struct
@@ -103,6 +104,20 @@ def driver_torques(params: DriverParams, command: wp.vec2, fresh: bool, speeds: 
     out = wp.vec2(left, right)
     new_applied = applied + lag_factor(lag, params.dt) * (out - applied)
     return ref, wp.vec2(i_left, i_right), new_applied
+
+
+@wp.func
+def proportional_slope(params: DriverParams, out: wp.vec2) -> wp.vec2:
+    """Each side's torque per rad/s of its wheels' speed change within the substep under an implicit loop
+    (``params.implicit``): the proportional gain where the loop's output ``out`` is inside the torque limit, 0 where
+    it saturates (a clamped torque does not follow the speed) or the loop is explicit."""
+    slope = wp.vec2(0.0, 0.0)
+    if params.implicit != 0:
+        if wp.abs(out[0]) < params.torque_limit:
+            slope = wp.vec2(params.kp, slope[1])
+        if wp.abs(out[1]) < params.torque_limit:
+            slope = wp.vec2(slope[0], params.kp)
+    return slope
 
 
 @wp.func
@@ -210,11 +225,17 @@ def drive_wheels(
     state_out: DriverState,
     joint_f: wp.array(dtype=float),
     wheel_torque: wp.array2d(dtype=float),
+    damping: wp.array2d(dtype=float),
 ):
     """Each wheel's joint torque for one substep: the world's torque ``commands`` (``DRIVE_TORQUE``), or the
     driver's output for its ``twist`` (``DRIVE_TWIST``), through the world's motor (torque scale, no-load taper);
     and the wheel odometry. ``state_in`` and ``state_out`` may be the same arrays (the simulator) or one per
-    substep (a differentiable rollout's tape)."""
+    substep (a differentiable rollout's tape).
+
+    ``damping`` (N, W) [N·m per rad/s]: with ``params.implicit``, the slope of each wheel's torque in its own speed
+    change over the substep (the loop's proportional gain through the motor, 0 where the loop saturates or takes
+    torque commands); the friction solve (:func:`~atrv_warp.sim.kernels.friction.solve_wheel_friction`) integrates it
+    implicitly, with the wheel's ground contact, so that no gain is bounded by the substep."""
     world = wp.tid()
     speeds = side_speeds(layout, joint_qd, world)
     pose, odom_twist = integrate_odometry(params, state_in.odometry[world], speeds)
@@ -241,10 +262,12 @@ def drive_wheels(
     integral = state_in.integral[world]
     applied = state_in.applied[world]
     age = state_in.age[world]
+    slope = wp.vec2(0.0, 0.0)  # each side's torque per rad/s of its wheels' speed change, before the motor
     if mode[world] == DRIVE_TWIST:
         reference, integral, applied = driver_torques(params, twist[world], age <= params.timeout, speeds, reference,
                                                       integral, applied, lag[world])
         side = applied
+        slope = proportional_slope(params, applied)
     state_out.reference[world] = reference
     state_out.integral[world] = integral
     state_out.applied[world] = applied
@@ -263,6 +286,11 @@ def drive_wheels(
             drive = layout.wheel_inertia[k] * (geared[layout.wheel_side[k]] - sign * joint_qd[dof]) / params.dt
         joint_f[dof] = sign * drive
         wheel_torque[world, k] = tau
+        # the motor passes the proportional action as it passes the command: its torque scale and no-load taper
+        taper = motor_torque(1.0, sign * joint_qd[dof], speed_limit)
+        if cmd[layout.wheel_side[k]] < 0.0:
+            taper = -motor_torque(-1.0, sign * joint_qd[dof], speed_limit)
+        damping[world, k] = slope[layout.wheel_side[k]] * physics.torque_scale[world] * taper
 
 
 @wp.kernel

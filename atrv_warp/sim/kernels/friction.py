@@ -194,6 +194,7 @@ def solve_wheel_friction(
     body_qd: wp.array(dtype=wp.spatial_vector),
     body_com: wp.array(dtype=wp.vec3),
     joint_f: wp.array(dtype=float),
+    damping: wp.array2d(dtype=float),
     warm_start: wp.array(dtype=wp.vec3),
     body_f: wp.array(dtype=wp.spatial_vector),
     impulses: wp.array(dtype=wp.vec3),
@@ -201,6 +202,12 @@ def solve_wheel_friction(
     """One thread per world: the wheels' ground contact forces (normal and Coulomb friction), added to
     ``body_f``. ``joint_f`` holds this substep's drive torques; ``physics`` each world's mu (and its rise with
     slip), stiffness and wheel radius.
+
+    ``damping`` (N, W) [N·m per rad/s] is how each wheel's drive torque falls with its speed's change over the
+    substep (an implicit wheel-speed loop's proportional action through the motor, :func:`~atrv_warp.sim.kernels.
+    driver.drive_wheels`; 0: the torque is ``joint_f``'s): the wheel then spins as if its inertia were ``J + damping
+    dt`` under ``joint_f``'s torque, the friction solved with it, and the torque's change is applied between wheel and
+    chassis (a damping integrated implicitly, which no gain can make unstable).
 
     ``warm_start`` (N x ``slots.count``) holds the previous substep's friction impulses [N·s], where the
     sweeps start; ``impulses`` receives this substep's (the simulator passes one array as both; a tape
@@ -230,6 +237,9 @@ def solve_wheel_friction(
     free = mat83()  # contact point velocity without friction at the end of the substep (spin part) [m/s]
     normal = mat83()  # normal force [N]
     limit = vec8()  # Coulomb disc radius mu f_n dt [N·s]
+    ispins = vec8()  # 1 / the spin inertia the wheel moves with: its own, plus its drive's damping x dt [1/(kg·m²)]
+    taus = vec8()  # the drive torque [N·m]
+    axle = mat83()  # the joint axis, world frame
     force = gravity / inv_mass
     torque = wp.vec3()
     for k in range(MAX_WHEELS):
@@ -248,6 +258,15 @@ def solve_wheel_friction(
                 fn = hunt_crossley(depth, -wp.dot(v, n), params, kp)
             u = wp.transform_vector(X, slots.axis[k])
             tau = joint_f[world * slots.dofs_per_world + slots.dof[k]]
+            ispin = slots.inv_spin_inertia[k]
+            tau_end = tau  # the drive torque at the substep's end, friction aside
+            c = damping[world, k]
+            if c > 0.0:
+                ispin = 1.0 / (1.0 / slots.inv_spin_inertia[k] + c * dt)
+                tau_end = tau - c * tau * dt * ispin
+            ispins = with_entry(ispins, k, ispin)
+            taus = with_entry(taus, k, tau)
+            axle = with_row(axle, k, u)
             w = wp.cross(u, p - hub)
             a = u - wp.dot(u, n) * n
             al = wp.length(a)
@@ -259,7 +278,7 @@ def solve_wheel_friction(
             lat = with_row(lat, k, a)
             lon = with_row(lon, k, wp.cross(n, a))
             spin = with_row(spin, k, w)
-            free = with_row(free, k, v + w * (tau * slots.inv_spin_inertia[k] * dt))
+            free = with_row(free, k, v + w * (tau * ispin * dt))
             normal = with_row(normal, k, fn * n)
             mu_k = mu
             if rise > 0.0:  # friction rising with the slip speed at the substep's start (ContactConfig.friction_rise)
@@ -267,7 +286,7 @@ def solve_wheel_friction(
                 mu_k = mu * (1.0 + rise * wp.sqrt(wp.dot(vt, vt) + 1.0e-12))
             limit = with_entry(limit, k, mu_k * fn * dt)
             force += fn * n
-            torque += wp.cross(p - centre, fn * n) - tau * u
+            torque += wp.cross(p - centre, fn * n) - tau_end * u
     dv = force * (inv_mass * dt)
     dw = inv_inertia * torque * dt
 
@@ -278,7 +297,7 @@ def solve_wheel_friction(
     inv_d = mat82()
     for k in range(MAX_WHEELS):
         if k < slots.count:
-            ispin = slots.inv_spin_inertia[k]
+            ispin = ispins[k]
             dk = wp.vec2(effective_inverse_mass(lon[k], arm[k], inv_mass, inv_inertia, spin[k], ispin),
                          effective_inverse_mass(lat[k], arm[k], inv_mass, inv_inertia, spin[k], ispin))
             d = with_row(d, k, dk)
@@ -296,7 +315,7 @@ def solve_wheel_friction(
         for k in range(MAX_WHEELS):
             if k < slots.count:
                 impulse, dv, dw = relax_contact(impulse, k, lon[k], lat[k], arm[k], spin[k], free[k], d[k], inv_d[k],
-                                                slots.inv_spin_inertia[k], limit[k], dv, dw, inv_mass, inv_inertia)
+                                                ispins[k], limit[k], dv, dw, inv_mass, inv_inertia)
 
     # 3. Normal plus friction force on each wheel, as a wrench about its COM.
     for k in range(MAX_WHEELS):
@@ -305,7 +324,13 @@ def solve_wheel_friction(
             p3 = lon[k] * pk[0] + lat[k] * pk[1]
             impulses[world * slots.count + k] = p3
             f = normal[k] + p3 / dt
-            wp.atomic_add(body_f, base + shapes.body[slots.shape[k]], wp.spatial_vector(f, wp.cross(lever[k], f)))
+            wheel = base + shapes.body[slots.shape[k]]
+            wp.atomic_add(body_f, wheel, wp.spatial_vector(f, wp.cross(lever[k], f)))
+            c = damping[world, k]
+            if c > 0.0:  # the drive torque's change with the wheel's speed over the substep, wheel against chassis
+                change = -c * (taus[k] * dt + wp.dot(spin[k], p3)) * ispins[k]
+                wp.atomic_add(body_f, wheel, wp.spatial_vector(wp.vec3(0.0), change * axle[k]))
+                wp.atomic_add(body_f, base + slots.chassis, wp.spatial_vector(wp.vec3(0.0), -change * axle[k]))
 
 
 @wp.kernel
