@@ -230,6 +230,11 @@ class ContactConfig:
     ``coefficient x sim_dt / m_eff`` stays small: past that it overshoots, and a deep impact leaves
     faster than it came in. It engages only in impacts (where, ``benchmarks/physics/physics_report.py``
     prints). ``None``: the plain law."""
+    patch: float = 0.0
+    """On terrain, each wheel's ground is the plane of the terrain's mean over a patch (five samples, +-``patch`` x
+    the wheel's radius along the rim and +-half its width across it), not the tangent plane at its deepest point: a
+    tyre touches over a patch. 0 (the default): one point. The study of whether the single point makes the turn on
+    uneven ground depend on the contact stiffness (``benchmarks/robots/robot_arc.py``)."""
 
     def __post_init__(self):
         _check_types(self)
@@ -252,6 +257,8 @@ class ContactConfig:
         if not (math.isfinite(self.friction_slope_fraction) and self.friction_slope_fraction > 0):
             raise ValueError("ContactConfig.friction_slope_fraction must be a finite number > 0, got "
                              f"{self.friction_slope_fraction!r}")
+        if not (math.isfinite(self.patch) and 0 <= self.patch <= 1):
+            raise ValueError(f"ContactConfig.patch must be a number in [0, 1] (a share of the radius), got {self.patch!r}")
         if self.damping_limit is not None and not (math.isfinite(self.damping_limit) and self.damping_limit > 0):
             raise ValueError(f"ContactConfig.damping_limit must be > 0 or None (no ceiling), got {self.damping_limit!r}")
 

@@ -56,6 +56,7 @@ def _law(cfg: ContactConfig, sim_dt: float, m_share: float) -> ContactParams:
     p.wheel_solver = int(cfg.friction_law == "coulomb")
     p.dt = sim_dt
     p.damping_cap = math.inf if cfg.damping_limit is None else cfg.damping_limit * m_share / sim_dt
+    p.patch = cfg.patch
     return p
 
 

@@ -64,6 +64,7 @@ class ContactParams:
     wheel_solver: int  # 1: the wheels' ground contacts are solve_wheel_friction's (friction_law "coulomb")
     dt: float  # sim_dt [s]
     damping_cap: float  # ceiling on kc d^n [N·s/m] (ContactConfig.damping_limit)
+    patch: float  # a wheel's ground on terrain: the mean over +-patch x radius along the rim (0: one point)
 
 
 @wp.struct
@@ -269,8 +270,31 @@ def plane_contact(
 
 
 @wp.func
-def wheel_ground_point(scene: Scene, tile: int, xf: wp.transform, size: wp.vec3):
-    """A cylinder's deepest point on the ground (the terrain's tangent plane, or plane 0):
+def patch_sample(terrain: TerrainGrid, tile: int, xf: wp.transform, p: wp.vec3, along: float, across: float
+                 ) -> wp.vec3:
+    """The terrain's (height [m] at ``p``, dh/dx, dh/dy) averaged over five points: ``p`` and ``p`` +- ``along``
+    [m] in the wheel's rolling direction and +- ``across`` [m] along its axle, each sample's height carried to
+    ``p`` along its own tangent plane."""
+    a = wp.transform_vector(xf, wp.vec3(0.0, 0.0, 1.0))
+    side = wp.vec3(a[0], a[1], 0.0)
+    sl = wp.length(side)
+    if sl > 1.0e-6:
+        side = side / sl
+    else:
+        side = wp.vec3(0.0, 1.0, 0.0)
+    ahead = wp.vec3(side[1], -side[0], 0.0)
+    total = terrain_sample(terrain, tile, p[0], p[1])
+    for k in range(4):
+        d = wp.where(k < 2, ahead * along, side * across) * wp.where(k % 2 == 0, 1.0, -1.0)
+        h = terrain_sample(terrain, tile, p[0] + d[0], p[1] + d[1])
+        total += wp.vec3(h[0] - h[1] * d[0] - h[2] * d[1], h[1], h[2])
+    return total * 0.2
+
+
+@wp.func
+def wheel_ground_point(scene: Scene, tile: int, xf: wp.transform, size: wp.vec3, patch: float):
+    """A cylinder's deepest point on the ground (the terrain's tangent plane, or plane 0; with ``patch`` > 0 the
+    plane of the terrain's mean over a patch +-``patch`` x radius along the rim and across the width):
     (point [m], ground normal, depth [m], > 0 when touching)."""
     n = scene.planes.normal[0]
     off = scene.planes.offset[0]
@@ -280,7 +304,10 @@ def wheel_ground_point(scene: Scene, tile: int, xf: wp.transform, size: wp.vec3)
         n = terrain_normal(h)
         off = terrain_plane_offset(n, c[0], c[1], h)
         p0 = cylinder_deepest_point(xf, size[0], size[1], n)
-        h = terrain_sample(scene.terrain, tile, p0[0], p0[1])
+        if patch > 0.0:
+            h = patch_sample(scene.terrain, tile, xf, p0, patch * size[0], size[1])
+        else:
+            h = terrain_sample(scene.terrain, tile, p0[0], p0[1])
         n = terrain_normal(h)
         off = terrain_plane_offset(n, p0[0], p0[1], h)
     p = cylinder_deepest_point(xf, size[0], size[1], n)
@@ -304,7 +331,7 @@ def cylinder_ground_contact(
     friction: float,
 ):
     """A cylinder on the terrain under the regularised law: (wrench about the COM, 1 if touching)."""
-    p, n, depth = wheel_ground_point(scene, tile, xf, size)
+    p, n, depth = wheel_ground_point(scene, tile, xf, size, params.patch)
     if depth <= 0.0:
         return wp.spatial_vector(), 0
     f = point_contact_force(p, depth, n, com, v_com, omega, axle, slope_lon, slope_lat, params, stiffness, friction)

@@ -248,7 +248,7 @@ def solve_wheel_friction(
             b = base + shapes.body[s]
             X = body_q[b]
             p, n, depth = wheel_ground_point(scene, tile, X * shapes.xform[s],
-                                             wheel_size(shapes.size[s], physics, world))
+                                             wheel_size(shapes.size[s], physics, world), params.patch)
             hub = wp.transform_point(X, body_com[b])
             qd = body_qd[b]
             lever = with_row(lever, k, p - hub)

@@ -1,0 +1,191 @@
+"""Why the turn on uneven ground depends on the contact stiffness: a contact patch against one point, and each
+wheel's load, at 0.1, 1 and 10 times the nominal stiffness, on the nav terrain and on flat ground.
+
+    python -m benchmarks.physics.contact_stiffness [--figure docs/turn_vs_stiffness.png]
+
+Each shipped robot, in ``nav_deploy``'s world fitted to it (the test set's first ``STARTS`` starts, nominal rover,
+no randomization), is sent one ``/cmd_vel`` (0.5 m/s, 0.5 rad/s) through its base for 6 s. Per robot, ground,
+stiffness (``ContactConfig.stiffness`` x ``SCALES``), contact (``point``: the tangent plane at the deepest rim point;
+``patch``: ``ContactConfig.patch`` = ``PATCH``, the terrain's mean over +-0.3 radius along the rim and the wheel's
+width) and substep (``SUBSTEPS``: converged where the finer ones agree): the median over the starts of the yaw
+turned over the yaw commanded, and the share of wheel-steps (the last two thirds of the drive) whose load is under a
+quarter of its chassis' mean wheel load, estimated from each hub's height over the ground under it (``kp d^1.5``).
+At 10x the stiffness also with the contact damping 10x (the damping that keeps ``kc / kp``). Writes
+``benchmarks/results/contact_stiffness.json``; ``--figure`` draws the turn against the stiffness.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from benchmarks._common import load_results, markdown_table, pin_to_one_core, save_figure, write_results
+
+VERSION = 1
+"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+
+RESULTS = Path(__file__).resolve().parents[1] / "results"
+SCALES = (0.1, 1.0, 10.0)
+"""Contact stiffness over the nominal."""
+PATCH = 0.3
+"""``ContactConfig.patch`` of the patch contact: +-0.3 wheel radius along the rim."""
+SUBSTEPS = (0.01, 0.005, 0.0025)
+"""Solver substeps [s]: the nominal and two finer."""
+STARTS = 64
+SECONDS = 6.0
+COMMAND = (0.5, 0.5)
+"""(linear [m/s], angular [rad/s])."""
+LOW_LOAD = 0.25
+"""A wheel under this share of its chassis' mean wheel load is all but lifted."""
+
+
+def drive(robot: str, terrain: str | None, scale: float, patch: float, sim_dt: float, damping_scale: float = 1.0
+          ) -> dict:
+    """One survey: the median turn over the commanded and the share of low-loaded wheel-steps."""
+    import numpy as np
+    import torch
+
+    from atrv_warp.sim.config import ContactConfig, SimConfig
+    from atrv_warp.task.env import RoverEnv
+    from atrv_warp.task.evaluation import EVAL_SEED
+
+    nominal = ContactConfig()
+    contact = ContactConfig(stiffness=nominal.stiffness * scale, damping=nominal.damping * damping_scale, patch=patch)
+    env = RoverEnv(STARTS, task="nav_deploy", robot=robot, contact=contact, sim=SimConfig(sim_dt=sim_dt),
+                   **({"terrain": terrain} if terrain else {}))
+    env.set_seed(EVAL_SEED)
+    td = env.reset()
+    sim, cfg = env.sim, env.task_cfg
+    linear, angular = COMMAND
+    action = torch.tensor([[linear / cfg.max_linear, angular / cfg.max_angular]]).expand(STARTS, 2)
+    steps = round(SECONDS / sim.sim_cfg.step_dt)
+    wheels, per_world = sim.built.wheel_bodies, sim.built.rover_builder.body_count
+    previous = sim.rpy[:, 2].clone().double()
+    yaw = torch.zeros(STARTS, dtype=torch.float64)
+    low = []
+    for k in range(steps):
+        td["action"] = action
+        td = env.step(td)["next"]
+        now = sim.rpy[:, 2].clone().double()
+        yaw += torch.remainder(now - previous + math.pi, 2 * math.pi) - math.pi
+        previous = now
+        if k >= steps // 3:
+            hubs = sim.state_0.body_q.numpy().reshape(STARTS, per_world, 7)[:, wheels, :3]
+            depth = np.maximum(_ground(sim, hubs) - (hubs[..., 2] - sim.rover_cfg.wheel_radius), 0.0)
+            load = depth ** 1.5
+            low.append(load < LOW_LOAD * load.mean(axis=1, keepdims=True))
+    ratio = yaw / (angular * steps * sim.sim_cfg.step_dt)
+    return {"turned": float(ratio.median()), "low_load_share": float(np.concatenate(low).mean())}
+
+
+def _ground(sim, hubs):
+    """The ground's height [m] under each hub (N, W, 3): the terrain's bilinear height, or the flat ground's top."""
+    import numpy as np
+
+    top = sim.arena_cfg.ground_top
+    grid = sim.terrain.grid
+    if grid is None:
+        return np.full(hubs.shape[:2], top)
+    n = grid.heights.shape[1]
+    fx = np.clip((hubs[..., 0] + grid.half_size) / grid.resolution, 0, n - 1 - 1e-3)
+    fy = np.clip((hubs[..., 1] + grid.half_size) / grid.resolution, 0, n - 1 - 1e-3)
+    i, j = fx.astype(int), fy.astype(int)
+    u, v = fx - i, fy - j
+    h = grid.heights[sim.terrain.tile.cpu().numpy()[:, None], i, j] * (1 - u) * (1 - v)
+    h += grid.heights[sim.terrain.tile.cpu().numpy()[:, None], i + 1, j] * u * (1 - v)
+    h += grid.heights[sim.terrain.tile.cpu().numpy()[:, None], i, j + 1] * (1 - u) * v
+    h += grid.heights[sim.terrain.tile.cpu().numpy()[:, None], i + 1, j + 1] * u * v
+    return h + top
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--figure", type=Path, help="draw the turn against the stiffness into this PNG")
+    parser.add_argument("--figure-only", action="store_true", help="only draw the figure from the results file")
+    args = parser.parse_args()
+    if not args.figure_only:
+        pin_to_one_core()
+        from atrv_warp.core.robot import ROBOTS
+
+        rows = []
+        for robot in ROBOTS:
+            for ground, terrain in (("nav", None), ("flat", "flat")):
+                for scale in SCALES:
+                    for contact, patch in (("point", 0.0), ("patch", PATCH)):
+                        for sim_dt in SUBSTEPS:
+                            row = {"robot": robot, "ground": ground, "stiffness": scale, "contact": contact,
+                                   "sim_dt": sim_dt, "damping": 1.0, **drive(robot, terrain, scale, patch, sim_dt)}
+                            rows.append(row)
+                            print(" ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
+                                           for k, v in row.items()), flush=True)
+                rows.append({"robot": robot, "ground": ground, "stiffness": 10.0, "contact": "point",
+                             "sim_dt": SUBSTEPS[-1], "damping": 10.0,
+                             **drive(robot, terrain, 10.0, 0.0, SUBSTEPS[-1], damping_scale=10.0)})
+                print(rows[-1], flush=True)
+        path = write_results(RESULTS / "contact_stiffness.json", {"rows": rows, "command": list(COMMAND),
+                                                                  "starts": STARTS, "seconds": SECONDS},
+                             version=VERSION, task=True, driver=True, robots=tuple(ROBOTS))
+        print(f"wrote {path}")
+    if args.figure:
+        draw(args.figure)
+    return 0
+
+
+def converged(rows: list[dict], robot: str, ground: str, contact: str = "point", damping: float = 1.0) -> dict:
+    """Each stiffness' figures at the finest substep (``SUBSTEPS[-1]``)."""
+    return {r["stiffness"]: r for r in rows if (r["robot"], r["ground"], r["contact"], r["sim_dt"], r["damping"])
+            == (robot, ground, contact, SUBSTEPS[-1], damping)}
+
+
+def draw(path: Path, results: str = "contact_stiffness.json") -> None:
+    """The median turn against the stiffness, per robot: nav and flat ground, point and patch contact."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = load_results(results)["rows"]
+    robots = list(dict.fromkeys(r["robot"] for r in rows))
+    fig, axes = plt.subplots(1, len(robots), figsize=(4.0 * len(robots), 3.4), sharey=True)
+    for ax, robot in zip(axes, robots):
+        for ground, contact, style in (("nav", "point", "-o"), ("nav", "patch", "--s"), ("flat", "point", "-^")):
+            got = converged(rows, robot, ground, contact)
+            xs = sorted(got)
+            ax.plot(xs, [got[x]["turned"] for x in xs], style, label=f"{ground}, {contact}")
+        ax.set_xscale("log")
+        ax.set_ylim(0, 1.05)
+        ax.set_title(robot)
+        ax.set_xlabel("contact stiffness / nominal")
+    axes[0].set_ylabel("yaw turned / commanded (median)")
+    axes[0].legend(loc="lower left")
+    fig.tight_layout()
+    save_figure(fig, path, version=VERSION, results=(results,), dpi=110)
+    plt.close(fig)
+    print(f"wrote {path}")
+
+
+# --- the figures' tables, drawn from the results files at docs build time --------------------------
+
+def contact_stiffness() -> str:
+    """``contact_stiffness.json``: per robot and stiffness, the turn and the low-loaded wheels (finest substep)."""
+    rows = load_results("contact_stiffness.json")["rows"]
+    out = []
+    for robot in dict.fromkeys(r["robot"] for r in rows):
+        nav, patch, flat = (converged(rows, robot, g, c) for g, c in (("nav", "point"), ("nav", "patch"),
+                                                                      ("flat", "point")))
+        for scale in SCALES:
+            out.append([f"`{robot}`", f"{scale:g}x", f"{100 * nav[scale]['turned']:.0f} %",
+                        f"{100 * patch[scale]['turned']:.0f} %", f"{100 * nav[scale]['low_load_share']:.0f} %",
+                        f"{100 * flat[scale]['turned']:.0f} %", f"{100 * flat[scale]['low_load_share']:.0f} %"])
+    return markdown_table(["robot", "stiffness", "nav: turned (point)", "nav: turned (patch)",
+                           "nav: wheels under 1/4 load", "flat: turned", "flat: wheels under 1/4 load"],
+                          ["---", "---:", "---:", "---:", "---:", "---:", "---:"], out)
+
+
+TABLES = {"contact_stiffness": contact_stiffness}
+
+
+if __name__ == "__main__":
+    sys.exit(main())
