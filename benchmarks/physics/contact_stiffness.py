@@ -73,11 +73,15 @@ def drive(robot: str, terrain: str | None, scale: float, patch: float, sim_dt: f
         previous = now
         if k >= steps // 3:
             hubs = sim.state_0.body_q.numpy().reshape(STARTS, per_world, 7)[:, wheels, :3]
+            finite = np.isfinite(hubs).all(axis=(1, 2))
+            hubs = np.where(finite[:, None, None], hubs, 0.0)
             depth = np.maximum(_ground(sim, hubs) - (hubs[..., 2] - sim.rover_cfg.wheel_radius), 0.0)
             load = depth ** 1.5
-            low.append(load < LOW_LOAD * load.mean(axis=1, keepdims=True))
+            low.append((load < LOW_LOAD * load.mean(axis=1, keepdims=True))[finite])
     ratio = yaw / (angular * steps * sim.sim_cfg.step_dt)
-    return {"turned": float(ratio.median()), "low_load_share": float(np.concatenate(low).mean())}
+    finite = torch.isfinite(ratio)
+    return {"turned": float(ratio[finite].median()), "low_load_share": float(np.concatenate(low).mean()),
+            "nonfinite": int((~finite).sum())}
 
 
 def _ground(sim, hubs):
