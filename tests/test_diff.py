@@ -306,12 +306,15 @@ def test_featherstone_wrench_adjoint_one_substep(with_fix):
         assert abs(grad - fd) > 0.25 * abs(fd) + 0.05
 
 
-def test_turning_gradient_through_a_geared_drivetrain():
-    """The Husky's sides are geared (``motor.per_side``): the chain's torque is in the tape, and steering's gradient
-    through it agrees with finite differences as the free-wheeled ATRV-Jr's does."""
-    from atrv_warp.sim.config import RoverConfig
+@pytest.mark.parametrize("in_the_solve", [False, True])
+def test_turning_gradient_through_a_geared_drivetrain(in_the_solve):
+    """The Husky's sides are geared (``motor.per_side``): the chain's torque is in the tape (the drive's, or inside
+    the friction solve: ``ContactConfig.solve_geared_sides``), and steering's gradient through it agrees with finite
+    differences as the free-wheeled ATRV-Jr's does."""
+    from atrv_warp.sim.config import ContactConfig, RoverConfig
 
-    roll = DiffRollout(1, steps=10, rover=RoverConfig(robot="husky"))
+    roll = DiffRollout(1, steps=10, rover=RoverConfig(robot="husky"),
+                       contact=ContactConfig(solve_geared_sides=in_the_solve))
     assert roll.sim.rover_cfg.robot_spec.motor_per_side
     state = roll.initial_state()
     a = torch.empty(10, 1, 2)

@@ -239,8 +239,10 @@ def rover_inertia(model: newton.Model, bodies_per_world: int, chassis: int) -> t
     return total, centre, tensor
 
 
-def _wheel_slots(built: BuiltModel, wheel_dofs: list[int], dofs_per_world: int, device) -> WheelSlots:
-    """The wheels' cylinders, joints and spin inertias, in the description's wheel order."""
+def _wheel_slots(built: BuiltModel, wheel_dofs: list[int], dofs_per_world: int, device, geared: bool = False
+                 ) -> WheelSlots:
+    """The wheels' cylinders, joints and spin inertias, in the description's wheel order; ``geared``: each side's
+    wheels turn as one in the solve (:attr:`~atrv_warp.sim.config.ContactConfig.solve_geared_sides`)."""
     rb, desc = built.rover_builder, built.description
     shape, axis, inv_spin = [], [], []
     inertia = built.model.body_inertia.numpy()
@@ -255,6 +257,11 @@ def _wheel_slots(built: BuiltModel, wheel_dofs: list[int], dofs_per_world: int, 
         inv_spin.append(1.0 / float(a @ inertia[body] @ a))
     slots = WheelSlots()
     slots.count = len(desc.wheels)
+    slots.coupled = int(geared)
+    side_inertia = [sum(1.0 / i for i, w in zip(inv_spin, desc.wheels) if w.side == q) for q in (0, 1)]
+    slots.side_inertia = wp.vec2(*side_inertia)
+    slots.side = wp.array([w.side for w in desc.wheels], dtype=int, device=device)
+    slots.sign = wp.array([float(w.drive_sign) for w in desc.wheels], dtype=float, device=device)
     slots.chassis = built.chassis_body
     slots.dofs_per_world = dofs_per_world
     slots.shape = wp.array(shape, dtype=int, device=device)
@@ -301,7 +308,7 @@ class ContactModel:
         self.wheels: WheelSlots | None = None
         if contact.friction_law == "coulomb":
             self.wheels = _wheel_slots(built, [rb.joint_qd_start[j] for j in built.wheel_joints], rb.joint_dof_count,
-                                       device)
+                                       device, geared=contact.solve_geared_sides and rover.robot_spec.motor_per_side)
         mass, com, tensor = rover_inertia(built.model, self.bodies_per_world, built.chassis_body)
         n = self.num_worlds
         inertia = RoverInertia()

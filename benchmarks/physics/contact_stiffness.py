@@ -1,5 +1,6 @@
-"""Why the turn on uneven ground depends on the contact stiffness: a contact patch against one point, and each
-wheel's load, at 0.1, 1 and 10 times the nominal stiffness, on the nav terrain and on flat ground.
+"""Why the turn on uneven ground depends on the contact stiffness: a contact patch against one point, the geared
+sides' chain inside the friction solve, and each wheel's load, at 0.1, 1 and 10 times the nominal stiffness, on the
+nav terrain and on flat ground.
 
     python -m benchmarks.physics.contact_stiffness [--figure docs/turn_vs_stiffness.png]
 
@@ -7,7 +8,8 @@ Each shipped robot, in ``nav_deploy``'s world fitted to it (the test set's first
 no randomization), is sent one ``/cmd_vel`` (0.5 m/s, 0.5 rad/s) through its base for 6 s. Per robot, ground,
 stiffness (``ContactConfig.stiffness`` x ``SCALES``), contact (``point``: the tangent plane at the deepest rim point;
 ``patch``: ``ContactConfig.patch`` = ``PATCH``, the terrain's mean over +-0.3 radius along the rim and the wheel's
-width) and substep (``SUBSTEPS``: converged where the finer ones agree): the median over the starts of the yaw
+width; ``chain``, for a robot with one motor per side: one point, and ``ContactConfig.solve_geared_sides``, each side's
+wheels turned as one inside the solve) and substep (``SUBSTEPS``: converged where the finer ones agree): the median over the starts of the yaw
 turned over the yaw commanded, and the share of wheel-steps (the last two thirds of the drive) whose load is under a
 quarter of its chassis' mean wheel load, estimated from each hub's height over the ground under it (``kp d^1.5``).
 At 10x the stiffness also with the contact damping 10x (the damping that keeps ``kc / kp``). Writes
@@ -23,7 +25,7 @@ from pathlib import Path
 
 from benchmarks._common import load_results, markdown_table, pin_to_one_core, save_figure, write_results
 
-VERSION = 1
+VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
@@ -41,8 +43,8 @@ LOW_LOAD = 0.25
 """A wheel under this share of its chassis' mean wheel load is all but lifted."""
 
 
-def drive(robot: str, terrain: str | None, scale: float, patch: float, sim_dt: float, damping_scale: float = 1.0
-          ) -> dict:
+def drive(robot: str, terrain: str | None, scale: float, patch: float, sim_dt: float, damping_scale: float = 1.0,
+          chain: bool = False) -> dict:
     """One survey: the median turn over the commanded and the share of low-loaded wheel-steps."""
     import numpy as np
     import torch
@@ -52,7 +54,8 @@ def drive(robot: str, terrain: str | None, scale: float, patch: float, sim_dt: f
     from atrv_warp.task.evaluation import EVAL_SEED
 
     nominal = ContactConfig()
-    contact = ContactConfig(stiffness=nominal.stiffness * scale, damping=nominal.damping * damping_scale, patch=patch)
+    contact = ContactConfig(stiffness=nominal.stiffness * scale, damping=nominal.damping * damping_scale, patch=patch,
+                            solve_geared_sides=chain)
     env = RoverEnv(STARTS, task="nav_deploy", robot=robot, contact=contact, sim=SimConfig(sim_dt=sim_dt),
                    **({"terrain": terrain} if terrain else {}))
     env.set_seed(EVAL_SEED)
@@ -111,16 +114,19 @@ def main() -> int:
     args = parser.parse_args()
     if not args.figure_only:
         pin_to_one_core()
-        from atrv_warp.core.robot import ROBOTS
+        from atrv_warp.core.robot import ROBOTS, load_robot
 
         rows = []
         for robot in ROBOTS:
+            contacts = [("point", 0.0, False), ("patch", PATCH, False)]
+            contacts += [("chain", 0.0, True)] if load_robot(robot).motor_per_side else []
             for ground, terrain in (("nav", None), ("flat", "flat")):
                 for scale in SCALES:
-                    for contact, patch in (("point", 0.0), ("patch", PATCH)):
+                    for contact, patch, chain in contacts:
                         for sim_dt in SUBSTEPS:
                             row = {"robot": robot, "ground": ground, "stiffness": scale, "contact": contact,
-                                   "sim_dt": sim_dt, "damping": 1.0, **drive(robot, terrain, scale, patch, sim_dt)}
+                                   "sim_dt": sim_dt, "damping": 1.0,
+                                   **drive(robot, terrain, scale, patch, sim_dt, chain=chain)}
                             rows.append(row)
                             print(" ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
                                            for k, v in row.items()), flush=True)
@@ -137,10 +143,11 @@ def main() -> int:
     return 0
 
 
-def converged(rows: list[dict], robot: str, ground: str, contact: str = "point", damping: float = 1.0) -> dict:
-    """Each stiffness' figures at the finest substep (``SUBSTEPS[-1]``)."""
+def converged(rows: list[dict], robot: str, ground: str, contact: str = "point", damping: float = 1.0,
+              sim_dt: float = SUBSTEPS[-1]) -> dict:
+    """Each stiffness' figures at a substep (default the finest, ``SUBSTEPS[-1]``)."""
     return {r["stiffness"]: r for r in rows if (r["robot"], r["ground"], r["contact"], r["sim_dt"], r["damping"])
-            == (robot, ground, contact, SUBSTEPS[-1], damping)}
+            == (robot, ground, contact, sim_dt, damping)}
 
 
 def draw(path: Path, results: str = "contact_stiffness.json") -> None:
@@ -154,16 +161,18 @@ def draw(path: Path, results: str = "contact_stiffness.json") -> None:
     robots = list(dict.fromkeys(r["robot"] for r in rows))
     fig, axes = plt.subplots(1, len(robots), figsize=(4.0 * len(robots), 3.4), sharey=True)
     for ax, robot in zip(axes, robots):
-        for ground, contact, style in (("nav", "point", "-o"), ("nav", "patch", "--s"), ("flat", "point", "-^")):
-            got = converged(rows, robot, ground, contact)
+        for ground, contact, style in (("nav", "point", "-o"), ("nav", "patch", "--s"), ("nav", "chain", "-D"),
+                                       ("flat", "point", "-^")):
+            got = converged(rows, robot, ground, contact, sim_dt=SUBSTEPS[0])
             xs = sorted(got)
-            ax.plot(xs, [got[x]["turned"] for x in xs], style, label=f"{ground}, {contact}")
+            if xs:
+                ax.plot(xs, [got[x]["turned"] for x in xs], style, label=f"{ground}, {contact}")
+        ax.legend(loc="lower left", fontsize=8)
         ax.set_xscale("log")
         ax.set_ylim(0, 1.05)
         ax.set_title(robot)
         ax.set_xlabel("contact stiffness / nominal")
-    axes[0].set_ylabel("yaw turned / commanded (median)")
-    axes[0].legend(loc="lower left")
+    axes[0].set_ylabel("yaw turned / commanded (median, 0.01 s substep)")
     fig.tight_layout()
     save_figure(fig, path, version=VERSION, results=(results,), dpi=110)
     plt.close(fig)
@@ -176,15 +185,20 @@ def contact_stiffness() -> str:
     """``contact_stiffness.json``: per robot and stiffness, the turn and the low-loaded wheels (finest substep)."""
     rows = load_results("contact_stiffness.json")["rows"]
     out = []
+
+    def cell(got: dict, scale: float, key: str = "turned") -> str:
+        return f"{100 * got[scale][key]:.0f} %" if scale in got else "-"
+
     for robot in dict.fromkeys(r["robot"] for r in rows):
-        nav, patch, flat = (converged(rows, robot, g, c) for g, c in (("nav", "point"), ("nav", "patch"),
-                                                                      ("flat", "point")))
+        nav, patch, chain, flat = (converged(rows, robot, g, c, sim_dt=SUBSTEPS[0]) for g, c in
+                                   (("nav", "point"), ("nav", "patch"), ("nav", "chain"), ("flat", "point")))
+        fine, fine_chain = converged(rows, robot, "nav", "point"), converged(rows, robot, "nav", "chain")
         for scale in SCALES:
-            out.append([f"`{robot}`", f"{scale:g}x", f"{100 * nav[scale]['turned']:.0f} %",
-                        f"{100 * patch[scale]['turned']:.0f} %", f"{100 * nav[scale]['low_load_share']:.0f} %",
-                        f"{100 * flat[scale]['turned']:.0f} %", f"{100 * flat[scale]['low_load_share']:.0f} %"])
-    return markdown_table(["robot", "stiffness", "nav: turned (point)", "nav: turned (patch)",
-                           "nav: wheels under 1/4 load", "flat: turned", "flat: wheels under 1/4 load"],
+            out.append([f"`{robot}`", f"{scale:g}x", f"{cell(nav, scale)} ({cell(fine, scale)})", cell(patch, scale),
+                        f"{cell(chain, scale)} ({cell(fine_chain, scale)})", cell(nav, scale, "low_load_share"),
+                        cell(flat, scale)])
+    return markdown_table(["robot", "stiffness", "nav: turned, point (at 0.0025 s)", "patch",
+                           "chain in the solve (at 0.0025 s)", "nav: wheels under 1/4 load", "flat: turned"],
                           ["---", "---:", "---:", "---:", "---:", "---:", "---:"], out)
 
 

@@ -112,12 +112,16 @@ class WheelSlots:
     """The wheels the solver handles, in :class:`~atrv_warp.sim.kernels.rover.RoverLayout` wheel order."""
 
     count: int  # wheels (2 to MAX_WHEELS): the slots in use, and the stride of the impulse arrays
+    coupled: int  # 1: each side's wheels are geared to one speed inside the solve (ContactConfig.solve_geared_sides)
+    side_inertia: wp.vec2  # each side's wheels' spin inertia together [kg·m²]
     chassis: int  # chassis body index within a world
     dofs_per_world: int
     shape: wp.array(dtype=int)  # (count,) the wheel's cylinder in RoverShapes
     dof: wp.array(dtype=int)  # the wheel joint's joint_f entry within a world
     axis: wp.array(dtype=wp.vec3)  # the joint axis in the wheel body frame (positive joint_f spins about it)
     inv_spin_inertia: wp.array(dtype=float)  # 1 / inertia about the axle [1/(kg·m²)]
+    side: wp.array(dtype=int)  # 0 left, 1 right
+    sign: wp.array(dtype=float)  # +1 where a positive joint speed drives forward
 
 
 @wp.func
@@ -178,6 +182,23 @@ def relax_contact(impulse: mat82, k: int, t1: wp.vec3, t2: wp.vec3, r: wp.vec3, 
     new = coulomb_impulse(v0, d, inv_d, limit)
     change = t1 * (new[0] - pk[0]) + t2 * (new[1] - pk[1])
     return with_row(impulse, k, new), dv + change * inv_mass, dw + inv_inertia * wp.cross(r, change)
+
+
+@wp.func
+def relax_geared(impulse: mat82, k: int, t1: wp.vec3, t2: wp.vec3, r: wp.vec3, spin: wp.vec3, sign: float, side: int,
+                 free: wp.vec3, d: wp.vec2, inv_d: wp.vec2, inv_side: float, limit: float, dv: wp.vec3, dw: wp.vec3,
+                 turn: wp.vec2, inv_mass: float, inv_inertia: wp.mat33):
+    """:func:`relax_contact` for a wheel geared to its side's others: its impulse turns the whole side (``turn``,
+    each side's forward spin change from the impulses so far [rad/s], its inverse inertia ``inv_side``), and the
+    side's turn moves this contact. Returns (impulses, dv, dw, turn)."""
+    pk = impulse[k]
+    v = free + dv + wp.cross(dw, r) + spin * (sign * turn[side])
+    v0 = wp.vec2(wp.dot(v, t1) - d[0] * pk[0], wp.dot(v, t2) - d[1] * pk[1])
+    new = coulomb_impulse(v0, d, inv_d, limit)
+    change = t1 * (new[0] - pk[0]) + t2 * (new[1] - pk[1])
+    step = sign * wp.dot(spin, change) * inv_side
+    return (with_row(impulse, k, new), dv + change * inv_mass, dw + inv_inertia * wp.cross(r, change),
+            wp.where(side == 0, wp.vec2(turn[0] + step, turn[1]), wp.vec2(turn[0], turn[1] + step)))
 
 
 @wp.kernel
@@ -242,6 +263,25 @@ def solve_wheel_friction(
     axle = mat83()  # the joint axis, world frame
     force = gravity / inv_mass
     torque = wp.vec3()
+    shrink = wp.vec2()  # geared sides: how much the drive's damping lowers the side's end speed [rad/s]
+    side_damping = wp.vec2()  # geared sides: the side's drive damping [N·m per rad/s]
+    if slots.coupled != 0:
+        side_torque = wp.vec2()
+        for k in range(MAX_WHEELS):
+            if k < slots.count:
+                t = slots.sign[k] * joint_f[world * slots.dofs_per_world + slots.dof[k]]
+                c = damping[world, k]
+                if slots.side[k] == 0:
+                    side_torque = wp.vec2(side_torque[0] + t, side_torque[1])
+                    side_damping = wp.vec2(side_damping[0] + c, side_damping[1])
+                else:
+                    side_torque = wp.vec2(side_torque[0], side_torque[1] + t)
+                    side_damping = wp.vec2(side_damping[0], side_damping[1] + c)
+        for q in range(2):
+            j = slots.side_inertia[q]
+            cq = side_damping[q] * dt
+            lowered = side_torque[q] * dt * cq / (j * (j + cq))
+            shrink = wp.where(q == 0, wp.vec2(lowered, shrink[1]), wp.vec2(shrink[0], lowered))
     for k in range(MAX_WHEELS):
         if k < slots.count:
             s = slots.shape[k]
@@ -260,8 +300,13 @@ def solve_wheel_friction(
             tau = joint_f[world * slots.dofs_per_world + slots.dof[k]]
             ispin = slots.inv_spin_inertia[k]
             tau_end = tau  # the drive torque at the substep's end, friction aside
+            spin_change = float(0.0)  # geared: the wheel's speed change without friction [rad/s]
             c = damping[world, k]
-            if c > 0.0:
+            if slots.coupled != 0:  # the side's inertia answers the impulse; its damping lowers its end speed
+                q = slots.side[k]
+                ispin = 1.0 / (slots.side_inertia[q] + side_damping[q] * dt)
+                spin_change = tau * dt * slots.inv_spin_inertia[k] - slots.sign[k] * shrink[q]
+            elif c > 0.0:
                 ispin = 1.0 / (1.0 / slots.inv_spin_inertia[k] + c * dt)
                 tau_end = tau - c * tau * dt * ispin
             ispins = with_entry(ispins, k, ispin)
@@ -278,7 +323,10 @@ def solve_wheel_friction(
             lat = with_row(lat, k, a)
             lon = with_row(lon, k, wp.cross(n, a))
             spin = with_row(spin, k, w)
-            free = with_row(free, k, v + w * (tau * ispin * dt))
+            if slots.coupled != 0:
+                free = with_row(free, k, v + w * spin_change)
+            else:
+                free = with_row(free, k, v + w * (tau * ispin * dt))
             normal = with_row(normal, k, fn * n)
             mu_k = mu
             if rise > 0.0:  # friction rising with the slip speed at the substep's start (ContactConfig.friction_rise)
@@ -295,6 +343,7 @@ def solve_wheel_friction(
     impulse = mat82()
     d = mat82()
     inv_d = mat82()
+    turn = wp.vec2()  # geared sides: each side's forward spin change from the friction impulses [rad/s]
     for k in range(MAX_WHEELS):
         if k < slots.count:
             ispin = ispins[k]
@@ -311,11 +360,19 @@ def solve_wheel_friction(
             p3 = lon[k] * pk[0] + lat[k] * pk[1]
             dv += p3 * inv_mass
             dw += inv_inertia * wp.cross(arm[k], p3)
+            if slots.coupled != 0:
+                step = slots.sign[k] * wp.dot(spin[k], p3) * ispin
+                turn = wp.where(slots.side[k] == 0, wp.vec2(turn[0] + step, turn[1]), wp.vec2(turn[0], turn[1] + step))
     for _sweep in range(FRICTION_SWEEPS):
         for k in range(MAX_WHEELS):
             if k < slots.count:
-                impulse, dv, dw = relax_contact(impulse, k, lon[k], lat[k], arm[k], spin[k], free[k], d[k], inv_d[k],
-                                                ispins[k], limit[k], dv, dw, inv_mass, inv_inertia)
+                if slots.coupled != 0:
+                    impulse, dv, dw, turn = relax_geared(impulse, k, lon[k], lat[k], arm[k], spin[k], slots.sign[k],
+                                                         slots.side[k], free[k], d[k], inv_d[k], ispins[k], limit[k],
+                                                         dv, dw, turn, inv_mass, inv_inertia)
+                else:
+                    impulse, dv, dw = relax_contact(impulse, k, lon[k], lat[k], arm[k], spin[k], free[k], d[k],
+                                                    inv_d[k], ispins[k], limit[k], dv, dw, inv_mass, inv_inertia)
 
     # 3. Normal plus friction force on each wheel, as a wrench about its COM.
     for k in range(MAX_WHEELS):
@@ -327,7 +384,14 @@ def solve_wheel_friction(
             wheel = base + shapes.body[slots.shape[k]]
             wp.atomic_add(body_f, wheel, wp.spatial_vector(f, wp.cross(lever[k], f)))
             c = damping[world, k]
-            if c > 0.0:  # the drive torque's change with the wheel's speed over the substep, wheel against chassis
+            if slots.coupled != 0:  # the chain's torque that turns this wheel with its side, wheel against chassis
+                q = slots.side[k]
+                change = (((taus[k] * dt * slots.inv_spin_inertia[k] - slots.sign[k] * shrink[q]
+                            + slots.sign[k] * turn[q]) / slots.inv_spin_inertia[k] - wp.dot(spin[k], p3)) / dt
+                          - taus[k])
+                wp.atomic_add(body_f, wheel, wp.spatial_vector(wp.vec3(0.0), change * axle[k]))
+                wp.atomic_add(body_f, base + slots.chassis, wp.spatial_vector(wp.vec3(0.0), -change * axle[k]))
+            elif c > 0.0:  # the drive torque's change with the wheel's speed over the substep, wheel against chassis
                 change = -c * (taus[k] * dt + wp.dot(spin[k], p3)) * ispins[k]
                 wp.atomic_add(body_f, wheel, wp.spatial_vector(wp.vec3(0.0), change * axle[k]))
                 wp.atomic_add(body_f, base + slots.chassis, wp.spatial_vector(wp.vec3(0.0), -change * axle[k]))
