@@ -27,12 +27,7 @@ from atrv_warp.sim.kernels.contact import (
     Scene,
     compute_contact_forces,
 )
-from atrv_warp.sim.kernels.friction import (
-    RoverInertia,
-    WheelSlots,
-    clear_impulses,
-    solve_wheel_friction,
-)
+from atrv_warp.sim.kernels.friction import RoverInertia, WheelSlots, friction_kernels
 from atrv_warp.sim.kernels.obstacles import OBSTACLE_BOX, OBSTACLE_CYLINDER, OBSTACLE_NONE, ObstacleSet
 from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics
 from atrv_warp.sim.kernels.terrain import TerrainGrid
@@ -290,7 +285,7 @@ class ContactModel:
 
     def __init__(self, built: BuiltModel, *, rover: RoverConfig, contact: ContactConfig, arena: ArenaConfig,
                  sim_dt: float, gravity: float, device, terrain: HeightGrid | None = None,
-                 obstacles: ObstacleConfig | None = None):
+                 obstacles: ObstacleConfig | None = None, implicit_drive: bool = False):
         self.num_worlds = built.num_worlds
         rb = built.rover_builder
         self.bodies_per_world = rb.body_count
@@ -324,6 +319,8 @@ class ContactModel:
         nominal.inv_inertia = wp.mat33(*inertia.inv_inertia.numpy()[0].flatten())
         self.nominal_rover = nominal
         self.wheel_count = len(desc.wheels)
+        geared = bool(self.wheels is not None and self.wheels.coupled)
+        self._solve, self._clear = friction_kernels(self.wheel_count, geared, implicit_drive)
         self.impulses = wp.zeros(self.num_worlds * self.wheel_count, dtype=wp.vec3, device=device)
         """(N x wheels) each wheel's last friction impulse [N·s], world frame: where the next substep's
         sweeps start (the Coulomb law's warm start)."""
@@ -343,7 +340,7 @@ class ContactModel:
                           state.body_qd, body_com],
                   outputs=[state.body_f, flags], device=self.device)
         if self.wheels is not None:
-            wp.launch(solve_wheel_friction, dim=self.num_worlds,
+            wp.launch(self._solve, dim=self.num_worlds,
                       inputs=[self.bodies_per_world, self.shapes, self.wheels, self.inertia, self.scene, self.params,
                               self.gravity, physics, state.body_q, state.body_qd, body_com, joint_f, damping,
                               self.impulses if warm_start is None else warm_start],
@@ -351,4 +348,5 @@ class ContactModel:
 
     def reset(self, mask: wp.array) -> None:
         """Forget the masked worlds' friction impulses (a reset rover starts unloaded)."""
-        wp.launch(clear_impulses, dim=self.num_worlds, inputs=[mask, self.wheel_count], outputs=[self.impulses], device=self.device)
+        wp.launch(self._clear, dim=self.num_worlds, inputs=[mask, self.wheel_count], outputs=[self.impulses],
+                  device=self.device)

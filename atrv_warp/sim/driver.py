@@ -77,7 +77,7 @@ class DriverConfig:
     """Without a command for this long [s], the target drops to zero (``diff_drive_controller``'s default)."""
     implicit_speed_loop: bool = False
     """The loop's proportional term acts on each wheel's speed at the substep's end, solved with its ground contact
-    (:func:`~atrv_warp.sim.kernels.friction.solve_wheel_friction`): no gain is bounded by the substep, where the
+    (:func:`~atrv_warp.sim.kernels.friction.friction_kernels`): no gain is bounded by the substep, where the
     explicit loop (``False``) goes unstable once a slipping wheel's ``kp x sim_dt / J`` reaches 2. Coulomb friction
     only (the viscous law has no solve to put it in)."""
     odometry_accel_time: float | None = None

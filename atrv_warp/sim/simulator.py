@@ -258,9 +258,13 @@ class RoverSim:
             terrain = get_terrain(terrain)
         if isinstance(terrain, TerrainConfig):
             terrain = terrain.generate(self.arena_cfg.half_size)
+        implicit = (driver or DriverConfig()).implicit_speed_loop
+        if implicit and self.contact_cfg.friction_law != "coulomb":
+            raise ValueError("DriverConfig.implicit_speed_loop solves the drive with the wheels' Coulomb friction; "
+                             f"ContactConfig.friction_law is {self.contact_cfg.friction_law!r}")
         self.contact = ContactModel(self.built, rover=self.rover_cfg, contact=self.contact_cfg, arena=self.arena_cfg,
                                     sim_dt=self.sim_cfg.sim_dt, gravity=self.sim_cfg.gravity, device=self.device,
-                                    terrain=terrain, obstacles=obstacles)
+                                    terrain=terrain, obstacles=obstacles, implicit_drive=implicit)
         """The contact model every substep launches (:class:`~atrv_warp.sim.contact.ContactModel`)."""
         self.params = WorldParams(num_worlds, rover=self.rover_cfg, contact=self.contact_cfg, device=self.device)
         """Each world's physical parameters (:class:`~atrv_warp.sim.params.WorldParams`): friction, stiffness,

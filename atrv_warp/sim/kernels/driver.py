@@ -232,9 +232,9 @@ def drive_wheels(
     and the wheel odometry. ``state_in`` and ``state_out`` may be the same arrays (the simulator) or one per
     substep (a differentiable rollout's tape).
 
-    ``damping`` (N, W) [N·m per rad/s]: with ``params.implicit``, the slope of each wheel's torque in its own speed
+    ``damping`` (N, W) [N·m per rad/s], written only with ``params.implicit``: the slope of each wheel's torque in its own speed
     change over the substep (the loop's proportional gain through the motor, 0 where the loop saturates or takes
-    torque commands); the friction solve (:func:`~atrv_warp.sim.kernels.friction.solve_wheel_friction`) integrates it
+    torque commands); the friction solve (:func:`~atrv_warp.sim.kernels.friction.friction_kernels`) integrates it
     implicitly, with the wheel's ground contact, so that no gain is bounded by the substep."""
     world = wp.tid()
     speeds = side_speeds(layout, joint_qd, world)
@@ -286,11 +286,11 @@ def drive_wheels(
             drive = layout.wheel_inertia[k] * (geared[layout.wheel_side[k]] - sign * joint_qd[dof]) / params.dt
         joint_f[dof] = sign * drive
         wheel_torque[world, k] = tau
-        # the motor passes the proportional action as it passes the command: its torque scale and no-load taper
-        taper = motor_torque(1.0, sign * joint_qd[dof], speed_limit)
-        if cmd[layout.wheel_side[k]] < 0.0:
-            taper = -motor_torque(-1.0, sign * joint_qd[dof], speed_limit)
-        damping[world, k] = slope[layout.wheel_side[k]] * physics.torque_scale[world] * taper
+        if params.implicit != 0:  # the motor passes the proportional action as it passes the command (scale, taper)
+            taper = motor_torque(1.0, sign * joint_qd[dof], speed_limit)
+            if cmd[layout.wheel_side[k]] < 0.0:
+                taper = -motor_torque(-1.0, sign * joint_qd[dof], speed_limit)
+            damping[world, k] = slope[layout.wheel_side[k]] * physics.torque_scale[world] * taper
 
 
 @wp.kernel

@@ -7,7 +7,7 @@ rover then turns as the ratio of its viscous slopes dictates (8.3x slower than i
 whatever mu), not as Coulomb friction does (about 1.6x).
 
 What this kernel does instead, for all the wheels of one world at once (one thread per world; 2 to
-``MAX_WHEELS``, each in a slot of fixed-size per-wheel values, the unused slots skipped):
+``MAX_WHEELS``, a kernel built for each wheel count, :func:`friction_kernels`):
 
 1. each wheel's deepest rim point on the ground (plane 0 or the terrain's tangent plane), its
    Hunt–Crossley normal force and the contact point's velocity;
@@ -37,6 +37,7 @@ is piecewise smooth: a contact that switches between sticking and sliding has a 
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import warp as wp
@@ -50,25 +51,73 @@ from atrv_warp.sim.kernels.contact import (
     wheel_size,
 )
 from atrv_warp.sim.kernels.params import WorldPhysics
-from atrv_warp.sim.kernels.rover import MAX_WHEELS
 
 FRICTION_SWEEPS = wp.constant(1)
 """Gauss–Seidel sweeps over the wheels per substep, each starting where the previous substep ended."""
 SLIDE_ITERATIONS = wp.constant(3)
 """Newton iterations for a sliding contact's slip speed (relative error under 1e-4 after three)."""
 
-mat83 = wp.types.matrix(shape=(8, 3), dtype=float)
-mat82 = wp.types.matrix(shape=(8, 2), dtype=float)
-vec8 = wp.types.vector(length=8, dtype=float)
-# one row (entry) per wheel slot: MAX_WHEELS of them (a Warp type's shape is a literal)
-
-
-# Per-wheel values live in the rows of small matrices (and entries of vectors). A row is replaced by
-# building a new matrix, not
-# written in place: Warp 1.19's adjoint of a repeated in-place row write is wrong (its gradients
-# disagree with finite differences), while a rebuilt value is plain SSA and differentiates exactly.
+# Per-wheel values live in the rows of small matrices (and entries of vectors), one row per wheel: the kernel is
+# built for each wheel count (:func:`friction_kernels`), so that a four-wheel rover's runs on 4-row values and
+# unrolled loops of four. A row is replaced by building a new matrix, not written in place: Warp 1.19's adjoint of a
+# repeated in-place row write is wrong (its gradients disagree with finite differences), while a rebuilt value is
+# plain SSA and differentiates exactly.
 @wp.func
-def with_row(m: Any, i: int, row: Any):
+def with_row2(m: Any, i: int, row: Any):
+    """``m`` (2 rows) with row ``i`` replaced by ``row``."""
+    r0 = m[0]
+    r1 = m[1]
+    if i == 0:
+        r0 = row
+    if i == 1:
+        r1 = row
+    return wp.matrix_from_rows(r0, r1)
+
+
+@wp.func
+def with_row4(m: Any, i: int, row: Any):
+    """``m`` (4 rows) with row ``i`` replaced by ``row``."""
+    r0 = m[0]
+    r1 = m[1]
+    r2 = m[2]
+    r3 = m[3]
+    if i == 0:
+        r0 = row
+    if i == 1:
+        r1 = row
+    if i == 2:
+        r2 = row
+    if i == 3:
+        r3 = row
+    return wp.matrix_from_rows(r0, r1, r2, r3)
+
+
+@wp.func
+def with_row6(m: Any, i: int, row: Any):
+    """``m`` (6 rows) with row ``i`` replaced by ``row``."""
+    r0 = m[0]
+    r1 = m[1]
+    r2 = m[2]
+    r3 = m[3]
+    r4 = m[4]
+    r5 = m[5]
+    if i == 0:
+        r0 = row
+    if i == 1:
+        r1 = row
+    if i == 2:
+        r2 = row
+    if i == 3:
+        r3 = row
+    if i == 4:
+        r4 = row
+    if i == 5:
+        r5 = row
+    return wp.matrix_from_rows(r0, r1, r2, r3, r4, r5)
+
+
+@wp.func
+def with_row8(m: Any, i: int, row: Any):
     """``m`` (8 rows) with row ``i`` replaced by ``row``."""
     r0 = m[0]
     r1 = m[1]
@@ -97,6 +146,45 @@ def with_row(m: Any, i: int, row: Any):
     return wp.matrix_from_rows(r0, r1, r2, r3, r4, r5, r6, r7)
 
 
+WITH_ROW = {2: with_row2, 4: with_row4, 6: with_row6, 8: with_row8}
+"""Each wheel count's row replacement (a Warp matrix's row count is part of its type)."""
+
+vec6 = wp.types.vector(length=6, dtype=float)
+vec8 = wp.types.vector(length=8, dtype=float)
+
+
+@wp.func
+def with_entry2(v: wp.vec2, i: int, x: float):
+    """``v`` with entry ``i`` replaced by ``x``."""
+    return wp.vec2(wp.where(i == 0, x, v[0]), wp.where(i == 1, x, v[1]))
+
+
+@wp.func
+def with_entry4(v: wp.vec4, i: int, x: float):
+    """``v`` with entry ``i`` replaced by ``x``."""
+    return wp.vec4(wp.where(i == 0, x, v[0]), wp.where(i == 1, x, v[1]), wp.where(i == 2, x, v[2]),
+                   wp.where(i == 3, x, v[3]))
+
+
+@wp.func
+def with_entry6(v: vec6, i: int, x: float):
+    """``v`` with entry ``i`` replaced by ``x``."""
+    return vec6(wp.where(i == 0, x, v[0]), wp.where(i == 1, x, v[1]), wp.where(i == 2, x, v[2]),
+                wp.where(i == 3, x, v[3]), wp.where(i == 4, x, v[4]), wp.where(i == 5, x, v[5]))
+
+
+@wp.func
+def with_entry8(v: vec8, i: int, x: float):
+    """``v`` with entry ``i`` replaced by ``x``."""
+    return vec8(wp.where(i == 0, x, v[0]), wp.where(i == 1, x, v[1]), wp.where(i == 2, x, v[2]),
+                wp.where(i == 3, x, v[3]), wp.where(i == 4, x, v[4]), wp.where(i == 5, x, v[5]),
+                wp.where(i == 6, x, v[6]), wp.where(i == 7, x, v[7]))
+
+
+WITH_ENTRY = {2: (wp.vec2, with_entry2), 4: (wp.vec4, with_entry4), 6: (vec6, with_entry6), 8: (vec8, with_entry8)}
+"""Each wheel count's vector type and entry replacement."""
+
+
 @wp.struct
 class RoverInertia:
     """Each world's rover as one rigid body (wheels included as if locked): what the solver predicts
@@ -122,14 +210,6 @@ class WheelSlots:
     inv_spin_inertia: wp.array(dtype=float)  # 1 / inertia about the axle [1/(kg·m²)]
     side: wp.array(dtype=int)  # 0 left, 1 right
     sign: wp.array(dtype=float)  # +1 where a positive joint speed drives forward
-
-
-@wp.func
-def with_entry(v: vec8, i: int, x: float):
-    """``v`` with entry ``i`` replaced by ``x``."""
-    return vec8(wp.where(i == 0, x, v[0]), wp.where(i == 1, x, v[1]), wp.where(i == 2, x, v[2]),
-                wp.where(i == 3, x, v[3]), wp.where(i == 4, x, v[4]), wp.where(i == 5, x, v[5]),
-                wp.where(i == 6, x, v[6]), wp.where(i == 7, x, v[7]))
 
 
 @wp.func
@@ -170,105 +250,118 @@ def effective_inverse_mass(t: wp.vec3, r: wp.vec3, inv_mass: float, inv_inertia:
 
 
 @wp.func
-def relax_contact(impulse: mat82, k: int, t1: wp.vec3, t2: wp.vec3, r: wp.vec3, spin: wp.vec3, free: wp.vec3,
+def relax_contact(pk: wp.vec2, t1: wp.vec3, t2: wp.vec3, r: wp.vec3, spin: wp.vec3, free: wp.vec3,
                   d: wp.vec2, inv_d: wp.vec2, inv_spin_inertia: float, limit: float, dv: wp.vec3, dw: wp.vec3,
                   inv_mass: float, inv_inertia: wp.mat33):
-    """One Gauss–Seidel update of contact ``k``: its impulse given the others' (carried by the rigid
-    body's velocity change ``dv``, ``dw``). Returns (impulses, dv, dw)."""
-    pk = impulse[k]
+    """One Gauss–Seidel update of a contact whose impulse is ``pk``: its impulse given the others' (carried by the
+    rigid body's velocity change ``dv``, ``dw``). Returns (its new impulse, dv, dw)."""
     p3 = t1 * pk[0] + t2 * pk[1]
     v = free + dv + wp.cross(dw, r) + spin * (inv_spin_inertia * wp.dot(spin, p3))
     v0 = wp.vec2(wp.dot(v, t1) - d[0] * pk[0], wp.dot(v, t2) - d[1] * pk[1])
     new = coulomb_impulse(v0, d, inv_d, limit)
     change = t1 * (new[0] - pk[0]) + t2 * (new[1] - pk[1])
-    return with_row(impulse, k, new), dv + change * inv_mass, dw + inv_inertia * wp.cross(r, change)
+    return new, dv + change * inv_mass, dw + inv_inertia * wp.cross(r, change)
 
 
 @wp.func
-def relax_geared(impulse: mat82, k: int, t1: wp.vec3, t2: wp.vec3, r: wp.vec3, spin: wp.vec3, sign: float, side: int,
+def relax_geared(pk: wp.vec2, t1: wp.vec3, t2: wp.vec3, r: wp.vec3, spin: wp.vec3, sign: float, side: int,
                  free: wp.vec3, d: wp.vec2, inv_d: wp.vec2, inv_side: float, limit: float, dv: wp.vec3, dw: wp.vec3,
                  turn: wp.vec2, inv_mass: float, inv_inertia: wp.mat33):
     """:func:`relax_contact` for a wheel geared to its side's others: its impulse turns the whole side (``turn``,
     each side's forward spin change from the impulses so far [rad/s], its inverse inertia ``inv_side``), and the
-    side's turn moves this contact. Returns (impulses, dv, dw, turn)."""
-    pk = impulse[k]
+    side's turn moves this contact. Returns (its new impulse, dv, dw, turn)."""
     v = free + dv + wp.cross(dw, r) + spin * (sign * turn[side])
     v0 = wp.vec2(wp.dot(v, t1) - d[0] * pk[0], wp.dot(v, t2) - d[1] * pk[1])
     new = coulomb_impulse(v0, d, inv_d, limit)
     change = t1 * (new[0] - pk[0]) + t2 * (new[1] - pk[1])
     step = sign * wp.dot(spin, change) * inv_side
-    return (with_row(impulse, k, new), dv + change * inv_mass, dw + inv_inertia * wp.cross(r, change),
+    return (new, dv + change * inv_mass, dw + inv_inertia * wp.cross(r, change),
             wp.where(side == 0, wp.vec2(turn[0] + step, turn[1]), wp.vec2(turn[0], turn[1] + step)))
 
 
-@wp.kernel
-def solve_wheel_friction(
-    bodies_per_world: int,
-    shapes: RoverShapes,
-    slots: WheelSlots,
-    rover: RoverInertia,
-    scene: Scene,
-    params: ContactParams,
-    gravity: wp.vec3,
-    physics: WorldPhysics,
-    body_q: wp.array(dtype=wp.transform),
-    body_qd: wp.array(dtype=wp.spatial_vector),
-    body_com: wp.array(dtype=wp.vec3),
-    joint_f: wp.array(dtype=float),
-    damping: wp.array2d(dtype=float),
-    warm_start: wp.array(dtype=wp.vec3),
-    body_f: wp.array(dtype=wp.spatial_vector),
-    impulses: wp.array(dtype=wp.vec3),
-):
-    """One thread per world: the wheels' ground contact forces (normal and Coulomb friction), added to
-    ``body_f``. ``joint_f`` holds this substep's drive torques; ``physics`` each world's mu (and its rise with
-    slip), stiffness and wheel radius.
+@functools.cache
+def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
+    """The (``solve_wheel_friction``, ``clear_impulses``) kernels for rovers of ``wheels`` wheels (2 to
+    ``MAX_WHEELS``, even): per-wheel values in ``wheels``-row matrices, loops of ``wheels`` unrolled; with ``geared``
+    each side's wheels turned as one inside the solve (``slots.coupled``), with ``implicit`` the drive's ``damping``
+    solved with the friction. What a kernel does not do is not in its code: the four-wheel rover's default kernel is
+    the one this solve has always been."""
+    if wheels not in WITH_ROW:
+        raise ValueError(f"the friction solve takes {sorted(WITH_ROW)} wheels, not {wheels}")
+    WHEELS = wheels
+    GEARED, IMPLICIT, EXTRAS = bool(geared), bool(implicit), bool(geared or implicit)
+    mat3 = wp.types.matrix(shape=(wheels, 3), dtype=float)
+    mat2 = wp.types.matrix(shape=(wheels, 2), dtype=float)
+    with_row_n = WITH_ROW[wheels]
+    vec, with_entry = WITH_ENTRY[wheels]
 
-    ``damping`` (N, W) [N·m per rad/s] is how each wheel's drive torque falls with its speed's change over the
-    substep (an implicit wheel-speed loop's proportional action through the motor, :func:`~atrv_warp.sim.kernels.
-    driver.drive_wheels`; 0: the torque is ``joint_f``'s): the wheel then spins as if its inertia were ``J + damping
-    dt`` under ``joint_f``'s torque, the friction solved with it, and the torque's change is applied between wheel and
-    chassis (a damping integrated implicitly, which no gain can make unstable).
+    @wp.kernel
+    def solve_wheel_friction(
+        bodies_per_world: int,
+        shapes: RoverShapes,
+        slots: WheelSlots,
+        rover: RoverInertia,
+        scene: Scene,
+        params: ContactParams,
+        gravity: wp.vec3,
+        physics: WorldPhysics,
+        body_q: wp.array(dtype=wp.transform),
+        body_qd: wp.array(dtype=wp.spatial_vector),
+        body_com: wp.array(dtype=wp.vec3),
+        joint_f: wp.array(dtype=float),
+        damping: wp.array2d(dtype=float),
+        warm_start: wp.array(dtype=wp.vec3),
+        body_f: wp.array(dtype=wp.spatial_vector),
+        impulses: wp.array(dtype=wp.vec3),
+    ):
+        """One thread per world: the wheels' ground contact forces (normal and Coulomb friction), added to
+        ``body_f``. ``joint_f`` holds this substep's drive torques; ``physics`` each world's mu (and its rise with
+        slip), stiffness and wheel radius.
 
-    ``warm_start`` (N x ``slots.count``) holds the previous substep's friction impulses [N·s], where the
-    sweeps start; ``impulses`` receives this substep's (the simulator passes one array as both; a tape
-    passes one per substep)."""
-    world = wp.tid()
-    mu = physics.friction[world]
-    rise = physics.friction_rise[world]
-    kp = physics.stiffness[world]
-    dt = params.dt
-    base = world * bodies_per_world
-    tile = int(0)
-    if scene.terrain.enabled != 0:
-        tile = scene.terrain.tile[world]
-    chassis = body_q[base + slots.chassis]
-    centre = wp.transform_point(chassis, rover.com[world])
-    rot = wp.quat_to_matrix(wp.transform_get_rotation(chassis))
-    inv_inertia = rot * rover.inv_inertia[world] * wp.transpose(rot)
-    inv_mass = rover.inv_mass[world]
+        ``damping`` (N, W) [N·m per rad/s] is how each wheel's drive torque falls with its speed's change over the
+        substep (an implicit wheel-speed loop's proportional action through the motor, :func:`~atrv_warp.sim.kernels.
+        driver.drive_wheels`; 0: the torque is ``joint_f``'s): the wheel then spins as if its inertia were ``J + damping
+        dt`` under ``joint_f``'s torque, the friction solved with it, and the torque's change is applied between wheel and
+        chassis (a damping integrated implicitly, which no gain can make unstable).
 
-    # 1. Contacts, and the known forces' wrench about the rover's COM (gravity, normal forces, the
-    # drive torques' reaction on the body).
-    lever = mat83()  # contact point - wheel COM [m]
-    arm = mat83()  # contact point - rover COM [m]
-    lon = mat83()  # rolling direction in the contact plane
-    lat = mat83()  # axle direction in the contact plane
-    spin = mat83()  # contact point velocity per unit wheel spin rate [m/s per rad/s]
-    free = mat83()  # contact point velocity without friction at the end of the substep (spin part) [m/s]
-    normal = mat83()  # normal force [N]
-    limit = vec8()  # Coulomb disc radius mu f_n dt [N·s]
-    ispins = vec8()  # 1 / the spin inertia the wheel moves with: its own, plus its drive's damping x dt [1/(kg·m²)]
-    taus = vec8()  # the drive torque [N·m]
-    axle = mat83()  # the joint axis, world frame
-    force = gravity / inv_mass
-    torque = wp.vec3()
-    shrink = wp.vec2()  # geared sides: how much the drive's damping lowers the side's end speed [rad/s]
-    side_damping = wp.vec2()  # geared sides: the side's drive damping [N·m per rad/s]
-    if slots.coupled != 0:
-        side_torque = wp.vec2()
-        for k in range(MAX_WHEELS):
-            if k < slots.count:
+        ``warm_start`` (N x ``slots.count``) holds the previous substep's friction impulses [N·s], where the
+        sweeps start; ``impulses`` receives this substep's (the simulator passes one array as both; a tape
+        passes one per substep)."""
+        world = wp.tid()
+        mu = physics.friction[world]
+        rise = physics.friction_rise[world]
+        kp = physics.stiffness[world]
+        dt = params.dt
+        base = world * bodies_per_world
+        tile = int(0)
+        if scene.terrain.enabled != 0:
+            tile = scene.terrain.tile[world]
+        chassis = body_q[base + slots.chassis]
+        centre = wp.transform_point(chassis, rover.com[world])
+        rot = wp.quat_to_matrix(wp.transform_get_rotation(chassis))
+        inv_inertia = rot * rover.inv_inertia[world] * wp.transpose(rot)
+        inv_mass = rover.inv_mass[world]
+
+        # 1. Contacts, and the known forces' wrench about the rover's COM (gravity, normal forces, the
+        # drive torques' reaction on the body).
+        lever = mat3()  # contact point - wheel COM [m]
+        arm = mat3()  # contact point - rover COM [m]
+        lon = mat3()  # rolling direction in the contact plane
+        lat = mat3()  # axle direction in the contact plane
+        spin = mat3()  # contact point velocity per unit wheel spin rate [m/s per rad/s]
+        free = mat3()  # contact point velocity without friction at the end of the substep (spin part) [m/s]
+        normal = mat3()  # normal force [N]
+        limit = vec()  # Coulomb disc radius mu f_n dt [N·s]
+        ispins = vec()  # 1 / the spin inertia the wheel moves with: its own, plus its drive's damping x dt [1/(kg·m²)]
+        taus = vec()  # the drive torque [N·m]
+        axle = mat3()  # the joint axis, world frame
+        force = gravity / inv_mass
+        torque = wp.vec3()
+        shrink = wp.vec2()  # geared sides: how much the drive's damping lowers the side's end speed [rad/s]
+        side_damping = wp.vec2()  # geared sides: the side's drive damping [N·m per rad/s]
+        if wp.static(GEARED):
+            side_torque = wp.vec2()
+            for k in range(WHEELS):
                 t = slots.sign[k] * joint_f[world * slots.dofs_per_world + slots.dof[k]]
                 c = damping[world, k]
                 if slots.side[k] == 0:
@@ -277,13 +370,12 @@ def solve_wheel_friction(
                 else:
                     side_torque = wp.vec2(side_torque[0], side_torque[1] + t)
                     side_damping = wp.vec2(side_damping[0], side_damping[1] + c)
-        for q in range(2):
-            j = slots.side_inertia[q]
-            cq = side_damping[q] * dt
-            lowered = side_torque[q] * dt * cq / (j * (j + cq))
-            shrink = wp.where(q == 0, wp.vec2(lowered, shrink[1]), wp.vec2(shrink[0], lowered))
-    for k in range(MAX_WHEELS):
-        if k < slots.count:
+            for q in range(2):
+                j = slots.side_inertia[q]
+                cq = side_damping[q] * dt
+                lowered = side_torque[q] * dt * cq / (j * (j + cq))
+                shrink = wp.where(q == 0, wp.vec2(lowered, shrink[1]), wp.vec2(shrink[0], lowered))
+        for k in range(WHEELS):
             s = slots.shape[k]
             b = base + shapes.body[s]
             X = body_q[b]
@@ -291,7 +383,7 @@ def solve_wheel_friction(
                                              wheel_size(shapes.size[s], physics, world), params.patch)
             hub = wp.transform_point(X, body_com[b])
             qd = body_qd[b]
-            lever = with_row(lever, k, p - hub)
+            lever = with_row_n(lever, k, p - hub)
             v = wp.spatial_top(qd) + wp.cross(wp.spatial_bottom(qd), p - hub)
             fn = float(0.0)
             if depth > 0.0:
@@ -301,17 +393,19 @@ def solve_wheel_friction(
             ispin = slots.inv_spin_inertia[k]
             tau_end = tau  # the drive torque at the substep's end, friction aside
             spin_change = float(0.0)  # geared: the wheel's speed change without friction [rad/s]
-            c = damping[world, k]
-            if slots.coupled != 0:  # the side's inertia answers the impulse; its damping lowers its end speed
+            if wp.static(GEARED):  # the side's inertia answers the impulse; its damping lowers its end speed
                 q = slots.side[k]
                 ispin = 1.0 / (slots.side_inertia[q] + side_damping[q] * dt)
                 spin_change = tau * dt * slots.inv_spin_inertia[k] - slots.sign[k] * shrink[q]
-            elif c > 0.0:
-                ispin = 1.0 / (1.0 / slots.inv_spin_inertia[k] + c * dt)
-                tau_end = tau - c * tau * dt * ispin
-            ispins = with_entry(ispins, k, ispin)
-            taus = with_entry(taus, k, tau)
-            axle = with_row(axle, k, u)
+            elif wp.static(IMPLICIT):
+                c = damping[world, k]
+                if c > 0.0:
+                    ispin = 1.0 / (1.0 / slots.inv_spin_inertia[k] + c * dt)
+                    tau_end = tau - c * tau * dt * ispin
+            if wp.static(EXTRAS):
+                ispins = with_entry(ispins, k, ispin)
+                taus = with_entry(taus, k, tau)
+                axle = with_row_n(axle, k, u)
             w = wp.cross(u, p - hub)
             a = u - wp.dot(u, n) * n
             al = wp.length(a)
@@ -319,15 +413,15 @@ def solve_wheel_friction(
                 a = a / al
             else:  # axle along the normal (a wheel on its side): any tangent pair will do
                 a = wp.normalize(wp.cross(n, wp.vec3(1.0, 0.0, 0.0)) + wp.vec3(0.0, 1.0e-3, 0.0))
-            arm = with_row(arm, k, p - centre)
-            lat = with_row(lat, k, a)
-            lon = with_row(lon, k, wp.cross(n, a))
-            spin = with_row(spin, k, w)
-            if slots.coupled != 0:
-                free = with_row(free, k, v + w * spin_change)
+            arm = with_row_n(arm, k, p - centre)
+            lat = with_row_n(lat, k, a)
+            lon = with_row_n(lon, k, wp.cross(n, a))
+            spin = with_row_n(spin, k, w)
+            if wp.static(GEARED):
+                free = with_row_n(free, k, v + w * spin_change)
             else:
-                free = with_row(free, k, v + w * (tau * ispin * dt))
-            normal = with_row(normal, k, fn * n)
+                free = with_row_n(free, k, v + w * (tau * ispin * dt))
+            normal = with_row_n(normal, k, fn * n)
             mu_k = mu
             if rise > 0.0:  # friction rising with the slip speed at the substep's start (ContactConfig.friction_rise)
                 vt = v - wp.dot(v, n) * n
@@ -335,74 +429,80 @@ def solve_wheel_friction(
             limit = with_entry(limit, k, mu_k * fn * dt)
             force += fn * n
             torque += wp.cross(p - centre, fn * n) - tau_end * u
-    dv = force * (inv_mass * dt)
-    dw = inv_inertia * torque * dt
+        dv = force * (inv_mass * dt)
+        dw = inv_inertia * torque * dt
 
-    # 2. Projected Gauss-Seidel on the friction impulses, from the previous substep's (clamped to this
-    # one's Coulomb discs); dv, dw carry the rigid body's velocity change.
-    impulse = mat82()
-    d = mat82()
-    inv_d = mat82()
-    turn = wp.vec2()  # geared sides: each side's forward spin change from the friction impulses [rad/s]
-    for k in range(MAX_WHEELS):
-        if k < slots.count:
-            ispin = ispins[k]
+        # 2. Projected Gauss-Seidel on the friction impulses, from the previous substep's (clamped to this
+        # one's Coulomb discs); dv, dw carry the rigid body's velocity change.
+        impulse = mat2()
+        d = mat2()
+        inv_d = mat2()
+        turn = wp.vec2()  # geared sides: each side's forward spin change from the friction impulses [rad/s]
+        for k in range(WHEELS):
+            ispin = slots.inv_spin_inertia[k]
+            if wp.static(EXTRAS):
+                ispin = ispins[k]
             dk = wp.vec2(effective_inverse_mass(lon[k], arm[k], inv_mass, inv_inertia, spin[k], ispin),
                          effective_inverse_mass(lat[k], arm[k], inv_mass, inv_inertia, spin[k], ispin))
-            d = with_row(d, k, dk)
-            inv_d = with_row(inv_d, k, wp.vec2(1.0 / dk[0], 1.0 / dk[1]))
+            d = with_row_n(d, k, dk)
+            inv_d = with_row_n(inv_d, k, wp.vec2(1.0 / dk[0], 1.0 / dk[1]))
             prev = warm_start[world * slots.count + k]
             pk = wp.vec2(wp.dot(prev, lon[k]), wp.dot(prev, lat[k]))
             size = wp.length(pk)
             if size > limit[k]:
                 pk = pk * (limit[k] / size)
-            impulse = with_row(impulse, k, pk)
+            impulse = with_row_n(impulse, k, pk)
             p3 = lon[k] * pk[0] + lat[k] * pk[1]
             dv += p3 * inv_mass
             dw += inv_inertia * wp.cross(arm[k], p3)
-            if slots.coupled != 0:
+            if wp.static(GEARED):
                 step = slots.sign[k] * wp.dot(spin[k], p3) * ispin
                 turn = wp.where(slots.side[k] == 0, wp.vec2(turn[0] + step, turn[1]), wp.vec2(turn[0], turn[1] + step))
-    for _sweep in range(FRICTION_SWEEPS):
-        for k in range(MAX_WHEELS):
-            if k < slots.count:
-                if slots.coupled != 0:
-                    impulse, dv, dw, turn = relax_geared(impulse, k, lon[k], lat[k], arm[k], spin[k], slots.sign[k],
-                                                         slots.side[k], free[k], d[k], inv_d[k], ispins[k], limit[k],
-                                                         dv, dw, turn, inv_mass, inv_inertia)
+        for _sweep in range(FRICTION_SWEEPS):
+            for k in range(WHEELS):
+                if wp.static(GEARED):
+                    new, dv, dw, turn = relax_geared(impulse[k], lon[k], lat[k], arm[k], spin[k], slots.sign[k],
+                                                     slots.side[k], free[k], d[k], inv_d[k], ispins[k], limit[k], dv, dw,
+                                                     turn, inv_mass, inv_inertia)
+                    impulse = with_row_n(impulse, k, new)
                 else:
-                    impulse, dv, dw = relax_contact(impulse, k, lon[k], lat[k], arm[k], spin[k], free[k], d[k],
-                                                    inv_d[k], ispins[k], limit[k], dv, dw, inv_mass, inv_inertia)
+                    ispin = slots.inv_spin_inertia[k]
+                    if wp.static(EXTRAS):
+                        ispin = ispins[k]
+                    new, dv, dw = relax_contact(impulse[k], lon[k], lat[k], arm[k], spin[k], free[k], d[k], inv_d[k],
+                                                ispin, limit[k], dv, dw, inv_mass, inv_inertia)
+                    impulse = with_row_n(impulse, k, new)
 
-    # 3. Normal plus friction force on each wheel, as a wrench about its COM.
-    for k in range(MAX_WHEELS):
-        if k < slots.count:
+        # 3. Normal plus friction force on each wheel, as a wrench about its COM.
+        for k in range(WHEELS):
             pk = impulse[k]
             p3 = lon[k] * pk[0] + lat[k] * pk[1]
             impulses[world * slots.count + k] = p3
             f = normal[k] + p3 / dt
             wheel = base + shapes.body[slots.shape[k]]
             wp.atomic_add(body_f, wheel, wp.spatial_vector(f, wp.cross(lever[k], f)))
-            c = damping[world, k]
-            if slots.coupled != 0:  # the chain's torque that turns this wheel with its side, wheel against chassis
+            if wp.static(GEARED):  # the chain's torque that turns this wheel with its side, wheel against chassis
                 q = slots.side[k]
                 change = (((taus[k] * dt * slots.inv_spin_inertia[k] - slots.sign[k] * shrink[q]
                             + slots.sign[k] * turn[q]) / slots.inv_spin_inertia[k] - wp.dot(spin[k], p3)) / dt
                           - taus[k])
                 wp.atomic_add(body_f, wheel, wp.spatial_vector(wp.vec3(0.0), change * axle[k]))
                 wp.atomic_add(body_f, base + slots.chassis, wp.spatial_vector(wp.vec3(0.0), -change * axle[k]))
-            elif c > 0.0:  # the drive torque's change with the wheel's speed over the substep, wheel against chassis
-                change = -c * (taus[k] * dt + wp.dot(spin[k], p3)) * ispins[k]
-                wp.atomic_add(body_f, wheel, wp.spatial_vector(wp.vec3(0.0), change * axle[k]))
-                wp.atomic_add(body_f, base + slots.chassis, wp.spatial_vector(wp.vec3(0.0), -change * axle[k]))
+            elif wp.static(IMPLICIT):  # the drive torque's change with the wheel's speed, wheel against chassis
+                c = damping[world, k]
+                if c > 0.0:
+                    change = -c * (taus[k] * dt + wp.dot(spin[k], p3)) * ispins[k]
+                    wp.atomic_add(body_f, wheel, wp.spatial_vector(wp.vec3(0.0), change * axle[k]))
+                    wp.atomic_add(body_f, base + slots.chassis, wp.spatial_vector(wp.vec3(0.0), -change * axle[k]))
 
 
-@wp.kernel
-def clear_impulses(mask: wp.array(dtype=bool), count: int, impulses: wp.array(dtype=wp.vec3)):
-    """Zero the masked worlds' friction impulses (on reset; ``count`` wheels per world)."""
-    world = wp.tid()
-    if not mask[world]:
-        return
-    for k in range(count):
-        impulses[world * count + k] = wp.vec3(0.0)
+    @wp.kernel
+    def clear_impulses(mask: wp.array(dtype=bool), count: int, impulses: wp.array(dtype=wp.vec3)):
+        """Zero the masked worlds' friction impulses (on reset; ``count`` wheels per world)."""
+        world = wp.tid()
+        if not mask[world]:
+            return
+        for k in range(count):
+            impulses[world * count + k] = wp.vec3(0.0)
 
+    return solve_wheel_friction, clear_impulses
