@@ -4,7 +4,8 @@ for every shipped robot and the test robots of ``tests/data``.
 
     python -m benchmarks.robots.implicit_driver
 
-Per robot and loop: each step case of ``robot_check.STEP_CASES`` at µ 0.3 and 0.8 (its settle time and overshoot,
+Per robot and loop: each step case of ``robot_check.STEP_CASES`` at µ 0.3 and 0.8 (its settle time, overshoot, and
+steady yaw rate and its ripple over the last second, over the command,
 ``sim.protocols.step_response``), with the robot file's effective track factor, and the slowest of the judged cases
 (in place and the 0.3 m/s arc, target ``robot_check.SETTLE_TARGET``). Writes
 ``benchmarks/results/implicit_driver.json``.
@@ -19,8 +20,8 @@ from pathlib import Path
 
 from benchmarks._common import ROOT, load_results, markdown_table, pin_to_one_core, write_results
 
-VERSION = 1
-"""This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
+VERSION = 2
+"""This script's method (2: each step's steady yaw rate and ripple kept), bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 TEST_ROBOTS = ("sixwheel", "eightwheel", "heavywheel", "lightwheel")
@@ -41,7 +42,8 @@ def measure(spec: str) -> dict:
     for loop, (kp, ki) in (("explicit", (robot.kp, robot.ki)), ("implicit", implicit)):
         driver = DriverConfig(kp=kp, ki=ki, implicit_speed_loop=loop == "implicit")
         steps = step_response(STEP_CASES, (0.3, 0.8), rover=RoverConfig(robot=robot.path), driver=driver)
-        rows = [{k: s[k] for k in ("linear", "angular", "friction", "settle", "overshoot")} for s in steps]
+        rows = [{k: s[k] for k in ("linear", "angular", "friction", "settle", "overshoot", "steady", "ripple")}
+                for s in steps]
         judged = [r["settle"] for r in rows if (r["linear"], r["angular"]) in STEP_CASES[:2]]
         out[loop] = {"kp": kp, "ki": ki, "gain_ratio": kp * 0.01 / out["wheel_inertia"], "steps": rows,
                      "slowest_judged": max(judged), "meets": max(judged) <= SETTLE_TARGET}
