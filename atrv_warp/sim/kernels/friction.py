@@ -295,7 +295,7 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
     with_row_n = WITH_ROW[wheels]
     vec, with_entry = WITH_ENTRY[wheels]
 
-    @wp.kernel
+    @wp.kernel(module="unique")
     def solve_wheel_friction(
         bodies_per_world: int,
         shapes: RoverShapes,
@@ -496,7 +496,7 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
                     wp.atomic_add(body_f, base + slots.chassis, wp.spatial_vector(wp.vec3(0.0), -change * axle[k]))
 
 
-    @wp.kernel
+    @wp.kernel(module="unique")
     def clear_impulses(mask: wp.array(dtype=bool), count: int, impulses: wp.array(dtype=wp.vec3)):
         """Zero the masked worlds' friction impulses (on reset; ``count`` wheels per world)."""
         world = wp.tid()
