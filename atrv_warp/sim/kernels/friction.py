@@ -199,7 +199,7 @@ class RoverInertia:
 class WheelSlots:
     """The wheels the solver handles, in :class:`~atrv_warp.sim.kernels.rover.RoverLayout` wheel order."""
 
-    count: int  # wheels (2 to MAX_WHEELS): the slots in use, and the stride of the impulse arrays
+    count: int  # wheels (2 to MAX_WHEELS): the stride of the impulse arrays
     coupled: int  # 1: each side's wheels are geared to one speed inside the solve (ContactConfig.solve_geared_sides)
     side_inertia: wp.vec2  # each side's wheels' spin inertia together [kg·m²]
     chassis: int  # chassis body index within a world

@@ -12,8 +12,8 @@ import warp as wp
 from atrv_warp.core import robot
 
 MAX_WHEELS = wp.constant(robot.MAX_WHEELS)
-"""The per-wheel loops of the encoders and the friction solve have this fixed length (the most wheels a rover may
-have), so Warp unrolls them and differentiates them."""
+"""The encoders' per-wheel loops have this fixed length (the most wheels a rover may have), so Warp unrolls them
+and differentiates them (the friction solve is built for each wheel count: ``kernels.friction.friction_kernels``)."""
 MOTOR_TAPER_START = wp.constant(0.8)
 """Fraction of the no-load speed at which drive torque starts to taper to zero."""
 
