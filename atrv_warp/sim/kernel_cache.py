@@ -31,6 +31,7 @@ STEP_MODULES = (
     "newton._src.sim.articulation",
     "newton._src.solvers.featherstone.kernels",
     # modules of one kernel each, named by the kernel and a hash
+    "friction_kernels__locals__",  # the friction solve of each wheel count (the four-wheel default defined at import)
     "compute_body_inverses_kernel_",
     "create_inertia_matrix_kernel_",
     "validate_and_correct_inertia_kernel_",

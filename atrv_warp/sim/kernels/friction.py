@@ -506,3 +506,6 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
             impulses[world * count + k] = wp.vec3(0.0)
 
     return solve_wheel_friction, clear_impulses
+
+
+friction_kernels(4)  # the default rover's, defined at import so that ``kernel_cache.precompile`` compiles it ahead
