@@ -264,7 +264,8 @@ class ContactConfig:
             raise ValueError("ContactConfig.friction_slope_fraction must be a finite number > 0, got "
                              f"{self.friction_slope_fraction!r}")
         if not (math.isfinite(self.patch) and 0 <= self.patch <= 1):
-            raise ValueError(f"ContactConfig.patch must be a number in [0, 1] (a share of the radius), got {self.patch!r}")
+            raise ValueError(f"ContactConfig.patch must be a number in [0, 1] (a share of the radius), got "
+                             f"{self.patch!r}")
         if self.damping_limit is not None and not (math.isfinite(self.damping_limit) and self.damping_limit > 0):
             raise ValueError(f"ContactConfig.damping_limit must be > 0 or None (no ceiling), got {self.damping_limit!r}")
 

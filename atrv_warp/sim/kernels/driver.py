@@ -232,9 +232,9 @@ def drive_wheels(
     and the wheel odometry. ``state_in`` and ``state_out`` may be the same arrays (the simulator) or one per
     substep (a differentiable rollout's tape).
 
-    ``damping`` (N, W) [N·m per rad/s], written only with ``params.implicit``: the slope of each wheel's torque in its own speed
-    change over the substep (the loop's proportional gain through the motor, 0 where the loop saturates or takes
-    torque commands); the friction solve (:func:`~atrv_warp.sim.kernels.friction.friction_kernels`) integrates it
+    ``damping`` (N, W) [N·m per rad/s], written only with ``params.implicit``: the slope of each wheel's torque in its
+    own speed change over the substep (the loop's proportional gain through the motor, 0 where the loop saturates or
+    takes torque commands); the friction solve (:func:`~atrv_warp.sim.kernels.friction.friction_kernels`) integrates it
     implicitly, with the wheel's ground contact, so that no gain is bounded by the substep."""
     world = wp.tid()
     speeds = side_speeds(layout, joint_qd, world)

@@ -319,10 +319,11 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
         slip), stiffness and wheel radius.
 
         ``damping`` (N, W) [N·m per rad/s] is how each wheel's drive torque falls with its speed's change over the
-        substep (an implicit wheel-speed loop's proportional action through the motor, :func:`~atrv_warp.sim.kernels.
-        driver.drive_wheels`; 0: the torque is ``joint_f``'s): the wheel then spins as if its inertia were ``J + damping
-        dt`` under ``joint_f``'s torque, the friction solved with it, and the torque's change is applied between wheel and
-        chassis (a damping integrated implicitly, which no gain can make unstable).
+        substep (an implicit wheel-speed loop's proportional action through the motor,
+        :func:`~atrv_warp.sim.kernels.driver.drive_wheels`; read only by an ``implicit`` kernel): the wheel then spins
+        as if its inertia were ``J + damping dt`` under ``joint_f``'s torque, the friction solved with it, and the
+        torque's change is applied between wheel and chassis (a damping integrated implicitly, which no gain can make
+        unstable).
 
         ``warm_start`` (N x ``slots.count``) holds the previous substep's friction impulses [N·s], where the
         sweeps start; ``impulses`` receives this substep's (the simulator passes one array as both; a tape
@@ -352,7 +353,7 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
         free = mat3()  # contact point velocity without friction at the end of the substep (spin part) [m/s]
         normal = mat3()  # normal force [N]
         limit = vec()  # Coulomb disc radius mu f_n dt [N·s]
-        ispins = vec()  # 1 / the spin inertia the wheel moves with: its own, plus its drive's damping x dt [1/(kg·m²)]
+        ispins = vec()  # 1 / the spin inertia the wheel moves with (its own, or its side's; + damping x dt) [1/(kg·m²)]
         taus = vec()  # the drive torque [N·m]
         axle = mat3()  # the joint axis, world frame
         force = gravity / inv_mass
@@ -462,8 +463,8 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
             for k in range(WHEELS):
                 if wp.static(GEARED):
                     new, dv, dw, turn = relax_geared(impulse[k], lon[k], lat[k], arm[k], spin[k], slots.sign[k],
-                                                     slots.side[k], free[k], d[k], inv_d[k], ispins[k], limit[k], dv, dw,
-                                                     turn, inv_mass, inv_inertia)
+                                                     slots.side[k], free[k], d[k], inv_d[k], ispins[k], limit[k], dv,
+                                                     dw, turn, inv_mass, inv_inertia)
                     impulse = with_row_n(impulse, k, new)
                 else:
                     ispin = slots.inv_spin_inertia[k]
