@@ -306,6 +306,23 @@ def test_featherstone_wrench_adjoint_one_substep(with_fix):
         assert abs(grad - fd) > 0.25 * abs(fd) + 0.05
 
 
+def assert_steering_gradient(roll: DiffRollout, linear: float, angular: float, rel: float) -> None:
+    """Ten steps of (``linear``, ``angular``) actions on the Husky: the gradient of a pose objective along a
+    left-right steering change at steps 0 and 5 agrees with central finite differences (steps of 1e-3: at 3e-3 the
+    differences at step 5 straddle a wheel's stick-slip kink)."""
+    state = roll.initial_state()
+    a = torch.empty(10, 1, 2)
+    a[..., 0], a[..., 1] = linear, angular
+    aa = a.clone().requires_grad_(True)
+    objective = lambda poses: poses[-1, 0, 0] + poses[-1, 0, 1] + 2.0 * poses[-1, 0, 5]
+    objective(roll(aa, state)).backward()
+    for t in (0, 5):
+        d = torch.zeros(10, 1, 2)
+        d[t, 0] = torch.tensor([1.0, -1.0]) / math.sqrt(2.0)
+        fd = ((objective(roll(a + 1e-3 * d, state)) - objective(roll(a - 1e-3 * d, state))) / 2e-3).item()
+        assert (aa.grad * d).sum().item() == pytest.approx(fd, rel=rel, abs=1e-4), t
+
+
 @pytest.mark.parametrize("in_the_solve", [False, True])
 def test_turning_gradient_through_a_geared_drivetrain(in_the_solve):
     """The Husky's sides are geared (``motor.per_side``): the chain's torque is in the tape (the drive's, or inside
@@ -316,17 +333,7 @@ def test_turning_gradient_through_a_geared_drivetrain(in_the_solve):
     roll = DiffRollout(1, steps=10, rover=RoverConfig(robot="husky"),
                        contact=ContactConfig(solve_geared_sides=in_the_solve))
     assert roll.sim.rover_cfg.robot_spec.motor_per_side
-    state = roll.initial_state()
-    a = torch.empty(10, 1, 2)
-    a[..., 0], a[..., 1] = 0.2, 0.4
-    aa = a.clone().requires_grad_(True)
-    objective = lambda poses: poses[-1, 0, 0] + poses[-1, 0, 1] + 2.0 * poses[-1, 0, 5]
-    objective(roll(aa, state)).backward()
-    for t in (0, 5):  # steps of 1e-3: at 3e-3 the differences at step 5 straddle a wheel's stick-slip kink
-        d = torch.zeros(10, 1, 2)
-        d[t, 0] = torch.tensor([1.0, -1.0]) / math.sqrt(2.0)
-        fd = ((objective(roll(a + 1e-3 * d, state)) - objective(roll(a - 1e-3 * d, state))) / 2e-3).item()
-        assert (aa.grad * d).sum().item() == pytest.approx(fd, rel=0.02, abs=1e-4), t
+    assert_steering_gradient(roll, 0.2, 0.4, rel=0.02)
 
 
 def test_twist_gradient_through_an_implicit_speed_loop():
@@ -337,14 +344,4 @@ def test_twist_gradient_through_an_implicit_speed_loop():
 
     roll = DiffRollout(1, steps=10, rover=RoverConfig(robot="husky"), twist=True,
                        driver=DriverConfig(implicit_speed_loop=True))
-    state = roll.initial_state()
-    a = torch.empty(10, 1, 2)
-    a[..., 0], a[..., 1] = 0.3, 0.4
-    aa = a.clone().requires_grad_(True)
-    objective = lambda poses: poses[-1, 0, 0] + poses[-1, 0, 1] + 2.0 * poses[-1, 0, 5]
-    objective(roll(aa, state)).backward()
-    for t in (0, 5):
-        d = torch.zeros(10, 1, 2)
-        d[t, 0] = torch.tensor([1.0, -1.0]) / math.sqrt(2.0)
-        fd = ((objective(roll(a + 1e-3 * d, state)) - objective(roll(a - 1e-3 * d, state))) / 2e-3).item()
-        assert (aa.grad * d).sum().item() == pytest.approx(fd, rel=0.03, abs=1e-4), t
+    assert_steering_gradient(roll, 0.3, 0.4, rel=0.03)
