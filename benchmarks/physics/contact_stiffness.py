@@ -19,11 +19,11 @@ At 10x the stiffness also with the contact damping 10x (the damping that keeps `
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
 from benchmarks._common import load_results, markdown_table, pin_to_one_core, save_figure, write_results
+from benchmarks.robots.robot_arc import turn_ratio
 
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -60,20 +60,11 @@ def drive(robot: str, terrain: str | None, scale: float, patch: float, sim_dt: f
                    **({"terrain": terrain} if terrain else {}))
     env.set_seed(EVAL_SEED)
     td = env.reset()
-    sim, cfg = env.sim, env.task_cfg
-    linear, angular = COMMAND
-    action = torch.tensor([[linear / cfg.max_linear, angular / cfg.max_angular]]).expand(STARTS, 2)
-    steps = round(SECONDS / sim.sim_cfg.step_dt)
+    sim = env.sim
     wheels, per_world = sim.built.wheel_bodies, sim.built.rover_builder.body_count
-    previous = sim.rpy[:, 2].clone().double()
-    yaw = torch.zeros(STARTS, dtype=torch.float64)
     low = []
-    for k in range(steps):
-        td["action"] = action
-        td = env.step(td)["next"]
-        now = sim.rpy[:, 2].clone().double()
-        yaw += torch.remainder(now - previous + math.pi, 2 * math.pi) - math.pi
-        previous = now
+
+    def loads(k: int, steps: int) -> None:  # the last two thirds: each wheel's load against its chassis' mean
         if k >= steps // 3:
             hubs = sim.state_0.body_q.numpy().reshape(STARTS, per_world, 7)[:, wheels, :3]
             finite = np.isfinite(hubs).all(axis=(1, 2))
@@ -81,7 +72,8 @@ def drive(robot: str, terrain: str | None, scale: float, patch: float, sim_dt: f
             depth = np.maximum(_ground(sim, hubs) - (hubs[..., 2] - sim.rover_cfg.wheel_radius), 0.0)
             load = depth ** 1.5
             low.append((load < LOW_LOAD * load.mean(axis=1, keepdims=True))[finite])
-    ratio = yaw / (angular * steps * sim.sim_cfg.step_dt)
+
+    ratio = turn_ratio(env, td, *COMMAND, SECONDS, on_step=loads)
     finite = torch.isfinite(ratio)
     return {"turned": float(ratio[finite].median()), "low_load_share": float(np.concatenate(low).mean()),
             "nonfinite": int((~finite).sum())}
@@ -100,11 +92,10 @@ def _ground(sim, hubs):
     fy = np.clip((hubs[..., 1] + grid.half_size) / grid.resolution, 0, n - 1 - 1e-3)
     i, j = fx.astype(int), fy.astype(int)
     u, v = fx - i, fy - j
-    h = grid.heights[sim.terrain.tile.cpu().numpy()[:, None], i, j] * (1 - u) * (1 - v)
-    h += grid.heights[sim.terrain.tile.cpu().numpy()[:, None], i + 1, j] * u * (1 - v)
-    h += grid.heights[sim.terrain.tile.cpu().numpy()[:, None], i, j + 1] * (1 - u) * v
-    h += grid.heights[sim.terrain.tile.cpu().numpy()[:, None], i + 1, j + 1] * u * v
-    return h + top
+    h = grid.heights[sim.terrain.tile.cpu().numpy()[:, None]]  # (N, n, n): each world's tile
+    rows = np.arange(len(hubs))[:, None]
+    return (h[rows, i, j] * (1 - u) * (1 - v) + h[rows, i + 1, j] * u * (1 - v) + h[rows, i, j + 1] * (1 - u) * v
+            + h[rows, i + 1, j + 1] * u * v + top)
 
 
 def main() -> int:
@@ -134,13 +125,31 @@ def main() -> int:
                              "sim_dt": SUBSTEPS[-1], "damping": 10.0,
                              **drive(robot, terrain, 10.0, 0.0, SUBSTEPS[-1], damping_scale=10.0)})
                 print(rows[-1], flush=True)
-        path = write_results(RESULTS / "contact_stiffness.json", {"rows": rows, "command": list(COMMAND),
-                                                                  "starts": STARTS, "seconds": SECONDS},
+        path = write_results(RESULTS / "contact_stiffness.json", {"rows": rows, "summary": summarize(rows),
+                                                                  "command": list(COMMAND), "starts": STARTS,
+                                                                  "seconds": SECONDS},
                              version=VERSION, task=True, driver=True, robots=tuple(ROBOTS))
         print(f"wrote {path}")
     if args.figure:
         draw(args.figure)
     return 0
+
+
+def summarize(rows: list[dict]) -> dict:
+    """The figures the docs quote, per robot: the share of low-loaded wheel-steps on the nav terrain at the nominal
+    and at ten times the stiffness (finest substep), and the median turn there at ten times the stiffness, one point
+    at the nominal and the finest substep and, for geared sides, with the chain in the solve at the nominal."""
+    out: dict = {"low_load_x1": {}, "low_load_x10": {}, "point_x10": {}, "point_x10_fine": {}, "chain_x10": {},
+                 "point_x1": {}}
+    for robot in dict.fromkeys(r["robot"] for r in rows):
+        fine, coarse = converged(rows, robot, "nav"), converged(rows, robot, "nav", sim_dt=SUBSTEPS[0])
+        chain = converged(rows, robot, "nav", "chain", sim_dt=SUBSTEPS[0])
+        out["low_load_x1"][robot], out["low_load_x10"][robot] = fine[1.0]["low_load_share"], fine[10.0]["low_load_share"]
+        out["point_x1"][robot], out["point_x10"][robot] = coarse[1.0]["turned"], coarse[10.0]["turned"]
+        out["point_x10_fine"][robot] = fine[10.0]["turned"]
+        if chain:
+            out["chain_x10"][robot] = chain[10.0]["turned"]
+    return out
 
 
 def converged(rows: list[dict], robot: str, ground: str, contact: str = "point", damping: float = 1.0,

@@ -91,6 +91,28 @@ def drive(robot: str, linear: float, angular: float, seconds: float, terrain: st
             "fused_position_error": float((fused[:2] - true_odom).norm())}
 
 
+def turn_ratio(env, td, linear: float, angular: float, seconds: float, on_step=None):
+    """(N,) float64: the yaw each world of ``env`` (reset, its tensordict ``td``) turned over the yaw commanded,
+    ``linear`` [m/s] and ``angular`` [rad/s] sent as its action for ``seconds``; ``on_step(k, steps)`` is called after
+    each step ``k``."""
+    import torch
+
+    sim, cfg = env.sim, env.task_cfg
+    action = torch.tensor([[linear / cfg.max_linear, angular / cfg.max_angular]]).expand(sim.num_worlds, 2)
+    steps = round(seconds / sim.sim_cfg.step_dt)
+    previous = sim.rpy[:, 2].clone().double()
+    yaw = torch.zeros(sim.num_worlds, dtype=torch.float64)
+    for k in range(steps):
+        td["action"] = action
+        td = env.step(td)["next"]
+        now = sim.rpy[:, 2].clone().double()
+        yaw += torch.remainder(now - previous + math.pi, 2 * math.pi) - math.pi
+        previous = now
+        if on_step is not None:
+            on_step(k, steps)
+    return yaw / (angular * steps * sim.sim_cfg.step_dt)
+
+
 def survey(robot: str | Path, linear: float, angular: float, seconds: float, starts: int,
            terrain: str | None = None, stiffness_scale: float = 1.0) -> dict:
     """:func:`drive`'s turn over the test set's first ``starts`` starts at once: how much of the commanded yaw each
@@ -106,19 +128,9 @@ def survey(robot: str | Path, linear: float, angular: float, seconds: float, sta
     env = RoverEnv(starts, task="nav_deploy", robot=robot, **options)
     env.set_seed(EVAL_SEED)
     td = env.reset()
-    sim, cfg = env.sim, env.task_cfg
+    sim = env.sim
     wp.to_torch(sim.params.physics.stiffness).mul_(stiffness_scale)
-    action = torch.tensor([[linear / cfg.max_linear, angular / cfg.max_angular]]).expand(starts, 2)
-    steps = round(seconds / sim.sim_cfg.step_dt)
-    previous = sim.rpy[:, 2].clone().double()
-    yaw = torch.zeros(starts, dtype=torch.float64)
-    for _ in range(steps):
-        td["action"] = action
-        td = env.step(td)["next"]
-        now = sim.rpy[:, 2].clone().double()
-        yaw += torch.remainder(now - previous + math.pi, 2 * math.pi) - math.pi
-        previous = now
-    ratio = yaw / (angular * steps * sim.sim_cfg.step_dt)
+    ratio = turn_ratio(env, td, linear, angular, seconds)
     q = torch.quantile(ratio, torch.tensor([0.25, 0.5, 0.75], dtype=torch.float64)).tolist()
     return {"starts": starts, "stiffness_scale": stiffness_scale, "sim_dt": sim.sim_cfg.sim_dt,
             "turned_over_commanded": {"q25": q[0], "median": q[1], "q75": q[2]},
