@@ -92,7 +92,7 @@ def _ground(sim, hubs):
     fy = np.clip((hubs[..., 1] + grid.half_size) / grid.resolution, 0, n - 1 - 1e-3)
     i, j = fx.astype(int), fy.astype(int)
     u, v = fx - i, fy - j
-    h = grid.heights[sim.terrain.tile.cpu().numpy()[:, None]]  # (N, n, n): each world's tile
+    h = grid.heights[sim.terrain.tile.cpu().numpy()]  # (N, n, n): each world's tile
     rows = np.arange(len(hubs))[:, None]
     return (h[rows, i, j] * (1 - u) * (1 - v) + h[rows, i + 1, j] * u * (1 - v) + h[rows, i, j + 1] * (1 - u) * v
             + h[rows, i + 1, j + 1] * u * v + top)
