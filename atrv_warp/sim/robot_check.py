@@ -67,8 +67,8 @@ GRIP_SHARE = 0.5
 """A turn whose lateral acceleration (linear x angular) exceeds this share of µ g is at the tyres' grip limit: the
 robot slides, and how far it turns is set by how it slides, not by the factor. Its error is reported, not fitted."""
 FACTOR_RULE = ("the factor with the least mean squared /cmd_vel yaw error over the turns within the tyres' grip "
-               "(lateral acceleration <= 0.5 µ g): a driver of factor f turns a robot of chi at f / chi of the command, "
-               "so f = sum(1 / chi) / sum(1 / chi^2)")
+               f"(lateral acceleration <= {GRIP_SHARE:g} µ g): a driver of factor f turns a robot of chi at f / chi of "
+               "the command, so f = sum(1 / chi) / sum(1 / chi^2)")
 """How :func:`measure_robot` picks the effective track factor from the turns' chi (:func:`track_factor_rule`)."""
 TURN_FRICTIONS: tuple[float, ...] = (0.3, 0.8)
 """Coulomb µ of the turns and the step response."""
@@ -240,9 +240,10 @@ class RobotCheck:
         return asdict(self)
 
 
-def _turns(rover: RoverConfig, description: RoverDescription, commands, frictions, seconds: float) -> list[dict]:
+def _turns(rover: RoverConfig, description: RoverDescription, commands, frictions, seconds: float
+           ) -> tuple[list[dict], float]:
     """Each steady turn's chi through a differential drive's wheel targets; then, through the driver with the factor
-    :func:`track_factor_rule` picks from them, its yaw and odometry errors."""
+    :func:`track_factor_rule` picks from them, its yaw and odometry errors. Returns (the turns, the factor)."""
     from atrv_warp.core.kinematics import track_width
     from atrv_warp.sim.driver import DriverConfig
     from atrv_warp.sim.protocols import turning_response
@@ -264,7 +265,7 @@ def _turns(rover: RoverConfig, description: RoverDescription, commands, friction
         t["yaw_error"] = row["yaw_rate"] / row["angular"] - 1.0
         odometry = r * (row["wheel_right"] - row["wheel_left"]) / (factor * track)
         t["odometry_error"] = odometry / row["yaw_rate"] - 1.0
-    return rows
+    return rows, factor
 
 
 def _top_speed(rover: RoverConfig, torque: float, seconds: float = 3.0) -> float:
@@ -302,10 +303,9 @@ def measure_robot(spec, *, frictions=TURN_FRICTIONS, turn_seconds: float = 15.0,
     rover = RoverConfig(robot=robot.path)
     kp, ki = driver_gains(description)
     say("steady turns over the robot's range (effective track factor, then /cmd_vel yaw error)")
-    turns = _turns(rover, description, turn_commands(robot), frictions, turn_seconds)
+    turns, factor = _turns(rover, description, turn_commands(robot), frictions, turn_seconds)
     say("full torque (top speed)")
     top = _top_speed(rover, robot.torque_limit)
-    factor = track_factor_rule(turns)
     say("/cmd_vel steps (driver response)")
     steps = step_response(STEP_CASES, frictions, seconds=step_seconds, rover=rover,
                           driver=DriverConfig(kp=kp, ki=ki, effective_track_factor=round(factor, 2)))
