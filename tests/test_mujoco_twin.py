@@ -408,6 +408,20 @@ def test_a_robot_files_policy_runs_in_the_twin_and_ours_as_pt_and_pt2_by_the_doc
     ours_pt, ours_pt2 = run(pt, "--robot", robot), run(pt2, "--robot", robot)
     assert ours_pt2["mean_return"] == pytest.approx(ours_pt["mean_return"], rel=1e-4)
     assert ours_pt2["success_rate"] == ours_pt["success_rate"]
+    # a file exported before contracts kept their records: its robot's name alone, which must be a shipped robot's
+    from atrv_warp.core.contract import CONTRACT_FILE, read_exported
+
+    program, contract = read_exported(pt2)
+    contract.pop("trained_with")
+    old = tmp_path / "old.pt2"
+    torch.export.save(program, str(old), extra_files={CONTRACT_FILE: json.dumps(contract)})
+    assert main([str(old), "--engine", "mujoco", "--episodes", "1"]) == 2
+    assert "exported before exported policies kept their robot, and 'sixwheel' is not a shipped robot: export it " \
+           "again" in capsys.readouterr().err
+    contract["robot"]["name"] = "husky"
+    torch.export.save(program, str(old), extra_files={CONTRACT_FILE: json.dumps(contract)})
+    assert main([str(old), "--engine", "mujoco", "--robot", "jackal", "--episodes", "1"]) == 2
+    assert "trained on husky (Clearpath Husky A200) but this is jackal" in capsys.readouterr().err
 
 
 def test_the_twins_implicit_speed_loop_holds_the_gains_ours_does():

@@ -204,17 +204,14 @@ def _robot_of_old_export(name: str, robot: str | None, allow: bool, source) -> t
     """:func:`_robot_to_run` for a file exported before exported files kept their records: its robot's ``name``
     alone, which must be a shipped robot's."""
     from atrv_warp.core.robot import ROBOTS, load_robot
+    from atrv_warp.policy import PolicyRecord
 
     if name not in ROBOTS:
         raise ValueError(f"{source} was exported before exported policies kept their robot, and {name!r} is not a "
                          "shipped robot: export it again (python -m atrv_warp.export POLICY OUT.pt2)")
-    if robot is None or load_robot(robot) == load_robot(name):
-        return robot or name, None
-    line = f"policy {source} was trained on {name} but this is {load_robot(robot).name}"
-    if not allow:
-        raise ValueError(f"{line}: evaluate or deploy it on its own robot, or pass the flag that allows another on "
-                         "purpose (--allow-other-robot)")
-    return robot, line
+    if robot is None:
+        return name, None
+    return _robot_to_run(PolicyRecord(None, load_robot(name), False), robot, allow, source)
 
 
 def _robot_to_run(record, robot: str | None, allow: bool, source) -> tuple[str, str | None]:
