@@ -95,8 +95,8 @@ __all__ = [
 
 DEFAULT_ROBOT = "atrvjr"
 MAX_WHEELS = 8
-"""Driven wheels a skid-steer rover may have: 2 to 8, as many on the left as on the right (the simulator's per-wheel
-loops have this fixed length)."""
+"""Driven wheels a skid-steer rover may have: 2 to 8, as many on the left as on the right (the encoders' loops have
+this fixed length; the friction solve is built for each count)."""
 """The robot everything uses unless told otherwise."""
 
 

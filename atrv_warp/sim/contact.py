@@ -234,10 +234,10 @@ def rover_inertia(model: newton.Model, bodies_per_world: int, chassis: int) -> t
     return total, centre, tensor
 
 
-def _wheel_slots(built: BuiltModel, wheel_dofs: list[int], dofs_per_world: int, device, geared: bool = False
-                 ) -> WheelSlots:
-    """The wheels' cylinders, joints and spin inertias, in the description's wheel order; ``geared``: each side's
-    wheels turn as one in the solve (:attr:`~atrv_warp.sim.config.ContactConfig.solve_geared_sides`)."""
+def _wheel_slots(built: BuiltModel, wheel_dofs: list[int], dofs_per_world: int, device) -> WheelSlots:
+    """The wheels' cylinders, joints, spin inertias and sides (each side's spin inertia for a solve that turns a
+    geared side as one, :attr:`~atrv_warp.sim.config.ContactConfig.solve_geared_sides`), in the description's wheel
+    order."""
     rb, desc = built.rover_builder, built.description
     shape, axis, inv_spin = [], [], []
     inertia = built.model.body_inertia.numpy()
@@ -252,7 +252,6 @@ def _wheel_slots(built: BuiltModel, wheel_dofs: list[int], dofs_per_world: int, 
         inv_spin.append(1.0 / float(a @ inertia[body] @ a))
     slots = WheelSlots()
     slots.count = len(desc.wheels)
-    slots.coupled = int(geared)
     side_inertia = [sum(1.0 / i for i, w in zip(inv_spin, desc.wheels) if w.side == q) for q in (0, 1)]
     slots.side_inertia = wp.vec2(*side_inertia)
     slots.side = wp.array([w.side for w in desc.wheels], dtype=int, device=device)
@@ -301,9 +300,10 @@ class ContactModel:
         self.scene = scene
         self.gravity = wp.vec3(0.0, 0.0, gravity)
         self.wheels: WheelSlots | None = None
+        geared = contact.friction_law == "coulomb" and contact.solve_geared_sides and rover.robot_spec.motor_per_side
         if contact.friction_law == "coulomb":
             self.wheels = _wheel_slots(built, [rb.joint_qd_start[j] for j in built.wheel_joints], rb.joint_dof_count,
-                                       device, geared=contact.solve_geared_sides and rover.robot_spec.motor_per_side)
+                                       device)
         mass, com, tensor = rover_inertia(built.model, self.bodies_per_world, built.chassis_body)
         n = self.num_worlds
         inertia = RoverInertia()
@@ -319,7 +319,6 @@ class ContactModel:
         nominal.inv_inertia = wp.mat33(*inertia.inv_inertia.numpy()[0].flatten())
         self.nominal_rover = nominal
         self.wheel_count = len(desc.wheels)
-        geared = bool(self.wheels is not None and self.wheels.coupled)
         self._solve, self._clear = friction_kernels(self.wheel_count, geared, implicit_drive)
         self.impulses = wp.zeros(self.num_worlds * self.wheel_count, dtype=wp.vec3, device=device)
         """(N x wheels) each wheel's last friction impulse [N·s], world frame: where the next substep's
@@ -330,7 +329,8 @@ class ContactModel:
         """Add every contact wrench to ``state.body_f`` and OR the contact bits into ``flags``.
 
         ``joint_f`` holds this substep's drive torques (the friction solver predicts the wheels'
-        spin with them), ``damping`` (N, W) how each falls with its wheel's speed change (an implicit driver's); ``physics`` each world's mu, stiffness and wheel radius
+        spin with them), ``damping`` (N, W) how each falls with its wheel's speed change (an implicit driver's);
+        ``physics`` each world's mu, stiffness and wheel radius
         (:class:`~atrv_warp.sim.params.WorldParams`, or a tape's own with differentiable arrays).
         ``warm_start`` and ``impulses`` (N x wheels ``wp.vec3``) replace :attr:`impulses` as the previous
         substep's friction impulses and this one's (a tape needs one array per substep).

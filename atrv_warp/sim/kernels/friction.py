@@ -200,7 +200,6 @@ class WheelSlots:
     """The wheels the solver handles, in :class:`~atrv_warp.sim.kernels.rover.RoverLayout` wheel order."""
 
     count: int  # wheels (2 to MAX_WHEELS): the stride of the impulse arrays
-    coupled: int  # 1: each side's wheels are geared to one speed inside the solve (ContactConfig.solve_geared_sides)
     side_inertia: wp.vec2  # each side's wheels' spin inertia together [kg·m²]
     chassis: int  # chassis body index within a world
     dofs_per_world: int
@@ -283,8 +282,8 @@ def relax_geared(pk: wp.vec2, t1: wp.vec3, t2: wp.vec3, r: wp.vec3, spin: wp.vec
 def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
     """The (``solve_wheel_friction``, ``clear_impulses``) kernels for rovers of ``wheels`` wheels (2 to
     ``MAX_WHEELS``, even): per-wheel values in ``wheels``-row matrices, loops of ``wheels`` unrolled; with ``geared``
-    each side's wheels turned as one inside the solve (``slots.coupled``), with ``implicit`` the drive's ``damping``
-    solved with the friction. What a kernel does not do is not in its code: the four-wheel rover's default kernel is
+    each side's wheels turned as one inside the solve (``ContactConfig.solve_geared_sides``), with ``implicit`` the
+    drive's ``damping`` solved with the friction. What a kernel does not do is not in its code: the four-wheel rover's default kernel is
     the one this solve has always been."""
     if wheels not in WITH_ROW:
         raise ValueError(f"the friction solve takes {sorted(WITH_ROW)} wheels, not {wheels}")
