@@ -731,7 +731,8 @@ def test_a_rollout_keeps_the_rover_configs_payload_unless_given_another():
         given = loaded(twist, state, chassis_mass=loaded.nominal_chassis_mass + 20.0)
         none = loaded(twist, state, chassis_mass=loaded.nominal_chassis_mass)
     assert torch.equal(default, given)
-    assert (default[-1, :, 0] - none[-1, :, 0]).abs().min().item() > 1e-3  # 20 kg accelerate more slowly
+    # 20 kg accelerate more slowly: 0.4 mm behind after 2 s under the implicit loop, whose rounding is 1e-7 m
+    assert (default[-1, :, 0] - none[-1, :, 0]).abs().min().item() > 1e-4
 
 
 def test_a_pause_in_a_bag_splits_it_and_costs_no_memory():

@@ -355,18 +355,19 @@ def test_the_accelerometer_aided_odometry_follows_the_chassis_where_the_wheels_s
 
 
 def test_an_implicit_speed_loop_holds_gains_that_make_the_explicit_loop_oscillate():
-    """The Jackal's light wheels (0.0024 kg·m²) at four times its gains, ``kp x sim_dt / J`` about 6: turning in place
-    at µ 0.3 its slipping wheels make the explicit loop oscillate for good, while the implicit one
+    """The Jackal's light wheels (0.0024 kg·m²) at four times the explicit rule's gains, ``kp x sim_dt / J`` about 6:
+    turning in place at µ 0.3 its slipping wheels make the explicit loop oscillate for good, while the implicit one
     (``DriverConfig.implicit_speed_loop``, its proportional action on the substep's end speed, solved with the
-    friction) settles within 0.2 s; at the shipped gains the two agree within 1 % of the command."""
-    from atrv_warp.core.robot import load_robot
+    friction) settles within 0.2 s; at the explicit rule's gains the two agree within 1 % of the command."""
     from atrv_warp.sim.config import RoverConfig
     from atrv_warp.sim.driver import DriverConfig
+    from atrv_warp.sim.robot_check import check_robot, driver_gains
 
-    jackal, rover = load_robot("jackal"), RoverConfig(robot="jackal")
+    rover = RoverConfig(robot="jackal")
+    kp, ki = driver_gains(check_robot("jackal")[1], implicit=False)
 
     def step(gain: float, implicit: bool) -> dict:
-        driver = DriverConfig(kp=gain * jackal.kp, ki=gain * jackal.ki, implicit_speed_loop=implicit)
+        driver = DriverConfig(kp=gain * kp, ki=gain * ki, implicit_speed_loop=implicit)
         return protocols.step_response(((0.0, 0.5),), (0.3,), seconds=2.0, rover=rover, driver=driver)[0]
 
     explicit, implicit = step(4.0, False), step(4.0, True)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+import re
 import shutil
 from pathlib import Path
 
@@ -96,26 +97,27 @@ def test_the_simulator_takes_the_robots_driver():
         RoverSim(1, robot="husky", rover=RoverConfig(robot="jackal"))
 
 
-def test_the_gain_rule_gives_the_atrvjrs_tuned_gains():
+def test_the_explicit_loops_gain_rule_gives_the_atrvjrs_tuned_gains():
+    """The explicit loop's rule (``GAIN_RATIO``) is the ATRV-Jr's tuned 3.0 at the 0.01 s substep."""
     from atrv_warp.sim.robot_check import check_robot, driver_gains
 
-    atrvjr = load_robot("atrvjr")
-    assert driver_gains(check_robot("atrvjr")[1]) == (atrvjr.kp, atrvjr.ki) == (3.0, 30.0)
-    for name in ("jackal", "husky"):
-        robot, description = check_robot(name)
-        assert driver_gains(description) == (robot.kp, robot.ki)
+    assert driver_gains(check_robot("atrvjr")[1], implicit=False) == (3.0, 30.0)
 
 
 def test_the_implicit_loops_gain_rule_answers_every_loaded_wheel_alike_within_its_cap():
-    """``kp = (J + mass / wheels x r²) / LOOP_TIME``: the ATRV-Jr's 58 kg on 0.125 m wheels give 4.92, the Jackal's
-    light wheels 0.933 (``kp x dt / J`` 3.9, under the cap of 4); a light wheel under a heavy robot is capped."""
+    """``kp = (J + mass / wheels x r²) / LOOP_TIME``, the default loop's and every shipped robot's: the ATRV-Jr's 58 kg
+    on 0.125 m wheels give 4.92, the Jackal's light wheels 0.933 (``kp x dt / J`` 3.9, under the cap of 4); a light
+    wheel under a heavy robot is capped."""
     from atrv_warp.sim.robot_check import IMPLICIT_GAIN_CAP, check_robot, driver_gains, wheel_inertia
 
-    assert driver_gains(check_robot("atrvjr")[1], implicit=True) == (4.92, 49.2)
+    assert driver_gains(check_robot("atrvjr")[1]) == (4.92, 49.2) == (load_robot("atrvjr").kp, load_robot("atrvjr").ki)
     _, jackal = check_robot("jackal")
-    assert driver_gains(jackal, implicit=True) == (0.933, 9.33)
+    assert driver_gains(jackal) == (0.933, 9.33)
+    for name in ROBOTS:
+        robot, description = check_robot(name)
+        assert driver_gains(description, wheel_radius=robot.wheel_radius) == (robot.kp, robot.ki)
     heavy = dataclasses.replace(jackal, chassis_inertial=dataclasses.replace(jackal.chassis_inertial, mass=200.0))
-    kp, _ = driver_gains(heavy, implicit=True)
+    kp, _ = driver_gains(heavy)
     assert kp == pytest.approx(IMPLICIT_GAIN_CAP * wheel_inertia(jackal) / 0.01, rel=0.01)
 
 
@@ -167,7 +169,7 @@ def _copy(tmp_path: Path, name: str = "jackal") -> Path:
      r"unknown field\(s\) \['colour'\]"),
     (lambda t: t.replace("[motor]", "[motor]\npeak_torque = 3.0"), r"unknown field\(s\) \['motor.peak_torque'\]"),
     (lambda t: t.replace("linear_velocity = 2.0\n", ""), "missing limits.linear_velocity"),
-    (lambda t: t.replace("kp = 0.369", "kp = -1.0"), "driver.kp must be > 0"),
+    (lambda t: re.sub(r"^kp = .*$", "kp = -1.0", t, count=1, flags=re.MULTILINE), "driver.kp must be > 0"),
     (lambda t: t.replace("per_side = true", 'per_side = "yes"'), "motor.per_side must be true or false"),
     (lambda t: t.replace('chassis = "chassis_link"', 'chassis = "body"'), r"links.chassis \(body\).*not found"),
     (lambda t: t.replace('imu = "imu_0_link"', 'imu = "imu_link"'), r"links.imu \(imu_link\).*not found"),
@@ -282,8 +284,8 @@ def test_the_check_turns_to_the_robots_limits_fits_the_factor_within_the_grip_an
     assert turn_commands(jackal) == ((0.0, 0.5), (0.0, 1.0), (0.0, 2.0), (0.0, 4.0), (1.0, 1.0), (1.0, -2.0),
                                      (2.0, 1.0), (2.0, 2.0))
     turns = [{"linear": 0.0, "angular": 4.0, "friction": 0.3, "chi": 1.5},
-             {"linear": 1.0, "angular": 1.0, "friction": 0.3, "chi": 1.2},
-             {"linear": 2.0, "angular": 2.0, "friction": 0.3, "chi": 0.5}]  # 4 m/s² > 0.5 x 0.3 g: sliding
+             {"linear": 0.5, "angular": 1.0, "friction": 0.3, "chi": 1.2},
+             {"linear": 2.0, "angular": 1.0, "friction": 0.3, "chi": 0.5}]  # 2 m/s² > 0.25 x 0.3 g: sliding
     assert [within_grip(t) for t in turns] == [True, True, False]
     f = track_factor_rule(turns)  # least squares of f / chi - 1 over the first two
     assert f == pytest.approx((1 / 1.5 + 1 / 1.2) / (1 / 1.5**2 + 1 / 1.2**2))
@@ -364,11 +366,13 @@ def test_check_write_puts_the_measured_values_in_the_file(tmp_path):
     path = _copy(tmp_path, "husky")
     before = path.read_text()
     report = {"gains": {"kp": 6.5, "ki": 65.0}, "effective_track_factor": 1.913, "wheel_inertia": 0.04411,
+              "loaded_inertia": 0.4298,
               "turns": [{}] * 14, "file": {"kp": 6.78, "ki": 67.8, "effective_track_factor": 1.97}}
     assert write_measured(path, report) == ["kp", "ki", "effective_track_factor"]
     robot = load_robot(path)
     assert (robot.kp, robot.ki, robot.effective_track_factor) == (6.5, 65.0, 1.91)
     assert "measured by `python -m atrv_warp.robot check`" in robot.sources["driver.effective_track_factor"]
+    assert "kp = J_loaded / 0.05 s" in robot.sources["driver.kp"] and "0.4298 kg m²" in robot.sources["driver.kp"]
     untouched = [line for line in before.splitlines() if not line.startswith(("kp", "ki", "effective", '"driver.'))]
     assert all(line in path.read_text().splitlines() for line in untouched)
     assert math.isclose(robot.limits.linear_velocity, 1.0)

@@ -130,11 +130,12 @@ def write_measured(path: str | Path, report: dict) -> list[str]:
     their ``[sources]`` lines), keeping everything else as written. Returns the changed keys."""
     path = Path(path)
     text = path.read_text(encoding="utf-8")
+    from atrv_warp.sim.robot_check import gain_rule_source
+
     day = datetime.date.today().isoformat()
     values = {"kp": report["gains"]["kp"], "ki": report["gains"]["ki"],
               "effective_track_factor": round(report["effective_track_factor"], 2)}
-    source = {"kp": "the rule of `python -m atrv_warp.robot check` (kp x sim_dt / J = 1.536, the ATRV-Jr's tuned "
-                    f"ratio, for the wheel's axial inertia {report['wheel_inertia']:.4g} kg m²), {day}",
+    source = {"kp": gain_rule_source(report["wheel_inertia"], report["loaded_inertia"], values["kp"], day),
               "ki": f"the rule: ki = 10 kp, {day}",
               "effective_track_factor": "measured by `python -m atrv_warp.robot check`: the least squared "
                                         "/cmd_vel yaw error over the turns within the grip of "
@@ -215,9 +216,11 @@ def starter_file(urdf: str | Path, name: str) -> str:
                              "driver's gains come from a wheel's inertia; give each wheel link its mass and inertia")
     inertia = min(float(np.asarray(j.axis, dtype=float) @ np.asarray(links[j.child].inertial.inertia, dtype=float)
                         @ np.asarray(j.axis, dtype=float)) / float(np.dot(j.axis, j.axis)) for j in weighed)
-    from atrv_warp.sim.robot_check import GAIN_RATIO, INTEGRAL_RATIO
+    from atrv_warp.sim.robot_check import gain_rule_source, rule_gains
 
-    kp = float(f"{GAIN_RATIO * inertia / 0.01:.3g}")
+    loaded = inertia + mass / len(wheels) * radius ** 2
+    kp, ki = rule_gains(inertia, loaded)
+    kp_source = gain_rule_source(inertia, loaded, kp, datetime.date.today().isoformat())
     torque = float(f"{1.125 * mass * 9.81 * radius / len(wheels):.2g}")
     try:
         rel = urdf.relative_to(Path.cwd())
@@ -249,7 +252,7 @@ per_side = false            # true: one motor per side drives its wheels through
 
 [driver]
 kp = {kp!r}
-ki = {float(f"{INTEGRAL_RATIO * kp:.3g}")!r}
+ki = {ki!r}
 effective_track_factor = 1.5   # `check --write` measures it
 
 [limits]                       # set your robot's diff_drive_controller limits
@@ -265,6 +268,8 @@ angular_acceleration = 1.0     # [rad/s²] angular.z.max_acceleration (optional)
 "motor.torque_limit" = "not published: the starter's rule, the torque that slips a wheel at µ 1.125 under its share"
 "motor.no_load_speed" = "not published: the starter's placeholder"
 "motor.per_side" = "not published: the starter's placeholder"
+"driver.kp" = {json.dumps(kp_source, ensure_ascii=False)}
+"driver.ki" = "the rule: ki = 10 kp"
 "limits.linear_velocity" = "not published: the starter's placeholder"
 "limits.angular_velocity" = "not published: the starter's placeholder"
 "limits.linear_acceleration" = "not published: the starter's placeholder"

@@ -235,10 +235,10 @@ class ContactConfig:
     the wheel's radius along the rim and +-half its width across it), not the tangent plane at its deepest point: a
     tyre touches over a patch. 0 (the default): one point. The study of whether the single point makes the turn on
     uneven ground depend on the contact stiffness (``benchmarks/physics/contact_stiffness.py``)."""
-    solve_geared_sides: bool = False
+    solve_geared_sides: bool = True
     """For a robot with one motor per side (``motor.per_side``): the friction solve turns each side's wheels as one
     body, the chain's coupling inside the solve, and gives each wheel the chain's torque that keeps it with its side
-    within the substep. ``False``: the chain's torque is the drive's, explicit (each wheel brought to the side's
+    within the substep (the default). ``False``: the chain's torque is the drive's, explicit (each wheel brought to the side's
     speed, friction aside), which converges only as the substep shrinks on uneven ground
     (``benchmarks/physics/contact_stiffness.py``)."""
 

@@ -75,11 +75,12 @@ class DriverConfig:
     """``angular.z.max_acceleration`` [rad/s²] (``None``: no limit)."""
     cmd_vel_timeout: float = 0.5
     """Without a command for this long [s], the target drops to zero (``diff_drive_controller``'s default)."""
-    implicit_speed_loop: bool = False
-    """The loop's proportional term acts on each wheel's speed at the substep's end, solved with its ground contact
-    (:func:`~atrv_warp.sim.kernels.friction.friction_kernels`): no gain is bounded by the substep, where the
+    implicit_speed_loop: bool | None = None
+    """``True``: the loop's proportional term acts on each wheel's speed at the substep's end, solved with its ground
+    contact (:func:`~atrv_warp.sim.kernels.friction.friction_kernels`): no gain is bounded by the substep, where the
     explicit loop (``False``) goes unstable once a slipping wheel's ``kp x sim_dt / J`` reaches 2. Coulomb friction
-    only (the viscous law has no solve to put it in)."""
+    only (the viscous law has no solve to put it in). ``None`` (the default): implicit under Coulomb friction (the
+    default law), explicit under the viscous law (:meth:`implicit_under`)."""
     odometry_accel_time: float | None = None
     """The fused odometry's velocity from the encoders and the IMU's accelerometer: a complementary filter with this
     time constant [s], which follows the integrated accelerometer over shorter spans and the encoders (their speed
@@ -99,6 +100,13 @@ class DriverConfig:
             if not _finite_positive(value) and not (name in ("kp", "ki") and value == 0):
                 at_least = ">= 0" if name in ("kp", "ki") else "> 0"
                 raise ValueError(f"DriverConfig.{name} must be a finite number {at_least}, got {value!r}")
+
+    def implicit_under(self, friction_law: str = "coulomb") -> bool:
+        """Whether the speed loop is implicit (:attr:`implicit_speed_loop`) with the wheels' ``friction_law``
+        (:attr:`~atrv_warp.sim.config.ContactConfig.friction_law`)."""
+        if self.implicit_speed_loop is None:
+            return friction_law == "coulomb"
+        return bool(self.implicit_speed_loop)
 
     def resolved(self, robot) -> DriverConfig:
         """This config with every field left ``None`` that is the robot's (:data:`ROBOT_OWN`) taken from ``robot``
@@ -132,7 +140,7 @@ class DriverConfig:
         p.max_linear, p.max_linear_accel = limit["linear_max_velocity"], limit["linear_max_acceleration"]
         p.max_angular, p.max_angular_accel = limit["angular_max_velocity"], limit["angular_max_acceleration"]
         p.timeout, p.dt = self.cmd_vel_timeout, dt
-        p.implicit = int(bool(self.implicit_speed_loop))
+        p.implicit = int(self.implicit_under())
         p.accel_time = 0.0 if self.odometry_accel_time is None else float(self.odometry_accel_time)
         if p.accel_time and p.accel_time < 2.0 * dt:
             raise ValueError(f"DriverConfig.odometry_accel_time must be at least two substeps ({2.0 * dt:g} s), got "

@@ -4,7 +4,7 @@ prints and ``benchmarks/robots/robot_check.py`` keeps.
 :func:`check_robot` reads the file and its URDF and raises one :class:`~atrv_warp.core.robot.RobotFileError` per
 problem, naming the file's field and the link or joint. :func:`measure_robot` drives the robot: its effective track
 factor in steady turns, its top speed under full torque, and its driver's ``/cmd_vel`` step response.
-:func:`driver_gains` is the rule that picks the driver's PI gains for the wheel's inertia.
+:func:`driver_gains` is the rule that picks the driver's PI gains for the wheel and its share of the robot.
 """
 
 from __future__ import annotations
@@ -35,7 +35,10 @@ __all__ = [
     "RobotCheck",
     "check_robot",
     "driver_gains",
+    "gain_rule_source",
+    "loaded_inertia",
     "measure_robot",
+    "rule_gains",
     "settle_misses",
     "track_factor_rule",
     "turn_commands",
@@ -63,9 +66,12 @@ IN_PLACE_SHARES: tuple[float, ...] = (0.125, 0.25, 0.5, 1.0)
 """Steady turns in place at these shares of the robot's angular limit."""
 ARC_SHARES: tuple[tuple[float, float], ...] = ((0.5, 0.25), (0.5, -0.5), (1.0, 0.25), (1.0, 0.5))
 """Steady arcs at these (linear, angular) shares of the robot's limits: at half and all of its linear limit."""
-GRIP_SHARE = 0.5
-"""A turn whose lateral acceleration (linear x angular) exceeds this share of µ g is at the tyres' grip limit: the
-robot slides, and how far it turns is set by how it slides, not by the factor. Its error is reported, not fitted."""
+GRIP_SHARE = 0.25
+"""A turn whose lateral acceleration (linear x angular) exceeds this share of µ g is past the turns a track factor
+serves: the robot slides outward, and how far it turns is set by how it slides. Its error is reported, not fitted.
+A quarter, not a half: with each side's wheels geared as one (``ContactConfig.solve_geared_sides``) the Jackal's chi
+falls from 1.45 in place to 1.35 at 0.13 µ g, 1.09-1.19 at 0.25 µ g and 1.0 at 0.34 µ g, and a factor fitted over
+those turns (1.30 at a half) leaves its turns in place 10 % short of every command."""
 FACTOR_RULE = ("the factor with the least mean squared /cmd_vel yaw error over the turns within the tyres' grip "
                f"(lateral acceleration <= {GRIP_SHARE:g} µ g): a driver of factor f turns a robot of chi at f / chi of "
                "the command, so f = sum(1 / chi) / sum(1 / chi^2)")
@@ -177,23 +183,42 @@ def wheel_inertia(description: RoverDescription) -> float:
     return min(float(w.axis @ w.inertial.inertia @ w.axis) for w in description.wheels)
 
 
-def driver_gains(description: RoverDescription, sim_dt: float | None = None, *, implicit: bool = False,
-                 wheel_radius: float | None = None) -> tuple[float, float]:
-    """(kp [N·m per rad/s], ki [N·m per rad]) by the rule: :data:`GAIN_RATIO` for the wheel's axial inertia at the
-    substep ``sim_dt`` (default :class:`~atrv_warp.sim.config.SimConfig`'s), or for an ``implicit`` loop
-    :data:`LOOP_TIME` for the wheel loaded with its share of the robot at ``wheel_radius`` [m] (default: the URDF's;
-    within :data:`IMPLICIT_GAIN_CAP`); ``ki = INTEGRAL_RATIO x kp``; three significant figures."""
+def rule_gains(inertia: float, loaded_inertia: float, sim_dt: float | None = None, *, implicit: bool = True
+               ) -> tuple[float, float]:
+    """(kp [N·m per rad/s], ki [N·m per rad]) by the rule, for a wheel of axial ``inertia`` [kg·m²] that carries its
+    share of the robot as ``loaded_inertia`` (``J + (mass / wheels) r²``): for the implicit loop (the default driver's,
+    :attr:`~atrv_warp.sim.driver.DriverConfig.implicit_speed_loop`) :data:`LOOP_TIME` within
+    :data:`IMPLICIT_GAIN_CAP`, for the explicit one :data:`GAIN_RATIO` at the substep ``sim_dt`` (default
+    :class:`~atrv_warp.sim.config.SimConfig`'s); ``ki = INTEGRAL_RATIO x kp``; three significant figures."""
     dt = SimConfig().sim_dt if sim_dt is None else sim_dt
-    inertia = wheel_inertia(description)
-    kp = GAIN_RATIO * inertia / dt
-    if implicit:
-        radius = description.wheel_radius if wheel_radius is None else wheel_radius
-        if radius is None:
-            raise ValueError("the implicit rule needs the wheel radius: the URDF gives none, pass wheel_radius")
-        loaded = inertia + description.total_mass / len(description.wheels) * radius ** 2
-        kp = min(loaded / LOOP_TIME, IMPLICIT_GAIN_CAP * inertia / dt)
+    kp = min(loaded_inertia / LOOP_TIME, IMPLICIT_GAIN_CAP * inertia / dt) if implicit else GAIN_RATIO * inertia / dt
     kp = float(f"{kp:.3g}")
     return kp, float(f"{INTEGRAL_RATIO * kp:.3g}")
+
+
+def gain_rule_source(inertia: float, loaded_inertia: float, kp: float, day: str) -> str:
+    """A robot file's ``[sources]`` line for the rule's ``driver.kp`` (:func:`rule_gains`, the implicit loop's)."""
+    capped = kp < float(f"{loaded_inertia / LOOP_TIME:.3g}")
+    bound = f", capped at kp x sim_dt / J = {IMPLICIT_GAIN_CAP:g}" if capped else ""
+    return (f"the rule of `python -m atrv_warp.robot check` (kp = J_loaded / {LOOP_TIME:g} s for the wheel loaded "
+            f"with its share of the robot, J_loaded = {loaded_inertia:.4g} kg m², axial J = {inertia:.4g} kg m²"
+            f"{bound}), {day}")
+
+
+def driver_gains(description: RoverDescription, sim_dt: float | None = None, *, implicit: bool = True,
+                 wheel_radius: float | None = None) -> tuple[float, float]:
+    """:func:`rule_gains` for a robot's wheels (:func:`wheel_inertia`, :func:`loaded_inertia` at ``wheel_radius``)."""
+    return rule_gains(wheel_inertia(description), loaded_inertia(description, wheel_radius), sim_dt,
+                      implicit=implicit)
+
+
+def loaded_inertia(description: RoverDescription, wheel_radius: float | None = None) -> float:
+    """A wheel's axial inertia with its share of the robot's mass at the rim, ``J + (mass / wheels) r²`` [kg·m²],
+    at ``wheel_radius`` [m] (default: the URDF's)."""
+    radius = description.wheel_radius if wheel_radius is None else wheel_radius
+    if radius is None:
+        raise ValueError("the gain rule needs the wheel radius: the URDF gives none, pass wheel_radius")
+    return wheel_inertia(description) + description.total_mass / len(description.wheels) * radius ** 2
 
 
 @dataclass
@@ -214,6 +239,8 @@ class RobotCheck:
     """From the chassis' centre of mass to its farthest corner [m]."""
     wheel_inertia: float
     """[kg·m²]"""
+    loaded_inertia: float
+    """A wheel with its share of the robot at the rim (:func:`loaded_inertia`) [kg·m²]."""
     gains: dict
     """``{"kp", "ki"}`` by the rule (the file's are in ``file``)."""
     effective_track_factor: float
@@ -301,7 +328,7 @@ def measure_robot(spec, *, frictions=TURN_FRICTIONS, turn_seconds: float = 15.0,
     say = progress or (lambda _line: None)
     robot, description = check_robot(spec)
     rover = RoverConfig(robot=robot.path)
-    kp, ki = driver_gains(description)
+    kp, ki = driver_gains(description, wheel_radius=robot.wheel_radius)
     say("steady turns over the robot's range (effective track factor, then /cmd_vel yaw error)")
     turns, factor = _turns(rover, description, turn_commands(robot), frictions, turn_seconds)
     say("full torque (top speed)")
@@ -314,7 +341,8 @@ def measure_robot(spec, *, frictions=TURN_FRICTIONS, turn_seconds: float = 15.0,
     return RobotCheck(
         robot=robot.name, title=robot.title, mass=description.total_mass, wheel_radius=robot.wheel_radius,
         track=track_width(description, rover), wheelbase=max(xs) - min(xs), reach=description.reach,
-        wheel_inertia=wheel_inertia(description), gains={"kp": kp, "ki": ki},
+        wheel_inertia=wheel_inertia(description), loaded_inertia=loaded_inertia(description, robot.wheel_radius),
+        gains={"kp": kp, "ki": ki},
         effective_track_factor=factor, turns=turns, top_speed=min(top, robot.top_speed), top_speed_measured=top,
         steps=[{k: s[k] for k in ("linear", "angular", "friction", "settle", "overshoot")} for s in steps],
         settle_misses=settle_misses(steps),

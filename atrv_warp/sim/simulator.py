@@ -9,6 +9,7 @@ views of Warp arrays that the step updates in place (no copy per step).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -258,18 +259,21 @@ class RoverSim:
             terrain = get_terrain(terrain)
         if isinstance(terrain, TerrainConfig):
             terrain = terrain.generate(self.arena_cfg.half_size)
-        implicit = (driver or DriverConfig()).implicit_speed_loop
-        if implicit and self.contact_cfg.friction_law != "coulomb":
+        driver = driver or DriverConfig()
+        if driver.implicit_speed_loop and self.contact_cfg.friction_law != "coulomb":
             raise ValueError("DriverConfig.implicit_speed_loop solves the drive with the wheels' Coulomb friction; "
                              f"ContactConfig.friction_law is {self.contact_cfg.friction_law!r}")
         self.contact = ContactModel(self.built, rover=self.rover_cfg, contact=self.contact_cfg, arena=self.arena_cfg,
                                     sim_dt=self.sim_cfg.sim_dt, gravity=self.sim_cfg.gravity, device=self.device,
-                                    terrain=terrain, obstacles=obstacles, implicit_drive=implicit)
+                                    terrain=terrain, obstacles=obstacles,
+                                    implicit_drive=driver.implicit_under(self.contact_cfg.friction_law))
         """The contact model every substep launches (:class:`~atrv_warp.sim.contact.ContactModel`)."""
         self.params = WorldParams(num_worlds, rover=self.rover_cfg, contact=self.contact_cfg, device=self.device)
         """Each world's physical parameters (:class:`~atrv_warp.sim.params.WorldParams`): friction, stiffness,
         wheel radius, motor torque scale and speed limit, payload. Change them with :meth:`set_params`."""
-        self.driver_cfg = (driver or DriverConfig()).resolved(nominal_rover.robot_spec)
+        self.driver_cfg = dataclasses.replace(
+            driver, implicit_speed_loop=driver.implicit_under(self.contact_cfg.friction_law)).resolved(
+            nominal_rover.robot_spec)
         """The driver's configuration, the robot's gains, torque limit and track factor filled in."""
         self.driver = Driver(self.driver_cfg, self.driver_cfg.kinematics(self.description, nominal_rover), num_worlds,
                              self.sim_cfg.sim_dt, self.device)

@@ -1,6 +1,7 @@
-"""The motor driver's ``/cmd_vel`` step response with its wheel-speed loop explicit (the robot file's gains, bounded
-by the substep) and implicit (``DriverConfig.implicit_speed_loop``, the gains of ``robot_check.LOOP_TIME``'s rule),
-for every shipped robot and the test robots of ``tests/data``.
+"""The motor driver's ``/cmd_vel`` step response with its wheel-speed loop explicit (the gains of
+``robot_check.GAIN_RATIO``'s rule, bounded by the substep) and implicit (``DriverConfig.implicit_speed_loop``, the
+default, with the robot file's gains: ``robot_check.LOOP_TIME``'s rule), for every shipped robot and the test robots
+of ``tests/data``.
 
     python -m benchmarks.robots.implicit_driver
 
@@ -20,8 +21,9 @@ from pathlib import Path
 
 from benchmarks._common import ROOT, load_results, markdown_table, pin_to_one_core, write_results
 
-VERSION = 2
-"""This script's method (2: each step's steady yaw rate and ripple kept), bumped by hand when what it measures or how changes (``_common.write_results``)."""
+VERSION = 3
+"""This script's method (2: each step's steady yaw rate and ripple kept; 3: the file's gains are the implicit loop's,
+the explicit loop's come from its rule), bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 TEST_ROBOTS = ("sixwheel", "eightwheel", "heavywheel", "lightwheel")
@@ -38,8 +40,8 @@ def measure(spec: str) -> dict:
     robot, description = check_robot(spec)
     out = {"robot": robot.name, "wheels": len(description.wheels), "wheel_inertia": wheel_inertia(description),
            "mass": description.total_mass}
-    implicit = driver_gains(description, implicit=True, wheel_radius=robot.wheel_radius)
-    for loop, (kp, ki) in (("explicit", (robot.kp, robot.ki)), ("implicit", implicit)):
+    explicit = driver_gains(description, implicit=False)
+    for loop, (kp, ki) in (("explicit", explicit), ("implicit", (robot.kp, robot.ki))):
         driver = DriverConfig(kp=kp, ki=ki, implicit_speed_loop=loop == "implicit")
         steps = step_response(STEP_CASES, (0.3, 0.8), rover=RoverConfig(robot=robot.path), driver=driver)
         rows = [{k: s[k] for k in ("linear", "angular", "friction", "settle", "overshoot", "steady", "ripple")}
@@ -82,7 +84,7 @@ def implicit_driver() -> str:
 
     rows = [[f"`{name}`", f"{r['wheel_inertia']:.4g}", cell(r["explicit"]), cell(r["implicit"])]
             for name, r in robots.items()]
-    return markdown_table(["robot", "wheel J [kg·m²]", "explicit loop (file's gains)", "implicit loop (rule's gains)"],
+    return markdown_table(["robot", "wheel J [kg·m²]", "explicit loop (its rule's gains)", "implicit loop (the file's gains)"],
                           ["---", "---:", "---:", "---:"], rows)
 
 

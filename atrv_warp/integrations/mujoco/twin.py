@@ -208,13 +208,13 @@ class MujocoTwin:
                                                           c.torque_limit, dt)
             self.applied = out  # the nominal motor has no lag
             torques = self.applied
-            if c.implicit_speed_loop:  # ``proportional_slope``: the gain where the loop is inside its torque limit
+            if c.implicit_under():  # ``proportional_slope``: the gain where the loop is inside its torque limit
                 slope = np.where(np.abs(out) < c.torque_limit, c.kp, 0.0)
         self.age += dt
         command = torques[self.wheel_side] * self.rover_cfg.torque_scale
         limit = self.rover_cfg.wheel_speed_limit
         self.data.ctrl[:] = _motor_torque(command, wheel, limit)
-        if torques is self.applied and c.implicit_speed_loop:
+        if torques is self.applied and c.implicit_under():
             # the implicit loop's damping (``drive_wheels``' ``damping``, through the motor's scale and taper):
             # MuJoCo's Euler integrates a joint's damping implicitly; the applied force makes it act on the speed's
             # change over the substep, not on the speed
