@@ -376,6 +376,22 @@ def test_an_implicit_speed_loop_holds_gains_that_make_the_explicit_loop_oscillat
     assert step(1.0, True)["steady"] == pytest.approx(step(1.0, False)["steady"], abs=0.01)
 
 
+def test_the_default_loop_is_implicit_under_coulomb_friction_and_explicit_under_the_viscous_law():
+    """``DriverConfig.implicit_speed_loop`` left ``None``: implicit wherever the friction solve can take it (the default
+    law), explicit under the viscous law, which has no solve; asked for under the viscous law, it is refused."""
+    from atrv_warp.sim.config import ContactConfig
+    from atrv_warp.sim.driver import DriverConfig
+
+    assert ContactConfig().solve_geared_sides  # and a geared side's chain is solved with its friction
+    assert DriverConfig().implicit_under("coulomb") and not DriverConfig().implicit_under("viscous")
+    assert not DriverConfig(implicit_speed_loop=False).implicit_under("coulomb")
+    assert RoverSim(1).driver_cfg.implicit_speed_loop is True
+    viscous = ContactConfig(friction_law="viscous")
+    assert RoverSim(1, contact=viscous).driver_cfg.implicit_speed_loop is False
+    with pytest.raises(ValueError, match="implicit_speed_loop solves the drive with the wheels' Coulomb friction"):
+        RoverSim(1, contact=viscous, driver=DriverConfig(implicit_speed_loop=True))
+
+
 def test_geared_sides_solved_in_the_friction_solve_converge_in_the_substep_and_keep_one_speed():
     """The Jackal on the nav terrain (``ContactConfig.solve_geared_sides``, the chain inside the friction solve):
     its turn at the 0.01 s substep is the 0.0025 s one within 2 %, where the explicit chain's differs by over 5 %
