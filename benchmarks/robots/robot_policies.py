@@ -1,6 +1,7 @@
 """Each shipped robot's deployable nav policy on its own robot: the test set in our simulator, and the MuJoCo twin.
 
-Run: ``python -m benchmarks.robots.robot_policies [--robots atrvjr jackal husky] [--episodes 1000] [--twin-episodes 200]``
+Run: ``python -m benchmarks.robots.robot_policies [--robots atrvjr jackal husky] [--episodes 1000] [--twin-episodes 200]
+[--jobs 2]``
 
 For each robot, its shipped ``nav_deploy_<robot>`` policy (trained at that robot's own limits, under ``wide``, by
 the command :data:`~atrv_warp.policy.SHIPPED_POLICIES` names) runs its recorded task, fitted to its robot, once on
@@ -10,7 +11,8 @@ the deploy docs advise (the task's velocity and acceleration limits, the robot's
 without the accelerometer), on the test set and again on the validation set (``VALIDATION_SEED``). The targets:
 >= 90 % in ours under both, >= 90 % in the twin on both sets.
 
-Per robot: its limits and control period, and per run the success rate and how the other episodes ended. Prints
+Per robot: its limits and control period, and per run the success rate, how the other episodes ended and its
+seconds (``--jobs`` runs at once, so with more than one they share the cores). Prints
 one table and writes ``benchmarks/results/robot_policies.json`` with each policy's sha256. The time each took to
 train is its own results file's (``train_to_success_nav_deploy_<robot>.json``).
 """
@@ -18,8 +20,12 @@ train is its own results file's (``train_to_success_nav_deploy_<robot>.json``).
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
+import contextlib
+import multiprocessing
 import sys
 import time
+import types
 from pathlib import Path
 
 from benchmarks._common import load_results, markdown_table, write_results
@@ -37,11 +43,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=1000, help="test-set episodes in our simulator")
     parser.add_argument("--twin-episodes", type=int, default=200, help="episodes in the MuJoCo twin (0: none)")
     parser.add_argument("--out", default=str(RESULTS / "robot_policies.json"))
+    parser.add_argument("--jobs", type=int, default=1,
+                        help="evaluations run at once, each in its own process on one thread (default 1)")
     args = parser.parse_args(argv)
-    if args.episodes < 1 or args.twin_episodes < 0:
-        parser.error("--episodes must be >= 1 and --twin-episodes >= 0")
+    if args.episodes < 1 or args.twin_episodes < 0 or args.jobs < 1:
+        parser.error("--episodes and --jobs must be >= 1 and --twin-episodes >= 0")
     from atrv_warp.core.robot import ROBOTS
-    from atrv_warp.evaluate import evaluate_policy
     from atrv_warp.policy import SHIPPED_POLICIES, policy_path, policy_record
     from atrv_warp.task.evaluation import VALIDATION_SEED
 
@@ -55,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
         except ImportError:
             print("MuJoCo is missing: pip install -e '.[mujoco]' (or --twin-episodes 0)", file=sys.stderr)
             return 2
-    table, files = {}, []
+    table, files, jobs = {}, [], []
     for robot in robots:
         name = f"nav_deploy_{robot}"
         if name not in SHIPPED_POLICIES:
@@ -76,18 +83,45 @@ def main(argv: list[str] | None = None) -> int:
             runs += [("mujoco", {"engine": "mujoco", "episodes": args.twin_episodes}),
                      ("mujoco_other_seed", {"engine": "mujoco", "episodes": args.twin_episodes,
                                             "seed": VALIDATION_SEED})]
-        for label, kw in runs:
-            t0 = time.perf_counter()
-            row[label] = r = rates(evaluate_policy(str(path), **kw).record)
-            r["seconds"] = round(time.perf_counter() - t0, 1)
+        jobs += [(robot, label, str(path), kw) for label, kw in runs]
+        table[robot] = row
+    jobs.sort(key=lambda job: job[3].get("engine") != "mujoco")  # the twin's, the longest, first
+    with _pool(args.jobs) as pool:
+        for (robot, label, _, _), r in zip(jobs, pool.map(_evaluate, jobs), strict=True):
+            table[robot][label] = r
             print(f"{robot:8s} {label:17s} " + " ".join(f"{k} {100 * r[k]:5.1f}%" for k in ENDS)
                   + f"  ({r['seconds']:.0f} s)", flush=True)
-        table[robot] = row
-    result = {"seed": "EVAL_SEED", "other_seed": "VALIDATION_SEED", "episodes": args.episodes, "twin_episodes": args.twin_episodes, "robots": table}
+    result = {"seed": "EVAL_SEED", "other_seed": "VALIDATION_SEED", "episodes": args.episodes,
+              "twin_episodes": args.twin_episodes, "jobs": args.jobs, "robots": table}
     out = write_results(args.out, result, version=VERSION, task=True, driver=True, policies=tuple(files),
                         robots=tuple(robots))
     print(f"written to {out}")
     return 0
+
+
+def _evaluate(job: tuple) -> dict:
+    """One evaluation of ``main``'s: its rates and the seconds it took."""
+    from atrv_warp.evaluate import evaluate_policy
+
+    _, _, path, kw = job
+    t0 = time.perf_counter()
+    r = rates(evaluate_policy(path, **kw).record)
+    r["seconds"] = round(time.perf_counter() - t0, 1)
+    return r
+
+
+def _pool(jobs: int):
+    """``jobs`` processes of one thread each (spawned: Warp and torch start fresh), or this process for one."""
+    if jobs == 1:
+        return contextlib.nullcontext(types.SimpleNamespace(map=map))
+    return concurrent.futures.ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"),
+                                                  initializer=_one_thread)
+
+
+def _one_thread() -> None:
+    import torch
+
+    torch.set_num_threads(1)
 
 
 # --- the figures' tables, drawn from the results files at docs build time --------------------------
