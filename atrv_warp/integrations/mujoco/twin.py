@@ -20,6 +20,7 @@ import numpy as np
 from atrv_warp.core.geometry import quat_to_rpy
 from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig, SimConfig
 from atrv_warp.sim.driver import DriverConfig
+from atrv_warp.sim.kernels.driver import SLOPE_RAMP
 from atrv_warp.sim.kernels.rover import MOTOR_TAPER_START
 from atrv_warp.sim.scanner import ScannerConfig
 from atrv_warp.sim.terrain import HeightGrid
@@ -208,8 +209,8 @@ class MujocoTwin:
                                                           c.torque_limit, dt)
             self.applied = out  # the nominal motor has no lag
             torques = self.applied
-            if c.implicit_under():  # ``proportional_slope``: the gain where the loop is inside its torque limit
-                slope = np.where(np.abs(out) < c.torque_limit, c.kp, 0.0)
+            if c.implicit_under():  # ``proportional_slope``: the gain inside the torque limit, ramped off at it
+                slope = c.kp * np.clip((c.torque_limit - np.abs(out)) / (SLOPE_RAMP * c.torque_limit), 0.0, 1.0)
         self.age += dt
         command = torques[self.wheel_side] * self.rover_cfg.torque_scale
         limit = self.rover_cfg.wheel_speed_limit
@@ -311,11 +312,14 @@ def _quat_wxyz(rot: np.ndarray) -> np.ndarray:
 
 
 def _pi_side(target: float, speed: float, integral: float, kp: float, ki: float, limit: float, dt: float):
-    """One side's wheel-speed PI (``pi_side``): torque [N·m] within ``limit`` and the new integral [rad], held
-    while the output saturates (anti-windup)."""
+    """One side's wheel-speed PI (``pi_side``): torque [N·m] within ``limit`` and the new integral [rad], which
+    integrates up to where the output meets the limit and no further (anti-windup)."""
     error = target - speed
     candidate = integral + error * dt
-    new = integral if abs(kp * error + ki * candidate) > limit else candidate
+    new = candidate
+    if ki > 0.0:
+        low, high = min(integral, (-limit - kp * error) / ki), max(integral, (limit - kp * error) / ki)
+        new = min(max(candidate, low), high)
     return float(np.clip(kp * error + ki * new, -limit, limit)), new
 
 

@@ -74,7 +74,7 @@ def integral_from_effort(effort, target, speed, driver: DriverConfig, *, torque_
     ``effort`` [N·m] (the torque of the driver's last loop times the motor's ``torque_scale``, tapered near its
     no-load ``speed_limit`` [rad/s] as the simulator's motor is), the driver's wheel-speed ``target`` and the wheels'
     ``speed`` [rad/s]. The torque the driver asked for, less its proportional term, over its integral gain. NaN where
-    the effort cannot tell it: a saturated motor (the integral is held there), one tapering past half its torque, a
+    the effort cannot tell it: a saturated motor (the integral stops where the output meets the limit), one tapering past half its torque, a
     zero torque scale or integral gain.
 
     It holds the integral to a few thousandths of a radian, where the driver replayed along 20 Hz wheel speeds is
