@@ -20,7 +20,6 @@ import numpy as np
 from atrv_warp.core.geometry import quat_to_rpy
 from atrv_warp.sim.config import ArenaConfig, ContactConfig, RoverConfig, SimConfig
 from atrv_warp.sim.driver import DriverConfig
-from atrv_warp.sim.kernels.driver import SLOPE_RAMP
 from atrv_warp.sim.kernels.rover import MOTOR_TAPER_START
 from atrv_warp.sim.scanner import ScannerConfig
 from atrv_warp.sim.terrain import HeightGrid
@@ -85,6 +84,8 @@ class MujocoTwin:
         self.wheel_dof = np.array([m.jnt_dofadr[j] for j in joints])
         self.wheel_sign = np.array([w.drive_sign for w in self.description.wheels])
         self.wheel_side = np.array([w.side for w in self.description.wheels])
+        self.wheel_inertia = np.array([float(np.asarray(w.axis) @ np.asarray(w.inertial.inertia) @ np.asarray(w.axis))
+                                       for w in self.description.wheels])  # about the axle [kg·m²]
         frames = {f.name: np.asarray(f.transform, dtype=np.float64) for f in self.description.frames}
         self.scanner_mount = frames[self.scanner_cfg.frame or self.rover_cfg.robot_spec.laser_frame]
         self.imu_mount = frames[self.rover_cfg.robot_spec.imu_frame]  # ROBOT_OBSERVATION's imu_* fields
@@ -209,18 +210,27 @@ class MujocoTwin:
                                                           c.torque_limit, dt)
             self.applied = out  # the nominal motor has no lag
             torques = self.applied
-            if c.implicit_under():  # ``proportional_slope``: the gain inside the torque limit, ramped off at it
-                slope = c.kp * np.clip((c.torque_limit - np.abs(out)) / (SLOPE_RAMP * c.torque_limit), 0.0, 1.0)
+            if c.implicit_under():  # ``drive_wheels``' ``beyond``: the output past its limit, before the clamp
+                raw = c.kp * (goal - speeds) + c.ki * self.integral
+                beyond = raw - np.clip(raw, -c.torque_limit, c.torque_limit)
         self.age += dt
-        command = torques[self.wheel_side] * self.rover_cfg.torque_scale
+        scale = self.rover_cfg.torque_scale
+        command = torques[self.wheel_side] * scale
         limit = self.rover_cfg.wheel_speed_limit
         self.data.ctrl[:] = _motor_torque(command, wheel, limit)
         if torques is self.applied and c.implicit_under():
-            # the implicit loop's damping (``drive_wheels``' ``damping``, through the motor's scale and taper):
+            # the implicit loop (``drive_wheels``): from its unclamped output, its proportional action a damping, where
+            # a friction-free wheel would end the substep inside the clamped torque; else the clamped torque alone.
             # MuJoCo's Euler integrates a joint's damping implicitly; the applied force makes it act on the speed's
             # change over the substep, not on the speed
-            taper = np.where(command < 0.0, -_motor_torque(-1.0, wheel, limit), _motor_torque(1.0, wheel, limit))
-            damping = slope[self.wheel_side] * self.rover_cfg.torque_scale * taper
+            unclamped_command = command + beyond[self.wheel_side] * scale
+            taper = np.where(unclamped_command < 0.0, -_motor_torque(-1.0, wheel, limit), _motor_torque(1.0, wheel, limit))
+            damping = c.kp * scale * taper
+            unclamped = _motor_torque(unclamped_command, wheel, limit)
+            inside = ((np.abs(unclamped * self.wheel_inertia / (self.wheel_inertia + damping * dt))
+                       <= np.abs(self.data.ctrl) + 1e-9) | (beyond[self.wheel_side] == 0.0))
+            self.data.ctrl[:] = np.where(inside, unclamped, self.data.ctrl)
+            damping = np.where(inside, damping, 0.0)
             self.model.dof_damping[self.wheel_dof] = damping
             self.data.qfrc_applied[self.wheel_dof] = damping * self.data.qvel[self.wheel_dof]
         else:

@@ -111,30 +111,12 @@ def driver_torques(params: DriverParams, command: wp.vec2, fresh: bool, speeds: 
     return ref, wp.vec2(i_left, i_right), new_applied
 
 
-SLOPE_RAMP = 0.2
-"""The implicit loop's slope (:func:`proportional_slope`) falls from the proportional gain to 0 linearly over the last
-``SLOPE_RAMP`` of the torque limit, not at it: a slope that switched off at the limit made the torque jump by the gain
-times the substep's speed change wherever the loop met its limit (with :func:`pi_side`'s continuous anti-windup, a
-drive's path is ten times smoother in the rover's parameters: the calibration converges on the Jackal again)."""
-
-
 @wp.func
-def ramp_share(out: float, limit: float) -> float:
-    """The share of the proportional gain acting at loop output ``out`` [N·m] (:data:`SLOPE_RAMP`): 1 up to the last
-    ``SLOPE_RAMP`` of ``limit``, 0 at and past it, linear between."""
-    return wp.clamp((limit - wp.abs(out)) / (wp.static(SLOPE_RAMP) * limit), 0.0, 1.0)
-
-
-@wp.func
-def proportional_slope(params: DriverParams, out: wp.vec2) -> wp.vec2:
-    """Each side's torque per rad/s of its wheels' speed change within the substep under an implicit loop
-    (``params.implicit``): the proportional gain where the loop's output ``out`` is inside the torque limit, ramped to 0
-    as it saturates (a clamped torque does not follow the speed; :data:`SLOPE_RAMP`), 0 where the loop is explicit."""
-    slope = wp.vec2(0.0, 0.0)
-    if params.implicit != 0:
-        slope = wp.vec2(params.kp * ramp_share(out[0], params.torque_limit),
-                        params.kp * ramp_share(out[1], params.torque_limit))
-    return slope
+def loop_output(params: DriverParams, reference: wp.vec2, speeds: wp.vec2, integral: wp.vec2) -> wp.vec2:
+    """Each side's PI output before its clamp [N·m], for the substep's new ``reference`` and ``integral``."""
+    half = 0.5 * reference[1] * params.effective_track
+    return wp.vec2(params.kp * ((reference[0] - half) / params.wheel_radius - speeds[0]) + params.ki * integral[0],
+                   params.kp * ((reference[0] + half) / params.wheel_radius - speeds[1]) + params.ki * integral[1])
 
 
 @wp.func
@@ -250,8 +232,11 @@ def drive_wheels(
     substep (a differentiable rollout's tape).
 
     ``damping`` (N, W) [N·m per rad/s], written only with ``params.implicit``: the slope of each wheel's torque in its
-    own speed change over the substep (the loop's proportional gain through the motor, 0 where the loop saturates or
-    takes torque commands); the friction solve (:func:`~atrv_warp.sim.kernels.friction.friction_kernels`) integrates it
+    own speed change over the substep (the loop's proportional gain through the motor; 0 for torque commands). Under
+    an implicit loop each wheel's regime is decided from the loop's unclamped output ``u``: where a friction-free
+    wheel would end the substep inside the clamped torque, the wheel gets ``u`` with that slope, so that the loop is
+    solved implicitly through its limit; else the clamped torque and no slope (a saturated output driven explicitly
+    flips between the limits every substep on a light, slipping wheel). The friction solve (:func:`~atrv_warp.sim.kernels.friction.friction_kernels`) integrates it
     implicitly, with the wheel's ground contact, so that no gain is bounded by the substep."""
     world = wp.tid()
     speeds = side_speeds(layout, joint_qd, world)
@@ -280,11 +265,16 @@ def drive_wheels(
     applied = state_in.applied[world]
     age = state_in.age[world]
     slope = wp.vec2(0.0, 0.0)  # each side's torque per rad/s of its wheels' speed change, before the motor
+    beyond = wp.vec2(0.0, 0.0)  # an implicit loop's output past its limit, before the clamp [N·m]
     if mode[world] == DRIVE_TWIST:
         reference, integral, applied = driver_torques(params, twist[world], age <= params.timeout, speeds, reference,
                                                       integral, applied, lag[world])
         side = applied
-        slope = proportional_slope(params, applied)
+        if params.implicit != 0:
+            slope = wp.vec2(params.kp, params.kp)
+            raw = loop_output(params, reference, speeds, integral)
+            beyond = raw - wp.vec2(wp.clamp(raw[0], -params.torque_limit, params.torque_limit),
+                                   wp.clamp(raw[1], -params.torque_limit, params.torque_limit))
     state_out.reference[world] = reference
     state_out.integral[world] = integral
     state_out.applied[world] = applied
@@ -297,17 +287,30 @@ def drive_wheels(
     for k in range(layout.wheel_count):
         dof = world * layout.dofs_per_world + layout.wheel_dof[k]
         sign = layout.wheel_sign[k]
-        tau = motor_torque(cmd[layout.wheel_side[k]], sign * joint_qd[dof], speed_limit)
+        side_k = layout.wheel_side[k]
+        tau = motor_torque(cmd[side_k], sign * joint_qd[dof], speed_limit)
+        slope_k = float(0.0)
+        if slope[side_k] > 0.0:  # implicit: the unclamped output, its proportional part acting on the substep's end speed
+            taper = motor_torque(1.0, sign * joint_qd[dof], speed_limit)
+            if cmd[side_k] + beyond[side_k] * physics.torque_scale[world] < 0.0:
+                taper = -motor_torque(-1.0, sign * joint_qd[dof], speed_limit)
+            slope_k = slope[side_k] * physics.torque_scale[world] * taper
+            unclamped = motor_torque(cmd[side_k] + beyond[side_k] * physics.torque_scale[world], sign * joint_qd[dof],
+                                     speed_limit)
+            j = layout.wheel_inertia[k]
+            # the torque at the substep's end with the wheel free of friction: inside the clamped torque's magnitude,
+            # the loop is solved implicitly from its unclamped output; past it, the motor gives its clamped torque
+            if wp.abs(unclamped * j / (j + slope_k * params.dt)) <= wp.abs(tau) + 1.0e-9 or beyond[side_k] == 0.0:
+                tau = unclamped
+            else:
+                slope_k = 0.0
         drive = tau
         if layout.sides_coupled != 0:  # the side's motor torque through the chain: its wheels at one speed, friction aside
             drive = layout.wheel_inertia[k] * (geared[layout.wheel_side[k]] - sign * joint_qd[dof]) / params.dt
         joint_f[dof] = sign * drive
         wheel_torque[world, k] = tau
-        if params.implicit != 0:  # the motor passes the proportional action as it passes the command (scale, taper)
-            taper = motor_torque(1.0, sign * joint_qd[dof], speed_limit)
-            if cmd[layout.wheel_side[k]] < 0.0:
-                taper = -motor_torque(-1.0, sign * joint_qd[dof], speed_limit)
-            damping[world, k] = slope[layout.wheel_side[k]] * physics.torque_scale[world] * taper
+        if params.implicit != 0:
+            damping[world, k] = slope_k
 
 
 @wp.kernel

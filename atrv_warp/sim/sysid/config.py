@@ -133,10 +133,8 @@ class CalibrationConfig:
     tolerance: float = 0.005
     """A start has settled once its undamped Gauss-Newton step moves no parameter more than this share of its
     range."""
-    difference_step: float = 0.02
-    """The forward differences' step, as a share of each parameter's range. 0.02, not 0.005: under the implicit
-    speed loop a drive's path is rough on the scale of 0.005 of a range (the Jackal's, its gain at the cap), and the
-    starts stopped apart."""
+    difference_step: float = 0.005
+    """The forward differences' step, as a share of each parameter's range."""
     damping: float = 0.01
     """Levenberg-Marquardt's first damping (a share of the normal equations' diagonal)."""
     robust: float | None = 1.0
