@@ -240,9 +240,10 @@ class DiffRollout:
         # The friction solver starts each substep from the previous one's impulses: one array per
         # substep boundary, so the tape differentiates through that chain too.
         self._impulses = [wp.zeros_like(self.sim.contact.impulses, requires_grad=True) for _ in range(n_sub + 1)]
-        self._torque = wp.zeros((num_worlds, len(wheels)), dtype=float, device=dev)
-        # an implicit driver's slope, written by each substep's drive and read by its friction solve: one per substep
+        # an implicit driver's slope and its clamped torque, written by each substep's drive and read by its friction
+        # solve (which a tape's backward pass runs again on them): one of each per substep
         self._damping = [wp.zeros((num_worlds, len(wheels)), dtype=float, device=dev) for _ in range(n_sub)]
+        self._torque = [wp.zeros((num_worlds, len(wheels)), dtype=float, device=dev) for _ in range(n_sub)]
         # Featherstone keeps its mass-matrix scratch (M, J, P, H, L) on the solver, shared by every
         # step. Under a tape each step must own them, or the adjoints of all steps mix in one buffer
         # (gradients explode with the horizon); so each substep gets its own set, swapped in below.
@@ -304,7 +305,7 @@ class DiffRollout:
                 for name, arr in self._scratch[k // self._refresh].items():
                     setattr(sim.solver, name, arr)
                 sim.substep(s_in, s_out, self.controls[k], self._commands[t], physics=self._physics,
-                            flags=self._flags, torque=self._torque, solver_in=self._solver_in[k],
+                            flags=self._flags, torque=self._torque[k], solver_in=self._solver_in[k],
                             warm_start=self._impulses[k], impulses=self._impulses[k + 1], twist=self._commands[t],
                             driver_in=self._driver[k], driver_out=self._driver[k + 1], mode=self._mode,
                             damping=self._damping[k])
@@ -312,7 +313,7 @@ class DiffRollout:
                     self._tape.record_func(backward=restore_external_wrench(s_out, s_in), arrays=[])
                 k += 1
             # the torque of the step's last substep, as the simulator's wheel_torque (and a ROS node's effort);
-            # recomputed from that substep's inputs, because the substeps' shared torque scratch is overwritten
+            # recomputed from that substep's inputs, which the tape differentiates (the drive's output it does not)
             side = self._driver[k].applied if self.twist else self._commands[t]
             wp.launch(gather_side_torques, dim=(n, len(sim.description.wheels)),
                       inputs=[lay, side, self._physics, self.states[k - 1].joint_qd, self._side_weight],

@@ -494,6 +494,7 @@ class RoverSim:
                            self._wheel_torque if torque is None else torque,
                            self._damping if damping is None else damping], device=self.device)
         self.contact.apply(s_in, self.model.body_com, control.joint_f, self._damping if damping is None else damping,
+                           self._wheel_torque if torque is None else torque,
                            self._contact_flags if flags is None else flags, physics, warm_start, impulses)
         self.solver.step(s_in if solver_in is None else solver_in, s_out, control, None, self.sim_cfg.sim_dt)
 

@@ -124,7 +124,7 @@ def _write_state(bag: BagWriter, twin: MujocoTwin, joints: list[str], noise: np.
     bag.write("/joint_states", "sensor_msgs/msg/JointState",
               {"header": _header(ns, ""), "name": joints,
                "position": twin.data.qpos[twin.model.jnt_qposadr[twin.model.dof_jntid[twin.wheel_dof]]].tolist(),
-               "velocity": velocity.tolist(), "effort": (twin.wheel_sign * twin.data.ctrl).tolist()}, ns)
+               "velocity": velocity.tolist(), "effort": (twin.wheel_sign * twin.wheel_torque).tolist()}, ns)
     pose = twin.root_pose
     rot = twin.chassis_rotation
     position, quat = pose[:3].copy(), pose[3:]

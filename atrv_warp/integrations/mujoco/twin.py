@@ -29,6 +29,8 @@ from .mjcf import SCENE_GROUP, MujocoContact, Obstacle, world_xml
 
 __all__ = ["FLAG_CHASSIS_GROUND", "FLAG_OBSTACLE", "FLAG_WALL", "MujocoTwin"]
 
+STATE = mujoco.mjtState.mjSTATE_INTEGRATION
+"""What a substep that runs again starts from (``mj_getState``)."""
 FLAG_WALL = 1
 """A rover shape touched a wall (:attr:`MujocoTwin.contact_flags`; the simulator's bits)."""
 FLAG_CHASSIS_GROUND = 2
@@ -122,6 +124,9 @@ class MujocoTwin:
         self.reference = np.zeros(2)
         self.integral = np.zeros(2)
         self.applied = np.zeros(2)
+        self.wheel_torque = np.zeros(len(self.wheel_dof))
+        """(W,) each wheel's motor torque for the clamped loop output [N·m], forward-positive (the simulator's
+        ``wheel_torque``: a base's effort)."""
         self.age = 0.0
         self.odometry = np.zeros(3)
         self.odom_twist = np.zeros(2)
@@ -187,12 +192,31 @@ class MujocoTwin:
         self.wheel_ground_substeps[:] = 0
         for _ in range(self.substeps):
             self._drive(None if torques is None else np.asarray(torques, dtype=np.float64))
-            for _ in range(self.contact_cfg.steps_per_substep):
-                mujoco.mj_step(self.model, self.data)
+            damping = self.model.dof_damping[self.wheel_dof].copy()
+            saved = None
+            if damping.any():  # an implicit loop's damped wheels: kept to their limit as the friction solve keeps them
+                saved = np.empty(mujoco.mj_stateSize(self.model, STATE))
+                mujoco.mj_getState(self.model, self.data, saved, STATE)
+                start = self.wheel_speed
+            self._advance()
+            if saved is not None:
+                end = self.data.ctrl - damping * (self.wheel_speed - start)
+                held = (damping > 0.0) & (np.abs(end) > np.abs(self.wheel_torque) + 1e-9)
+                if held.any():  # friction held the wheel: its end torque past the limit; again with the clamped one
+                    mujoco.mj_setState(self.model, self.data, saved, STATE)
+                    self.data.ctrl[held] = np.copysign(np.abs(self.wheel_torque[held]), end[held])
+                    self.model.dof_damping[self.wheel_dof[held]] = 0.0
+                    self.data.qfrc_applied[self.wheel_dof[held]] = 0.0
+                    self._advance()
             self._note_contacts()
             if not self.finite:
                 break
         self.time += self.sim_cfg.step_dt
+
+    def _advance(self) -> None:
+        """One substep of MuJoCo steps."""
+        for _ in range(self.contact_cfg.steps_per_substep):
+            mujoco.mj_step(self.model, self.data)
 
     def _drive(self, torques: np.ndarray | None) -> None:
         """One substep of :func:`atrv_warp.sim.kernels.driver.drive_wheels` for this rover."""
@@ -218,9 +242,11 @@ class MujocoTwin:
         command = torques[self.wheel_side] * scale
         limit = self.rover_cfg.wheel_speed_limit
         self.data.ctrl[:] = _motor_torque(command, wheel, limit)
+        self.wheel_torque = self.data.ctrl.copy()
         if torques is self.applied and c.implicit_under():
-            # the implicit loop (``drive_wheels``): from its unclamped output, its proportional action a damping, where
-            # a friction-free wheel would end the substep inside the clamped torque; else the clamped torque alone.
+            # the implicit loop (``drive_wheels``' ``drive_regime``): from its unclamped output, its proportional action a
+            # damping, where a friction-free wheel would end the substep inside the clamped torque; else the clamped
+            # torque alone. ``step`` holds a wheel that friction carries past the limit at the clamped torque.
             # MuJoCo's Euler integrates a joint's damping implicitly; the applied force makes it act on the speed's
             # change over the substep, not on the speed
             unclamped_command = command + beyond[self.wheel_side] * scale

@@ -139,12 +139,29 @@ def side_speeds(layout: RoverLayout, joint_qd: wp.array(dtype=float), world: int
 
 
 @wp.func
+def implicit_drive(command: float, beyond: float, speed: float, speed_limit: float, gain: float):
+    """An implicit loop's drive on one wheel: (its torque [N·m], its slope [N·m per rad/s] in the wheel's speed change
+    over the substep), the motor's torque for the loop's unclamped output (``command`` plus ``beyond``, its part past
+    the limit, both through the motor's scale) and the loop's proportional ``gain`` through the scale and the taper.
+    The friction solve integrates the slope with the wheel's contact and holds a wheel whose end torque would pass
+    the limit at its clamped torque (:func:`~atrv_warp.sim.kernels.friction.friction_kernels`): the loop solved
+    implicitly through its limit, where a saturated output driven explicitly flips between the limits every substep
+    on a light, slipping wheel."""
+    unclamped = command + beyond
+    taper = motor_torque(1.0, speed, speed_limit)
+    if unclamped < 0.0:
+        taper = -motor_torque(-1.0, speed, speed_limit)
+    return motor_torque(unclamped, speed, speed_limit), gain * taper
+
+
+@wp.func
 def geared_speeds(layout: RoverLayout, joint_qd: wp.array(dtype=float), world: int, command: wp.vec2,
-                  speed_limit: float, dt: float) -> wp.vec2:
+                  beyond: wp.vec2, gain: wp.vec2, speed_limit: float, dt: float) -> wp.vec2:
     """Each side's forward speed [rad/s] at the end of a substep with its wheels geared together and driven by its
     motor's torque: the side's spin momentum plus its motor's impulse (each wheel's share of ``command`` through the
-    taper), over the side's spin inertia. A torque of ``J_k (geared - speed_k) / dt`` on each wheel brings them all
-    to it; over the side it sums to the motor's torque (the chain moves momentum between the wheels and adds none)."""
+    taper, or an implicit loop's :func:`implicit_drive` where ``gain`` > 0), over the side's spin inertia. A torque of
+    ``J_k (geared - speed_k) / dt`` on each wheel brings them all to it; over the side it sums to the motor's torque
+    (the chain moves momentum between the wheels and adds none)."""
     momentum = wp.vec2(0.0, 0.0)
     inertia = wp.vec2(0.0, 0.0)
     for k in range(MAX_WHEELS):
@@ -152,7 +169,10 @@ def geared_speeds(layout: RoverLayout, joint_qd: wp.array(dtype=float), world: i
             j = layout.wheel_inertia[k]
             side = layout.wheel_side[k]
             v = layout.wheel_sign[k] * joint_qd[world * layout.dofs_per_world + layout.wheel_dof[k]]
-            p = j * v + motor_torque(command[side], v, speed_limit) * dt
+            tau = motor_torque(command[side], v, speed_limit)
+            if gain[side] > 0.0:
+                tau, _slope = implicit_drive(command[side], beyond[side], v, speed_limit, gain[side])
+            p = j * v + tau * dt
             if side == 0:
                 momentum = wp.vec2(momentum[0] + p, momentum[1])
                 inertia = wp.vec2(inertia[0] + j, inertia[1])
@@ -231,13 +251,11 @@ def drive_wheels(
     and the wheel odometry. ``state_in`` and ``state_out`` may be the same arrays (the simulator) or one per
     substep (a differentiable rollout's tape).
 
-    ``damping`` (N, W) [N·m per rad/s], written only with ``params.implicit``: the slope of each wheel's torque in its
-    own speed change over the substep (the loop's proportional gain through the motor; 0 for torque commands). Under
-    an implicit loop each wheel's regime is decided from the loop's unclamped output ``u``: where a friction-free
-    wheel would end the substep inside the clamped torque, the wheel gets ``u`` with that slope, so that the loop is
-    solved implicitly through its limit; else the clamped torque and no slope (a saturated output driven explicitly
-    flips between the limits every substep on a light, slipping wheel). The friction solve (:func:`~atrv_warp.sim.kernels.friction.friction_kernels`) integrates it
-    implicitly, with the wheel's ground contact, so that no gain is bounded by the substep."""
+    ``wheel_torque`` (N, W) [N·m]: each wheel's motor torque for the clamped loop output, forward-positive (what a
+    base reports as its effort, and the most an implicit loop's wheel may take). ``damping`` (N, W) [N·m per rad/s],
+    written only with ``params.implicit``: the slope of each wheel's torque in its own speed change over the substep
+    (the loop's proportional gain through the motor, :func:`implicit_drive`; 0 for torque commands). The friction solve (:func:`~atrv_warp.sim.kernels.friction.friction_kernels`) integrates
+    it implicitly, with the wheel's ground contact, so that no gain is bounded by the substep."""
     world = wp.tid()
     speeds = side_speeds(layout, joint_qd, world)
     pose, odom_twist = integrate_odometry(params, state_in.odometry[world], speeds)
@@ -279,32 +297,23 @@ def drive_wheels(
     state_out.integral[world] = integral
     state_out.applied[world] = applied
     state_out.age[world] = age + params.dt
-    cmd = side * physics.torque_scale[world]
+    scale = physics.torque_scale[world]
+    cmd = side * scale
+    gain = slope * scale
+    over = beyond * scale
     speed_limit = physics.speed_limit[world]
     geared = wp.vec2(0.0, 0.0)
     if layout.sides_coupled != 0:
-        geared = geared_speeds(layout, joint_qd, world, cmd, speed_limit, params.dt)
+        geared = geared_speeds(layout, joint_qd, world, cmd, over, gain, speed_limit, params.dt)
     for k in range(layout.wheel_count):
         dof = world * layout.dofs_per_world + layout.wheel_dof[k]
         sign = layout.wheel_sign[k]
         side_k = layout.wheel_side[k]
         tau = motor_torque(cmd[side_k], sign * joint_qd[dof], speed_limit)
-        slope_k = float(0.0)
-        if slope[side_k] > 0.0:  # implicit: the unclamped output, its proportional part acting on the substep's end speed
-            taper = motor_torque(1.0, sign * joint_qd[dof], speed_limit)
-            if cmd[side_k] + beyond[side_k] * physics.torque_scale[world] < 0.0:
-                taper = -motor_torque(-1.0, sign * joint_qd[dof], speed_limit)
-            slope_k = slope[side_k] * physics.torque_scale[world] * taper
-            unclamped = motor_torque(cmd[side_k] + beyond[side_k] * physics.torque_scale[world], sign * joint_qd[dof],
-                                     speed_limit)
-            j = layout.wheel_inertia[k]
-            # the torque at the substep's end with the wheel free of friction: inside the clamped torque's magnitude,
-            # the loop is solved implicitly from its unclamped output; past it, the motor gives its clamped torque
-            if wp.abs(unclamped * j / (j + slope_k * params.dt)) <= wp.abs(tau) + 1.0e-9 or beyond[side_k] == 0.0:
-                tau = unclamped
-            else:
-                slope_k = 0.0
         drive = tau
+        slope_k = float(0.0)
+        if gain[side_k] > 0.0:  # implicit: the unclamped output, its proportional part on the substep's end speed
+            drive, slope_k = implicit_drive(cmd[side_k], over[side_k], sign * joint_qd[dof], speed_limit, gain[side_k])
         if layout.sides_coupled != 0:  # the side's motor torque through the chain: its wheels at one speed, friction aside
             drive = layout.wheel_inertia[k] * (geared[layout.wheel_side[k]] - sign * joint_qd[dof]) / params.dt
         joint_f[dof] = sign * drive

@@ -309,6 +309,7 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
         body_com: wp.array(dtype=wp.vec3),
         joint_f: wp.array(dtype=float),
         damping: wp.array2d(dtype=float),
+        clamped: wp.array2d(dtype=float),
         warm_start: wp.array(dtype=wp.vec3),
         body_f: wp.array(dtype=wp.spatial_vector),
         impulses: wp.array(dtype=wp.vec3),
@@ -322,7 +323,9 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
         :func:`~atrv_warp.sim.kernels.driver.drive_wheels`; read only by an ``implicit`` kernel): the wheel then spins
         as if its inertia were ``J + damping dt`` under ``joint_f``'s torque, the friction solved with it, and the
         torque's change is applied between wheel and chassis (a damping integrated implicitly, which no gain can make
-        unstable).
+        unstable). ``clamped`` (N, W) [N·m, forward-positive] is each wheel's motor torque at the loop's limit: where
+        the friction carries a damped wheel's end torque past it (a wheel held by the ground), the wheel (a geared
+        side: its side) takes that torque instead.
 
         ``warm_start`` (N x ``slots.count``) holds the previous substep's friction impulses [N·s], where the
         sweeps start; ``impulses`` receives this substep's (the simulator passes one array as both; a tape
@@ -359,17 +362,22 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
         torque = wp.vec3()
         shrink = wp.vec2()  # geared sides: how much the drive's damping lowers the side's end speed [rad/s]
         side_damping = wp.vec2()  # geared sides: the side's drive damping [N·m per rad/s]
+        side_torque = wp.vec2()  # geared sides: the side's motor torque, forward [N·m]
+        side_held = wp.vec2()  # geared sides: the side's motor torque at the loop's limit, forward [N·m]
+        cs = vec()  # implicit: each wheel's drive damping [N·m per rad/s] (0 once its torque is held at the limit)
         if wp.static(GEARED):
-            side_torque = wp.vec2()
             for k in range(WHEELS):
                 t = slots.sign[k] * joint_f[world * slots.dofs_per_world + slots.dof[k]]
                 c = damping[world, k]
+                h = clamped[world, k]
                 if slots.side[k] == 0:
                     side_torque = wp.vec2(side_torque[0] + t, side_torque[1])
                     side_damping = wp.vec2(side_damping[0] + c, side_damping[1])
+                    side_held = wp.vec2(side_held[0] + h, side_held[1])
                 else:
                     side_torque = wp.vec2(side_torque[0], side_torque[1] + t)
                     side_damping = wp.vec2(side_damping[0], side_damping[1] + c)
+                    side_held = wp.vec2(side_held[0], side_held[1] + h)
             for q in range(2):
                 j = slots.side_inertia[q]
                 cq = side_damping[q] * dt
@@ -399,6 +407,7 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
                 spin_change = tau * dt * slots.inv_spin_inertia[k] - slots.sign[k] * shrink[q]
             elif wp.static(IMPLICIT):
                 c = damping[world, k]
+                cs = with_entry(cs, k, c)
                 if c > 0.0:
                     ispin = 1.0 / (1.0 / slots.inv_spin_inertia[k] + c * dt)
                     tau_end = tau - c * tau * dt * ispin
@@ -473,6 +482,36 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
                                                 ispin, limit[k], dv, dw, inv_mass, inv_inertia)
                     impulse = with_row_n(impulse, k, new)
 
+        # 2b. An implicit drive's end torque past the motor's limit (friction holding the wheel against it): that
+        # wheel, or geared side, takes its clamped torque instead, with the impulses as they are (continuous at the
+        # limit, where the end torque is the clamped torque either way; what the held torque leaves of the slip, the
+        # next substep's sweep takes up, as it does every other change).
+        if wp.static(IMPLICIT):
+            if wp.static(GEARED):
+                for q in range(2):
+                    if side_damping[q] > 0.0:
+                        j = slots.side_inertia[q]
+                        end = side_torque[q] - side_damping[q] * (side_torque[q] * dt / j - shrink[q] + turn[q])
+                        if wp.abs(end) > wp.abs(side_held[q]):
+                            target = wp.where(end < 0.0, -wp.abs(side_held[q]), wp.abs(side_held[q]))
+                            # the held torque's speed change replaces the damping's, and the impulses turn the side
+                            # through its own inertia
+                            lowered = -(target - side_torque[q]) * dt / j
+                            grown = (j + side_damping[q] * dt) / j
+                            turn = wp.where(q == 0, wp.vec2(turn[0] * grown, turn[1]), wp.vec2(turn[0], turn[1] * grown))
+                            shrink = wp.where(q == 0, wp.vec2(lowered, shrink[1]), wp.vec2(shrink[0], lowered))
+            else:
+                for k in range(WHEELS):
+                    c = cs[k]
+                    if c > 0.0:
+                        pk = impulse[k]
+                        tau = taus[k]
+                        end = tau - c * (tau * dt + wp.dot(spin[k], lon[k] * pk[0] + lat[k] * pk[1])) * ispins[k]
+                        held = wp.abs(clamped[world, k])
+                        if wp.abs(end) > held:
+                            taus = with_entry(taus, k, wp.where(end < 0.0, -held, held))
+                            cs = with_entry(cs, k, 0.0)
+
         # 3. Normal plus friction force on each wheel, as a wrench about its COM.
         for k in range(WHEELS):
             pk = impulse[k]
@@ -488,10 +527,11 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
                           - taus[k])
                 wp.atomic_add(body_f, wheel, wp.spatial_vector(wp.vec3(0.0), change * axle[k]))
                 wp.atomic_add(body_f, base + slots.chassis, wp.spatial_vector(wp.vec3(0.0), -change * axle[k]))
-            elif wp.static(IMPLICIT):  # the drive torque's change with the wheel's speed, wheel against chassis
-                c = damping[world, k]
-                if c > 0.0:
-                    change = -c * (taus[k] * dt + wp.dot(spin[k], p3)) * ispins[k]
+            elif wp.static(IMPLICIT):  # noqa: SIM102 (wp.static stands alone: Warp resolves it as it builds the kernel)
+                # the drive torque's change with the wheel's speed (or to its held torque), wheel against chassis
+                if damping[world, k] > 0.0:
+                    change = ((taus[k] - joint_f[world * slots.dofs_per_world + slots.dof[k]])
+                              - cs[k] * (taus[k] * dt + wp.dot(spin[k], p3)) * ispins[k])
                     wp.atomic_add(body_f, wheel, wp.spatial_vector(wp.vec3(0.0), change * axle[k]))
                     wp.atomic_add(body_f, base + slots.chassis, wp.spatial_vector(wp.vec3(0.0), -change * axle[k]))
 
