@@ -278,6 +278,65 @@ def relax_geared(pk: wp.vec2, t1: wp.vec3, t2: wp.vec3, r: wp.vec3, spin: wp.vec
             wp.where(side == 0, wp.vec2(turn[0] + step, turn[1]), wp.vec2(turn[0], turn[1] + step)))
 
 
+@wp.func
+def drive_regime(s: float, torque: float, damping: float, held: float, inertia: float, dt: float) -> float:
+    """An implicit drive's regime for a friction spin impulse ``s`` [N·m·s] on its wheel (side): 0 damped (its end
+    torque ``torque - damping x spin change`` within ``held``), +1 / -1 held at ``+held`` / ``-held``."""
+    end = torque - damping * (torque * dt + s) / (inertia + damping * dt)
+    up = wp.where(end > held, 1.0, 0.0)
+    down = wp.where(end < -held, -1.0, 0.0)
+    return wp.where(damping > 0.0, up + down, 0.0)
+
+
+@wp.func
+def drive_spin_change(s: float, regime: float, torque: float, damping: float, held: float, inertia: float,
+                      dt: float) -> float:
+    """The wheel's (side's) spin change [rad/s] under a friction spin impulse ``s`` in ``regime``
+    (:func:`drive_regime`): damped ``(torque dt + s) / (J + damping dt)``, held ``(+-held dt + s) / J`` (continuous
+    where they meet)."""
+    return wp.where(regime == 0.0, (torque * dt + s) / (inertia + damping * dt), (regime * held * dt + s) / inertia)
+
+
+@wp.func
+def relax_drive_solve(pk: wp.vec2, t1: wp.vec3, t2: wp.vec3, base: wp.vec3, spin: wp.vec3, sign: float, others: float,
+                      regime: float, dd: wp.vec2, inv_dd: wp.vec2, dh: wp.vec2, inv_dh: wp.vec2, limit: float,
+                      torque: float, damping: float, held: float, inertia: float, dt: float):
+    """:func:`relax_drive`'s contact impulse in one regime, and the wheel's (side's) friction spin impulse with it."""
+    dk = wp.where(regime == 0.0, dd, dh)
+    inv_dk = wp.where(regime == 0.0, inv_dd, inv_dh)
+    own = sign * wp.dot(spin, t1 * pk[0] + t2 * pk[1])
+    v = base + spin * (sign * drive_spin_change(others + own, regime, torque, damping, held, inertia, dt))
+    v0 = wp.vec2(wp.dot(v, t1) - dk[0] * pk[0], wp.dot(v, t2) - dk[1] * pk[1])
+    new = coulomb_impulse(v0, dk, inv_dk, limit)
+    return new, others + sign * wp.dot(spin, t1 * new[0] + t2 * new[1])
+
+
+@wp.func
+def relax_drive(pk: wp.vec2, t1: wp.vec3, t2: wp.vec3, r: wp.vec3, spin: wp.vec3, sign: float, free: wp.vec3,
+                dd: wp.vec2, inv_dd: wp.vec2, dh: wp.vec2, inv_dh: wp.vec2, limit: float, dv: wp.vec3, dw: wp.vec3,
+                s: float, torque: float, damping: float, held: float, inertia: float, dt: float, inv_mass: float,
+                inv_inertia: wp.mat33):
+    """:func:`relax_contact` for an implicit drive held at its torque limit inside the solve: the wheel (a geared
+    side: ``sign`` its forward sign, ``torque``, ``damping``, ``held``, ``inertia`` the side's) spins by
+    :func:`drive_spin_change` of its friction spin impulse ``s`` (this contact's included), a continuous, monotone,
+    piecewise-linear function. The update solves in the regime ``s`` is in, and again in the regime its result is in
+    where that differs (twice at most). ``free`` is the contact's end velocity without friction and without the
+    drive's spin change, ``dd`` / ``dh`` its inverse masses damped / held. Returns (its new impulse, dv, dw, s)."""
+    others = s - sign * wp.dot(spin, t1 * pk[0] + t2 * pk[1])
+    base = free + dv + wp.cross(dw, r)
+    regime = drive_regime(s, torque, damping, held, inertia, dt)
+    new, s_new = relax_drive_solve(pk, t1, t2, base, spin, sign, others, regime, dd, inv_dd, dh, inv_dh, limit,
+                                   torque, damping, held, inertia, dt)
+    for _ in range(2):
+        after = drive_regime(s_new, torque, damping, held, inertia, dt)
+        if after != regime:
+            regime = after
+            new, s_new = relax_drive_solve(pk, t1, t2, base, spin, sign, others, regime, dd, inv_dd, dh, inv_dh,
+                                           limit, torque, damping, held, inertia, dt)
+    change = t1 * (new[0] - pk[0]) + t2 * (new[1] - pk[1])
+    return new, dv + change * inv_mass, dw + inv_inertia * wp.cross(r, change), s_new
+
+
 @functools.cache
 def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
     """The (``solve_wheel_friction``, ``clear_impulses``) kernels for rovers of ``wheels`` wheels (2 to
@@ -426,8 +485,14 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
             lat = with_row_n(lat, k, a)
             lon = with_row_n(lon, k, wp.cross(n, a))
             spin = with_row_n(spin, k, w)
-            if wp.static(GEARED):
+            if wp.static(GEARED and IMPLICIT):  # the side's spin change is the solve's (relax_drive)
+                q = slots.side[k]
+                own = tau * dt * slots.inv_spin_inertia[k] - slots.sign[k] * side_torque[q] * dt / slots.side_inertia[q]
+                free = with_row_n(free, k, v + w * own)
+            elif wp.static(GEARED):
                 free = with_row_n(free, k, v + w * spin_change)
+            elif wp.static(IMPLICIT):  # the wheel's spin change is the solve's (relax_drive)
+                free = with_row_n(free, k, v)
             else:
                 free = with_row_n(free, k, v + w * (tau * ispin * dt))
             normal = with_row_n(normal, k, fn * n)
@@ -447,6 +512,10 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
         d = mat2()
         inv_d = mat2()
         turn = wp.vec2()  # geared sides: each side's forward spin change from the friction impulses [rad/s]
+        dh = mat2()  # implicit: the contacts' inverse masses with the drive held at its limit [1/kg]
+        inv_dh = mat2()
+        side_spin = wp.vec2()  # implicit, geared: each side's forward friction spin impulse [N·m·s]
+        wheel_spin = vec()  # implicit: each wheel's friction spin impulse [N·m·s]
         for k in range(WHEELS):
             ispin = slots.inv_spin_inertia[k]
             if wp.static(EXTRAS):
@@ -455,6 +524,14 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
                          effective_inverse_mass(lat[k], arm[k], inv_mass, inv_inertia, spin[k], ispin))
             d = with_row_n(d, k, dk)
             inv_d = with_row_n(inv_d, k, wp.vec2(1.0 / dk[0], 1.0 / dk[1]))
+            if wp.static(IMPLICIT):
+                ihold = slots.inv_spin_inertia[k]
+                if wp.static(GEARED):
+                    ihold = 1.0 / slots.side_inertia[slots.side[k]]
+                dhk = wp.vec2(effective_inverse_mass(lon[k], arm[k], inv_mass, inv_inertia, spin[k], ihold),
+                              effective_inverse_mass(lat[k], arm[k], inv_mass, inv_inertia, spin[k], ihold))
+                dh = with_row_n(dh, k, dhk)
+                inv_dh = with_row_n(inv_dh, k, wp.vec2(1.0 / dhk[0], 1.0 / dhk[1]))
             prev = warm_start[world * slots.count + k]
             pk = wp.vec2(wp.dot(prev, lon[k]), wp.dot(prev, lat[k]))
             size = wp.length(pk)
@@ -464,12 +541,33 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
             p3 = lon[k] * pk[0] + lat[k] * pk[1]
             dv += p3 * inv_mass
             dw += inv_inertia * wp.cross(arm[k], p3)
-            if wp.static(GEARED):
+            if wp.static(GEARED and IMPLICIT):
+                own = slots.sign[k] * wp.dot(spin[k], p3)
+                side_spin = wp.where(slots.side[k] == 0, wp.vec2(side_spin[0] + own, side_spin[1]),
+                                     wp.vec2(side_spin[0], side_spin[1] + own))
+            elif wp.static(GEARED):
                 step = slots.sign[k] * wp.dot(spin[k], p3) * ispin
                 turn = wp.where(slots.side[k] == 0, wp.vec2(turn[0] + step, turn[1]), wp.vec2(turn[0], turn[1] + step))
+            elif wp.static(IMPLICIT):
+                wheel_spin = with_entry(wheel_spin, k, wp.dot(spin[k], p3))
         for _sweep in range(FRICTION_SWEEPS):
             for k in range(WHEELS):
-                if wp.static(GEARED):
+                if wp.static(GEARED and IMPLICIT):
+                    q = slots.side[k]
+                    new, dv, dw, sq = relax_drive(impulse[k], lon[k], lat[k], arm[k], spin[k], slots.sign[k], free[k],
+                                                  d[k], inv_d[k], dh[k], inv_dh[k], limit[k], dv, dw, side_spin[q],
+                                                  side_torque[q], side_damping[q], wp.abs(side_held[q]),
+                                                  slots.side_inertia[q], dt, inv_mass, inv_inertia)
+                    side_spin = wp.where(q == 0, wp.vec2(sq, side_spin[1]), wp.vec2(side_spin[0], sq))
+                    impulse = with_row_n(impulse, k, new)
+                elif wp.static(IMPLICIT):
+                    new, dv, dw, sk = relax_drive(impulse[k], lon[k], lat[k], arm[k], spin[k], 1.0, free[k], d[k],
+                                                  inv_d[k], dh[k], inv_dh[k], limit[k], dv, dw, wheel_spin[k],
+                                                  taus[k], cs[k], wp.abs(clamped[world, k]),
+                                                  1.0 / slots.inv_spin_inertia[k], dt, inv_mass, inv_inertia)
+                    wheel_spin = with_entry(wheel_spin, k, sk)
+                    impulse = with_row_n(impulse, k, new)
+                elif wp.static(GEARED):
                     new, dv, dw, turn = relax_geared(impulse[k], lon[k], lat[k], arm[k], spin[k], slots.sign[k],
                                                      slots.side[k], free[k], d[k], inv_d[k], ispins[k], limit[k], dv,
                                                      dw, turn, inv_mass, inv_inertia)
@@ -482,36 +580,6 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
                                                 ispin, limit[k], dv, dw, inv_mass, inv_inertia)
                     impulse = with_row_n(impulse, k, new)
 
-        # 2b. An implicit drive's end torque past the motor's limit (friction holding the wheel against it): that
-        # wheel, or geared side, takes its clamped torque instead, with the impulses as they are (continuous at the
-        # limit, where the end torque is the clamped torque either way; what the held torque leaves of the slip, the
-        # next substep's sweep takes up, as it does every other change).
-        if wp.static(IMPLICIT):
-            if wp.static(GEARED):
-                for q in range(2):
-                    if side_damping[q] > 0.0:
-                        j = slots.side_inertia[q]
-                        end = side_torque[q] - side_damping[q] * (side_torque[q] * dt / j - shrink[q] + turn[q])
-                        if wp.abs(end) > wp.abs(side_held[q]):
-                            target = wp.where(end < 0.0, -wp.abs(side_held[q]), wp.abs(side_held[q]))
-                            # the held torque's speed change replaces the damping's, and the impulses turn the side
-                            # through its own inertia
-                            lowered = -(target - side_torque[q]) * dt / j
-                            grown = (j + side_damping[q] * dt) / j
-                            turn = wp.where(q == 0, wp.vec2(turn[0] * grown, turn[1]), wp.vec2(turn[0], turn[1] * grown))
-                            shrink = wp.where(q == 0, wp.vec2(lowered, shrink[1]), wp.vec2(shrink[0], lowered))
-            else:
-                for k in range(WHEELS):
-                    c = cs[k]
-                    if c > 0.0:
-                        pk = impulse[k]
-                        tau = taus[k]
-                        end = tau - c * (tau * dt + wp.dot(spin[k], lon[k] * pk[0] + lat[k] * pk[1])) * ispins[k]
-                        held = wp.abs(clamped[world, k])
-                        if wp.abs(end) > held:
-                            taus = with_entry(taus, k, wp.where(end < 0.0, -held, held))
-                            cs = with_entry(cs, k, 0.0)
-
         # 3. Normal plus friction force on each wheel, as a wrench about its COM.
         for k in range(WHEELS):
             pk = impulse[k]
@@ -520,7 +588,18 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
             f = normal[k] + p3 / dt
             wheel = base + shapes.body[slots.shape[k]]
             wp.atomic_add(body_f, wheel, wp.spatial_vector(f, wp.cross(lever[k], f)))
-            if wp.static(GEARED):  # the chain's torque that turns this wheel with its side, wheel against chassis
+            if wp.static(GEARED and IMPLICIT):  # the chain's and drive's torque that turn this wheel with its side
+                q = slots.side[k]
+                sq = side_spin[q]
+                jq = slots.side_inertia[q]
+                hq = wp.abs(side_held[q])
+                regime = drive_regime(sq, side_torque[q], side_damping[q], hq, jq, dt)
+                target = (taus[k] * dt * slots.inv_spin_inertia[k] - slots.sign[k] * side_torque[q] * dt / jq
+                          + slots.sign[k] * drive_spin_change(sq, regime, side_torque[q], side_damping[q], hq, jq, dt))
+                change = (target / slots.inv_spin_inertia[k] - wp.dot(spin[k], p3)) / dt - taus[k]
+                wp.atomic_add(body_f, wheel, wp.spatial_vector(wp.vec3(0.0), change * axle[k]))
+                wp.atomic_add(body_f, base + slots.chassis, wp.spatial_vector(wp.vec3(0.0), -change * axle[k]))
+            elif wp.static(GEARED):  # the chain's torque that turns this wheel with its side, wheel against chassis
                 q = slots.side[k]
                 change = (((taus[k] * dt * slots.inv_spin_inertia[k] - slots.sign[k] * shrink[q]
                             + slots.sign[k] * turn[q]) / slots.inv_spin_inertia[k] - wp.dot(spin[k], p3)) / dt
@@ -529,9 +608,13 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
                 wp.atomic_add(body_f, base + slots.chassis, wp.spatial_vector(wp.vec3(0.0), -change * axle[k]))
             elif wp.static(IMPLICIT):  # noqa: SIM102 (wp.static stands alone: Warp resolves it as it builds the kernel)
                 # the drive torque's change with the wheel's speed (or to its held torque), wheel against chassis
-                if damping[world, k] > 0.0:
-                    change = ((taus[k] - joint_f[world * slots.dofs_per_world + slots.dof[k]])
-                              - cs[k] * (taus[k] * dt + wp.dot(spin[k], p3)) * ispins[k])
+                if cs[k] > 0.0:
+                    hk = wp.abs(clamped[world, k])
+                    jk = 1.0 / slots.inv_spin_inertia[k]
+                    sk = wheel_spin[k]
+                    regime = drive_regime(sk, taus[k], cs[k], hk, jk, dt)
+                    change = ((drive_spin_change(sk, regime, taus[k], cs[k], hk, jk, dt) * jk - wp.dot(spin[k], p3)) / dt
+                              - taus[k])
                     wp.atomic_add(body_f, wheel, wp.spatial_vector(wp.vec3(0.0), change * axle[k]))
                     wp.atomic_add(body_f, base + slots.chassis, wp.spatial_vector(wp.vec3(0.0), -change * axle[k]))
 
