@@ -331,7 +331,7 @@ class ContactModel:
 
         ``joint_f`` holds this substep's drive torques (the friction solver predicts the wheels'
         spin with them), ``damping`` (N, W) how each falls with its wheel's speed change (an implicit driver's),
-        ``clamped`` (N, W) each wheel's motor torque at the loop's limit (the drive's ``wheel_torque``);
+        ``clamped`` (N, W) each wheel's motor torque at the loop's limit (the drive's ``torque_cap``);
         ``physics`` each world's mu, stiffness and wheel radius
         (:class:`~atrv_warp.sim.params.WorldParams`, or a tape's own with differentiable arrays).
         ``warm_start`` and ``impulses`` (N x wheels ``wp.vec3``) replace :attr:`impulses` as the previous

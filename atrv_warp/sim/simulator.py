@@ -301,6 +301,7 @@ class RoverSim:
         self._wheel_speed = wp.zeros((n, w), dtype=float, device=dev)
         self._wheel_torque = wp.zeros((n, w), dtype=float, device=dev)
         self._damping = wp.zeros((n, w), dtype=float, device=dev)
+        self._torque_cap = wp.zeros((n, w), dtype=float, device=dev)
         self._contact_flags = wp.zeros(n, dtype=wp.int32, device=dev)
         self._nonfinite = wp.zeros(n, dtype=wp.int32, device=dev)
         self._reset_mask = wp.zeros(n, dtype=bool, device=dev)
@@ -470,7 +471,7 @@ class RoverSim:
                 solver_in: newton.State | None = None, warm_start: wp.array | None = None,
                 impulses: wp.array | None = None, twist: wp.array | None = None,
                 driver_in: DriverState | None = None, driver_out: DriverState | None = None,
-                mode: wp.array | None = None, damping: wp.array | None = None) -> None:
+                mode: wp.array | None = None, damping: wp.array | None = None, cap: wp.array | None = None) -> None:
         """One solver substep of ``sim_dt``: the wheels' drive (torque commands, or the motor driver's loop),
         contact wrenches, one Featherstone step.
 
@@ -481,7 +482,8 @@ class RoverSim:
         differentiable mu), ``flags`` (N,) and ``torque`` (N, W) outputs, ``solver_in``: a view of ``s_in`` with
         its own ``body_q`` for the solver to write, and the wheels' friction impulses of the previous substep
         (``warm_start``) and of this one (``impulses``), N x wheels ``wp.vec3`` each, and ``damping`` (N, W), the
-        implicit driver's slope that the drive writes and the friction solve reads (a tape needs one per substep).
+        implicit driver's slope that the drive writes and the friction solve reads (a tape needs one per substep), and
+        ``cap`` (N, W), its torque cap, likewise.
         """
         physics = self.params.physics if physics is None else physics
         d = self.driver
@@ -492,9 +494,10 @@ class RoverSim:
                           d.state if driver_in is None else driver_in],
                   outputs=[d.state if driver_out is None else driver_out, control.joint_f,
                            self._wheel_torque if torque is None else torque,
-                           self._damping if damping is None else damping], device=self.device)
+                           self._damping if damping is None else damping,
+                           self._torque_cap if cap is None else cap], device=self.device)
         self.contact.apply(s_in, self.model.body_com, control.joint_f, self._damping if damping is None else damping,
-                           self._wheel_torque if torque is None else torque,
+                           self._torque_cap if cap is None else cap,
                            self._contact_flags if flags is None else flags, physics, warm_start, impulses)
         self.solver.step(s_in if solver_in is None else solver_in, s_out, control, None, self.sim_cfg.sim_dt)
 

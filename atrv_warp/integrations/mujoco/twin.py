@@ -127,6 +127,7 @@ class MujocoTwin:
         self.wheel_torque = np.zeros(len(self.wheel_dof))
         """(W,) each wheel's motor torque for the clamped loop output [N·m], forward-positive (the simulator's
         ``wheel_torque``: a base's effort)."""
+        self._torque_cap = np.zeros(len(self.wheel_dof))  # an implicit loop's torque cap [N·m] (``drive_wheels``')
         self.age = 0.0
         self.odometry = np.zeros(3)
         self.odom_twist = np.zeros(2)
@@ -201,10 +202,10 @@ class MujocoTwin:
             self._advance()
             if saved is not None:
                 end = self.data.ctrl - damping * (self.wheel_speed - start)
-                held = (damping > 0.0) & (np.abs(end) > np.abs(self.wheel_torque) + 1e-9)
+                held = (damping > 0.0) & (np.abs(end) > self._torque_cap + 1e-9)
                 if held.any():  # friction held the wheel: its end torque past the limit; again with the clamped one
                     mujoco.mj_setState(self.model, self.data, saved, STATE)
-                    self.data.ctrl[held] = np.copysign(np.abs(self.wheel_torque[held]), end[held])
+                    self.data.ctrl[held] = np.copysign(self._torque_cap[held], end[held])
                     self.model.dof_damping[self.wheel_dof[held]] = 0.0
                     self.data.qfrc_applied[self.wheel_dof[held]] = 0.0
                     self._advance()
@@ -253,6 +254,9 @@ class MujocoTwin:
             taper = np.where(unclamped_command < 0.0, -_motor_torque(-1.0, wheel, limit), _motor_torque(1.0, wheel, limit))
             damping = c.kp * scale * taper
             unclamped = _motor_torque(unclamped_command, wheel, limit)
+            # ``drive_wheels``' ``torque_cap``: the motor's torque at the loop's limit, the most an end torque may reach
+            self._torque_cap = np.abs(_motor_torque(np.where(unclamped_command < 0.0, -1.0, 1.0) * c.torque_limit * scale,
+                                                    wheel, limit))
             inside = ((np.abs(unclamped * self.wheel_inertia / (self.wheel_inertia + damping * dt))
                        <= np.abs(self.data.ctrl) + 1e-9) | (beyond[self.wheel_side] == 0.0))
             self.data.ctrl[:] = np.where(inside, unclamped, self.data.ctrl)

@@ -245,6 +245,7 @@ def drive_wheels(
     joint_f: wp.array(dtype=float),
     wheel_torque: wp.array2d(dtype=float),
     damping: wp.array2d(dtype=float),
+    torque_cap: wp.array2d(dtype=float),
 ):
     """Each wheel's joint torque for one substep: the world's torque ``commands`` (``DRIVE_TORQUE``), or the
     driver's output for its ``twist`` (``DRIVE_TWIST``), through the world's motor (torque scale, no-load taper);
@@ -255,7 +256,10 @@ def drive_wheels(
     base reports as its effort, and the most an implicit loop's wheel may take). ``damping`` (N, W) [N·m per rad/s],
     written only with ``params.implicit``: the slope of each wheel's torque in its own speed change over the substep
     (the loop's proportional gain through the motor, :func:`implicit_drive`; 0 for torque commands). The friction solve (:func:`~atrv_warp.sim.kernels.friction.friction_kernels`) integrates
-    it implicitly, with the wheel's ground contact, so that no gain is bounded by the substep."""
+    it implicitly, with the wheel's ground contact, so that no gain is bounded by the substep. ``torque_cap`` (N, W)
+    [N·m, >= 0], written only with ``params.implicit``: the motor's torque at the loop's limit (``torque_limit``
+    through the scale and the taper, in the unclamped output's direction), the most the friction solve lets an
+    implicit wheel's end torque reach (the clamped torque where the loop saturates; above it where it does not)."""
     world = wp.tid()
     speeds = side_speeds(layout, joint_qd, world)
     pose, odom_twist = integrate_odometry(params, state_in.odometry[world], speeds)
@@ -320,6 +324,9 @@ def drive_wheels(
         wheel_torque[world, k] = tau
         if params.implicit != 0:
             damping[world, k] = slope_k
+            toward = wp.where(cmd[side_k] + over[side_k] < 0.0, -1.0, 1.0)
+            torque_cap[world, k] = wp.abs(motor_torque(toward * params.torque_limit * scale, sign * joint_qd[dof],
+                                                       speed_limit))
 
 
 @wp.kernel
