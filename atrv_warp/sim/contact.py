@@ -324,14 +324,14 @@ class ContactModel:
         """(N x wheels) each wheel's last friction impulse [N·s], world frame: where the next substep's
         sweeps start (the Coulomb law's warm start)."""
 
-    def apply(self, state: newton.State, body_com: wp.array, joint_f: wp.array, damping: wp.array, clamped: wp.array,
+    def apply(self, state: newton.State, body_com: wp.array, joint_f: wp.array, damping: wp.array, torque_cap: wp.array,
               flags: wp.array, physics: WorldPhysics, warm_start: wp.array | None = None,
               impulses: wp.array | None = None) -> None:
         """Add every contact wrench to ``state.body_f`` and OR the contact bits into ``flags``.
 
         ``joint_f`` holds this substep's drive torques (the friction solver predicts the wheels'
         spin with them), ``damping`` (N, W) how each falls with its wheel's speed change (an implicit driver's),
-        ``clamped`` (N, W) each wheel's motor torque at the loop's limit (the drive's ``torque_cap``);
+        ``torque_cap`` (N, W) each wheel's motor torque at the loop's limit (the drive's ``torque_cap``);
         ``physics`` each world's mu, stiffness and wheel radius
         (:class:`~atrv_warp.sim.params.WorldParams`, or a tape's own with differentiable arrays).
         ``warm_start`` and ``impulses`` (N x wheels ``wp.vec3``) replace :attr:`impulses` as the previous
@@ -345,7 +345,7 @@ class ContactModel:
             wp.launch(self._solve, dim=self.num_worlds,
                       inputs=[self.bodies_per_world, self.shapes, self.wheels, self.inertia, self.scene, self.params,
                               self.gravity, physics, state.body_q, state.body_qd, body_com, joint_f, damping,
-                              clamped, self.impulses if warm_start is None else warm_start],
+                              torque_cap, self.impulses if warm_start is None else warm_start],
                       outputs=[state.body_f, self.impulses if impulses is None else impulses], device=self.device)
 
     def reset(self, mask: wp.array) -> None:

@@ -240,11 +240,10 @@ class DiffRollout:
         # The friction solver starts each substep from the previous one's impulses: one array per
         # substep boundary, so the tape differentiates through that chain too.
         self._impulses = [wp.zeros_like(self.sim.contact.impulses, requires_grad=True) for _ in range(n_sub + 1)]
-        # an implicit driver's slope, its clamped torque and its torque cap, written by each substep's drive (the slope
-        # and the cap read by its friction solve, which a tape's backward pass runs again on them): one of each per
-        # substep
+        self._torque = wp.zeros((num_worlds, len(wheels)), dtype=float, device=dev)  # the drive's effort, not read back
+        # an implicit driver's slope and torque cap, written by each substep's drive and read by its friction solve
+        # (which a tape's backward pass runs again on them): one of each per substep
         self._damping = [wp.zeros((num_worlds, len(wheels)), dtype=float, device=dev) for _ in range(n_sub)]
-        self._torque = [wp.zeros((num_worlds, len(wheels)), dtype=float, device=dev) for _ in range(n_sub)]
         self._cap = [wp.zeros((num_worlds, len(wheels)), dtype=float, device=dev) for _ in range(n_sub)]
         # Featherstone keeps its mass-matrix scratch (M, J, P, H, L) on the solver, shared by every
         # step. Under a tape each step must own them, or the adjoints of all steps mix in one buffer
@@ -307,7 +306,7 @@ class DiffRollout:
                 for name, arr in self._scratch[k // self._refresh].items():
                     setattr(sim.solver, name, arr)
                 sim.substep(s_in, s_out, self.controls[k], self._commands[t], physics=self._physics,
-                            flags=self._flags, torque=self._torque[k], solver_in=self._solver_in[k],
+                            flags=self._flags, torque=self._torque, solver_in=self._solver_in[k],
                             warm_start=self._impulses[k], impulses=self._impulses[k + 1], twist=self._commands[t],
                             driver_in=self._driver[k], driver_out=self._driver[k + 1], mode=self._mode,
                             damping=self._damping[k], cap=self._cap[k])

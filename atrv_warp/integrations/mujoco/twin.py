@@ -86,8 +86,6 @@ class MujocoTwin:
         self.wheel_dof = np.array([m.jnt_dofadr[j] for j in joints])
         self.wheel_sign = np.array([w.drive_sign for w in self.description.wheels])
         self.wheel_side = np.array([w.side for w in self.description.wheels])
-        self.wheel_inertia = np.array([float(np.asarray(w.axis) @ np.asarray(w.inertial.inertia) @ np.asarray(w.axis))
-                                       for w in self.description.wheels])  # about the axle [kg·m²]
         frames = {f.name: np.asarray(f.transform, dtype=np.float64) for f in self.description.frames}
         self.scanner_mount = frames[self.scanner_cfg.frame or self.rover_cfg.robot_spec.laser_frame]
         self.imu_mount = frames[self.rover_cfg.robot_spec.imu_frame]  # ROBOT_OBSERVATION's imu_* fields
@@ -203,7 +201,7 @@ class MujocoTwin:
             if saved is not None:
                 end = self.data.ctrl - damping * (self.wheel_speed - start)
                 held = (damping > 0.0) & (np.abs(end) > self._torque_cap + 1e-9)
-                if held.any():  # friction held the wheel: its end torque past the limit; again with the clamped one
+                if held.any():  # friction carried a wheel's end torque past the limit: again, that wheel at the limit
                     mujoco.mj_setState(self.model, self.data, saved, STATE)
                     self.data.ctrl[held] = np.copysign(self._torque_cap[held], end[held])
                     self.model.dof_damping[self.wheel_dof[held]] = 0.0
@@ -245,22 +243,17 @@ class MujocoTwin:
         self.data.ctrl[:] = _motor_torque(command, wheel, limit)
         self.wheel_torque = self.data.ctrl.copy()
         if torques is self.applied and c.implicit_under():
-            # the implicit loop (``drive_wheels``' ``drive_regime``): from its unclamped output, its proportional action a
-            # damping, where a friction-free wheel would end the substep inside the clamped torque; else the clamped
-            # torque alone. ``step`` holds a wheel that friction carries past the limit at the clamped torque.
-            # MuJoCo's Euler integrates a joint's damping implicitly; the applied force makes it act on the speed's
-            # change over the substep, not on the speed
+            # the implicit loop (``drive_wheels``' ``implicit_drive``): the unclamped output, its proportional action a
+            # damping; ``step`` runs a substep again with the motor's torque at the loop's limit on a wheel whose end
+            # torque passes it (the friction solve's hold). MuJoCo's Euler integrates a joint's damping implicitly;
+            # the applied force makes it act on the speed's change over the substep, not on the speed
             unclamped_command = command + beyond[self.wheel_side] * scale
             taper = np.where(unclamped_command < 0.0, -_motor_torque(-1.0, wheel, limit), _motor_torque(1.0, wheel, limit))
             damping = c.kp * scale * taper
-            unclamped = _motor_torque(unclamped_command, wheel, limit)
+            self.data.ctrl[:] = _motor_torque(unclamped_command, wheel, limit)
             # ``drive_wheels``' ``torque_cap``: the motor's torque at the loop's limit, the most an end torque may reach
             self._torque_cap = np.abs(_motor_torque(np.where(unclamped_command < 0.0, -1.0, 1.0) * c.torque_limit * scale,
                                                     wheel, limit))
-            inside = ((np.abs(unclamped * self.wheel_inertia / (self.wheel_inertia + damping * dt))
-                       <= np.abs(self.data.ctrl) + 1e-9) | (beyond[self.wheel_side] == 0.0))
-            self.data.ctrl[:] = np.where(inside, unclamped, self.data.ctrl)
-            damping = np.where(inside, damping, 0.0)
             self.model.dof_damping[self.wheel_dof] = damping
             self.data.qfrc_applied[self.wheel_dof] = damping * self.data.qvel[self.wheel_dof]
         else:

@@ -253,7 +253,7 @@ def drive_wheels(
     substep (a differentiable rollout's tape).
 
     ``wheel_torque`` (N, W) [N·m]: each wheel's motor torque for the clamped loop output, forward-positive (what a
-    base reports as its effort, and the most an implicit loop's wheel may take). ``damping`` (N, W) [N·m per rad/s],
+    base reports as its effort). ``damping`` (N, W) [N·m per rad/s],
     written only with ``params.implicit``: the slope of each wheel's torque in its own speed change over the substep
     (the loop's proportional gain through the motor, :func:`implicit_drive`; 0 for torque commands). The friction solve (:func:`~atrv_warp.sim.kernels.friction.friction_kernels`) integrates
     it implicitly, with the wheel's ground contact, so that no gain is bounded by the substep. ``torque_cap`` (N, W)

@@ -368,7 +368,7 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
         body_com: wp.array(dtype=wp.vec3),
         joint_f: wp.array(dtype=float),
         damping: wp.array2d(dtype=float),
-        clamped: wp.array2d(dtype=float),
+        torque_cap: wp.array2d(dtype=float),
         warm_start: wp.array(dtype=wp.vec3),
         body_f: wp.array(dtype=wp.spatial_vector),
         impulses: wp.array(dtype=wp.vec3),
@@ -382,9 +382,9 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
         :func:`~atrv_warp.sim.kernels.driver.drive_wheels`; read only by an ``implicit`` kernel): the wheel then spins
         as if its inertia were ``J + damping dt`` under ``joint_f``'s torque, the friction solved with it, and the
         torque's change is applied between wheel and chassis (a damping integrated implicitly, which no gain can make
-        unstable). ``clamped`` (N, W) [N·m, forward-positive] is each wheel's motor torque at the loop's limit: where
-        the friction carries a damped wheel's end torque past it (a wheel held by the ground), the wheel (a geared
-        side: its side) takes that torque instead.
+        unstable). ``torque_cap`` (N, W) [N·m, >= 0] is each wheel's motor torque at the loop's limit: a damped
+        wheel's (a geared side's) end torque goes no further (a wheel the ground holds against its drive), its spin a
+        piecewise-linear function of its friction impulse that each contact's update solves (:func:`relax_drive`).
 
         ``warm_start`` (N x ``slots.count``) holds the previous substep's friction impulses [N·s], where the
         sweeps start; ``impulses`` receives this substep's (the simulator passes one array as both; a tape
@@ -428,7 +428,7 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
             for k in range(WHEELS):
                 t = slots.sign[k] * joint_f[world * slots.dofs_per_world + slots.dof[k]]
                 c = damping[world, k]
-                h = clamped[world, k]
+                h = torque_cap[world, k]
                 if slots.side[k] == 0:
                     side_torque = wp.vec2(side_torque[0] + t, side_torque[1])
                     side_damping = wp.vec2(side_damping[0] + c, side_damping[1])
@@ -563,7 +563,7 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
                 elif wp.static(IMPLICIT):
                     new, dv, dw, sk = relax_drive(impulse[k], lon[k], lat[k], arm[k], spin[k], 1.0, free[k], d[k],
                                                   inv_d[k], dh[k], inv_dh[k], limit[k], dv, dw, wheel_spin[k],
-                                                  taus[k], cs[k], wp.abs(clamped[world, k]),
+                                                  taus[k], cs[k], wp.abs(torque_cap[world, k]),
                                                   1.0 / slots.inv_spin_inertia[k], dt, inv_mass, inv_inertia)
                     wheel_spin = with_entry(wheel_spin, k, sk)
                     impulse = with_row_n(impulse, k, new)
@@ -609,7 +609,7 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
             elif wp.static(IMPLICIT):  # noqa: SIM102 (wp.static stands alone: Warp resolves it as it builds the kernel)
                 # the drive torque's change with the wheel's speed (or to its held torque), wheel against chassis
                 if cs[k] > 0.0:
-                    hk = wp.abs(clamped[world, k])
+                    hk = wp.abs(torque_cap[world, k])
                     jk = 1.0 / slots.inv_spin_inertia[k]
                     sk = wheel_spin[k]
                     regime = drive_regime(sk, taus[k], cs[k], hk, jk, dt)
