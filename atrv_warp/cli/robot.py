@@ -174,13 +174,36 @@ _IMU = re.compile(r"imu", re.IGNORECASE)
 _LASER = re.compile(r"laser|lidar|lrf|scan|hokuyo|sick|lms", re.IGNORECASE)
 
 
+def _wheel_geometry(urdf: Path, links: dict, wheels: list) -> tuple[float, float, float]:
+    """The starter's wheel: the first wheel cylinder's radius and width [m], and the least axial inertia of the wheel
+    links [kg·m²] (the driver's gains come from it)."""
+    import numpy as np
+
+    from atrv_warp.core.robot import RobotFileError
+
+    radius = width = None
+    for j in wheels:
+        for geoms in (links[j.child].collisions, links[j.child].visuals):
+            for g in geoms or ():
+                if radius is None and g.geometry is not None and g.geometry.cylinder is not None:
+                    radius, width = float(g.geometry.cylinder.radius), float(g.geometry.cylinder.length)
+    if radius is None:
+        raise RobotFileError(f"{urdf}: the wheels have no cylinder geometry; write wheels.radius and wheels.width "
+                             "by hand")
+    weighed = [j for j in wheels if links[j.child].inertial is not None and links[j.child].inertial.inertia is not None]
+    if not weighed:
+        raise RobotFileError(f"{urdf}: the wheel links ({', '.join(j.child for j in wheels)}) have no <inertial>: the "
+                             "driver's gains come from a wheel's inertia; give each wheel link its mass and inertia")
+    inertia = min(float(np.asarray(j.axis, dtype=float) @ np.asarray(links[j.child].inertial.inertia, dtype=float)
+                        @ np.asarray(j.axis, dtype=float)) / float(np.dot(j.axis, j.axis)) for j in weighed)
+    return radius, width, inertia
+
+
 def starter_file(urdf: str | Path, name: str) -> str:
     """A robot file for ``urdf`` as far as the URDF tells: the chassis (the wheels' parent), the wheels found by the
     rule, an IMU and a laser frame fixed to the chassis (by their names), the wheel cylinder, the rule's gains, and a
     torque limit by the shipped robots' rule. Every field a robot file has is written (the optional ones as comments);
     the motor's and the limits are placeholders, their ``[sources]`` say so: set your robot's."""
-    import numpy as np
-
     from atrv_warp.core.robot import RobotFileError
     from atrv_warp.sim.urdf import read_urdf, rigid_group
 
@@ -199,23 +222,9 @@ def starter_file(urdf: str | Path, name: str) -> str:
     if missing:
         raise RobotFileError(f"{urdf}: no {' and no '.join(missing)} fixed to the chassis {chassis!r}; add one to the "
                              "URDF (a fixed joint with the chassis' axes) or write links.imu and links.laser by hand")
-    radius = width = None
     mass = sum(float(link.inertial.mass) for link in links.values()
                if link.inertial is not None and link.inertial.mass is not None)
-    for j in wheels:
-        for geoms in (links[j.child].collisions, links[j.child].visuals):
-            for g in geoms or ():
-                if radius is None and g.geometry is not None and g.geometry.cylinder is not None:
-                    radius, width = float(g.geometry.cylinder.radius), float(g.geometry.cylinder.length)
-    if radius is None:
-        raise RobotFileError(f"{urdf}: the wheels have no cylinder geometry; write wheels.radius and wheels.width "
-                             "by hand")
-    weighed = [j for j in wheels if links[j.child].inertial is not None and links[j.child].inertial.inertia is not None]
-    if not weighed:
-        raise RobotFileError(f"{urdf}: the wheel links ({', '.join(j.child for j in wheels)}) have no <inertial>: the "
-                             "driver's gains come from a wheel's inertia; give each wheel link its mass and inertia")
-    inertia = min(float(np.asarray(j.axis, dtype=float) @ np.asarray(links[j.child].inertial.inertia, dtype=float)
-                        @ np.asarray(j.axis, dtype=float)) / float(np.dot(j.axis, j.axis)) for j in weighed)
+    radius, width, inertia = _wheel_geometry(urdf, links, wheels)
     from atrv_warp.sim.robot_check import gain_rule_source, rule_gains
 
     loaded = inertia + mass / len(wheels) * radius ** 2

@@ -491,8 +491,8 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
                 free = with_row_n(free, k, v + w * own)
             elif wp.static(GEARED):
                 free = with_row_n(free, k, v + w * spin_change)
-            elif wp.static(IMPLICIT):  # the wheel's spin change is the solve's (relax_drive)
-                free = with_row_n(free, k, v)
+            elif wp.static(IMPLICIT):  # a damped wheel's spin change is the solve's (relax_drive)
+                free = with_row_n(free, k, wp.where(cs[k] > 0.0, v, v + w * (tau * ispin * dt)))
             else:
                 free = with_row_n(free, k, v + w * (tau * ispin * dt))
             normal = with_row_n(normal, k, fn * n)
@@ -560,13 +560,18 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
                                                   slots.side_inertia[q], dt, inv_mass, inv_inertia)
                     side_spin = wp.where(q == 0, wp.vec2(sq, side_spin[1]), wp.vec2(side_spin[0], sq))
                     impulse = with_row_n(impulse, k, new)
-                elif wp.static(IMPLICIT):
-                    new, dv, dw, sk = relax_drive(impulse[k], lon[k], lat[k], arm[k], spin[k], 1.0, free[k], d[k],
-                                                  inv_d[k], dh[k], inv_dh[k], limit[k], dv, dw, wheel_spin[k],
-                                                  taus[k], cs[k], wp.abs(torque_cap[world, k]),
-                                                  1.0 / slots.inv_spin_inertia[k], dt, inv_mass, inv_inertia)
-                    wheel_spin = with_entry(wheel_spin, k, sk)
-                    impulse = with_row_n(impulse, k, new)
+                elif wp.static(IMPLICIT):  # a wheel under torque commands as the kernels without the drive solve it
+                    if cs[k] > 0.0:
+                        new, dv, dw, sk = relax_drive(impulse[k], lon[k], lat[k], arm[k], spin[k], 1.0, free[k], d[k],
+                                                      inv_d[k], dh[k], inv_dh[k], limit[k], dv, dw, wheel_spin[k],
+                                                      taus[k], cs[k], wp.abs(torque_cap[world, k]),
+                                                      1.0 / slots.inv_spin_inertia[k], dt, inv_mass, inv_inertia)
+                        wheel_spin = with_entry(wheel_spin, k, sk)
+                        impulse = with_row_n(impulse, k, new)
+                    else:
+                        new, dv, dw = relax_contact(impulse[k], lon[k], lat[k], arm[k], spin[k], free[k], d[k],
+                                                    inv_d[k], ispins[k], limit[k], dv, dw, inv_mass, inv_inertia)
+                        impulse = with_row_n(impulse, k, new)
                 elif wp.static(GEARED):
                     new, dv, dw, turn = relax_geared(impulse[k], lon[k], lat[k], arm[k], spin[k], slots.sign[k],
                                                      slots.side[k], free[k], d[k], inv_d[k], ispins[k], limit[k], dv,
