@@ -160,13 +160,15 @@ def test_the_twin_turns_in_place_on_all_four_wheels_as_coulomb_friction_does():
     """At µ 0.8 every wheel stays on the ground through an in-place turn, the sliding wheels' friction is µ times
     their load, and chi is within 10 % of the Coulomb figure for this geometry, 1 + (wheelbase / track)² (ours:
     1.58). With MuJoCo's default stiff contact the sliding wheels hop (the soft constraint lifts a sliding contact
-    past its static sink) and chi is several times that: the gap ``benchmarks/transfer/mujoco_turning_study.py`` traced."""
+    past its static sink) and chi is more than twice that: the gap ``benchmarks/transfer/mujoco_turning_study.py``
+    traced (2.2 times since the implicit loop is held at its torque limit; 2.5 before, its output flipping between the
+    limits)."""
     from atrv_warp.integrations.mujoco.mjcf import MUJOCO_DEFAULT_CONTACT, MujocoContact
 
     chi, hops, ratio, coulomb = _turn_in_place(MujocoContact())
     assert hops == 0 and ratio == pytest.approx(0.8, rel=0.05) and chi == pytest.approx(coulomb, rel=0.10)
     chi, hops, _, _ = _turn_in_place(MUJOCO_DEFAULT_CONTACT)
-    assert hops > 5 and chi > 2.5 * coulomb
+    assert hops > 5 and chi > 2.0 * coulomb
 
 
 def test_the_wheels_friction_pairs_replace_the_wheels_ground_contacts():

@@ -60,8 +60,10 @@ robot's loaded wheel answers as fast (the ATRV-Jr's tuned 3.0 is 0.082 s, the Ja
 ``benchmarks/robots/implicit_driver.py`` measures every robot's settling under both loops), at most
 :data:`IMPLICIT_GAIN_CAP`."""
 IMPLICIT_GAIN_CAP = 4.0
-"""The implicit rule's ``kp x sim_dt / J`` at most: above about 6, the loop's damping, on inside the torque limit and
-off at it, switches every substep on a slipping light wheel (the Jackal at µ 0.3) and the turn oscillates."""
+"""The implicit rule's ``kp x sim_dt / J`` at most. It was set when the loop's damping switched off at the torque limit
+and, above about 6, flipped every substep on a slipping light wheel (the Jackal at µ 0.3); the friction solve now
+holds a wheel at its limit with the damping on (:func:`~atrv_warp.sim.kernels.friction.relax_drive`), and the cap
+binds none of the shipped or test robots."""
 IN_PLACE_SHARES: tuple[float, ...] = (0.125, 0.25, 0.5, 1.0)
 """Steady turns in place at these shares of the robot's angular limit."""
 ARC_SHARES: tuple[tuple[float, float], ...] = ((0.5, 0.25), (0.5, -0.5), (1.0, 0.25), (1.0, 0.5))
