@@ -423,7 +423,7 @@ def friction_kernels(wheels: int, geared: bool = False, implicit: bool = False):
         side_damping = wp.vec2()  # geared sides: the side's drive damping [N·m per rad/s]
         side_torque = wp.vec2()  # geared sides: the side's motor torque, forward [N·m]
         side_held = wp.vec2()  # geared sides: the side's motor torque at the loop's limit, forward [N·m]
-        cs = vec()  # implicit: each wheel's drive damping [N·m per rad/s] (0 once its torque is held at the limit)
+        cs = vec()  # implicit: each wheel's drive damping [N·m per rad/s] (0: a wheel under torque commands)
         if wp.static(GEARED):
             for k in range(WHEELS):
                 t = slots.sign[k] * joint_f[world * slots.dofs_per_world + slots.dof[k]]
