@@ -90,9 +90,9 @@ def test_skid_steer_kinematics():
     linear, angular = base.twist(speeds)
     assert float(linear) == pytest.approx(0.5) and float(angular) == pytest.approx(0.8)
     # the effective track: a skid-steer turns slower than a differential drive on the same wheel speeds
-    factor = load_robot("atrvjr").effective_track_factor  # the robot file's measured factor
+    factor = load_robot("atrvjr").effective_track_factor  # the robot file's measured factor, the kinematics' default
     assert factor > 1.0
-    assert float(SkidSteer(rover.wheel_radius, track, factor).twist(speeds)[1]) == pytest.approx(0.8 * factor)
+    assert float(SkidSteer(rover.wheel_radius, track, 1.0).twist(speeds)[1]) == pytest.approx(0.8 * factor)
     for bad in ({"wheel_radius": 0.0}, {"track_width": -1.0}, {"effective_track_factor": math.nan}):
         name = next(iter(bad))
         with pytest.raises(ValueError, match=f"{name} must be a finite number > 0"):
