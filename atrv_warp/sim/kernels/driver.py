@@ -69,11 +69,11 @@ def limit_twist(params: DriverParams, command: wp.vec2, reference: wp.vec2) -> w
 
 @wp.func
 def pi_side(target: float, speed: float, integral: float, kp: float, ki: float, limit: float, dt: float):
-    """One side's wheel-speed PI: torque [N·m] within ``limit``, and the new integral [rad], which integrates up to
+    """One side's wheel-speed PI: torque [N·m] within ``limit``, the new integral [rad], which integrates up to
     where the output meets the limit and no further (anti-windup), never moving away from the integral it had past
     it. Continuous in every input: a hold that switched on past the limit made a drive's path a rough function of
     the rover's parameters, and stalled the calibration's Gauss-Newton steps (the Jackal's, with its gain at the
-    implicit rule's cap)."""
+    implicit rule's cap); and the output before the clamp [N·m] (an implicit loop's)."""
     error = target - speed
     candidate = integral + error * dt
     new = candidate
@@ -81,7 +81,8 @@ def pi_side(target: float, speed: float, integral: float, kp: float, ki: float, 
         low = wp.min(integral, (-limit - kp * error) / ki)
         high = wp.max(integral, (limit - kp * error) / ki)
         new = wp.clamp(candidate, low, high)
-    return wp.clamp(kp * error + ki * new, -limit, limit), new
+    raw = kp * error + ki * new
+    return wp.clamp(raw, -limit, limit), new, raw
 
 
 @wp.func
@@ -95,28 +96,21 @@ def lag_factor(tau: float, dt: float) -> float:
 @wp.func
 def driver_torques(params: DriverParams, command: wp.vec2, fresh: bool, speeds: wp.vec2, reference: wp.vec2,
                    integral: wp.vec2, applied: wp.vec2, lag: float):
-    """One substep of the driver for one world: the new reference twist, integral and lagged side torques.
+    """One substep of the driver for one world: the new reference twist, integral and lagged side torques, and each
+    side's output before its clamp and lag.
     ``fresh``: a command arrived within the timeout (else the target is zero)."""
     target = wp.vec2(0.0, 0.0)
     if fresh:
         target = command
     ref = limit_twist(params, target, reference)
     half = 0.5 * ref[1] * params.effective_track
-    left, i_left = pi_side((ref[0] - half) / params.wheel_radius, speeds[0], integral[0], params.kp, params.ki,
-                           params.torque_limit, params.dt)
-    right, i_right = pi_side((ref[0] + half) / params.wheel_radius, speeds[1], integral[1], params.kp, params.ki,
-                             params.torque_limit, params.dt)
+    left, i_left, raw_left = pi_side((ref[0] - half) / params.wheel_radius, speeds[0], integral[0], params.kp,
+                                     params.ki, params.torque_limit, params.dt)
+    right, i_right, raw_right = pi_side((ref[0] + half) / params.wheel_radius, speeds[1], integral[1], params.kp,
+                                        params.ki, params.torque_limit, params.dt)
     out = wp.vec2(left, right)
     new_applied = applied + lag_factor(lag, params.dt) * (out - applied)
-    return ref, wp.vec2(i_left, i_right), new_applied
-
-
-@wp.func
-def loop_output(params: DriverParams, reference: wp.vec2, speeds: wp.vec2, integral: wp.vec2) -> wp.vec2:
-    """Each side's PI output before its clamp [N·m], for the substep's new ``reference`` and ``integral``."""
-    half = 0.5 * reference[1] * params.effective_track
-    return wp.vec2(params.kp * ((reference[0] - half) / params.wheel_radius - speeds[0]) + params.ki * integral[0],
-                   params.kp * ((reference[0] + half) / params.wheel_radius - speeds[1]) + params.ki * integral[1])
+    return ref, wp.vec2(i_left, i_right), new_applied, wp.vec2(raw_left, raw_right)
 
 
 @wp.func
@@ -289,12 +283,11 @@ def drive_wheels(
     slope = wp.vec2(0.0, 0.0)  # each side's torque per rad/s of its wheels' speed change, before the motor
     beyond = wp.vec2(0.0, 0.0)  # an implicit loop's output past its limit, before the clamp [N·m]
     if mode[world] == DRIVE_TWIST:
-        reference, integral, applied = driver_torques(params, twist[world], age <= params.timeout, speeds, reference,
-                                                      integral, applied, lag[world])
+        reference, integral, applied, raw = driver_torques(params, twist[world], age <= params.timeout, speeds,
+                                                           reference, integral, applied, lag[world])
         side = applied
         if params.implicit != 0:
             slope = wp.vec2(params.kp, params.kp)
-            raw = loop_output(params, reference, speeds, integral)
             beyond = raw - wp.vec2(wp.clamp(raw[0], -params.torque_limit, params.torque_limit),
                                    wp.clamp(raw[1], -params.torque_limit, params.torque_limit))
     state_out.reference[world] = reference
@@ -375,7 +368,7 @@ def replay_driver(
         for s in range(substeps):
             f = float(s) / float(substeps)
             v = speeds[log, t] * (1.0 - f) + speeds[log, t + 1] * f
-            ref, acc, out = driver_torques(params, commands[log, t], fresh[log, t], v, ref, acc, out, 0.0)
+            ref, acc, out, _raw = driver_torques(params, commands[log, t], fresh[log, t], v, ref, acc, out, 0.0)
     reference[log, steps] = ref
     integral[log, steps] = acc
     applied[log, steps] = out
