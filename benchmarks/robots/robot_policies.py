@@ -7,8 +7,8 @@ For each robot, its shipped ``nav_deploy_<robot>`` policy (trained at that robot
 the command :data:`~atrv_warp.policy.SHIPPED_POLICIES` names) runs its recorded task, fitted to its robot, once on
 each of the first ``--episodes`` episodes of the test set (``EVAL_SEED``) under ``wide`` and on the nominal rover,
 and once on each of the first ``--twin-episodes`` in the MuJoCo twin of the nav world at the nominal µ, its base as
-the deploy docs advise (the task's velocity and acceleration limits, the robot's driver, the encoders' odometry
-without the accelerometer), on the test set and again on the validation set (``VALIDATION_SEED``). The targets:
+the deploy docs advise (the task's velocity and acceleration limits, the robot's driver configured for the radius
+the twin's tyres roll on, the encoders' odometry without the accelerometer), on the test set and again on the validation set (``VALIDATION_SEED``). The targets:
 >= 90 % in ours under both, >= 90 % in the twin on both sets.
 
 Per robot: its limits and control period, and per run the success rate, how the other episodes ended and its

@@ -5,13 +5,16 @@ period (``SimConfig.step_dt``, 0.05 s) in substeps of ``SimConfig.sim_dt`` (0.01
 motor driver as :mod:`atrv_warp.sim.kernels.driver` does, with the same :class:`~atrv_warp.sim.driver.DriverConfig`:
 the twist to each side's wheel-speed target through :class:`~atrv_warp.core.kinematics.SkidSteer`, a PI loop on the
 encoders within the torque limit (anti-windup), the motor's taper above ``MOTOR_TAPER_START`` of its no-load speed,
-the wheel odometry and the fused pose (the encoders' distance along the gyro's heading). The scanner's beams are
+the wheel odometry and the fused pose (the encoders' distance along the gyro's heading); a driver that leaves its
+wheel radius unset is configured for the radius the twin's tyres roll on (:func:`rolling_radius`). The scanner's beams are
 MuJoCo's own rays (``mj_multiRay``) from the URDF's scanner frame; the IMU reads the chassis' orientation and
 angular velocity in the URDF's IMU frame.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 
 import mujoco
@@ -27,7 +30,7 @@ from atrv_warp.sim.urdf import RoverDescription, load_rover
 
 from .mjcf import SCENE_GROUP, MujocoContact, Obstacle, world_xml
 
-__all__ = ["FLAG_CHASSIS_GROUND", "FLAG_OBSTACLE", "FLAG_WALL", "MujocoTwin"]
+__all__ = ["FLAG_CHASSIS_GROUND", "FLAG_OBSTACLE", "FLAG_WALL", "MujocoTwin", "rolling_radius"]
 
 STATE = mujoco.mjtState.mjSTATE_INTEGRATION
 """What a substep that runs again starts from (``mj_getState``)."""
@@ -66,6 +69,9 @@ class MujocoTwin:
         self.arena_cfg = arena or ArenaConfig()
         self.sim_cfg = sim or SimConfig()
         self.driver_cfg = (driver or DriverConfig()).resolved(self.rover_cfg.robot_spec)
+        if self.driver_cfg.wheel_radius is None:  # the base configured for the radius this rover's tyres roll on
+            self.driver_cfg = dataclasses.replace(self.driver_cfg, wheel_radius=rolling_radius(
+                self.rover_cfg, self.arena_cfg, self.sim_cfg, contact or MujocoContact()))
         self.scanner_cfg = scanner or ScannerConfig()
         self.contact_cfg = contact or MujocoContact()
         self.friction = ContactConfig().friction if friction is None else float(friction)
@@ -336,6 +342,29 @@ class MujocoTwin:
         rot = self.frame_pose(self.imu_mount)[:3, :3]
         w, x, y, z = _quat_wxyz(rot)
         return np.array([x, y, z, w]), rot.T @ self.angular_velocity
+
+
+REST_S = 1.0
+"""How long :func:`rolling_radius` lets the rover settle [s]."""
+
+
+@functools.cache
+def rolling_radius(rover: RoverConfig, arena: ArenaConfig, sim: SimConfig, contact: MujocoContact) -> float:
+    """The radius [m] the twin's tyres roll on: ``(r + h) / 2``, ``r`` the wheel's radius and ``h`` the axles' mean
+    height above the flat ground after :data:`REST_S` at rest (one rover-only world per configuration, cached).
+
+    MuJoCo puts a contact's point midway through the penetration, so a wheel that sinks ``r - h`` pushes on the
+    ground ``(r - h) / 2`` inside its radius and rolls that much smaller (5 to 6 % on the shipped robots under the
+    tyre's compliance, :class:`~.mjcf.MujocoContact`); ours rolls on ``r``. A :class:`MujocoTwin` whose driver
+    leaves its radius unset is configured with this one, as a real base is with its wheels' rolling radius
+    (``diff_drive_controller``'s ``wheel_radius_multiplier``): in each engine, an unset radius is the radius the
+    rover's wheels roll on there."""
+    twin = MujocoTwin(rover=rover, arena=arena, sim=sim, contact=contact, driver=DriverConfig(wheel_radius=rover.wheel_radius))
+    for _ in range(round(REST_S / sim.step_dt)):
+        twin.step(torques=(0.0, 0.0))
+    bodies = [mujoco.mj_name2id(twin.model, mujoco.mjtObj.mjOBJ_BODY, w.link) for w in twin.description.wheels]
+    height = float(np.mean(twin.data.xpos[bodies, 2])) - arena.ground_top
+    return 0.5 * (rover.wheel_radius + height)
 
 
 def _quat_wxyz(rot: np.ndarray) -> np.ndarray:
