@@ -8,7 +8,9 @@ inputs, and per figure a tolerance and the reason for any gap:
 
 1. **Rest height**: the chassis origin above the ground after 1 s at rest.
 2. **Acceleration under +2 N·m** on every wheel: the mean forward acceleration from 0.2 to 1.2 s, against the
-   no-slip rolling figure (:func:`atrv_warp.sim.protocols.rolling_acceleration`).
+   no-slip rolling figure (:func:`atrv_warp.sim.protocols.rolling_acceleration`); and **straight at 1 m/s** through
+   ``/cmd_vel``: the speed over the command and each engine's rolling radius (the twin's base is configured for its
+   own, :func:`atrv_warp.integrations.mujoco.twin.rolling_radius`).
 3. **chi**, the effective track ratio ``r (w_right - w_left) / (yaw rate x track)``, in place (0, 0.5) and on an
    arc (0.5 m/s, 0.5 rad/s) at µ 0.3 and 0.8: the motor driver with a differential drive's wheel targets (factor 1)
    for 8 s, the mean over the last 3 s.
@@ -32,7 +34,7 @@ import numpy as np
 
 from benchmarks._common import load_results, markdown_table, write_results
 
-VERSION = 2
+VERSION = 3
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
@@ -181,6 +183,31 @@ def step_response(command: tuple[float, float], seconds: float = 5.0, band: floa
     return out
 
 
+def straight(speed: float = 1.0, seconds: float = 4.0, average: float = 1.0) -> dict:
+    """Driving straight at ``speed`` [m/s] through ``/cmd_vel`` from rest, the last ``average`` seconds: in each
+    engine the forward speed over the command and the rolling radius (forward speed over the wheels' mean speed) [m],
+    and the radius the twin's base is configured for."""
+    import torch
+
+    from atrv_warp import RoverSim
+    from atrv_warp.integrations.mujoco import MujocoTwin
+
+    sim, twin = RoverSim(1), MujocoTwin()
+    dt = sim.sim_cfg.step_dt
+    kept = steps(average, dt)
+    sums = {"ours": np.zeros(2), "mujoco": np.zeros(2)}
+    for k in range(steps(seconds, dt)):
+        sim.set_twist(torch.tensor([[speed, 0.0]]))
+        sim.step()
+        twin.command(speed, 0.0)
+        twin.step()
+        if k >= steps(seconds, dt) - kept:
+            sums["ours"] += (float(sim.lin_vel[0, 0]), float(sim.wheel_speed[0].mean()))
+            sums["mujoco"] += (float(twin.chassis_rotation[:, 0] @ twin.linear_velocity), float(twin.wheel_speed.mean()))
+    out = {name: {"speed": float(v / kept / speed), "rolling_radius": float(v / w)} for name, (v, w) in sums.items()}
+    return out | {"twin_base_radius": float(twin.driver_cfg.wheel_radius), "wheel_radius": float(sim.rover_cfg.wheel_radius)}
+
+
 def slope_hold(mu: float = 0.3, fraction: float = 0.8, seconds: float = 5.0) -> dict:
     from atrv_warp.integrations.mujoco import MujocoTwin
     from atrv_warp.sim import RoverSim
@@ -266,6 +293,13 @@ def main() -> int:
         acc["mujoco"] - acc["ours"], f"both roll without slip (no-slip figure {acc['rolling']:.3f}); the twin's wheel "
         "pushes on the ground at its contact point, half its 12.7 mm sink inside the radius the no-slip figure uses "
         "(with that 0.119 m lever the figure is 1.061)")
+    line = straight()
+    row("straight at 1 m/s through /cmd_vel: speed / command", "-", line["ours"]["speed"], line["mujoco"]["speed"],
+        0.02, line["mujoco"]["speed"] - line["ours"]["speed"],
+        f"ours rolls on its {1000 * line['ours']['rolling_radius']:.1f} mm radius, the twin on "
+        f"{1000 * line['mujoco']['rolling_radius']:.1f} mm (MuJoCo pushes midway through the tyre's sink); each base "
+        f"is configured for its own (the twin's {1000 * line['twin_base_radius']:.1f} mm, rolling_radius), as a real "
+        "base is for its wheels' rolling radius")
     chis = []
     for mu in TURN_FRICTIONS:
         for label, command in TURNS.items():
@@ -295,7 +329,7 @@ def main() -> int:
         scan["terrain_p95_gap"],
         "our scanner marches each ray over bilinear heights (1 m steps, refined); MuJoCo's height field is two "
         "triangles per cell: a beam grazing the ground meets the two surfaces at different ranges")
-    result = {"rows": rows, "rest": rest, "acceleration": acc, "chi": chis, "step_response": steps_out, "slope": slope,
+    result = {"rows": rows, "rest": rest, "acceleration": acc, "straight": line, "chi": chis, "step_response": steps_out, "slope": slope,
               "scan": scan}
     path = write_results(RESULTS / "mujoco_agreement.json", result, version=VERSION, driver=True)
     print(f"written to {path}")
