@@ -300,22 +300,26 @@ def main() -> int:
         f"{1000 * line['mujoco']['rolling_radius']:.1f} mm (MuJoCo pushes midway through the tyre's sink); each base "
         f"is configured for its own (the twin's {1000 * line['twin_base_radius']:.1f} mm, rolling_radius), as a real "
         "base is for its wheels' rolling radius")
+    rolling = line["mujoco"]["rolling_radius"] / line["wheel_radius"]
     chis = []
     for mu in TURN_FRICTIONS:
         for label, command in TURNS.items():
             c = chi(mu, command)
             chis.append({"turn": label.replace(" ", "_"), "mu": mu, **c})
+            rolled = c["mujoco"] * rolling
             row(f"chi {label}, µ {mu:g}", "-", c["ours"], c["mujoco"], 0.15 * c["ours"], c["mujoco"] - c["ours"],
                 "the sliding wheels' forces set it: ours solve Coulomb's law exactly at velocity level (1.58 whatever "
                 "µ, the Coulomb figure for this geometry); MuJoCo's soft elliptic cone, with the tyre's compliance, "
                 "keeps every wheel on the ground (mujoco_turning_study.py: with MuJoCo's stiff default the sliding "
-                "wheels hop and chi was 2.5 to 7.4)")
+                "wheels hop and chi was 2.5 to 7.4). Both from the geometric radius: with the twin's rolling radius "
+                f"its chi is {rolled:.3f}, {rolled / c['ours'] - 1:+.1%} from ours")
     steps_out = {}
     for label, command in TURNS.items():
         s = steps_out[label.replace(" ", "_")] = step_response(command)
         row(f"/cmd_vel step {label}: steady yaw rate / command", "-", s["ours"]["steady"], s["mujoco"]["steady"], 0.15,
-            s["mujoco"]["steady"] - s["ours"]["steady"], "the driver assumes our chi (effective_track_factor): the "
-            "twin turns at the command times our chi over its own")
+            s["mujoco"]["steady"] - s["ours"]["steady"], "the driver assumes our chi (effective_track_factor) and "
+            "each engine's rolling radius: the twin turns at the command times our chi over its own with its rolling "
+            "radius (the chi rows)")
         row(f"/cmd_vel step {label}: settling time", "s", s["ours"]["settle"], s["mujoco"]["settle"], 0.5,
             s["mujoco"]["settle"] - s["ours"]["settle"], "the same PI loop; the contacts' compliance shapes the "
             "transient")
