@@ -354,11 +354,11 @@ def rolling_radius(rover: RoverConfig, arena: ArenaConfig, sim: SimConfig, conta
     height above the flat ground after :data:`REST_S` at rest (one rover-only world per configuration, cached).
 
     MuJoCo puts a contact's point midway through the penetration, so a wheel that sinks ``r - h`` pushes on the
-    ground ``(r - h) / 2`` inside its radius and rolls that much smaller (5 to 6 % on the shipped robots under the
+    ground ``(r - h) / 2`` inside its radius and rolls that much smaller (4 to 6 % on the shipped robots under the
     tyre's compliance, :class:`~.mjcf.MujocoContact`); ours rolls on ``r``. A :class:`MujocoTwin` whose driver
     leaves its radius unset is configured with this one, as a real base is with its wheels' rolling radius
-    (``diff_drive_controller``'s ``wheel_radius_multiplier``): in each engine, an unset radius is the radius the
-    rover's wheels roll on there."""
+    (``diff_drive_controller``'s ``wheel_radius_multiplier``) and as our simulator's driver is with the radius the
+    nominal rover's wheels roll on there."""
     twin = MujocoTwin(rover=rover, arena=arena, sim=sim, contact=contact, driver=DriverConfig(wheel_radius=rover.wheel_radius))
     for _ in range(round(REST_S / sim.step_dt)):
         twin.step(torques=(0.0, 0.0))
