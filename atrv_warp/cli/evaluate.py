@@ -24,7 +24,8 @@ Examples::
 
 ``--engine mujoco`` (the ``mujoco`` extra) drives a deployable policy (``/cmd_vel`` actions from the robot
 observation) through ``atrv_warp.integrations.mujoco``'s twin of each episode's world: the same worlds, starts and
-goals, the observation built by the light core's ``RobotObservation`` as on a robot. The library function is
+goals, the observation built by the light core's ``RobotObservation`` as on a robot, the base configured for the
+radius the twin's tyres roll on (``integrations.mujoco.twin.rolling_radius``). The library function is
 :func:`evaluate_policy`.
 """
 
