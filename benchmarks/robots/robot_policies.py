@@ -1,7 +1,8 @@
 """Each shipped robot's deployable nav policy on its own robot: the test set in our simulator, and the MuJoCo twin.
 
 Run: ``python -m benchmarks.robots.robot_policies [--robots atrvjr jackal husky] [--episodes 1000] [--twin-episodes 200]
-[--jobs 2]``
+[--jobs 2]``; ``--robot-file FILE --policy PATH --out OUT`` runs a robot file's policy the same way (the six-wheel
+test robot's: ``robot_policies_sixwheel.json``).
 
 For each robot, its shipped ``nav_deploy_<robot>`` policy (trained at that robot's own limits, under ``wide``, by
 the command :data:`~atrv_warp.policy.SHIPPED_POLICIES` names) runs its recorded task, fitted to its robot, once on
@@ -42,6 +43,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--robots", nargs="+", default=None, help="shipped robots (default: every one)")
     parser.add_argument("--episodes", type=int, default=1000, help="test-set episodes in our simulator")
     parser.add_argument("--twin-episodes", type=int, default=200, help="episodes in the MuJoCo twin (0: none)")
+    parser.add_argument("--robot-file", metavar="FILE", default=None,
+                        help="a robot file of one's own, run with its --policy instead of the shipped robots (write it "
+                             "elsewhere with --out)")
+    parser.add_argument("--policy", metavar="PATH", default=None, help="the --robot-file's policy (.pt)")
     parser.add_argument("--out", default=str(RESULTS / "robot_policies.json"))
     parser.add_argument("--jobs", type=int, default=1,
                         help="evaluations run at once, each in its own process on one thread (default 1)")
@@ -52,8 +57,12 @@ def main(argv: list[str] | None = None) -> int:
     from atrv_warp.policy import SHIPPED_POLICIES, policy_path, policy_record
     from atrv_warp.task.evaluation import VALIDATION_SEED
 
-    robots = args.robots or list(ROBOTS)
-    unknown = [r for r in robots if r not in ROBOTS]
+    if (args.robot_file is None) != (args.policy is None):
+        parser.error("--robot-file and --policy go together")
+    if args.robot_file is not None and (args.robots or Path(args.out) == RESULTS / "robot_policies.json"):
+        parser.error("--robot-file runs that robot alone: leave out --robots and give its own --out")
+    robots = [args.robot_file] if args.robot_file else args.robots or list(ROBOTS)
+    unknown = [r for r in robots if r not in ROBOTS and r != args.robot_file]
     if unknown:
         parser.error(f"unknown robot(s) {unknown}; shipped: {', '.join(ROBOTS)}")
     if args.twin_episodes:
@@ -64,8 +73,8 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     table, files, jobs = {}, [], []
     for robot in robots:
-        name = f"nav_deploy_{robot}"
-        if name not in SHIPPED_POLICIES:
+        name = args.policy or f"nav_deploy_{robot}"
+        if args.policy is None and name not in SHIPPED_POLICIES:
             parser.error(f"no shipped policy {name!r} for robot {robot!r}")
         try:
             path = policy_path(name)
@@ -74,7 +83,8 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         files.append(path)
         task = policy_record(path).task
-        row = {"policy": name, "train": SHIPPED_POLICIES[name].train, "max_linear": task.config.max_linear,
+        train = SHIPPED_POLICIES[name].train if args.policy is None else None
+        row = {"policy": name, "train": train, "max_linear": task.config.max_linear,
                "max_angular": task.config.max_angular, "linear_max_acceleration": task.config.linear_max_acceleration,
                "control_period": task.config.control_period, "max_steps": task.config.max_steps}
         runs = [("wide", {"randomization": "wide", "episodes": args.episodes}),
@@ -83,8 +93,10 @@ def main(argv: list[str] | None = None) -> int:
             runs += [("mujoco", {"engine": "mujoco", "episodes": args.twin_episodes}),
                      ("mujoco_other_seed", {"engine": "mujoco", "episodes": args.twin_episodes,
                                             "seed": VALIDATION_SEED})]
-        jobs += [(robot, label, str(path), kw) for label, kw in runs]
-        table[robot] = row
+        own = {"robot": robot} if args.robot_file else {}  # a file's: evaluate takes its path, the table its name
+        key = policy_record(path).robot.name if args.robot_file else robot
+        jobs += [(key, label, str(path), kw | own) for label, kw in runs]
+        table[key] = row
     jobs.sort(key=lambda job: job[3].get("engine") != "mujoco")  # the twin's, the longest, first
     with _pool(args.jobs) as pool:
         for (robot, label, _, _), r in zip(jobs, pool.map(_evaluate, jobs), strict=True):
