@@ -154,13 +154,16 @@ def provenance(version: int, *, script: str | Path | None = None, dynamics: bool
 
 def task_robot_pairs(policies: tuple[str | Path, ...] = (), tasks: tuple[tuple[str, str], ...] = ()) -> list:
     """The (task, robot) pairs of ``tasks`` and of each policy file's record (what it trained on), each once, in
-    order."""
+    order. A policy of a robot file of one's own records the robot, not its file's path: its pair is the caller's to
+    give in ``tasks``, with the file's path."""
+    from atrv_warp.core.robot import ROBOTS
     from atrv_warp.policy import policy_record
 
     pairs = list(tasks)
     for policy in policies:
         record = policy_record(policy)
-        pairs.append((record.task.name, record.robot.name))
+        if record.robot.name in ROBOTS:
+            pairs.append((record.task.name, record.robot.name))
     return list(dict.fromkeys((str(t), str(r)) for t, r in pairs))
 
 

@@ -105,8 +105,9 @@ def main(argv: list[str] | None = None) -> int:
                   + f"  ({r['seconds']:.0f} s)", flush=True)
     result = {"seed": "EVAL_SEED", "other_seed": "VALIDATION_SEED", "episodes": args.episodes,
               "twin_episodes": args.twin_episodes, "jobs": args.jobs, "robots": table}
+    own = ((policy_record(files[0]).task.name, args.robot_file),) if args.robot_file else ()
     out = write_results(args.out, result, version=VERSION, task=True, driver=True, policies=tuple(files),
-                        robots=tuple(robots))
+                        robots=tuple(robots), tasks=own)
     print(f"written to {out}")
     return 0
 
