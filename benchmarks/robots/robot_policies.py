@@ -9,8 +9,8 @@ the command :data:`~atrv_warp.policy.SHIPPED_POLICIES` names) runs its recorded 
 each of the first ``--episodes`` episodes of the test set (``EVAL_SEED``) under ``wide`` and on the nominal rover,
 and once on each of the first ``--twin-episodes`` in the MuJoCo twin of the nav world at the nominal µ, its base as
 the deploy docs advise (the task's velocity and acceleration limits, the robot's driver configured for the radius
-the twin's tyres roll on, the encoders' odometry without the accelerometer), on the test set and again on the validation set (``VALIDATION_SEED``). The targets:
->= 90 % in ours under both, >= 90 % in the twin on both sets.
+the twin's tyres roll on, the encoders' odometry without the accelerometer), on the test set and again on the
+validation set (``VALIDATION_SEED``). The targets: >= 90 % in ours under both, >= 90 % in the twin on both sets.
 
 Per robot: its limits and control period, and per run the success rate, how the other episodes ended and its
 seconds (``--jobs`` runs at once, so with more than one they share the cores). Prints
@@ -105,9 +105,9 @@ def main(argv: list[str] | None = None) -> int:
                   + f"  ({r['seconds']:.0f} s)", flush=True)
     result = {"seed": "EVAL_SEED", "other_seed": "VALIDATION_SEED", "episodes": args.episodes,
               "twin_episodes": args.twin_episodes, "jobs": args.jobs, "robots": table}
-    own = ((policy_record(files[0]).task.name, args.robot_file),) if args.robot_file else ()
+    pairs = ((policy_record(files[0]).task.name, args.robot_file),) if args.robot_file else ()  # by the file's path
     out = write_results(args.out, result, version=VERSION, task=True, driver=True, policies=tuple(files),
-                        robots=tuple(robots), tasks=own)
+                        robots=tuple(robots), tasks=pairs)
     print(f"written to {out}")
     return 0
 
