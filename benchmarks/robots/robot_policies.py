@@ -2,7 +2,8 @@
 
 Run: ``python -m benchmarks.robots.robot_policies [--robots atrvjr jackal husky] [--episodes 1000] [--twin-episodes 200]
 [--jobs 2]``; ``--robot-file FILE --policy PATH --out OUT`` runs a robot file's policy the same way (the six-wheel
-test robot's: ``robot_policies_sixwheel.json``).
+test robot's: ``robot_policies_sixwheel.json``); ``--twin-geometric-radius`` configures the twin's base for the
+wheels' geometric radius, as the twin did before (``robot_policies_geometric_radius.json``).
 
 For each robot, its shipped ``nav_deploy_<robot>`` policy (trained at that robot's own limits, under ``wide``, by
 the command :data:`~atrv_warp.policy.SHIPPED_POLICIES` names) runs its recorded task, fitted to its robot, once on
@@ -47,6 +48,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="a robot file of one's own, run with its --policy instead of the shipped robots (write it "
                              "elsewhere with --out)")
     parser.add_argument("--policy", metavar="PATH", default=None, help="the --robot-file's policy (.pt)")
+    parser.add_argument("--twin-geometric-radius", action="store_true",
+                        help="configure the twin's base for the wheels' geometric radius, not the radius its tyres "
+                             "roll on (the twin's default before; write it elsewhere with --out)")
     parser.add_argument("--out", default=str(RESULTS / "robot_policies.json"))
     parser.add_argument("--jobs", type=int, default=1,
                         help="evaluations run at once, each in its own process on one thread (default 1)")
@@ -55,12 +59,16 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--episodes and --jobs must be >= 1 and --twin-episodes >= 0")
     from atrv_warp.core.robot import ROBOTS
     from atrv_warp.policy import SHIPPED_POLICIES, policy_path, policy_record
+    from atrv_warp.sim.config import nominal_rover_config
+    from atrv_warp.sim.driver import DriverConfig
     from atrv_warp.task.evaluation import VALIDATION_SEED
 
     if (args.robot_file is None) != (args.policy is None):
         parser.error("--robot-file and --policy go together")
     if args.robot_file is not None and (args.robots or Path(args.out) == RESULTS / "robot_policies.json"):
         parser.error("--robot-file runs that robot alone: leave out --robots and give its own --out")
+    if args.twin_geometric_radius and Path(args.out) == RESULTS / "robot_policies.json":
+        parser.error("--twin-geometric-radius is a study: give it its own --out")
     robots = [args.robot_file] if args.robot_file else args.robots or list(ROBOTS)
     unknown = [r for r in robots if r not in ROBOTS and r != args.robot_file]
     if unknown:
@@ -82,7 +90,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"robot_policies.py: error: {' '.join(str(err).split())}", file=sys.stderr)
             return 2
         files.append(path)
-        task = policy_record(path).task
+        record = policy_record(path)
+        task = record.task
         train = SHIPPED_POLICIES[name].train if args.policy is None else None
         row = {"policy": name, "train": train, "max_linear": task.config.max_linear,
                "max_angular": task.config.max_angular, "linear_max_acceleration": task.config.linear_max_acceleration,
@@ -90,11 +99,12 @@ def main(argv: list[str] | None = None) -> int:
         runs = [("wide", {"randomization": "wide", "episodes": args.episodes}),
                 ("nominal", {"randomization": "none", "episodes": args.episodes})]
         if args.twin_episodes:
-            runs += [("mujoco", {"engine": "mujoco", "episodes": args.twin_episodes}),
-                     ("mujoco_other_seed", {"engine": "mujoco", "episodes": args.twin_episodes,
-                                            "seed": VALIDATION_SEED})]
+            twin = {"engine": "mujoco", "episodes": args.twin_episodes}
+            if args.twin_geometric_radius:
+                twin["driver"] = DriverConfig(wheel_radius=nominal_rover_config(robot).wheel_radius)
+            runs += [("mujoco", twin), ("mujoco_other_seed", {**twin, "seed": VALIDATION_SEED})]
         own = {"robot": robot} if args.robot_file else {}  # a file's: evaluate takes its path, the table its name
-        key = policy_record(path).robot.name if args.robot_file else robot
+        key = record.robot.name if args.robot_file else robot
         jobs += [(key, label, str(path), kw | own) for label, kw in runs]
         table[key] = row
     jobs.sort(key=lambda job: job[3].get("engine") != "mujoco")  # the twin's, the longest, first
@@ -104,7 +114,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{robot:8s} {label:17s} " + " ".join(f"{k} {100 * r[k]:5.1f}%" for k in ENDS)
                   + f"  ({r['seconds']:.0f} s)", flush=True)
     result = {"seed": "EVAL_SEED", "other_seed": "VALIDATION_SEED", "episodes": args.episodes,
-              "twin_episodes": args.twin_episodes, "jobs": args.jobs, "robots": table}
+              "twin_episodes": args.twin_episodes, "twin_base_radius": "geometric" if args.twin_geometric_radius
+              else "rolling", "jobs": args.jobs, "robots": table}
     pairs = ((policy_record(files[0]).task.name, args.robot_file),) if args.robot_file else ()  # by the file's path
     out = write_results(args.out, result, version=VERSION, task=True, driver=True, policies=tuple(files),
                         robots=tuple(robots), tasks=pairs)
