@@ -27,6 +27,7 @@ __all__ = [
     "parked_on_slope",
     "reference_drive",
     "rolling_acceleration",
+    "settle_time",
     "slip_ratio",
     "step_response",
     "turning_response",
@@ -214,6 +215,15 @@ STEP_FRICTIONS: tuple[float, ...] = (0.2, 0.3, 0.8, 1.0)
 """Coulomb µ of the step response: ice-like to dry asphalt."""
 
 
+def settle_time(ratio, dt: float, band: float = 0.1) -> float:
+    """The time [s] after which ``ratio`` (a trace over its target, sampled every ``dt`` [s] from ``dt`` on) stays
+    within ``band`` of 1: 0 where it never leaves the band, ``inf`` where its last sample is outside it."""
+    outside = np.flatnonzero(np.abs(np.asarray(ratio, dtype=np.float64) - 1.0) > band)
+    if not len(outside):
+        return 0.0
+    return math.inf if outside[-1] + 1 == len(ratio) else float(dt * (outside[-1] + 1))
+
+
 def step_response(commands=STEP_COMMANDS, frictions=STEP_FRICTIONS, *, seconds: float = 5.0, band: float = 0.1,
                   driver=None, sim: SimConfig | None = None, rover: RoverConfig | None = None) -> list[dict]:
     """The motor driver's answer to ``/cmd_vel`` steps: one world per (command, µ), from rest, the command
@@ -245,9 +255,7 @@ def step_response(commands=STEP_COMMANDS, frictions=STEP_FRICTIONS, *, seconds: 
     out = []
     for i, (v, w, mu) in enumerate(cases):
         r = rate[:, i] / w
-        outside = ((r - 1.0).abs() > band).nonzero().flatten()
-        settle = 0.0 if not len(outside) else float(time[outside[-1]]) if int(outside[-1]) + 1 < steps else math.inf
-        out.append({"linear": v, "angular": w, "friction": mu, "settle": settle,
+        out.append({"linear": v, "angular": w, "friction": mu, "settle": settle_time(r.numpy(), dt, band),
                     "overshoot": float(r.max() - 1.0), "steady": float(r[-last:].mean()),
                     "ripple": float(r[-last:].std()),
                     "speed": float(speed[-last:, i].mean() / v) if v else math.nan,

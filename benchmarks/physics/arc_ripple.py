@@ -17,7 +17,6 @@ Prints the table, writes ``benchmarks/results/arc_ripple.json`` and, with ``--fi
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
@@ -41,14 +40,6 @@ CHECK_STEP = 0.05
 """The check's sampling [s]."""
 
 
-def settle(trace: np.ndarray, target: np.ndarray, dt: float) -> float:
-    """The time [s] after which ``trace`` stays within :data:`BAND` of ``target`` (``inf``: never)."""
-    outside = np.flatnonzero(np.abs(trace / target - 1.0) > BAND)
-    if not len(outside):
-        return 0.0
-    return math.inf if outside[-1] + 1 == len(trace) else float((outside[-1] + 1) * dt)
-
-
 def drive(robot: str, friction: float, damping: float, stiffness: float) -> dict:
     """One arc from rest on ``robot`` at ``friction``, the contact's damping and stiffness scaled."""
     import dataclasses
@@ -58,6 +49,7 @@ def drive(robot: str, friction: float, damping: float, stiffness: float) -> dict
     from atrv_warp import RoverSim
     from atrv_warp.sim.config import ContactConfig, RoverConfig, SimConfig
     from atrv_warp.sim.driver import DriverConfig
+    from atrv_warp.sim.protocols import settle_time
     from atrv_warp.sim.urdf import load_rover
 
     base = ContactConfig()
@@ -97,8 +89,8 @@ def drive(robot: str, friction: float, damping: float, stiffness: float) -> dict
             "ripple_early": float(np.ptp(rate[round(0.5 / dt):round(1.0 / dt)]) / 2),
             "ripple_late": float(np.ptp(rate[round(1.5 / dt):]) / 2),
             "period": float(2 * np.diff(crossings).mean() * dt) if len(crossings) > 2 else None,
-            "settle_check": settle(np.asarray(checked), np.ones(len(checked)), CHECK_STEP),
-            "wheels_settle": max(settle(wheels[:, s], np.full(len(wheels), goal[s]), dt) for s in (0, 1)),
+            "settle_check": settle_time(checked, CHECK_STEP, BAND),
+            "wheels_settle": max(settle_time(wheels[:, s] / goal[s], dt, BAND) for s in (0, 1)),
             "time": (dt * np.arange(1, len(rate) + 1)).tolist(), "yaw_rate": rate.tolist()}
 
 
