@@ -305,8 +305,8 @@ def main() -> int:
     for mu in TURN_FRICTIONS:
         for label, command in TURNS.items():
             c = chi(mu, command)
-            chis.append({"turn": label.replace(" ", "_"), "mu": mu, **c})
-            rolled = c["mujoco"] * rolling
+            rolled = c["mujoco"] * rolling  # the twin's chi with the radius its wheels roll on
+            chis.append({"turn": label.replace(" ", "_"), "mu": mu, **c, "mujoco_rolling": rolled})
             row(f"chi {label}, µ {mu:g}", "-", c["ours"], c["mujoco"], 0.15 * c["ours"], c["mujoco"] - c["ours"],
                 "the sliding wheels' forces set it: ours solve Coulomb's law exactly at velocity level (1.58 whatever "
                 "µ, the Coulomb figure for this geometry); MuJoCo's soft elliptic cone, with the tyre's compliance, "
@@ -333,6 +333,7 @@ def main() -> int:
         scan["terrain_p95_gap"],
         "our scanner marches each ray over bilinear heights (1 m steps, refined); MuJoCo's height field is two "
         "triangles per cell: a beam grazing the ground meets the two surfaces at different ranges")
+    line["chi_rolling_gap_max"] = max(abs(c["mujoco_rolling"] / c["ours"] - 1.0) for c in chis)
     result = {"rows": rows, "rest": rest, "acceleration": acc, "straight": line, "chi": chis, "step_response": steps_out, "slope": slope,
               "scan": scan}
     path = write_results(RESULTS / "mujoco_agreement.json", result, version=VERSION, driver=True)
