@@ -221,3 +221,23 @@ def _no_training_in_the_quick_tier(request, monkeypatch):
     monkeypatch.setattr(TrainLoop, "run", refuse)
     yield
 
+
+@pytest.fixture(autouse=True, scope="module")
+def _adjoints_off_after_a_file_that_differentiates():
+    """A differentiable simulator compiles Warp's kernels with their adjoints from then on, in its whole process
+    (:func:`atrv_warp.runtime.enable_gradients`); after the test file that built one (its module-scoped fixtures may
+    hold one), this puts the process back as the package's import leaves it (every module, and what compiles next,
+    without adjoints), so that a later file's test in the same worker compiles what its own command would. Left on,
+    the tests after the gradient tests paid the adjoints' compile: the eight-wheel friction solve took 69 s instead of
+    7 (a cold kernel cache, the quick tier on two workers)."""
+    yield
+    wp = sys.modules.get("warp")
+    if wp is None or "atrv_warp.runtime" not in sys.modules or not wp.config.enable_backward:
+        return  # as the package's import leaves it (runtime.configure: no adjoints)
+    from warp._src.context import user_modules
+
+    wp.config.enable_backward = False
+    for module in list(user_modules.values()):
+        if module.options.get("enable_backward"):
+            wp.set_module_options({"enable_backward": False}, module)
+
