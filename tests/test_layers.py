@@ -22,6 +22,7 @@ PACKAGE = ROOT / "atrv_warp"
 LAYERS = (
     ("atrv_warp.core",),
     ("atrv_warp.runtime", "atrv_warp.storage"),
+    ("atrv_warp.world",),
     ("atrv_warp.sim",),
     ("atrv_warp.task",),
     ("atrv_warp.policy",),
