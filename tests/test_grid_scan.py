@@ -102,3 +102,37 @@ def test_a_beam_over_the_walls_or_from_inside_one():
     assert ranges[1] == 10.0  # passes over the 1 m wall
     assert ranges[2] == 0.0  # from inside a wall
     assert ranges[3] == pytest.approx(1.0, abs=1e-5)  # the map's edge at x = 0: what lies beyond is unknown
+
+
+def test_a_rover_in_a_map_sees_its_walls_and_is_stopped_by_them():
+    """``RoverSim(maps=[...])``: the laser reads the map's wall (and, beyond the map's edge, the unknown), worlds take
+    the maps in turn, and a rover driven into a wall is held by it and flagged as touching an obstacle, while a rover
+    in a world without that wall drives on."""
+    import torch
+
+    from atrv_warp.sim import RoverSim
+    from atrv_warp.sim.kernels.contact import FLAG_OBSTACLE
+    from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
+
+    walled = np.zeros((200, 200), dtype=np.int8)  # 10 m square at 0.05 m about the origin
+    walled[:, 160] = OCCUPIED  # a wall across x = 3.0 ... 3.05 m
+    open_site = OccupancyMap(cells=np.zeros((200, 200), dtype=np.int8), resolution=0.05, origin=(-5.0, -5.0))
+    sim = RoverSim(3, maps=[OccupancyMap(cells=walled, resolution=0.05, origin=(-5.0, -5.0)), open_site])
+    assert sim.maps.world_map.tolist() == [0, 1, 0]
+    scanner = LaserScanner(sim, ScannerConfig(beams=1, fov=0.1))
+    sim.reset(poses=torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 1.0, math.pi]]))
+    sim.step()
+    scanner.scan()
+    ranges = scanner.ranges[:, 0].tolist()
+    assert ranges[0] == pytest.approx(ranges[1] - 2.0, abs=0.01)  # the wall 2 m before the open map's edge
+    assert ranges[2] == pytest.approx(ranges[1], abs=0.01)  # facing the walled map's edge at x = -5: as far
+    touched, furthest = torch.zeros(3, dtype=torch.int32), -math.inf
+    for _ in range(round(4.0 / sim.sim_cfg.step_dt)):  # 4 s at 1 m/s: 3 m to the wall, 5 to the open map's edge
+        sim.set_twist(torch.tensor([[1.0, 0.0], [1.0, 0.0], [0.0, 0.0]]))
+        sim.step()
+        touched |= sim.contact_flags.cpu() & int(FLAG_OBSTACLE)
+        furthest = max(furthest, float(sim.root_pose[0, 0]))
+    front = 3.0 - furthest  # the wall's face from the chassis' centre, nearest: the chassis' front half, no less
+    assert 0.2 < front < 0.8, furthest
+    assert touched.tolist() == [int(FLAG_OBSTACLE), 0, 0]
+    assert float(sim.root_pose[1, 0]) > 3.0  # no wall in the open map

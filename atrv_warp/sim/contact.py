@@ -31,6 +31,7 @@ from atrv_warp.sim.kernels.friction import RoverInertia, WheelSlots, friction_ke
 from atrv_warp.sim.kernels.obstacles import OBSTACLE_BOX, OBSTACLE_CYLINDER, OBSTACLE_NONE, ObstacleSet
 from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics
 from atrv_warp.sim.kernels.terrain import TerrainGrid
+from atrv_warp.sim.maps import GridWorlds
 from atrv_warp.sim.model import BuiltModel
 from atrv_warp.sim.terrain import HeightGrid
 
@@ -273,7 +274,8 @@ class ContactModel:
         shapes: the template rover's shapes (:class:`~atrv_warp.sim.kernels.contact.RoverShapes`).
         planes: ground and walls (:class:`~atrv_warp.sim.kernels.contact.ArenaPlanes`).
         terrain: each world's ground (:class:`Terrain`); obstacles: each world's (:class:`Obstacles`).
-        scene: planes, terrain and obstacles as the kernel's struct.
+        maps: each world's map (:class:`~atrv_warp.sim.maps.GridWorlds`; none by default): walls the laser sees.
+        scene: planes, terrain, obstacles and maps as the kernel's struct.
         wheels: the wheels the Coulomb friction solver handles
             (:class:`~atrv_warp.sim.kernels.friction.WheelSlots`; ``None`` under the viscous law).
         inertia: each world's rover as one rigid body, the solver's model of it
@@ -284,7 +286,8 @@ class ContactModel:
 
     def __init__(self, built: BuiltModel, *, rover: RoverConfig, contact: ContactConfig, arena: ArenaConfig,
                  sim_dt: float, gravity: float, device, terrain: HeightGrid | None = None,
-                 obstacles: ObstacleConfig | None = None, implicit_drive: bool = False):
+                 obstacles: ObstacleConfig | None = None, implicit_drive: bool = False,
+                 maps: GridWorlds | None = None):
         self.num_worlds = built.num_worlds
         rb = built.rover_builder
         self.bodies_per_world = rb.body_count
@@ -295,8 +298,10 @@ class ContactModel:
         self.planes = _planes(arena, device)
         self.terrain = Terrain(terrain, self.num_worlds, arena, device)
         self.obstacles = Obstacles(obstacles, self.num_worlds, arena, device)
+        self.maps = maps if maps is not None else GridWorlds([], [-1] * self.num_worlds, device)
         scene = Scene()
         scene.planes, scene.terrain, scene.obstacles = self.planes, self.terrain.kernel, self.obstacles.kernel
+        scene.grids = self.maps.struct
         self.scene = scene
         self.gravity = wp.vec3(0.0, 0.0, gravity)
         self.wheels: WheelSlots | None = None

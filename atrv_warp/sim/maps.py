@@ -18,7 +18,7 @@ import warp as wp
 from atrv_warp.sim.kernels.grid import GridMaps, distance_columns, distance_rows, ray_grid
 from atrv_warp.world import OccupancyMap
 
-__all__ = ["DEFAULT_WALL_TOP", "GridWorlds", "distance_field"]
+__all__ = ["DEFAULT_WALL_TOP", "GridWorlds", "distance_field", "round_robin"]
 
 DEFAULT_WALL_TOP = 2.0
 """Height of a map's walls [m]: above every shipped robot's laser and chassis (a building's walls, a yard's fences)."""
@@ -40,6 +40,11 @@ def distance_field(walls: np.ndarray, device: str | wp.context.Device | None = N
     return distance.numpy()
 
 
+def round_robin(num_worlds: int, num_maps: int) -> list[int]:
+    """World ``w``'s map: ``w % num_maps`` (each map in turn), or -1 for every world where there are no maps."""
+    return [w % num_maps if num_maps else -1 for w in range(num_worlds)]
+
+
 @wp.kernel
 def cast_grid_rays(grids: GridMaps, m: int, origins: wp.array(dtype=wp.vec3), directions: wp.array(dtype=wp.vec3),
                    t_max: float, ranges: wp.array(dtype=float)):
@@ -50,7 +55,7 @@ def cast_grid_rays(grids: GridMaps, m: int, origins: wp.array(dtype=wp.vec3), di
 
 class GridWorlds:
     """``maps`` on ``device``, each held once, and which map each world drives in (``world_map[w]``: an index into
-    ``maps``, or -1 for a world without one); :attr:`struct` is what the kernels read."""
+    ``maps``, or -1 for a world without one); :attr:`struct` is what the kernels read. No maps: no world has one."""
 
     def __init__(self, maps: Sequence[OccupancyMap], world_map: Sequence[int], device=None, *,
                  wall_top: float = DEFAULT_WALL_TOP):
@@ -61,23 +66,25 @@ class GridWorlds:
             raise ValueError(f"world_map holds {sorted(set(world_map.tolist()))}, but there are {len(self.maps)} maps")
         walls = [m.walls for m in self.maps]
         fields = [distance_field(w, self.device) for w in walls]
-        sizes = [w.size for w in walls]
-        start = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int32) if sizes else np.zeros(0, np.int32)
+        if not walls:  # no map: one placeholder cell, which no world reads (count 0)
+            walls, fields = [np.ones((1, 1), dtype=bool)], [np.zeros((1, 1), dtype=np.float32)]
+        start = np.concatenate([[0], np.cumsum([w.size for w in walls])[:-1]]).astype(np.int32)
         s = GridMaps()
         s.count = len(self.maps)
-        flat = np.concatenate([w.ravel() for w in walls]).astype(np.uint8) if walls else np.zeros(1, np.uint8)
-        s.wall = wp.array(flat, dtype=wp.uint8, device=self.device)
-        s.distance = wp.array(np.concatenate([f.ravel() for f in fields]) if fields else np.zeros(1, np.float32),
-                              dtype=float, device=self.device)
+        s.wall = wp.array(np.concatenate([w.ravel() for w in walls]).astype(np.uint8), dtype=wp.uint8,
+                          device=self.device)
+        s.distance = wp.array(np.concatenate([f.ravel() for f in fields]), dtype=float, device=self.device)
         s.start = wp.array(start, dtype=wp.int32, device=self.device)
         s.rows = wp.array([w.shape[0] for w in walls], dtype=wp.int32, device=self.device)
         s.cols = wp.array([w.shape[1] for w in walls], dtype=wp.int32, device=self.device)
-        s.resolution = wp.array([m.resolution for m in self.maps], dtype=float, device=self.device)
-        s.origin = wp.array([m.origin for m in self.maps], dtype=wp.vec2, device=self.device)
-        s.world_map = wp.array(world_map, dtype=wp.int32, device=self.device)
+        s.resolution = wp.array([m.resolution for m in self.maps] or [1.0], dtype=float, device=self.device)
+        s.origin = wp.array([m.origin for m in self.maps] or [(0.0, 0.0)], dtype=wp.vec2, device=self.device)
+        s.world_map = wp.array(world_map if world_map.size else np.full(1, -1, np.int32), dtype=wp.int32,
+                               device=self.device)
         s.top = float(wall_top)
         self.struct = s
-        self.distance = fields  # each map's field [cells], on the host
+        self.distance = fields[:len(self.maps)]  # each map's field [cells], on the host
+        self.world_map = world_map  # (N,) each world's map, or -1
 
     def cast(self, m: int, origins, directions, max_range: float) -> np.ndarray:
         """Ranges [m] of rays from ``origins`` (R, 3) along unit ``directions`` (R, 3) in map ``m``: the beam the

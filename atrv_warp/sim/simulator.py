@@ -10,7 +10,7 @@ views of Warp arrays that the step updates in place (no copy per step).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,6 +38,7 @@ from atrv_warp.sim.kernels.driver import DriverState, drive_wheels
 from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics, apply_payload
 from atrv_warp.sim.kernels.rover import RoverLayout, compute_rover_state, reset_worlds
 from atrv_warp.sim.kernels.terrain import place_on_terrain
+from atrv_warp.sim.maps import GridWorlds, round_robin
 from atrv_warp.sim.model import BuiltModel, build_model
 from atrv_warp.sim.modes import DRIVE_MODE_REFERENCE_TORQUE, DRIVE_MODE_TORQUES, DriveMode
 from atrv_warp.sim.params import (
@@ -51,6 +52,7 @@ from atrv_warp.sim.params import (
 )
 from atrv_warp.sim.terrain import HeightGrid, TerrainConfig, get_terrain
 from atrv_warp.sim.urdf import load_rover
+from atrv_warp.world import OccupancyMap, load_map
 
 __all__ = ["DRIVE_MODE_REFERENCE_TORQUE", "DRIVE_MODE_TORQUES", "DriveMode", "RoverSim", "SimBuffers"]
 
@@ -179,6 +181,11 @@ class RoverSim:
         driver: The base's motor driver (:class:`~atrv_warp.sim.driver.DriverConfig`; default: its defaults).
             Its radius and track default to the nominal rover's: ``rover`` before ``sim_config`` changes it; its
             gains, torque limit and track factor to the robot's.
+        maps: Sites as Nav2 maps (:class:`~atrv_warp.world.OccupancyMap`, or a ``map_server`` YAML's path), each
+            held once; world ``w`` drives in map ``w % len(maps)``. Their walls and unknown cells (and what lies
+            beyond a map's edge) stand :data:`~atrv_warp.sim.maps.DEFAULT_WALL_TOP` high: the laser reads them, and
+            the rover meets them as it meets an obstacle (``FLAG_OBSTACLE``). The arena's ground and walls stay.
+            ``()``: none.
 
     State views (torch tensors on the sim device, updated in place by :meth:`step`; clone to keep):
         ``root_pose`` (N, 7): chassis position [m] and quaternion (x, y, z, w), world frame.
@@ -203,7 +210,7 @@ class RoverSim:
         :attr:`contact` the contact model, and :meth:`substep` one solver substep, which
         :class:`~atrv_warp.sim.diff.DiffRollout` steps through too;
         :attr:`terrain` and :attr:`obstacles` each world's ground and obstacles (write a world's tile or
-        layout, then reset it);
+        layout, then reset it); :attr:`maps` each world's map;
         :attr:`params` each world's physical parameters (:meth:`set_params`, or a kernel's writes and
         :meth:`apply_payload`).
     """
@@ -224,6 +231,7 @@ class RoverSim:
         requires_grad: bool = False,
         sim_config: str | Path | None = None,
         driver: DriverConfig | None = None,
+        maps: Sequence[OccupancyMap | str | Path] = (),
     ):
         self.device = wp.get_device(device)
         check_world_count(num_worlds, self.device)
@@ -255,6 +263,7 @@ class RoverSim:
         self.state_1 = self.model.state()
         self.control = self.model.control()
         self._make_layout()
+        site_maps = [m if isinstance(m, OccupancyMap) else load_map(m) for m in maps]
         if isinstance(terrain, str):
             terrain = get_terrain(terrain)
         if isinstance(terrain, TerrainConfig):
@@ -266,7 +275,8 @@ class RoverSim:
         self.contact = ContactModel(self.built, rover=self.rover_cfg, contact=self.contact_cfg, arena=self.arena_cfg,
                                     sim_dt=self.sim_cfg.sim_dt, gravity=self.sim_cfg.gravity, device=self.device,
                                     terrain=terrain, obstacles=obstacles,
-                                    implicit_drive=driver.implicit_under(self.contact_cfg.friction_law))
+                                    implicit_drive=driver.implicit_under(self.contact_cfg.friction_law),
+                                    maps=GridWorlds(site_maps, round_robin(num_worlds, len(site_maps)), self.device))
         """The contact model every substep launches (:class:`~atrv_warp.sim.contact.ContactModel`)."""
         self.params = WorldParams(num_worlds, rover=self.rover_cfg, contact=self.contact_cfg, device=self.device)
         """Each world's physical parameters (:class:`~atrv_warp.sim.params.WorldParams`): friction, stiffness,
@@ -381,6 +391,11 @@ class RoverSim:
     def obstacles(self) -> Obstacles:
         """Each world's obstacles (:class:`~atrv_warp.sim.contact.Obstacles`; no slots without an ObstacleConfig)."""
         return self.contact.obstacles
+
+    @property
+    def maps(self) -> GridWorlds:
+        """Each world's map (:class:`~atrv_warp.sim.maps.GridWorlds`: ``maps``, ``world_map``; none by default)."""
+        return self.contact.maps
 
     @property
     def buffers(self) -> SimBuffers:

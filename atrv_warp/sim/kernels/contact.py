@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from atrv_warp.sim.kernels.grid import SKIP_MARGIN, GridMaps, is_wall
 from atrv_warp.sim.kernels.obstacles import (
     OBSTACLE_BOX,
     OBSTACLE_CYLINDER,
@@ -46,7 +47,7 @@ FLAG_WALL = wp.constant(1)
 FLAG_BODY_GROUND = wp.constant(2)
 """A non-wheel shape (the chassis) touches the ground."""
 FLAG_OBSTACLE = wp.constant(4)
-"""Any rover shape touches an obstacle."""
+"""Any rover shape touches an obstacle or a wall of its map."""
 
 ARENA_PLANES = wp.constant(5)
 """The arena's half-spaces: the ground (plane 0), then the four walls (``ArenaConfig.planes``)."""
@@ -96,6 +97,7 @@ class Scene:
     planes: ArenaPlanes
     terrain: TerrainGrid  # replaces plane 0 when enabled
     obstacles: ObstacleSet
+    grids: GridMaps  # each world's map (count 0: none): walls the laser sees
 
 
 @wp.func
@@ -373,6 +375,28 @@ def box_terrain_contact(
 
 
 @wp.func
+def footprint(kind: int, xf: wp.transform, size: wp.vec3, axle: wp.vec3):
+    """A rover shape's footprint on the ground plane, an oriented rectangle about its centre: (unit axis, half size
+    along it, half size across; the half sizes 0 for a shape whose axis stands upright)."""
+    a1 = wp.vec2(0.0)
+    h1 = float(0.0)
+    h2 = float(0.0)
+    if kind == SHAPE_CYLINDER:  # footprint: the axle's length by the diameter
+        a1 = wp.vec2(axle[0], axle[1])
+        h1 = size[1]
+        h2 = size[0]
+    else:  # footprint: the box's x and y extents
+        ex = wp.transform_vector(xf, wp.vec3(1.0, 0.0, 0.0))
+        a1 = wp.vec2(ex[0], ex[1])
+        h1 = size[0]
+        h2 = size[1]
+    al = wp.length(a1)
+    if al < 1.0e-6:
+        return a1, 0.0, 0.0
+    return a1 / al, h1, h2
+
+
+@wp.func
 def obstacle_contact(
     obstacles: ObstacleSet,
     world: int,
@@ -391,24 +415,11 @@ def obstacle_contact(
     """A rover shape's footprint against every obstacle of the world: (wrench, 1 if touching)."""
     c3 = wp.transform_get_translation(xf)
     c = wp.vec2(c3[0], c3[1])
-    a1 = wp.vec2(0.0)
-    h1 = float(0.0)
-    h2 = float(0.0)
-    if kind == SHAPE_CYLINDER:  # footprint: the axle's length by the diameter
-        a1 = wp.vec2(axle[0], axle[1])
-        h1 = size[1]
-        h2 = size[0]
-    else:  # footprint: the box's x and y extents
-        ex = wp.transform_vector(xf, wp.vec3(1.0, 0.0, 0.0))
-        a1 = wp.vec2(ex[0], ex[1])
-        h1 = size[0]
-        h2 = size[1]
-    al = wp.length(a1)
+    a1, h1, h2 = footprint(kind, xf, size, axle)
     wrench = wp.spatial_vector()
     touching = int(0)
-    if al < 1.0e-6:
+    if h1 <= 0.0:
         return wrench, touching
-    a1 = a1 / al
     reach = wp.sqrt(h1 * h1 + h2 * h2)
     for o in range(obstacles.count):
         okind = obstacles.kind[world, o]
@@ -432,6 +443,62 @@ def obstacle_contact(
                                      omega, axle, slope, slope, params, stiffness, friction)
             touching = 1
     return wrench, touching
+
+@wp.func
+def grid_contact(
+    grids: GridMaps,
+    m: int,
+    kind: int,
+    xf: wp.transform,
+    size: wp.vec3,
+    com: wp.vec3,
+    v_com: wp.vec3,
+    omega: wp.vec3,
+    axle: wp.vec3,
+    slope: float,
+    params: ContactParams,
+    stiffness: float,
+    friction: float,
+):
+    """A rover shape's footprint against the wall cells of map ``m`` (each a square standing to ``grids.top``): the
+    deepest cell's contact, as one obstacle's (a wall of many cells pushes once, not once per cell): (wrench, 1 if
+    touching). Far from every wall (the distance field says so at the shape's centre) it reads no cell."""
+    c3 = wp.transform_get_translation(xf)
+    c = wp.vec2(c3[0], c3[1])
+    a1, h1, h2 = footprint(kind, xf, size, axle)
+    wrench = wp.spatial_vector()
+    if h1 <= 0.0 or c3[2] > grids.top:
+        return wrench, 0
+    res = grids.resolution[m]
+    o2 = grids.origin[m]
+    reach = wp.sqrt(h1 * h1 + h2 * h2)
+    col0 = int(wp.floor((c[0] - o2[0]) / res))
+    row0 = int(wp.floor((c[1] - o2[1]) / res))
+    inside = row0 >= 0 and col0 >= 0 and row0 < grids.rows[m] and col0 < grids.cols[m]
+    if inside and (grids.distance[grids.start[m] + row0 * grids.cols[m] + col0] - SKIP_MARGIN) * res > reach:
+        return wrench, 0
+    span = int(wp.ceil(reach / res)) + 1
+    best = float(0.0)
+    normal = wp.vec2(0.0)
+    point = c
+    b1 = wp.vec2(1.0, 0.0)
+    half = 0.5 * res
+    for dr in range(-span, span + 1):
+        for dc in range(-span, span + 1):
+            row = row0 + dr
+            col = col0 + dc
+            if is_wall(grids, m, row, col):
+                q = wp.vec2(o2[0] + (float(col) + 0.5) * res, o2[1] + (float(row) + 0.5) * res)
+                depth, n2, p2 = footprint_vs_box(c, a1, h1, h2, q, b1, half, half)
+                if depth > best:
+                    best = depth
+                    normal = n2
+                    point = p2
+    if best <= 0.0:
+        return wrench, 0
+    wrench = contact_wrench(wp.vec3(point[0], point[1], c3[2]), best, wp.vec3(normal[0], normal[1], 0.0), com, v_com,
+                            omega, axle, slope, slope, params, stiffness, friction)
+    return wrench, 1
 
 
 @wp.kernel
@@ -513,6 +580,14 @@ def compute_contact_forces(
             wrench += w
             if touching != 0:
                 flags = flags | FLAG_OBSTACLE
+        if scene.grids.count > 0:  # the world's map: its walls and unknown cells, as obstacles
+            m = scene.grids.world_map[world]
+            if m >= 0:
+                w, touching = grid_contact(scene.grids, m, shapes.kind[s], xf, size, com, v_com, omega, axle,
+                                           shapes.slope_lat[s], params, kp, mu)
+                wrench += w
+                if touching != 0:
+                    flags = flags | FLAG_OBSTACLE
         # atomic_add, not read-modify-write: it has an adjoint, so wp.Tape can differentiate it
         wp.atomic_add(body_f, b, wrench)
     contact_flags[world] = flags

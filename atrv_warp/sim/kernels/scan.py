@@ -1,11 +1,12 @@
 """The 2-D laser scanner: one ray per (world, beam) against the arena walls, the ground or terrain,
-and the world's obstacles, with seeded Gaussian range noise and dropout."""
+the world's obstacles and its map's walls, with seeded Gaussian range noise and dropout."""
 
 from __future__ import annotations
 
 import warp as wp
 
 from atrv_warp.sim.kernels.contact import ARENA_PLANES, Scene
+from atrv_warp.sim.kernels.grid import ray_grid
 from atrv_warp.sim.kernels.obstacles import ray_obstacle
 from atrv_warp.sim.kernels.terrain import ray_terrain
 
@@ -51,6 +52,10 @@ def cast_beam(params: ScanParams, scene: Scene, world: int, beam: int, X: wp.tra
         if kind != 0:
             t = wp.min(t, ray_obstacle(kind, obstacles.pose[world, o], obstacles.size[world, o], obstacles.top, origin,
                                        direction, t))
+    if scene.grids.count > 0:  # the world's map: walls and unknown cells
+        m = scene.grids.world_map[world]
+        if m >= 0:
+            t = wp.min(t, ray_grid(scene.grids, m, origin, direction, t))
     if scene.terrain.enabled != 0:  # last: the nearest other hit bounds the march
         t = wp.min(t, ray_terrain(scene.terrain, scene.terrain.tile[world], origin, direction, t, params.march_step))
     if params.noise_std > 0.0 or params.dropout > 0.0:
