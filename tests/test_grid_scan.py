@@ -136,3 +136,26 @@ def test_a_rover_in_a_map_sees_its_walls_and_is_stopped_by_them():
     assert 0.2 < front < 0.8, furthest
     assert touched.tolist() == [int(FLAG_OBSTACLE), 0, 0]
     assert float(sim.root_pose[1, 0]) > 3.0  # no wall in the open map
+
+
+def test_a_100_m_map_at_5_cm_loads_from_its_files_and_steps(tmp_path):
+    """The size issue 72 names (2,000 x 2,000 cells), given to the simulator as a YAML's path: it loads, its rover
+    steps, and its laser reads the building's outer wall."""
+    import torch
+    from PIL import Image
+
+    from atrv_warp.sim import RoverSim
+    from atrv_warp.sim.scanner import LaserScanner, ScannerConfig
+
+    pixels = np.full((2000, 2000), 254, dtype=np.uint8)
+    pixels[:20], pixels[-20:], pixels[:, :20], pixels[:, -20:] = 0, 0, 0, 0  # 1 m outer walls
+    Image.fromarray(pixels, mode="L").save(tmp_path / "hall.pgm")
+    (tmp_path / "hall.yaml").write_text("image: hall.pgm\nresolution: 0.05\norigin: [-50.0, -50.0, 0.0]\nnegate: 0\n"
+                                        "occupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    sim = RoverSim(1, maps=[tmp_path / "hall.yaml"])
+    assert sim.maps.maps[0].shape == (2000, 2000) and sim.maps.maps[0].name == "hall"
+    scanner = LaserScanner(sim, ScannerConfig(beams=1, fov=0.1, max_range=60.0))
+    sim.reset(poses=torch.tensor([[10.0, 0.0, 0.0]]))
+    sim.step()
+    scanner.scan()
+    assert 38.0 < float(scanner.ranges[0, 0]) < 39.0  # the outer wall's face at x = 49 m, from a laser ahead of 10 m

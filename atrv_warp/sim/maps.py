@@ -15,10 +15,11 @@ from collections.abc import Sequence
 import numpy as np
 import warp as wp
 
+from atrv_warp.sim.config import ArenaConfig
 from atrv_warp.sim.kernels.grid import GridMaps, distance_columns, distance_rows, ray_grid
 from atrv_warp.world import OccupancyMap
 
-__all__ = ["DEFAULT_WALL_TOP", "GridWorlds", "distance_field", "round_robin"]
+__all__ = ["ARENA_MARGIN", "DEFAULT_WALL_TOP", "GridWorlds", "arena_around", "distance_field", "round_robin"]
 
 DEFAULT_WALL_TOP = 2.0
 """Height of a map's walls [m]: above every shipped robot's laser and chassis (a building's walls, a yard's fences)."""
@@ -38,6 +39,21 @@ def distance_field(walls: np.ndarray, device: str | wp.context.Device | None = N
     distance = wp.empty((rows, cols), dtype=float, device=device)
     wp.launch(distance_columns, dim=cols, inputs=[across, apex, bound], outputs=[distance], device=device)
     return distance.numpy()
+
+
+ARENA_MARGIN = 1.0
+"""Ground beyond the farthest map's edge [m] in :func:`arena_around`'s arena."""
+
+
+def arena_around(maps: Sequence[OccupancyMap]) -> ArenaConfig:
+    """The reference arena, or, with ``maps``, a square arena centred on the origin whose walls stand
+    :data:`ARENA_MARGIN` beyond every map's edge: a map bounds its world (what lies beyond its edge is a wall), so the
+    arena's walls are never met and its ground lies under every map."""
+    if not maps:
+        return ArenaConfig()
+    reach = max(max(abs(m.origin[0]), abs(m.origin[1]), abs(m.origin[0] + m.size[0]), abs(m.origin[1] + m.size[1]))
+                for m in maps)
+    return ArenaConfig(size=max(ArenaConfig().size, 2.0 * (reach + ARENA_MARGIN)))
 
 
 def round_robin(num_worlds: int, num_maps: int) -> list[int]:

@@ -38,7 +38,7 @@ from atrv_warp.sim.kernels.driver import DriverState, drive_wheels
 from atrv_warp.sim.kernels.params import MassProperties, WorldPhysics, apply_payload
 from atrv_warp.sim.kernels.rover import RoverLayout, compute_rover_state, reset_worlds
 from atrv_warp.sim.kernels.terrain import place_on_terrain
-from atrv_warp.sim.maps import GridWorlds, round_robin
+from atrv_warp.sim.maps import GridWorlds, arena_around, round_robin
 from atrv_warp.sim.model import BuiltModel, build_model
 from atrv_warp.sim.modes import DRIVE_MODE_REFERENCE_TORQUE, DRIVE_MODE_TORQUES, DriveMode
 from atrv_warp.sim.params import (
@@ -184,8 +184,8 @@ class RoverSim:
         maps: Sites as Nav2 maps (:class:`~atrv_warp.world.OccupancyMap`, or a ``map_server`` YAML's path), each
             held once; world ``w`` drives in map ``w % len(maps)``. Their walls and unknown cells (and what lies
             beyond a map's edge) stand :data:`~atrv_warp.sim.maps.DEFAULT_WALL_TOP` high: the laser reads them, and
-            the rover meets them as it meets an obstacle (``FLAG_OBSTACLE``). The arena's ground and walls stay.
-            ``()``: none.
+            the rover meets them as it meets an obstacle (``FLAG_OBSTACLE``). Without an ``arena``, the arena's
+            ground and walls are drawn around every map (:func:`~atrv_warp.sim.maps.arena_around`). ``()``: none.
 
     State views (torch tensors on the sim device, updated in place by :meth:`step`; clone to keep):
         ``root_pose`` (N, 7): chassis position [m] and quaternion (x, y, z, w), world frame.
@@ -243,7 +243,8 @@ class RoverSim:
                                                                         sim_config)
         """``bounds``: each bounded physical parameter's range for this robot
         (:func:`~atrv_warp.sim.params.parameter_bounds`): the configs' values and :meth:`set_params` are held to them."""
-        self.arena_cfg = arena or ArenaConfig()
+        site_maps = [m if isinstance(m, OccupancyMap) else load_map(m) for m in maps]
+        self.arena_cfg = arena or arena_around(site_maps)
         self.sim_cfg = sim or SimConfig()
         self.num_worlds = num_worlds
         self.substeps = self.sim_cfg.substeps
@@ -263,7 +264,6 @@ class RoverSim:
         self.state_1 = self.model.state()
         self.control = self.model.control()
         self._make_layout()
-        site_maps = [m if isinstance(m, OccupancyMap) else load_map(m) for m in maps]
         if isinstance(terrain, str):
             terrain = get_terrain(terrain)
         if isinstance(terrain, TerrainConfig):
