@@ -274,7 +274,8 @@ class ContactModel:
         shapes: the template rover's shapes (:class:`~atrv_warp.sim.kernels.contact.RoverShapes`).
         planes: ground and walls (:class:`~atrv_warp.sim.kernels.contact.ArenaPlanes`).
         terrain: each world's ground (:class:`Terrain`); obstacles: each world's (:class:`Obstacles`).
-        maps: each world's map (:class:`~atrv_warp.sim.maps.GridWorlds`; none by default): walls the laser sees.
+        maps: each world's map (:class:`~atrv_warp.sim.maps.GridWorlds`; none by default): walls the laser sees and
+            the rover meets.
         scene: planes, terrain, obstacles and maps as the kernel's struct.
         wheels: the wheels the Coulomb friction solver handles
             (:class:`~atrv_warp.sim.kernels.friction.WheelSlots`; ``None`` under the viscous law).

@@ -97,7 +97,7 @@ class Scene:
     planes: ArenaPlanes
     terrain: TerrainGrid  # replaces plane 0 when enabled
     obstacles: ObstacleSet
-    grids: GridMaps  # each world's map (count 0: none): walls the laser sees
+    grids: GridMaps  # each world's map (count 0: none): walls the laser sees and the rover meets
 
 
 @wp.func
@@ -443,6 +443,7 @@ def obstacle_contact(
                                      omega, axle, slope, slope, params, stiffness, friction)
             touching = 1
     return wrench, touching
+
 
 @wp.func
 def grid_contact(
