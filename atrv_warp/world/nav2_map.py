@@ -114,14 +114,8 @@ def load_map(path: str | Path) -> OccupancyMap:
     """Read a ``map_server`` map's YAML and its image (see the module's docstring); :class:`MapError` naming the file
     and the problem where it cannot."""
     yaml_path = Path(path).expanduser()
-    try:
-        text = yaml_path.read_bytes()
-    except FileNotFoundError:
-        raise MapError(f"map not found: {yaml_path}") from None
-    except IsADirectoryError:
-        raise MapError(f"map {yaml_path}: is a folder; give the map's YAML file") from None
-    except OSError as err:
-        raise MapError(f"map {yaml_path}: cannot be read ({err.strerror})") from None
+    text = _read_bytes(yaml_path, f"map {yaml_path}:", missing=f"map not found: {yaml_path}",
+                       folder=f"map {yaml_path}: is a folder; give the map's YAML file")
     meta = _read_yaml(yaml_path, text)
     image_path = Path(meta["image"]).expanduser()
     if not image_path.is_absolute():
@@ -208,19 +202,25 @@ def _number(where: str, key: str, value) -> float:
     return float(value)
 
 
+def _read_bytes(path: Path, where: str, *, missing: str, folder: str) -> bytes:
+    """``path``'s bytes, or :class:`MapError`: ``missing`` where there is no file, ``folder`` where it is a folder,
+    else ``where`` and why it cannot be read."""
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise MapError(missing) from None
+    except IsADirectoryError:
+        raise MapError(folder) from None
+    except OSError as err:
+        raise MapError(f"{where} cannot be read ({err.strerror})") from None
+
+
 def _read_image(yaml_path: Path, image_path: Path) -> tuple[np.ndarray, np.ndarray | None, bytes]:
     """The image's 8-bit grey and alpha (``None`` where it has none), and its bytes."""
     from PIL import Image, UnidentifiedImageError
 
     where = f"map {yaml_path}: image {image_path}"
-    try:
-        data = image_path.read_bytes()
-    except FileNotFoundError:
-        raise MapError(f"{where} not found") from None
-    except IsADirectoryError:
-        raise MapError(f"{where} is a folder") from None
-    except OSError as err:
-        raise MapError(f"{where} cannot be read ({err.strerror})") from None
+    data = _read_bytes(image_path, where, missing=f"{where} not found", folder=f"{where} is a folder")
     import io
 
     try:

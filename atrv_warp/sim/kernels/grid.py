@@ -52,6 +52,18 @@ def is_wall(grids: GridMaps, m: int, row: int, col: int) -> bool:
 
 
 @wp.func
+def first_crossing(t: float, position: float, cell: int, d: float, res: float):
+    """Along one axis of a ray at ``t`` [m], at ``position`` [cells] in cell ``cell``, moving ``d`` [m per m along
+    the ray]: (the cell step, -1 or 1; the t of the next cell boundary; the t between boundaries), the t never for
+    an axis the ray does not move along."""
+    if d > 0.0:
+        return 1, t + (float(cell + 1) - position) * res / d, res / d
+    if d < 0.0:
+        return -1, t + (float(cell) - position) * res / d, -res / d
+    return 1, float(1.0e30), float(1.0e30)
+
+
+@wp.func
 def ray_grid(grids: GridMaps, m: int, origin: wp.vec3, direction: wp.vec3, t_max: float) -> float:
     """Distance [m] along a unit ray from ``origin`` to the first wall cell of map ``m`` it enters, or ``t_max``;
     0 from inside a wall; a hit above the walls' top misses."""
@@ -82,26 +94,8 @@ def ray_grid(grids: GridMaps, m: int, origin: wp.vec3, direction: wp.vec3, t_max
             t = t + free * res / planar
             continue
         # walk: the t at which the ray crosses the next column's and the next row's boundary, and their spacing
-        step_c = int(1)
-        next_c = float(1.0e30)
-        delta_c = float(1.0e30)
-        if dx > 0.0:
-            next_c = t + (float(col + 1) - u) * res / dx
-            delta_c = res / dx
-        elif dx < 0.0:
-            step_c = -1
-            next_c = t + (float(col) - u) * res / dx
-            delta_c = -res / dx
-        step_r = int(1)
-        next_r = float(1.0e30)
-        delta_r = float(1.0e30)
-        if dy > 0.0:
-            next_r = t + (float(row + 1) - v) * res / dy
-            delta_r = res / dy
-        elif dy < 0.0:
-            step_r = -1
-            next_r = t + (float(row) - v) * res / dy
-            delta_r = -res / dy
+        step_c, next_c, delta_c = first_crossing(t, u, col, dx, res)
+        step_r, next_r, delta_r = first_crossing(t, v, row, dy, res)
         for _cell in range(WALK_CELLS):
             if next_c < next_r:
                 col = col + step_c
