@@ -1,6 +1,7 @@
 """Drive five ways side by side, one world each, and print what happened.
 
-Run: ``python -m atrv_warp.demo [--seconds 3] [--robot atrvjr] [--variant realistic] [--drive base|torque]``
+Run: ``python -m atrv_warp.demo [--seconds 3] [--robot atrvjr] [--variant realistic] [--drive base|torque]
+[--map MAP.yaml]``
 
 By default each world drives through the robot's base as ``/cmd_vel`` would, at the robot's own limits (its file's
 ``[limits]``): still, forward and backward at its top speed, turning right and left in place at its top yaw rate.
@@ -29,6 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="base: twists at the robot's limits through its base (default); torque: the reference "
                              "tutorial's fixed wheel torques")
     parser.add_argument("--device", default="cpu", help="Warp device, e.g. cpu or cuda:0")
+    parser.add_argument("--map", metavar="MAP.yaml", help="drive in a Nav2 map_server map, from its most open spot")
     return parser
 
 
@@ -43,12 +45,16 @@ def main(argv: list[str] | None = None) -> int:
     print(f"building {len(modes)} worlds (first run compiles Warp kernels, ~1 min on CPU) ...", flush=True)
     t0 = time.perf_counter()
     try:
-        sim = RoverSim(len(modes), robot=args.robot, variant=args.variant, device=args.device)
-    except ValueError as err:  # an unknown robot, a bad robot file or URDF
+        sim = RoverSim(len(modes), robot=args.robot, variant=args.variant, device=args.device,
+                       maps=[args.map] if args.map else ())
+    except ValueError as err:  # an unknown robot, a bad robot file or URDF, a bad map
         print(f"error: {err}", file=sys.stderr)
         return 2
     sim.step()
     print(f"ready in {time.perf_counter() - t0:.1f} s: {sim}")
+    if args.map:
+        x, y = sim.maps.open_spot(0)
+        print(f"in {args.map}, from its most open spot ({x:.2f}, {y:.2f}) m")
     for _ in range(19):
         sim.step()
     start = sim.root_pose[:, :3].clone()

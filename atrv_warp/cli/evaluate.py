@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from atrv_warp.runtime import add_verbose_argument, device_summary, error_line, set_verbose
@@ -73,7 +73,7 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
                     randomization: str = "none", friction: float | None = None, sim_config: str | None = None,
                     device: str = "cpu", attach: Callable | None = None, driver=None,
                     task_module: str | None = None, robot: str | None = None,
-                    allow_other_robot: bool = False) -> Evaluation:
+                    allow_other_robot: bool = False, maps: Sequence[str] = ()) -> Evaluation:
     """Run a policy once on each of the first ``episodes`` episodes of evaluation set ``seed``.
 
     Args:
@@ -99,6 +99,9 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
             it was trained on, never today's declaration of it.
         allow_other_robot: Run a policy on another robot than its own on purpose (a study); without it, that is
             refused naming both.
+        maps: Nav2 ``map_server`` YAML files to drive in (``ours`` only): episode ``k`` in map ``k % len(maps)``,
+            its start and goal in the map's free space (:class:`~atrv_warp.task.env.RoverEnv`); the JSON records
+            each map (its file and sha256), each episode's and the success in each.
 
     Raises:
         ValueError: One line naming the problem: an unknown engine, task or preset; a policy that cannot be loaded
@@ -126,7 +129,10 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
         from atrv_warp.core.robot import load_robot
 
         load_robot(robot)  # an unknown one is named, with the shipped ones
+    site_maps = _load_maps(maps)
     if engine == "mujoco":
+        if site_maps:
+            raise ValueError("engine mujoco drives the twin's flat arena; maps are for engine ours")
         return _evaluate_twin(policy, task=task, episodes=episodes, seed=seed, friction=friction,
                               baseline=baseline, randomization=randomization, sim_config=sim_config, driver=driver,
                               robot=robot, allow_other_robot=allow_other_robot)
@@ -135,7 +141,31 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
                          "config or the randomization")
     return _evaluate_ours(policy, task=task, episodes=episodes, seed=seed, baseline=baseline,
                           randomization=randomization, sim_config=sim_config, device=device, attach=attach,
-                          driver=driver, robot=robot, allow_other_robot=allow_other_robot)
+                          driver=driver, robot=robot, allow_other_robot=allow_other_robot, maps=site_maps)
+
+
+def _load_maps(maps: Sequence) -> list:
+    """Each map read (a bad one stops here, in one line naming it, before any simulator is built)."""
+    if not maps:
+        return []
+    from atrv_warp.world import OccupancyMap, load_map
+
+    return [m if isinstance(m, OccupancyMap) else load_map(m) for m in maps]
+
+
+def _map_figures(maps: Sequence, record, num_worlds: int) -> dict:
+    """The JSON's record of the maps: each one's file and sha256, each episode's map and the success in each."""
+    import torch
+
+    from atrv_warp.sim.maps import round_robin
+
+    episode_map = round_robin(num_worlds, len(maps))
+    success = record.success.float()
+    return {"maps": [{"name": m.name, "file": str(m.source) if m.source else None, "sha256": m.digest,
+                      "episodes": episode_map.count(k),
+                      "success": float(success[torch.tensor(episode_map) == k].mean())}
+                     for k, m in enumerate(maps)],
+            "episode_map": episode_map}
 
 
 def evaluate_around(policy: str | None = None, *, sim_config: str, randomization: str = "around",
@@ -236,7 +266,7 @@ def _robot_to_run(record, robot: str | None, allow: bool, source) -> tuple[str, 
 
 
 def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim_config, device, attach,
-                   driver, robot=None, allow_other_robot=False) -> Evaluation:
+                   driver, robot=None, allow_other_robot=False, maps=()) -> Evaluation:
     from atrv_warp.policy import shipped_policy_for
     from atrv_warp.task.evaluation import range_bins, run_episodes, success_by_bin
     from atrv_warp.task.randomization import AROUND_PRESETS, get_randomization
@@ -263,7 +293,7 @@ def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim
     # `around` resolved against sim_config; a preset fitted to the robot
     shift = get_randomization(randomization, sim_config=sim_config, rover=nominal_rover_config(robot))
     env = RoverEnv(episodes, device=device, task=env_task, randomization=shift, sim_config=sim_config,
-                   driver=driver, robot=robot)
+                   driver=driver, robot=robot, maps=maps)
     module = module.to(env.device)  # loaded on the CPU; the env's observations live on its device
     record = run_episodes(module, env, seed=seed, on_step=attach(env) if attach is not None else None)
     extra = {}
@@ -272,6 +302,8 @@ def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim
         extra = {"randomization": randomization,
                  "ranges": {k: [d.low, d.high] for k, d in shift.physics.items()} | {"latency": list(shift.latency)},
                  "success_by_bin": success_by_bin(record, range_bins(shift)) if around else success_by_bin(record)}
+    if maps:
+        extra |= _map_figures(maps, record, episodes)
     return Evaluation(str(name), task, seed, "ours", record, extra)
 
 
@@ -343,6 +375,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--sim-config", metavar="FILE",
                         help="simulator-config TOML, e.g. atrv-calibrate's fit of a real rover (docs/calibration.md)")
     parser.add_argument("--device", default="cpu", help="simulation device")
+    parser.add_argument("--map", nargs="+", metavar="MAP.yaml",
+                        help="drive in Nav2 map_server maps (episode k in map k %% N), starts and goals in their free "
+                             "space")
     parser.add_argument("--json", metavar="FILE", help="also write the figures to FILE")
     parser.add_argument("--rerun", metavar="FILE.rrd", help="record the episodes to a Rerun file")
     parser.add_argument("--serve", action="store_true", help="serve a live Rerun web viewer on 127.0.0.1")
@@ -446,7 +481,7 @@ def main(argv: list[str] | None = None) -> int:
     options = {"engine": args.engine, "task": args.task, "episodes": args.episodes, "seed": args.seed,
                "baseline": args.baseline, "friction": args.friction, "device": args.device, "attach": viewers,
                "driver": driver, "task_module": args.task_module, "robot": args.robot,
-               "allow_other_robot": args.allow_other_robot}
+               "allow_other_robot": args.allow_other_robot, "maps": args.map or ()}
     on = None
     try:
         if around:  # the config's rover itself, then across the spread around it
@@ -470,6 +505,9 @@ def main(argv: list[str] | None = None) -> int:
         print(format_result(run.name, result) + tail)
     if "success_by_bin" in extra:
         print(format_bins(extra["success_by_bin"]))
+    if len(extra.get("maps", ())) > 1:
+        print("  success by map: " + " | ".join(f"{m['name']}: {100 * m['success']:.1f}% ({m['episodes']})"
+                                                for m in extra["maps"]))
     if args.rerun:
         print(f"recording: {args.rerun}  (view with: rerun {args.rerun})")
     if viewers.video is not None:

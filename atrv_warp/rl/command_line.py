@@ -48,7 +48,7 @@ names are unique across groups, so ``lr=3e-4`` is enough), and ``collector=sync`
 BOOLEAN_SPELLINGS = {"1": "True", "true": "True", "yes": "True", "on": "True",
                      "0": "False", "false": "False", "no": "False", "off": "False"}
 """The words a true/false field accepts (any case), as tyro spells them."""
-FLAG_ALIASES = {"--sim-config": "--env.sim-config"}
+FLAG_ALIASES = {"--sim-config": "--env.sim-config", "--map": "--env.map"}
 """Flags shared with the other commands (``atrv-calibrate`` writes what ``--sim-config`` reads), and the field each sets."""
 DEFAULT_PRESET = "default"
 PROG = "python -m atrv_warp.train"
@@ -82,6 +82,10 @@ def _token(dotted: str, value) -> list[str]:
     """
     text = str(value)
     kind = _field_type(dotted)
+    if typing.get_origin(kind) is tuple:  # a list: a TOML array, or `[a, b]` / `a,b` / `a` on the command line
+        items = value if isinstance(value, (list, tuple)) else [
+            t.strip() for t in text.strip().removeprefix("[").removesuffix("]").split(",") if t.strip()]
+        return [f"--{dotted.replace('_', '-')}", *(str(t) for t in items)]
     if kind is bool:
         text = BOOLEAN_SPELLINGS.get(text.strip().lower(), text)
     elif kind is int and not isinstance(value, bool):

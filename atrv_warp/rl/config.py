@@ -102,6 +102,10 @@ class EnvConfig:
     sim_config: str = ""
     """A simulator-config TOML file applied to every world (``[rover]`` and ``[contact]`` tables), e.g. the
     calibration ``atrv-calibrate`` fitted to a real rover's bag (docs/calibration.md); empty: the nominal rover."""
+    map: tuple[str, ...] = ()
+    """Nav2 ``map_server`` maps (YAML files) the worlds drive in, world ``w`` in map ``w % len(map)``, each episode's
+    start and target in a map's free space (``env.map=site.yaml``, ``env.map=[a.yaml,b.yaml]``, ``--map site.yaml``);
+    empty: the task's arena."""
 
     def env_kwargs(self) -> tuple[tuple[str, object], ...]:
         """:class:`~atrv_warp.task.env.RoverEnv` keyword arguments of these environments, as
@@ -114,6 +118,8 @@ class EnvConfig:
         if self.task_module:
             kwargs = (*kwargs, ("task_module", self.task_module))
         kwargs = (*kwargs, *task_field_values(self).items())
+        if self.map:
+            kwargs = (*kwargs, ("maps", self.map))
         return (*kwargs, ("sim_config", self.sim_config)) if self.sim_config else kwargs
 
     def eval_env_kwargs(self) -> tuple[tuple[str, object], ...]:

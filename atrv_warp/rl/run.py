@@ -36,6 +36,8 @@ class RunSpec:
     (:class:`~atrv_warp.task.randomization.RandomizationConfig`; ``around`` resolved against ``env.sim_config``)."""
     eval_randomization: object
     """The evaluations' (``env.eval_randomization``; the training's where that is empty)."""
+    maps: tuple = ()
+    """The sites (:class:`~atrv_warp.world.OccupancyMap`), from ``env.map``, each read once."""
 
     def record(self) -> dict:
         """The task and the robot as a saved policy and a checkpoint keep them (:func:`atrv_warp.policy.run_record`):
@@ -48,9 +50,9 @@ class RunSpec:
         """:class:`~atrv_warp.task.env.RoverEnv` keyword arguments of an env of the run built in this process:
         ``cfg.env``'s (:meth:`~atrv_warp.rl.config.EnvConfig.env_kwargs`) with this spec's task, rover and
         randomization (``judged``: the evaluations') in place of the names they resolve."""
-        named = {"robot", "task", "task_module", "randomization", *(name for name, _ in cfg.env.task_fields)}
+        named = {"robot", "task", "task_module", "randomization", "maps", *(name for name, _ in cfg.env.task_fields)}
         kept = {k: v for k, v in cfg.env.env_kwargs() if k not in named}
-        return {**kept, "task": self.task, "rover": self.rover,
+        return {**kept, "task": self.task, "rover": self.rover, "maps": self.maps,
                 "randomization": self.eval_randomization if judged else self.randomization}
 
 
@@ -73,7 +75,7 @@ def _files_read(env) -> tuple:
     resolution names what is wrong): a file changed since the last call is read again."""
     from atrv_warp.core.robot import load_robot
 
-    paths = [Path(p) for p in (env.sim_config, env.task_module) if p]
+    paths = [Path(p) for p in (env.sim_config, env.task_module, *env.map) if p]
     try:
         robot = load_robot(env.robot)
         paths += [Path(robot.path), Path(robot.urdf)]
@@ -89,6 +91,7 @@ def _resolve(env, _files: tuple) -> RunSpec:
     from atrv_warp.task.randomization import get_randomization
     from atrv_warp.task.registry import load_task_module, resolve_task
     from atrv_warp.task.scaling import fit_task
+    from atrv_warp.world import load_map
 
     try:  # loads task_module, names the known tasks if this one is not, checks every task field
         if env.task_module:
@@ -108,7 +111,12 @@ def _resolve(env, _files: tuple) -> RunSpec:
 
     shift = randomization("randomization")
     judged = randomization("eval_randomization") if env.eval_randomization else shift
-    return RunSpec(robot=rover.robot_spec, rover=rover, task=task, randomization=shift, eval_randomization=judged)
+    try:
+        maps = tuple(load_map(path) for path in env.map)
+    except ValueError as err:  # MapError: the file and the problem named
+        raise ValueError(f"train config: env.map: {err}") from None
+    return RunSpec(robot=rover.robot_spec, rover=rover, task=task, randomization=shift, eval_randomization=judged,
+                   maps=maps)
 
 
 TASK_MODULE_RECORD = "task_module.json"

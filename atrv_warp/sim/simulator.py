@@ -276,7 +276,8 @@ class RoverSim:
                                     sim_dt=self.sim_cfg.sim_dt, gravity=self.sim_cfg.gravity, device=self.device,
                                     terrain=terrain, obstacles=obstacles,
                                     implicit_drive=driver.implicit_under(self.contact_cfg.friction_law),
-                                    maps=GridWorlds(site_maps, round_robin(num_worlds, len(site_maps)), self.device))
+                                    maps=GridWorlds(site_maps, round_robin(num_worlds, len(site_maps)), self.device,
+                                                    footprint=self.footprint_radii))
         """The contact model every substep launches (:class:`~atrv_warp.sim.contact.ContactModel`)."""
         self.params = WorldParams(num_worlds, rover=self.rover_cfg, contact=self.contact_cfg, device=self.device)
         """Each world's physical parameters (:class:`~atrv_warp.sim.params.WorldParams`): friction, stiffness,
@@ -601,12 +602,16 @@ class RoverSim:
         Args:
             mask: (N,) bool mask or integer world indices; ``None`` = all worlds.
             poses: (N, 3) or (M, 3) for the M selected worlds: x [m], y [m], yaw [rad];
-                ``None`` = origin, yaw 0. A pose with |x| or |y| at or beyond the walls'
+                ``None`` = origin, yaw 0 (in a world with a map, the centre of the map's cell farthest from
+                every wall). A pose with |x| or |y| at or beyond the walls'
                 inner faces (``ArenaConfig.half_size``) is a ``ValueError``.
             height: Chassis-origin height [m]; default :attr:`rest_height`.
         """
         m = _as_world_mask(mask, self.num_worlds)
         p = np.zeros((self.num_worlds, 3), dtype=np.float32)
+        if poses is None and self.maps.maps:  # a map's world starts at its most open spot, not in a wall
+            spots = [self.maps.open_spot(k) for k in range(len(self.maps.maps))]
+            p[:, :2] = [spots[k] if k >= 0 else (0.0, 0.0) for k in self.maps.world_map]
         if poses is not None:
             given = np.asarray(poses.detach().cpu() if isinstance(poses, torch.Tensor) else poses, dtype=np.float32)
             if given.shape == (self.num_worlds, 3):
@@ -737,6 +742,23 @@ class RoverSim:
     def obstacle_contact(self) -> torch.Tensor:
         """(N,) bool: an obstacle contact happened during the last step."""
         return (self.contact_flags & int(FLAG_OBSTACLE)) != 0
+
+    @property
+    def footprint_radii(self) -> tuple[float, float]:
+        """(inscribed, circumscribed) radius [m] of the rover's outline seen from above, about the chassis origin (the
+        pose an episode starts at): the chassis box and every wheel's outer edges, as a rectangle about the origin
+        (Nav2's footprint radii: a planner keeps the inscribed one from walls, a spawn the circumscribed one)."""
+        d, rover = self.description, self.rover_cfg
+        points = []
+        if d.chassis_box is not None:
+            pose, half = d.chassis_box
+            points += [pose[:2, :3] @ (half * np.array(s)) + pose[:2, 3]
+                       for s in np.array(np.meshgrid(*[[-1, 1]] * 3)).T.reshape(-1, 3)]
+        for w in d.wheels:
+            r, width = w.radius or rover.wheel_radius or 0.0, w.width or rover.wheel_length or 0.0
+            points += [w.origin[:2, 3] + np.array([sx * r, sy * 0.5 * width]) for sx in (-1, 1) for sy in (-1, 1)]
+        half = np.abs(np.array(points)).max(axis=0)
+        return float(half.min()), float(np.hypot(*half))
 
     @property
     def _footprint(self) -> float:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 
 import torch
 import warp as wp
@@ -88,6 +89,7 @@ from atrv_warp.task.spec import (
     observation_fields,
     scan_sectors,
 )
+from atrv_warp.world import OccupancyMap
 
 __all__ = ["END_REASONS", "OBSERVATION_NAMES", "SNAPSHOT_FORMAT", "ATRVjrEnv", "EnvFactory", "RoverEnv"]
 
@@ -137,6 +139,10 @@ class RoverEnv(EnvBase):
         driver: The base's motor driver (:class:`~atrv_warp.sim.driver.DriverConfig`), which velocity actions
             go through (see :class:`RoverSim`); the task's acceleration limits fill in those it leaves unset
             (:meth:`TaskConfig.driver`).
+        maps: Sites as Nav2 maps (see :class:`RoverSim`), world ``w`` in map ``w % len(maps)``. Each episode there
+            starts and ends in the map's free space, clear of the robot's footprint, the target reachable from the
+            start (``target_distance`` away where the map allows; obstacles anywhere on the map); the clearance term
+            reads its walls. ``()``: the arena.
         **task_overrides: Fields of :class:`TaskConfig` (e.g. ``max_steps=100``); an unknown
             name raises ``ValueError``.
     """
@@ -160,6 +166,7 @@ class RoverEnv(EnvBase):
         randomization: RandomizationConfig | AroundConfig | str | None = None,
         sim_config: str | None = None,
         driver: DriverConfig | None = None,
+        maps: Sequence[OccupancyMap | str | Path] = (),
         **task_overrides,
     ):
         if task_module:
@@ -178,7 +185,7 @@ class RoverEnv(EnvBase):
         ranges (one centred on ``sim_config``, resolved)."""
         self.sim = RoverSim(num_envs, rover=rover, contact=contact, arena=arena, sim=sim,
                             terrain=c.terrain, obstacles=ObstacleConfig(slots=c.obstacles) if c.obstacles else None,
-                            device=device, sim_config=sim_config, driver=c.driver(driver))
+                            device=device, sim_config=sim_config, driver=c.driver(driver), maps=maps)
         self.sensors = build_sensors(self.sim, c, self.robot, self.randomization.noise)
         """The rovers' sensors that the task uses (:mod:`atrv_warp.task.sensors`), in the order they are observed."""
         laser = next((s for s in self.sensors if isinstance(s, LaserSensor) and s.name == "scan"), None)
@@ -193,7 +200,8 @@ class RoverEnv(EnvBase):
         self._twist = c.action == "twist"
         self._observe_kind = OBSERVE_KINDS.get(c.observation, -1)  # -1: the task's own fields
         self._lead_dim = len(OBSERVATION_KINDS[c.observation])  # the columns before the sensors' fields
-        self._nav = c.target_distance is not None or c.obstacles > 0 or self.sim.terrain.enabled
+        self._nav = (c.target_distance is not None or c.obstacles > 0 or self.sim.terrain.enabled
+                     or bool(self.sim.maps.maps))
         self._wp_device = self.sim.device
         self._make_task_buffers()
         self._make_task_kernels()
@@ -254,6 +262,7 @@ class RoverEnv(EnvBase):
         self._rover = rover
         inputs = TermInputs()
         inputs.rover, inputs.task, inputs.obstacles = rover, self._task, self.sim.obstacles.kernel
+        inputs.maps = self.sim.maps.struct
         inputs.action = self._action
         inputs.scan = self.scanner.buffer if self.scanner is not None else wp.zeros((self.num_envs, 1), dtype=float,
                                                                                     device=self._wp_device)
@@ -478,7 +487,8 @@ class RoverEnv(EnvBase):
         if self._nav:
             wp.launch(sample_nav_episodes, dim=self.num_envs,
                       inputs=[self._seed, self._params, self._target_distance, self._tiles, self._mask],
-                      outputs=[self._task, self._reset_poses, sim.obstacles.kernel, sim.terrain.kernel],
+                      outputs=[self._task, self._reset_poses, sim.obstacles.kernel, sim.terrain.kernel,
+                               sim.maps.struct],
                       device=self._wp_device)
         else:
             wp.launch(sample_episodes, dim=self.num_envs, inputs=[self._seed, self._params, self._mask],

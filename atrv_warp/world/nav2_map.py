@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["FREE", "MAX_CELLS", "MODES", "NAV2_MAP_IO", "OCCUPIED", "UNKNOWN", "MapError", "OccupancyMap",
-           "load_map"]
+           "load_map", "save_map"]
 
 FREE, OCCUPIED, UNKNOWN = 0, 100, -1
 """An OccupancyGrid cell's values (``nav2_util/occ_grid_values.hpp``)."""
@@ -129,6 +129,28 @@ def load_map(path: str | Path) -> OccupancyMap:
     digest = hashlib.sha256(hashlib.sha256(text).digest() + hashlib.sha256(image_bytes).digest()).hexdigest()
     return OccupancyMap(cells=cells, resolution=meta["resolution"], origin=(meta["origin"][0], meta["origin"][1]),
                         source=yaml_path, mode=meta["mode"], digest=digest)
+
+
+def save_map(site: OccupancyMap, path: str | Path) -> Path:
+    """Write ``site`` as ``map_saver_cli`` does in ``trinary`` mode: ``path`` (a ``.yaml``) beside a binary PGM of the
+    same stem, free 254, occupied 0, unknown 205 (and a cell between the thresholds unknown), with ``free_thresh``
+    0.196 and ``occupied_thresh`` 0.65, so that :func:`load_map` (and ``map_server``) reads back the same cells.
+    Returns the YAML's path."""
+    yaml_path = Path(path).expanduser()
+    if yaml_path.suffix not in (".yaml", ".yml"):
+        raise MapError(f"map {yaml_path}: give the YAML's path (.yaml)")
+    cells = np.asarray(site.cells)
+    pixels = np.full(cells.shape, 205, dtype=np.uint8)
+    pixels[(cells >= 0) & (cells <= 19)] = 254  # occupancy <= free_thresh 0.196
+    pixels[(cells >= 65) & (cells <= 100)] = 0  # occupancy >= occupied_thresh 0.65
+    image = yaml_path.with_suffix(".pgm")
+    rows, cols = cells.shape
+    image.write_bytes(f"P5\n{cols} {rows}\n255\n".encode() + pixels[::-1].tobytes())  # the top row is the last
+    x, y = site.origin
+    yaml_path.write_text(f"image: {image.name}\nmode: trinary\nresolution: {site.resolution!r}\n"
+                         f"origin: [{float(x)!r}, {float(y)!r}, 0.0]\nnegate: 0\noccupied_thresh: 0.65\n"
+                         "free_thresh: 0.196\n")
+    return yaml_path
 
 
 def cells_from_pixels(gray: np.ndarray, alpha: np.ndarray | None, *, mode: str = "trinary", negate: bool = False,

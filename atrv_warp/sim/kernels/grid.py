@@ -41,6 +41,13 @@ class GridMaps:
     origin: wp.array(dtype=wp.vec2)  # (M,) the lower-left cell's outer corner (x, y) [m]
     world_map: wp.array(dtype=wp.int32)  # (N,) each world's map, or -1 for none
     top: float  # height of every wall's top [m], absolute
+    # where an episode may start or end: every map's cells clear of the robot at any heading, map by map and, within a
+    # map, in groups the robot can drive between (``atrv_warp.sim.maps.spawn_cells``)
+    spawn: wp.array(dtype=wp.int32)  # each such cell's index within its map (row * cols + col)
+    spawn_start: wp.array(dtype=wp.int32)  # (M,) each map's first entry in ``spawn``
+    spawn_count: wp.array(dtype=wp.int32)  # (M,) each map's entries
+    spawn_group: wp.array(dtype=wp.int32)  # beside ``spawn``: the first entry of the cell's group
+    spawn_group_count: wp.array(dtype=wp.int32)  # beside ``spawn``: the entries of the cell's group
 
 
 @wp.func
@@ -49,6 +56,28 @@ def is_wall(grids: GridMaps, m: int, row: int, col: int) -> bool:
     if row < 0 or col < 0 or row >= grids.rows[m] or col >= grids.cols[m]:
         return True
     return grids.wall[grids.start[m] + row * grids.cols[m] + col] != wp.uint8(0)
+
+
+@wp.func
+def wall_distance(grids: GridMaps, m: int, p: wp.vec2) -> float:
+    """How far ``p`` [m] is from the nearest wall cell of map ``m`` [m], to within a cell: the distance field at
+    ``p``'s cell less half a cell (centre to centre, less the wall cell's half width); 0 in a wall or off the map."""
+    res = grids.resolution[m]
+    o2 = grids.origin[m]
+    col = int(wp.floor((p[0] - o2[0]) / res))
+    row = int(wp.floor((p[1] - o2[1]) / res))
+    if is_wall(grids, m, row, col):
+        return 0.0
+    return (grids.distance[grids.start[m] + row * grids.cols[m] + col] - 0.5) * res
+
+
+@wp.func
+def spawn_point(grids: GridMaps, m: int, entry: int) -> wp.vec2:
+    """The centre [m] of map ``m``'s cell at ``entry`` of ``grids.spawn``."""
+    cell = grids.spawn[entry]
+    cols = grids.cols[m]
+    res = grids.resolution[m]
+    return grids.origin[m] + wp.vec2((float(cell % cols) + 0.5) * res, (float(cell / cols) + 0.5) * res)
 
 
 @wp.func

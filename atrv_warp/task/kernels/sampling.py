@@ -11,6 +11,7 @@ from typing import Any
 
 import warp as wp
 
+from atrv_warp.sim.kernels.grid import GridMaps, spawn_point
 from atrv_warp.sim.kernels.obstacles import OBSTACLE_BOX, OBSTACLE_CYLINDER, ObstacleSet, bounding_radius
 from atrv_warp.sim.kernels.terrain import TerrainGrid
 from atrv_warp.task.kernels.state import TaskBuffers
@@ -52,34 +53,70 @@ def sample_nav_episodes(
     poses: wp.array(dtype=wp.vec3),
     obstacles: ObstacleSet,
     terrain: TerrainGrid,
+    grids: GridMaps,
 ):
     """Draw a masked world's episode: start and yaw, a target ``distance`` (min, max) [m] away, one of ``tiles``
     terrain tiles and an obstacle layout (``params.obstacles``, ``obstacles_on_path`` of them across the straight
     line, ``obstacle_size``) that keeps ``params.clearance`` from both ends, from a per-(world, episode) stream; the
-    goal's heading last."""
+    goal's heading last.
+
+    In a world with a map (``grids``), the start and the target are cells of the map's ``spawn`` list (clear of the
+    robot's footprint), the target in the start's group (reachable) and ``distance`` away (after 16 starts of 32
+    targets each, the last drawn), and the obstacles anywhere on the map."""
     world = wp.tid()
     if not mask[world]:
         return
     h = wp.rand_init(seed, task.stream[world])
     state = wp.rand_init(wp.int32(h), task.episode[world])
     b = params.spawn_bound
-    start = wp.vec2(wp.randf(state, -b, b), wp.randf(state, -b, b))
-    poses[world] = wp.vec3(start[0], start[1], wp.randf(state, -wp.pi, wp.pi))
+    half = b + 2.0
+    low = wp.vec2(-half, -half)  # where the obstacles may stand
+    high = wp.vec2(half, half)
+    m = int(-1)
+    if grids.count > 0:
+        m = grids.world_map[world]
+    start = wp.vec2(0.0)
     target = start
-    for _ in range(32):  # a direction whose target lies inside the bound (the last try is clamped)
-        a = wp.randf(state, -wp.pi, wp.pi)
-        d = wp.randf(state, distance[0], distance[1])
-        target = start + d * wp.vec2(wp.cos(a), wp.sin(a))
-        if wp.abs(target[0]) <= b and wp.abs(target[1]) <= b:
-            break
-    target = wp.vec2(wp.clamp(target[0], -b, b), wp.clamp(target[1], -b, b))
+    if m >= 0:
+        first = grids.spawn_start[m]
+        count = grids.spawn_count[m]
+        entry = first
+        goal = first
+        found = int(0)
+        for _ in range(16):  # a start with a target at the asked distance in its group
+            entry = first + wp.min(int(wp.randf(state) * float(count)), count - 1)
+            group = grids.spawn_group[entry]
+            members = grids.spawn_group_count[entry]
+            for _draw in range(32):
+                goal = group + wp.min(int(wp.randf(state) * float(members)), members - 1)
+                d = wp.length(spawn_point(grids, m, goal) - spawn_point(grids, m, entry))
+                if d >= distance[0] and d <= distance[1]:
+                    found = 1
+                    break
+            if found == 1:
+                break
+        start = spawn_point(grids, m, entry)
+        target = spawn_point(grids, m, goal)
+        poses[world] = wp.vec3(start[0], start[1], wp.randf(state, -wp.pi, wp.pi))
+        low = grids.origin[m]
+        high = low + grids.resolution[m] * wp.vec2(float(grids.cols[m]), float(grids.rows[m]))
+    else:
+        start = wp.vec2(wp.randf(state, -b, b), wp.randf(state, -b, b))
+        poses[world] = wp.vec3(start[0], start[1], wp.randf(state, -wp.pi, wp.pi))
+        target = start
+        for _ in range(32):  # a direction whose target lies inside the bound (the last try is clamped)
+            a = wp.randf(state, -wp.pi, wp.pi)
+            d = wp.randf(state, distance[0], distance[1])
+            target = start + d * wp.vec2(wp.cos(a), wp.sin(a))
+            if wp.abs(target[0]) <= b and wp.abs(target[1]) <= b:
+                break
+        target = wp.vec2(wp.clamp(target[0], -b, b), wp.clamp(target[1], -b, b))
     task.target[world] = target
     terrain.tile[world] = wp.int32(wp.min(int(wp.randf(state) * float(tiles)), tiles - 1))
     line = target - start
     length = wp.max(wp.length(line), 1.0e-6)
     along = line / length
     across = wp.vec2(-along[1], along[0])
-    half = b + 2.0
     size = params.obstacle_size
     for o in range(obstacles.count):
         obstacles.kind[world, o] = 0
@@ -92,7 +129,7 @@ def sample_nav_episodes(
             extent = wp.vec2(wp.randf(state, size[0], size[1]), 0.0)
             if kind == OBSTACLE_BOX:
                 extent = wp.vec2(extent[0], wp.randf(state, size[0], size[1]))
-            q = wp.vec2(wp.randf(state, -half, half), wp.randf(state, -half, half))
+            q = wp.vec2(wp.randf(state, low[0], high[0]), wp.randf(state, low[1], high[1]))
             if o < params.obstacles_on_path:
                 q = start + wp.randf(state, 0.35, 0.65) * line + wp.randf(state, -1.0, 1.0) * params.path_offset * across
             yaw = wp.randf(state, -wp.pi, wp.pi)

@@ -11,6 +11,7 @@ import typing
 
 import warp as wp
 
+from atrv_warp.sim.kernels.grid import GridMaps
 from atrv_warp.sim.kernels.obstacles import ObstacleSet
 from atrv_warp.task.spec import EndReason
 
@@ -83,11 +84,12 @@ class TaskBuffers:
 @wp.struct
 class TermInputs:
     """Everything a reward term (or a success test) may read, one struct: the rover, the task's buffers, the
-    obstacles, this step's action and the step's scan, and the step's end."""
+    obstacles and maps, this step's action and the step's scan, and the step's end."""
 
     rover: RoverState
     task: TaskBuffers
     obstacles: ObstacleSet
+    maps: GridMaps  # the worlds' maps (``count`` 0 where none has one)
     action: wp.array2d(dtype=float)  # (N, 2) this step's action as given (a term clips it where it needs to)
     scan: wp.array2d(dtype=float)  # (N, beams) this step's ranges [m]; (N, 1) of zeros without a scanner
     end_reason: wp.array(dtype=wp.int32)  # this step's end (END_*; END_TIMEOUT on truncation)

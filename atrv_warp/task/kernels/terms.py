@@ -10,6 +10,7 @@ from typing import Any
 
 import warp as wp
 
+from atrv_warp.sim.kernels.grid import wall_distance
 from atrv_warp.sim.kernels.obstacles import OBSTACLE_NONE, bounding_radius
 from atrv_warp.task.kernels.state import TermInputs
 
@@ -48,8 +49,8 @@ def event(params: Any, inputs: TermInputs, world: int) -> float:
 
 @wp.func
 def clearance(params: Any, inputs: TermInputs, world: int) -> float:
-    """Minus how far the nearest obstacle's bounding circle reaches inside ``clearance_radius`` of the chassis
-    origin [m]."""
+    """Minus how far the nearest obstacle's bounding circle, or the world's map's nearest wall cell, reaches inside
+    ``clearance_radius`` of the chassis origin [m]."""
     rover = inputs.rover
     obstacles = inputs.obstacles
     pose = rover.body_q[world * rover.bodies_per_world + rover.chassis_body]
@@ -61,6 +62,10 @@ def clearance(params: Any, inputs: TermInputs, world: int) -> float:
             q = obstacles.pose[world, o]
             gap = wp.length(wp.vec2(q[0] - p[0], q[1] - p[1])) - bounding_radius(kind, obstacles.size[world, o])
             inside = wp.max(inside, params.clearance_radius - gap)
+    if inputs.maps.count > 0:
+        m = inputs.maps.world_map[world]
+        if m >= 0:
+            inside = wp.max(inside, params.clearance_radius - wall_distance(inputs.maps, m, wp.vec2(p[0], p[1])))
     return -inside
 
 

@@ -1,0 +1,186 @@
+"""Worlds from a Nav2 map (``RoverEnv(maps=...)``, ``--map``): episodes start and end in the map's free space, clear
+of the robot's footprint, the target reachable from the start; the clearance term reads the walls; every command
+that builds a world takes the map, and a bad map is one line."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from atrv_warp.sim.maps import CELL_REACH, components, spawn_cells
+from atrv_warp.world import MapError, OccupancyMap, load_map, save_map
+from atrv_warp.world.nav2_map import FREE, OCCUPIED, UNKNOWN
+
+RESOLUTION, ORIGIN = 0.1, (-12.0, -8.0)
+
+
+def two_rooms() -> OccupancyMap:
+    """24 m x 16 m at 0.1 m: two rooms joined by a 1.2 m doorway, an unknown corner, and a closed 1.7 m closet in the
+    left room (room enough for the robot, no way out)."""
+    g = np.full((160, 240), FREE, np.int8)
+    g[0, :] = g[-1, :] = g[:, 0] = g[:, -1] = OCCUPIED
+    g[:, 120] = OCCUPIED
+    g[70:82, 120] = FREE  # the doorway
+    g[120:, 200:] = UNKNOWN
+    g[100:119, 20:40] = OCCUPIED
+    g[101:118, 21:39] = FREE  # the closet's inside
+    return OccupancyMap(cells=g, resolution=RESOLUTION, origin=ORIGIN)
+
+
+def flood(mask: np.ndarray) -> np.ndarray:
+    """4-connected groups by a breadth-first fill, each named by its smallest flat index (the check of
+    :func:`components`)."""
+    out = np.full(mask.shape, -1, dtype=np.int64)
+    rows, cols = mask.shape
+    for start in np.flatnonzero(mask):
+        r0, c0 = divmod(int(start), cols)
+        if out[r0, c0] >= 0:
+            continue
+        out[r0, c0], todo = start, [(r0, c0)]
+        while todo:
+            r, c = todo.pop()
+            for rr, cc in ((r + 1, c), (r - 1, c), (r, c + 1), (r, c - 1)):
+                if 0 <= rr < rows and 0 <= cc < cols and mask[rr, cc] and out[rr, cc] < 0:
+                    out[rr, cc] = start
+                    todo.append((rr, cc))
+    return out
+
+
+def test_components_are_the_4_connected_groups():
+    rng = np.random.default_rng(0)
+    for shape, density in (((40, 60), 0.3), ((25, 25), 0.5), ((1, 30), 0.2), ((30, 1), 0.0), ((50, 50), 0.45)):
+        mask = rng.random(shape) >= density
+        assert np.array_equal(components(mask), flood(mask)), (shape, density)
+    snake = np.zeros((41, 41), bool)  # one corridor back and forth: the longest chain a grid has
+    snake[::2, :] = True
+    snake[1::4, -1] = snake[3::4, 0] = True
+    assert np.array_equal(components(snake), flood(snake)) and len(np.unique(components(snake))) == 2
+
+
+def test_spawn_cells_keep_the_footprint_clear_and_group_by_where_the_robot_can_drive():
+    from atrv_warp.sim.maps import distance_field
+
+    site = two_rooms()
+    field = distance_field(site.walls)
+    cells, first, count = spawn_cells(field, RESOLUTION, circumscribed=0.41, inscribed=0.26)
+    assert ((field.ravel()[cells] - CELL_REACH) * RESOLUTION >= 0.41).all()
+    groups = components((field - CELL_REACH) * RESOLUTION >= 0.26).ravel()[cells]
+    assert np.array_equal(groups, groups[first]) and np.array_equal(count, np.bincount(first)[first])
+    # both rooms are one group through the doorway; the closet is its own
+    rows, cols = np.divmod(cells, site.shape[1])
+    x, _ = site.centre_of(rows, cols)
+    closet = (rows > 100) & (rows < 118) & (cols > 21) & (cols < 39)
+    assert closet.any() and len(set(groups[closet])) == 1 and set(groups[closet]).isdisjoint(groups[~closet])
+    assert len(set(groups[(x < 0) & ~closet]) | set(groups[x > 0])) == 1
+    # a doorway narrower than the robot parts the rooms
+    narrow = site.cells.copy()
+    narrow[70:82, 120], narrow[74:78, 120] = OCCUPIED, FREE
+    field = distance_field(OccupancyMap(cells=narrow, resolution=RESOLUTION, origin=ORIGIN).walls)
+    cells, first, _ = spawn_cells(field, RESOLUTION, circumscribed=0.41, inscribed=0.26)
+    x, _ = site.centre_of(*np.divmod(cells, site.shape[1]))
+    assert set(first[x < 0]).isdisjoint(first[x > 0])
+
+
+def test_episodes_in_a_map_start_and_end_clear_of_its_walls_and_reachable():
+    """256 episodes of nav_deploy on the ATRV-Jr in the two rooms: every start and target clear of the walls by the
+    robot's circumscribed radius, the target in the start's group (never in the closet with a start outside), and
+    the task's 5-10 m apart; a third of the targets lie in the other room; the same seed draws the same episodes."""
+    from atrv_warp.task.env import RoverEnv
+
+    site = two_rooms()
+    env = RoverEnv(256, task="nav_deploy", seed=3, maps=[site])
+    env.reset()
+    starts, targets = env.episode_start[:, :2].numpy(), env.target.numpy()
+    inscribed, circumscribed = env.sim.footprint_radii
+    field = env.sim.maps.distance[0]
+    groups = components((field - CELL_REACH) * RESOLUTION >= inscribed)
+    for points in (starts, targets):
+        row, col = site.cell_of(points[:, 0], points[:, 1])
+        assert ((field[row, col] - CELL_REACH) * RESOLUTION >= circumscribed).all()
+    assert np.array_equal(groups[site.cell_of(*starts.T)], groups[site.cell_of(*targets.T)])
+    distance = np.linalg.norm(targets - starts, axis=1)
+    low, high = env.task_cfg.target_distance
+    assert ((distance >= low - 1e-4) & (distance <= high + 1e-4)).all()
+    crossing = np.sign(starts[:, 0]) != np.sign(targets[:, 0])
+    assert 0.2 < crossing.mean() < 0.6
+    # the unmapped obstacles stand on the map
+    kind, pose = env.sim.obstacles.kind.numpy(), env.sim.obstacles.pose.numpy()
+    xy = pose[kind > 0][:, :2]
+    assert len(xy) and (xy >= ORIGIN).all() and (xy <= (12.0, 8.0)).all()
+    again = RoverEnv(256, task="nav_deploy", seed=3, maps=[site])
+    again.reset()
+    assert torch.equal(again.episode_start, env.episode_start) and torch.equal(again.target, env.target)
+
+
+def test_the_clearance_term_reads_the_nearest_wall():
+    """A rover parked at a known spot near the doorway's wall: the clearance term is the radius less its distance to
+    the nearest wall cell (the field, less half a cell), where no obstacle slot is nearer."""
+    from atrv_warp.task.env import RoverEnv
+
+    site = two_rooms()
+    env = RoverEnv(2, task="nav_deploy", seed=0, maps=[site], obstacles=0, obstacles_on_path=0,
+                   clearance_weight=1.0)
+    td = env.reset()
+    spots = torch.tensor([[0.6, -3.0, 0.0], [-6.0, 0.0, 0.0]])  # 0.55 m from the wall at x = 0; the room's middle
+    env.sim.reset(poses=spots)
+    td = env.step(td.set("action", torch.zeros(2, 2)))["next"]
+    p = env.sim.root_pose[:, :2].numpy()
+    row, col = site.cell_of(p[:, 0], p[:, 1])
+    gap = (env.sim.maps.distance[0][row, col] - 0.5) * RESOLUTION
+    radius = env.task_cfg.clearance_radius
+    expected = -np.clip(radius - gap, 0.0, None)
+    assert expected[0] < 0.0 and expected[1] == 0.0
+    assert td["reward_terms", "clearance"].flatten().numpy() == pytest.approx(expected, abs=1e-5)
+
+
+def test_a_saved_map_reads_back_as_map_server_reads_it(tmp_path):
+    site = two_rooms()
+    path = save_map(site, tmp_path / "rooms.yaml")
+    back = load_map(path)
+    assert np.array_equal(back.cells, site.cells) and back.origin == ORIGIN and back.resolution == RESOLUTION
+    assert (tmp_path / "rooms.pgm").read_bytes().startswith(b"P5\n240 160\n255\n")
+    with pytest.raises(MapError, match="give the YAML's path"):
+        save_map(site, tmp_path / "rooms.pgm")
+
+
+def test_a_map_too_tight_for_the_robot_is_named():
+    from atrv_warp.sim import RoverSim
+
+    g = np.full((12, 12), OCCUPIED, np.int8)
+    g[4:8, 4:8] = FREE  # 0.4 m of free floor: no ATRV-Jr fits
+    with pytest.raises(MapError, match="no free cell is 0.41 m from every wall"):
+        RoverSim(1, maps=[OccupancyMap(cells=g, resolution=0.1, origin=(0.0, 0.0))])
+
+
+def test_evaluate_demo_and_train_take_a_map(tmp_path, capsys):
+    """``evaluate --map``: the episodes in the map, its file and sha256 and each episode's map in the JSON, the
+    success by map with two; ``demo --map`` starts at the most open spot; ``train --map`` records it, and a bad map
+    stops each before any work in one line."""
+    from atrv_warp.cli import demo, evaluate
+    from atrv_warp.rl.command_line import load_train_config
+
+    rooms = save_map(two_rooms(), tmp_path / "rooms.yaml")
+    other = save_map(OccupancyMap(cells=two_rooms().cells[:, ::-1].copy(), resolution=RESOLUTION, origin=ORIGIN),
+                     tmp_path / "mirrored.yaml")
+    out = tmp_path / "eval.json"
+    assert evaluate.main(["nav_deploy", "--map", str(rooms), str(other), "--episodes", "4", "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "success by map: rooms:" in printed and "mirrored:" in printed
+    figures = json.loads(out.read_text())
+    assert [m["name"] for m in figures["maps"]] == ["rooms", "mirrored"]
+    assert figures["maps"][0]["sha256"] == load_map(rooms).digest and figures["episode_map"] == [0, 1, 0, 1]
+    assert demo.main(["--map", str(rooms), "--seconds", "0.5"]) == 0
+    assert f"in {rooms}, from its most open spot" in capsys.readouterr().out
+    cfg = load_train_config("smoke", {"env.map": f"[{rooms},{other}]"})
+    assert cfg.env.map == (str(rooms), str(other))
+    missing = tmp_path / "gone.yaml"
+    assert evaluate.main(["nav_deploy", "--map", str(missing), "--episodes", "2"]) == 2
+    assert demo.main(["--map", str(missing)]) == 2
+    assert f"map not found: {missing}" in capsys.readouterr().err
+    with pytest.raises(ValueError, match=f"train config: env.map: map not found: {missing}"):
+        load_train_config("smoke", {"env.map": str(missing)})
+    assert evaluate.main(["nav_deploy", "--engine", "mujoco", "--map", str(rooms), "--episodes", "2"]) == 2
+    assert "maps are for engine ours" in capsys.readouterr().err
