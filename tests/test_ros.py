@@ -612,6 +612,54 @@ def test_latched_markers_show_the_nav_world_and_the_goal(ros_env):
     assert obstacles and np.allclose(obstacles, sorted(map(tuple, xy[kind > 0].tolist())), atol=1e-5)
 
 
+@pytest.mark.slow  # a live ROS 2 node
+def test_a_map_is_served_on_map_and_the_rover_starts_in_its_free_space(ros_env, tmp_path):
+    """``map:=FILE``: a late subscriber gets /map as map_server serves it (transient local, frame map, the cells as
+    the file holds them); /tf's tree starts at map (map -> odom -> base_link: the true pose, in the map); the rover
+    starts clear of the walls; a bad map stops the node in one line."""
+    import numpy as np
+    from nav_msgs.msg import OccupancyGrid, Odometry
+    from test_map_worlds import two_rooms
+
+    from atrv_warp.core.ros_interfaces import TF2_MSGS, load_interface
+    from atrv_warp.world import load_map, save_map
+
+    TFMessage, where = load_interface(TF2_MSGS, "msg", "TFMessage")
+    assert TFMessage is not None, where
+    path = save_map(two_rooms(), tmp_path / "rooms.yaml")
+    site = load_map(path)
+    # "-p" before it: a .yaml alone is a params file
+    proc = start_node(ros_env, "-p", f"map:={path}", "task:=nav_deploy", "wait_for_subscribers:=1", "duration:=30.0")
+    client = Client("atrv_map_client")
+    grids, tf, truth = [], [], []
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=rclpy.qos.DurabilityPolicy.TRANSIENT_LOCAL)
+    client.node.create_subscription(TFMessage, "/tf", tf.append, 100)
+    client.node.create_subscription(Odometry, "/ground_truth/odom", truth.append, 100)
+    try:
+        live = client.wait_for(lambda: len(client.poses) > 0 and len(tf) > 3, timeout=120)
+        if live:  # a late subscriber
+            client.node.create_subscription(OccupancyGrid, "/map", grids.append, latched)
+            client.wait_for(lambda: bool(grids), timeout=30)
+    finally:
+        client.close()
+        out = stop(proc, signal.SIGTERM)
+    assert live and grids and proc.returncode == 0, out[-3000:]
+    grid = grids[-1]
+    assert grid.header.frame_id == "map" and grid.info.resolution == pytest.approx(site.resolution)
+    assert (grid.info.width, grid.info.height) == (site.shape[1], site.shape[0])
+    assert (grid.info.origin.position.x, grid.info.origin.position.y) == pytest.approx(site.origin)
+    assert np.array_equal(np.array(grid.data, dtype=np.int8).reshape(site.shape), site.cells)
+    frames = {t.child_frame_id: t for m in tf for t in m.transforms}
+    assert frames["odom"].header.frame_id == "map" and truth[-1].header.frame_id == "map"
+    g = truth[-1].pose.pose.position
+    row, col = site.cell_of(g.x, g.y)
+    assert not site.walls[row, col] and "rovers start at their first episodes' starts" in out
+    bad = start_node(ros_env, "-p", f"map:={tmp_path / 'gone.yaml'}")
+    out, _ = bad.communicate(timeout=120)
+    assert bad.returncode != 0 and f"parameter map: map not found: {tmp_path / 'gone.yaml'}" in out
+
+
 def test_foxglove_layout_shows_what_the_node_publishes():
     """docs/foxglove_layout.json: a 3D panel with the URDF from /robot_description, the markers, the scan and
     the odometry, following base_link; every topic it names is one the node publishes."""

@@ -10,7 +10,7 @@ REP 105, with the simulator as the localisation::
 ``base_link`` at the simulator's true pose (/ground_truth/odom without its optional noise), as a
 localisation node would publish it; ``base_link -> <chassis>`` is the identity (the URDF's root link
 is the base), static; each wheel turns about its joint axis by its joint position. With several rovers
-every frame but ``world`` is prefixed ``rover_<k>/``.
+every frame but ``world`` is prefixed ``rover_<k>/``. In a map, ``world`` is ``map`` (:data:`MAP_FRAME`).
 """
 
 from __future__ import annotations
@@ -21,10 +21,13 @@ import numpy as np
 
 from atrv_warp.core.geometry import matrix_to_quat, quat_to_matrix, yaw_to_quat
 
-__all__ = ["WORLD_FRAME", "planar_matrix", "pose_matrix", "transform_dict", "turn_matrix"]
+__all__ = ["MAP_FRAME", "WORLD_FRAME", "planar_matrix", "pose_matrix", "transform_dict", "turn_matrix"]
 
 WORLD_FRAME = "world"
 """The fixed frame of /ground_truth/odom, the markers and the top of the tree."""
+MAP_FRAME = "map"
+"""The top of the tree in place of ``world`` where the node drives in a map (parameter ``map``): Nav2's global frame,
+the frame of /map, whose ``map -> odom`` is what AMCL would publish."""
 
 
 def pose_matrix(xyz, quat_xyzw) -> np.ndarray:

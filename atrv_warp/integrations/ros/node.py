@@ -7,11 +7,13 @@ real time; the executor serves the subscriptions between steps. Topics and param
 
 from __future__ import annotations
 
+import array
 import math
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
 import rclpy
 import torch
 from builtin_interfaces.msg import Time
@@ -29,7 +31,7 @@ from atrv_warp.core.files import OutputPathError, check_output_path, fresh_path
 from atrv_warp.core.geometry import quat_to_matrix
 from atrv_warp.core.parameters import ParameterError, check_parameters, params_file_names
 from atrv_warp.integrations.ros.bag import BagWriter
-from atrv_warp.integrations.ros.frames import WORLD_FRAME
+from atrv_warp.integrations.ros.frames import MAP_FRAME, WORLD_FRAME
 from atrv_warp.integrations.ros.markers import scene_of, world_markers
 from atrv_warp.integrations.ros.parameters import (
     PARAMETER_BY_NAME,
@@ -81,6 +83,8 @@ class RoverSimNode(Node):
         self.tf_pub = None
         """Live /tf's publisher, where tf2_msgs loads (parameter ``tf``)."""
         self.sim = None
+        self.world_frame = WORLD_FRAME
+        """The top of the frame tree: ``world``, or ``map`` in a map (parameter ``map``)."""
         self.scanner = None
         self.rovers: list[RoverIO] = []
         self.policy = None  # goal mode's (policy, TensorDict): a -p policy file once checked, else loaded on first use
@@ -117,13 +121,20 @@ class RoverSimNode(Node):
                 self._fail(f"parameter policy: {err}")
             if task.name != p["task"]:
                 self._fail(f"parameter policy: {p['policy']} was trained on task {task.name!r}, not task={p['task']!r}")
+        from atrv_warp.world import MapError, load_map
+
+        try:
+            site = [load_map(p["map"])] if p["map"] else []  # a bad map stops the node before Newton loads
+        except MapError as err:
+            self._fail(f"parameter map: {err}")
         from atrv_warp.task.env import RoverEnv  # the simulator (Newton), once the parameters are good
 
-        # goal mode reads the policy's observation kernel
-        try:
+        try:  # goal mode reads the policy's observation kernel
             self.env = RoverEnv(k, robot=p["robot"], variant=p["variant"], task=task, seed=int(p["seed"]),
-                                 sim_config=p["sim_config"] or None, driver=self.driver,
+                                 sim_config=p["sim_config"] or None, driver=self.driver, maps=site,
                                  **({"terrain": p["terrain"]} if p["terrain"] else {}))
+        except MapError as err:  # the file and the problem
+            self._fail(f"parameter map: {err}")
         except ValueError as err:
             self._fail(f"parameter sim_config: {err}" if p["sim_config"] else str(err))
         if p["sim_config"]:
@@ -132,11 +143,12 @@ class RoverSimNode(Node):
                           f"{self.env.sim.contact_cfg.friction:g}, wheel radius {self.env.sim.rover_cfg.wheel_radius:g} m")
         self.sim = self.env.sim
         starts = [[p["x"], p["y"] + i * p["spacing"], p["yaw"]] for i in range(k)]
-        if p["task"] != "reach":  # terrain tiles and obstacle layouts come with the task's first episodes
+        if p["task"] != "reach" or p["map"]:  # terrain tiles, obstacles, a map's free space: the first episodes'
             self.env.reset()
             starts = self.sim.root_pose[:, :2].tolist()
             starts = [[x, y, float(yaw)] for (x, y), yaw in zip(starts, self.sim.rpy[:, 2].tolist())]
-            self.log.info(f"task {p['task']}: rovers start at their first episodes' starts "
+            self.log.info(f"task {p['task']}{' in ' + p['map'] if p['map'] else ''}: rovers start at their first "
+                          "episodes' starts "
                           + ", ".join(f"({x:.1f}, {y:.1f})" for x, y, _ in starts))
         try:
             self.sim.reset(poses=starts)
@@ -173,6 +185,9 @@ class RoverSimNode(Node):
         self.rovers = [RoverIO(self, i, f"/rover_{i}" if k > 1 else "", qos) for i in range(k)]
         for rover, start in zip(self.rovers, starts):  # the odom frame starts at the start pose
             rover.start = tuple(float(v) for v in start)
+        if p["map"]:
+            self.world_frame = MAP_FRAME
+            self.publish_map(latched)
         self.publish_markers()
         self.tf_pub = self.tf_message = None
         if p["tf"]:
@@ -284,13 +299,30 @@ class RoverSimNode(Node):
         self.create_publisher(cls, "/tf_static", latched).publish(
             self.tf_message([t for r in self.rovers for t in r.static_frames(ns)]))
 
+    def publish_map(self, latched: QoSProfile) -> None:
+        """The map as ``map_server`` serves it: ``nav_msgs/OccupancyGrid`` on /map in frame ``map``, transient local
+        (a Nav2 stack's static layer and planner read it), once."""
+        from nav_msgs.msg import OccupancyGrid
+
+        site = self.sim.maps.maps[0]
+        msg = OccupancyGrid()
+        msg.header.stamp, msg.header.frame_id = ros_time(self.stamp_ns()), MAP_FRAME
+        msg.info.map_load_time = msg.header.stamp
+        msg.info.resolution = float(site.resolution)
+        msg.info.height, msg.info.width = (int(n) for n in site.shape)
+        msg.info.origin.position.x, msg.info.origin.position.y = (float(v) for v in site.origin)
+        msg.info.origin.orientation.w = 1.0
+        msg.data = array.array("b", site.cells.astype(np.int8).tobytes())  # row-major from the origin, as it is
+        self.create_publisher(OccupancyGrid, "/map", latched).publish(msg)
+        self.log.info(f"map {site.source}: {msg.info.width} x {msg.info.height} cells at {site.resolution:g} m on /map")
+
     def publish_markers(self) -> None:
         """The latched /visualization_marker_array (world frame): walls, each rover's obstacles, goal and
         terrain (:mod:`.markers`); a rover whose world holds a non-finite pose is left out, with one line."""
         several = len(self.rovers) > 1
         scenes = [scene_of(self.sim, r.index, ns=f"rover_{r.index}/" if several else "", goal=r.goal,
                            goal_radius=self.params["reach_radius"]) for r in self.rovers]
-        msg, skipped = world_markers(self.sim.arena_cfg, scenes, WORLD_FRAME, ros_time(self.stamp_ns()))
+        msg, skipped = world_markers(self.sim.arena_cfg, scenes, self.world_frame, ros_time(self.stamp_ns()))
         for name in skipped:
             self.log.warning(f"markers of {name} not published: its world holds a non-finite pose")
         self.marker_pub.publish(msg)

@@ -23,7 +23,7 @@ from std_msgs.msg import Int32, String
 from atrv_warp.core.geometry import wrap_angle, yaw_to_quat
 from atrv_warp.integrations.ros.bag import joint_state_dict, odometry_dict, pose_dict, twist_dict
 from atrv_warp.integrations.ros.base import imu_reading
-from atrv_warp.integrations.ros.frames import WORLD_FRAME, planar_matrix, pose_matrix, transform_dict, turn_matrix
+from atrv_warp.integrations.ros.frames import planar_matrix, pose_matrix, transform_dict, turn_matrix
 from atrv_warp.integrations.ros.parameters import COMMANDS, GOAL, VELOCITY
 from atrv_warp.sim.modes import DRIVE_MODE_TORQUES, DriveMode
 
@@ -218,7 +218,7 @@ class RoverIO:
         o.x, o.y, o.z, o.w = yaw_to_quat(fyaw).tolist()
         self.fused_pub.publish(msg)
         truth = Odometry()
-        truth.header.stamp, truth.header.frame_id, truth.child_frame_id = ros_time(ns), WORLD_FRAME, self.tf_base
+        truth.header.stamp, truth.header.frame_id, truth.child_frame_id = ros_time(ns), node.world_frame, self.tf_base
         t = truth.pose.pose
         t.position.x, t.position.y, t.position.z = pose[0], pose[1], pose[2]
         t.orientation.x, t.orientation.y, t.orientation.z, t.orientation.w = pose[3], pose[4], pose[5], pose[6]
@@ -265,7 +265,7 @@ class RoverIO:
             return
         self.tf_skipped = False
         world_base, odom_base = pose_matrix(pose[:3], pose[3:7]), planar_matrix(x, y, yaw)
-        transforms = [transform_dict(WORLD_FRAME, self.tf_odom, ns, world_base @ np.linalg.inv(odom_base)),
+        transforms = [transform_dict(node.world_frame, self.tf_odom, ns, world_base @ np.linalg.inv(odom_base)),
                       transform_dict(self.tf_odom, self.tf_base, ns, odom_base)]
         transforms += [transform_dict(self.tf_chassis, self.tf_prefix + w.link, ns,
                                       np.asarray(w.origin, dtype=float) @ turn_matrix(w.axis, q))
