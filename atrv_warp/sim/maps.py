@@ -19,7 +19,7 @@ from atrv_warp.sim.config import ArenaConfig
 from atrv_warp.sim.kernels.grid import GridMaps, distance_columns, distance_rows, ray_grid
 from atrv_warp.world import MapError, OccupancyMap
 
-__all__ = ["ARENA_MARGIN", "DEFAULT_WALL_TOP", "GridWorlds", "arena_around", "components",
+__all__ = ["ARENA_MARGIN", "CELL_REACH", "DEFAULT_WALL_TOP", "GridWorlds", "arena_around", "components",
            "distance_field", "round_robin", "spawn_cells"]
 
 DEFAULT_WALL_TOP = 2.0

@@ -1,0 +1,169 @@
+"""Nav2's global planner in the simulator: each world's path over its map, as ``planner_server`` hands a controller a
+``nav_msgs/Path``.
+
+    from atrv_warp.sim.planner import Planner, PlannerConfig
+    planner = Planner(sim.maps, footprint=sim.footprint_radii)          # the maps' costmaps, built once
+    planner.plan(worlds, starts, goals)                                  # (K,) world indices, (N, 2) [m] each
+    planner.path[w, :planner.path_length[w]]                             # world w's points [m], start to goal
+
+The costmap is Nav2's global costmap over the map (``static_layer`` and ``inflation_layer``, with
+``track_unknown_space``): a cell on an occupied map cell is lethal (254), one within the robot's inscribed radius of it
+inscribed (253), one farther ``252 exp(-cost_scaling_factor (d - inscribed))`` out to ``inflation_radius`` and 0 beyond
+(``nav2_costmap_2d/inflation_layer.hpp``, ``computeCost``; ``d`` centre to centre), an unknown cell unknown (255,
+neither inflated nor inflating). The planner weighs it as NavFn does (:mod:`atrv_warp.sim.kernels.planner`): lethal
+and inscribed cells closed, unknown ones passable at 253 where :attr:`PlannerConfig.allow_unknown` (Nav2's default),
+and every other cell ``50 + 0.8 c``: the cheapest path keeps to the middle of a doorway and away from walls, and a
+doorway 1.5 times the robot's width stays open (only the inscribed radius closes, not the whole footprint).
+
+The planning grid may be coarser than the map (:attr:`PlannerConfig.resolution`; never coarser than the inscribed
+radius, so that a wall's closed band is at least two cells wide and no diagonal step crosses it). Each planning cell
+reads the map cell under its centre. Plans run in slots of scratch (:attr:`PlannerConfig.slots` worlds at a time),
+on the maps' device.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import warp as wp
+
+from atrv_warp.sim.kernels.planner import PlanMaps, plan_paths
+from atrv_warp.sim.maps import GridWorlds, distance_field
+from atrv_warp.world.nav2_map import OCCUPIED, UNKNOWN
+
+__all__ = ["INSCRIBED", "LETHAL", "NO_INFORMATION", "Planner", "PlannerConfig", "costmap", "navfn_costs"]
+
+LETHAL, INSCRIBED, NO_INFORMATION = 254, 253, 255
+"""Nav2's costmap values (``nav2_costmap_2d/cost_values.hpp``): ``LETHAL_OBSTACLE``, ``INSCRIBED_INFLATED_OBSTACLE``,
+``NO_INFORMATION``."""
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """The global costmap's inflation and the planner's settings, named as Nav2's params file names them."""
+
+    inflation_radius: float = 0.7
+    """How far from a wall the inflation reaches [m] (``inflation_layer.inflation_radius``)."""
+    cost_scaling_factor: float = 3.0
+    """How fast the inflated cost decays with distance [1/m] (``inflation_layer.cost_scaling_factor``)."""
+    allow_unknown: bool = True
+    """Plan through unknown cells, at the highest passable cost (``GridBased.allow_unknown``; Nav2's default)."""
+    resolution: float = 0.1
+    """The planning grid's cell [m]; the map's where it is finer, the inscribed radius where that is smaller."""
+    max_points: int = 2048
+    """The most points a path may have; a longer one is no path."""
+    slots: int = 64
+    """Worlds planned at a time (each holds scratch for its map's planning grid)."""
+
+    def __post_init__(self):
+        for name in ("inflation_radius", "cost_scaling_factor", "resolution"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"PlannerConfig.{name} must be a finite number > 0, got {value!r}")
+        for name in ("max_points", "slots"):
+            if getattr(self, name) < 2:
+                raise ValueError(f"PlannerConfig.{name} must be >= 2, got {getattr(self, name)!r}")
+
+
+def costmap(cells: np.ndarray, occupied_distance: np.ndarray, resolution: float, inscribed: float,
+            cfg: PlannerConfig) -> np.ndarray:
+    """(rows, cols) uint8: Nav2's global costmap of map cells ``cells`` (OccupancyGrid values) whose distance to the
+    nearest occupied cell is ``occupied_distance`` [cells, centre to centre] (see the module's docstring)."""
+    d = occupied_distance * resolution
+    cost = np.zeros(cells.shape, dtype=np.uint8)
+    near = (d > inscribed) & (d <= cfg.inflation_radius)
+    cost[near] = (252.0 * np.exp(-cfg.cost_scaling_factor * (d[near] - inscribed))).astype(np.uint8)
+    cost[d <= inscribed] = INSCRIBED
+    cost[cells == OCCUPIED] = LETHAL
+    cost[cells == UNKNOWN] = NO_INFORMATION
+    return cost
+
+
+def navfn_costs(cost: np.ndarray, allow_unknown: bool) -> np.ndarray:
+    """NavFn's traversal cost of each costmap cell (``NavFn::setCostmap``): ``50 + 0.8 c`` below 253, 253 for an
+    unknown cell where allowed, -1 (closed) otherwise."""
+    out = np.where(cost < INSCRIBED, 50.0 + 0.8 * cost.astype(np.float32), -1.0).astype(np.float32)
+    if allow_unknown:
+        out[cost == NO_INFORMATION] = 253.0
+    return out
+
+
+class Planner:
+    """Every world's global planner over its map (``grids``: the simulator's :class:`~atrv_warp.sim.maps.GridWorlds`)
+    for a robot of ``footprint`` (inscribed, circumscribed radius [m]); :meth:`plan` plans some worlds, :attr:`path`,
+    :attr:`path_length` and :attr:`path_cost` hold every world's last plan."""
+
+    def __init__(self, grids: GridWorlds, footprint: tuple[float, float], cfg: PlannerConfig | None = None):
+        self.cfg = cfg = cfg or PlannerConfig()
+        self.grids, self.device = grids, grids.device
+        inscribed = footprint[0]
+        self.costmaps: list[np.ndarray] = []
+        """Each map's costmap on its planning grid (Nav2's values: :func:`costmap`)."""
+        self.resolutions: list[float] = []
+        """Each map's planning cell [m]."""
+        for site in grids.maps:
+            res = max(site.resolution, min(cfg.resolution, inscribed))
+            rows, cols = (max(1, round(n * site.resolution / res)) for n in site.shape)
+            y, x = np.meshgrid(site.origin[1] + (np.arange(rows) + 0.5) * res,
+                               site.origin[0] + (np.arange(cols) + 0.5) * res, indexing="ij")
+            r, c = site.cell_of(x, y)
+            r, c = np.clip(r, 0, site.shape[0] - 1), np.clip(c, 0, site.shape[1] - 1)
+            # unknown cells do not inflate, nor does the map's edge (padded with free cells beyond the inflation)
+            pad = math.ceil(cfg.inflation_radius / site.resolution) + 1
+            occupied = distance_field(np.pad(site.cells == OCCUPIED, pad), self.device)[pad:-pad, pad:-pad]
+            self.costmaps.append(costmap(site.cells[r, c], occupied[r, c], site.resolution, inscribed, cfg))
+            self.resolutions.append(res)
+        self.struct = self._pack()
+        n, cells = len(grids.world_map), max([c.size for c in self.costmaps] or [1])
+        slots = min(cfg.slots, max(n, 1))
+        self.g = wp.empty((slots, cells), dtype=float, device=self.device)
+        self.parent = wp.empty((slots, cells), dtype=wp.int32, device=self.device)
+        self.place = wp.empty((slots, cells), dtype=wp.int32, device=self.device)
+        self.heap_f = wp.empty((slots, cells), dtype=float, device=self.device)
+        self.heap_cell = wp.empty((slots, cells), dtype=wp.int32, device=self.device)
+        self._path = wp.zeros((max(n, 1), cfg.max_points), dtype=wp.vec2, device=self.device)
+        self._length = wp.zeros(max(n, 1), dtype=wp.int32, device=self.device)
+        self._cost = wp.zeros(max(n, 1), dtype=float, device=self.device)
+        self._world_map = grids.struct.world_map
+        self.path = wp.to_torch(self._path).view(max(n, 1), cfg.max_points, 2)
+        """(N, max_points, 2) each world's last path [m], start to goal, in its first :attr:`path_length` rows."""
+        self.path_length = wp.to_torch(self._length)
+        """(N,) points in each world's last path; 0: none was found."""
+        self.path_cost = wp.to_torch(self._cost)
+        """(N,) each last path's cost (NavFn's units: 50 for each free cell crossed)."""
+
+    def _pack(self) -> PlanMaps:
+        s = PlanMaps()
+        costs = [navfn_costs(c, self.cfg.allow_unknown) for c in self.costmaps] or [np.full((1, 1), -1.0, np.float32)]
+        starts = np.concatenate([[0], np.cumsum([c.size for c in costs])[:-1]]).astype(np.int32)
+        device = self.device
+        s.cost = wp.array(np.concatenate([c.ravel() for c in costs]), dtype=float, device=device)
+        s.start = wp.array(starts, dtype=wp.int32, device=device)
+        s.rows = wp.array([c.shape[0] for c in costs], dtype=wp.int32, device=device)
+        s.cols = wp.array([c.shape[1] for c in costs], dtype=wp.int32, device=device)
+        s.resolution = wp.array(self.resolutions or [1.0], dtype=float, device=device)
+        s.origin = wp.array([m.origin for m in self.grids.maps] or [(0.0, 0.0)], dtype=wp.vec2, device=device)
+        return s
+
+    def plan(self, worlds: Sequence[int] | torch.Tensor, starts: torch.Tensor, goals: torch.Tensor) -> None:
+        """Plan ``worlds`` (indices) from ``starts`` to ``goals`` ((N, 2) [m], every world's; only those of
+        ``worlds`` are read), :attr:`PlannerConfig.slots` at a time; the other worlds' paths are kept."""
+        worlds = torch.as_tensor(worlds, dtype=torch.int32).reshape(-1)
+        if not len(worlds):
+            return
+        starts = wp.from_torch(starts.detach().to(torch.float32).contiguous(), dtype=wp.vec2)
+        goals = wp.from_torch(goals.detach().to(torch.float32).contiguous(), dtype=wp.vec2)
+        slots = self.g.shape[0]
+        for first in range(0, len(worlds), slots):
+            chunk = wp.array(worlds[first:first + slots].numpy(), dtype=wp.int32, device=self.device)
+            wp.launch(plan_paths, dim=len(chunk), inputs=[self.struct, self._world_map, chunk, starts, goals, self.g,
+                                                          self.parent, self.place, self.heap_f, self.heap_cell],
+                      outputs=[self._path, self._length, self._cost], device=self.device)
+
+    def points(self, world: int) -> np.ndarray:
+        """(L, 2) world ``world``'s last path [m] (empty where none was found)."""
+        return self.path[world, :int(self.path_length[world])].cpu().numpy()
