@@ -151,7 +151,7 @@ def test_a_map_too_tight_for_the_robot_is_named():
 
     g = np.full((12, 12), OCCUPIED, np.int8)
     g[4:8, 4:8] = FREE  # 0.4 m of free floor: no ATRV-Jr fits
-    with pytest.raises(MapError, match="no free cell is 0.41 m from every wall"):
+    with pytest.raises(MapError, match="no free cell is 0.43 m from every wall"):
         RoverSim(1, maps=[OccupancyMap(cells=g, resolution=0.1, origin=(0.0, 0.0))])
 
 

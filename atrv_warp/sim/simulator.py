@@ -51,7 +51,7 @@ from atrv_warp.sim.params import (
     parameter_values,
 )
 from atrv_warp.sim.terrain import HeightGrid, TerrainConfig, get_terrain
-from atrv_warp.sim.urdf import load_rover
+from atrv_warp.sim.urdf import footprint_points, load_rover
 from atrv_warp.world import OccupancyMap, load_map
 
 __all__ = ["DRIVE_MODE_REFERENCE_TORQUE", "DRIVE_MODE_TORQUES", "DriveMode", "RoverSim", "SimBuffers"]
@@ -745,20 +745,13 @@ class RoverSim:
 
     @property
     def footprint_radii(self) -> tuple[float, float]:
-        """(inscribed, circumscribed) radius [m] of the rover's outline seen from above, about the chassis origin (the
-        pose an episode starts at): the chassis box and every wheel's outer edges, as a rectangle about the origin
-        (Nav2's footprint radii: a planner keeps the inscribed one from walls, a spawn the circumscribed one)."""
-        d, rover = self.description, self.rover_cfg
-        points = []
-        if d.chassis_box is not None:
-            pose, half = d.chassis_box
-            points += [pose[:2, :3] @ (half * np.array(s)) + pose[:2, 3]
-                       for s in np.array(np.meshgrid(*[[-1, 1]] * 3)).T.reshape(-1, 3)]
-        for w in d.wheels:
-            r, width = w.radius or rover.wheel_radius or 0.0, w.width or rover.wheel_length or 0.0
-            points += [w.origin[:2, 3] + np.array([sx * r, sy * 0.5 * width]) for sx in (-1, 1) for sy in (-1, 1)]
-        half = np.abs(np.array(points)).max(axis=0)
-        return float(half.min()), float(np.hypot(*half))
+        """(inscribed, circumscribed) radius [m] of the rover's outline seen from above about the chassis origin (the
+        pose an episode starts at; :func:`~atrv_warp.sim.urdf.footprint_points`): the nearest side of its bounding
+        rectangle, and its farthest point (the task's ``footprint_radius``). Nav2's footprint radii: a planner keeps
+        the inscribed one from walls, a spawn the circumscribed one."""
+        points = footprint_points(self.description, self.rover_cfg)
+        half = np.abs(points).max(axis=0)
+        return float(half.min()), float(np.linalg.norm(points, axis=1).max())
 
     @property
     def _footprint(self) -> float:

@@ -20,7 +20,7 @@ from atrv_warp.core.robot import MAX_WHEELS
 from atrv_warp.sim.config import InertialOverride, RoverConfig, default_urdf_path
 
 __all__ = ["URDF_RANGE", "Frame", "Inertial", "RoverDescription", "URDFError", "Wheel", "check_numbers", "check_tree",
-           "load_rover", "read_urdf", "rigid_group"]
+           "footprint_points", "load_rover", "read_urdf", "rigid_group"]
 
 
 class URDFError(ValueError):
@@ -120,6 +120,25 @@ class RoverDescription:
                        for s in np.array(np.meshgrid(*[[-1, 1]] * 3)).T.reshape(-1, 3)]
             return float(max(np.linalg.norm(c - com) for c in corners))
         return float(max(np.linalg.norm(w.origin[:3, 3] - com) for w in self.wheels))
+
+
+def footprint_points(description: RoverDescription, rover) -> np.ndarray:
+    """(P, 2) the rover's outline seen from above, about its chassis origin [m]: its chassis box's corners and the
+    corners of its wheels' contact cylinders (``rover``: its :class:`~atrv_warp.sim.config.RoverConfig`, whose
+    cylinder the model uses: radius, length, offset outward)."""
+    points = []
+    if description.chassis_box is not None:
+        pose, half = description.chassis_box
+        for corner in np.array(np.meshgrid(*[[-1.0, 1.0]] * 3)).T.reshape(-1, 3):
+            points.append((pose[:3, :3] @ (half * corner) + pose[:3, 3])[:2])
+    for wheel in description.wheels:
+        out = wheel.origin[:3, :3] @ wheel.outward
+        centre = wheel.origin[:3, 3] + out * rover.wheel_offset
+        for side in (-0.5, 0.5):
+            for along in (-1.0, 1.0):
+                points.append((centre + out * side * rover.wheel_length + np.array([along * rover.wheel_radius, 0, 0]))
+                              [:2])
+    return np.array(points)
 
 
 def _inertial_of(link) -> Inertial:

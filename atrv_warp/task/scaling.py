@@ -49,19 +49,9 @@ def footprint_radius(description, rover) -> float:
     ``rover``: its :class:`~atrv_warp.sim.config.RoverConfig`, whose cylinder the model uses)."""
     import numpy as np
 
-    points = []
-    if description.chassis_box is not None:
-        pose, half = description.chassis_box
-        for corner in np.array(np.meshgrid(*[[-1.0, 1.0]] * 3)).T.reshape(-1, 3):
-            points.append((pose[:3, :3] @ (half * corner) + pose[:3, 3])[:2])
-    for wheel in description.wheels:
-        out = wheel.origin[:3, :3] @ wheel.outward
-        centre = wheel.origin[:3, 3] + out * rover.wheel_offset
-        for side in (-0.5, 0.5):
-            for along in (-1.0, 1.0):
-                points.append((centre + out * side * rover.wheel_length + np.array([along * rover.wheel_radius, 0, 0]))
-                              [:2])
-    return float(max(np.linalg.norm(p) for p in points))
+    from atrv_warp.sim.urdf import footprint_points
+
+    return float(max(np.linalg.norm(p) for p in footprint_points(description, rover)))
 
 
 def scale_to_robot(config, robot, footprint: float):
