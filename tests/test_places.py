@@ -53,3 +53,24 @@ def test_a_place_saves_as_a_map_and_an_unknown_kind_is_named(tmp_path):
     assert abs(site.origin[0] + site.size[0] / 2) < 1e-6 and abs(site.origin[1] + site.size[1] / 2) < 1e-6
     with pytest.raises(ValueError, match="unknown place 'castle'; known: building, yard"):
         place("castle", 0, 0.5)
+
+
+def test_procedural_entries_are_drawn_for_the_robot_that_drives_them():
+    """``building:2@7`` is seeds 7 and 8, ``yard:1`` seed 0, each named and hashed; a simulator draws them at its
+    robot's width (twice its inscribed radius); a bad entry is one line."""
+    from atrv_warp.sim import RoverSim
+    from atrv_warp.world import MapError, resolve_sites
+    from atrv_warp.world.places import building
+
+    sites = resolve_sites(["building:2@7", "yard:1"], 0.5)
+    assert [s.name for s in sites] == ["building_7", "building_8", "yard_0"]
+    assert np.array_equal(sites[0].cells, building(7, 0.5).cells) and len({s.digest for s in sites}) == 3
+    sim = RoverSim(2, maps=["building:1"])
+    width = 2 * sim.footprint_radii[0]
+    assert sim.maps.maps[0].name == "building_0" and np.array_equal(sim.maps.maps[0].cells, building(0, width).cells)
+    with pytest.raises(MapError, match="unknown place 'castle' .*and no such file"):
+        resolve_sites(["castle:3"], 0.5)
+    with pytest.raises(MapError, match="at least one place"):
+        resolve_sites(["yard:0"], 0.5)
+    with pytest.raises(MapError, match="map not found: nowhere.yaml"):
+        resolve_sites(["nowhere.yaml"], 0.5)

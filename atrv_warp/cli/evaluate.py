@@ -145,12 +145,12 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
 
 
 def _load_maps(maps: Sequence) -> list:
-    """Each map read (a bad one stops here, in one line naming it, before any simulator is built)."""
-    if not maps:
-        return []
+    """Each map read (a bad one stops here, in one line naming it, before any simulator is built); a procedural entry
+    (``building:100@1000``) is kept for the environment, which draws it for its robot."""
     from atrv_warp.world import OccupancyMap, load_map
+    from atrv_warp.world.places import SPEC
 
-    return [m if isinstance(m, OccupancyMap) else load_map(m) for m in maps]
+    return [m if isinstance(m, OccupancyMap) or SPEC.match(str(m)) else load_map(m) for m in maps]
 
 
 def _map_figures(maps: Sequence, record, num_worlds: int) -> dict:
@@ -303,7 +303,7 @@ def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim
                  "ranges": {k: [d.low, d.high] for k, d in shift.physics.items()} | {"latency": list(shift.latency)},
                  "success_by_bin": success_by_bin(record, range_bins(shift)) if around else success_by_bin(record)}
     if maps:
-        extra |= _map_figures(maps, record, episodes)
+        extra |= _map_figures(env.sim.maps.maps, record, episodes)
     return Evaluation(str(name), task, seed, "ours", record, extra)
 
 
@@ -376,8 +376,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="simulator-config TOML, e.g. atrv-calibrate's fit of a real rover (docs/calibration.md)")
     parser.add_argument("--device", default="cpu", help="simulation device")
     parser.add_argument("--map", nargs="+", metavar="MAP.yaml",
-                        help="drive in Nav2 map_server maps (episode k in map k %% N), starts and goals in their free "
-                             "space")
+                        help="drive in Nav2 map_server maps or procedural places (building:100@1000: 100 buildings "
+                             "from seed 1000), episode k in map k %% N, starts and goals in their free space")
     parser.add_argument("--json", metavar="FILE", help="also write the figures to FILE")
     parser.add_argument("--rerun", metavar="FILE.rrd", help="record the episodes to a Rerun file")
     parser.add_argument("--serve", action="store_true", help="serve a live Rerun web viewer on 127.0.0.1")
@@ -505,7 +505,7 @@ def main(argv: list[str] | None = None) -> int:
         print(format_result(run.name, result) + tail)
     if "success_by_bin" in extra:
         print(format_bins(extra["success_by_bin"]))
-    if len(extra.get("maps", ())) > 1:
+    if 1 < len(extra.get("maps", ())) <= 8:
         print("  success by map: " + " | ".join(f"{m['name']}: {100 * m['success']:.1f}% ({m['episodes']})"
                                                 for m in extra["maps"]))
     if args.rerun:

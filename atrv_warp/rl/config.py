@@ -103,9 +103,10 @@ class EnvConfig:
     """A simulator-config TOML file applied to every world (``[rover]`` and ``[contact]`` tables), e.g. the
     calibration ``atrv-calibrate`` fitted to a real rover's bag (docs/calibration.md); empty: the nominal rover."""
     map: tuple[str, ...] = ()
-    """Nav2 ``map_server`` maps (YAML files) the worlds drive in, world ``w`` in map ``w % len(map)``, each episode's
-    start and target in a map's free space (``env.map=site.yaml``, ``env.map=[a.yaml,b.yaml]``, ``--map site.yaml``);
-    empty: the task's arena."""
+    """Nav2 ``map_server`` maps (YAML files) or procedural places sized for the robot (``building:64``: 64 buildings,
+    seeds 0-63; ``yard:16@100``: seeds 100-115) the worlds drive in, world ``w`` in map ``w % len(maps)``, each
+    episode's start and target in a map's free space (``env.map=site.yaml``, ``env.map=[building:32,yard:32]``,
+    ``--map site.yaml``); empty: the task's arena."""
 
     def env_kwargs(self) -> tuple[tuple[str, object], ...]:
         """:class:`~atrv_warp.task.env.RoverEnv` keyword arguments of these environments, as

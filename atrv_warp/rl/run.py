@@ -75,7 +75,7 @@ def _files_read(env) -> tuple:
     resolution names what is wrong): a file changed since the last call is read again."""
     from atrv_warp.core.robot import load_robot
 
-    paths = [Path(p) for p in (env.sim_config, env.task_module, *env.map) if p]
+    paths = [Path(p) for p in (env.sim_config, env.task_module, *env.map) if p]  # a procedural entry: not a file
     try:
         robot = load_robot(env.robot)
         paths += [Path(robot.path), Path(robot.urdf)]
@@ -88,10 +88,11 @@ def _files_read(env) -> tuple:
 def _resolve(env, _files: tuple) -> RunSpec:
     from atrv_warp.sim.config import nominal_rover_config
     from atrv_warp.sim.config_file import load_sim_config
+    from atrv_warp.sim.urdf import footprint_radii, load_rover
     from atrv_warp.task.randomization import get_randomization
     from atrv_warp.task.registry import load_task_module, resolve_task
     from atrv_warp.task.scaling import fit_task
-    from atrv_warp.world import load_map
+    from atrv_warp.world import resolve_sites
 
     try:  # loads task_module, names the known tasks if this one is not, checks every task field
         if env.task_module:
@@ -111,8 +112,8 @@ def _resolve(env, _files: tuple) -> RunSpec:
 
     shift = randomization("randomization")
     judged = randomization("eval_randomization") if env.eval_randomization else shift
-    try:
-        maps = tuple(load_map(path) for path in env.map)
+    try:  # the robot's width sizes the procedural places
+        maps = tuple(resolve_sites(env.map, 2 * footprint_radii(load_rover(rover), rover)[0])) if env.map else ()
     except ValueError as err:  # MapError: the file and the problem named
         raise ValueError(f"train config: env.map: {err}") from None
     return RunSpec(robot=rover.robot_spec, rover=rover, task=task, randomization=shift, eval_randomization=judged,

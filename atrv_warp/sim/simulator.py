@@ -51,8 +51,8 @@ from atrv_warp.sim.params import (
     parameter_values,
 )
 from atrv_warp.sim.terrain import HeightGrid, TerrainConfig, get_terrain
-from atrv_warp.sim.urdf import footprint_points, load_rover
-from atrv_warp.world import OccupancyMap, load_map
+from atrv_warp.sim.urdf import footprint_radii, load_rover
+from atrv_warp.world import OccupancyMap, resolve_sites
 
 __all__ = ["DRIVE_MODE_REFERENCE_TORQUE", "DRIVE_MODE_TORQUES", "DriveMode", "RoverSim", "SimBuffers"]
 
@@ -181,8 +181,9 @@ class RoverSim:
         driver: The base's motor driver (:class:`~atrv_warp.sim.driver.DriverConfig`; default: its defaults).
             Its radius and track default to the nominal rover's: ``rover`` before ``sim_config`` changes it; its
             gains, torque limit and track factor to the robot's.
-        maps: Sites as Nav2 maps (:class:`~atrv_warp.world.OccupancyMap`, or a ``map_server`` YAML's path), each
-            held once; world ``w`` drives in map ``w % len(maps)``. Their walls and unknown cells (and what lies
+        maps: Sites as Nav2 maps (:class:`~atrv_warp.world.OccupancyMap`, a ``map_server`` YAML's path, or procedural
+            places for this robot such as ``"building:64"``: :func:`~atrv_warp.world.resolve_sites`), each held once;
+            world ``w`` drives in map ``w % len(maps)``. Their walls and unknown cells (and what lies
             beyond a map's edge) stand :data:`~atrv_warp.sim.maps.DEFAULT_WALL_TOP` high: the laser reads them, and
             the rover meets them as it meets an obstacle (``FLAG_OBSTACLE``). Without an ``arena``, the arena's
             ground and walls are drawn around every map (:func:`~atrv_warp.sim.maps.arena_around`). ``()``: none.
@@ -243,7 +244,7 @@ class RoverSim:
                                                                         sim_config)
         """``bounds``: each bounded physical parameter's range for this robot
         (:func:`~atrv_warp.sim.params.parameter_bounds`): the configs' values and :meth:`set_params` are held to them."""
-        site_maps = [m if isinstance(m, OccupancyMap) else load_map(m) for m in maps]
+        site_maps = resolve_sites(maps, 2 * footprint_radii(load_rover(self.rover_cfg), self.rover_cfg)[0]) if maps else []
         self.arena_cfg = arena or arena_around(site_maps)
         self.sim_cfg = sim or SimConfig()
         self.num_worlds = num_worlds
@@ -745,13 +746,8 @@ class RoverSim:
 
     @property
     def footprint_radii(self) -> tuple[float, float]:
-        """(inscribed, circumscribed) radius [m] of the rover's outline seen from above about the chassis origin (the
-        pose an episode starts at; :func:`~atrv_warp.sim.urdf.footprint_points`): the nearest side of its bounding
-        rectangle, and its farthest point (the task's ``footprint_radius``). Nav2's footprint radii: a planner keeps
-        the inscribed one from walls, a spawn the circumscribed one."""
-        points = footprint_points(self.description, self.rover_cfg)
-        half = np.abs(points).max(axis=0)
-        return float(half.min()), float(np.linalg.norm(points, axis=1).max())
+        """(inscribed, circumscribed) radius [m] of the rover's outline (:func:`~atrv_warp.sim.urdf.footprint_radii`)."""
+        return footprint_radii(self.description, self.rover_cfg)
 
     @property
     def _footprint(self) -> float:

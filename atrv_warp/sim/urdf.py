@@ -20,7 +20,7 @@ from atrv_warp.core.robot import MAX_WHEELS
 from atrv_warp.sim.config import InertialOverride, RoverConfig, default_urdf_path
 
 __all__ = ["URDF_RANGE", "Frame", "Inertial", "RoverDescription", "URDFError", "Wheel", "check_numbers", "check_tree",
-           "footprint_points", "load_rover", "read_urdf", "rigid_group"]
+           "footprint_points", "footprint_radii", "load_rover", "read_urdf", "rigid_group"]
 
 
 class URDFError(ValueError):
@@ -139,6 +139,15 @@ def footprint_points(description: RoverDescription, rover) -> np.ndarray:
                 points.append((centre + out * side * rover.wheel_length + np.array([along * rover.wheel_radius, 0, 0]))
                               [:2])
     return np.array(points)
+
+
+def footprint_radii(description: RoverDescription, rover) -> tuple[float, float]:
+    """(inscribed, circumscribed) radius [m] of :func:`footprint_points` about the chassis origin (the pose an
+    episode starts at): the nearest side of its bounding rectangle, and its farthest point (the task's
+    ``footprint_radius``). Nav2's footprint radii: a planner keeps the inscribed one from walls, a spawn the
+    circumscribed one."""
+    points = footprint_points(description, rover)
+    return float(np.abs(points).max(axis=0).min()), float(np.linalg.norm(points, axis=1).max())
 
 
 def _inertial_of(link) -> Inertial:

@@ -76,7 +76,8 @@ class OccupancyMap:
     origin: tuple[float, float]  # the lower-left cell's outer corner (x, y) [m], in the map frame
     source: Path | None = None  # the YAML it was read from
     mode: str = "trinary"
-    digest: str = field(default="")  # sha256 of the YAML and image bytes: which map an episode ran on
+    digest: str = field(default="")  # sha256 of the YAML and image bytes (of a drawn map, its cells): which map it is
+    label: str = ""  # a name where there is no file (a procedural place's ``building_3``)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -95,8 +96,8 @@ class OccupancyMap:
 
     @property
     def name(self) -> str:
-        """The YAML's file name without its suffix (``"map"`` for a map not read from a file)."""
-        return self.source.stem if self.source is not None else "map"
+        """The YAML's file name without its suffix, else :attr:`label`, else ``"map"``."""
+        return self.source.stem if self.source is not None else (self.label or "map")
 
     def cell_of(self, x, y) -> tuple[np.ndarray, np.ndarray]:
         """The (row, col) indices of the cells holding the points ``(x, y)`` [m] (outside the map: out of range)."""

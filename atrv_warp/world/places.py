@@ -14,14 +14,18 @@ yard's fence line, lies unknown space, as a saved map has it. Same seed, same pl
 
 from __future__ import annotations
 
+import hashlib
+import re
+from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from atrv_warp.world.nav2_map import FREE, OCCUPIED, UNKNOWN, OccupancyMap
+from atrv_warp.world.nav2_map import FREE, OCCUPIED, UNKNOWN, MapError, OccupancyMap, load_map
 
 __all__ = ["DOOR_WIDTHS", "MIN_ROOM", "PLACES", "WALL", "Door", "building", "draw_building", "draw_yard", "place",
-           "yard"]
+           "resolve_sites", "yard"]
 
 MIN_ROOM = 3.0
 """The least side of a building's room [m] (or four robot widths, whichever is more)."""
@@ -61,8 +65,9 @@ class _Canvas:
         inside = ((xx + 0.5) * self.res - x) ** 2 + ((yy + 0.5) * self.res - y) ** 2 <= radius ** 2
         self.cells[inside] = value
 
-    def site(self, origin: tuple[float, float]) -> OccupancyMap:
-        return OccupancyMap(cells=self.cells, resolution=self.res, origin=origin)
+    def site(self, origin: tuple[float, float], label: str) -> OccupancyMap:
+        digest = hashlib.sha256(self.cells.tobytes() + repr((self.cells.shape, self.res, origin)).encode()).hexdigest()
+        return OccupancyMap(cells=self.cells, resolution=self.res, origin=origin, digest=digest, label=label)
 
 
 def _door_width(rng: np.random.Generator, robot_width: float) -> float:
@@ -166,7 +171,7 @@ def draw_building(seed: int, robot_width: float, *, size: tuple[float, float] | 
                 rng.uniform(y0 + d / 2 + WALL, y1 - d / 2 - WALL))
             if _clear_of(doors, cx, cy, max(w, d) / 2 + 1.5 * robot_width):
                 canvas.box(cx - w / 2, cy - d / 2, cx + w / 2, cy + d / 2, OCCUPIED)
-    return _placed(canvas, doors)
+    return _placed(canvas, doors, f"building_{seed}")
 
 
 def draw_yard(seed: int, robot_width: float, *, size: tuple[float, float] | None = None, resolution: float = 0.05,
@@ -216,14 +221,14 @@ def draw_yard(seed: int, robot_width: float, *, size: tuple[float, float] | None
         x, y = float(rng.uniform(margin + 1.0, margin + width - 1.0)), float(rng.uniform(margin + 1.0, margin + height - 1.0))
         if _clear_of(gates, x, y, r + 1.5 * robot_width):
             canvas.disc(x, y, r, OCCUPIED)
-    return _placed(canvas, gates)
+    return _placed(canvas, gates, f"yard_{seed}")
 
 
-def _placed(canvas: _Canvas, doors: list[Door]) -> tuple[OccupancyMap, list[Door]]:
+def _placed(canvas: _Canvas, doors: list[Door], label: str) -> tuple[OccupancyMap, list[Door]]:
     """The canvas as a map centred on (0, 0), and its doors moved with it."""
     rows, cols = canvas.cells.shape
     ox, oy = -cols * canvas.res / 2, -rows * canvas.res / 2
-    return canvas.site((ox, oy)), [Door(d.x + ox, d.y + oy, d.width, d.along_x) for d in doors]
+    return canvas.site((ox, oy), label), [Door(d.x + ox, d.y + oy, d.width, d.along_x) for d in doors]
 
 
 PLACES = {"building": building, "yard": yard}
@@ -235,3 +240,33 @@ def place(kind: str, seed: int, robot_width: float, **settings) -> OccupancyMap:
     if kind not in PLACES:
         raise ValueError(f"unknown place {kind!r}; known: {', '.join(PLACES)}")
     return PLACES[kind](seed, robot_width, **settings)
+
+
+SPEC = re.compile(r"^(?P<kind>[a-z_]+):(?P<count>\d+)(@(?P<seed>\d+))?$")
+"""A procedural entry in a list of sites: ``KIND:COUNT`` (seeds 0 to COUNT - 1) or ``KIND:COUNT@FIRST`` (seeds FIRST
+on: places never trained on, for an evaluation)."""
+
+
+def resolve_sites(entries: Sequence[OccupancyMap | str | Path], robot_width: float) -> list[OccupancyMap]:
+    """Each entry as maps: a map as it is, a ``map_server`` YAML read (:func:`~atrv_warp.world.load_map`), a
+    procedural entry (:data:`SPEC`: ``building:64``, ``yard:10@1000``) drawn for a robot ``robot_width`` [m] wide.
+
+    Raises:
+        MapError: A map that does not read, or an entry that is neither a file nor a procedural one (named).
+    """
+    sites: list[OccupancyMap] = []
+    for entry in entries:
+        if isinstance(entry, OccupancyMap):
+            sites.append(entry)
+            continue
+        spec = SPEC.match(str(entry))
+        if spec is None or Path(entry).exists():
+            sites.append(load_map(entry))
+            continue
+        if spec["kind"] not in PLACES:
+            raise MapError(f"map {entry}: unknown place {spec['kind']!r} (known: {', '.join(PLACES)}) and no such file")
+        first, count = int(spec["seed"] or 0), int(spec["count"])
+        if count < 1:
+            raise MapError(f"map {entry}: at least one place, got {count}")
+        sites += [place(spec["kind"], seed, robot_width) for seed in range(first, first + count)]
+    return sites
