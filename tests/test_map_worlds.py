@@ -184,3 +184,14 @@ def test_evaluate_demo_and_train_take_a_map(tmp_path, capsys):
         load_train_config("smoke", {"env.map": str(missing)})
     assert evaluate.main(["nav_deploy", "--engine", "mujoco", "--map", str(rooms), "--episodes", "2"]) == 2
     assert "maps are for engine ours" in capsys.readouterr().err
+
+
+def test_a_map_larger_than_the_arena_holds_the_nav_terrain():
+    """A 33.4 m yard: the arena drawn around it is a whole number of 2 m, which the nav task's terrain grid spans."""
+    from atrv_warp.sim.maps import arena_around
+    from atrv_warp.task.env import RoverEnv
+
+    site = OccupancyMap(cells=np.full((334, 334), FREE, np.int8), resolution=0.1, origin=(-16.7, -16.7))
+    assert arena_around([site]).size == 36.0  # 2 x ceil(16.7 + 1)
+    env = RoverEnv(2, task="nav_deploy", seed=0, maps=[site])
+    env.rollout(3)

@@ -10,6 +10,7 @@ every world that drives in it.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -98,13 +99,14 @@ ARENA_MARGIN = 1.0
 
 def arena_around(maps: Sequence[OccupancyMap]) -> ArenaConfig:
     """The reference arena, or, with ``maps``, a square arena centred on the origin whose walls stand
-    :data:`ARENA_MARGIN` beyond every map's edge: a map bounds its world (what lies beyond its edge is a wall), so the
+    :data:`ARENA_MARGIN` beyond every map's edge (its side rounded up to a whole number of 2 m): a map bounds its world (what lies beyond its edge is a wall), so the
     arena's walls are never met and its ground lies under every map."""
     if not maps:
         return ArenaConfig()
     reach = max(max(abs(m.origin[0]), abs(m.origin[1]), abs(m.origin[0] + m.size[0]), abs(m.origin[1] + m.size[1]))
                 for m in maps)
-    return ArenaConfig(size=max(ArenaConfig().size, 2.0 * (reach + ARENA_MARGIN)))
+    # a whole number of 2 m: the terrain's height grid spans it at any of its resolutions
+    return ArenaConfig(size=max(ArenaConfig().size, 2.0 * math.ceil(reach + ARENA_MARGIN)))
 
 
 def round_robin(num_worlds: int, num_maps: int) -> list[int]:

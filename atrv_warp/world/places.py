@@ -143,7 +143,7 @@ def yard(seed: int, robot_width: float, **settings) -> OccupancyMap:
 
 
 def draw_building(seed: int, robot_width: float, *, size: tuple[float, float] | None = None,
-                  resolution: float = 0.05, furniture: int = 3) -> tuple[OccupancyMap, list[Door]]:
+                  resolution: float = 0.1, furniture: int = 3) -> tuple[OccupancyMap, list[Door]]:
     """A building drawn from ``seed`` for a robot ``robot_width`` [m] wide: outer walls, rooms split off by walls
     with doorways (some by a corridor), up to ``furniture`` pieces in each room (tables and shelves, clear of the
     doorways), unknown space 1 m around; ``size`` (width, height) [m], default drawn from 14 to 24 m a side. The map's
@@ -174,7 +174,7 @@ def draw_building(seed: int, robot_width: float, *, size: tuple[float, float] | 
     return _placed(canvas, doors, f"building_{seed}")
 
 
-def draw_yard(seed: int, robot_width: float, *, size: tuple[float, float] | None = None, resolution: float = 0.05,
+def draw_yard(seed: int, robot_width: float, *, size: tuple[float, float] | None = None, resolution: float = 0.1,
               trees: int = 12, sheds: int = 2) -> tuple[OccupancyMap, list[Door]]:
     """A yard drawn from ``seed`` for a robot ``robot_width`` [m] wide: a fence all round and one across it, each with
     gates; ``sheds`` sheds (walled, a door each) and ``trees`` trees (trunks 0.15 to 0.4 m in radius) clear of the
@@ -215,7 +215,7 @@ def draw_yard(seed: int, robot_width: float, *, size: tuple[float, float] | None
         canvas.box(cx - w / 2 + WALL, cy - d / 2 + WALL, cx + w / 2 - WALL, cy + d / 2 - WALL, FREE)
         door = min(_door_width(rng, robot_width), w - 4 * WALL)
         canvas.box(cx - door / 2, cy - d / 2 - WALL, cx + door / 2, cy - d / 2 + 2 * WALL, FREE)
-        gates.append(Door(cx, cy - d / 2, door, True))
+        gates.append(Door(cx, cy - d / 2 + WALL / 2, door, True))  # the middle of its wall
     for _ in range(trees):
         r = float(rng.uniform(0.15, 0.4))
         x, y = float(rng.uniform(margin + 1.0, margin + width - 1.0)), float(rng.uniform(margin + 1.0, margin + height - 1.0))
