@@ -195,3 +195,39 @@ def test_a_map_larger_than_the_arena_holds_the_nav_terrain():
     assert arena_around([site]).size == 36.0  # 2 x ceil(16.7 + 1)
     env = RoverEnv(2, task="nav_deploy", seed=0, maps=[site])
     env.rollout(3)
+
+
+def test_the_planner_in_the_loop_plans_each_episode_and_replans_from_the_robot():
+    """``planner=PlannerConfig()``: each reset's path runs from the episode's start to its target; every
+    ``replan_period`` a world plans again from where its robot is; an episode whose path the planner cannot give
+    (here: longer than ``max_points``) is drawn again, at most ``redraws`` times; a restored snapshot plans from the
+    restored poses."""
+    from atrv_warp.sim.planner import PlannerConfig
+    from atrv_warp.task.env import RoverEnv
+
+    site = two_rooms()
+    env = RoverEnv(32, task="nav_deploy", seed=1, maps=[site], planner=PlannerConfig(replan_period=1.0))
+    td = env.reset()
+    assert (env.path_length > 2).all()
+    first = torch.stack([env.path[w, 0] for w in range(32)])
+    last = torch.stack([env.path[w, int(env.path_length[w]) - 1] for w in range(32)])
+    assert torch.equal(first, env.episode_start[:, :2]) and torch.equal(last, env.target)
+    period = round(1.0 / env.sim.sim_cfg.step_dt)
+    for k in range(period):
+        td = env.step(td.set("action", torch.full((32, 2), 0.5)))["next"]
+        if k == period - 2:
+            pose = env.sim.root_pose[:, :2].clone()
+    live = td["done"].reshape(-1) == 0
+    assert torch.equal(env.path[live, 0], env.sim.root_pose[live, :2]) and not torch.equal(pose[live], first[live])
+    snapshot = env.state_dict()
+    env.reset()
+    env.load_state_dict(snapshot)
+    assert torch.equal(env.path[live, 0], env.sim.root_pose[live, :2])
+    # paths of at most 70 points (about 7 m at 0.1 m): more than half the 5-10 m episodes are drawn again, and
+    # eight redraws find every world one that fits (29 of 64 without)
+    short = {redraws: RoverEnv(64, task="nav_deploy", seed=1, maps=[site],
+                               planner=PlannerConfig(max_points=70, redraws=redraws)) for redraws in (0, 8)}
+    for env in short.values():
+        env.reset()
+    planned = {redraws: int((env.path_length > 0).sum()) for redraws, env in short.items()}
+    assert planned[0] < 40 and planned[8] == 64

@@ -1,5 +1,5 @@
 """The global planner (``atrv_warp.sim.planner``): Nav2's costmap (inflation as ``computeCost``), NavFn's weights, and
-A* in a kernel that finds the cheapest path, checked against a plain Dijkstra."""
+a field from the goal in a kernel whose walks are the cheapest paths, checked against a plain Dijkstra."""
 
 from __future__ import annotations
 
@@ -65,9 +65,10 @@ def test_the_costmap_inflates_as_nav2_and_navfn_weighs_it():
 
 
 def test_the_planner_finds_the_cheapest_path_as_dijkstra_does():
-    """60 plans on random maps with walls and unknown patches: the kernel's A* costs what a plain Dijkstra's walk
-    costs (to float rounding), finds none exactly where there is none, and each path steps cell to cell from the
-    start to the goal through passable cells."""
+    """60 plans on random maps with walls and unknown patches: each path (the walk down the goal's field) costs what
+    a plain Dijkstra's walk from the start costs (to float rounding), there is none exactly where Dijkstra finds none,
+    and each path steps cell to cell from the start to the goal through passable cells; 60 replans from other starts
+    down the same fields cost what Dijkstra's walks from there cost."""
     rng = np.random.default_rng(0)
     found = 0
     for trial in range(6):
@@ -97,6 +98,14 @@ def test_the_planner_finds_the_cheapest_path_as_dijkstra_does():
                 assert (steps <= 0.1 * math.sqrt(2.0) + 1e-5).all()
                 r, c = site.cell_of(points[:, 0], points[:, 1])
                 assert (weights[r, c] >= 0).all()
+        # a replan from elsewhere walks the same field: the cheapest path from there, no new search
+        elsewhere = open_cells[rng.choice(len(open_cells), worlds, replace=False)]
+        planner.replan(range(worlds), torch.tensor(np.stack(site.centre_of(elsewhere[:, 0], elsewhere[:, 1]), -1),
+                                                   dtype=torch.float32))
+        for w in range(worlds):
+            want = dijkstra(weights, tuple(elsewhere[w]), tuple(picks[worlds + w]))
+            got = float(planner.path_cost[w]) if planner.path_length[w] > 0 else math.inf
+            assert got == pytest.approx(want, rel=1e-5), (trial, w, "replan")
     assert found >= 40  # most pairs are joined: the comparison is of paths, not of failures
 
 
@@ -124,3 +133,18 @@ def test_a_bad_planner_setting_is_named():
         PlannerConfig(inflation_radius=float("nan"))
     with pytest.raises(ValueError, match="slots must be >= 2"):
         PlannerConfig(slots=0)
+
+
+def test_a_robot_in_a_walls_inscribed_band_is_led_out_and_too_many_fields_are_refused():
+    """A start inside the closed band beside a wall (a robot that strayed there) gets a path out of it, stepping
+    straight into open cells; fields that would not fit in memory are refused, naming the worlds and cells."""
+    cells = np.full((40, 40), FREE, np.int8)
+    cells[:, 20] = OCCUPIED
+    site = site_of(cells)
+    planner = Planner(GridWorlds([site], [0], "cpu"), (0.25, 0.4))
+    planner.plan([0], torch.tensor([[1.85, 1.0]]), torch.tensor([[0.5, 3.5]]))  # 0.2 m from the wall's face
+    points = planner.points(0)
+    assert len(points) > 2 and points[1][0] < 1.85 and np.allclose(points[-1], [0.5, 3.5])
+    large = site_of(np.full((400, 400), FREE, np.int8))
+    with pytest.raises(ValueError, match=r"fields would take 6.0 GiB \(10000 worlds x 160,000 planning cells"):
+        Planner(GridWorlds([large], [0] * 10_000, "cpu"), (0.25, 0.4), PlannerConfig(resolution=0.1))

@@ -5,6 +5,7 @@
     planner = Planner(sim.maps, footprint=sim.footprint_radii)          # the maps' costmaps, built once
     planner.plan(worlds, starts, goals)                                  # (K,) world indices, (N, 2) [m] each
     planner.path[w, :planner.path_length[w]]                             # world w's points [m], start to goal
+    planner.replan(worlds, poses, goals)                                 # from where the robots are now: cheap
 
 The costmap is Nav2's global costmap over the map (``static_layer`` and ``inflation_layer``, with
 ``track_unknown_space``): a cell on an occupied map cell is lethal (254), one within the robot's inscribed radius of it
@@ -15,10 +16,13 @@ and inscribed cells closed, unknown ones passable at 253 where :attr:`PlannerCon
 and every other cell ``50 + 0.8 c``: the cheapest path keeps to the middle of a doorway and away from walls, and a
 doorway 1.5 times the robot's width stays open (only the inscribed radius closes, not the whole footprint).
 
-The planning grid may be coarser than the map (:attr:`PlannerConfig.resolution`; never coarser than the inscribed
-radius, so that a wall's closed band is at least two cells wide and no diagonal step crosses it). Each planning cell
-reads the map cell under its centre. Plans run in slots of scratch (:attr:`PlannerConfig.slots` worlds at a time),
-on the maps' device.
+A plan is NavFn's: a field from the goal over the whole map (:meth:`Planner.set_goals`, Dijkstra in a kernel), then
+the walk down it from the start (:meth:`Planner.replan`), so that a replan to the same goal (Nav2's behaviour tree
+asks about once a second) costs microseconds. The planning grid may be coarser than the map
+(:attr:`PlannerConfig.resolution`; never coarser than the inscribed radius, so that a wall's closed band is at least
+two cells wide and no diagonal step crosses it). Each planning cell reads the map cell under its centre. Fields are
+computed :attr:`PlannerConfig.slots` worlds at a time, on the maps' device; each world keeps its field (four bytes a
+planning cell).
 """
 
 from __future__ import annotations
@@ -31,15 +35,18 @@ import numpy as np
 import torch
 import warp as wp
 
-from atrv_warp.sim.kernels.planner import PlanMaps, plan_paths
+from atrv_warp.sim.kernels.planner import PlanMaps, follow_fields, goal_fields
 from atrv_warp.sim.maps import GridWorlds, distance_field
 from atrv_warp.world.nav2_map import OCCUPIED, UNKNOWN
 
-__all__ = ["INSCRIBED", "LETHAL", "NO_INFORMATION", "Planner", "PlannerConfig", "costmap", "navfn_costs"]
+__all__ = ["FIELD_MEMORY", "INSCRIBED", "LETHAL", "NO_INFORMATION", "Planner", "PlannerConfig", "costmap",
+           "navfn_costs"]
 
 LETHAL, INSCRIBED, NO_INFORMATION = 254, 253, 255
 """Nav2's costmap values (``nav2_costmap_2d/cost_values.hpp``): ``LETHAL_OBSTACLE``, ``INSCRIBED_INFLATED_OBSTACLE``,
 ``NO_INFORMATION``."""
+FIELD_MEMORY = 4 << 30
+"""The most the worlds' fields may take [bytes]: more is refused, naming the worlds and cells it would take."""
 
 
 @dataclass(frozen=True)
@@ -57,7 +64,12 @@ class PlannerConfig:
     max_points: int = 2048
     """The most points a path may have; a longer one is no path."""
     slots: int = 64
-    """Worlds planned at a time (each holds scratch for its map's planning grid)."""
+    """Worlds whose fields are computed at a time (each holds scratch for its map's planning grid)."""
+    replan_period: float = 1.0
+    """How often each world's path is planned again from where its robot is [s] (Nav2's default behaviour tree
+    replans at 1 Hz: ``RateController hz="1.0"``); 0: only at a reset."""
+    redraws: int = 8
+    """Times a reset draws a world's episode again while its start and goal have no path between them."""
 
     def __post_init__(self):
         for name in ("inflation_radius", "cost_scaling_factor", "resolution"):
@@ -67,6 +79,10 @@ class PlannerConfig:
         for name in ("max_points", "slots"):
             if getattr(self, name) < 2:
                 raise ValueError(f"PlannerConfig.{name} must be >= 2, got {getattr(self, name)!r}")
+        if not (math.isfinite(self.replan_period) and self.replan_period >= 0):
+            raise ValueError(f"PlannerConfig.replan_period must be a finite number >= 0, got {self.replan_period!r}")
+        if self.redraws < 0:
+            raise ValueError(f"PlannerConfig.redraws must be >= 0, got {self.redraws!r}")
 
 
 def costmap(cells: np.ndarray, occupied_distance: np.ndarray, resolution: float, inscribed: float,
@@ -118,18 +134,26 @@ class Planner:
             self.costmaps.append(costmap(site.cells[r, c], occupied[r, c], site.resolution, inscribed, cfg))
             self.resolutions.append(res)
         self.struct = self._pack()
-        n, cells = len(grids.world_map), max([c.size for c in self.costmaps] or [1])
-        slots = min(cfg.slots, max(n, 1))
+        n, cells = max(len(grids.world_map), 1), max([c.size for c in self.costmaps] or [1])
+        if 4 * n * cells > FIELD_MEMORY:
+            raise ValueError(f"the planner's fields would take {4 * n * cells / 2**30:.1f} GiB ({n} worlds x "
+                             f"{cells:,} planning cells of the largest map): plan on a coarser grid "
+                             f"(PlannerConfig.resolution, now {cfg.resolution} m) or in fewer worlds")
+        slots = min(cfg.slots, n)
         self.g = wp.empty((slots, cells), dtype=float, device=self.device)
-        self.parent = wp.empty((slots, cells), dtype=wp.int32, device=self.device)
         self.place = wp.empty((slots, cells), dtype=wp.int32, device=self.device)
         self.heap_f = wp.empty((slots, cells), dtype=float, device=self.device)
         self.heap_cell = wp.empty((slots, cells), dtype=wp.int32, device=self.device)
-        self._path = wp.zeros((max(n, 1), cfg.max_points), dtype=wp.vec2, device=self.device)
-        self._length = wp.zeros(max(n, 1), dtype=wp.int32, device=self.device)
-        self._cost = wp.zeros(max(n, 1), dtype=float, device=self.device)
+        self.toward = wp.full((n, cells), -1, dtype=wp.int32, device=self.device)
+        """(N, cells) each world's field: the next planning cell toward its goal (-1: none)."""
+        self._goals = wp.zeros(n, dtype=wp.vec2, device=self.device)
+        self._path = wp.zeros((n, cfg.max_points), dtype=wp.vec2, device=self.device)
+        self._length = wp.zeros(n, dtype=wp.int32, device=self.device)
+        self._cost = wp.zeros(n, dtype=float, device=self.device)
         self._world_map = grids.struct.world_map
-        self.path = wp.to_torch(self._path).view(max(n, 1), cfg.max_points, 2)
+        self.goals = wp.to_torch(self._goals).view(n, 2)
+        """(N, 2) each world's goal [m], as :meth:`set_goals` last set it."""
+        self.path = wp.to_torch(self._path).view(n, cfg.max_points, 2)
         """(N, max_points, 2) each world's last path [m], start to goal, in its first :attr:`path_length` rows."""
         self.path_length = wp.to_torch(self._length)
         """(N,) points in each world's last path; 0: none was found."""
@@ -149,20 +173,37 @@ class Planner:
         s.origin = wp.array([m.origin for m in self.grids.maps] or [(0.0, 0.0)], dtype=wp.vec2, device=device)
         return s
 
-    def plan(self, worlds: Sequence[int] | torch.Tensor, starts: torch.Tensor, goals: torch.Tensor) -> None:
-        """Plan ``worlds`` (indices) from ``starts`` to ``goals`` ((N, 2) [m], every world's; only those of
-        ``worlds`` are read), :attr:`PlannerConfig.slots` at a time; the other worlds' paths are kept."""
-        worlds = torch.as_tensor(worlds, dtype=torch.int32).reshape(-1)
+    def set_goals(self, worlds: Sequence[int] | torch.Tensor, goals: torch.Tensor) -> None:
+        """Compute the fields of ``worlds`` (indices) toward ``goals`` ((N, 2) [m], every world's; those of ``worlds``
+        are read and kept in :attr:`goals`), :attr:`PlannerConfig.slots` worlds at a time."""
+        worlds = torch.as_tensor(worlds, dtype=torch.int32).reshape(-1).cpu()
         if not len(worlds):
             return
-        starts = wp.from_torch(starts.detach().to(torch.float32).contiguous(), dtype=wp.vec2)
-        goals = wp.from_torch(goals.detach().to(torch.float32).contiguous(), dtype=wp.vec2)
+        index = worlds.long().to(self.goals.device)
+        self.goals[index] = goals.detach().to(self.goals)[index]
         slots = self.g.shape[0]
         for first in range(0, len(worlds), slots):
             chunk = wp.array(worlds[first:first + slots].numpy(), dtype=wp.int32, device=self.device)
-            wp.launch(plan_paths, dim=len(chunk), inputs=[self.struct, self._world_map, chunk, starts, goals, self.g,
-                                                          self.parent, self.place, self.heap_f, self.heap_cell],
-                      outputs=[self._path, self._length, self._cost], device=self.device)
+            wp.launch(goal_fields, dim=len(chunk), inputs=[self.struct, self._world_map, chunk, self._goals, self.g,
+                                                           self.place, self.heap_f, self.heap_cell],
+                      outputs=[self.toward], device=self.device)
+
+    def replan(self, worlds: Sequence[int] | torch.Tensor, starts: torch.Tensor) -> None:
+        """Each of ``worlds``' path from ``starts`` ((N, 2) [m], every world's) down its field to its goal."""
+        worlds = torch.as_tensor(worlds, dtype=torch.int32).reshape(-1).cpu()
+        if not len(worlds):
+            return
+        chunk = wp.array(worlds.numpy(), dtype=wp.int32, device=self.device)
+        starts = wp.from_torch(starts.detach().to(device=self.goals.device, dtype=torch.float32).contiguous(),
+                               dtype=wp.vec2)
+        wp.launch(follow_fields, dim=len(chunk), inputs=[self.struct, self._world_map, chunk, starts, self._goals,
+                                                         self.toward],
+                  outputs=[self._path, self._length, self._cost], device=self.device)
+
+    def plan(self, worlds: Sequence[int] | torch.Tensor, starts: torch.Tensor, goals: torch.Tensor) -> None:
+        """:meth:`set_goals`, then :meth:`replan` from ``starts``: each of ``worlds``' path; the others' are kept."""
+        self.set_goals(worlds, goals)
+        self.replan(worlds, starts)
 
     def points(self, world: int) -> np.ndarray:
         """(L, 2) world ``world``'s last path [m] (empty where none was found)."""

@@ -45,6 +45,7 @@ from atrv_warp.sim.config import (
 )
 from atrv_warp.sim.driver import DRIVE_TWIST, DriverConfig
 from atrv_warp.sim.kernel_cache import precompile
+from atrv_warp.sim.planner import Planner, PlannerConfig
 from atrv_warp.sim.simulator import RoverSim
 from atrv_warp.task.config import TaskConfig
 from atrv_warp.task.definition import Task
@@ -143,6 +144,11 @@ class RoverEnv(EnvBase):
             starts and ends in the map's free space, clear of the robot's footprint, the target reachable from the
             start (``target_distance`` away where the map allows; obstacles anywhere on the map); the clearance term
             reads its walls. ``()``: the arena.
+        planner: Nav2's global planner in the loop, in the worlds with a map (:mod:`atrv_warp.sim.planner`): each
+            reset plans the episode's path from its start to its target (an episode without one is drawn again,
+            :attr:`~atrv_warp.sim.planner.PlannerConfig.redraws` times at most), and each world plans again from its
+            robot's pose every :attr:`~atrv_warp.sim.planner.PlannerConfig.replan_period`; :attr:`path` and
+            :attr:`path_length` hold them. ``None``: no planner.
         **task_overrides: Fields of :class:`TaskConfig` (e.g. ``max_steps=100``); an unknown
             name raises ``ValueError``.
     """
@@ -167,6 +173,7 @@ class RoverEnv(EnvBase):
         sim_config: str | None = None,
         driver: DriverConfig | None = None,
         maps: Sequence[OccupancyMap | str | Path] = (),
+        planner: PlannerConfig | None = None,
         **task_overrides,
     ):
         if task_module:
@@ -209,6 +216,7 @@ class RoverEnv(EnvBase):
         self._make_views()
         self._make_randomization()
         self._make_spec()
+        self._make_planner(planner)
         self.nonfinite_count = 0
         """Worlds terminated and reset because their state stopped being finite."""
         self._seed = 0
@@ -334,6 +342,42 @@ class RoverEnv(EnvBase):
             obstacles = self.sim.obstacles
             self._task_views.update({"tile": self.sim.terrain.tile, "obstacle_kind": obstacles.kind,
                                      "obstacle_pose": obstacles.pose, "obstacle_size": obstacles.size})
+
+    def _make_planner(self, cfg: PlannerConfig | None) -> None:
+        """Nav2's global planner over the worlds' maps, where asked for and there are maps."""
+        self.planner = None
+        """The worlds' global planner (:class:`~atrv_warp.sim.planner.Planner`), or ``None``."""
+        self.path = self.path_length = None
+        if cfg is None or not self.sim.maps.maps:
+            return
+        self.planner = Planner(self.sim.maps, self.sim.footprint_radii, cfg)
+        self.path, self.path_length = self.planner.path, self.planner.path_length
+        """(N, max_points, 2) each world's last plan [m], start to target, in its first ``path_length`` (N,) rows (0:
+        none; a world without a map has none)."""
+        self._mapped = torch.as_tensor(self.sim.maps.world_map >= 0, device=self.device)
+        self._replan_steps = round(cfg.replan_period / self.sim.sim_cfg.step_dt) if cfg.replan_period else 0
+
+    def _plan_episodes(self) -> None:
+        """The resetting worlds' paths from their starts to their targets; an episode without one drawn again."""
+        worlds = torch.nonzero(self._mask_t.reshape(-1) & self._mapped).flatten()
+        for attempt in range(self.planner.cfg.redraws + 1):
+            self.planner.plan(worlds, self.episode_start[:, :2], self.target)
+            worlds = worlds[self.path_length[worlds] == 0]
+            if not len(worlds) or attempt == self.planner.cfg.redraws:
+                return
+            redraw = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+            redraw[worlds] = True
+            wp.launch(sample_nav_episodes, dim=self.num_envs,
+                      inputs=[self._seed, self._params, self._target_distance, self._tiles,
+                              wp.from_torch(redraw)],
+                      outputs=[self._task, self._reset_poses, self.sim.obstacles.kernel, self.sim.terrain.kernel,
+                               self.sim.maps.struct], device=self._wp_device)
+
+    def _replan(self) -> None:
+        """The worlds due (every ``replan_period`` of their episode) plan again from their robots' poses."""
+        due = (self.step_count.reshape(-1) % self._replan_steps == 0) & self._mapped
+        if bool(due.any()):
+            self.planner.replan(torch.nonzero(due).flatten(), self.sim.root_pose[:, :2])
 
     def _make_randomization(self) -> None:
         """The draws' spec, the action delay's buffers and the noise, as the kernels take them."""
@@ -493,6 +537,8 @@ class RoverEnv(EnvBase):
         else:
             wp.launch(sample_episodes, dim=self.num_envs, inputs=[self._seed, self._params, self._mask],
                       outputs=[self._task, self._reset_poses], device=self._wp_device)
+        if self.planner is not None:  # before the rovers are placed: an episode without a path is drawn again
+            self._plan_episodes()
         sim.reset_worlds(self._mask, self._reset_poses)
         if self._robot:  # a new odometry frame: the start pose, without drift yet
             self.odom_drift.masked_fill_(self._mask_t.unsqueeze(-1), 0.0)
@@ -585,6 +631,8 @@ class RoverEnv(EnvBase):
         self._add_noise(self._all, advance=True)
         if self._draws_on_tick:
             self._draw(PHASE_TICK, self._all)
+        if self.planner is not None and self._replan_steps:
+            self._replan()
         if bool(sim.nonfinite.any()):  # one flag read per step; blown-up worlds are rare
             self.nonfinite_count += int(sim.nonfinite.sum())
         out = {"observation": self._obs_t.clone(), "reward": self._reward_t.clone(),
@@ -719,6 +767,9 @@ class RoverEnv(EnvBase):
         self._reseed_sensors()
         for sensor in self.sensors:
             sensor.load_state(task_state)
+        if self.planner is not None:  # the plans are the restored episodes', from where the rovers are
+            mapped = torch.nonzero(self._mapped).flatten()
+            self.planner.plan(mapped, self.sim.root_pose[:, :2], self.target)
         return super().load_state_dict(state_dict, strict=strict, assign=assign)
 
     def __repr__(self) -> str:

@@ -3,20 +3,23 @@
 The costmap (:class:`PlanMaps`) holds, per planning cell, NavFn's traversal cost (``nav2_navfn_planner/navfn.cpp``,
 ``NavFn::setCostmap``): ``COST_NEUTRAL + COST_FACTOR * c`` (50 + 0.8 c) for a Nav2 cost ``c`` below the inscribed
 obstacle's 253, the unknown cell's 253 where unknown space may be planned through, and none (-1) for a lethal or
-inscribed cell. :func:`plan_paths` runs A* over it, one thread a world: 8-connected (a diagonal step only where both
-cells beside it are passable), each step's cost its length in cells times the cost of the cell it enters, guided by
-the octile distance times the cheapest cell's cost (so the path is the cheapest, not only one found first). Its
-scratch (costs so far, parents, the open set as a binary heap with each cell's place in it) is one row per slot.
+inscribed cell. :func:`goal_fields` runs Dijkstra from each world's goal over its whole map, one thread a world, as
+NavFn computes its potential from the goal: 8-connected (a diagonal step only where both cells beside it are
+passable), each step's cost its length in cells times the cost of the cell it enters; it keeps, for every cell, the
+next cell toward the goal. :func:`follow_fields` then reads a world's path from any start in a few microseconds: a
+replan with the same goal and costmap (what Nav2's behaviour tree asks for about once a second) is a walk down the
+field. The search's scratch (costs so far, the open set as a binary heap with each cell's place in it) is one row
+per slot.
 """
 
 from __future__ import annotations
 
 import warp as wp
 
-__all__ = ["COST_NEUTRAL", "PlanMaps", "plan_paths"]
+__all__ = ["COST_NEUTRAL", "PlanMaps", "follow_fields", "goal_fields"]
 
 COST_NEUTRAL = wp.constant(50.0)
-"""NavFn's cost of a free cell (``COST_NEUTRAL``): the least a step can cost, what the heuristic counts."""
+"""NavFn's cost of a free cell (``COST_NEUTRAL``): the least a step can cost."""
 UNREACHED = wp.constant(1.0e30)
 OPEN_NONE = wp.constant(-1)
 CLOSED = wp.constant(-2)
@@ -87,14 +90,6 @@ def sift_down(f: wp.array2d(dtype=float), cell: wp.array2d(dtype=wp.int32), plac
 
 
 @wp.func
-def octile(r0: int, c0: int, r1: int, c1: int) -> float:
-    """The length [cells] of the shortest 8-connected walk between two cells on an empty grid."""
-    dr = float(wp.abs(r1 - r0))
-    dc = float(wp.abs(c1 - c0))
-    return dr + dc + (1.41421356 - 2.0) * wp.min(dr, dc)
-
-
-@wp.func
 def passable(maps: PlanMaps, m: int, row: int, col: int) -> bool:
     if row < 0 or col < 0 or row >= maps.rows[m] or col >= maps.cols[m]:
         return False
@@ -102,55 +97,47 @@ def passable(maps: PlanMaps, m: int, row: int, col: int) -> bool:
 
 
 @wp.kernel
-def plan_paths(
+def goal_fields(
     maps: PlanMaps,
     world_map: wp.array(dtype=wp.int32),
     worlds: wp.array(dtype=wp.int32),
-    starts: wp.array(dtype=wp.vec2),
     goals: wp.array(dtype=wp.vec2),
     g: wp.array2d(dtype=float),
-    parent: wp.array2d(dtype=wp.int32),
     place: wp.array2d(dtype=wp.int32),
     heap_f: wp.array2d(dtype=float),
     heap_cell: wp.array2d(dtype=wp.int32),
-    path: wp.array2d(dtype=wp.vec2),
-    path_length: wp.array(dtype=wp.int32),
-    path_cost: wp.array(dtype=float),
+    toward: wp.array2d(dtype=wp.int32),
 ):
-    """Slot ``s`` plans world ``worlds[s]``: its path from ``starts[w]`` to ``goals[w]`` [m] over its map, written to
-    ``path[w]`` (the start, the centres of the cells between, the goal) with ``path_length[w]`` points and its cost
-    ``path_cost[w]`` (NavFn's units: 50 a free cell); ``path_length[w]`` 0 where there is none (a start or goal off
-    the map or in a lethal cell, no way between, or a path longer than ``path`` holds)."""
+    """Slot ``s`` computes world ``worlds[s]``'s field toward ``goals[w]`` [m], as NavFn's potential (Dijkstra from
+    the goal over the whole map): ``toward[w, k]``, for every cell ``k``, the next cell of the cheapest walk from
+    ``k`` to the goal (the goal's own: itself; -1: no walk). A closed cell next to an open one gets its way out too
+    (a robot that has strayed into a wall's inscribed band is led out of it, as NavFn clears the start), but no
+    walk passes through one."""
     s = wp.tid()
     w = worlds[s]
-    path_length[w] = 0
-    path_cost[w] = UNREACHED
     m = world_map[w]
     if m < 0:
         return
-    rows = maps.rows[m]
     cols = maps.cols[m]
-    res = maps.resolution[m]
-    o = maps.origin[m]
+    cells = maps.rows[m] * cols
     base = maps.start[m]
-    sr = int(wp.floor((starts[w][1] - o[1]) / res))
-    sc = int(wp.floor((starts[w][0] - o[0]) / res))
-    gr = int(wp.floor((goals[w][1] - o[1]) / res))
-    gc = int(wp.floor((goals[w][0] - o[0]) / res))
-    if sr < 0 or sc < 0 or sr >= rows or sc >= cols or not passable(maps, m, gr, gc):
-        return
-    for k in range(rows * cols):
+    for k in range(cells):
+        toward[w, k] = -1
         g[s, k] = UNREACHED
         place[s, k] = OPEN_NONE
-    start_cell = sr * cols + sc
+    res = maps.resolution[m]
+    o = maps.origin[m]
+    gr = int(wp.floor((goals[w][1] - o[1]) / res))
+    gc = int(wp.floor((goals[w][0] - o[0]) / res))
+    if not passable(maps, m, gr, gc):
+        return
     goal_cell = gr * cols + gc
-    g[s, start_cell] = 0.0
-    parent[s, start_cell] = -1
-    heap_f[s, 0] = octile(sr, sc, gr, gc) * COST_NEUTRAL
-    heap_cell[s, 0] = start_cell
-    place[s, start_cell] = 0
+    toward[w, goal_cell] = goal_cell
+    g[s, goal_cell] = 0.0
+    heap_f[s, 0] = 0.0
+    heap_cell[s, 0] = goal_cell
+    place[s, goal_cell] = 0
     size = int(1)
-    found = int(0)
     while size > 0:
         current = heap_cell[s, 0]
         size = size - 1
@@ -160,54 +147,90 @@ def plan_paths(
             place[s, heap_cell[s, 0]] = 0
             sift_down(heap_f, heap_cell, place, s, size)
         place[s, current] = CLOSED
-        if current == goal_cell:
-            found = 1
-            break
         r = current / cols
         c = current - r * cols
+        entering = maps.cost[base + current]  # what a step into ``current`` costs, per cell of its length
         for dr in range(-1, 2):
             for dc in range(-1, 2):
                 nr = r + dr
                 nc = c + dc
-                if (dr == 0 and dc == 0) or not passable(maps, m, nr, nc):
+                # a walk from the neighbour steps into ``current``: the step seen from the neighbour's side
+                if nr < 0 or nc < 0 or nr >= maps.rows[m] or nc >= cols or (dr == 0 and dc == 0):
                     continue
-                step = float(1.0)
-                if dr != 0 and dc != 0:  # no corner cutting
-                    if not passable(maps, m, r, nc) or not passable(maps, m, nr, c):
-                        continue
-                    step = 1.41421356
+                if dr != 0 and dc != 0 and (not passable(maps, m, nr, c) or not passable(maps, m, r, nc)):
+                    continue
                 n = nr * cols + nc
                 if place[s, n] == CLOSED:
                     continue
-                tentative = g[s, current] + step * maps.cost[base + n]
-                if tentative < g[s, n]:
-                    g[s, n] = tentative
-                    parent[s, n] = current
-                    f = tentative + octile(nr, nc, gr, gc) * COST_NEUTRAL
-                    i = place[s, n]
-                    if i == OPEN_NONE:
-                        i = size
-                        size = size + 1
-                    heap_f[s, i] = f
-                    heap_cell[s, i] = n
-                    place[s, n] = i
-                    sift_up(heap_f, heap_cell, place, s, i)
-    if found == 0:
+                step = float(1.0)
+                if dr != 0 and dc != 0:
+                    step = 1.41421356
+                candidate = g[s, current] + step * entering
+                if candidate < g[s, n]:
+                    g[s, n] = candidate
+                    toward[w, n] = current
+                    if passable(maps, m, nr, nc):  # a closed cell is left, never walked through
+                        i = place[s, n]
+                        if i == OPEN_NONE:
+                            i = size
+                            size = size + 1
+                        heap_f[s, i] = candidate
+                        heap_cell[s, i] = n
+                        place[s, n] = i
+                        sift_up(heap_f, heap_cell, place, s, i)
+
+
+@wp.kernel
+def follow_fields(
+    maps: PlanMaps,
+    world_map: wp.array(dtype=wp.int32),
+    worlds: wp.array(dtype=wp.int32),
+    starts: wp.array(dtype=wp.vec2),
+    goals: wp.array(dtype=wp.vec2),
+    toward: wp.array2d(dtype=wp.int32),
+    path: wp.array2d(dtype=wp.vec2),
+    path_length: wp.array(dtype=wp.int32),
+    path_cost: wp.array(dtype=float),
+):
+    """World ``worlds[i]``'s path from ``starts[w]`` [m] down its field (:func:`goal_fields`) to ``goals[w]``:
+    ``path[w]`` (the start, the centres of the cells between, the goal), ``path_length[w]`` points (0 where there is
+    no walk, or one longer than ``path`` holds) and its cost ``path_cost[w]`` (NavFn's units: 50 a free cell)."""
+    i = wp.tid()
+    w = worlds[i]
+    path_length[w] = 0
+    path_cost[w] = UNREACHED
+    m = world_map[w]
+    if m < 0:
         return
-    count = int(1)  # the cells from the goal back to the start
-    k = goal_cell
-    while parent[s, k] >= 0:
-        k = parent[s, k]
-        count = count + 1
-    if count > path.shape[1]:
+    rows = maps.rows[m]
+    cols = maps.cols[m]
+    res = maps.resolution[m]
+    o = maps.origin[m]
+    sr = int(wp.floor((starts[w][1] - o[1]) / res))
+    sc = int(wp.floor((starts[w][0] - o[0]) / res))
+    if sr < 0 or sc < 0 or sr >= rows or sc >= cols:
         return
-    k = goal_cell
-    for i in range(count):
-        r = k / cols
-        c = k - r * cols
-        path[w, count - 1 - i] = o + wp.vec2((float(c) + 0.5) * res, (float(r) + 0.5) * res)
-        k = parent[s, k]
+    k = sr * cols + sc
+    if toward[w, k] < 0:
+        return
+    capacity = path.shape[1]
+    count = int(1)
+    cost = float(0.0)
     path[w, 0] = starts[w]
+    while toward[w, k] != k:
+        n = toward[w, k]
+        step = float(1.0)
+        if n / cols != k / cols and n % cols != k % cols:
+            step = 1.41421356
+        cost = cost + step * maps.cost[maps.start[m] + n]
+        k = n
+        if count >= capacity:
+            return
+        path[w, count] = o + wp.vec2((float(k % cols) + 0.5) * res, (float(k / cols) + 0.5) * res)
+        count = count + 1
+    if count == 1:  # the start's cell is the goal's
+        path[w, 1] = goals[w]
+        count = 2
     path[w, count - 1] = goals[w]
     path_length[w] = count
-    path_cost[w] = g[s, goal_cell]
+    path_cost[w] = cost
