@@ -68,7 +68,8 @@ def test_the_planner_finds_the_cheapest_path_as_dijkstra_does():
     """60 plans on random maps with walls and unknown patches: each path (the walk down the goal's field) costs what
     a plain Dijkstra's walk from the start costs (to float rounding), there is none exactly where Dijkstra finds none,
     and each path steps cell to cell from the start to the goal through passable cells; 60 replans from other starts
-    down the same fields cost what Dijkstra's walks from there cost."""
+    down the same fields cost what Dijkstra's walks from there cost (fields of the whole map), or find a way where
+    Dijkstra does (fields searched to twice the start's cost, searched again from a start beyond)."""
     rng = np.random.default_rng(0)
     found = 0
     for trial in range(6):
@@ -79,7 +80,8 @@ def test_the_planner_finds_the_cheapest_path_as_dijkstra_does():
         site = site_of(cells)
         worlds = 10
         grids = GridWorlds([site], [0] * worlds, "cpu")
-        planner = Planner(grids, (0.12, 0.2), PlannerConfig(allow_unknown=bool(trial % 2), slots=4))
+        planner = Planner(grids, (0.12, 0.2), PlannerConfig(allow_unknown=bool(trial % 2), slots=4,
+                                                            field_reach=0.0 if trial < 3 else 2.0))
         weights = navfn_costs(planner.costmaps[0], planner.cfg.allow_unknown)
         open_cells = np.argwhere(weights >= 0)
         picks = open_cells[rng.choice(len(open_cells), 2 * worlds, replace=False)]
@@ -102,10 +104,13 @@ def test_the_planner_finds_the_cheapest_path_as_dijkstra_does():
         elsewhere = open_cells[rng.choice(len(open_cells), worlds, replace=False)]
         planner.replan(range(worlds), torch.tensor(np.stack(site.centre_of(elsewhere[:, 0], elsewhere[:, 1]), -1),
                                                    dtype=torch.float32))
-        for w in range(worlds):
+        for w in range(worlds):  # the whole map's field: the cheapest; a field to twice the start's: a way there
             want = dijkstra(weights, tuple(elsewhere[w]), tuple(picks[worlds + w]))
             got = float(planner.path_cost[w]) if planner.path_length[w] > 0 else math.inf
-            assert got == pytest.approx(want, rel=1e-5), (trial, w, "replan")
+            if planner.cfg.field_reach == 0 or math.isinf(want):
+                assert got == pytest.approx(want, rel=1e-5), (trial, w, "replan")
+            else:
+                assert want * (1 - 1e-5) <= got < math.inf, (trial, w, "replan")
     assert found >= 40  # most pairs are joined: the comparison is of paths, not of failures
 
 

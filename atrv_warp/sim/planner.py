@@ -70,6 +70,9 @@ class PlannerConfig:
     replans at 1 Hz: ``RateController hz="1.0"``); 0: only at a reset."""
     redraws: int = 8
     """Times a reset draws a world's episode again while its start and goal have no path between them."""
+    field_reach: float = 1.5
+    """How far a goal's field is searched, as a multiple of the cost of the start's path (0: the whole map): the
+    replans of a robot that keeps near its way read it; one that strays beyond is searched again from there."""
 
     def __post_init__(self):
         for name in ("inflation_radius", "cost_scaling_factor", "resolution"):
@@ -83,6 +86,9 @@ class PlannerConfig:
             raise ValueError(f"PlannerConfig.replan_period must be a finite number >= 0, got {self.replan_period!r}")
         if self.redraws < 0:
             raise ValueError(f"PlannerConfig.redraws must be >= 0, got {self.redraws!r}")
+        if not (math.isfinite(self.field_reach) and (self.field_reach == 0 or self.field_reach >= 1)):
+            raise ValueError(f"PlannerConfig.field_reach must be 0 (the whole map) or a finite number >= 1, got "
+                             f"{self.field_reach!r}")
 
 
 def costmap(cells: np.ndarray, occupied_distance: np.ndarray, resolution: float, inscribed: float,
@@ -106,6 +112,10 @@ def navfn_costs(cost: np.ndarray, allow_unknown: bool) -> np.ndarray:
     if allow_unknown:
         out[cost == NO_INFORMATION] = 253.0
     return out
+
+
+def _indices(worlds) -> torch.Tensor:
+    return torch.as_tensor(worlds, dtype=torch.int32).reshape(-1).cpu()
 
 
 class Planner:
@@ -173,37 +183,50 @@ class Planner:
         s.origin = wp.array([m.origin for m in self.grids.maps] or [(0.0, 0.0)], dtype=wp.vec2, device=device)
         return s
 
-    def set_goals(self, worlds: Sequence[int] | torch.Tensor, goals: torch.Tensor) -> None:
+    def set_goals(self, worlds: Sequence[int] | torch.Tensor, goals: torch.Tensor, starts: torch.Tensor) -> None:
         """Compute the fields of ``worlds`` (indices) toward ``goals`` ((N, 2) [m], every world's; those of ``worlds``
-        are read and kept in :attr:`goals`), :attr:`PlannerConfig.slots` worlds at a time."""
-        worlds = torch.as_tensor(worlds, dtype=torch.int32).reshape(-1).cpu()
+        are read and kept in :attr:`goals`), each searched to :attr:`PlannerConfig.field_reach` times the cost of
+        the path from its world's ``starts`` (N, 2), :attr:`PlannerConfig.slots` worlds at a time."""
+        worlds = _indices(worlds)
         if not len(worlds):
             return
         index = worlds.long().to(self.goals.device)
         self.goals[index] = goals.detach().to(self.goals)[index]
+        starts = self._points(starts)
         slots = self.g.shape[0]
         for first in range(0, len(worlds), slots):
             chunk = wp.array(worlds[first:first + slots].numpy(), dtype=wp.int32, device=self.device)
-            wp.launch(goal_fields, dim=len(chunk), inputs=[self.struct, self._world_map, chunk, self._goals, self.g,
-                                                           self.place, self.heap_f, self.heap_cell],
+            wp.launch(goal_fields, dim=len(chunk), inputs=[self.struct, self._world_map, chunk, starts, self._goals,
+                                                           float(self.cfg.field_reach), self.g, self.place,
+                                                           self.heap_f, self.heap_cell],
                       outputs=[self.toward], device=self.device)
 
     def replan(self, worlds: Sequence[int] | torch.Tensor, starts: torch.Tensor) -> None:
-        """Each of ``worlds``' path from ``starts`` ((N, 2) [m], every world's) down its field to its goal."""
-        worlds = torch.as_tensor(worlds, dtype=torch.int32).reshape(-1).cpu()
-        if not len(worlds):
-            return
-        chunk = wp.array(worlds.numpy(), dtype=wp.int32, device=self.device)
-        starts = wp.from_torch(starts.detach().to(device=self.goals.device, dtype=torch.float32).contiguous(),
-                               dtype=wp.vec2)
-        wp.launch(follow_fields, dim=len(chunk), inputs=[self.struct, self._world_map, chunk, starts, self._goals,
-                                                         self.toward],
-                  outputs=[self._path, self._length, self._cost], device=self.device)
+        """Each of ``worlds``' path from ``starts`` ((N, 2) [m], every world's) down its field to its goal; a world
+        whose field does not reach its start is searched again from there."""
+        worlds = _indices(worlds)
+        self._follow(worlds, starts)
+        lost = worlds[self.path_length[worlds.long().to(self.path_length.device)].cpu() == 0]
+        if len(lost):  # strayed beyond its field's reach (or no path at all: searched again to say so)
+            self.set_goals(lost, self.goals, starts)
+            self._follow(lost, starts)
 
     def plan(self, worlds: Sequence[int] | torch.Tensor, starts: torch.Tensor, goals: torch.Tensor) -> None:
         """:meth:`set_goals`, then :meth:`replan` from ``starts``: each of ``worlds``' path; the others' are kept."""
-        self.set_goals(worlds, goals)
-        self.replan(worlds, starts)
+        worlds = _indices(worlds)
+        self.set_goals(worlds, goals, starts)
+        self._follow(worlds, starts)
+
+    def _points(self, xy: torch.Tensor) -> wp.array:
+        return wp.from_torch(xy.detach().to(device=self.goals.device, dtype=torch.float32).contiguous(), dtype=wp.vec2)
+
+    def _follow(self, worlds: torch.Tensor, starts: torch.Tensor) -> None:
+        if not len(worlds):
+            return
+        chunk = wp.array(worlds.numpy(), dtype=wp.int32, device=self.device)
+        wp.launch(follow_fields, dim=len(chunk), inputs=[self.struct, self._world_map, chunk, self._points(starts),
+                                                         self._goals, self.toward],
+                  outputs=[self._path, self._length, self._cost], device=self.device)
 
     def points(self, world: int) -> np.ndarray:
         """(L, 2) world ``world``'s last path [m] (empty where none was found)."""

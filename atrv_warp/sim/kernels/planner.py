@@ -101,7 +101,9 @@ def goal_fields(
     maps: PlanMaps,
     world_map: wp.array(dtype=wp.int32),
     worlds: wp.array(dtype=wp.int32),
+    starts: wp.array(dtype=wp.vec2),
     goals: wp.array(dtype=wp.vec2),
+    reach: float,
     g: wp.array2d(dtype=float),
     place: wp.array2d(dtype=wp.int32),
     heap_f: wp.array2d(dtype=float),
@@ -112,14 +114,19 @@ def goal_fields(
     the goal over the whole map): ``toward[w, k]``, for every cell ``k``, the next cell of the cheapest walk from
     ``k`` to the goal (the goal's own: itself; -1: no walk). A closed cell next to an open one gets its way out too
     (a robot that has strayed into a wall's inscribed band is led out of it, as NavFn clears the start), but no
-    walk passes through one."""
+    walk passes through one.
+
+    The search stops once it has reached every cell up to ``reach`` times the cost of the walk from ``starts[w]``
+    (0: the whole map): far enough for the replans of a robot that keeps near its way; a cell beyond is left at -1,
+    and a replan from there searches again."""
     s = wp.tid()
     w = worlds[s]
     m = world_map[w]
     if m < 0:
         return
+    rows = maps.rows[m]
     cols = maps.cols[m]
-    cells = maps.rows[m] * cols
+    cells = rows * cols
     base = maps.start[m]
     for k in range(cells):
         toward[w, k] = -1
@@ -132,6 +139,12 @@ def goal_fields(
     if not passable(maps, m, gr, gc):
         return
     goal_cell = gr * cols + gc
+    sr = int(wp.floor((starts[w][1] - o[1]) / res))
+    sc = int(wp.floor((starts[w][0] - o[0]) / res))
+    start_cell = int(-1)
+    if sr >= 0 and sc >= 0 and sr < rows and sc < cols:
+        start_cell = sr * cols + sc
+    bound = float(UNREACHED)
     toward[w, goal_cell] = goal_cell
     g[s, goal_cell] = 0.0
     heap_f[s, 0] = 0.0
@@ -147,29 +160,34 @@ def goal_fields(
             place[s, heap_cell[s, 0]] = 0
             sift_down(heap_f, heap_cell, place, s, size)
         place[s, current] = CLOSED
+        if g[s, current] > bound:
+            break
+        if reach > 0.0 and start_cell >= 0 and g[s, start_cell] < UNREACHED and bound == UNREACHED:
+            bound = reach * g[s, start_cell]  # the start's walk is known: search on to ``reach`` times it
         r = current / cols
         c = current - r * cols
         entering = maps.cost[base + current]  # what a step into ``current`` costs, per cell of its length
+        here = g[s, current]
         for dr in range(-1, 2):
             for dc in range(-1, 2):
                 nr = r + dr
                 nc = c + dc
                 # a walk from the neighbour steps into ``current``: the step seen from the neighbour's side
-                if nr < 0 or nc < 0 or nr >= maps.rows[m] or nc >= cols or (dr == 0 and dc == 0):
-                    continue
-                if dr != 0 and dc != 0 and (not passable(maps, m, nr, c) or not passable(maps, m, r, nc)):
+                if nr < 0 or nc < 0 or nr >= rows or nc >= cols or (dr == 0 and dc == 0):
                     continue
                 n = nr * cols + nc
                 if place[s, n] == CLOSED:
                     continue
                 step = float(1.0)
-                if dr != 0 and dc != 0:
+                if dr != 0 and dc != 0:  # no corner cutting: both cells beside the step open
+                    if maps.cost[base + nr * cols + c] < 0.0 or maps.cost[base + r * cols + nc] < 0.0:
+                        continue
                     step = 1.41421356
-                candidate = g[s, current] + step * entering
+                candidate = here + step * entering
                 if candidate < g[s, n]:
                     g[s, n] = candidate
                     toward[w, n] = current
-                    if passable(maps, m, nr, nc):  # a closed cell is left, never walked through
+                    if maps.cost[base + n] >= 0.0:  # a closed cell is left, never walked through
                         i = place[s, n]
                         if i == OPEN_NONE:
                             i = size
