@@ -27,7 +27,7 @@ def two_rooms() -> OccupancyMap:
     g[120:, 200:] = UNKNOWN
     g[100:119, 20:40] = OCCUPIED
     g[101:118, 21:39] = FREE  # the closet's inside
-    return OccupancyMap(cells=g, resolution=RESOLUTION, origin=ORIGIN)
+    return OccupancyMap(cells=g, resolution=RESOLUTION, origin=ORIGIN, label="rooms")
 
 
 def flood(mask: np.ndarray) -> np.ndarray:
@@ -231,3 +231,44 @@ def test_the_planner_in_the_loop_plans_each_episode_and_replans_from_the_robot()
         env.reset()
     planned = {redraws: int((env.path_length > 0).sum()) for redraws, env in short.items()}
     assert planned[0] < 40 and planned[8] == 64
+
+
+def test_worlds_set_to_given_layouts_keep_them_until_released():
+    """``set_worlds``: the given start, target, map and obstacles, replayed by every reset (auto-resets too) until
+    ``release_worlds``; the other worlds draw as before, bit for bit; a bad layout is one line naming the world and
+    changes nothing."""
+    from atrv_warp.task.env import RoverEnv
+
+    rooms, mirrored = two_rooms(), OccupancyMap(cells=two_rooms().cells[:, ::-1].copy(), resolution=RESOLUTION,
+                                                origin=ORIGIN)
+    env = RoverEnv(4, task="nav_deploy", seed=2, maps=[rooms, mirrored])
+    plain = RoverEnv(4, task="nav_deploy", seed=2, maps=[rooms, mirrored])
+    env.reset()
+    plain.reset()
+    layout = [("box", -2.0, 1.0, 0.3, 0.4, 0.2), ("cylinder", -3.0, -2.0, 0.25)]
+    env.set_worlds([1], starts=[[-6.0, 3.0, 0.5]], targets=[[5.0, -3.0]], target_yaws=[1.0], obstacles=[layout],
+                   maps=[0])
+    assert env.sim.maps.world_map[1] == 0
+    for _ in range(3):  # resets of world 1 replay it; the others keep their own streams
+        assert env.episode_start[1].tolist() == pytest.approx([-6.0, 3.0, 0.5])
+        assert env.target[1].tolist() == pytest.approx([5.0, -3.0]) and float(env.target_yaw[1]) == pytest.approx(1.0)
+        assert env.sim.obstacles.kind[1, :2].tolist() == [1, 2] and (env.sim.obstacles.kind[1, 2:] == 0).all()
+        assert env.sim.obstacles.pose[1, 0].tolist() == pytest.approx([-2.0, 1.0, 0.3])
+        env.reset()
+        plain.reset()
+        others = [0, 2, 3]
+        assert torch.equal(env.episode_start[others], plain.episode_start[others])
+    assert env.pinned.tolist() == [False, True, False, False]
+    env.release_worlds([1])
+    env.reset()
+    assert env.episode_start[1].tolist() != pytest.approx([-6.0, 3.0, 0.5])
+    before = env.episode_start.clone()
+    for bad, message in (
+            ({"starts": [[0.05, -3.0, 0.0]], "targets": [[5.0, -3.0]]}, "world 2's start .* is in a wall of map rooms"),
+            ({"starts": [[-6.0, 3.0, 0.0]], "targets": [[50.0, 0.0]]}, "world 2's target .* inside the arena"),
+            ({"starts": [[-6.0, 3.0, 0.0]], "targets": [[5.0, -3.0]], "obstacles": [[("cone", 1.0, 1.0)]]},
+             "world 2: obstacle 0: .*'cone'"),
+            ({"starts": [[-6.0, 3.0, 0.0]], "targets": [[5.0, -3.0]], "maps": [2]}, "maps must index the 2 maps")):
+        with pytest.raises(ValueError, match=message):
+            env.set_worlds([2], **bad)
+    assert torch.equal(env.episode_start, before) and env.pinned.tolist() == [False] * 4

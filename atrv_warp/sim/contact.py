@@ -128,10 +128,19 @@ class Obstacles:
     def set(self, world: int, layout) -> None:
         """Replace one world's obstacles by ``layout``: a sequence of ``("box", x, y, yaw, hx, hy)``
         and ``("cylinder", x, y, radius)`` [m, rad]. Checked: kinds, sizes > 0, inside the arena."""
+        kind, pose, size = self.layout(layout)
+        self.kind[world] = kind.to(self.kind.device)
+        self.pose[world] = pose.to(self.pose.device)
+        self.size[world] = size.to(self.size.device)
+
+    def layout(self, layout) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``layout`` (as :meth:`set` takes it) checked, as one world's slots: kind (slots,), pose (slots, 3), size
+        (slots, 2)."""
         if len(layout) > self.slots:
             raise ValueError(f"{len(layout)} obstacles do not fit the {self.slots} slots (ObstacleConfig.slots)")
-        kind = torch.zeros(self.slots, dtype=torch.int32)
-        pose, size = torch.zeros(self.slots, 3), torch.zeros(self.slots, 2)
+        width = max(self.slots, 1)  # as the kernels' arrays (a world without slots has one, always empty)
+        kind = torch.zeros(width, dtype=torch.int32)
+        pose, size = torch.zeros(width, 3), torch.zeros(width, 2)
         for i, item in enumerate(layout):
             name, *values = item
             if name == "box" and len(values) == 5:
@@ -149,9 +158,7 @@ class Obstacles:
                 raise ValueError(f"obstacle {i}: centre ({float(pose[i, 0]):g}, {float(pose[i, 1]):g}) m is outside "
                                  f"the arena (|x|, |y| < {self._half:g} m)")
             kind[i] = OBSTACLE_KINDS[name]
-        self.kind[world] = kind.to(self.kind.device)
-        self.pose[world] = pose.to(self.pose.device)
-        self.size[world] = size.to(self.size.device)
+        return kind, pose, size
 
 
 def _planes(arena: ArenaConfig, device) -> ArenaPlanes:

@@ -71,7 +71,7 @@ from atrv_warp.task.kernels.randomization import (
     delay_twist,
     draw_physics,
 )
-from atrv_warp.task.kernels.sampling import locate_goals, sample_episodes, sample_nav_episodes
+from atrv_warp.task.kernels.sampling import PinnedWorlds, locate_goals, sample_episodes, sample_nav_episodes
 from atrv_warp.task.kernels.state import RoverState, StepOutputs, TaskBuffers, TermInputs, params_of
 from atrv_warp.task.kernels.steps import advance_odometry_drift, command_twist, sum_terms
 from atrv_warp.task.kernels.tables import ends_kernel, field_kernel, term_kernels
@@ -249,6 +249,18 @@ class RoverEnv(EnvBase):
         out.distance = self._distance = wp.zeros(n, dtype=float, device=dev)
         self._out = out
         self._mask = wp.zeros(n, dtype=bool, device=dev)
+        pins = PinnedWorlds()
+        pins.pinned = wp.zeros(n, dtype=bool, device=dev)
+        pins.start = wp.zeros(n, dtype=wp.vec3, device=dev)
+        pins.target = wp.zeros(n, dtype=wp.vec2, device=dev)
+        pins.target_yaw = wp.zeros(n, dtype=float, device=dev)
+        pins.tile = wp.zeros(n, dtype=wp.int32, device=dev)
+        slots = self.sim.obstacles.kernel.kind.shape[1]
+        pins.kind = wp.zeros((n, slots), dtype=wp.int32, device=dev)
+        pins.pose = wp.zeros((n, slots), dtype=wp.vec3, device=dev)
+        pins.size = wp.zeros((n, slots), dtype=wp.vec2, device=dev)
+        self._pins = pins
+        self._pinned_t = wp.to_torch(pins.pinned)
         self._reset_poses = wp.zeros(n, dtype=wp.vec3, device=dev)  # the sampler's starts (x, y, yaw)
         # the last actions, newest first ([left, right] in [-1, 1]), observed after the sensors' fields
         self._actions = wp.zeros((n, c.action_history), dtype=wp.vec2, device=dev) if c.action_history else None
@@ -362,7 +374,7 @@ class RoverEnv(EnvBase):
         worlds = torch.nonzero(self._mask_t.reshape(-1) & self._mapped).flatten()
         for attempt in range(self.planner.cfg.redraws + 1):
             self.planner.plan(worlds, self.episode_start[:, :2], self.target)
-            worlds = worlds[self.path_length[worlds] == 0]
+            worlds = worlds[(self.path_length[worlds] == 0) & ~self._pinned_t[worlds]]  # a given layout stays
             if not len(worlds) or attempt == self.planner.cfg.redraws:
                 return
             redraw = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
@@ -371,7 +383,7 @@ class RoverEnv(EnvBase):
                       inputs=[self._seed, self._params, self._target_distance, self._tiles,
                               wp.from_torch(redraw)],
                       outputs=[self._task, self._reset_poses, self.sim.obstacles.kernel, self.sim.terrain.kernel,
-                               self.sim.maps.struct], device=self._wp_device)
+                               self.sim.maps.struct, self._pins], device=self._wp_device)
 
     def _replan(self) -> None:
         """The worlds due (every ``replan_period`` of their episode) plan again from their robots' poses."""
@@ -487,6 +499,115 @@ class RoverEnv(EnvBase):
         for sensor in self.sensors:
             sensor.reseed(self._seed)
 
+    def set_worlds(self, worlds: Sequence[int], starts, targets, *, target_yaws=None, obstacles=None, maps=None,
+                   tiles=None) -> TensorDictBase:
+        """Reset ``worlds`` to given layouts and keep them: every later reset of one of them (an auto-reset too)
+        replays its layout instead of drawing one, until :meth:`release_worlds`. For an evaluation or a test that
+        replays a place, or a site set up by hand.
+
+        Args:
+            worlds: K world indices.
+            starts: (K, 3) each world's start: x [m], y [m], yaw [rad].
+            targets: (K, 2) each world's target [m].
+            target_yaws: (K,) the targets' headings [rad]; default 0.
+            obstacles: per world, its obstacles as :meth:`Obstacles.set <atrv_warp.sim.contact.Obstacles.set>`
+                takes them (``("box", x, y, yaw, hx, hy)``, ``("cylinder", x, y, radius)``), at most the task's
+                slots; default none.
+            maps: (K,) each world's map, an index into ``sim.maps.maps``; default the one it has.
+            tiles: (K,) each world's terrain tile; default 0.
+
+        Raises:
+            ValueError: One line naming the world and the problem (a shape, a non-finite or out-of-arena pose, a
+                start or target in a map's wall or off it, an obstacle that does not fit or is malformed, a map
+                index out of range); nothing is changed.
+
+        Returns:
+            The reset tensordict (as :meth:`reset_to_episodes`).
+        """
+        worlds = [int(w) for w in worlds]
+        k = len(worlds)
+        starts = torch.as_tensor(starts, dtype=torch.float32).reshape(-1, 3) if k else torch.zeros(0, 3)
+        targets = torch.as_tensor(targets, dtype=torch.float32).reshape(-1, 2) if k else torch.zeros(0, 2)
+        yaws = torch.zeros(k) if target_yaws is None else torch.as_tensor(target_yaws, dtype=torch.float32).reshape(-1)
+        tiles = torch.zeros(k, dtype=torch.int32) if tiles is None else torch.as_tensor(tiles).reshape(-1).int()
+        site = self.sim.maps.world_map.copy()
+        if maps is not None:
+            site[worlds] = [int(m) for m in maps]
+        layouts = self._check_layouts(worlds, starts, targets, yaws, tiles, obstacles, site)
+        if maps is not None:  # each world's map, for the kernels and the host alike
+            self.sim.maps.world_map[:] = site
+            wp.copy(self.sim.maps.struct.world_map, wp.array(site, dtype=wp.int32, device=self._wp_device))
+            if self.planner is not None:
+                self._mapped = torch.as_tensor(site >= 0, device=self.device)
+        index = torch.as_tensor(worlds, dtype=torch.long, device=self.device)
+        pins = self._pins
+        wp.to_torch(pins.start)[index] = starts.to(self.device)
+        wp.to_torch(pins.target)[index] = targets.to(self.device)
+        wp.to_torch(pins.target_yaw)[index] = yaws.to(self.device)
+        wp.to_torch(pins.tile)[index] = tiles.to(self.device)
+        for i, (kind, pose, size) in zip(worlds, layouts, strict=True):
+            wp.to_torch(pins.kind)[i] = kind.to(self.device)
+            wp.to_torch(pins.pose)[i] = pose.to(self.device)
+            wp.to_torch(pins.size)[i] = size.to(self.device)
+        self._pinned_t[index] = True
+        mask = torch.zeros(self.num_envs, 1, dtype=torch.bool, device=self.device)
+        mask[index] = True
+        return self.reset(TensorDict({"_reset": mask}, batch_size=self.batch_size, device=self.device))
+
+    @property
+    def pinned(self) -> torch.Tensor:
+        """(N,) bool: the worlds that replay a given layout at every reset (:meth:`set_worlds`), a copy."""
+        return self._pinned_t.clone()
+
+    def release_worlds(self, worlds: Sequence[int] | None = None) -> None:
+        """Let ``worlds`` (default: every world) draw their layouts again at their next reset (:meth:`set_worlds`)."""
+        if worlds is None:
+            self._pinned_t.fill_(False)
+        else:
+            self._pinned_t[torch.as_tensor(list(worlds), dtype=torch.long, device=self.device)] = False
+
+    def _check_layouts(self, worlds, starts, targets, yaws, tiles, obstacles, site) -> list:
+        """:meth:`set_worlds`'s input checked, each world's obstacles as (kind, pose, size) slot tensors."""
+        k = len(worlds)
+        for name, value, shape in (("starts", starts, (k, 3)), ("targets", targets, (k, 2)), ("target_yaws", yaws, (k,)),
+                                   ("tiles", tiles, (k,))):
+            if tuple(value.shape) != shape:
+                raise ValueError(f"set_worlds: {name} must have shape {shape} for {k} worlds, got {tuple(value.shape)}")
+        if any(not 0 <= w < self.num_envs for w in worlds) or len(set(worlds)) != k:
+            raise ValueError(f"set_worlds: worlds must be distinct indices in [0, {self.num_envs}), got {worlds}")
+        if obstacles is not None and len(obstacles) != k:
+            raise ValueError(f"set_worlds: obstacles must hold one layout for each of the {k} worlds, got "
+                             f"{len(obstacles)}")
+        if ((tiles < 0) | (tiles >= self._tiles)).any():
+            raise ValueError(f"set_worlds: tiles must be in [0, {self._tiles}), got {tiles.tolist()}")
+        if (site < -1).any() or (site >= len(self.sim.maps.maps)).any() or (
+                len(self.sim.maps.maps) and (site[worlds] < 0).any()):
+            raise ValueError(f"set_worlds: maps must index the {len(self.sim.maps.maps)} maps, got "
+                             f"{site[worlds].tolist()}")
+        half = self.sim.arena_cfg.half_size
+        for i, w in enumerate(worlds):
+            for what, point in (("start", starts[i, :2]), ("target", targets[i])):
+                if not bool(torch.isfinite(point).all()) or bool(point.abs().max() >= half):
+                    raise ValueError(f"set_worlds: world {w}'s {what} {point.tolist()} is not a finite point inside "
+                                     f"the arena (|x|, |y| < {half:g} m)")
+                m = int(site[w])
+                if m >= 0:
+                    row, col = self.sim.maps.maps[m].cell_of(float(point[0]), float(point[1]))
+                    walls = self.sim.maps.maps[m].walls
+                    if not (0 <= row < walls.shape[0] and 0 <= col < walls.shape[1]) or walls[row, col]:
+                        raise ValueError(f"set_worlds: world {w}'s {what} ({float(point[0]):g}, {float(point[1]):g}) m "
+                                         f"is in a wall of map {self.sim.maps.maps[m].name} or off it")
+            if not bool(torch.isfinite(starts[i]).all() & torch.isfinite(yaws[i])):
+                raise ValueError(f"set_worlds: world {w}'s start yaw or target heading is not finite")
+        layouts = []
+        obstacles_of = self.sim.obstacles
+        for i, w in enumerate(worlds):
+            try:
+                layouts.append(obstacles_of.layout(obstacles[i] if obstacles is not None else ()))
+            except ValueError as err:
+                raise ValueError(f"set_worlds: world {w}: {err}") from None
+        return layouts
+
     def reset_to_episodes(self, worlds: Sequence[int], episodes: Sequence[int], *, seed: int) -> TensorDictBase:
         """Reset ``worlds`` to episodes of a seeded evaluation set: world ``worlds[i]`` draws what world
         ``episodes[i]`` of an environment seeded ``seed`` draws in its first episode (start, target, terrain tile,
@@ -532,10 +653,10 @@ class RoverEnv(EnvBase):
             wp.launch(sample_nav_episodes, dim=self.num_envs,
                       inputs=[self._seed, self._params, self._target_distance, self._tiles, self._mask],
                       outputs=[self._task, self._reset_poses, sim.obstacles.kernel, sim.terrain.kernel,
-                               sim.maps.struct],
+                               sim.maps.struct, self._pins],
                       device=self._wp_device)
         else:
-            wp.launch(sample_episodes, dim=self.num_envs, inputs=[self._seed, self._params, self._mask],
+            wp.launch(sample_episodes, dim=self.num_envs, inputs=[self._seed, self._params, self._mask, self._pins],
                       outputs=[self._task, self._reset_poses], device=self._wp_device)
         if self.planner is not None:  # before the rovers are placed: an episode without a path is drawn again
             self._plan_episodes()

@@ -16,16 +16,45 @@ from atrv_warp.sim.kernels.obstacles import OBSTACLE_BOX, OBSTACLE_CYLINDER, Obs
 from atrv_warp.sim.kernels.terrain import TerrainGrid
 from atrv_warp.task.kernels.state import TaskBuffers
 
-__all__ = ["locate_goals", "obstacle_clear", "sample_episodes", "sample_nav_episodes"]
+__all__ = ["PinnedWorlds", "locate_goals", "obstacle_clear", "sample_episodes", "sample_nav_episodes"]
+
+
+@wp.struct
+class PinnedWorlds:
+    """Layouts given to some worlds (``RoverEnv.set_worlds``): a pinned world's every reset replays its own instead of
+    drawing one."""
+
+    pinned: wp.array(dtype=bool)  # (N,)
+    start: wp.array(dtype=wp.vec3)  # (N,) x [m], y [m], yaw [rad]
+    target: wp.array(dtype=wp.vec2)  # (N,) [m]
+    target_yaw: wp.array(dtype=float)  # (N,) [rad]
+    tile: wp.array(dtype=wp.int32)  # (N,) the terrain tile
+    kind: wp.array2d(dtype=wp.int32)  # (N, slots) as ObstacleSet's
+    pose: wp.array2d(dtype=wp.vec3)
+    size: wp.array2d(dtype=wp.vec2)
+
+
+@wp.func
+def replay_pinned(world: int, pins: PinnedWorlds, task: TaskBuffers, poses: wp.array(dtype=wp.vec3)):
+    """A pinned world's given start, target and the target's heading, as a draw would write them; the episode
+    counted as a draw counts it."""
+    poses[world] = pins.start[world]
+    task.target[world] = pins.target[world]
+    task.target_yaw[world] = pins.target_yaw[world]
+    task.episode[world] = task.episode[world] + 1
+    task.step_count[world] = 0
 
 
 @wp.kernel
-def sample_episodes(seed: int, params: Any, mask: wp.array(dtype=bool), task: TaskBuffers,
+def sample_episodes(seed: int, params: Any, mask: wp.array(dtype=bool), pins: PinnedWorlds, task: TaskBuffers,
                     poses: wp.array(dtype=wp.vec3)):
     """Draw target, start position and yaw for masked worlds from a per-(world, episode) stream; the goal's heading
-    last (so the draws before it are the reference's)."""
+    last (so the draws before it are the reference's). A pinned world replays its given layout."""
     world = wp.tid()
     if not mask[world]:
+        return
+    if pins.pinned[world]:
+        replay_pinned(world, pins, task, poses)
         return
     h = wp.rand_init(seed, task.stream[world])
     state = wp.rand_init(wp.int32(h), task.episode[world])
@@ -54,6 +83,7 @@ def sample_nav_episodes(
     obstacles: ObstacleSet,
     terrain: TerrainGrid,
     grids: GridMaps,
+    pins: PinnedWorlds,
 ):
     """Draw a masked world's episode: start and yaw, a target ``distance`` (min, max) [m] away, one of ``tiles``
     terrain tiles and an obstacle layout (``params.obstacles``, ``obstacles_on_path`` of them across the straight
@@ -62,9 +92,18 @@ def sample_nav_episodes(
 
     In a world with a map (``grids``), the start and the target are cells of the map's ``spawn`` list (clear of the
     robot's footprint), the target in the start's group (reachable) and ``distance`` away (after 16 starts of 32
-    targets each, the last drawn), and the obstacles anywhere on the map."""
+    targets each, the last drawn), and the obstacles anywhere on the map. A pinned world (``pins``) replays its
+    given layout: start, target, terrain tile and obstacles."""
     world = wp.tid()
     if not mask[world]:
+        return
+    if pins.pinned[world]:
+        replay_pinned(world, pins, task, poses)
+        terrain.tile[world] = pins.tile[world]
+        for o in range(obstacles.count):
+            obstacles.kind[world, o] = pins.kind[world, o]
+            obstacles.pose[world, o] = pins.pose[world, o]
+            obstacles.size[world, o] = pins.size[world, o]
         return
     h = wp.rand_init(seed, task.stream[world])
     state = wp.rand_init(wp.int32(h), task.episode[world])
