@@ -222,3 +222,41 @@ def test_unwritable_recording_fails_before_any_simulation(tmp_path, name, messag
     lines = proc.stderr.strip().splitlines()
     assert lines == [f"python -m atrv_warp.evaluate: error: --rerun: recording {tmp_path / name}: {message}"], lines
     assert "device" not in proc.stdout  # stopped before the simulator was built (its device line)
+
+
+def test_a_map_world_records_its_walls_and_plan_and_its_video_draws_them(tmp_path):
+    """A world in a map: the recording holds its occupied and unknown cells as boxes covering exactly those cells
+    (merged rectangles), and the planner's path each step from the robot to the target; the top-down video draws the
+    walls over the ground."""
+    from test_map_worlds import two_rooms
+
+    from atrv_warp.integrations.video import EvalVideo
+    from atrv_warp.sim.planner import PlannerConfig
+    from atrv_warp.task.env import RoverEnv
+    from atrv_warp.world.nav2_map import OCCUPIED
+
+    site = two_rooms()
+    env = RoverEnv(2, task="nav_deploy", seed=3, maps=[site], planner=PlannerConfig())
+    path = tmp_path / "map.rrd"
+    recorder = RerunRecorder(env.sim, path=path, worlds=[0])
+    video = EvalVideo(env, episodes=1, panel=240)
+    hooks = (recorder.env_hook(), video.env_hook())
+    td = env.reset()
+    for _ in range(3):
+        td = env.step(td.set("action", torch.zeros(2, 2)))
+        for hook in hooks:
+            hook(env, td)
+        td = td["next"]
+    recorder.close()
+    data = read_rrd(path)
+    halves = np.array(column(data["/world_0/map/occupied"], "Boxes3D:half_sizes")[0]).reshape(-1, 3)
+    assert 4 * (halves[:, 0] * halves[:, 1]).sum() == pytest.approx((site.cells == OCCUPIED).sum() * 0.01, rel=1e-4)
+    assert "/world_0/map/unknown" in data
+    strips = column(data["/world_0/plan"], "LineStrips3D:strips")
+    last = np.array(strips[-1][0]).reshape(-1, 3)
+    assert len(strips) == 3 and last[-1, :2] == pytest.approx(env.target[0].tolist(), abs=1e-5)
+    frame = next(iter(video.frames()))
+    row, col = site.cell_of(0.05, 6.0)  # the middle wall, away from the doorway: dark in the panel
+    assert site.walls[row, col]
+    x, y = int((0.05 + video.view) * video.scale), int((video.view - 6.0) * video.scale)  # its pixel in the panel
+    assert frame[y, x].tolist() == [70, 70, 80]

@@ -8,6 +8,8 @@ Entities (``W`` = world index)::
     world_W/rover/<link>                           Transform3D per step; the URDF's visuals static below it
     world_W/terrain                                the world's terrain tile (mesh), when it changes
     world_W/obstacles/{boxes,cylinders}            the world's obstacles, when they change
+    world_W/map/{occupied,unknown}                 the world's map's walls (a Nav2 map's cells), when it changes
+    world_W/plan                                   the planner's path, per step (an env with a planner)
     world_W/scan/{hits,rays}                       the laser scan's returns and beams, per step
     world_W/target                                 target disc
     world_W/trajectory                             chassis path of the current episode
@@ -40,8 +42,9 @@ import numpy as np
 import rerun as rr
 
 from atrv_warp.integrations.blueprint import viewer_blueprint, world_offsets
-from atrv_warp.integrations.topdown import terrain_colors
+from atrv_warp.integrations.topdown import map_rectangles, terrain_colors
 from atrv_warp.integrations.viewer import ServedViewer
+from atrv_warp.world.nav2_map import OCCUPIED, UNKNOWN
 
 __all__ = ["DEFAULT_WORLDS", "RECORDING_SUFFIX", "RerunRecorder", "check_recording_path", "rover_visuals"]
 
@@ -54,6 +57,8 @@ _TARGET_COLOR = (40, 90, 230)
 _GROUND_COLOR = (150, 150, 140)
 _WALL_COLOR = (120, 120, 130)
 _OBSTACLE_COLOR = (200, 140, 40)
+_UNKNOWN_COLOR = (205, 205, 210)
+_PLAN_COLOR = (40, 190, 90)
 _SCAN_COLOR = (230, 30, 200)
 _SCAN_RAY_COLOR = (250, 200, 245)
 _TERRAIN_MAX_SIDE = 121
@@ -226,6 +231,7 @@ class RerunRecorder:
         self._trails: dict[int, list[np.ndarray]] = {w: [] for w in self.worlds}
         self._drawn_tile: dict[int, int] = {}
         self._drawn_obstacles: dict[int, np.ndarray] = {}
+        self._drawn_map: dict[int, int] = {}
         layout = sim.buffers.layout
         # world 0's bodies: the chassis, then the wheels (a rover's fixed frames are lumped into the chassis)
         self._bodies = [layout.chassis_body, *(b for b in range(layout.bodies_per_world) if b != layout.chassis_body)]
@@ -268,6 +274,7 @@ class RerunRecorder:
                 self._drawn_tile[w] = tile
                 rec.log(f"world_{w}/terrain", _terrain_mesh(terrain.grid.heights[tile], terrain.grid.half_size,
                                                             terrain.base))
+        self._log_map(w)
         obstacles = sim.obstacles
         if not obstacles.slots:
             return
@@ -288,6 +295,24 @@ class RerunRecorder:
             lengths=[2 * hz] * int(cyls.sum()), radii=size[cyls, 0], centers=[(x, y, zc) for x, y in pose[cyls, :2]],
             colors=[_OBSTACLE_COLOR], fill_mode="solid"))
 
+    def _log_map(self, w: int) -> None:
+        """The world's map, as boxes standing from the ground to the walls' top, when the world has one and it is
+        not drawn yet: occupied cells dark, unknown ones pale (both are walls to the rover)."""
+        grids = self.sim.maps
+        m = int(grids.world_map[w]) if grids.maps else -1
+        if m < 0 or self._drawn_map.get(w) == m:
+            return
+        self._drawn_map[w] = m
+        site, base = grids.maps[m], self.sim.arena_cfg.ground_top
+        top = grids.struct.top
+        for name, mask, color in (("occupied", site.cells == OCCUPIED, _WALL_COLOR),
+                                  ("unknown", site.cells == UNKNOWN, _UNKNOWN_COLOR)):
+            rects = map_rectangles(mask, site.resolution, site.origin)
+            self.rec.log(f"world_{w}/map/{name}", rr.Boxes3D(
+                centers=[(0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * (base + top)) for x0, y0, x1, y1 in rects],
+                half_sizes=[(0.5 * (x1 - x0), 0.5 * (y1 - y0), 0.5 * (top - base)) for x0, y0, x1, y1 in rects],
+                colors=[color], fill_mode="solid"))
+
     def _log_scan(self, w: int, scanner, points: np.ndarray) -> None:
         origin = self.sim.frame_pose(scanner.frame)[w, :3, 3].numpy()
         hit = scanner.ranges[w].detach().cpu().numpy() < scanner.cfg.max_range
@@ -295,7 +320,8 @@ class RerunRecorder:
         self.rec.log(f"world_{w}/scan/rays", rr.LineStrips3D([[origin, p] for p in points],
                                                              colors=[(*_SCAN_RAY_COLOR, 50)], radii=0.003))
 
-    def log_step(self, *, targets=None, rewards=None, distances=None, reset_mask=None, scanner=None) -> None:
+    def log_step(self, *, targets=None, rewards=None, distances=None, reset_mask=None, scanner=None,
+                 paths=None) -> None:
         """Log the current state of the selected worlds at the next ``step``.
 
         Args:
@@ -304,6 +330,7 @@ class RerunRecorder:
             distances: (N,) or (N, 1) per-world distances to the target [m] to plot.
             reset_mask: (N,) bool, worlds whose episode restarts here (their trail is cleared).
             scanner: A :class:`~atrv_warp.sim.scanner.LaserScanner` whose last scan is drawn.
+            paths: (path (N, P, 2) [m], path_length (N,)): each world's plan (``RoverEnv.path``, ``.path_length``).
         """
         rec, sim = self.rec, self.sim
         rec.set_time("step", sequence=self.step)
@@ -327,6 +354,11 @@ class RerunRecorder:
             self._trails[w].append(body_q[w, sim.layout.chassis_body, :3].copy())
             rec.log(f"world_{w}/trajectory", rr.LineStrips3D([np.array(self._trails[w])], colors=[(230, 160, 20)],
                                                              radii=0.02))
+            if paths is not None:
+                points, count = paths[0][w][:int(paths[1][w])].detach().cpu().numpy(), int(paths[1][w])
+                z = np.full((count, 1), sim.arena_cfg.ground_top + 0.05)
+                rec.log(f"world_{w}/plan", rr.LineStrips3D([np.concatenate([points, z], axis=1)] if count else [],
+                                                           colors=[_PLAN_COLOR], radii=0.03))
             if targets is not None:
                 tx, ty = (float(v) for v in targets[w][:2])
                 rec.log(f"world_{w}/target", rr.Cylinders3D(lengths=[0.02], radii=[self.sim.arena_cfg.target_radius],
@@ -354,8 +386,10 @@ class RerunRecorder:
         def on_step(env, td):
             base = getattr(env, "base_env", env)
             nxt = td["next"]
+            planner = getattr(base, "planner", None)
             self.log_step(targets=base.target.cpu().numpy(), rewards=nxt["reward"].cpu().numpy(),
-                          distances=nxt["distance"].cpu().numpy(), scanner=getattr(base, "scanner", None))
+                          distances=nxt["distance"].cpu().numpy(), scanner=getattr(base, "scanner", None),
+                          paths=(base.path, base.path_length) if planner is not None else None)
 
         return on_step
 

@@ -10,7 +10,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-__all__ = ["OBSTACLE_BOX", "OBSTACLE_CYLINDER", "box_corners", "obstacle_shapes", "terrain_colors"]
+__all__ = ["OBSTACLE_BOX", "OBSTACLE_CYLINDER", "box_corners", "map_rectangles", "obstacle_shapes", "terrain_colors"]
 
 OBSTACLE_BOX, OBSTACLE_CYLINDER = 1, 2
 """Obstacle kinds as ``Obstacles.kind`` holds them (0 is an empty slot)."""
@@ -37,3 +37,24 @@ def obstacle_shapes(kind: np.ndarray, pose: np.ndarray, size: np.ndarray) -> Ite
             yield "box", box_corners(x, y, yaw, a, b)
         elif k == OBSTACLE_CYLINDER:
             yield "cylinder", np.array([x, y, a])
+
+
+def map_rectangles(mask: np.ndarray, resolution: float, origin: tuple[float, float]) -> np.ndarray:
+    """The cells of a map's ``mask`` (rows, cols) as few axis-aligned rectangles (R, 4): x0, y0, x1, y1 [m]. Each
+    row's runs of cells, a run merged with the same run of the rows after it (a thick wall or an unknown expanse is
+    one rectangle, not a box a cell)."""
+    mask = np.asarray(mask, dtype=bool)
+    out, open_runs = [], {}  # (c0, c1) -> the row its rectangle started at
+    for r in range(mask.shape[0] + 1):
+        row = mask[r] if r < mask.shape[0] else np.zeros(mask.shape[1], dtype=bool)
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], row.astype(np.int8), [0]])))
+        runs = set(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+        for run in [k for k in open_runs if k not in runs]:
+            out.append((open_runs.pop(run), r, *run))
+        for run in runs:
+            open_runs.setdefault(run, r)
+    if not out:
+        return np.zeros((0, 4))
+    r0, r1, c0, c1 = np.array(out, dtype=float).T
+    x, y = origin
+    return np.stack([x + c0 * resolution, y + r0 * resolution, x + c1 * resolution, y + r1 * resolution], axis=-1)

@@ -22,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from atrv_warp.integrations.topdown import box_corners, obstacle_shapes, terrain_colors
+from atrv_warp.integrations.topdown import box_corners, map_rectangles, obstacle_shapes, terrain_colors
+from atrv_warp.world.nav2_map import OCCUPIED, UNKNOWN
 
 __all__ = ["VIDEO_SUFFIX", "EvalVideo", "VideoFile", "check_video_path", "log_video", "read_video"]
 
@@ -32,6 +33,8 @@ _GROUND = (150, 150, 140)
 _GRID = (135, 135, 126)
 _WALL = (70, 70, 80)
 _OBSTACLE = (55, 55, 55)
+_UNKNOWN = (190, 190, 195)
+_PLAN = (40, 190, 90)
 _TARGET = (120, 160, 240)
 _PATH = (230, 140, 20)
 _ROVER = (200, 30, 30)
@@ -161,6 +164,16 @@ class EvalVideo:
         if obstacles.slots:
             kind, pose, size = (t[worlds].cpu().numpy() for t in (obstacles.kind, obstacles.pose, obstacles.size))
             scene["obstacles"] = [list(obstacle_shapes(kind[i], pose[i], size[i])) for i in range(len(worlds))]
+        scene["map"] = [None] * len(worlds)  # each world's map's (occupied, unknown) rectangles
+        for i, w in enumerate(worlds):
+            m = int(sim.maps.world_map[w]) if sim.maps.maps else -1
+            if m >= 0:
+                site = sim.maps.maps[m]
+                scene["map"][i] = tuple(map_rectangles(site.cells == value, site.resolution, site.origin)
+                                        for value in (OCCUPIED, UNKNOWN))
+        planner = getattr(self.env, "planner", None)  # the plan each episode started with
+        scene["plan"] = [self.env.path[w, :int(self.env.path_length[w])].cpu().numpy().copy() if planner else None
+                         for w in worlds]
         return scene
 
     # ------------------------------------------------------------------ drawing
@@ -201,6 +214,14 @@ class EvalVideo:
                 draw.line([(a, b), (c, d)], fill=_GRID)
         (x0, y0), (x1, y1) = self._to_px(np.array([[-h, h], [h, -h]]))
         draw.rectangle([x0, y0, x1, y1], outline=_WALL, width=max(2, p // 80))
+        if self.scene["map"][i] is not None:  # the map's walls: occupied dark, unknown pale
+            for rects, fill in zip(self.scene["map"][i], (_WALL, _UNKNOWN), strict=True):
+                for x0, y0, x1, y1 in rects:
+                    (a, b), (c, d) = self._to_px(np.array([[x0, y1], [x1, y0]]))
+                    draw.rectangle([a, b, max(a, c - 1), max(b, d - 1)], fill=fill)
+        plan = self.scene["plan"][i]
+        if plan is not None and len(plan) > 1:
+            draw.line([tuple(c) for c in self._to_px(plan)], fill=_PLAN, width=max(1, p // 128))
         for kind, shape in self.scene["obstacles"][i]:
             if kind == "box":
                 draw.polygon([tuple(c) for c in self._to_px(shape)], fill=_OBSTACLE)
