@@ -99,8 +99,8 @@ ARENA_MARGIN = 1.0
 
 def arena_around(maps: Sequence[OccupancyMap]) -> ArenaConfig:
     """The reference arena, or, with ``maps``, a square arena centred on the origin whose walls stand
-    :data:`ARENA_MARGIN` beyond every map's edge (its side rounded up to a whole number of 2 m): a map bounds its world (what lies beyond its edge is a wall), so the
-    arena's walls are never met and its ground lies under every map."""
+    :data:`ARENA_MARGIN` beyond every map's edge (its side rounded up to a whole number of 2 m): a map bounds its world
+    (what lies beyond its edge is a wall), so the arena's walls are never met and its ground lies under every map."""
     if not maps:
         return ArenaConfig()
     reach = max(max(abs(m.origin[0]), abs(m.origin[1]), abs(m.origin[0] + m.size[0]), abs(m.origin[1] + m.size[1]))
@@ -173,8 +173,8 @@ class GridWorlds:
         for m, field in zip(self.maps, fields, strict=False):
             c, f, n = spawn_cells(field, m.resolution, circumscribed, inscribed)
             if not c.size:
-                raise MapError(f"{m.source or m.name}: no free cell is {circumscribed:.2f} m from every wall (the robot's "
-                               "footprint at any heading): no episode can start in this map")
+                raise MapError(f"{m.source or m.name}: no free cell is {circumscribed:.2f} m from every wall (the "
+                               "robot's footprint at any heading): no episode can start in this map")
             starts.append(sum(len(x) for x in cells))
             cells.append(c)
             first.append(f + starts[-1])

@@ -244,7 +244,8 @@ class RoverSim:
                                                                         sim_config)
         """``bounds``: each bounded physical parameter's range for this robot
         (:func:`~atrv_warp.sim.params.parameter_bounds`): the configs' values and :meth:`set_params` are held to them."""
-        site_maps = resolve_sites(maps, 2 * footprint_radii(load_rover(self.rover_cfg), self.rover_cfg)[0]) if maps else []
+        width = 2 * footprint_radii(load_rover(self.rover_cfg), self.rover_cfg)[0] if maps else 0.0
+        site_maps = resolve_sites(maps, width)  # procedural places drawn at the robot's width
         self.arena_cfg = arena or arena_around(site_maps)
         self.sim_cfg = sim or SimConfig()
         self.num_worlds = num_worlds
@@ -746,7 +747,8 @@ class RoverSim:
 
     @property
     def footprint_radii(self) -> tuple[float, float]:
-        """(inscribed, circumscribed) radius [m] of the rover's outline (:func:`~atrv_warp.sim.urdf.footprint_radii`)."""
+        """(inscribed, circumscribed) radius [m] of the rover's outline
+        (:func:`~atrv_warp.sim.urdf.footprint_radii`)."""
         return footprint_radii(self.description, self.rover_cfg)
 
     @property

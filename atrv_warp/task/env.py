@@ -569,8 +569,8 @@ class RoverEnv(EnvBase):
     def _check_layouts(self, worlds, starts, targets, yaws, tiles, obstacles, site) -> list:
         """:meth:`set_worlds`'s input checked, each world's obstacles as (kind, pose, size) slot tensors."""
         k = len(worlds)
-        for name, value, shape in (("starts", starts, (k, 3)), ("targets", targets, (k, 2)), ("target_yaws", yaws, (k,)),
-                                   ("tiles", tiles, (k,))):
+        for name, value, shape in (("starts", starts, (k, 3)), ("targets", targets, (k, 2)),
+                                   ("target_yaws", yaws, (k,)), ("tiles", tiles, (k,))):
             if tuple(value.shape) != shape:
                 raise ValueError(f"set_worlds: {name} must have shape {shape} for {k} worlds, got {tuple(value.shape)}")
         if any(not 0 <= w < self.num_envs for w in worlds) or len(set(worlds)) != k:

@@ -186,7 +186,8 @@ def draw_yard(seed: int, robot_width: float, *, size: tuple[float, float] | None
     canvas = _Canvas(width + 2 * margin, height + 2 * margin, resolution, UNKNOWN)
     canvas.box(margin, margin, margin + width, margin + height, FREE)
     gates: list[Door] = []
-    fences = [((0, 0), (width, 0)), ((0, height), (width, height)), ((0, 0), (0, height)), ((width, 0), (width, height))]
+    fences = [((0, 0), (width, 0)), ((0, height), (width, height)), ((0, 0), (0, height)),
+              ((width, 0), (width, height))]
     across = float(rng.uniform(0.35, 0.65))
     fences.append(((across * width, 0), (across * width, height)))  # one fence across, with two gates
     for k, ((ax, ay), (bx, by)) in enumerate(fences):
@@ -218,7 +219,8 @@ def draw_yard(seed: int, robot_width: float, *, size: tuple[float, float] | None
         gates.append(Door(cx, cy - d / 2 + WALL / 2, door, True))  # the middle of its wall
     for _ in range(trees):
         r = float(rng.uniform(0.15, 0.4))
-        x, y = float(rng.uniform(margin + 1.0, margin + width - 1.0)), float(rng.uniform(margin + 1.0, margin + height - 1.0))
+        x = float(rng.uniform(margin + 1.0, margin + width - 1.0))
+        y = float(rng.uniform(margin + 1.0, margin + height - 1.0))
         if _clear_of(gates, x, y, r + 1.5 * robot_width):
             canvas.disc(x, y, r, OCCUPIED)
     return _placed(canvas, gates, f"yard_{seed}")
