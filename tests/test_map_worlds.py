@@ -272,3 +272,30 @@ def test_worlds_set_to_given_layouts_keep_them_until_released():
         with pytest.raises(ValueError, match=message):
             env.set_worlds([2], **bad)
     assert torch.equal(env.episode_start, before) and env.pinned.tolist() == [False] * 4
+
+
+def test_the_obstacles_across_the_way_stand_on_the_plan():
+    """With the planner, the task's ``obstacles_on_path`` stand on each episode's plan (within ``path_offset`` of it,
+    clear of the start and the target), where a straight line through the rooms' wall would not put them; the
+    planner's path runs through them (it plans on the map alone)."""
+    from atrv_warp.sim.planner import PlannerConfig
+    from atrv_warp.task.env import RoverEnv
+
+    env = RoverEnv(64, task="nav_deploy", seed=4, maps=[two_rooms()], planner=PlannerConfig())
+    env.reset()
+    cfg = env.task_cfg
+    assert cfg.obstacles_on_path == 1
+    crossing = 0
+    for w in range(64):
+        path = env.path[w, :int(env.path_length[w])].numpy()
+        q = env.sim.obstacles.pose[w, 0, :2].numpy()
+        ends = (env.episode_start[w, :2].numpy(), env.target[w].numpy())
+        radius = env.sim.obstacles.size[w, 0].norm().item() if env.sim.obstacles.kind[w, 0] == 1 else \
+            env.sim.obstacles.size[w, 0, 0].item()
+        if min(np.linalg.norm(q - e) for e in ends) <= radius + cfg.clearance:  # no place on the plan kept it clear
+            continue
+        a, b = path[:-1], path[1:]
+        t = np.clip(((q - a) * (b - a)).sum(-1) / np.maximum(((b - a) ** 2).sum(-1), 1e-12), 0.0, 1.0)
+        assert np.linalg.norm(a + t[:, None] * (b - a) - q, axis=1).min() <= cfg.path_offset + 1e-4, w
+        crossing += bool(np.sign(ends[0][0]) != np.sign(ends[1][0]))
+    assert crossing >= 10  # plans through the doorway, not along the straight line through the wall

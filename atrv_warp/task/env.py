@@ -71,7 +71,13 @@ from atrv_warp.task.kernels.randomization import (
     delay_twist,
     draw_physics,
 )
-from atrv_warp.task.kernels.sampling import PinnedWorlds, locate_goals, sample_episodes, sample_nav_episodes
+from atrv_warp.task.kernels.sampling import (
+    PinnedWorlds,
+    locate_goals,
+    place_on_plans,
+    sample_episodes,
+    sample_nav_episodes,
+)
 from atrv_warp.task.kernels.state import RoverState, StepOutputs, TaskBuffers, TermInputs, params_of
 from atrv_warp.task.kernels.steps import advance_odometry_drift, command_twist, sum_terms
 from atrv_warp.task.kernels.tables import ends_kernel, field_kernel, term_kernels
@@ -146,9 +152,10 @@ class RoverEnv(EnvBase):
             reads its walls. ``()``: the arena.
         planner: Nav2's global planner in the loop, in the worlds with a map (:mod:`atrv_warp.sim.planner`): each
             reset plans the episode's path from its start to its target (an episode without one is drawn again,
-            :attr:`~atrv_warp.sim.planner.PlannerConfig.redraws` times at most), and each world plans again from its
-            robot's pose every :attr:`~atrv_warp.sim.planner.PlannerConfig.replan_period`; :attr:`path` and
-            :attr:`path_length` hold them. ``None``: no planner.
+            :attr:`~atrv_warp.sim.planner.PlannerConfig.redraws` times at most) and stands the task's
+            ``obstacles_on_path`` on it (unseen by the planner), and each world plans again from its robot's pose
+            every :attr:`~atrv_warp.sim.planner.PlannerConfig.replan_period`; :attr:`path` and :attr:`path_length`
+            hold them. ``None``: no planner.
         **task_overrides: Fields of :class:`TaskConfig` (e.g. ``max_steps=100``); an unknown
             name raises ``ValueError``.
     """
@@ -376,7 +383,7 @@ class RoverEnv(EnvBase):
             self.planner.plan(worlds, self.episode_start[:, :2], self.target)
             worlds = worlds[(self.path_length[worlds] == 0) & ~self._pinned_t[worlds]]  # a given layout stays
             if not len(worlds) or attempt == self.planner.cfg.redraws:
-                return
+                break
             redraw = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
             redraw[worlds] = True
             wp.launch(sample_nav_episodes, dim=self.num_envs,
@@ -384,6 +391,11 @@ class RoverEnv(EnvBase):
                               wp.from_torch(redraw)],
                       outputs=[self._task, self._reset_poses, self.sim.obstacles.kernel, self.sim.terrain.kernel,
                                self.sim.maps.struct, self._pins], device=self._wp_device)
+        if self.task_cfg.obstacles_on_path:  # the obstacles across the way stand on the plan, not the straight line
+            wp.launch(place_on_plans, dim=self.num_envs,
+                      inputs=[self._seed, self._params, self._mask, self._pins, self._task, self._reset_poses,
+                              wp.from_torch(self.path, dtype=wp.vec2), wp.from_torch(self.path_length)],
+                      outputs=[self.sim.obstacles.kernel], device=self._wp_device)
 
     def _replan(self) -> None:
         """The worlds due (every ``replan_period`` of their episode) plan again from their robots' poses."""

@@ -16,7 +16,11 @@ from atrv_warp.sim.kernels.obstacles import OBSTACLE_BOX, OBSTACLE_CYLINDER, Obs
 from atrv_warp.sim.kernels.terrain import TerrainGrid
 from atrv_warp.task.kernels.state import TaskBuffers
 
-__all__ = ["PinnedWorlds", "locate_goals", "obstacle_clear", "sample_episodes", "sample_nav_episodes"]
+__all__ = ["PLAN_STREAM", "PinnedWorlds", "locate_goals", "obstacle_clear", "place_on_plans", "sample_episodes",
+           "sample_nav_episodes"]
+
+PLAN_STREAM = wp.constant(0x5EED)
+"""Offsets the seed of :func:`place_on_plans`' stream from the episode sampler's, whose draws it leaves alone."""
 
 
 @wp.struct
@@ -180,6 +184,59 @@ def sample_nav_episodes(
     task.target_yaw[world] = wp.randf(state, -wp.pi, wp.pi)
     task.episode[world] = task.episode[world] + 1
     task.step_count[world] = 0
+
+
+@wp.kernel
+def place_on_plans(
+    seed: int,
+    params: Any,
+    mask: wp.array(dtype=bool),
+    pins: PinnedWorlds,
+    task: TaskBuffers,
+    starts: wp.array(dtype=wp.vec3),
+    path: wp.array2d(dtype=wp.vec2),
+    path_length: wp.array(dtype=wp.int32),
+    obstacles: ObstacleSet,
+):
+    """Move a masked world's first ``params.obstacles_on_path`` obstacles from the straight line onto its plan (a
+    world with a path of two points or more, not pinned): each at 35-65 % of the plan's length, within
+    ``params.path_offset`` of it across, keeping ``params.clearance`` from the start and the target (else it stays
+    where the sampler put it), from a stream of its own. The planner does not see them: what a saved map does not
+    show stands on the path it plans, as a chair or a person does."""
+    world = wp.tid()
+    n = path_length[world]
+    if not mask[world] or pins.pinned[world] or n < 2:
+        return
+    h = wp.rand_init(seed + PLAN_STREAM, task.stream[world])
+    state = wp.rand_init(wp.int32(h), task.episode[world])
+    total = float(0.0)
+    for i in range(n - 1):
+        total = total + wp.length(path[world, i + 1] - path[world, i])
+    s0 = starts[world]
+    start = wp.vec2(s0[0], s0[1])
+    target = task.target[world]
+    for o in range(wp.min(params.obstacles_on_path, obstacles.count)):
+        if obstacles.kind[world, o] == 0:
+            continue
+        for _ in range(8):
+            want = wp.randf(state, 0.35, 0.65) * total
+            offset = wp.randf(state, -1.0, 1.0) * params.path_offset
+            walked = float(0.0)
+            q = path[world, n - 1]
+            for i in range(n - 1):
+                a = path[world, i]
+                b = path[world, i + 1]
+                step = wp.length(b - a)
+                if walked + step >= want and step > 0.0:
+                    along = (b - a) / step
+                    q = a + (want - walked) * along + offset * wp.vec2(-along[1], along[0])
+                    break
+                walked = walked + step
+            if obstacle_clear(q, bounding_radius(obstacles.kind[world, o], obstacles.size[world, o]), start, target,
+                              params.clearance):
+                pose = obstacles.pose[world, o]
+                obstacles.pose[world, o] = wp.vec3(q[0], q[1], pose[2])
+                break
 
 
 @wp.kernel
