@@ -299,3 +299,35 @@ def test_the_obstacles_across_the_way_stand_on_the_plan():
         assert np.linalg.norm(a + t[:, None] * (b - a) - q, axis=1).min() <= cfg.path_offset + 1e-4, w
         crossing += bool(np.sign(ends[0][0]) != np.sign(ends[1][0]))
     assert crossing >= 10  # plans through the doorway, not along the straight line through the wall
+
+
+def test_an_obstacle_of_its_own_height_under_the_laser_is_met_not_seen():
+    """``set_worlds``' obstacles take a height: a box 0.15 m high, under the ATRV-Jr's laser (0.28 m), is not in the
+    scan but stops the rover; the same box at the task's height is seen 1.4 m ahead. A snapshot restores the heights,
+    and one without them (from before) restores the task's."""
+    from atrv_warp.task.env import RoverEnv
+
+    env = RoverEnv(2, task="nav_deploy", seed=0, obstacles=2, obstacles_on_path=0)
+    wall = ("box", 2.0, 0.0, 0.0, 0.3, 1.0)
+    env.set_worlds([0, 1], starts=[[0.0, 0.0, 0.0]] * 2, targets=[[8.0, 0.0]] * 2,
+                   obstacles=[[wall], [(*wall, 0.15)]])
+    ground = env.sim.arena_cfg.ground_top
+    assert env.sim.obstacles.height[:, 0].tolist() == pytest.approx([env.sim.obstacles.kernel.top, ground + 0.15])
+    ahead = env.scanner.ranges[:, env.scanner.ranges.shape[1] // 2]
+    assert ahead[0] == pytest.approx(1.42, abs=0.02) and ahead[1] > 10.0
+    snapshot = env.state_dict()
+    td = env.reset()
+    ends = torch.zeros(2, dtype=torch.long)
+    for _ in range(60):
+        td = env.step(td.set("action", torch.tensor([[0.5, 0.0]] * 2)))["next"]
+        ends = torch.where(ends == 0, td["end_reason"].reshape(-1), ends)
+    from atrv_warp.task.spec import END_REASONS
+
+    assert ends.tolist() == [END_REASONS.index("obstacle")] * 2  # both ended on the obstacle
+    env.load_state_dict(snapshot)
+    assert env.sim.obstacles.height[1, 0] == pytest.approx(ground + 0.15)
+    old = {k: v for k, v in snapshot.items() if k != "task.obstacle_height"}
+    env.load_state_dict(old)
+    assert (env.sim.obstacles.height == env.sim.obstacles.kernel.top).all()
+    with pytest.raises(ValueError, match="needs a height above the ground > 0"):
+        env.set_worlds([0], starts=[[0.0, 0.0, 0.0]], targets=[[8.0, 0.0]], obstacles=[[(*wall, -1.0)]])

@@ -118,8 +118,14 @@ def restore(env, golden, step: int) -> None:
     """Set ``env`` to the golden's snapshot before step ``step`` (its identity entries are ``env``'s own)."""
     import torch
 
+    from atrv_warp.task.env import TASK_SNAPSHOT_ADDED
+
     state = env.state_dict()
     for key in [k for k in state if isinstance(state[k], torch.Tensor)]:
+        if f"pin.{key}" not in golden and f"pin_const.{key}" not in golden and \
+                key.removeprefix("task.") in TASK_SNAPSHOT_ADDED:
+            del state[key]  # an entry added since the golden was written: restored as such a snapshot restores it
+            continue
         value = golden[f"pin.{key}"][step] if f"pin.{key}" in golden else golden[f"pin_const.{key}"]
         state[key] = torch.from_numpy(np.array(value))
     env.load_state_dict(state)

@@ -278,21 +278,24 @@ class RerunRecorder:
         obstacles = sim.obstacles
         if not obstacles.slots:
             return
-        kind, pose, size = (t[w].detach().cpu().numpy().copy() for t in (obstacles.kind, obstacles.pose, obstacles.size))
-        layout = np.concatenate([kind[:, None], pose, size], axis=1)
+        kind, pose, size, tops = (t[w].detach().cpu().numpy().copy()
+                                  for t in (obstacles.kind, obstacles.pose, obstacles.size, obstacles.height))
+        layout = np.concatenate([kind[:, None], pose, size, tops[:, None]], axis=1)
         if w in self._drawn_obstacles and np.array_equal(self._drawn_obstacles[w], layout):
             return
         self._drawn_obstacles[w] = layout
-        base, top = terrain.base - 0.5, obstacles.kernel.top
-        zc, hz = 0.5 * (base + top), 0.5 * (top - base)
+        base = terrain.base - 0.5
+        zc, hz = 0.5 * (base + tops), 0.5 * (tops - base)  # each obstacle from below the ground to its own top
         boxes, cyls = kind == 1, kind == 2
         yaw = pose[boxes, 2]
         rec.log(f"world_{w}/obstacles/boxes", rr.Boxes3D(
-            centers=[(x, y, zc) for x, y in pose[boxes, :2]], half_sizes=[(a, b, hz) for a, b in size[boxes]],
+            centers=[(x, y, z) for (x, y), z in zip(pose[boxes, :2], zc[boxes], strict=True)],
+            half_sizes=[(a, b, h) for (a, b), h in zip(size[boxes], hz[boxes], strict=True)],
             quaternions=[rr.Quaternion(xyzw=[0.0, 0.0, np.sin(0.5 * t), np.cos(0.5 * t)]) for t in yaw],
             colors=[_OBSTACLE_COLOR], fill_mode="solid"))
         rec.log(f"world_{w}/obstacles/cylinders", rr.Cylinders3D(
-            lengths=[2 * hz] * int(cyls.sum()), radii=size[cyls, 0], centers=[(x, y, zc) for x, y in pose[cyls, :2]],
+            lengths=2 * hz[cyls], radii=size[cyls, 0],
+            centers=[(x, y, z) for (x, y), z in zip(pose[cyls, :2], zc[cyls], strict=True)],
             colors=[_OBSTACLE_COLOR], fill_mode="solid"))
 
     def _log_map(self, w: int) -> None:

@@ -118,47 +118,60 @@ class Obstacles:
         k.pose = wp.zeros(shape, dtype=wp.vec3, device=device)
         k.size = wp.zeros(shape, dtype=wp.vec2, device=device)
         k.top = arena.ground_top + (cfg.height if cfg is not None else 0.0)
+        k.height = wp.full(shape, k.top, dtype=float, device=device)
         self.kernel = k
         self.slots = slots
         self.kind = wp.to_torch(k.kind)
         self.pose = wp.to_torch(k.pose)
         self.size = wp.to_torch(k.size)
+        self.height = wp.to_torch(k.height)
         self._half = arena.half_size
+        self._ground = arena.ground_top
 
     def set(self, world: int, layout) -> None:
         """Replace one world's obstacles by ``layout``: a sequence of ``("box", x, y, yaw, hx, hy)``
-        and ``("cylinder", x, y, radius)`` [m, rad]. Checked: kinds, sizes > 0, inside the arena."""
-        kind, pose, size = self.layout(layout)
+        and ``("cylinder", x, y, radius)`` [m, rad], each with its height above the ground [m] last where it is
+        not the config's (``("box", x, y, yaw, hx, hy, 0.2)``: a low box, under a laser mounted higher). Checked:
+        kinds, sizes and heights > 0, inside the arena."""
+        kind, pose, size, height = self.layout(layout)
         self.kind[world] = kind.to(self.kind.device)
         self.pose[world] = pose.to(self.pose.device)
         self.size[world] = size.to(self.size.device)
+        self.height[world] = height.to(self.height.device)
 
-    def layout(self, layout) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def layout(self, layout) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """``layout`` (as :meth:`set` takes it) checked, as one world's slots: kind (slots,), pose (slots, 3), size
-        (slots, 2)."""
+        (slots, 2), top (slots,) [m, absolute]."""
         if len(layout) > self.slots:
             raise ValueError(f"{len(layout)} obstacles do not fit the {self.slots} slots (ObstacleConfig.slots)")
         width = max(self.slots, 1)  # as the kernels' arrays (a world without slots has one, always empty)
         kind = torch.zeros(width, dtype=torch.int32)
         pose, size = torch.zeros(width, 3), torch.zeros(width, 2)
+        top = torch.full((width,), float(self.kernel.top))
         for i, item in enumerate(layout):
             name, *values = item
-            if name == "box" and len(values) == 5:
+            given = {"box": 5, "cylinder": 3}.get(name)
+            if given is None or len(values) not in (given, given + 1):
+                raise ValueError(f"obstacle {i}: {item!r} is neither ('box', x, y, yaw, hx, hy[, height]) nor "
+                                 "('cylinder', x, y, radius[, height])")
+            if len(values) > given:
+                height = float(values[given])
+                if not (math.isfinite(height) and height > 0):
+                    raise ValueError(f"obstacle {i}: {item!r} needs a height above the ground > 0")
+                top[i] = self._ground + height
+            if name == "box":
                 pose[i] = torch.tensor(values[:3])
-                size[i] = torch.tensor(values[3:])
-            elif name == "cylinder" and len(values) == 3:
+                size[i] = torch.tensor(values[3:5])
+            else:
                 pose[i, :2] = torch.tensor(values[:2])
                 size[i, 0] = values[2]
-            else:
-                raise ValueError(f"obstacle {i}: {item!r} is neither ('box', x, y, yaw, hx, hy) nor "
-                                 "('cylinder', x, y, radius)")
             if not (size[i, 0] > 0 and (name == "cylinder" or size[i, 1] > 0)) or not torch.isfinite(pose[i]).all():
                 raise ValueError(f"obstacle {i}: {item!r} needs positive sizes and a finite pose")
             if pose[i, :2].abs().max() >= self._half:
                 raise ValueError(f"obstacle {i}: centre ({float(pose[i, 0]):g}, {float(pose[i, 1]):g}) m is outside "
                                  f"the arena (|x|, |y| < {self._half:g} m)")
             kind[i] = OBSTACLE_KINDS[name]
-        return kind, pose, size
+        return kind, pose, size, top
 
 
 def _planes(arena: ArenaConfig, device) -> ArenaPlanes:

@@ -98,7 +98,12 @@ from atrv_warp.task.spec import (
 )
 from atrv_warp.world import OccupancyMap
 
-__all__ = ["END_REASONS", "OBSERVATION_NAMES", "SNAPSHOT_FORMAT", "ATRVjrEnv", "EnvFactory", "RoverEnv"]
+__all__ = ["END_REASONS", "OBSERVATION_NAMES", "SNAPSHOT_FORMAT", "TASK_SNAPSHOT_ADDED", "ATRVjrEnv", "EnvFactory",
+           "RoverEnv"]
+
+TASK_SNAPSHOT_ADDED = ("obstacle_height",)
+"""Task entries of a snapshot that a snapshot of an earlier version lacks: each obstacle's height (restored as the
+config's, which every obstacle had then)."""
 
 SNAPSHOT_FORMAT = 3
 """Version of :meth:`RoverEnv.state_dict`'s snapshot (3: everything the next step reads, restored bit for bit, the
@@ -266,6 +271,7 @@ class RoverEnv(EnvBase):
         pins.kind = wp.zeros((n, slots), dtype=wp.int32, device=dev)
         pins.pose = wp.zeros((n, slots), dtype=wp.vec3, device=dev)
         pins.size = wp.zeros((n, slots), dtype=wp.vec2, device=dev)
+        pins.height = wp.zeros((n, slots), dtype=float, device=dev)
         self._pins = pins
         self._pinned_t = wp.to_torch(pins.pinned)
         self._reset_poses = wp.zeros(n, dtype=wp.vec3, device=dev)  # the sampler's starts (x, y, yaw)
@@ -360,7 +366,8 @@ class RoverEnv(EnvBase):
         if self._nav:  # the episode's layout is part of the task's state
             obstacles = self.sim.obstacles
             self._task_views.update({"tile": self.sim.terrain.tile, "obstacle_kind": obstacles.kind,
-                                     "obstacle_pose": obstacles.pose, "obstacle_size": obstacles.size})
+                                     "obstacle_pose": obstacles.pose, "obstacle_size": obstacles.size,
+                                     "obstacle_height": obstacles.height})
 
     def _make_planner(self, cfg: PlannerConfig | None) -> None:
         """Nav2's global planner over the worlds' maps, where asked for and there are maps."""
@@ -523,8 +530,8 @@ class RoverEnv(EnvBase):
             targets: (K, 2) each world's target [m].
             target_yaws: (K,) the targets' headings [rad]; default 0.
             obstacles: per world, its obstacles as :meth:`Obstacles.set <atrv_warp.sim.contact.Obstacles.set>`
-                takes them (``("box", x, y, yaw, hx, hy)``, ``("cylinder", x, y, radius)``), at most the task's
-                slots; default none.
+                takes them (``("box", x, y, yaw, hx, hy)``, ``("cylinder", x, y, radius)``, each with its own height
+                above the ground last where it is not the task's), at most the task's slots; default none.
             maps: (K,) each world's map, an index into ``sim.maps.maps``; default the one it has.
             tiles: (K,) each world's terrain tile; default 0.
 
@@ -557,10 +564,11 @@ class RoverEnv(EnvBase):
         wp.to_torch(pins.target)[index] = targets.to(self.device)
         wp.to_torch(pins.target_yaw)[index] = yaws.to(self.device)
         wp.to_torch(pins.tile)[index] = tiles.to(self.device)
-        for i, (kind, pose, size) in zip(worlds, layouts, strict=True):
+        for i, (kind, pose, size, top) in zip(worlds, layouts, strict=True):
             wp.to_torch(pins.kind)[i] = kind.to(self.device)
             wp.to_torch(pins.pose)[i] = pose.to(self.device)
             wp.to_torch(pins.size)[i] = size.to(self.device)
+            wp.to_torch(pins.height)[i] = top.to(self.device)
         self._pinned_t[index] = True
         mask = torch.zeros(self.num_envs, 1, dtype=torch.bool, device=self.device)
         mask[index] = True
@@ -579,7 +587,7 @@ class RoverEnv(EnvBase):
             self._pinned_t[torch.as_tensor(list(worlds), dtype=torch.long, device=self.device)] = False
 
     def _check_layouts(self, worlds, starts, targets, yaws, tiles, obstacles, site) -> list:
-        """:meth:`set_worlds`'s input checked, each world's obstacles as (kind, pose, size) slot tensors."""
+        """:meth:`set_worlds`'s input checked, each world's obstacles as (kind, pose, size, top) slot tensors."""
         k = len(worlds)
         for name, value, shape in (("starts", starts, (k, 3)), ("targets", targets, (k, 2)),
                                    ("target_yaws", yaws, (k,)), ("tiles", tiles, (k,))):
@@ -874,10 +882,12 @@ class RoverEnv(EnvBase):
         need = {**self._task_views, "seed": None, "nonfinite_count": None}
         for sensor in self.sensors:
             need.update(dict.fromkeys(sensor.state()))
-        missing = sorted(k for k in need if f"task.{k}" not in state_dict)
+        missing = sorted(k for k in need if f"task.{k}" not in state_dict and k not in TASK_SNAPSHOT_ADDED)
         if missing:
             raise ValueError(f"the snapshot lacks task entries {missing}")
         for k, v in self._task_views.items():
+            if f"task.{k}" not in state_dict:  # added since (TASK_SNAPSHOT_ADDED)
+                continue
             got = tuple(torch.as_tensor(state_dict[f"task.{k}"]).shape)
             if got != tuple(v.shape):
                 raise ValueError(f"snapshot entry 'task.{k}' has shape {got}, this env's is {tuple(v.shape)}")
@@ -893,7 +903,10 @@ class RoverEnv(EnvBase):
             if k.startswith("snapshot."):
                 del state_dict[k]
         for k, v in self._task_views.items():
-            v.copy_(task_state[k])
+            if k in task_state:
+                v.copy_(task_state[k])
+            elif k == "obstacle_height":  # a snapshot from before obstacles had heights: every one the config's
+                v.fill_(self.sim.obstacles.kernel.top)
         self.sim.set_state(sim_state)
         self._seed = int(task_state["seed"])
         self.nonfinite_count = int(task_state["nonfinite_count"])

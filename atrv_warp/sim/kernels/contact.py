@@ -428,7 +428,7 @@ def obstacle_contact(
         pose = obstacles.pose[world, o]
         osize = obstacles.size[world, o]
         q = wp.vec2(pose[0], pose[1])
-        if wp.length(q - c) > reach + bounding_radius(okind, osize) or c3[2] > obstacles.top:
+        if wp.length(q - c) > reach + bounding_radius(okind, osize) or c3[2] > obstacles.height[world, o]:
             continue
         depth = float(0.0)
         n2 = wp.vec2(0.0)

@@ -1,7 +1,8 @@
 """Static obstacles in kernels: upright boxes and cylinders, per world, that rovers must not touch.
 
-Obstacles stand from below the ground to ``ObstacleSet.top`` [m], taller than the rover, so their
-contact with the rover is worked out in the ground plane: each rover shape's footprint (an oriented
+Obstacles stand from below the ground to their ``ObstacleSet.height`` [m] (by default ``ObstacleSet.top``, taller
+than the rover; a lower one passes under the laser), and their contact with the rover is worked out in the ground
+plane: each rover shape's footprint (an oriented
 rectangle) against each obstacle's (a rectangle or a disc). The deepest point of the pair gets the
 same Hunt–Crossley force and friction as the ground, horizontally, at the shape's centre height.
 """
@@ -23,7 +24,8 @@ class ObstacleSet:
     kind: wp.array2d(dtype=wp.int32)  # (N, count) OBSTACLE_NONE / _BOX / _CYLINDER
     pose: wp.array2d(dtype=wp.vec3)  # (N, count) centre x [m], y [m], yaw [rad]
     size: wp.array2d(dtype=wp.vec2)  # (N, count) box half extents (x, y) [m]; cylinder (radius, 0) [m]
-    top: float  # height of every obstacle's top [m], absolute
+    top: float  # the default obstacle's top [m], absolute: every drawn one's
+    height: wp.array2d(dtype=float)  # (N, count) each obstacle's top [m], absolute
 
 
 @wp.func

@@ -50,8 +50,8 @@ def cast_beam(params: ScanParams, scene: Scene, world: int, beam: int, X: wp.tra
     for o in range(obstacles.count):
         kind = obstacles.kind[world, o]
         if kind != 0:
-            t = wp.min(t, ray_obstacle(kind, obstacles.pose[world, o], obstacles.size[world, o], obstacles.top, origin,
-                                       direction, t))
+            t = wp.min(t, ray_obstacle(kind, obstacles.pose[world, o], obstacles.size[world, o],
+                                       obstacles.height[world, o], origin, direction, t))
     if scene.grids.count > 0:  # the world's map: walls and unknown cells
         m = scene.grids.world_map[world]
         if m >= 0:

@@ -36,6 +36,7 @@ class PinnedWorlds:
     kind: wp.array2d(dtype=wp.int32)  # (N, slots) as ObstacleSet's
     pose: wp.array2d(dtype=wp.vec3)
     size: wp.array2d(dtype=wp.vec2)
+    height: wp.array2d(dtype=float)
 
 
 @wp.func
@@ -108,6 +109,7 @@ def sample_nav_episodes(
             obstacles.kind[world, o] = pins.kind[world, o]
             obstacles.pose[world, o] = pins.pose[world, o]
             obstacles.size[world, o] = pins.size[world, o]
+            obstacles.height[world, o] = pins.height[world, o]
         return
     h = wp.rand_init(seed, task.stream[world])
     state = wp.rand_init(wp.int32(h), task.episode[world])
@@ -163,6 +165,7 @@ def sample_nav_episodes(
     size = params.obstacle_size
     for o in range(obstacles.count):
         obstacles.kind[world, o] = 0
+        obstacles.height[world, o] = obstacles.top  # a drawn obstacle is the config's height
         if o >= params.obstacles:
             continue
         for _ in range(8):  # retry a layout that would crowd the start or the target
