@@ -268,10 +268,13 @@ def test_worlds_set_to_given_layouts_keep_them_until_released():
             ({"starts": [[-6.0, 3.0, 0.0]], "targets": [[50.0, 0.0]]}, "world 2's target .* inside the arena"),
             ({"starts": [[-6.0, 3.0, 0.0]], "targets": [[5.0, -3.0]], "obstacles": [[("cone", 1.0, 1.0)]]},
              "world 2: obstacle 0: .*'cone'"),
-            ({"starts": [[-6.0, 3.0, 0.0]], "targets": [[5.0, -3.0]], "maps": [2]}, "maps must index the 2 maps")):
+            ({"starts": [[-6.0, 3.0, 0.0]], "targets": [[5.0, -3.0]], "maps": [2]}, "maps must index the 2 maps"),
+            ({"starts": [[-6.0, 3.0, 0.0]], "targets": [[5.0, -3.0]], "maps": [0, 1]}, "one map index for each of")):
         with pytest.raises(ValueError, match=message):
             env.set_worlds([2], **bad)
     assert torch.equal(env.episode_start, before) and env.pinned.tolist() == [False] * 4
+    with pytest.raises(ValueError, match=r"release_worlds: world indices must be in \[0, 4\), got \[7\]"):
+        env.release_worlds([7])
 
 
 def test_the_obstacles_across_the_way_stand_on_the_plan():

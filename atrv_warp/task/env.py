@@ -551,6 +551,9 @@ class RoverEnv(EnvBase):
         tiles = torch.zeros(k, dtype=torch.int32) if tiles is None else torch.as_tensor(tiles).reshape(-1).int()
         site = self.sim.maps.world_map.copy()
         if maps is not None:
+            if len(maps) != k:
+                raise ValueError(f"set_worlds: maps must hold one map index for each of the {k} worlds, got "
+                                 f"{len(maps)}")
             site[worlds] = [int(m) for m in maps]
         layouts = self._check_layouts(worlds, starts, targets, yaws, tiles, obstacles, site)
         if maps is not None:  # each world's map, for the kernels and the host alike
@@ -583,8 +586,11 @@ class RoverEnv(EnvBase):
         """Let ``worlds`` (default: every world) draw their layouts again at their next reset (:meth:`set_worlds`)."""
         if worlds is None:
             self._pinned_t.fill_(False)
-        else:
-            self._pinned_t[torch.as_tensor(list(worlds), dtype=torch.long, device=self.device)] = False
+            return
+        worlds = [int(w) for w in worlds]
+        if any(not 0 <= w < self.num_envs for w in worlds):
+            raise ValueError(f"release_worlds: world indices must be in [0, {self.num_envs}), got {worlds}")
+        self._pinned_t[torch.as_tensor(worlds, dtype=torch.long, device=self.device)] = False
 
     def _check_layouts(self, worlds, starts, targets, yaws, tiles, obstacles, site) -> list:
         """:meth:`set_worlds`'s input checked, each world's obstacles as (kind, pose, size, top) slot tensors."""
