@@ -5,7 +5,7 @@
     planner = Planner(sim.maps, footprint=sim.footprint_radii)          # the maps' costmaps, built once
     planner.plan(worlds, starts, goals)                                  # (K,) world indices, (N, 2) [m] each
     planner.path[w, :planner.path_length[w]]                             # world w's points [m], start to goal
-    planner.replan(worlds, poses, goals)                                 # from where the robots are now: cheap
+    planner.replan(worlds, poses)                                        # from where the robots are now: cheap
 
 The costmap is Nav2's global costmap over the map (``static_layer`` and ``inflation_layer``, with
 ``track_unknown_space``): a cell on an occupied map cell is lethal (254), one within the robot's inscribed radius of it
@@ -16,9 +16,10 @@ and inscribed cells closed, unknown ones passable at 253 where :attr:`PlannerCon
 and every other cell ``50 + 0.8 c``: the cheapest path keeps to the middle of a doorway and away from walls, and a
 doorway 1.5 times the robot's width stays open (only the inscribed radius closes, not the whole footprint).
 
-A plan is NavFn's: a field from the goal over the whole map (:meth:`Planner.set_goals`, Dijkstra in a kernel), then
-the walk down it from the start (:meth:`Planner.replan`), so that a replan to the same goal (Nav2's behaviour tree
-asks about once a second) costs microseconds. The planning grid may be coarser than the map
+A plan is NavFn's: a field from the goal over the map (:meth:`Planner.set_goals`, Dijkstra in a kernel, searched as
+far as :attr:`PlannerConfig.field_reach` times the start's path cost), then the walk down it from the start
+(:meth:`Planner.replan`), so that a replan to the same goal (Nav2's behaviour tree asks about once a second) costs
+microseconds; a robot that strays beyond the field is searched for again from where it is. The planning grid may be coarser than the map
 (:attr:`PlannerConfig.resolution`; never coarser than the inscribed radius, so that a wall's closed band is at least
 two cells wide and no diagonal step crosses it). Each planning cell reads the map cell under its centre. Fields are
 computed :attr:`PlannerConfig.slots` worlds at a time, on the maps' device; each world keeps its field (four bytes a
