@@ -334,3 +334,32 @@ def test_an_obstacle_of_its_own_height_under_the_laser_is_met_not_seen():
     assert (env.sim.obstacles.height == env.sim.obstacles.kernel.top).all()
     with pytest.raises(ValueError, match="needs a height above the ground > 0"):
         env.set_worlds([0], starts=[[0.0, 0.0, 0.0]], targets=[[8.0, 0.0]], obstacles=[[(*wall, -1.0)]])
+
+
+def test_an_arena_without_walls_is_open_ground():
+    """``ArenaConfig(walls=False)``: a rover driven at full speed past where the walls stood meets nothing and is
+    not flagged, the laser reads no wall, and the recording draws none; with the walls, the same drive is stopped."""
+    from atrv_warp.integrations.recorder import RerunRecorder
+    from atrv_warp.sim import RoverSim
+    from atrv_warp.sim.config import ArenaConfig
+
+    rovers = {walls: RoverSim(1, arena=ArenaConfig(walls=walls)) for walls in (True, False)}
+    for walls, sim in rovers.items():
+        sim.reset(poses=[[12.0, 0.0, 0.0]])
+        hit = False
+        for _ in range(160):  # 8 s at the ATRV-Jr's top speed: 4 m, past the wall at 15 m
+            sim.set_twist(torch.tensor([[0.5, 0.0]]))
+            sim.step()
+            hit |= bool(sim.wall_contact.any())
+        x = float(sim.root_pose[0, 0])
+        assert (hit, x < 15.0) == (walls, walls), (walls, x)
+    from atrv_warp.sim.scanner import LaserScanner
+
+    for walls, sim in rovers.items():  # ahead: a wall 15 m from the origin, or nothing within the laser's 20 m
+        scanner = LaserScanner(sim)
+        ranges = scanner.scan()
+        assert bool((ranges < scanner.cfg.max_range).any()) == walls
+    assert rovers[False].arena_cfg.boxes()[1:] == ()
+    recorder = RerunRecorder(rovers[False], worlds=[0])
+    recorder.log_step()
+    recorder.close()

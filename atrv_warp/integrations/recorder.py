@@ -256,9 +256,10 @@ class RerunRecorder:
                 rec.log(f"world_{w}/arena/ground", rr.Boxes3D(centers=[ground_centre], half_sizes=[ground_half],
                                                               colors=[_GROUND_COLOR], fill_mode="solid"), static=True)
                 rec.log(f"world_{w}/arena/grid", rr.LineStrips3D(grid, colors=[(90, 90, 90)], radii=0.005), static=True)
-            rec.log(f"world_{w}/arena/walls", rr.Boxes3D(centers=[c for _, c, _ in walls],
-                                                         half_sizes=[e for _, _, e in walls], colors=[_WALL_COLOR],
-                                                         fill_mode="solid"), static=True)
+            if walls:  # an arena may have none (ArenaConfig.walls)
+                rec.log(f"world_{w}/arena/walls", rr.Boxes3D(centers=[c for _, c, _ in walls],
+                                                             half_sizes=[e for _, _, e in walls],
+                                                             colors=[_WALL_COLOR], fill_mode="solid"), static=True)
             # every world's rover is the same: the URDF's visuals in the frame of their body
             for i, visual in enumerate(visuals):
                 _log_visual(rec, f"world_{w}/rover/{visual.body}/visual_{i}", visual, wheel=visual.body in wheels)

@@ -212,8 +212,9 @@ class EvalVideo:
                 draw.line([(a, b), (c, d)], fill=_GRID)
                 (a, b), (c, d) = self._to_px(np.array([[-h, tick], [h, tick]]))
                 draw.line([(a, b), (c, d)], fill=_GRID)
-        (x0, y0), (x1, y1) = self._to_px(np.array([[-h, h], [h, -h]]))
-        draw.rectangle([x0, y0, x1, y1], outline=_WALL, width=max(2, p // 80))
+        if arena.walls:
+            (x0, y0), (x1, y1) = self._to_px(np.array([[-h, h], [h, -h]]))
+            draw.rectangle([x0, y0, x1, y1], outline=_WALL, width=max(2, p // 80))
         if self.scene["map"][i] is not None:  # the map's walls: occupied dark, unknown pale
             for rects, fill in zip(self.scene["map"][i], (_WALL, _UNKNOWN), strict=True):
                 for x0, y0, x1, y1 in rects:

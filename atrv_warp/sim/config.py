@@ -17,6 +17,7 @@ from atrv_warp.core.robot import DEFAULT_ROBOT, Robot, load_robot
 __all__ = [
     "FAST_SIM_DT",
     "FRICTION_LAWS",
+    "NO_WALL",
     "REFERENCE_SIM_DT",
     "SENSOR_NOISE",
     "VARIANTS",
@@ -270,9 +271,13 @@ class ContactConfig:
             raise ValueError(f"ContactConfig.damping_limit must be > 0 or None (no ceiling), got {self.damping_limit!r}")
 
 
+NO_WALL = 1.0e6
+"""Where an arena without walls puts each wall's face [m]: beyond any rover's reach and any beam's range."""
+
+
 @dataclass(frozen=True)
 class ArenaConfig:
-    """Ground box and four walls of the reference arena."""
+    """Ground box and four walls of the reference arena (or the ground alone: :attr:`walls`)."""
 
     size: float = 30.0
     """Side of the square ground [m]."""
@@ -286,6 +291,10 @@ class ArenaConfig:
     """[m]"""
     target_radius: float = 0.25
     """Radius of the target disc (graphics only) [m]."""
+    walls: bool = True
+    """The four walls around the ground; without them a rover drives on past the ground box's edge (the ground is a
+    plane to the contact and the laser; a terrain's edge heights continue beyond its grid), nothing stops it and no
+    beam ends on a wall: open ground, for goals farther than the arena allows."""
 
     @property
     def ground_top(self) -> float:
@@ -302,8 +311,11 @@ class ArenaConfig:
         builds and the viewer draws."""
         h, t = self.half_size, 0.5 * self.wall_thickness
         zc, hz = self.ground_top + 0.5 * self.wall_height, 0.5 * self.wall_height
+        ground = (("ground", (0.0, 0.0, self.ground_center_z), (h, h, 0.5 * self.ground_thickness)),)
+        if not self.walls:
+            return ground
         return (
-            ("ground", (0.0, 0.0, self.ground_center_z), (h, h, 0.5 * self.ground_thickness)),
+            *ground,
             ("wall_+x", (h + t, 0.0, zc), (t, h + 2 * t, hz)),
             ("wall_-x", (-h - t, 0.0, zc), (t, h + 2 * t, hz)),
             ("wall_+y", (0.0, h + t, zc), (h, t, hz)),
@@ -312,8 +324,9 @@ class ArenaConfig:
 
     def planes(self) -> tuple[tuple[tuple[float, float, float], float], ...]:
         """(normal, offset) of each box's inner face as a half-space ``n·x >= offset``, same order
-        as :meth:`boxes`: what the contact kernel tests."""
-        h = self.half_size
+        as :meth:`boxes`: what the contact kernel tests. Without :attr:`walls`, each wall's half-space holds every
+        point a rover can reach (its face :data:`NO_WALL` away), so none is ever met."""
+        h = self.half_size if self.walls else NO_WALL
         return (((0.0, 0.0, 1.0), self.ground_top), ((1.0, 0.0, 0.0), -h), ((-1.0, 0.0, 0.0), -h),
                 ((0.0, 1.0, 0.0), -h), ((0.0, -1.0, 0.0), -h))
 
