@@ -158,5 +158,6 @@ def test_the_gpu_check_runs_every_part(tmp_path):
     assert {"compile", "tiers", "updates", "train", "provenance"} <= result.keys()
     assert result["compile"]["cold"]["first_step_s"] > result["compile"]["warm"]["first_step_s"]
     assert [row["worlds"] for row in result["tiers"]["rows"]] == [16, 32]
+    assert all(row["env in maps"]["env_steps_per_s"] > 0 for row in result["tiers"]["rows"])
     assert set(result["updates"]["updates_per_s"]) == {"off", "compile"}
     assert result["train"]["seeds"][0]["frames"] >= 2048 and result["provenance"]["task"]

@@ -10,7 +10,10 @@ call adds to it): ``--parts compile tiers updates`` and ``--parts train`` each f
   process with its own cache folder, so nothing compiled before counts), then the same with the cache it left.
 - ``tiers``: Isaac Lab's three tiers at 4,096 and 16,384 worlds, in env-steps/s (worlds x steps per second): the env
   stepped with random actions; stepped with the shipped ATRV-Jr policy choosing every action; and stepped with the
-  policy while the ``nav_deploy_gpu`` recipe learns (its batch, its updates per env step, its built update).
+  policy while the ``nav_deploy_gpu`` recipe learns (its batch, its updates per env step, its built update). Then
+  the env in map worlds with random actions: 16 procedural buildings with Nav2's planner in the loop (the scan and
+  the contact against the grid, a plan on a 0.2 m grid every reset, a replan every second), against the first
+  tier.
 - ``updates``: SAC updates/s at the recipe's batch, eager against each built form (``compile``, ``cudagraphs``),
   in interleaved rounds on the same learner state.
 - ``train``: time to 90 % validation success on ``nav_deploy`` with the ``nav_deploy_gpu`` preset, per seed (as
@@ -36,7 +39,7 @@ from pathlib import Path
 
 from benchmarks._common import write_results
 
-VERSION = 1
+VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -155,8 +158,33 @@ def part_tiers(args) -> dict:
             seconds = time.perf_counter() - t0
             row[tier] = {"env_steps_per_s": worlds * steps / seconds, "seconds": seconds, "updates": updates}
             print(f"tiers: {worlds:>6} worlds, {tier:<20} {worlds * steps / seconds:>12,.0f} env-steps/s", flush=True)
+        row["env in maps"] = _map_tier(args, worlds, steps)
+        row["env in maps"]["over_env"] = row["env"]["env_steps_per_s"] / row["env in maps"]["env_steps_per_s"]
         rows.append(row)
     return {"task": "nav_deploy", "randomization": "wide", "rows": rows}
+
+
+def _map_tier(args, worlds: int, steps: int) -> dict:
+    """Env-steps/s of ``nav_deploy`` in 16 procedural buildings with the planner in the loop, random actions; the
+    planning grid at 0.2 m, so that 16,384 worlds' fields fit (``sim.planner.FIELD_MEMORY``)."""
+    import torch
+
+    from atrv_warp.sim.planner import PlannerConfig
+    from atrv_warp.task.env import RoverEnv
+
+    env = RoverEnv(worlds, task="nav_deploy", randomization="wide", device=args.device, seed=0,
+                   maps=["building:16"], planner=PlannerConfig(resolution=0.2))
+    td = env.reset()
+    for i in range(steps + 5):  # five warm-up steps, as the tiers'
+        if i == 5:
+            _sync(args.device)
+            t0 = time.perf_counter()
+        td["action"] = torch.rand(worlds, 2, device=env.device) * 2 - 1
+        _, td = env.step_and_maybe_reset(td)
+    _sync(args.device)
+    seconds = time.perf_counter() - t0
+    print(f"tiers: {worlds:>6} worlds, {'env in maps':<20} {worlds * steps / seconds:>12,.0f} env-steps/s", flush=True)
+    return {"env_steps_per_s": worlds * steps / seconds, "seconds": seconds, "maps": "building:16"}
 
 
 def part_updates(args) -> dict:
