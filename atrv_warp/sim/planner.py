@@ -16,14 +16,16 @@ and inscribed cells closed, unknown ones passable at 253 where :attr:`PlannerCon
 and every other cell ``50 + 0.8 c``: the cheapest path keeps to the middle of a doorway and away from walls, and a
 doorway 1.5 times the robot's width stays open (only the inscribed radius closes, not the whole footprint).
 
-A plan is NavFn's: a field from the goal over the map (:meth:`Planner.set_goals`, Dijkstra in a kernel, searched as
-far as :attr:`PlannerConfig.field_reach` times the start's path cost), then the walk down it from the start
-(:meth:`Planner.replan`), so that a replan to the same goal (Nav2's behaviour tree asks about once a second) costs
-microseconds; a robot that strays beyond the field is searched for again from where it is. The planning grid may be coarser than the map
-(:attr:`PlannerConfig.resolution`; never coarser than the inscribed radius, so that a wall's closed band is at least
-two cells wide and no diagonal step crosses it). Each planning cell reads the map cell under its centre. Fields are
-computed :attr:`PlannerConfig.slots` worlds at a time, on the maps' device; each world keeps its field (four bytes a
-planning cell).
+A plan is the cheapest path over NavFn's weights, found the other way round: NavFn spreads its potential from the
+robot and walks it down from the goal; here a field spreads from the goal (:meth:`Planner.set_goals`, Dijkstra in a
+kernel, 8-connected where NavFn interpolates across cells, searched as far as :attr:`PlannerConfig.field_reach` times
+the start's path cost) and is walked down from the robot (:meth:`Planner.replan`), so that a replan to the same goal
+(Nav2's behaviour tree asks about once a second) costs microseconds; a robot that strays beyond the field is
+searched for again from where it is. NavFn's intermediate poses carry no heading (its last is the goal's), so a path
+here is points. The planning grid may be coarser than the map (:attr:`PlannerConfig.resolution`; never coarser than
+the inscribed radius, so that a wall's closed band is at least two cells wide and no diagonal step crosses it). Each
+planning cell reads the map cell under its centre. Fields are computed :attr:`PlannerConfig.slots` worlds at a time,
+on the maps' device; each world keeps its field (four bytes a planning cell).
 """
 
 from __future__ import annotations

@@ -3,10 +3,11 @@
 The costmap (:class:`PlanMaps`) holds, per planning cell, NavFn's traversal cost (``nav2_navfn_planner/navfn.cpp``,
 ``NavFn::setCostmap``): ``COST_NEUTRAL + COST_FACTOR * c`` (50 + 0.8 c) for a Nav2 cost ``c`` below the inscribed
 obstacle's 253, the unknown cell's 253 where unknown space may be planned through, and none (-1) for a lethal or
-inscribed cell. :func:`goal_fields` runs Dijkstra from each world's goal over its whole map, one thread a world, as
-NavFn computes its potential from the goal: 8-connected (a diagonal step only where both cells beside it are
-passable), each step's cost its length in cells times the cost of the cell it enters; it keeps, for every cell, the
-next cell toward the goal. :func:`follow_fields` then reads a world's path from any start in a few microseconds: a
+inscribed cell. :func:`goal_fields` runs Dijkstra from each world's goal over its map, one thread a world (NavFn
+computes its potential from the robot and walks it down from the goal; rooted at the goal instead, the field serves
+every later pose of the robot): 8-connected (a diagonal step only where both cells beside it are passable), each
+step's cost its length in cells times the cost of the cell it enters; it keeps, for every cell, the next cell toward
+the goal. :func:`follow_fields` then reads a world's path from any start in a few microseconds: a
 replan with the same goal and costmap (what Nav2's behaviour tree asks for about once a second) is a walk down the
 field. The search's scratch (costs so far, the open set as a binary heap with each cell's place in it) is one row
 per slot.
