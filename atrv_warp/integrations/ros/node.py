@@ -121,22 +121,7 @@ class RoverSimNode(Node):
                 self._fail(f"parameter policy: {err}")
             if task.name != p["task"]:
                 self._fail(f"parameter policy: {p['policy']} was trained on task {task.name!r}, not task={p['task']!r}")
-        from atrv_warp.world import MapError, load_map
-
-        try:
-            site = [load_map(p["map"])] if p["map"] else []  # a bad map stops the node before Newton loads
-        except MapError as err:
-            self._fail(f"parameter map: {err}")
-        from atrv_warp.task.env import RoverEnv  # the simulator (Newton), once the parameters are good
-
-        try:  # goal mode reads the policy's observation kernel
-            self.env = RoverEnv(k, robot=p["robot"], variant=p["variant"], task=task, seed=int(p["seed"]),
-                                 sim_config=p["sim_config"] or None, driver=self.driver, maps=site,
-                                 **({"terrain": p["terrain"]} if p["terrain"] else {}))
-        except MapError as err:  # the file and the problem
-            self._fail(f"parameter map: {err}")
-        except ValueError as err:
-            self._fail(f"parameter sim_config: {err}" if p["sim_config"] else str(err))
+        self.env = self._build_env(task)
         if p["sim_config"]:
             self.log.info(f"simulator config {p['sim_config']}: {self.env.sim.rover_cfg.torque_scale:g}x motor torque, "
                           f"{self.env.sim.rover_cfg.payload_mass:g} kg payload, friction "
@@ -205,6 +190,29 @@ class RoverSimNode(Node):
             self.record("/robot_description", "std_msgs/msg/String", {"data": urdf})
             self.record("/tf_static", "tf2_msgs/msg/TFMessage",
                         {"transforms": [t for r in self.rovers for t in r.static_frames(self.stamp_ns())]})
+
+    def _build_env(self, task):
+        """The simulated world (``RoverEnv``) the parameters describe, on ``task``; a bad map, robot or simulator
+        config is one logged line (:class:`NodeConfigError`)."""
+        from atrv_warp.world import MapError, load_map
+        from atrv_warp.world.places import SPEC
+
+        p = self.params
+        procedural = bool(p["map"]) and SPEC.match(p["map"]) is not None and not Path(p["map"]).exists()
+        try:  # a bad map file stops the node before Newton loads; a place (building:1@7) is drawn for the robot
+            site = [p["map"] if procedural else load_map(p["map"])] if p["map"] else []
+        except MapError as err:
+            self._fail(f"parameter map: {err}")
+        from atrv_warp.task.env import RoverEnv  # the simulator (Newton), once the parameters are good
+
+        try:  # goal mode reads the policy's observation kernel
+            return RoverEnv(p["num_rovers"], robot=p["robot"], variant=p["variant"], task=task, seed=int(p["seed"]),
+                            sim_config=p["sim_config"] or None, driver=self.driver, maps=site,
+                            **({"terrain": p["terrain"]} if p["terrain"] else {}))
+        except MapError as err:  # the file and the problem
+            self._fail(f"parameter map: {err}")
+        except ValueError as err:
+            self._fail(f"parameter sim_config: {err}" if p["sim_config"] else str(err))
 
     def _fail(self, message: str):
         self.log.error(message)
@@ -314,7 +322,8 @@ class RoverSimNode(Node):
         msg.info.origin.orientation.w = 1.0
         msg.data = array.array("b", site.cells.astype(np.int8).tobytes())  # row-major from the origin, as it is
         self.create_publisher(OccupancyGrid, "/map", latched).publish(msg)
-        self.log.info(f"map {site.source}: {msg.info.width} x {msg.info.height} cells at {site.resolution:g} m on /map")
+        self.log.info(f"map {site.source or site.name}: {msg.info.width} x {msg.info.height} cells at "
+                      f"{site.resolution:g} m on /map")
 
     def publish_markers(self) -> None:
         """The latched /visualization_marker_array (world frame): walls, each rover's obstacles, goal and

@@ -90,9 +90,9 @@ PARAMETERS = (
               "sees it)", "number", "s"),
     Parameter("terrain", "", "the ground, a terrain preset (e.g. slope: a 10 deg incline uphill toward +x); '' = the "
               "task's", "text"),
-    Parameter("map", "", "a Nav2 map_server map (YAML) to drive in: its walls for /scan and collision, served on /map "
-              "(frame map, transient local) with map -> odom on /tf; the rovers start at their first episodes' "
-              "starts in its free space", "text"),
+    Parameter("map", "", "a Nav2 map_server map (YAML) to drive in, or a procedural place (building:1@7, yard:1): "
+              "its walls for /scan and collision, served on /map (frame map, transient local) with map -> odom on "
+              "/tf; the rovers start at their first episodes' starts in its free space", "text"),
     Parameter("imu_accel_noise", SENSOR_NOISE.accel, "IMU accelerometer noise, standard deviation [m/s²]", "number",
               "m/s²"),
     Parameter("imu_gyro_noise", SENSOR_NOISE.gyro, "IMU gyroscope noise, standard deviation [rad/s]", "number",
