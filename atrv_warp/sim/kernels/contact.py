@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from atrv_warp.sim.kernels.grid import SKIP_MARGIN, GridMaps, is_wall
+from atrv_warp.sim.kernels.grid import SKIP_MARGIN, GridMaps, cell_at, is_wall
 from atrv_warp.sim.kernels.obstacles import (
     OBSTACLE_BOX,
     OBSTACLE_CYLINDER,
@@ -473,8 +473,7 @@ def grid_contact(
     res = grids.resolution[m]
     o2 = grids.origin[m]
     reach = wp.sqrt(h1 * h1 + h2 * h2)
-    col0 = int(wp.floor((c[0] - o2[0]) / res))
-    row0 = int(wp.floor((c[1] - o2[1]) / res))
+    row0, col0 = cell_at(grids, m, c)
     inside = row0 >= 0 and col0 >= 0 and row0 < grids.rows[m] and col0 < grids.cols[m]
     if inside and (grids.distance[grids.start[m] + row0 * grids.cols[m] + col0] - SKIP_MARGIN) * res > reach:
         return wrench, 0

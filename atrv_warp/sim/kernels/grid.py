@@ -59,16 +59,21 @@ def is_wall(grids: GridMaps, m: int, row: int, col: int) -> bool:
 
 
 @wp.func
+def cell_at(grids: GridMaps, m: int, p: wp.vec2):
+    """The (row, col) of map ``m``'s cell that holds ``p`` [m] (off the map: out of range)."""
+    res = grids.resolution[m]
+    o2 = grids.origin[m]
+    return int(wp.floor((p[1] - o2[1]) / res)), int(wp.floor((p[0] - o2[0]) / res))
+
+
+@wp.func
 def wall_distance(grids: GridMaps, m: int, p: wp.vec2) -> float:
     """How far ``p`` [m] is from the nearest wall cell of map ``m`` [m], to within a cell: the distance field at
     ``p``'s cell less half a cell (centre to centre, less the wall cell's half width); 0 in a wall or off the map."""
-    res = grids.resolution[m]
-    o2 = grids.origin[m]
-    col = int(wp.floor((p[0] - o2[0]) / res))
-    row = int(wp.floor((p[1] - o2[1]) / res))
+    row, col = cell_at(grids, m, p)
     if is_wall(grids, m, row, col):
         return 0.0
-    return (grids.distance[grids.start[m] + row * grids.cols[m] + col] - 0.5) * res
+    return (grids.distance[grids.start[m] + row * grids.cols[m] + col] - 0.5) * grids.resolution[m]
 
 
 @wp.func

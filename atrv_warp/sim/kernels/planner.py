@@ -91,6 +91,14 @@ def sift_down(f: wp.array2d(dtype=float), cell: wp.array2d(dtype=wp.int32), plac
 
 
 @wp.func
+def plan_cell(maps: PlanMaps, m: int, p: wp.vec2):
+    """The (row, col) of map ``m``'s planning cell that holds ``p`` [m] (off the grid: out of range)."""
+    res = maps.resolution[m]
+    o = maps.origin[m]
+    return int(wp.floor((p[1] - o[1]) / res)), int(wp.floor((p[0] - o[0]) / res))
+
+
+@wp.func
 def passable(maps: PlanMaps, m: int, row: int, col: int) -> bool:
     if row < 0 or col < 0 or row >= maps.rows[m] or col >= maps.cols[m]:
         return False
@@ -111,8 +119,8 @@ def goal_fields(
     heap_cell: wp.array2d(dtype=wp.int32),
     toward: wp.array2d(dtype=wp.int32),
 ):
-    """Slot ``s`` computes world ``worlds[s]``'s field toward ``goals[w]`` [m], as NavFn's potential (Dijkstra from
-    the goal over the whole map): ``toward[w, k]``, for every cell ``k``, the next cell of the cheapest walk from
+    """Slot ``s`` computes world ``worlds[s]``'s field toward ``goals[w]`` [m] (Dijkstra from the goal, where NavFn's
+    potential spreads from the robot): ``toward[w, k]``, for every cell ``k``, the next cell of the cheapest walk from
     ``k`` to the goal (the goal's own: itself; -1: no walk). A closed cell next to an open one gets its way out too
     (a robot that has strayed into a wall's inscribed band is led out of it, as NavFn clears the start), but no
     walk passes through one.
@@ -133,15 +141,11 @@ def goal_fields(
         toward[w, k] = -1
         g[s, k] = UNREACHED
         place[s, k] = OPEN_NONE
-    res = maps.resolution[m]
-    o = maps.origin[m]
-    gr = int(wp.floor((goals[w][1] - o[1]) / res))
-    gc = int(wp.floor((goals[w][0] - o[0]) / res))
+    gr, gc = plan_cell(maps, m, goals[w])
     if not passable(maps, m, gr, gc):
         return
     goal_cell = gr * cols + gc
-    sr = int(wp.floor((starts[w][1] - o[1]) / res))
-    sc = int(wp.floor((starts[w][0] - o[0]) / res))
+    sr, sc = plan_cell(maps, m, starts[w])
     start_cell = int(-1)
     if sr >= 0 and sc >= 0 and sr < rows and sc < cols:
         start_cell = sr * cols + sc
@@ -225,8 +229,7 @@ def follow_fields(
     cols = maps.cols[m]
     res = maps.resolution[m]
     o = maps.origin[m]
-    sr = int(wp.floor((starts[w][1] - o[1]) / res))
-    sc = int(wp.floor((starts[w][0] - o[0]) / res))
+    sr, sc = plan_cell(maps, m, starts[w])
     if sr < 0 or sc < 0 or sr >= rows or sc >= cols:
         return
     k = sr * cols + sc
