@@ -55,6 +55,22 @@ def test_a_place_saves_as_a_map_and_an_unknown_kind_is_named(tmp_path):
         place("castle", 0, 0.5)
 
 
+def test_a_file_named_like_a_place_is_read_as_the_file(tmp_path, monkeypatch):
+    """``place_entry``: ``building:2`` is a place unless a file of that name is there, which every command then reads
+    as a map (``read_map_files`` reads files now and keeps places for the robot's width)."""
+    from atrv_warp.world import OccupancyMap
+    from atrv_warp.world.places import place_entry, read_map_files
+
+    monkeypatch.chdir(tmp_path)
+    assert place_entry("building:2")["count"] == "2" and place_entry("rooms.yaml") is None
+    site = place("yard", 3, 0.5)
+    yaml_text = save_map(site, tmp_path / "saved.yaml").read_text()
+    (tmp_path / "building:2").write_text(yaml_text)
+    assert place_entry("building:2") is None
+    read = read_map_files(["building:2", "yard:1", site])
+    assert np.array_equal(read[0].cells, site.cells) and read[1] == "yard:1" and isinstance(read[2], OccupancyMap)
+
+
 def test_procedural_entries_are_drawn_for_the_robot_that_drives_them():
     """``building:2@7`` is seeds 7 and 8, ``yard:1`` seed 0, each named and hashed; a simulator draws them at its
     robot's width (twice its inscribed radius); a bad entry is one line."""

@@ -129,7 +129,9 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
         from atrv_warp.core.robot import load_robot
 
         load_robot(robot)  # an unknown one is named, with the shipped ones
-    site_maps = _load_maps(maps)
+    from atrv_warp.world.places import read_map_files
+
+    site_maps = read_map_files(maps)  # a bad map file stops here; a place is drawn by the env for its robot
     if engine == "mujoco":
         if site_maps:
             raise ValueError("engine mujoco drives the twin's flat arena; maps are for engine ours")
@@ -142,15 +144,6 @@ def evaluate_policy(policy: str | None = None, *, engine: str = "ours", task: st
     return _evaluate_ours(policy, task=task, episodes=episodes, seed=seed, baseline=baseline,
                           randomization=randomization, sim_config=sim_config, device=device, attach=attach,
                           driver=driver, robot=robot, allow_other_robot=allow_other_robot, maps=site_maps)
-
-
-def _load_maps(maps: Sequence) -> list:
-    """Each map read (a bad one stops here, in one line naming it, before any simulator is built); a procedural entry
-    (``building:100@1000``) is kept for the environment, which draws it for its robot."""
-    from atrv_warp.world import OccupancyMap, load_map
-    from atrv_warp.world.places import SPEC
-
-    return [m if isinstance(m, OccupancyMap) or SPEC.match(str(m)) else load_map(m) for m in maps]
 
 
 def _map_figures(maps: Sequence, record, num_worlds: int) -> dict:

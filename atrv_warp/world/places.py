@@ -25,7 +25,7 @@ import numpy as np
 from atrv_warp.world.nav2_map import FREE, OCCUPIED, UNKNOWN, MapError, OccupancyMap, load_map
 
 __all__ = ["DOOR_WIDTHS", "MIN_ROOM", "PLACES", "WALL", "Door", "building", "draw_building", "draw_yard", "place",
-           "resolve_sites", "yard"]
+           "place_entry", "read_map_files", "resolve_sites", "yard"]
 
 MIN_ROOM = 3.0
 """The least side of a building's room [m] (or four robot widths, whichever is more)."""
@@ -249,6 +249,22 @@ SPEC = re.compile(r"^(?P<kind>[a-z_]+):(?P<count>\d+)(@(?P<seed>\d+))?$")
 on: places never trained on, for an evaluation)."""
 
 
+def place_entry(entry: OccupancyMap | str | Path) -> re.Match | None:
+    """The procedural entry ``entry`` is (:data:`SPEC`'s match), or ``None`` for a map: an
+    :class:`~atrv_warp.world.OccupancyMap`, or a file (a file named like a place is read as the file)."""
+    if isinstance(entry, OccupancyMap):
+        return None
+    spec = SPEC.match(str(entry))
+    return None if spec is None or Path(entry).exists() else spec
+
+
+def read_map_files(entries: Sequence[OccupancyMap | str | Path]) -> list:
+    """Each entry that is a map's file read now (a bad one a :class:`~atrv_warp.world.MapError` naming it), the
+    others kept: what a command checks before it builds a simulator, which draws the places for its robot."""
+    return [entry if isinstance(entry, OccupancyMap) or place_entry(entry) is not None else load_map(entry)
+            for entry in entries]
+
+
 def resolve_sites(entries: Sequence[OccupancyMap | str | Path], robot_width: float) -> list[OccupancyMap]:
     """Each entry as maps: a map as it is, a ``map_server`` YAML read (:func:`~atrv_warp.world.load_map`), a
     procedural entry (:data:`SPEC`: ``building:64``, ``yard:10@1000``) drawn for a robot ``robot_width`` [m] wide.
@@ -258,12 +274,9 @@ def resolve_sites(entries: Sequence[OccupancyMap | str | Path], robot_width: flo
     """
     sites: list[OccupancyMap] = []
     for entry in entries:
-        if isinstance(entry, OccupancyMap):
-            sites.append(entry)
-            continue
-        spec = SPEC.match(str(entry))
-        if spec is None or Path(entry).exists():
-            sites.append(load_map(entry))
+        spec = place_entry(entry)
+        if spec is None:
+            sites.append(entry if isinstance(entry, OccupancyMap) else load_map(entry))
             continue
         if spec["kind"] not in PLACES:
             raise MapError(f"map {entry}: unknown place {spec['kind']!r} (known: {', '.join(PLACES)}) and no such file")

@@ -194,13 +194,12 @@ class RoverSimNode(Node):
     def _build_env(self, task):
         """The simulated world (``RoverEnv``) the parameters describe, on ``task``; a bad map, robot or simulator
         config is one logged line (:class:`NodeConfigError`)."""
-        from atrv_warp.world import MapError, load_map
-        from atrv_warp.world.places import SPEC
+        from atrv_warp.world import MapError
+        from atrv_warp.world.places import read_map_files
 
         p = self.params
-        procedural = bool(p["map"]) and SPEC.match(p["map"]) is not None and not Path(p["map"]).exists()
         try:  # a bad map file stops the node before Newton loads; a place (building:1@7) is drawn for the robot
-            site = [p["map"] if procedural else load_map(p["map"])] if p["map"] else []
+            site = read_map_files([p["map"]] if p["map"] else [])
         except MapError as err:
             self._fail(f"parameter map: {err}")
         from atrv_warp.task.env import RoverEnv  # the simulator (Newton), once the parameters are good
