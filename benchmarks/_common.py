@@ -42,6 +42,20 @@ def pin_to_one_core() -> None:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
 
 
+def random_step(env, gen):
+    """A call that steps ``env`` (reset here, once) with uniform random actions in [-1, 1]² drawn from ``gen``,
+    the worlds that end reset (``step_and_maybe_reset``): the environment's cost, for :func:`rate`."""
+    import torch
+
+    state = {"td": env.reset()}
+
+    def step():
+        td = state["td"]
+        td["action"] = (torch.rand(env.num_envs, 2, generator=gen) * 2 - 1).to(env.device)
+        _, state["td"] = env.step_and_maybe_reset(td)
+    return step
+
+
 def rate(fn, per_call: int, seconds: float, *, sync=None) -> float:
     """Items per second of ``fn`` (``per_call`` items a call): one warm-up call (compiles, graph captures,
     allocations), then calls until ``seconds`` have passed. ``sync`` (e.g. ``warp.synchronize``) runs after each call,

@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from benchmarks._common import pin_to_one_core, rate, write_results
+from benchmarks._common import pin_to_one_core, random_step, rate, write_results
 
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -74,24 +74,14 @@ def main() -> int:
             for name, (maps, planner) in worlds.items()}
     build_s = time.perf_counter() - t0
     gen = torch.Generator().manual_seed(0)
-    tds = {name: env.reset() for name, env in envs.items()}
-
-    def stepper(name):
-        env = envs[name]
-
-        def step():
-            td = tds[name]
-            td["action"] = (torch.rand(env.num_envs, 2, generator=gen) * 2 - 1).to(env.device)
-            _, tds[name] = env.step_and_maybe_reset(td)
-        return step
-
-    for name in envs:  # the first steps compile (or load) every kernel
+    steppers = {name: random_step(env, gen) for name, env in envs.items()}
+    for step in steppers.values():  # the first steps compile (or load) every kernel
         for _ in range(3):
-            stepper(name)()
+            step()
     best = dict.fromkeys(envs, 0.0)
     for _ in range(args.rounds):  # interleaved: every world kind sees the same machine load
         for name in envs:
-            best[name] = max(best[name], rate(stepper(name), args.worlds, args.seconds, sync=wp.synchronize))
+            best[name] = max(best[name], rate(steppers[name], args.worlds, args.seconds, sync=wp.synchronize))
     rows = [{"worlds": name, "env_steps_per_s": best[name], "us_per_world_step": 1e6 / best[name],
              "over_arena": best["arena"] / best[name]} for name in envs]
     for row in rows:

@@ -19,24 +19,13 @@ import sys
 import time
 from pathlib import Path
 
-from benchmarks._common import load_results, markdown_table, pin_to_one_core, rate, write_results
+from benchmarks._common import load_results, markdown_table, pin_to_one_core, random_step, rate, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 
-
-
-def _stepper(env, tds: dict, task: str, gen):
-    """One random-action step (with resets) of ``env``, keeping its tensordict in ``tds[task]``."""
-    import torch
-
-    def step():
-        td = tds[task]
-        td["action"] = (torch.rand(env.num_envs, 2, generator=gen) * 2 - 1).to(env.device)
-        _, tds[task] = env.step_and_maybe_reset(td)
-    return step
 
 
 def main() -> int:
@@ -68,12 +57,12 @@ def main() -> int:
     for n in args.sizes:
         envs = {task: ATRVjrEnv(n, task=task, seed=0, device=args.device) for task in ("reach", "nav")}
         gen = torch.Generator().manual_seed(0)
-        tds = {task: env.reset() for task, env in envs.items()}
+        steppers = {task: random_step(env, gen) for task, env in envs.items()}
 
         best = {"reach": 0.0, "nav": 0.0}
         for _ in range(args.rounds):  # interleaved: both tasks see the same machine load
             for task, so_far in best.items():
-                best[task] = max(so_far, rate(_stepper(envs[task], tds, task, gen), n, args.seconds, sync=wp.synchronize))
+                best[task] = max(so_far, rate(steppers[task], n, args.seconds, sync=wp.synchronize))
         sims = {task: env.sim for task, env in envs.items()}
         sim_rate = {task: rate(sim.step, n, args.seconds, sync=wp.synchronize) for task, sim in sims.items()}
         scanner = envs["nav"].scanner

@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from benchmarks._common import load_results, markdown_table, pin_to_one_core, rate, write_results
+from benchmarks._common import load_results, markdown_table, pin_to_one_core, random_step, rate, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -26,19 +26,6 @@ VERSION = 1
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 PRESETS = ("none", "wide")
 
-
-
-def _stepper(env, gen):
-    """One random-action step (with resets) of ``env``."""
-    import torch
-
-    state = {"td": env.reset()}
-
-    def step():
-        td = state["td"]
-        td["action"] = torch.rand(env.num_envs, 2, generator=gen) * 2 - 1
-        _, state["td"] = env.step_and_maybe_reset(td)
-    return step
 
 
 def main() -> int:
@@ -67,7 +54,7 @@ def main() -> int:
     rows = []
     for task in args.tasks:
         gen = torch.Generator().manual_seed(0)
-        steppers = {p: _stepper(ATRVjrEnv(args.num_envs, task=task, seed=0, randomization=p), gen) for p in PRESETS}
+        steppers = {p: random_step(ATRVjrEnv(args.num_envs, task=task, seed=0, randomization=p), gen) for p in PRESETS}
         best = dict.fromkeys(PRESETS, 0.0)
         for _ in range(args.rounds):  # interleaved: both see the same machine load
             for p in PRESETS:
