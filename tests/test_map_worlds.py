@@ -336,7 +336,7 @@ def test_an_obstacle_of_its_own_height_under_the_laser_is_met_not_seen():
         env.set_worlds([0], starts=[[0.0, 0.0, 0.0]], targets=[[8.0, 0.0]], obstacles=[[(*wall, -1.0)]])
 
 
-def test_an_arena_without_walls_is_open_ground():
+def test_an_arena_without_walls_is_open_ground(tmp_path):
     """``ArenaConfig(walls=False)``: a rover driven at full speed past where the walls stood meets nothing and is
     not flagged, the laser reads no wall, and the recording draws none; with the walls, the same drive is stopped."""
     from atrv_warp.integrations.recorder import RerunRecorder
@@ -360,6 +360,11 @@ def test_an_arena_without_walls_is_open_ground():
         ranges = scanner.scan()
         assert bool((ranges < scanner.cfg.max_range).any()) == walls
     assert rovers[False].arena_cfg.boxes()[1:] == ()
-    recorder = RerunRecorder(rovers[False], worlds=[0])
-    recorder.log_step()
-    recorder.close()
+    from test_viz import read_rrd
+
+    for walls, sim in rovers.items():
+        path = tmp_path / f"walls_{walls}.rrd"
+        recorder = RerunRecorder(sim, path=path, worlds=[0])
+        recorder.log_step()
+        recorder.close()
+        assert ("/world_0/arena/walls" in read_rrd(path)) == walls
