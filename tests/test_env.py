@@ -370,7 +370,7 @@ def test_reward_terms_sum_to_the_reward_and_follow_the_spec():
     env = ATRVjrEnv(32, seed=5)
     assert env.observation_spec["observation"].shape[-1] == OBS_DIM
     # the codes a results file or a consumer stores
-    assert END_REASONS == ("running", "success", "wall", "flip", "timeout", "nonfinite", "obstacle")
+    assert END_REASONS == ("running", "success", "wall", "flip", "timeout", "nonfinite", "obstacle", "no_progress")
     assert [int(r) for r in EndReason] == list(range(len(END_REASONS)))
     td = env.rollout(200, scripted_policy(), break_when_any_done=False)
     nxt = td["next"]

@@ -258,6 +258,18 @@ def _robot_to_run(record, robot: str | None, allow: bool, source) -> tuple[str, 
     return robot, warning
 
 
+def _baseline(env):
+    """The scripted baseline of ``env``'s task: Nav2's Regulated Pure Pursuit for a task that follows a plan, else
+    the heading driver."""
+    if env.task_cfg.observation == "path":
+        from atrv_warp.task.pursuit import pursuit_policy
+
+        return pursuit_policy(env.task_cfg, env.robot), "regulated pure pursuit"
+    from atrv_warp.task.baseline import scripted_policy
+
+    return scripted_policy(), "scripted baseline"
+
+
 def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim_config, device, attach,
                    driver, robot=None, allow_other_robot=False, maps=()) -> Evaluation:
     from atrv_warp.policy import shipped_policy_for
@@ -268,11 +280,9 @@ def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim
         from atrv_warp.sim.config_file import load_sim_config
 
         load_sim_config(sim_config)  # a bad file stops here, before the simulator is built
-    if baseline:
-        from atrv_warp.task.baseline import scripted_policy
-
+    if baseline:  # built for the env below: a plan's follower reads the observation of the robot's sensors
         task = task or "reach"
-        module, name, env_task = scripted_policy(), f"scripted baseline ({task})", task
+        module, name, env_task = None, f"scripted baseline ({task})", task
     else:
         name = policy or shipped_policy_for(task or "reach", robot)  # the robot's shipped policy, else the task's
         module, task, record = _load(name, task)
@@ -287,6 +297,9 @@ def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim
     shift = get_randomization(randomization, sim_config=sim_config, rover=nominal_rover_config(robot))
     env = RoverEnv(episodes, device=device, task=env_task, randomization=shift, sim_config=sim_config,
                    driver=driver, robot=robot, maps=maps)
+    if baseline:
+        module, kind = _baseline(env)
+        name = f"{kind} ({task})"
     module = module.to(env.device)  # loaded on the CPU; the env's observations live on its device
     record = run_episodes(module, env, seed=seed, on_step=attach(env) if attach is not None else None)
     extra = {}
@@ -297,7 +310,24 @@ def _evaluate_ours(policy, *, task, episodes, seed, baseline, randomization, sim
                  "success_by_bin": success_by_bin(record, range_bins(shift)) if around else success_by_bin(record)}
     if maps:
         extra |= _map_figures(env.sim.maps.maps, record, episodes)
+    if record.path_ratio is not None:
+        extra |= _path_figures(record, env.sim.sim_cfg.step_dt)
     return Evaluation(str(name), task, seed, "ours", record, extra)
+
+
+def _path_figures(record, step_dt: float) -> dict:
+    """A path task's episodes, each: how it ended, its time [s], the distance driven over its first plan's length,
+    its least clearance [m]; and the successful episodes' medians."""
+    from atrv_warp.task.spec import END_REASONS
+
+    done = record.success
+    median = (lambda x: float(x[done].median())) if bool(done.any()) else (lambda x: None)
+    return {"episodes_path": {"end": [END_REASONS[int(r)] for r in record.end_reason],
+                              "seconds": [round(float(s) * step_dt, 3) for s in record.steps],
+                              "path_ratio": [round(float(r), 4) for r in record.path_ratio],
+                              "least_clearance_m": [round(float(c), 4) for c in record.least_clearance]},
+            "success_median_path_ratio": median(record.path_ratio),
+            "success_median_least_clearance_m": median(record.least_clearance)}
 
 
 def _evaluate_twin(policy, *, task, episodes, seed, friction, baseline, randomization, sim_config,
@@ -354,7 +384,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="run a policy on another robot than its own on purpose (a study); refused without it")
     parser.add_argument("--episodes", type=int, default=1000, help="number of seeded episodes (one world each)")
     parser.add_argument("--seed", type=int, default=None, help="evaluation-set seed (default: the standard set)")
-    parser.add_argument("--baseline", action="store_true", help="evaluate the scripted baseline instead")
+    parser.add_argument("--baseline", action="store_true", help="evaluate the scripted baseline instead (Nav2's "
+                        "Regulated Pure Pursuit on a task that follows a plan)")
     parser.add_argument("--task", default=None,
                         help="task: reach | nav | nav_deploy, or yours (--task-module) (default: the policy's own; reach "
                              "for the baseline)")
@@ -501,6 +532,9 @@ def main(argv: list[str] | None = None) -> int:
     if 1 < len(extra.get("maps", ())) <= 8:
         print("  success by map: " + " | ".join(f"{m['name']}: {100 * m['success']:.1f}% ({m['episodes']})"
                                                 for m in extra["maps"]))
+    if extra.get("success_median_path_ratio") is not None:
+        print(f"  successful episodes (median): drove {extra['success_median_path_ratio']:.2f}x the plan's length, "
+              f"least clearance {extra['success_median_least_clearance_m']:.2f} m")
     if args.rerun:
         print(f"recording: {args.rerun}  (view with: rerun {args.rerun})")
     if viewers.video is not None:

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from atrv_warp.sim.driver import DriverConfig
 
-__all__ = ["TaskConfig"]
+__all__ = ["FollowPathConfig", "TaskConfig"]
 
 
 @dataclass(frozen=True)
@@ -138,6 +138,9 @@ class TaskConfig:
                                                     and math.isfinite(self.control_period) and self.control_period > 0):
             raise ValueError(f"TaskConfig.control_period must be a finite number > 0 [s] or None, got "
                              f"{self.control_period!r}")
+        if self.observation == "path" and not hasattr(self, "path_search"):
+            raise ValueError("TaskConfig.observation='path' follows a plan: its config is a FollowPathConfig (the goal "
+                             "and progress checkers' settings)")
         if self.scan_sectors and (self.scan_beams % self.scan_sectors or self.scan_sectors < 0):
             raise ValueError(f"scan_beams={self.scan_beams} must be a multiple of scan_sectors={self.scan_sectors}")
         if self.obstacles_on_path > self.obstacles or self.obstacles < 0:
@@ -164,3 +167,39 @@ class TaskConfig:
         limits = {name: getattr(self, name) for name, _ in BASE_LIMITS
                   if getattr(self, name) is not None and getattr(driver, name) is None}
         return dataclasses.replace(driver, **limits) if limits else driver
+
+
+@dataclass(frozen=True)
+class FollowPathConfig(TaskConfig):
+    """A task that follows Nav2's plan to its goal (``observation="path"``): the goal is reached as Nav2's
+    ``SimpleGoalChecker`` judges it (``reach_radius`` and :attr:`yaw_tolerance`, stateful), and an episode fails
+    where the robot makes no progress as its ``SimpleProgressChecker`` judges it. Its worlds are maps, planned over by
+    :mod:`atrv_warp.sim.planner`."""
+
+    yaw_tolerance: float = 0.25
+    """The goal checker's ``yaw_goal_tolerance`` [rad]: once within ``reach_radius`` of the goal (which it then keeps,
+    stateful), the goal is reached when the base's heading is this close to the goal's."""
+    progress_radius: float = 0.5
+    """The progress checker's ``required_movement_radius`` [m]."""
+    progress_time: float = 10.0
+    """Its ``movement_time_allowance`` [s]: an episode whose robot stays within :attr:`progress_radius` of where it
+    last moved that far for this long ends, a failure (``no_progress``)."""
+    path_search: float = 2.0
+    """How far along the plan past the last nearest point the next is searched for [m] (Nav2's
+    ``max_robot_pose_search_dist``)."""
+    path_progress_weight: float = 1.0
+    """Weight of the path-progress term (the way to go shortened this step: the distance back to the plan plus the
+    plan's length left from there) [1/m]."""
+    path_offset_weight: float = 0.0
+    """Weight of the path-offset term (minus the base's distance from the plan) [1/m]; 0: off."""
+    goal_yaw_weight: float = 0.0
+    """Weight of the goal-heading term (minus the heading left to turn, once the goal's position is reached)
+    [1/rad]; 0: off."""
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.observation != "path":
+            raise ValueError(f"FollowPathConfig.observation must be 'path' (it follows a plan), got {self.observation!r}")
+        for name in ("yaw_tolerance", "progress_radius", "progress_time", "path_search"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"FollowPathConfig.{name} must be > 0, got {getattr(self, name)!r}")

@@ -22,10 +22,10 @@ PHASES = {"running": 0, "success": 1, "failure": 2}
 end the episode (a truncated one included), on the step that reached the goal, or on one that failed (a wall, the
 chassis, an obstacle, a flip)."""
 
-READS = ("state", "action", "previous action", "scan", "obstacles", "wheels", "events")
+READS = ("state", "action", "previous action", "scan", "obstacles", "wheels", "events", "path")
 """What a term may read: the chassis' state and the target, this step's action, the one before, the scan, the
-obstacles, the wheels' torques and speeds, the step's end (documentation, and checked: a term that reads the scan
-needs a task with a scanner)."""
+obstacles, the wheels' torques and speeds, the step's end, the plan and where the robot is on it (documentation, and
+checked: a term that reads the scan needs a task with a scanner)."""
 
 
 @dataclass(frozen=True)

@@ -56,6 +56,7 @@ from atrv_warp.task.kernels.observe import (
     record_actions,
     write_action_observation,
 )
+from atrv_warp.task.kernels.paths import FOLLOW_OBSERVE, FOLLOW_RESET, FOLLOW_STEP, follow_paths
 from atrv_warp.task.kernels.randomization import (
     DRAW_COUNT,
     HISTORY,
@@ -78,7 +79,7 @@ from atrv_warp.task.kernels.sampling import (
     sample_episodes,
     sample_nav_episodes,
 )
-from atrv_warp.task.kernels.state import RoverState, StepOutputs, TaskBuffers, TermInputs, params_of
+from atrv_warp.task.kernels.state import PathState, RoverState, StepOutputs, TaskBuffers, TermInputs, params_of
 from atrv_warp.task.kernels.steps import advance_odometry_drift, command_twist, sum_terms
 from atrv_warp.task.kernels.tables import ends_kernel, field_kernel, term_kernels
 from atrv_warp.task.randomization import PHYSICS_DRAWS, AroundConfig, RandomizationConfig, get_randomization
@@ -101,17 +102,23 @@ from atrv_warp.world import OccupancyMap
 __all__ = ["END_REASONS", "OBSERVATION_NAMES", "SNAPSHOT_FORMAT", "TASK_SNAPSHOT_ADDED", "ATRVjrEnv", "EnvFactory",
            "RoverEnv"]
 
-TASK_SNAPSHOT_ADDED = ("obstacle_height",)
+PATH_STATE = ("segment", "point", "remaining", "prev_to_go", "offset", "reached", "stalled", "baseline", "since",
+              "clearance")
+"""How each world follows its plan (:class:`~atrv_warp.task.kernels.state.PathState`), a snapshot's ``path_*``
+entries."""
+
+TASK_SNAPSHOT_ADDED = ("obstacle_height", "path", "path_length")
 """Task entries of a snapshot that a snapshot of an earlier version lacks: each obstacle's height (restored as the
-config's, which every obstacle had then)."""
+config's, which every obstacle had then) and each world's plan (planned again from where the rovers are)."""
 
 SNAPSHOT_FORMAT = 3
 """Version of :meth:`RoverEnv.state_dict`'s snapshot (3: everything the next step reads, restored bit for bit, the
 reward terms' memory of the last action and the goal's heading included)."""
 
-OBSERVE_KINDS = {"arena": 0, "robot": 1}
-"""The leading fields the shipped observation kernels write (:mod:`atrv_warp.task.kernels.observe`); any other kind
-is a task's own, written field by field (:func:`~atrv_warp.task.kernels.tables.field_kernel`)."""
+OBSERVE_KINDS = {"arena": 0, "robot": 1, "path": 2}
+"""The leading fields the shipped observation kernels write (:mod:`atrv_warp.task.kernels.observe`; the path
+observation's, :func:`~atrv_warp.task.kernels.paths.follow_paths`); any other kind is a task's own, written field by
+field (:func:`~atrv_warp.task.kernels.tables.field_kernel`)."""
 
 
 def _torch_device(device: wp.context.Device) -> torch.device:
@@ -216,6 +223,12 @@ class RoverEnv(EnvBase):
         self._sensor_fields = tuple(f for sensor in self.sensors for f in sensor.fields)
         self.obs_dim = len(observation_fields(c, self._sensor_fields))
         self._robot = c.observation == "robot"
+        self._paths = c.observation == "path"
+        if self._paths and not self.sim.maps.maps:
+            raise ValueError(f"task {self.task.name!r} follows Nav2's plan over a map: give it maps (maps=[...] here, "
+                             "--map on the commands: a Nav2 map's YAML or a procedural place, e.g. building:16)")
+        if self._paths and planner is None:
+            planner = PlannerConfig()
         self._twist = c.action == "twist"
         self._observe_kind = OBSERVE_KINDS.get(c.observation, -1)  # -1: the task's own fields
         self._lead_dim = len(OBSERVATION_KINDS[c.observation])  # the columns before the sensors' fields
@@ -251,6 +264,16 @@ class RoverEnv(EnvBase):
         t.odom_scale = wp.ones(n, dtype=float, device=dev)
         t.prev_action = wp.zeros(n, dtype=wp.vec2, device=dev)
         self._task = t
+        path = PathState()  # the planner's paths replace the placeholders (_make_planner)
+        path.points = wp.zeros((n, 1), dtype=wp.vec2, device=dev)
+        path.length = wp.zeros(n, dtype=wp.int32, device=dev)
+        for name in ("segment", "reached", "stalled", "since"):
+            setattr(path, name, wp.zeros(n, dtype=wp.int32, device=dev))
+        for name in ("remaining", "prev_to_go", "offset", "clearance"):
+            setattr(path, name, wp.zeros(n, dtype=float, device=dev))
+        path.baseline = wp.zeros(n, dtype=wp.vec2, device=dev)
+        path.point = wp.zeros(n, dtype=wp.vec2, device=dev)
+        self._path_state = path
         out = StepOutputs()
         out.obs = self._obs = wp.zeros((n, self.obs_dim), dtype=float, device=dev)
         out.reward = self._reward = wp.zeros(n, dtype=float, device=dev)
@@ -296,6 +319,7 @@ class RoverEnv(EnvBase):
         inputs = TermInputs()
         inputs.rover, inputs.task, inputs.obstacles = rover, self._task, self.sim.obstacles.kernel
         inputs.maps = self.sim.maps.struct
+        inputs.path = self._path_state
         inputs.action = self._action
         inputs.scan = self.scanner.buffer if self.scanner is not None else wp.zeros((self.num_envs, 1), dtype=float,
                                                                                     device=self._wp_device)
@@ -373,7 +397,7 @@ class RoverEnv(EnvBase):
         """Nav2's global planner over the worlds' maps, where asked for and there are maps."""
         self.planner = None
         """The worlds' global planner (:class:`~atrv_warp.sim.planner.Planner`), or ``None``."""
-        self.path = self.path_length = None
+        self.path = self.path_length = self.path_remaining = self.clearance = None
         if cfg is None or not self.sim.maps.maps:
             return
         self.planner = Planner(self.sim.maps, self.sim.footprint_radii, cfg)
@@ -382,6 +406,19 @@ class RoverEnv(EnvBase):
         none; a world without a map has none)."""
         self._mapped = torch.as_tensor(self.sim.maps.world_map >= 0, device=self.device)
         self._replan_steps = round(cfg.replan_period / self.sim.sim_cfg.step_dt) if cfg.replan_period else 0
+        self._plan_from = torch.zeros(self.num_envs, 2, device=self.device)  # where a path task's robots were a step ago
+        self._path_state.points = wp.from_torch(self.path, dtype=wp.vec2)
+        self._path_state.length = wp.from_torch(self.path_length)
+        self._inputs.path = self._path_state  # a struct member holds a copy: set it again
+        self._task_views.update({"path": self.path, "path_length": self.path_length})
+        if self._paths:
+            self._task_views.update({f"path_{name}": wp.to_torch(getattr(self._path_state, name))
+                                     for name in PATH_STATE})
+            self.path_remaining = self._task_views["path_remaining"]
+            """(N,) a path task's plan length left from its robot's nearest point on it [m] (a view)."""
+            self.clearance = self._task_views["path_clearance"]
+            """(N,) a path task's robot's distance from its chassis origin to the nearest wall cell or obstacle
+            surface after the last reset or step [m] (a view)."""
 
     def _plan_episodes(self) -> None:
         """The resetting worlds' paths from their starts to their targets; an episode without one drawn again."""
@@ -405,10 +442,20 @@ class RoverEnv(EnvBase):
                       outputs=[self.sim.obstacles.kernel], device=self._wp_device)
 
     def _replan(self) -> None:
-        """The worlds due (every ``replan_period`` of their episode) plan again from their robots' poses."""
+        """The worlds due (every ``replan_period`` of their episode) plan again from their robots' poses (a path
+        task's from where they were a step before: the plan a controller is handed was planned a moment ago)."""
         due = (self.step_count.reshape(-1) % self._replan_steps == 0) & self._mapped
         if bool(due.any()):
-            self.planner.replan(torch.nonzero(due).flatten(), self.sim.root_pose[:, :2])
+            self.planner.replan(torch.nonzero(due).flatten(),
+                                self._plan_from if self._paths else self.sim.root_pose[:, :2])
+            if self._paths:  # a new plan: its nearest point is searched from its start
+                wp.to_torch(self._path_state.segment).masked_fill_(due, -1)
+
+    def _follow_paths(self, mode: int, mask: wp.array | None = None) -> None:
+        """Where each world's robot is on its plan (:func:`~atrv_warp.task.kernels.paths.follow_paths`)."""
+        wp.launch(follow_paths, dim=self.num_envs,
+                  inputs=[self._params, self._inputs, mode, mask if mask is not None else self._mask,
+                          self.sim.sim_cfg.step_dt], outputs=[self._obs], device=self._wp_device)
 
     def _make_randomization(self) -> None:
         """The draws' spec, the action delay's buffers and the noise, as the kernels take them."""
@@ -468,7 +515,7 @@ class RoverEnv(EnvBase):
     def _add_noise(self, mask: wp.array, *, advance: bool = False) -> None:
         """The sensors' noise on the masked worlds' observation; ``advance``: a step went by (the robot
         observation's odometry drifts). A task's own observation kind takes none: the noise is the shipped kinds'."""
-        if self.randomization.noise is None or self._observe_kind < 0:
+        if self.randomization.noise is None or self._observe_kind < 0 or self._paths:
             return
         if self._robot:
             wp.launch(add_robot_observation_noise, dim=self.num_envs,
@@ -734,6 +781,8 @@ class RoverEnv(EnvBase):
         wp.launch(observe_reset, dim=self.num_envs, inputs=[self._observe_kind, self._mask, self._task, self._rover],
                   outputs=[self._out], device=self._wp_device)
         self._launch_fields()
+        if self._paths:
+            self._follow_paths(FOLLOW_RESET, self._mask)
         self._launch_observation_tail()
         self._add_noise(self._mask)
 
@@ -770,6 +819,8 @@ class RoverEnv(EnvBase):
         else:
             action_to_torque(action, self.task_cfg.action_scale, out=sim.commands)
         self.record_actions(action)
+        if self._paths:  # a plan reaches the controller a period after it was planned: it starts behind the robot
+            self._plan_from.copy_(sim.root_pose[:, :2])
         sim.step()
         for sensor in self.sensors:
             sensor.read()
@@ -780,6 +831,8 @@ class RoverEnv(EnvBase):
             self._draw(PHASE_TICK, self._all)
         if self.planner is not None and self._replan_steps:
             self._replan()
+        if self._paths:  # the observation reads each world's plan as it is now
+            self._follow_paths(FOLLOW_OBSERVE)
         if bool(sim.nonfinite.any()):  # one flag read per step; blown-up worlds are rare
             self.nonfinite_count += int(sim.nonfinite.sum())
         out = {"observation": self._obs_t.clone(), "reward": self._reward_t.clone(),
@@ -793,6 +846,8 @@ class RoverEnv(EnvBase):
         """A step's ends, the odometry's drift, the observation's leading fields, each reward term and the reward
         (:mod:`atrv_warp.task.kernels.steps`), in that order."""
         n, dev = self.num_envs, self._wp_device
+        if self._paths:  # where each robot is on the plan its step was taken on; the goal and progress checkers
+            self._follow_paths(FOLLOW_STEP)
         wp.launch(self._ends, dim=n, inputs=[self._params, self._inputs], outputs=[self._out], device=dev)
         if self._robot:
             wp.launch(advance_odometry_drift, dim=n, inputs=[self.sim.sim_cfg.step_dt, self._task, self._rover],
@@ -919,9 +974,12 @@ class RoverEnv(EnvBase):
         self._reseed_sensors()
         for sensor in self.sensors:
             sensor.load_state(task_state)
-        if self.planner is not None:  # the plans are the restored episodes', from where the rovers are
+        if self.planner is not None:  # the goals' fields; the plans as they were (planned again if not kept)
             mapped = torch.nonzero(self._mapped).flatten()
-            self.planner.plan(mapped, self.sim.root_pose[:, :2], self.target)
+            if "path" in task_state:
+                self.planner.set_goals(mapped, self.target, self.sim.root_pose[:, :2])
+            else:
+                self.planner.plan(mapped, self.sim.root_pose[:, :2], self.target)
         return super().load_state_dict(state_dict, strict=strict, assign=assign)
 
     def __repr__(self) -> str:

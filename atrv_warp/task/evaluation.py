@@ -33,6 +33,8 @@ class EvalResult:
     timeout_rate: float
     nonfinite_rate: float
     obstacle_rate: float = 0.0
+    no_progress_rate: float = 0.0
+    """Episodes the progress checker ended (a task that follows a plan)."""
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -51,6 +53,10 @@ class EpisodeRecord:
     params: dict[str, torch.Tensor]
     """Each world's physical parameters during its episode (:data:`atrv_warp.sim.params.PARAMETERS`), and
     ``latency`` [steps]."""
+    path_ratio: torch.Tensor | None = None
+    """(N,) a path task's: the distance the chassis drove over the length of the episode's first plan."""
+    least_clearance: torch.Tensor | None = None
+    """(N,) a path task's: the least distance from the chassis origin to a wall cell or an obstacle's surface [m]."""
 
     @property
     def success(self) -> torch.Tensor:
@@ -64,7 +70,7 @@ class EpisodeRecord:
         counts = torch.bincount(self.end_reason, minlength=len(END_REASONS)).float() / n
         rate = dict(zip(END_REASONS, counts.tolist()))
         return EvalResult(n, rate["success"], self.returns.mean().item(), self.steps.mean().item(), rate["wall"],
-                          rate["flip"], rate["timeout"], rate["nonfinite"], rate["obstacle"])
+                          rate["flip"], rate["timeout"], rate["nonfinite"], rate["obstacle"], rate["no_progress"])
 
 
 SHIFT_BINS: dict[str, tuple[float, ...]] = {
@@ -135,11 +141,21 @@ def run_episodes(policy, env, *, seed: int = EVAL_SEED, on_step=None) -> Episode
     steps = torch.zeros(n)
     reason = torch.zeros(n, dtype=torch.long)
     finished = torch.zeros(n, dtype=torch.bool)
+    follows = getattr(base, "path_remaining", None) is not None
+    if follows:  # a path task's: how far it drove against its plan, and how near it came to a wall or obstacle
+        plan = base.path_remaining.detach().cpu().clone()
+        driven, least = torch.zeros(n), base.clearance.detach().cpu().clone()
+        where = base.sim.root_pose[:, :2].detach().cpu().clone()
     with set_exploration_type(ExplorationType.DETERMINISTIC):
         while not finished.all():
             td = env.step(policy(td))
             nxt = td["next"]
             live = ~finished
+            if follows:
+                now = base.sim.root_pose[:, :2].detach().cpu().clone()
+                driven += torch.where(live, (now - where).norm(dim=-1), 0.0)
+                least = torch.where(live, torch.minimum(least, base.clearance.detach().cpu()), least)
+                where = now
             returns += torch.where(live, nxt["reward"].reshape(-1).cpu(), 0.0)
             steps += live.float()
             done = nxt["done"].reshape(-1).cpu()
@@ -149,6 +165,8 @@ def run_episodes(policy, env, *, seed: int = EVAL_SEED, on_step=None) -> Episode
             if on_step is not None:
                 on_step(env, td)
             td = step_mdp(td)
+    if follows:
+        return EpisodeRecord(reason, returns, steps, params, driven / plan.clamp(min=1e-6), least)
     return EpisodeRecord(reason, returns, steps, params)
 
 
@@ -179,7 +197,8 @@ def format_result(name: str, r: EvalResult) -> str:
     return (f"{name}: success {100 * r.success_rate:.1f}% over {r.episodes} episodes | return {r.mean_return:.2f} | "
             f"steps {r.mean_steps:.1f} | wall {100 * r.wall_rate:.1f}% flip {100 * r.flip_rate:.1f}% "
             f"obstacle {100 * r.obstacle_rate:.1f}% timeout {100 * r.timeout_rate:.1f}% "
-            f"nonfinite {100 * r.nonfinite_rate:.1f}%")
+            f"nonfinite {100 * r.nonfinite_rate:.1f}%" + (f" no progress {100 * r.no_progress_rate:.1f}%"
+                                                          if r.no_progress_rate else ""))
 
 
 def write_result(path: str | Path, name: str, task: str, seed: int, r: EvalResult, **extra) -> None:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from atrv_warp.task.config import TaskConfig
 from atrv_warp.task.definition import Task
-from atrv_warp.task.tasks import nav, nav_deploy, reach
+from atrv_warp.task.tasks import follow_path, nav, nav_deploy, reach
 
 __all__ = ["TASKS", "TASK_VARIANTS", "get_task", "load_task_module", "register_task", "resolve_task", "task_names"]
 
@@ -114,5 +114,5 @@ def load_task_module(path: str | Path) -> list[str]:
     return added
 
 
-for _shipped in (reach, nav, nav_deploy):
+for _shipped in (reach, nav, nav_deploy, follow_path):
     register_task(_shipped.TASK)

@@ -38,6 +38,11 @@ __all__ = [
     "OBSERVATION_NAMES",
     "OBS_DIM",
     "OBS_INDEX",
+    "PATH_BOUND",
+    "PATH_OBSERVATION",
+    "PATH_POINTS",
+    "PATH_REMAINING_BOUND",
+    "PATH_SPACING",
     "ROBOT_OBSERVATION",
     "ActionKind",
     "EndReason",
@@ -47,6 +52,7 @@ __all__ = [
     "laser_fields",
     "observation_bounds",
     "observation_fields",
+    "path_contract",
     "policy_contract",
     "register_observation",
     "scan_sectors",
@@ -109,7 +115,36 @@ ROBOT_OBSERVATION: tuple[ObservationField, ...] = (
 """The robot observation, in order: only what a robot's own stack publishes (wheel odometry, an IMU, the goal in
 the odometry frame; then the task's scan sectors and last actions). No arena coordinates."""
 
-OBSERVATION_KINDS: dict[str, tuple[ObservationField, ...]] = {"arena": OBSERVATION, "robot": ROBOT_OBSERVATION}
+PATH_POINTS = 10
+"""K: the points of the plan a path-following policy observes (:data:`PATH_OBSERVATION`)."""
+PATH_SPACING = 0.4
+"""[m] Their spacing along the plan: point k lies k x this past the robot's nearest point on the plan (k = 0 … K-1),
+so the policy sees 3.6 m of the plan ahead, whatever the spacing of the path's own poses."""
+PATH_BOUND = 5.0
+"""[m] Each observed point's coordinates are clipped to ±this."""
+PATH_REMAINING_BOUND = 10.0
+"""[m] The observed length of the plan left is clipped to this."""
+
+PATH_OBSERVATION: tuple[ObservationField, ...] = (
+    *(ObservationField(f"path_{k}_{axis}", PATH_BOUND,
+                       f"{axis} of the plan's point {k * PATH_SPACING:.1f} m past the base's nearest point on it "
+                       "(point 0: that nearest point; past the plan's end, its end), from the localized pose (the "
+                       "plan transformed through map -> odom -> base_link)", "m", "base_link")
+      for k in range(PATH_POINTS) for axis in ("x", "y")),
+    ObservationField("path_remaining", PATH_REMAINING_BOUND, "the plan's length from the base's nearest point on it to "
+                     "its end (the goal)", "m", "-"),
+    ObservationField("sin_goal_yaw", 1.0, "sine of the goal's heading less the base's (counter-clockwise positive): "
+                     "the turn left to the goal's orientation", "-", "base_link"),
+    ObservationField("cos_goal_yaw", 1.0, "its cosine", "-", "base_link"),
+    *(f for f in ROBOT_OBSERVATION if f.name not in ("goal_distance", "sin_goal_bearing", "cos_goal_bearing")),
+)
+"""The path observation, in order: what Nav2's controller server hands its controller (the plan, as
+``nav_msgs/Path`` from the planner, and the robot's localized pose), then the robot's own odometry twist and IMU;
+then the task's scan sectors and last actions. The plan is read as :class:`~atrv_warp.core.path.PathTracker` reads it
+(the nearest point searched forward from the last, :data:`PATH_POINTS` points :data:`PATH_SPACING` apart)."""
+
+OBSERVATION_KINDS: dict[str, tuple[ObservationField, ...]] = {"arena": OBSERVATION, "robot": ROBOT_OBSERVATION,
+                                                              "path": PATH_OBSERVATION}
 """``TaskConfig.observation`` -> the observation's leading fields (a task of your own adds its kind with
 :func:`register_observation`)."""
 
@@ -122,7 +157,7 @@ def register_observation(kind: str, fields: tuple[ObservationField, ...]) -> tup
     Raises:
         ValueError: A shipped kind's name, no fields, a field without its function, or two of one name.
     """
-    if kind in ("arena", "robot"):
+    if kind in ("arena", "robot", "path"):
         raise ValueError(f"observation kind {kind!r} is a shipped one; name yours otherwise")
     names = [f.name for f in fields]
     if not fields or any(f.warp is None for f in fields) or len(set(names)) != len(names):
@@ -204,6 +239,9 @@ class EndReason(IntEnum):
     """The world's state stopped being finite; it is reset on its own."""
     OBSTACLE = 6
     """A rover shape touched an obstacle."""
+    NO_PROGRESS = 7
+    """The robot moved less than the task's ``progress_radius`` in ``progress_time`` (Nav2's progress checker: the
+    controller server aborts the goal)."""
 
 
 END_REASONS: tuple[str, ...] = tuple(r.name.lower() for r in EndReason)
@@ -254,13 +292,14 @@ def policy_contract(task) -> dict:
     """What a policy of ``task`` (a :class:`~atrv_warp.task.config.TaskConfig`) observes and commands, as plain
     values (JSON-ready): the task's part of an exported policy's contract.
 
-    Keys: ``observation_kind`` (``arena`` | ``robot``); ``observation``, each field in order with ``name``,
+    Keys: ``observation_kind`` (``arena`` | ``robot`` | ``path``); ``observation``, each field in order with ``name``,
     ``index``, ``low``, ``high``, ``bound``, ``unit``, ``frame``, ``description``; ``action``: ``kind`` (``torque``
     | ``twist``), ``names``, ``low``/``high`` (-1, 1), ``scale`` and ``units`` per column (what 1.0 is worth),
     ``limits`` (the :class:`~atrv_warp.task.config.TaskConfig` fields the scale comes from, by name, with units),
     ``base_limits`` (the :data:`BASE_LIMITS` the task's base applied to the command, by name, with units),
     ``command`` (what a robot does with it); ``scan``: ``{"sectors": ScanSectors.describe()}`` or ``None``;
-    ``action_history``: ``steps``, ``columns`` and ``meaning``, or ``None``.
+    ``action_history``: ``steps``, ``columns`` and ``meaning``, or ``None``; ``path``: :func:`path_contract` for a
+    path-following task, else ``None``.
     """
     fields = observation_fields(task)
     low, high = observation_bounds(task=task)
@@ -287,4 +326,25 @@ def policy_contract(task) -> dict:
                                    if getattr(task, name) is not None}},
         "scan": {"sectors": sectors.describe()} if sectors is not None else None,
         "action_history": history,
+        "path": path_contract(task) if task.observation == "path" else None,
     }
+
+
+def path_contract(task) -> dict:
+    """How a path-following policy of ``task`` (a :class:`~atrv_warp.task.config.FollowPathConfig`) reads its plan
+    and when its goal ends, as plain values: the :data:`PATH_OBSERVATION`'s points (count, spacing, the search for the
+    nearest point), and Nav2's goal and progress checkers as the task judged them (named as Nav2's params file names
+    them)."""
+    return {"points": PATH_POINTS, "spacing_m": PATH_SPACING, "search_m": task.path_search,
+            "frame": "the plan's poses and the base's pose in one frame (map, through map -> odom -> base_link); the "
+                     "points observed in base_link",
+            "meaning": "the nearest point of the plan to the base is searched from the last one forward, over "
+                       f"{task.path_search:g} m of the plan (Nav2's max_robot_pose_search_dist), on its segments; a new "
+                       "plan starts the search at its first pose. path_k is the point k x spacing_m further along the "
+                       "plan (its end past the end); path_remaining the plan's length from the nearest point on. The "
+                       "plan's orientations are not read but the goal's (its last pose's)",
+            "goal_checker": {"plugin": "nav2_controller::SimpleGoalChecker", "xy_goal_tolerance": task.reach_radius,
+                             "yaw_goal_tolerance": task.yaw_tolerance, "stateful": True},
+            "progress_checker": {"plugin": "nav2_controller::SimpleProgressChecker",
+                                 "required_movement_radius": task.progress_radius,
+                                 "movement_time_allowance": task.progress_time}}

@@ -16,7 +16,7 @@ from atrv_warp.task.spec import EndReason
 __all__ = ["FAILURES", "TorchRollout", "action_rate", "clearance", "energy", "failed", "heading", "progress",
            "step", "succeeded"]
 
-FAILURES = (int(EndReason.WALL), int(EndReason.FLIP), int(EndReason.OBSTACLE))
+FAILURES = (int(EndReason.WALL), int(EndReason.FLIP), int(EndReason.OBSTACLE), int(EndReason.NO_PROGRESS))
 """The end reasons a ``failure`` term counts on."""
 
 

@@ -2,7 +2,8 @@
 the robot's, :data:`~atrv_warp.task.spec.ROBOT_OBSERVATION`), then the scan's sectors and the last actions after them.
 
 One thread per world. Indices and clip bounds come from :mod:`atrv_warp.task.spec`; ``robot`` (1: the robot
-observation) is the task's observation kind, resolved once by the environment (0: the arena's; -1: a kind of a task's own, whose
+observation) is the task's observation kind, resolved once by the environment (0: the arena's; 2: the path
+observation, whose fields :func:`~atrv_warp.task.kernels.paths.follow_paths` writes; -1: a kind of a task's own, whose
 fields :func:`~atrv_warp.task.kernels.tables.field_kernel` writes).
 """
 
@@ -194,16 +195,16 @@ def observe_reset(robot: int, mask: wp.array(dtype=bool), task: TaskBuffers, rov
     task.prev_distance[world] = d
     task.prev_heading_error[world] = wp.abs(err)
     out.distance[world] = d
-    if robot >= 0:  # a task's own kind: its field kernels write them
+    if robot == 0 or robot == 1:  # else the path kernel (2) or a task's own field kernels (-1) write them
         write_leading_fields(out.obs, world, robot, task, rover, pose, err)
 
 
 @wp.kernel
 def observe_step(robot: int, task: TaskBuffers, rover: RoverState, out: StepOutputs):
-    """Every world's leading fields after a step (a blown-up world's neutral ones); none for a task's own kind
-    (``robot`` -1), whose field kernels write them."""
+    """Every world's leading fields after a step (a blown-up world's neutral ones); none for the path observation
+    (``robot`` 2) or a task's own kind (-1), whose kernels write them."""
     world = wp.tid()
-    if robot < 0:
+    if robot < 0 or robot > 1:
         return
     if rover.nonfinite[world] != 0:
         write_neutral_observation(out.obs, world, robot, task)

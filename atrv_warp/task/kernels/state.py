@@ -15,8 +15,8 @@ from atrv_warp.sim.kernels.grid import GridMaps
 from atrv_warp.sim.kernels.obstacles import ObstacleSet
 from atrv_warp.task.spec import EndReason
 
-__all__ = ["END_FLIP", "END_NONE", "END_NONFINITE", "END_OBSTACLE", "END_SUCCESS", "END_TIMEOUT", "END_WALL",
-           "RoverState", "StepOutputs", "TaskBuffers", "TermInputs", "params_of", "params_struct"]
+__all__ = ["END_FLIP", "END_NONE", "END_NONFINITE", "END_NO_PROGRESS", "END_OBSTACLE", "END_SUCCESS", "END_TIMEOUT",
+           "END_WALL", "PathState", "RoverState", "StepOutputs", "TaskBuffers", "TermInputs", "params_of", "params_struct"]
 
 # Why an episode ended (``end_reason``), from task_spec.EndReason.
 END_NONE = wp.constant(int(EndReason.RUNNING))
@@ -26,6 +26,7 @@ END_FLIP = wp.constant(int(EndReason.FLIP))
 END_TIMEOUT = wp.constant(int(EndReason.TIMEOUT))
 END_NONFINITE = wp.constant(int(EndReason.NONFINITE))
 END_OBSTACLE = wp.constant(int(EndReason.OBSTACLE))
+END_NO_PROGRESS = wp.constant(int(EndReason.NO_PROGRESS))
 
 
 @wp.struct
@@ -82,6 +83,26 @@ class TaskBuffers:
 
 
 @wp.struct
+class PathState:
+    """Each world's plan and how its robot follows it (:mod:`atrv_warp.task.kernels.paths`; arrays of one row where
+    the task follows no plan)."""
+
+    points: wp.array2d(dtype=wp.vec2)  # (N, max_points) the planner's paths [m], start to goal (map frame)
+    length: wp.array(dtype=wp.int32)  # (N,) points in each path (0: none: the target alone)
+    segment: wp.array(dtype=wp.int32)  # the segment the base's nearest point lies on (searched forward from here;
+    # -1: a new plan, searched from its start)
+    point: wp.array(dtype=wp.vec2)  # the base's nearest point on the plan [m]
+    remaining: wp.array(dtype=float)  # the plan's length from the nearest point to the goal [m], after this step
+    prev_to_go: wp.array(dtype=float)  # the way to go (offset + remaining) as the last observation saw it [m]
+    offset: wp.array(dtype=float)  # the base's distance from the plan [m]
+    reached: wp.array(dtype=wp.int32)  # 1 once the goal checker has found the goal's position reached (stateful)
+    stalled: wp.array(dtype=wp.int32)  # 1 where the progress checker fails the episode this step
+    baseline: wp.array(dtype=wp.vec2)  # the progress checker's last pose [m]
+    since: wp.array(dtype=wp.int32)  # steps since the robot was last there
+    clearance: wp.array(dtype=float)  # the base's distance to the nearest wall cell or obstacle surface [m]
+
+
+@wp.struct
 class TermInputs:
     """Everything a reward term (or a success test) may read, one struct: the rover, the task's buffers, the
     obstacles and maps, this step's action and the step's scan, and the step's end."""
@@ -90,6 +111,7 @@ class TermInputs:
     task: TaskBuffers
     obstacles: ObstacleSet
     maps: GridMaps  # the worlds' maps (``count`` 0 where none has one)
+    path: PathState  # each world's plan and how it is followed (a path-following task's; stalled 0 otherwise)
     action: wp.array2d(dtype=float)  # (N, 2) this step's action as given (a term clips it where it needs to)
     scan: wp.array2d(dtype=float)  # (N, beams) this step's ranges [m]; (N, 1) of zeros without a scanner
     end_reason: wp.array(dtype=wp.int32)  # this step's end (END_*; END_TIMEOUT on truncation)

@@ -1,8 +1,8 @@
 """A step's outcome, split by job, one thread per world, launched in this order by the environment:
 
 1. :func:`make_ends_kernel`'s kernel: the step counter, the chassis' distance and heading error to the target, and
-   how the step ended (the task's success test, then a flip, an obstacle, any other contact; else a timeout at
-   ``max_steps``), or a blown-up world's containment;
+   how the step ended (the task's success test, then a flip, an obstacle, any other contact, a path-following
+   task's progress checker; else a timeout at ``max_steps``), or a blown-up world's containment;
 2. :func:`advance_odometry_drift`: the robot observation's odometry drift from the encoders' slip;
 3. the observation (:mod:`.observe`);
 4. :func:`make_term_kernel`'s kernels, one per reward term: each writes its column, weighted, where its phase
@@ -23,6 +23,7 @@ from atrv_warp.sim.kernels.contact import FLAG_OBSTACLE
 from atrv_warp.task.kernels.observe import heading_error, planar_distance
 from atrv_warp.task.kernels.state import (
     END_FLIP,
+    END_NO_PROGRESS,
     END_NONE,
     END_NONFINITE,
     END_OBSTACLE,
@@ -73,6 +74,8 @@ def make_ends_kernel(success):
         elif rover.contact_flags[world] != 0:
             # wall, or the chassis on the ground: any contact beyond the wheels' ground contacts
             reason = END_WALL
+        elif inputs.path.stalled[world] != 0:  # a path-following task's progress checker
+            reason = END_NO_PROGRESS
         term = reason != END_NONE
         trunc = (not term) and steps >= params.max_steps
         if trunc:
@@ -114,7 +117,7 @@ def make_term_kernel(term, column: int, phase: int):
         elif phase == 1:
             live = reason == END_SUCCESS
         else:
-            live = reason == END_FLIP or reason == END_OBSTACLE or reason == END_WALL
+            live = reason == END_FLIP or reason == END_OBSTACLE or reason == END_WALL or reason == END_NO_PROGRESS
         value = float(0.0)
         if live:
             value = weight * term(params, inputs, world)
