@@ -38,7 +38,8 @@ import numpy as np
 import torch
 import warp as wp
 
-from atrv_warp.sim.kernels.planner import PlanMaps, follow_fields, goal_fields
+from atrv_warp.sim.kernels.obstacles import ObstacleSet
+from atrv_warp.sim.kernels.planner import PlanMaps, PlanMarks, follow_fields, goal_fields, mark_seen
 from atrv_warp.sim.maps import GridWorlds, distance_field
 from atrv_warp.world.nav2_map import OCCUPIED, UNKNOWN
 
@@ -76,9 +77,15 @@ class PlannerConfig:
     field_reach: float = 1.5
     """How far a goal's field is searched, as a multiple of the cost of the start's path (0: the whole map): the
     replans of a robot that keeps near its way read it; one that strays beyond is searched again from there."""
+    obstacle_layer: bool = False
+    """The global costmap's obstacle layer: each world's unmapped obstacles are marked once its laser sees them
+    (within :attr:`obstacle_range` and the laser's field of view; occlusion is not modelled) and inflated as the
+    map's walls, and its next replan goes around them. Off: the plan is over the map alone."""
+    obstacle_range: float = 2.5
+    """How far the obstacle layer marks what the laser sees [m] (Nav2's ``obstacle_max_range``)."""
 
     def __post_init__(self):
-        for name in ("inflation_radius", "cost_scaling_factor", "resolution"):
+        for name in ("inflation_radius", "cost_scaling_factor", "resolution", "obstacle_range"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"PlannerConfig.{name} must be a finite number > 0, got {value!r}")
@@ -126,7 +133,8 @@ class Planner:
     for a robot of ``footprint`` (inscribed, circumscribed radius [m]); :meth:`plan` plans some worlds, :attr:`path`,
     :attr:`path_length` and :attr:`path_cost` hold every world's last plan."""
 
-    def __init__(self, grids: GridWorlds, footprint: tuple[float, float], cfg: PlannerConfig | None = None):
+    def __init__(self, grids: GridWorlds, footprint: tuple[float, float], cfg: PlannerConfig | None = None,
+                 obstacles: ObstacleSet | None = None):
         self.cfg = cfg = cfg or PlannerConfig()
         self.grids, self.device = grids, grids.device
         inscribed = footprint[0]
@@ -164,6 +172,10 @@ class Planner:
         self._length = wp.zeros(n, dtype=wp.int32, device=self.device)
         self._cost = wp.zeros(n, dtype=float, device=self.device)
         self._world_map = grids.struct.world_map
+        self.marks = self._marks(n, inscribed, obstacles)
+        self.seen = wp.to_torch(self.marks.seen)
+        """(N, slots) 1 where a world's costmap has marked the obstacle in that slot (the obstacle layer)."""
+        self._stale = wp.zeros(n, dtype=wp.int32, device=self.device)
         self.goals = wp.to_torch(self._goals).view(n, 2)
         """(N, 2) each world's goal [m], as :meth:`set_goals` last set it."""
         self.path = wp.to_torch(self._path).view(n, cfg.max_points, 2)
@@ -172,6 +184,38 @@ class Planner:
         """(N,) points in each world's last path; 0: none was found."""
         self.path_cost = wp.to_torch(self._cost)
         """(N,) each last path's cost (NavFn's units: 50 for each free cell crossed)."""
+
+    def _marks(self, n: int, inscribed: float, obstacles: ObstacleSet | None) -> PlanMarks:
+        marks = PlanMarks()
+        slots = obstacles.count if obstacles is not None else 0
+        marks.active = int(self.cfg.obstacle_layer and slots > 0)
+        marks.seen = wp.zeros((n, max(slots, 1)), dtype=wp.int32, device=self.device)
+        marks.marked = wp.zeros(n, dtype=wp.int32, device=self.device)
+        if obstacles is None:
+            obstacles = ObstacleSet()
+            obstacles.count, obstacles.top = 0, 0.0
+            for name, dtype in (("kind", wp.int32), ("pose", wp.vec3), ("size", wp.vec2), ("height", float)):
+                setattr(obstacles, name, wp.zeros((n, 1), dtype=dtype, device=self.device))
+        marks.obstacles = obstacles
+        marks.inscribed, marks.inflation_radius = inscribed, self.cfg.inflation_radius
+        marks.cost_scaling_factor = self.cfg.cost_scaling_factor
+        return marks
+
+    def observe(self, body_q: wp.array, bodies_per_world: int, chassis: int, fov: float) -> None:
+        """The obstacle layer marks what each world's laser (field of view ``fov`` [rad] about the chassis' heading)
+        now sees, from the chassis poses in ``body_q``; nothing without the layer."""
+        if self.marks.active:
+            wp.launch(mark_seen, dim=self._length.shape[0], inputs=[body_q, bodies_per_world, chassis,
+                                                                    float(self.cfg.obstacle_range), 0.5 * fov,
+                                                                    self.marks, self._stale], device=self.device)
+
+    def forget(self, worlds: torch.Tensor) -> None:
+        """Clear the obstacle layer's marks of ``worlds`` ((N,) bool: a new episode's costmap has seen nothing)."""
+        if self.marks.active:
+            mask = worlds.to(self.seen.device).reshape(-1)
+            self.seen[mask] = 0
+            wp.to_torch(self.marks.marked)[mask] = 0
+            wp.to_torch(self._stale)[mask] = 0
 
     def _pack(self) -> PlanMaps:
         s = PlanMaps()
@@ -200,14 +244,21 @@ class Planner:
         for first in range(0, len(worlds), slots):
             chunk = wp.array(worlds[first:first + slots].numpy(), dtype=wp.int32, device=self.device)
             wp.launch(goal_fields, dim=len(chunk), inputs=[self.struct, self._world_map, chunk, starts, self._goals,
-                                                           float(self.cfg.field_reach), self.g, self.place,
-                                                           self.heap_f, self.heap_cell],
+                                                           float(self.cfg.field_reach), self.marks, self.g,
+                                                           self.place, self.heap_f, self.heap_cell],
                       outputs=[self.toward], device=self.device)
 
     def replan(self, worlds: Sequence[int] | torch.Tensor, starts: torch.Tensor) -> None:
         """Each of ``worlds``' path from ``starts`` ((N, 2) [m], every world's) down its field to its goal; a world
         whose field does not reach its start is searched again from there."""
         worlds = _indices(worlds)
+        if self.marks.active:  # a costmap that marked an obstacle since its field was searched: search it again
+            stale = wp.to_torch(self._stale)
+            index = worlds.long().to(stale.device)
+            marked = worlds[stale[index].cpu() != 0]
+            if len(marked):
+                stale[marked.long().to(stale.device)] = 0
+                self.set_goals(marked, self.goals, starts)
         self._follow(worlds, starts)
         lost = worlds[self.path_length[worlds.long().to(self.path_length.device)].cpu() == 0]
         if len(lost):  # strayed beyond its field's reach (or no path at all: searched again to say so)
@@ -228,7 +279,7 @@ class Planner:
             return
         chunk = wp.array(worlds.numpy(), dtype=wp.int32, device=self.device)
         wp.launch(follow_fields, dim=len(chunk), inputs=[self.struct, self._world_map, chunk, self._points(starts),
-                                                         self._goals, self.toward],
+                                                         self._goals, self.toward, self.marks],
                   outputs=[self._path, self._length, self._cost], device=self.device)
 
     def points(self, world: int) -> np.ndarray:

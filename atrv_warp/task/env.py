@@ -400,7 +400,7 @@ class RoverEnv(EnvBase):
         self.path = self.path_length = self.path_remaining = self.clearance = None
         if cfg is None or not self.sim.maps.maps:
             return
-        self.planner = Planner(self.sim.maps, self.sim.footprint_radii, cfg)
+        self.planner = Planner(self.sim.maps, self.sim.footprint_radii, cfg, obstacles=self.sim.obstacles.kernel)
         self.path, self.path_length = self.planner.path, self.planner.path_length
         """(N, max_points, 2) each world's last plan [m], start to target, in its first ``path_length`` (N,) rows (0:
         none; a world without a map has none)."""
@@ -423,6 +423,7 @@ class RoverEnv(EnvBase):
     def _plan_episodes(self) -> None:
         """The resetting worlds' paths from their starts to their targets; an episode without one drawn again."""
         worlds = torch.nonzero(self._mask_t.reshape(-1) & self._mapped).flatten()
+        self.planner.forget(self._mask_t)  # a new episode's costmap has marked nothing yet
         for attempt in range(self.planner.cfg.redraws + 1):
             self.planner.plan(worlds, self.episode_start[:, :2], self.target)
             worlds = worlds[(self.path_length[worlds] == 0) & ~self._pinned_t[worlds]]  # a given layout stays
@@ -830,6 +831,8 @@ class RoverEnv(EnvBase):
         if self._draws_on_tick:
             self._draw(PHASE_TICK, self._all)
         if self.planner is not None and self._replan_steps:
+            b = self.sim.buffers  # the obstacle layer marks what the lasers see now (none without it)
+            self.planner.observe(b.body_q, b.layout.bodies_per_world, b.layout.chassis_body, self.task_cfg.scan_fov)
             self._replan()
         if self._paths:  # the observation reads each world's plan as it is now
             self._follow_paths(FOLLOW_OBSERVE)

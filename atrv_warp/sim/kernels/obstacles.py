@@ -36,6 +36,19 @@ def rotate2(v: wp.vec2, yaw: float) -> wp.vec2:
 
 
 @wp.func
+def surface_distance(kind: int, pose: wp.vec3, size: wp.vec2, p: wp.vec2) -> float:
+    """How far ``p`` is from an obstacle's surface in the ground plane [m] (0 inside): a box's (``pose`` x, y, yaw;
+    half sides ``size``) or a cylinder's (radius ``size[0]``)."""
+    d = wp.vec2(p[0] - pose[0], p[1] - pose[1])
+    if kind == OBSTACLE_CYLINDER:
+        return wp.max(wp.length(d) - size[0], 0.0)
+    c = wp.cos(pose[2])
+    s = wp.sin(pose[2])
+    out = wp.vec2(wp.max(wp.abs(c * d[0] + s * d[1]) - size[0], 0.0), wp.max(wp.abs(-s * d[0] + c * d[1]) - size[1], 0.0))
+    return wp.length(out)
+
+
+@wp.func
 def bounding_radius(kind: int, size: wp.vec2) -> float:
     if kind == OBSTACLE_CYLINDER:
         return size[0]

@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import warp as wp
 
-__all__ = ["COST_NEUTRAL", "PlanMaps", "follow_fields", "goal_fields"]
+from atrv_warp.sim.kernels.obstacles import OBSTACLE_NONE, ObstacleSet, surface_distance
+
+__all__ = ["COST_NEUTRAL", "PlanMaps", "PlanMarks", "follow_fields", "goal_fields", "mark_seen"]
 
 COST_NEUTRAL = wp.constant(50.0)
 """NavFn's cost of a free cell (``COST_NEUTRAL``): the least a step can cost."""
@@ -36,6 +38,20 @@ class PlanMaps:
     cols: wp.array(dtype=wp.int32)  # (M,)
     resolution: wp.array(dtype=float)  # (M,) [m per planning cell]
     origin: wp.array(dtype=wp.vec2)  # (M,) the lower-left planning cell's outer corner (x, y) [m]
+
+
+@wp.struct
+class PlanMarks:
+    """The unmapped obstacles each world's global costmap has marked (Nav2's obstacle layer), inflated as the map's
+    walls are; read only where ``active``."""
+
+    active: int  # 0: no obstacle layer
+    seen: wp.array2d(dtype=wp.int32)  # (N, slots) 1: the obstacle in that slot is marked
+    marked: wp.array(dtype=wp.int32)  # (N,) how many are (0: the map's costs alone)
+    obstacles: ObstacleSet
+    inscribed: float  # [m]
+    inflation_radius: float  # [m]
+    cost_scaling_factor: float  # [1/m]
 
 
 @wp.func
@@ -105,6 +121,55 @@ def passable(maps: PlanMaps, m: int, row: int, col: int) -> bool:
     return maps.cost[maps.start[m] + row * maps.cols[m] + col] >= 0.0
 
 
+@wp.func
+def cell_cost(maps: PlanMaps, m: int, k: int, marks: PlanMarks, w: int) -> float:
+    """Planning cell ``k``'s traversal cost in world ``w`` (-1: closed): its map's, and where the world's costmap has
+    marked obstacles, theirs as Nav2's inflation layer costs a cell at their surfaces' distance (NavFn's weight of
+    the higher; closed within the inscribed radius)."""
+    c = maps.cost[maps.start[m] + k]
+    if marks.active == 0 or c < 0.0 or marks.marked[w] == 0:
+        return c
+    cols = maps.cols[m]
+    res = maps.resolution[m]
+    centre = maps.origin[m] + wp.vec2((float(k % cols) + 0.5) * res, (float(k / cols) + 0.5) * res)
+    obstacles = marks.obstacles
+    for o in range(obstacles.count):
+        kind = obstacles.kind[w, o]
+        if marks.seen[w, o] != 0 and kind != OBSTACLE_NONE:
+            d = surface_distance(kind, obstacles.pose[w, o], obstacles.size[w, o], centre)
+            if d <= marks.inscribed:
+                return -1.0
+            if d <= marks.inflation_radius:
+                inflated = wp.floor(252.0 * wp.exp(-marks.cost_scaling_factor * (d - marks.inscribed)))
+                c = wp.max(c, COST_NEUTRAL + 0.8 * inflated)
+    return c
+
+
+@wp.kernel
+def mark_seen(poses: wp.array(dtype=wp.transform), bodies_per_world: int, chassis: int, reach: float,
+              half_fov: float, marks: PlanMarks, stale: wp.array(dtype=wp.int32)):
+    """Each world's costmap marks the unmapped obstacles its laser now sees: within ``reach`` [m] of the chassis
+    origin (Nav2's ``obstacle_max_range``) and inside the laser's field of view, ``half_fov`` [rad] either side of the
+    heading (occlusion not modelled); a world that marks a new one is ``stale`` (its field is searched again)."""
+    w = wp.tid()
+    pose = poses[w * bodies_per_world + chassis]
+    p = wp.transform_get_translation(pose)
+    q = wp.vec2(p[0], p[1])
+    heading = wp.quat_rotate(wp.transform_get_rotation(pose), wp.vec3(1.0, 0.0, 0.0))
+    yaw = wp.atan2(heading[1], heading[0])
+    obstacles = marks.obstacles
+    for o in range(obstacles.count):
+        kind = obstacles.kind[w, o]
+        if kind != OBSTACLE_NONE and marks.seen[w, o] == 0:
+            c = obstacles.pose[w, o]
+            bearing = wp.atan2(c[1] - q[1], c[0] - q[0]) - yaw
+            bearing = wp.atan2(wp.sin(bearing), wp.cos(bearing))
+            if surface_distance(kind, c, obstacles.size[w, o], q) <= reach and wp.abs(bearing) <= half_fov:
+                marks.seen[w, o] = 1
+                marks.marked[w] = marks.marked[w] + 1
+                stale[w] = 1
+
+
 @wp.kernel
 def goal_fields(
     maps: PlanMaps,
@@ -113,6 +178,7 @@ def goal_fields(
     starts: wp.array(dtype=wp.vec2),
     goals: wp.array(dtype=wp.vec2),
     reach: float,
+    marks: PlanMarks,
     g: wp.array2d(dtype=float),
     place: wp.array2d(dtype=wp.int32),
     heap_f: wp.array2d(dtype=float),
@@ -136,7 +202,6 @@ def goal_fields(
     rows = maps.rows[m]
     cols = maps.cols[m]
     cells = rows * cols
-    base = maps.start[m]
     for k in range(cells):
         toward[w, k] = -1
         g[s, k] = UNREACHED
@@ -171,7 +236,7 @@ def goal_fields(
             bound = reach * g[s, start_cell]  # the start's walk is known: search on to ``reach`` times it
         r = current / cols
         c = current - r * cols
-        entering = maps.cost[base + current]  # what a step into ``current`` costs, per cell of its length
+        entering = cell_cost(maps, m, current, marks, w)  # what a step into ``current`` costs, per cell of its length
         here = g[s, current]
         for dr in range(-1, 2):
             for dc in range(-1, 2):
@@ -185,14 +250,15 @@ def goal_fields(
                     continue
                 step = float(1.0)
                 if dr != 0 and dc != 0:  # no corner cutting: both cells beside the step open
-                    if maps.cost[base + nr * cols + c] < 0.0 or maps.cost[base + r * cols + nc] < 0.0:
+                    if cell_cost(maps, m, nr * cols + c, marks, w) < 0.0 or cell_cost(maps, m, r * cols + nc, marks,
+                                                                                       w) < 0.0:
                         continue
                     step = 1.41421356
                 candidate = here + step * entering
                 if candidate < g[s, n]:
                     g[s, n] = candidate
                     toward[w, n] = current
-                    if maps.cost[base + n] >= 0.0:  # a closed cell is left, never walked through
+                    if cell_cost(maps, m, n, marks, w) >= 0.0:  # a closed cell is left, never walked through
                         i = place[s, n]
                         if i == OPEN_NONE:
                             i = size
@@ -211,6 +277,7 @@ def follow_fields(
     starts: wp.array(dtype=wp.vec2),
     goals: wp.array(dtype=wp.vec2),
     toward: wp.array2d(dtype=wp.int32),
+    marks: PlanMarks,
     path: wp.array2d(dtype=wp.vec2),
     path_length: wp.array(dtype=wp.int32),
     path_cost: wp.array(dtype=float),
@@ -244,7 +311,7 @@ def follow_fields(
         step = float(1.0)
         if n / cols != k / cols and n % cols != k % cols:
             step = 1.41421356
-        cost = cost + step * maps.cost[maps.start[m] + n]
+        cost = cost + step * cell_cost(maps, m, n, marks, w)
         k = n
         if count >= capacity:
             return

@@ -18,7 +18,7 @@ from typing import Any
 import warp as wp
 
 from atrv_warp.sim.kernels.grid import wall_distance
-from atrv_warp.sim.kernels.obstacles import OBSTACLE_CYLINDER, OBSTACLE_NONE
+from atrv_warp.sim.kernels.obstacles import OBSTACLE_NONE, surface_distance
 from atrv_warp.task.kernels.observe import (
     IMU_PITCH_BOUND,
     IMU_ROLL_BOUND,
@@ -32,7 +32,7 @@ from atrv_warp.task.kernels.state import PathState, TermInputs
 from atrv_warp.task.spec import PATH_BOUND, PATH_OBSERVATION, PATH_POINTS, PATH_REMAINING_BOUND, PATH_SPACING
 
 __all__ = ["FOLLOW_OBSERVE", "FOLLOW_RESET", "FOLLOW_STEP", "advance_on_path", "clearance_at", "follow_paths",
-           "goal_checked", "goal_yaw", "nearest_on_path", "path_offset", "path_progress", "surface_distance"]
+           "goal_checked", "goal_yaw", "nearest_on_path", "path_offset", "path_progress"]
 
 FOLLOW_RESET = wp.constant(0)
 FOLLOW_STEP = wp.constant(1)
@@ -52,19 +52,6 @@ IMU_ROLL = wp.constant(_INDEX["imu_roll"])
 IMU_PITCH = wp.constant(_INDEX["imu_pitch"])
 IMU_YAW_RATE = wp.constant(_INDEX["imu_yaw_rate"])
 assert [_INDEX[f"path_{k}_x"] for k in range(PATH_POINTS)] == list(range(0, 2 * PATH_POINTS, 2))
-
-
-@wp.func
-def surface_distance(kind: int, pose: wp.vec3, size: wp.vec2, p: wp.vec2) -> float:
-    """How far ``p`` is from an obstacle's surface in the ground plane [m] (0 inside): a box's (``pose`` x, y, yaw;
-    half sides ``size``) or a cylinder's (radius ``size[0]``)."""
-    d = wp.vec2(p[0] - pose[0], p[1] - pose[1])
-    if kind == OBSTACLE_CYLINDER:
-        return wp.max(wp.length(d) - size[0], 0.0)
-    c = wp.cos(pose[2])
-    s = wp.sin(pose[2])
-    out = wp.vec2(wp.max(wp.abs(c * d[0] + s * d[1]) - size[0], 0.0), wp.max(wp.abs(-s * d[0] + c * d[1]) - size[1], 0.0))
-    return wp.length(out)
 
 
 @wp.func
