@@ -88,5 +88,10 @@ def follow_path_baseline() -> str:
                            "driven / plan"], ["---"] * 3 + ["---:"] * 5, rows)
 
 
+TABLES = {
+    "follow_path_baseline": follow_path_baseline,
+}
+
+
 if __name__ == "__main__":
     sys.exit(main())
