@@ -115,6 +115,10 @@ SNAPSHOT_FORMAT = 3
 """Version of :meth:`RoverEnv.state_dict`'s snapshot (3: everything the next step reads, restored bit for bit, the
 reward terms' memory of the last action and the goal's heading included)."""
 
+ODOM_COLUMN = {kind: [f.name for f in OBSERVATION_KINDS[kind]].index("odom_linear") for kind in ("robot", "path")}
+"""Where the robot's twist and IMU fields start in the observation kinds that have them (the same five, in one
+order: ``atrv_warp.task.kernels.paths`` holds it)."""
+
 OBSERVE_KINDS = {"arena": 0, "robot": 1, "path": 2}
 """The leading fields the shipped observation kernels write (:mod:`atrv_warp.task.kernels.observe`; the path
 observation's, :func:`~atrv_warp.task.kernels.paths.follow_paths`); any other kind is a task's own, written field by
@@ -516,12 +520,13 @@ class RoverEnv(EnvBase):
     def _add_noise(self, mask: wp.array, *, advance: bool = False) -> None:
         """The sensors' noise on the masked worlds' observation; ``advance``: a step went by (the robot
         observation's odometry drifts). A task's own observation kind takes none: the noise is the shipped kinds'."""
-        if self.randomization.noise is None or self._observe_kind < 0 or self._paths:
+        if self.randomization.noise is None or self._observe_kind < 0:
             return
-        if self._robot:
+        if self._robot or self._paths:  # the robot's twist and IMU fields (a path task's stand after its plan)
+            shift = ODOM_COLUMN[self.task_cfg.observation] - ODOM_COLUMN["robot"]
             wp.launch(add_robot_observation_noise, dim=self.num_envs,
                       inputs=[self._seed, mask, int(advance), self.sim.sim_cfg.step_dt, self._task, self._obs_noise,
-                              self.sim.driver.state.fused, self.sim.buffers.nonfinite],
+                              self.sim.driver.state.fused, self.sim.buffers.nonfinite, shift, int(self._robot)],
                       outputs=[self._obs], device=self._wp_device)
         else:
             wp.launch(add_observation_noise, dim=self.num_envs,

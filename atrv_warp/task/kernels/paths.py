@@ -29,7 +29,14 @@ from atrv_warp.task.kernels.observe import (
     wrap_angle,
 )
 from atrv_warp.task.kernels.state import PathState, TermInputs
-from atrv_warp.task.spec import PATH_BOUND, PATH_OBSERVATION, PATH_POINTS, PATH_REMAINING_BOUND, PATH_SPACING
+from atrv_warp.task.spec import (
+    PATH_BOUND,
+    PATH_OBSERVATION,
+    PATH_POINTS,
+    PATH_REMAINING_BOUND,
+    PATH_SPACING,
+    ROBOT_OBSERVATION,
+)
 
 __all__ = ["FOLLOW_OBSERVE", "FOLLOW_RESET", "FOLLOW_STEP", "advance_on_path", "clearance_at", "follow_paths",
            "goal_checked", "goal_yaw", "nearest_on_path", "path_offset", "path_progress"]
@@ -52,6 +59,8 @@ IMU_ROLL = wp.constant(_INDEX["imu_roll"])
 IMU_PITCH = wp.constant(_INDEX["imu_pitch"])
 IMU_YAW_RATE = wp.constant(_INDEX["imu_yaw_rate"])
 assert [_INDEX[f"path_{k}_x"] for k in range(PATH_POINTS)] == list(range(0, 2 * PATH_POINTS, 2))
+# the robot's twist and IMU fields, in the robot observation's order (its noise kernel shifts them as one block)
+assert [f.name for f in PATH_OBSERVATION[-5:]] == [f.name for f in ROBOT_OBSERVATION[-5:]]
 
 
 @wp.func
@@ -151,13 +160,12 @@ def remaining_on_path(path: PathState, target: wp.vec2, world: int, segment: int
 
 
 @wp.func
-def write_path_observation(obs: wp.array2d(dtype=float), world: int, inputs: TermInputs, segment: int,
-                           point: wp.vec2, q: wp.vec2, yaw: float, pose: wp.transform):
-    """The path observation's leading fields: the plan's points ahead in the base's frame, its length left, the
-    turn to the goal's heading, the encoders' twist and the IMU's, each clipped to its bound."""
+def write_plan_observation(obs: wp.array2d(dtype=float), world: int, inputs: TermInputs, segment: int,
+                           point: wp.vec2, q: wp.vec2, yaw: float):
+    """The path observation's plan fields: the plan's points ahead in the base's frame, its length left, the turn to
+    the goal's heading, each clipped to its bound."""
     path = inputs.path
     task = inputs.task
-    rover = inputs.rover
     target = task.target[world]
     c = wp.cos(yaw)
     s = wp.sin(yaw)
@@ -173,6 +181,14 @@ def write_path_observation(obs: wp.array2d(dtype=float), world: int, inputs: Ter
     turn = wrap_angle(task.target_yaw[world] - yaw)
     obs[world, SIN_GOAL_YAW] = wp.sin(turn)
     obs[world, COS_GOAL_YAW] = wp.cos(turn)
+
+
+@wp.func
+def write_robot_fields(obs: wp.array2d(dtype=float), world: int, inputs: TermInputs, pose: wp.transform):
+    """The path observation's robot fields: the encoders' twist and the IMU's, each clipped to its bound (the
+    sensors' noise is added after them)."""
+    task = inputs.task
+    rover = inputs.rover
     scale = task.odom_scale[world]
     twist = rover.odom_twist[world]
     r = rover.rpy[world]
@@ -187,17 +203,20 @@ def write_path_observation(obs: wp.array2d(dtype=float), world: int, inputs: Ter
 @wp.kernel
 def follow_paths(params: Any, inputs: TermInputs, mode: int, mask: wp.array(dtype=bool), dt: float,
                  obs: wp.array2d(dtype=float)):
-    """Each world's nearest point on its plan and the plan's length left; the checkers after a step
-    (``FOLLOW_STEP``) or from a reset (``FOLLOW_RESET``, masked worlds only); the observation and the way to go the
-    next progress counts from (``FOLLOW_RESET``, ``FOLLOW_OBSERVE``)."""
+    """Each world's nearest point on its plan and the plan's length left; the checkers and the observation's robot
+    fields after a step (``FOLLOW_STEP``) or from a reset (``FOLLOW_RESET``, masked worlds only); the observation's
+    plan fields and the way to go the next progress counts from (``FOLLOW_RESET``, ``FOLLOW_OBSERVE``)."""
     world = wp.tid()
     if mode == FOLLOW_RESET and not mask[world]:
         return
     path = inputs.path
     rover = inputs.rover
     if rover.nonfinite[world] != 0:  # a blown-up world: at rest, the goal where it was
+        if mode != FOLLOW_OBSERVE:
+            for i in range(ODOM_LINEAR, IMU_YAW_RATE + 1):
+                obs[world, i] = 0.0
         if mode != FOLLOW_STEP:
-            for i in range(IMU_YAW_RATE + 1):
+            for i in range(COS_GOAL_YAW):
                 obs[world, i] = 0.0
             obs[world, REMAINING] = wp.clamp(path.remaining[world], -REMAINING_BOUND, REMAINING_BOUND)
             obs[world, COS_GOAL_YAW] = 1.0
@@ -219,8 +238,9 @@ def follow_paths(params: Any, inputs: TermInputs, mode: int, mask: wp.array(dtyp
         path.point[world] = point
         path.offset[world] = offset
         path.remaining[world] = remaining_on_path(path, target, world, segment, point)
-    if mode != FOLLOW_OBSERVE:
+    if mode != FOLLOW_OBSERVE:  # after a reset or a step, before the sensors' noise
         path.clearance[world] = clearance_at(inputs, world, q)
+        write_robot_fields(obs, world, inputs, pose)
     if mode == FOLLOW_STEP:
         # Nav2's SimpleGoalChecker (stateful: the position, once reached, stays reached) and SimpleProgressChecker
         if wp.length(q - target) <= params.reach_radius:
@@ -236,7 +256,7 @@ def follow_paths(params: Any, inputs: TermInputs, mode: int, mask: wp.array(dtyp
         path.stalled[world] = stalled
         return
     path.prev_to_go[world] = path.offset[world] + path.remaining[world]
-    write_path_observation(obs, world, inputs, path.segment[world], path.point[world], q, yaw, pose)
+    write_plan_observation(obs, world, inputs, path.segment[world], path.point[world], q, yaw)
 
 
 @wp.func

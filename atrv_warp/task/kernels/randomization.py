@@ -289,13 +289,17 @@ def add_robot_observation_noise(
     noise: ObservationNoise,
     odometry: wp.array(dtype=wp.vec3),
     nonfinite: wp.array(dtype=wp.int32),
+    shift: int,
+    goal: int,
     obs: wp.array2d(dtype=float),
 ):
     """The robot observation's noise in the masked worlds, from the world's (episode, step) stream: zero-mean
     Gaussian noise on the odometry's twist (``velocity``, ``odom_angular``), the IMU's roll and pitch
     (``attitude``) and yaw rate (``gyro``), each clipped to its bound; and the fused odometry's drift, a random walk
     over ``step_dt`` [s] of the encoders' speed noise along the heading and of the gyro's noise in the heading
-    (``advance`` = 1: a step; 0: a reset or a re-observation), which moves the pose the goal is observed from."""
+    (``advance`` = 1: a step; 0: a reset or a re-observation), which moves the pose the goal is observed from
+    (``goal`` 1). The twist and IMU fields stand ``shift`` columns after the robot observation's (the path
+    observation's, after its plan; ``goal`` 0: it sees its plan from the localized pose, not the odometry's)."""
     world = wp.tid()
     if not mask[world] or nonfinite[world] != 0:
         return
@@ -303,20 +307,21 @@ def add_robot_observation_noise(
     state = wp.rand_init(wp.int32(stream) ^ 0x5F3759DF, int(task.step_count[world]))
     dv = noise.velocity * wp.randn(state)
     dw = noise.odom_angular * wp.randn(state)
-    roll = obs[world, ROBOT_ROLL] + noise.attitude * wp.randn(state)
-    pitch = obs[world, ROBOT_PITCH] + noise.attitude * wp.randn(state)
+    roll = obs[world, ROBOT_ROLL + shift] + noise.attitude * wp.randn(state)
+    pitch = obs[world, ROBOT_PITCH + shift] + noise.attitude * wp.randn(state)
     dg = noise.gyro * wp.randn(state)
-    rate = obs[world, ROBOT_YAW_RATE] + dg
-    obs[world, ROBOT_ODOM_LINEAR] = wp.clamp(obs[world, ROBOT_ODOM_LINEAR] + dv, -ODOM_LINEAR_BOUND, ODOM_LINEAR_BOUND)
-    obs[world, ROBOT_ODOM_ANGULAR] = wp.clamp(obs[world, ROBOT_ODOM_ANGULAR] + dw, -ODOM_ANGULAR_BOUND,
+    rate = obs[world, ROBOT_YAW_RATE + shift] + dg
+    obs[world, ROBOT_ODOM_LINEAR + shift] = wp.clamp(obs[world, ROBOT_ODOM_LINEAR + shift] + dv, -ODOM_LINEAR_BOUND, ODOM_LINEAR_BOUND)
+    obs[world, ROBOT_ODOM_ANGULAR + shift] = wp.clamp(obs[world, ROBOT_ODOM_ANGULAR + shift] + dw, -ODOM_ANGULAR_BOUND,
                                               ODOM_ANGULAR_BOUND)
-    obs[world, ROBOT_ROLL] = wp.clamp(roll, -IMU_ROLL_BOUND, IMU_ROLL_BOUND)
-    obs[world, ROBOT_PITCH] = wp.clamp(pitch, -IMU_PITCH_BOUND, IMU_PITCH_BOUND)
-    obs[world, ROBOT_YAW_RATE] = wp.clamp(rate, -IMU_YAW_RATE_BOUND, IMU_YAW_RATE_BOUND)
+    obs[world, ROBOT_ROLL + shift] = wp.clamp(roll, -IMU_ROLL_BOUND, IMU_ROLL_BOUND)
+    obs[world, ROBOT_PITCH + shift] = wp.clamp(pitch, -IMU_PITCH_BOUND, IMU_PITCH_BOUND)
+    obs[world, ROBOT_YAW_RATE + shift] = wp.clamp(rate, -IMU_YAW_RATE_BOUND, IMU_YAW_RATE_BOUND)
     drift = task.odom_drift[world]
     if advance != 0:
         yaw = odometry[world][2] + drift[2]
         drift = drift + wp.vec3(dv * step_dt * wp.cos(yaw), dv * step_dt * wp.sin(yaw), dg * step_dt)
         task.odom_drift[world] = drift
-    write_goal_observation(obs, world, task.goal_odom[world], scaled_odometry(odometry[world], task.odom_scale[world])
-                           + drift)
+    if goal != 0:
+        write_goal_observation(obs, world, task.goal_odom[world],
+                               scaled_odometry(odometry[world], task.odom_scale[world]) + drift)
