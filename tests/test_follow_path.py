@@ -207,3 +207,28 @@ def test_evaluate_reports_each_path_episodes_end_time_detour_and_least_clearance
     for end, least in zip(episodes["end"], episodes["least_clearance_m"], strict=True):
         # a body that touched came within its footprint's reach (0.43 m from the ATRV-Jr's origin); none went through
         assert 0 < least < (0.43 if end == "obstacle" else 6.0), (end, least)
+
+
+def test_every_unmapped_obstacle_leaves_a_way_round_it():
+    """In a map, no obstacle (the one on the plan included) stands closer to a wall than the task's clearance:
+    one in a doorway would close it, and an episode without a way is no test of following a plan."""
+    env = RoverEnv(64, task="follow_path", maps=["building:4"], seed=2)
+    env.reset()
+    passage, placed = 2 * env.sim.footprint_radii[1], 0
+    obstacles = env.sim.obstacles
+    for w in range(env.num_envs):
+        site = env.sim.maps.maps[int(env.sim.maps.world_map[w])]
+        rows, cols = np.nonzero(site.walls)
+        walls = np.stack([site.origin[0] + (cols + 0.5) * site.resolution,
+                          site.origin[1] + (rows + 0.5) * site.resolution], 1)
+        for o in range(obstacles.kind.shape[1]):
+            kind = int(obstacles.kind[w, o])
+            if kind == 0:
+                continue
+            x, y = (float(v) for v in obstacles.pose[w, o, :2])
+            size = obstacles.size[w, o].numpy()
+            radius = float(size[0]) if kind == 2 else float(np.hypot(*size))
+            gap = float(np.hypot(walls[:, 0] - x, walls[:, 1] - y).min()) - radius
+            assert gap >= passage - site.resolution, (w, o, gap)  # the distance field's own half-cell
+            placed += 1
+    assert placed > 2 * env.num_envs  # most of the four slots find a place

@@ -95,7 +95,8 @@ class TaskConfig:
     obstacle_size: tuple[float, float] = (0.3, 0.6)
     """Range of cylinder radii and box half sides [m]."""
     clearance: float = 1.0
-    """No obstacle's bounding circle comes closer than this to the start or the target [m]."""
+    """No obstacle's bounding circle comes closer than this to the start or the target [m]. (In a map, none comes
+    closer to a wall than the robot's circumscribed diameter: a way round it.)"""
     scan_beams: int = 0
     """Scanner beams (0: no scanner). The full scan is the step's ``scan`` entry [m]."""
     scan_fov: float = math.pi

@@ -339,6 +339,7 @@ class RoverEnv(EnvBase):
             field_kernel(f.warp, i, -f.bound, f.bound) for i, f in enumerate(fields)]
         self._target_distance = wp.vec2(*(c.target_distance or (c.reach_radius, 2.0 * c.spawn_bound)))
         self._tiles = self.sim.terrain.grid.tiles if self.sim.terrain.enabled else 1
+        self._passage = 2.0 * float(self.sim.footprint_radii[1])  # beside an unmapped obstacle: room to turn in
         self.scan_sectors = scan_sectors(c)
         """The observed scan's sectors (:class:`~atrv_warp.core.scan.ScanSectors`; ``None`` without them)."""
 
@@ -436,14 +437,15 @@ class RoverEnv(EnvBase):
             redraw = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
             redraw[worlds] = True
             wp.launch(sample_nav_episodes, dim=self.num_envs,
-                      inputs=[self._seed, self._params, self._target_distance, self._tiles,
+                      inputs=[self._seed, self._params, self._target_distance, self._tiles, self._passage,
                               wp.from_torch(redraw)],
                       outputs=[self._task, self._reset_poses, self.sim.obstacles.kernel, self.sim.terrain.kernel,
                                self.sim.maps.struct, self._pins], device=self._wp_device)
         if self.task_cfg.obstacles_on_path:  # the obstacles across the way stand on the plan, not the straight line
             wp.launch(place_on_plans, dim=self.num_envs,
                       inputs=[self._seed, self._params, self._mask, self._pins, self._task, self._reset_poses,
-                              wp.from_torch(self.path, dtype=wp.vec2), wp.from_torch(self.path_length)],
+                              wp.from_torch(self.path, dtype=wp.vec2), wp.from_torch(self.path_length),
+                              self.sim.maps.struct, self._passage],
                       outputs=[self.sim.obstacles.kernel], device=self._wp_device)
 
     def _replan(self) -> None:
@@ -730,7 +732,8 @@ class RoverEnv(EnvBase):
             self._draw(PHASE_EPISODE, self._mask)
         if self._nav:
             wp.launch(sample_nav_episodes, dim=self.num_envs,
-                      inputs=[self._seed, self._params, self._target_distance, self._tiles, self._mask],
+                      inputs=[self._seed, self._params, self._target_distance, self._tiles, self._passage,
+                              self._mask],
                       outputs=[self._task, self._reset_poses, sim.obstacles.kernel, sim.terrain.kernel,
                                sim.maps.struct, self._pins],
                       device=self._wp_device)

@@ -11,7 +11,7 @@ from typing import Any
 
 import warp as wp
 
-from atrv_warp.sim.kernels.grid import GridMaps, spawn_point
+from atrv_warp.sim.kernels.grid import GridMaps, spawn_point, wall_distance
 from atrv_warp.sim.kernels.obstacles import OBSTACLE_BOX, OBSTACLE_CYLINDER, ObstacleSet, bounding_radius
 from atrv_warp.sim.kernels.terrain import TerrainGrid
 from atrv_warp.task.kernels.state import TaskBuffers
@@ -76,12 +76,26 @@ def obstacle_clear(q: wp.vec2, r: float, start: wp.vec2, target: wp.vec2, cleara
     return wp.length(q - start) > r + clearance and wp.length(q - target) > r + clearance
 
 
+@wp.func
+def leaves_a_way(grids: GridMaps, m: int, q: wp.vec2, r: float, passage: float) -> bool:
+    """Whether an obstacle of bounding radius ``r`` at ``q`` leaves ``passage`` [m] free between it and the nearest
+    wall of map ``m`` (a way round it, whatever else it stands in); anywhere where there is no map."""
+    if m < 0:
+        return True
+    return wall_distance(grids, m, q) >= r + passage
+
+
+MAP_TRIES = wp.constant(32)
+"""Places an obstacle in a map world tries (in the arena: 8)."""
+
+
 @wp.kernel
 def sample_nav_episodes(
     seed: int,
     params: Any,
     distance: wp.vec2,
     tiles: int,
+    passage: float,
     mask: wp.array(dtype=bool),
     task: TaskBuffers,
     poses: wp.array(dtype=wp.vec3),
@@ -97,8 +111,9 @@ def sample_nav_episodes(
 
     In a world with a map (``grids``), the start and the target are cells of the map's ``spawn`` list (clear of the
     robot's footprint), the target in the start's group (reachable) and ``distance`` away (after 16 starts of 32
-    targets each, the last drawn), and the obstacles anywhere on the map. A pinned world (``pins``) replays its
-    given layout: start, target, terrain tile and obstacles."""
+    targets each, the last drawn), and the obstacles anywhere on the map where each leaves a way round it (``passage``
+    to the nearest wall). A pinned world (``pins``) replays its given layout: start, target, terrain tile and
+    obstacles."""
     world = wp.tid()
     if not mask[world]:
         return
@@ -168,7 +183,10 @@ def sample_nav_episodes(
         obstacles.height[world, o] = obstacles.top  # a drawn obstacle is the config's height
         if o >= params.obstacles:
             continue
-        for _ in range(8):  # retry a layout that would crowd the start or the target
+        tries = int(8)
+        if m >= 0:
+            tries = MAP_TRIES
+        for _ in range(tries):  # retry a layout that would crowd the start or the target, or close a way
             kind = OBSTACLE_CYLINDER
             if wp.randf(state) < 0.5:
                 kind = OBSTACLE_BOX
@@ -179,7 +197,8 @@ def sample_nav_episodes(
             if o < params.obstacles_on_path:
                 q = start + wp.randf(state, 0.35, 0.65) * line + wp.randf(state, -1.0, 1.0) * params.path_offset * across
             yaw = wp.randf(state, -wp.pi, wp.pi)
-            if obstacle_clear(q, bounding_radius(kind, extent), start, target, params.clearance):
+            r = bounding_radius(kind, extent)
+            if obstacle_clear(q, r, start, target, params.clearance) and leaves_a_way(grids, m, q, r, passage):
                 obstacles.kind[world, o] = kind
                 obstacles.pose[world, o] = wp.vec3(q[0], q[1], yaw)
                 obstacles.size[world, o] = extent
@@ -199,12 +218,15 @@ def place_on_plans(
     starts: wp.array(dtype=wp.vec3),
     path: wp.array2d(dtype=wp.vec2),
     path_length: wp.array(dtype=wp.int32),
+    grids: GridMaps,
+    passage: float,
     obstacles: ObstacleSet,
 ):
     """Move a masked world's first ``params.obstacles_on_path`` obstacles from the straight line onto its plan (a
     world with a path of two points or more, not pinned): each at 35-65 % of the plan's length, within
-    ``params.path_offset`` of it across, keeping ``params.clearance`` from the start and the target (else it stays
-    where the sampler put it), from a stream of its own. The planner does not see them: what a saved map does not
+    ``params.path_offset`` of it across, keeping ``params.clearance`` from the start and the target and ``passage``
+    between it and the nearest wall (a way round; else it stays where the sampler put it), from a stream of its
+    own. The planner does not see them: what a saved map does not
     show stands on the path it plans, as a chair or a person does."""
     world = wp.tid()
     n = path_length[world]
@@ -221,7 +243,7 @@ def place_on_plans(
     for o in range(wp.min(params.obstacles_on_path, obstacles.count)):
         if obstacles.kind[world, o] == 0:
             continue
-        for _ in range(8):
+        for _ in range(MAP_TRIES):
             want = wp.randf(state, 0.35, 0.65) * total
             offset = wp.randf(state, -1.0, 1.0) * params.path_offset
             walked = float(0.0)
@@ -235,8 +257,9 @@ def place_on_plans(
                     q = a + (want - walked) * along + offset * wp.vec2(-along[1], along[0])
                     break
                 walked = walked + step
-            if obstacle_clear(q, bounding_radius(obstacles.kind[world, o], obstacles.size[world, o]), start, target,
-                              params.clearance):
+            r = bounding_radius(obstacles.kind[world, o], obstacles.size[world, o])
+            if obstacle_clear(q, r, start, target, params.clearance) and leaves_a_way(
+                    grids, grids.world_map[world], q, r, passage):
                 pose = obstacles.pose[world, o]
                 obstacles.pose[world, o] = wp.vec3(q[0], q[1], pose[2])
                 break
