@@ -171,7 +171,8 @@ class RoverEnv(EnvBase):
             :attr:`~atrv_warp.sim.planner.PlannerConfig.redraws` times at most) and stands the task's
             ``obstacles_on_path`` on it (unseen by the planner), and each world plans again from its robot's pose
             every :attr:`~atrv_warp.sim.planner.PlannerConfig.replan_period`; :attr:`path` and :attr:`path_length`
-            hold them. ``None``: no planner.
+            hold them. ``None``: no planner (a task that follows a plan, ``observation="path"``: ``PlannerConfig()``;
+            it needs ``maps``).
         **task_overrides: Fields of :class:`TaskConfig` (e.g. ``max_steps=100``); an unknown
             name raises ``ValueError``.
     """
