@@ -191,11 +191,11 @@ class Planner:
         marks.active = int(self.cfg.obstacle_layer and slots > 0)
         marks.seen = wp.zeros((n, max(slots, 1)), dtype=wp.int32, device=self.device)
         marks.marked = wp.zeros(n, dtype=wp.int32, device=self.device)
-        if obstacles is None:
-            obstacles = ObstacleSet()
-            obstacles.count, obstacles.top = 0, 0.0
-            for name, dtype in (("kind", wp.int32), ("pose", wp.vec3), ("size", wp.vec2), ("height", float)):
-                setattr(obstacles, name, wp.zeros((n, 1), dtype=dtype, device=self.device))
+        if obstacles is None:  # worlds without obstacle slots, as the simulator holds them
+            from atrv_warp.sim.config import ArenaConfig
+            from atrv_warp.sim.contact import Obstacles
+
+            obstacles = Obstacles(None, n, ArenaConfig(), self.device).kernel
         marks.obstacles = obstacles
         marks.inscribed, marks.inflation_radius = inscribed, self.cfg.inflation_radius
         marks.cost_scaling_factor = self.cfg.cost_scaling_factor

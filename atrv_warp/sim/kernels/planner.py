@@ -115,6 +115,14 @@ def plan_cell(maps: PlanMaps, m: int, p: wp.vec2):
 
 
 @wp.func
+def cell_centre(maps: PlanMaps, m: int, k: int) -> wp.vec2:
+    """The centre [m] of map ``m``'s planning cell ``k`` (row-major)."""
+    cols = maps.cols[m]
+    res = maps.resolution[m]
+    return maps.origin[m] + wp.vec2((float(k % cols) + 0.5) * res, (float(k / cols) + 0.5) * res)
+
+
+@wp.func
 def passable(maps: PlanMaps, m: int, row: int, col: int) -> bool:
     if row < 0 or col < 0 or row >= maps.rows[m] or col >= maps.cols[m]:
         return False
@@ -129,9 +137,7 @@ def cell_cost(maps: PlanMaps, m: int, k: int, marks: PlanMarks, w: int) -> float
     c = maps.cost[maps.start[m] + k]
     if marks.active == 0 or c < 0.0 or marks.marked[w] == 0:
         return c
-    cols = maps.cols[m]
-    res = maps.resolution[m]
-    centre = maps.origin[m] + wp.vec2((float(k % cols) + 0.5) * res, (float(k / cols) + 0.5) * res)
+    centre = cell_centre(maps, m, k)
     obstacles = marks.obstacles
     for o in range(obstacles.count):
         kind = obstacles.kind[w, o]
@@ -294,8 +300,6 @@ def follow_fields(
         return
     rows = maps.rows[m]
     cols = maps.cols[m]
-    res = maps.resolution[m]
-    o = maps.origin[m]
     sr, sc = plan_cell(maps, m, starts[w])
     if sr < 0 or sc < 0 or sr >= rows or sc >= cols:
         return
@@ -315,7 +319,7 @@ def follow_fields(
         k = n
         if count >= capacity:
             return
-        path[w, count] = o + wp.vec2((float(k % cols) + 0.5) * res, (float(k / cols) + 0.5) * res)
+        path[w, count] = cell_centre(maps, m, k)
         count = count + 1
     if count == 1:  # the start's cell is the goal's
         path[w, 1] = goals[w]
