@@ -196,6 +196,11 @@ class FollowPathConfig(TaskConfig):
     goal_yaw_weight: float = 0.0
     """Weight of the goal-heading term (minus the heading left to turn, once the goal's position is reached)
     [1/rad]; 0: off."""
+    obstacle_layer: bool = True
+    """The plan comes from a global costmap with Nav2's obstacle layer (its default ``plugins``: static, obstacle,
+    inflation): an unmapped obstacle the laser has seen is marked, and the next replan goes around it
+    (:attr:`~atrv_warp.sim.planner.PlannerConfig.obstacle_layer`). False: the plan is over the map alone, through
+    what the map does not show. The env's ``planner``, where given, decides instead."""
 
     def __post_init__(self):
         super().__post_init__()

@@ -171,8 +171,8 @@ class RoverEnv(EnvBase):
             :attr:`~atrv_warp.sim.planner.PlannerConfig.redraws` times at most) and stands the task's
             ``obstacles_on_path`` on it (unseen by the planner), and each world plans again from its robot's pose
             every :attr:`~atrv_warp.sim.planner.PlannerConfig.replan_period`; :attr:`path` and :attr:`path_length`
-            hold them. ``None``: no planner (a task that follows a plan, ``observation="path"``: ``PlannerConfig()``;
-            it needs ``maps``).
+            hold them. ``None``: no planner (a task that follows a plan, ``observation="path"``: ``PlannerConfig()``
+            with the task's :attr:`~atrv_warp.task.config.FollowPathConfig.obstacle_layer`; it needs ``maps``).
         **task_overrides: Fields of :class:`TaskConfig` (e.g. ``max_steps=100``); an unknown
             name raises ``ValueError``.
     """
@@ -233,7 +233,7 @@ class RoverEnv(EnvBase):
             raise ValueError(f"task {self.task.name!r} follows Nav2's plan over a map: give it maps (maps=[...] here, "
                              "--map on the commands: a Nav2 map's YAML or a procedural place, e.g. building:16)")
         if self._paths and planner is None:
-            planner = PlannerConfig()
+            planner = PlannerConfig(obstacle_layer=c.obstacle_layer)
         self._twist = c.action == "twist"
         self._observe_kind = OBSERVE_KINDS.get(c.observation, -1)  # -1: the task's own fields
         self._lead_dim = len(OBSERVATION_KINDS[c.observation])  # the columns before the sensors' fields
