@@ -117,14 +117,19 @@ class PolicyRecord:
     recorded: bool
     """Whether the file records them (format 2), or they are what a format-1 file meant: the task as its module
     declares it, on the ATRV-Jr."""
+    sites: dict | None = None
+    """The maps it trained in, as its run recorded them (:meth:`~atrv_warp.rl.run.RunSpec.sites_record`: the run's
+    ``env.map`` entries, the places' generator, each map's name, file and sha256); ``None``: none recorded (the
+    arena, or a policy saved before policies recorded them)."""
 
 
-def run_record(task, robot) -> dict:
+def run_record(task, robot, sites: dict | None = None) -> dict:
     """The ``task_record`` and ``robot`` entries a saved policy keeps (``task``: a
-    :class:`~atrv_warp.task.definition.Task`, fitted; ``robot``: a :class:`~atrv_warp.core.robot.Robot`)."""
+    :class:`~atrv_warp.task.definition.Task`, fitted; ``robot``: a :class:`~atrv_warp.core.robot.Robot`), and
+    ``sites``, where given: the maps it trained in (:meth:`~atrv_warp.rl.run.RunSpec.sites_record`)."""
     from atrv_warp.core.robot import robot_record
 
-    return {"task_record": task.record(), "robot": robot_record(robot)}
+    return {"task_record": task.record(), "robot": robot_record(robot)} | ({"sites": sites} if sites else {})
 
 
 class Normalize(nn.Module):
@@ -234,7 +239,7 @@ def policy_record(path_or_payload, *, where: str = "the policy") -> PolicyRecord
     import dataclasses
 
     task = dataclasses.replace(registered, config=config, robot=payload["task_record"].get("robot") or robot.name)
-    return PolicyRecord(task, robot, True)
+    return PolicyRecord(task, robot, True, payload.get("sites"))
 
 
 def exported_policy_record(path: str | Path, contract: dict) -> PolicyRecord:

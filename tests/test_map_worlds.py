@@ -161,6 +161,7 @@ def test_evaluate_demo_and_train_take_a_map(tmp_path, capsys):
     stops each before any work in one line."""
     from atrv_warp.cli import demo, evaluate
     from atrv_warp.rl.command_line import load_train_config
+    from atrv_warp.rl.run import resolve_run
 
     rooms = save_map(two_rooms(), tmp_path / "rooms.yaml")
     other = save_map(OccupancyMap(cells=two_rooms().cells[:, ::-1].copy(), resolution=RESOLUTION, origin=ORIGIN),
@@ -174,8 +175,13 @@ def test_evaluate_demo_and_train_take_a_map(tmp_path, capsys):
     assert figures["maps"][0]["sha256"] == load_map(rooms).digest and figures["episode_map"] == [0, 1, 0, 1]
     assert demo.main(["--map", str(rooms), "--seconds", "0.5"]) == 0
     assert f"in {rooms}, from its most open spot" in capsys.readouterr().out
-    cfg = load_train_config("smoke", {"env.map": f"[{rooms},{other}]"})
-    assert cfg.env.map == (str(rooms), str(other))
+    cfg = load_train_config("smoke", {"env.map": f"[{rooms},{other},building:1@7]"})
+    assert cfg.env.map == (str(rooms), str(other), "building:1@7")
+    sites = resolve_run(cfg).record()["sites"]  # what the run's policies record of the maps they trained in
+    assert sites["entries"] == [str(rooms), str(other), "building:1@7"]
+    assert [(m["name"], m["file"]) for m in sites["maps"]] == [("rooms", str(rooms)), ("mirrored", str(other)),
+                                                               ("building_7", None)]
+    assert sites["maps"][0]["sha256"] == load_map(rooms).digest and len(sites["maps"][2]["sha256"]) == 64
     missing = tmp_path / "gone.yaml"
     assert evaluate.main(["nav_deploy", "--map", str(missing), "--episodes", "2"]) == 2
     assert demo.main(["--map", str(missing)]) == 2

@@ -154,8 +154,7 @@ def _map_figures(maps: Sequence, record, num_worlds: int) -> dict:
 
     episode_map = round_robin(num_worlds, len(maps))
     success = record.success.float()
-    return {"maps": [{"name": m.name, "file": str(m.source) if m.source else None, "sha256": m.digest,
-                      "episodes": episode_map.count(k),
+    return {"maps": [{**m.record(), "episodes": episode_map.count(k),
                       "success": float(success[torch.tensor(episode_map) == k].mean())}
                      for k, m in enumerate(maps)],
             "episode_map": episode_map}

@@ -133,7 +133,7 @@ def contract(source: Path, payload: dict, sim: SimConfig | None = None) -> dict:
                 "reach_radius_m": task.reach_radius}
     if record.recorded:  # the task and robot as trained, as the policy file keeps them: what evaluate runs it on
         contract["trained_with"] = {"meta": {"task": record.task.name}, "task_record": payload["task_record"],
-                                    "robot": payload["robot"]}
+                                    "robot": payload["robot"]} | ({"sites": payload["sites"]} if "sites" in payload else {})
     return contract
 
 

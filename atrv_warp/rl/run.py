@@ -38,13 +38,25 @@ class RunSpec:
     """The evaluations' (``env.eval_randomization``; the training's where that is empty)."""
     maps: tuple = ()
     """The sites (:class:`~atrv_warp.world.OccupancyMap`), from ``env.map``, each read once."""
+    map_entries: tuple = ()
+    """``env.map`` as the config gives it: map files and procedural entries (``building:32``)."""
 
     def record(self) -> dict:
         """The task and the robot as a saved policy and a checkpoint keep them (:func:`atrv_warp.policy.run_record`):
-        what an export or an evaluation reads, not today's code."""
+        what an export or an evaluation reads, not today's code; and the sites it trained in
+        (:meth:`sites_record`), where it has maps."""
         from atrv_warp.policy import run_record
 
-        return run_record(self.task, self.robot)
+        return run_record(self.task, self.robot, self.sites_record())
+
+    def sites_record(self) -> dict | None:
+        """The maps the run trains in: ``env.map``'s entries, the generator of its procedural places (drawn for the
+        robot's width, the robot record's) and each map (:meth:`~atrv_warp.world.OccupancyMap.record`); ``None``
+        without maps."""
+        if not self.maps:
+            return None
+        return {"entries": [str(e) for e in self.map_entries], "generator": "atrv_warp.world.places",
+                "maps": [m.record() for m in self.maps]}
 
     def env_kwargs(self, cfg, *, judged: bool = False) -> dict:
         """:class:`~atrv_warp.task.env.RoverEnv` keyword arguments of an env of the run built in this process:
@@ -117,7 +129,7 @@ def _resolve(env, _files: tuple) -> RunSpec:
     except ValueError as err:  # MapError: the file and the problem named
         raise ValueError(f"train config: env.map: {err}") from None
     return RunSpec(robot=rover.robot_spec, rover=rover, task=task, randomization=shift, eval_randomization=judged,
-                   maps=maps)
+                   maps=maps, map_entries=tuple(env.map))
 
 
 TASK_MODULE_RECORD = "task_module.json"

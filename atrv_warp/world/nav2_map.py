@@ -99,6 +99,11 @@ class OccupancyMap:
         """The YAML's file name without its suffix, else :attr:`label`, else ``"map"``."""
         return self.source.stem if self.source is not None else (self.label or "map")
 
+    def record(self) -> dict:
+        """Which map this is, as a results file or a policy records it: its :attr:`name`, its YAML (``None`` for a
+        drawn place) and its :attr:`digest`."""
+        return {"name": self.name, "file": str(self.source) if self.source else None, "sha256": self.digest}
+
     def cell_of(self, x, y) -> tuple[np.ndarray, np.ndarray]:
         """The (row, col) indices of the cells holding the points ``(x, y)`` [m] (outside the map: out of range)."""
         col = np.floor((np.asarray(x, dtype=float) - self.origin[0]) / self.resolution).astype(np.int64)
