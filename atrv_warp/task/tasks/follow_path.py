@@ -4,7 +4,8 @@
   Nav2's planner (:mod:`atrv_warp.sim.planner`), which plans again from the robot every second; flat floors (on
   the nav terrain's hollows the ATRV-Jr's free wheels stall in the plan's turns: Nav2's Regulated Pure Pursuit
   reached 40.6 % of 128 episodes in unseen places there, 95.3 % on flat floors, ``follow_path_baseline.json``);
-  four unmapped obstacles, one on the plan (which the planner does not see).
+  four unmapped obstacles, one on the plan: the map does not show them, but the global costmap's obstacle layer
+  (Nav2's default) marks each once the laser sees it within 2.5 m, and the next replan goes around it.
 - Reset: start and goal in the map's free space, 6-12 m apart, reachable; the goal's heading drawn.
 - Observation: the plan's next 10 points 0.4 m apart in the base's frame, its length left, the turn to the goal's
   heading, the odometry's twist, the IMU (``observation="path"``: ``atrv_warp.task.spec.PATH_OBSERVATION``), then
