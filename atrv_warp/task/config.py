@@ -196,6 +196,15 @@ class FollowPathConfig(TaskConfig):
     goal_yaw_weight: float = 0.0
     """Weight of the goal-heading term (minus the heading left to turn, once the goal's position is reached)
     [1/rad]; 0: off."""
+    controller_max_linear: float = 0.5
+    """The fastest the controller drives [m/s], below the robot's own limit where that is higher: Nav2's controller
+    indoors (Clearpath's Nav2 configuration of the Jackal J100 and the Husky A200, MPPI's ``vx_max: 0.5``,
+    clearpathrobotics/clearpath_nav2_demos@0ce927b4 ``config/j100/nav2.yaml`` and @9ed975c5 ``config/a200/nav2.yaml``;
+    the ATRV-Jr's DWB ``max_vel_x``; Regulated Pure Pursuit's default ``desired_linear_vel``). The base's own limits
+    stay the velocity smoother's; the control period follows this speed (:func:`atrv_warp.task.scaling.control_period`)."""
+    controller_max_angular: float = 1.9
+    """The fastest the controller turns [rad/s], below the robot's own limit where that is higher (the same files'
+    MPPI ``wz_max: 1.9``)."""
     obstacle_layer: bool = True
     """The plan comes from a global costmap with Nav2's obstacle layer (its default ``plugins``: static, obstacle,
     inflation): an unmapped obstacle the laser has seen is marked, and the next replan goes around it
@@ -206,6 +215,7 @@ class FollowPathConfig(TaskConfig):
         super().__post_init__()
         if self.observation != "path":
             raise ValueError(f"FollowPathConfig.observation must be 'path' (it follows a plan), got {self.observation!r}")
-        for name in ("yaw_tolerance", "progress_radius", "progress_time", "path_search"):
+        for name in ("yaw_tolerance", "progress_radius", "progress_time", "path_search", "controller_max_linear",
+                     "controller_max_angular"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"FollowPathConfig.{name} must be > 0, got {getattr(self, name)!r}")

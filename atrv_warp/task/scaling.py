@@ -29,8 +29,8 @@ from __future__ import annotations
 import dataclasses
 import math
 
-__all__ = ["REFERENCE_FOOTPRINT", "REFERENCE_SPEED", "REFERENCE_STEP_DT", "fit_task", "footprint_radius",
-           "scale_to_robot"]
+__all__ = ["REFERENCE_FOOTPRINT", "REFERENCE_SPEED", "REFERENCE_STEP_DT", "control_period", "fit_task",
+           "footprint_radius", "scale_to_robot"]
 
 REFERENCE_SPEED = 2.0
 """[m/s] The forward speed the twist tasks were shaped at (their action 1 before robots had files)."""
@@ -66,9 +66,15 @@ def scale_to_robot(config, robot, footprint: float):
         changes.update(max_linear=lim.linear_velocity, max_angular=lim.angular_velocity,
                        linear_max_acceleration=lim.linear_acceleration,
                        angular_max_acceleration=lim.angular_acceleration)
-        period = REFERENCE_STEP_DT * max(1.0, REFERENCE_SPEED / lim.linear_velocity)
-        changes["control_period"] = max(1, math.ceil(period / SUBSTEP - 1e-9)) * SUBSTEP
+        changes["control_period"] = control_period(lim.linear_velocity)
     return dataclasses.replace(config, **changes)
+
+
+def control_period(speed: float) -> float:
+    """The control period of a twist task whose action 1 drives at ``speed`` [m/s], by the rule: longer than
+    :data:`REFERENCE_STEP_DT` by :data:`REFERENCE_SPEED` / ``speed`` (never shorter), on the :data:`SUBSTEP` grid."""
+    period = REFERENCE_STEP_DT * max(1.0, REFERENCE_SPEED / speed)
+    return max(1, math.ceil(period / SUBSTEP - 1e-9)) * SUBSTEP
 
 
 def fit_task(task, rover):

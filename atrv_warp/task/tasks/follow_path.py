@@ -10,7 +10,8 @@
 - Observation: the plan's next 10 points 0.4 m apart in the base's frame, its length left, the turn to the goal's
   heading, the odometry's twist, the IMU (``observation="path"``: ``atrv_warp.task.spec.PATH_OBSERVATION``), then
   the scan as 16 sectors and the last three actions.
-- Action: a ``/cmd_vel`` at the robot's limits, through a base that accelerates at up to 1 m/s².
+- Action: a ``/cmd_vel`` at Nav2's controller's speeds (at most 0.5 m/s and 1.9 rad/s, the robot's own where lower),
+  through a base that accelerates at up to 1 m/s².
 - Ends: Nav2's goal checker (within 0.25 m, then within 0.25 rad of the goal's heading; stateful); a wall, chassis or
   obstacle contact, or a flip; Nav2's progress checker (less than 0.5 m in 10 s); 600 steps.
 - Reward: the way to go (back to the plan, then along it), shortened, x 1; -0.03 a step; a clearance cost x 0.5
@@ -24,7 +25,7 @@ import dataclasses
 from atrv_warp.task.config import FollowPathConfig
 from atrv_warp.task.definition import Task
 from atrv_warp.task.kernels.paths import goal_checked
-from atrv_warp.task.scaling import scale_to_robot
+from atrv_warp.task.scaling import control_period, scale_to_robot
 from atrv_warp.task.terms import (
     ACTION_RATE,
     CLEARANCE,
@@ -46,8 +47,14 @@ TERMS = (PATH_PROGRESS, STEP_PENALTY, SUCCESS, FAILURE, CLEARANCE, PATH_OFFSET, 
 
 def _fit(config, robot, footprint):
     """The shipped rule (:func:`~atrv_warp.task.scaling.scale_to_robot`), but the goal checker's tolerance stays
-    Nav2's, whatever the robot's size."""
-    return dataclasses.replace(scale_to_robot(config, robot, footprint), reach_radius=config.reach_radius)
+    Nav2's, whatever the robot's size, and the controller drives at most at Nav2's controller's speeds
+    (:attr:`~atrv_warp.task.config.FollowPathConfig.controller_max_linear`), its control period by the rule at that
+    speed: the Jackal follows its plan at 0.5 m/s and 1.9 rad/s every 0.2 s, as the ATRV-Jr does at its 0.5 m/s."""
+    fitted = scale_to_robot(config, robot, footprint)
+    linear = min(fitted.max_linear, config.controller_max_linear)
+    return dataclasses.replace(fitted, reach_radius=config.reach_radius, max_linear=linear,
+                               max_angular=min(fitted.max_angular, config.controller_max_angular),
+                               control_period=control_period(linear))
 
 
 TASK = Task("follow_path", CONFIG, TERMS, goal_checked, description=__doc__.splitlines()[0], source=__file__,
