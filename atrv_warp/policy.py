@@ -76,11 +76,24 @@ def _robot_policies() -> dict[str, ShippedPolicy]:
         for robot in ROBOTS}
 
 
+def _path_policies() -> dict[str, ShippedPolicy]:
+    """Each shipped robot's policy that follows Nav2's plan, ``follow_path_<robot>``: at its own limits, trained by the
+    ``follow_path`` preset in procedural buildings and yards (``benchmarks/training/follow_path_policies.py``
+    evaluates them, and reads their training from the run folders)."""
+    from atrv_warp.core.robot import ROBOTS
+
+    return {f"follow_path_{robot}": ShippedPolicy(
+        f"follow_path_{robot}_policy.pt", "follow_path",
+        f"python -m atrv_warp.train --config follow_path env.robot={robot} run.name=follow_path_{robot}")
+        for robot in ROBOTS}
+
+
 SHIPPED_POLICIES: dict[str, ShippedPolicy] = {
     "reach": ShippedPolicy("pretrained_policy.pt", "reach", "python -m atrv_warp.train"),
     "nav": ShippedPolicy("nav_policy.pt", "nav", "python -m atrv_warp.train --config nav randomization=wide"),
     "nav_plain": ShippedPolicy("nav_policy_plain.pt", "nav", "python -m atrv_warp.train --config nav"),
     **_robot_policies(),  # a robot shipped in the robots folder ships its policy under this name
+    **_path_policies(),  # and its policy as Nav2's controller
     # the two 2 m/s studies: trained before robots had files (the ATRV-Jr's body at the Jackal's speed, a 1 m/s² base)
     # and before nav_deploy.toml's batch went from 512 to 256; the deploy and MuJoCo figures of the docs cite them
     "nav_deploy": ShippedPolicy("nav_deploy_policy.pt", "nav_deploy",
@@ -92,7 +105,8 @@ SHIPPED_POLICIES: dict[str, ShippedPolicy] = {
 domain randomization), ``nav_plain`` (navigation on the nominal rover with perfect sensors),
 ``nav_deploy_<robot>`` for every robot of the robots folder (its navigation policy: ``/cmd_vel`` commands at its own
 limits from the robot observation, trained under ``wide``; a robot shipped without it names the command that trains
-it), ``nav_deploy`` (the 2 m/s study it grew from: the ATRV-Jr at the Jackal's speed, the task as declared),
+it), ``follow_path_<robot>`` for every robot of the robots folder (its policy as Nav2's controller: following the
+plan in buildings and yards, :mod:`atrv_warp.task.tasks.follow_path`), ``nav_deploy`` (the 2 m/s study it grew from: the ATRV-Jr at the Jackal's speed, the task as declared),
 ``nav_deploy_plain`` (the same study trained on the nominal rover, without randomization: the MuJoCo twin's
 comparison)."""
 
@@ -315,8 +329,11 @@ def check_policy_task(payload: dict, task, *, source: str | Path) -> None:
 
 def shipped_policy_for(task: str, robot: str | None = None) -> str:
     """The name of the shipped policy that drives ``task`` on ``robot`` (a shipped robot's name): the robot's own
-    (``nav_deploy_husky``) where one ships, else the task's, else ``reach``'s."""
-    for name in (f"{task}_{robot}" if robot else None, task):
+    (``nav_deploy_husky``) where one ships, else the task's, else the default robot's (``follow_path_atrvjr``),
+    else ``reach``'s."""
+    from atrv_warp.core.robot import DEFAULT_ROBOT
+
+    for name in (f"{task}_{robot}" if robot else None, task, f"{task}_{DEFAULT_ROBOT}"):
         if name in SHIPPED_POLICIES and SHIPPED_POLICIES[name].task == task:
             return name
     return "reach"

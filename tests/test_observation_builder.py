@@ -273,7 +273,7 @@ def test_shipped_policies_load_by_name(monkeypatch):
         load_policy("nav_deploy")
     with pytest.raises(ValueError, match="no shipped policy is called 'navx'"):
         shipped_policy_path("navx")
-    assert {SHIPPED_POLICIES[n].task for n in SHIPPED_POLICIES} == {"reach", "nav", "nav_deploy"}
+    assert {SHIPPED_POLICIES[n].task for n in SHIPPED_POLICIES} == {"reach", "nav", "nav_deploy", "follow_path"}
 
 
 def test_evaluate_refuses_before_any_step(tmp_path, capsys, monkeypatch):

@@ -688,3 +688,22 @@ def test_no_bad_number_in_a_robot_file_or_its_urdf_reaches_the_physics(tmp_path)
                                         "wheel_axis_-1", "wheel_axis_1e30"}, sorted(p.stem for p in driven)
     for path in driven:
         _finite_rollout(path)
+
+
+def test_each_robot_has_its_shipped_follow_path_policy_with_the_places_it_trained_in():
+    """``follow_path_<robot>`` (issue 72, part 8): each file records its robot, the task fitted to it as ``RoverEnv``
+    fits it today, and the procedural places its run trained in; a command that names no robot takes the ATRV-Jr's."""
+    from atrv_warp.policy import SHIPPED_POLICIES, policy_record, shipped_policy_for
+    from atrv_warp.rl.command_line import load_train_config
+    from atrv_warp.task.env import RoverEnv
+
+    preset = load_train_config("follow_path", {})
+    for robot in ROBOTS:
+        name = shipped_policy_for("follow_path", robot)
+        assert name == f"follow_path_{robot}" and SHIPPED_POLICIES[name].task == "follow_path"
+        record = policy_record(name)
+        assert record.recorded and record.robot == load_robot(robot)
+        assert record.task.config == RoverEnv(1, robot=robot, task="follow_path", maps=["building:1"]).task_cfg, robot
+        assert record.sites["entries"] == list(preset.env.map) and len(record.sites["maps"]) == 64
+        assert all(m["file"] is None and len(m["sha256"]) == 64 for m in record.sites["maps"])
+    assert shipped_policy_for("follow_path") == "follow_path_atrvjr"

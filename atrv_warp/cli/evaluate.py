@@ -367,8 +367,8 @@ def build_parser() -> argparse.ArgumentParser:
     """The command line's parser (the docs' command table reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m atrv_warp.evaluate", description=__doc__.splitlines()[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
-    parser.add_argument("checkpoint", nargs="?", default=None, help="policy or checkpoint file, or a shipped policy's name (reach, nav, nav_plain, nav_deploy; "
-                             "default: the task's shipped one)")
+    parser.add_argument("checkpoint", nargs="?", default=None, help="policy or checkpoint file, or a shipped policy's name (reach, nav, nav_plain, nav_deploy, "
+                             "nav_deploy_<robot>, follow_path_<robot>; default: the task's shipped one)")
     parser.add_argument("--engine", default="ours", help=f"simulator: {' | '.join(ENGINES)} (mujoco: the MuJoCo twin "
                         "of the nav world, for a deployable policy; the mujoco extra)")
     parser.add_argument("--friction", type=float, default=None, metavar="MU",
@@ -386,7 +386,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--baseline", action="store_true", help="evaluate the scripted baseline instead (Nav2's "
                         "Regulated Pure Pursuit on a task that follows a plan)")
     parser.add_argument("--task", default=None,
-                        help="task: reach | nav | nav_deploy, or yours (--task-module) (default: the policy's own; reach "
+                        help="task: reach | nav | nav_deploy | follow_path, or yours (--task-module) (default: the policy's own; reach "
                              "for the baseline)")
     parser.add_argument("--task-module", metavar="FILE.py", default=None,
                         help="a Python file that registers a task of your own (docs/your-own-task.md)")

@@ -11,7 +11,7 @@
   heading, the odometry's twist, the IMU (``observation="path"``: ``atrv_warp.task.spec.PATH_OBSERVATION``), then
   the scan as 16 sectors and the last three actions.
 - Action: a ``/cmd_vel`` at Nav2's controller's speeds (at most 0.5 m/s and 1.9 rad/s, the robot's own where lower),
-  through a base that accelerates at up to 1 m/s².
+  through the base's driver at the robot's acceleration limits; one every 0.2 s at 0.5 m/s.
 - Ends: Nav2's goal checker (within 0.25 m, then within 0.25 rad of the goal's heading; stateful); a wall, chassis or
   obstacle contact, or a flip; Nav2's progress checker (less than 0.5 m in 10 s); 600 steps.
 - Reward: the way to go (back to the plan, then along it), shortened, x 1; -0.03 a step; a clearance cost x 0.5
