@@ -201,7 +201,8 @@ class FollowPathConfig(TaskConfig):
     indoors (Clearpath's Nav2 configuration of the Jackal J100 and the Husky A200, MPPI's ``vx_max: 0.5``,
     clearpathrobotics/clearpath_nav2_demos@0ce927b4 ``config/j100/nav2.yaml`` and @9ed975c5 ``config/a200/nav2.yaml``;
     the ATRV-Jr's DWB ``max_vel_x``; Regulated Pure Pursuit's default ``desired_linear_vel``). The base's own limits
-    stay the velocity smoother's; the control period follows this speed (:func:`atrv_warp.task.scaling.control_period`)."""
+    stay the velocity smoother's; the control period follows this speed (:func:`atrv_warp.task.scaling.control_period`).
+    The task's fit reads it: a run's ``env.task.`` override, applied after the fit, sets ``max_linear`` instead."""
     controller_max_angular: float = 1.9
     """The fastest the controller turns [rad/s], below the robot's own limit where that is higher (the same files'
     MPPI ``wz_max: 1.9``)."""

@@ -2,7 +2,7 @@
 Pursuit on the same episodes, and how long its training took to reach 90 %.
 
 Run: ``python -m benchmarks.training.follow_path_policies [--episodes 1000] [--robots atrvjr ...]
-[--run ROBOT=RUN_DIR ...]`` (about ten minutes a robot on 2 cores). For each robot whose ``follow_path_<robot>``
+[--run ROBOT=RUN_DIR ...]`` (about six minutes a robot on 2 cores). For each robot whose ``follow_path_<robot>``
 ships, one deterministic episode in each of ``--episodes`` worlds, seeded with the test set's seed
 (``EVAL_SEED``), as ``python -m atrv_warp.evaluate follow_path_<robot> --map building:50@1000 yard:50@1000`` runs
 them:
