@@ -320,3 +320,18 @@ def markdown_table(header: list[str], align: list[str], rows: list[list[str]]) -
 def markdown_cell(text: str) -> str:
     """``text`` on one line, safe in a table cell (double backticks made single, pipes escaped)."""
     return " ".join(str(text).split()).replace("``", "`").replace("|", "\\|")
+
+
+def paired_difference(a: list, b: list) -> dict:
+    """Two success series over the same episodes: the mean of ``a - b`` (``difference``), its 95 % confidence
+    interval by the normal approximation (``ci95``), and the episodes only one of them succeeded in (``only_a``,
+    ``only_b``)."""
+    import math
+
+    n = len(a)
+    d = [float(x) - float(y) for x, y in zip(a, b, strict=True)]
+    mean = sum(d) / n
+    sd = math.sqrt(sum((x - mean) ** 2 for x in d) / (n - 1)) if n > 1 else float("nan")
+    half = 1.96 * sd / math.sqrt(n)
+    return {"difference": mean, "ci95": [mean - half, mean + half], "only_a": sum(bool(x) and not y for x, y in zip(a, b)),
+            "only_b": sum(bool(y) and not x for x, y in zip(a, b))}

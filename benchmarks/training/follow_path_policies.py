@@ -27,12 +27,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
 
-from benchmarks._common import file_sha256, load_results, markdown_table, write_results
+from benchmarks._common import file_sha256, load_results, markdown_table, paired_difference, write_results
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -47,14 +46,10 @@ THRESHOLD = 0.9
 
 
 def paired(a: list[bool], b: list[bool]) -> dict:
-    """The paired difference of two success series over the same episodes (a - b) and its 95 % interval."""
-    n = len(a)
-    d = [float(x) - float(y) for x, y in zip(a, b, strict=True)]
-    mean = sum(d) / n
-    sd = math.sqrt(sum((x - mean) ** 2 for x in d) / (n - 1)) if n > 1 else float("nan")
-    half = 1.96 * sd / math.sqrt(n)
-    return {"difference": mean, "ci95": [mean - half, mean + half],
-            "only_policy": sum(x and not y for x, y in zip(a, b)), "only_baseline": sum(y and not x for x, y in zip(a, b))}
+    """The policy's success minus the baseline's over the same episodes, with its 95 % interval
+    (:func:`~benchmarks._common.paired_difference`)."""
+    p = paired_difference(a, b)
+    return {"difference": p["difference"], "ci95": p["ci95"], "only_policy": p["only_a"], "only_baseline": p["only_b"]}
 
 
 def _series(path: Path) -> dict[int, float]:

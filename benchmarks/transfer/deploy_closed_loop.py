@@ -44,7 +44,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks._common import write_results
+from benchmarks._common import paired_difference, write_results
 
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -261,15 +261,9 @@ def ros_episodes(pt2: Path, goals: list[tuple[float, float]], seed: int, workdir
 
 def paired(ros: list[bool], evaluate: list[bool]) -> dict:
     """Success rates, their paired difference (ros - evaluate) and its 95 % confidence interval."""
-    n = len(ros)
-    d = [float(a) - float(b) for a, b in zip(ros, evaluate, strict=True)]
-    mean = sum(d) / n
-    sd = math.sqrt(sum((x - mean) ** 2 for x in d) / (n - 1)) if n > 1 else float("nan")
-    half = 1.96 * sd / math.sqrt(n)
+    n, p = len(ros), paired_difference(ros, evaluate)
     return {"episodes": n, "ros_success": sum(ros) / n, "evaluate_success": sum(evaluate) / n,
-            "difference": mean, "ci95": [mean - half, mean + half],
-            "only_ros": sum(a and not b for a, b in zip(ros, evaluate)),
-            "only_evaluate": sum(b and not a for a, b in zip(ros, evaluate))}
+            "difference": p["difference"], "ci95": p["ci95"], "only_ros": p["only_a"], "only_evaluate": p["only_b"]}
 
 
 def percentile(values: list[float], q: float) -> float:
