@@ -382,3 +382,31 @@ def test_an_arena_without_walls_is_open_ground(tmp_path):
         recorder.log_step()
         recorder.close()
         assert ("/world_0/arena/walls" in read_rrd(path)) == walls
+
+
+def test_the_example_map_is_what_its_script_draws_and_every_robot_fits_its_doorways():
+    """``atrv_warp/assets/maps/office.yaml`` (shipped as package data) reads back as ``docs/make_example_map.py``
+    draws it, cell for cell; each shipped robot can start and end an episode in every room of it (one group of
+    spawn cells: every doorway passes its inscribed radius)."""
+    import importlib.util
+    from pathlib import Path
+
+    from atrv_warp.core.robot import ROBOTS
+    from atrv_warp.sim.config import nominal_rover_config
+    from atrv_warp.sim.maps import distance_field
+    from atrv_warp.sim.urdf import footprint_radii, load_rover
+
+    root = Path(__file__).resolve().parent.parent
+    spec = importlib.util.spec_from_file_location("make_example_map", root / "docs" / "make_example_map.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    shipped = load_map(root / "atrv_warp" / "assets" / "maps" / "office.yaml")
+    drawn = script.office()
+    assert shipped.resolution == drawn.resolution and shipped.origin == drawn.origin
+    assert np.array_equal(shipped.cells, drawn.cells)
+    field = distance_field(shipped.walls)
+    for robot in ROBOTS:
+        rover = nominal_rover_config(robot)
+        inscribed, circumscribed = footprint_radii(load_rover(rover), rover)
+        cells, first, _ = spawn_cells(field, shipped.resolution, circumscribed, inscribed)
+        assert len(cells) > 1000 and len(set(first.tolist())) == 1, robot
