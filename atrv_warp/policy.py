@@ -77,9 +77,9 @@ def _robot_policies() -> dict[str, ShippedPolicy]:
 
 
 def _path_policies() -> dict[str, ShippedPolicy]:
-    """Each shipped robot's policy that follows Nav2's plan, ``follow_path_<robot>``: at its own limits, trained by the
-    ``follow_path`` preset in procedural buildings and yards (``benchmarks/training/follow_path_policies.py``
-    evaluates them, and reads their training from the run folders)."""
+    """Each shipped robot's policy that follows Nav2's plan, ``follow_path_<robot>``: at Nav2's controller speeds (its
+    own limits where lower), trained by the ``follow_path`` preset in procedural buildings and yards
+    (``benchmarks/training/follow_path_policies.py`` evaluates them, and reads their training from the run folders)."""
     from atrv_warp.core.robot import ROBOTS
 
     return {f"follow_path_{robot}": ShippedPolicy(
@@ -106,7 +106,8 @@ domain randomization), ``nav_plain`` (navigation on the nominal rover with perfe
 ``nav_deploy_<robot>`` for every robot of the robots folder (its navigation policy: ``/cmd_vel`` commands at its own
 limits from the robot observation, trained under ``wide``; a robot shipped without it names the command that trains
 it), ``follow_path_<robot>`` for every robot of the robots folder (its policy as Nav2's controller: following the
-plan in buildings and yards, :mod:`atrv_warp.task.tasks.follow_path`), ``nav_deploy`` (the 2 m/s study it grew from: the ATRV-Jr at the Jackal's speed, the task as declared),
+plan in buildings and yards, :mod:`atrv_warp.task.tasks.follow_path`), ``nav_deploy`` (the 2 m/s study it grew
+from: the ATRV-Jr at the Jackal's speed, the task as declared),
 ``nav_deploy_plain`` (the same study trained on the nominal rover, without randomization: the MuJoCo twin's
 comparison)."""
 
