@@ -335,3 +335,12 @@ def paired_difference(a: list, b: list) -> dict:
     half = 1.96 * sd / math.sqrt(n)
     return {"difference": mean, "ci95": [mean - half, mean + half], "only_a": sum(bool(x) and not y for x, y in zip(a, b)),
             "only_b": sum(bool(y) and not x for x, y in zip(a, b))}
+
+
+def logged_series(path: str | Path) -> list[tuple[int, float]]:
+    """A training run's logged scalar (``logs/scalars/NAME.csv``: ``frames,value`` rows) as (frames, value) pairs;
+    empty where the run never logged it."""
+    path = Path(path)
+    if not path.is_file():
+        return []
+    return [(int(a), float(b)) for a, b in (line.split(",") for line in path.read_text().splitlines() if line)]

@@ -210,8 +210,8 @@ def test_evaluate_reports_each_path_episodes_end_time_detour_and_least_clearance
 
 
 def test_every_unmapped_obstacle_leaves_a_way_round_it():
-    """In a map, no obstacle (the one on the plan included) stands closer to a wall than the task's clearance:
-    one in a doorway would close it, and an episode without a way is no test of following a plan."""
+    """In a map, no obstacle (the one on the plan included) stands closer to a wall than the robot's circumscribed
+    diameter: one in a doorway would close it, and an episode without a way is no test of following a plan."""
     env = RoverEnv(64, task="follow_path", maps=["building:4"], seed=2)
     env.reset()
     passage, placed = 2 * env.sim.footprint_radii[1], 0

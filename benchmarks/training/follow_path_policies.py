@@ -31,7 +31,14 @@ import sys
 import time
 from pathlib import Path
 
-from benchmarks._common import file_sha256, load_results, markdown_table, paired_difference, write_results
+from benchmarks._common import (
+    file_sha256,
+    load_results,
+    logged_series,
+    markdown_table,
+    paired_difference,
+    write_results,
+)
 
 VERSION = 1
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -52,17 +59,11 @@ def paired(a: list[bool], b: list[bool]) -> dict:
     return {"difference": p["difference"], "ci95": p["ci95"], "only_policy": p["only_a"], "only_baseline": p["only_b"]}
 
 
-def _series(path: Path) -> dict[int, float]:
-    if not path.is_file():
-        return {}
-    return {int(a): float(b) for a, b in (line.split(",") for line in path.read_text().splitlines() if line)}
-
-
 def training_figures(run_dir: Path, shipped: Path) -> dict:
     """The run's validation curve, when it first reached :data:`THRESHOLD` and its minutes, from its logs."""
     scalars = run_dir / "logs" / "scalars"
-    success = _series(scalars / "eval_success_rate.csv")
-    known = _series(scalars / "eval_known_wall_s.csv") or _series(scalars / "wall_time_s.csv")
+    success = dict(logged_series(scalars / "eval_success_rate.csv"))
+    known = dict(logged_series(scalars / "eval_known_wall_s.csv") or logged_series(scalars / "wall_time_s.csv"))
     if not success:
         raise SystemExit(f"no training logs in {run_dir} (give --run ROBOT=RUN_DIR)")
     best = run_dir / "best_policy.pt"

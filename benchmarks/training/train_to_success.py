@@ -29,19 +29,13 @@ import sys
 import time
 from pathlib import Path
 
-from benchmarks._common import load_results, markdown_table, results_path, save_figure, write_results
+from benchmarks._common import load_results, logged_series, markdown_table, results_path, save_figure, write_results
 
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = Path(__file__).resolve().parents[1] / "results"
-
-
-def _series(path: Path) -> list[tuple[int, float]]:
-    if not path.is_file():
-        return []
-    return [(int(a), float(b)) for a, b in (line.split(",") for line in path.read_text().splitlines() if line)]
 
 
 def _one_seed(config: str, overrides: dict, threshold: float) -> dict:
@@ -60,11 +54,11 @@ def _one_seed(config: str, overrides: dict, threshold: float) -> dict:
 def _summarize(run_dir: Path, seed: int, threshold: float, total_s: float | None) -> dict:
     """One seed's figures from its run folder's logs and ``final_eval.json``."""
     scalars = run_dir / "logs" / "scalars"
-    success = _series(scalars / "eval_success_rate.csv")
-    taken = dict(_series(scalars / "wall_time_s.csv"))  # when the weights were taken
+    success = logged_series(scalars / "eval_success_rate.csv")
+    taken = dict(logged_series(scalars / "wall_time_s.csv"))  # when the weights were taken
     # when the validation's figures were known: later than the weights by the validation (in the trainer), or by
     # the validation and the poll (in the background); runs from before eval_known_wall_s have only `taken`
-    known = dict(_series(scalars / "eval_known_wall_s.csv"))
+    known = dict(logged_series(scalars / "eval_known_wall_s.csv"))
     wall = known or taken
     # rates are logged as float32: 900 of 1,000 episodes reads 0.89999998, which is 90 %
     reached = next(((f, r) for f, r in success if r >= threshold - 1e-6), None)
