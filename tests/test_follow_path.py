@@ -102,6 +102,23 @@ def test_the_goal_checker_keeps_the_position_once_reached_and_the_progress_check
     assert ends[1] == (math.floor(stall) + 1, EndReason.NO_PROGRESS), ends
 
 
+def test_backing_up_costs_its_distance_but_near_the_goal():
+    """The prefer-forward term (Nav2's MPPI ``PreferForwardCritic``): a step commanded backward costs the distance
+    commanded, forward costs nothing, and within ``prefer_forward_threshold`` of the goal backing up is free."""
+    env = RoverEnv(2, task="follow_path", maps=[hall()], seed=0, obstacles=0, obstacles_on_path=0)
+    c = env.task_cfg
+    assert c.prefer_forward_weight > 0 and c.prefer_forward_threshold == 0.5
+    env.set_worlds([0, 1], starts=[[-5.0, -3.0, 0.0], [-5.3, 0.0, 0.0]], targets=[[-1.0, -3.0], [-5.0, 0.0]],
+                   target_yaws=[0.0, 1.2])
+    td = env.reset()
+    per_step = c.max_linear * env.sim.sim_cfg.step_dt
+    for linear, want in ((-0.5, [-0.5 * per_step, 0.0]), (0.7, [0.0, 0.0])):
+        out, td = env.step_and_maybe_reset(td.set("action", torch.tensor([[linear, 0.0], [linear, 0.0]])))
+        column = out["next", "reward_terms", "prefer_forward"].flatten()
+        assert not out["next", "done"].any()
+        assert column.tolist() == pytest.approx([c.prefer_forward_weight * w for w in want], abs=1e-6), linear
+
+
 def test_the_contract_says_how_to_read_the_plan_and_a_bad_plan_is_named():
     config = get_task("follow_path")
     contract = policy_contract(config)

@@ -196,6 +196,13 @@ class FollowPathConfig(TaskConfig):
     goal_yaw_weight: float = 0.0
     """Weight of the goal-heading term (minus the heading left to turn, once the goal's position is reached)
     [1/rad]; 0: off."""
+    prefer_forward_weight: float = 0.0
+    """Weight of the prefer-forward term (minus the distance commanded backward this step, Nav2's MPPI
+    ``PreferForwardCritic``: the laser looks forward, so reversing is blind) [1/m]; 0: off."""
+    prefer_forward_threshold: float = 0.5
+    """Within this distance of the goal the prefer-forward term is off, so the robot may back into the goal's pose
+    [m] (the critic's ``threshold_to_consider``, default 0.5 m: ros-navigation/navigation2@0cf04629
+    ``nav2_mppi_controller/src/critics/prefer_forward_critic.cpp``)."""
     controller_max_linear: float = 0.5
     """The fastest the controller drives [m/s], below the robot's own limit where that is higher: Nav2's controller
     indoors (Clearpath's Nav2 configuration of the Jackal J100 and the Husky A200, MPPI's ``vx_max: 0.5``,
@@ -217,6 +224,6 @@ class FollowPathConfig(TaskConfig):
         if self.observation != "path":
             raise ValueError(f"FollowPathConfig.observation must be 'path' (it follows a plan), got {self.observation!r}")
         for name in ("yaw_tolerance", "progress_radius", "progress_time", "path_search", "controller_max_linear",
-                     "controller_max_angular"):
+                     "controller_max_angular", "prefer_forward_threshold"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"FollowPathConfig.{name} must be > 0, got {getattr(self, name)!r}")

@@ -12,7 +12,7 @@ from atrv_warp.task.kernels import paths
 from atrv_warp.task.kernels import terms as k
 
 __all__ = ["ACTION_RATE", "CLEARANCE", "ENERGY", "FAILURE", "GOAL_YAW", "HEADING", "PATH_OFFSET", "PATH_PROGRESS",
-           "PROGRESS", "REFERENCE_TERMS", "REWARD_TERMS", "STEP_PENALTY", "SUCCESS"]
+           "PREFER_FORWARD", "PROGRESS", "REFERENCE_TERMS", "REWARD_TERMS", "STEP_PENALTY", "SUCCESS"]
 
 PROGRESS = RewardTerm("progress", k.progress, "progress_weight", torch=twins.progress,
                       description="the distance gained toward the target this step [m]")
@@ -49,3 +49,7 @@ PATH_OFFSET = RewardTerm("path_offset", paths.path_offset, "path_offset_weight",
                          description="minus the base's distance from the plan [m]")
 GOAL_YAW = RewardTerm("goal_yaw", paths.goal_yaw, "goal_yaw_weight", reads=("state", "path"),
                       description="minus the turn left to the goal's heading [rad], once its position is reached")
+PREFER_FORWARD = RewardTerm("prefer_forward", paths.prefer_forward, "prefer_forward_weight",
+                            reads=("action", "state"),
+                            description="minus the distance commanded backward this step [m], except near the goal "
+                                        "(Nav2's MPPI PreferForwardCritic)")

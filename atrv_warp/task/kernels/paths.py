@@ -39,7 +39,7 @@ from atrv_warp.task.spec import (
 )
 
 __all__ = ["FOLLOW_OBSERVE", "FOLLOW_RESET", "FOLLOW_STEP", "advance_on_path", "clearance_at", "follow_paths",
-           "goal_checked", "goal_yaw", "nearest_on_path", "path_offset", "path_progress"]
+           "goal_checked", "goal_yaw", "nearest_on_path", "path_offset", "path_progress", "prefer_forward"]
 
 FOLLOW_RESET = wp.constant(0)
 FOLLOW_STEP = wp.constant(1)
@@ -281,6 +281,16 @@ def path_progress(params: Any, inputs: TermInputs, world: int) -> float:
 def path_offset(params: Any, inputs: TermInputs, world: int) -> float:
     """Minus the base's distance from the plan [m]."""
     return -inputs.path.offset[world]
+
+
+@wp.func
+def prefer_forward(params: Any, inputs: TermInputs, world: int) -> float:
+    """Minus the distance commanded backward this step [m] (the action's linear part, clipped, times ``max_linear``
+    and the step's duration), except within ``prefer_forward_threshold`` of the goal: Nav2's MPPI
+    ``PreferForwardCritic``."""
+    if inputs.task.distance[world] <= params.prefer_forward_threshold:
+        return 0.0
+    return wp.min(wp.clamp(inputs.action[world, 0], -1.0, 1.0), 0.0) * params.max_linear * inputs.step_dt
 
 
 @wp.func
