@@ -9,7 +9,10 @@ publishes. :class:`RobotObservation` turns those messages into the policy's inpu
   IMU's frame;
 - a ``sensor_msgs/LaserScan`` (:class:`Scan`): any beam count and field of view, reduced into the policy's
   sectors through :mod:`.scan` (REP 117);
-- the goal (x, y) in the odometry frame (``/goal_pose`` transformed into ``odom``);
+- the goal (x, y) in the odometry frame (``/goal_pose`` transformed into ``odom``), or, for a policy that follows a
+  plan (``observation_kind`` ``path``, the ``follow_path`` task), the plan's fields as
+  :class:`~atrv_warp.core.path.PathTracker` reads them (``path_<k>_x``, ``path_<k>_y``, ``path_remaining``,
+  ``sin_goal_yaw``, ``cos_goal_yaw``);
 - the policy's last actions, newest first.
 
 Nothing is declared here: the field order, each field's clip bounds, the scan's sector edges and clip, and the
@@ -51,15 +54,20 @@ import torch
 from atrv_warp.core.geometry import quat_to_rpy, quat_to_yaw, wrap_angle
 from atrv_warp.core.scan import ScanSectors, remount, sector_readings
 
-__all__ = ["ROBOT_SIGNALS", "RobotObservation", "Scan"]
+__all__ = ["PATH_SIGNALS", "ROBOT_SIGNALS", "RobotObservation", "Scan"]
 
 ROBOT_SIGNALS: tuple[str, ...] = ("goal_distance", "sin_goal_bearing", "cos_goal_bearing", "odom_linear",
                                   "odom_angular", "imu_roll", "imu_pitch", "imu_yaw_rate")
 """The leading fields :class:`RobotObservation` computes from a robot's messages (by name; their order, bounds,
 units and frames are the contract's, from ``atrv_warp.task.spec.ROBOT_OBSERVATION``)."""
+PATH_SIGNALS: tuple[str, ...] = ("path_remaining", "sin_goal_yaw", "cos_goal_yaw")
+"""A plan-following policy's fields besides its points (``path_<k>_x``, ``path_<k>_y``), read from the ``path``
+mapping :class:`~atrv_warp.core.path.PathTracker` gives (``atrv_warp.task.spec.PATH_OBSERVATION``)."""
+_GOAL_SIGNALS = ("goal_distance", "sin_goal_bearing", "cos_goal_bearing")
 
 _SCAN = re.compile(r"scan_(\d+)")
 _LAST_ACTION = re.compile(r"last_action_(\d+)_(\w+)")
+_PATH_POINT = re.compile(r"path_(\d+)_[xy]")
 
 
 @dataclass(frozen=True)
@@ -120,7 +128,7 @@ class RobotObservation:
         self.action_history = 0
         """K: the last actions observed (``last_action_1_*`` … ``last_action_K_*``)."""
         for f in self.fields:
-            if f.name in ROBOT_SIGNALS:
+            if f.name in ROBOT_SIGNALS or f.name in PATH_SIGNALS or _PATH_POINT.fullmatch(f.name):
                 continue
             if m := _SCAN.fullmatch(f.name):
                 if sectors is None or int(m[1]) >= sectors.count:
@@ -134,7 +142,10 @@ class RobotObservation:
             else:
                 raise ValueError(f"the policy observes {f.name!r}, which a robot does not publish: RobotObservation "
                                  f"builds the robot observation ({', '.join(ROBOT_SIGNALS)}, scan sectors, last "
-                                 "actions); export a policy trained with observation='robot' (e.g. task nav_deploy)")
+                                 "actions) and the path one (the plan's points and fields); export a policy trained "
+                                 "with observation='robot' or 'path' (e.g. task nav_deploy or follow_path)")
+        self.follows_path = any(f.name in PATH_SIGNALS or _PATH_POINT.fullmatch(f.name) for f in self.fields)
+        """Whether the policy observes a plan (``path=`` is then needed, ``goal=`` not)."""
         self.low = torch.tensor([f.low for f in self.fields], dtype=torch.float64)
         self.high = torch.tensor([f.high for f in self.fields], dtype=torch.float64)
 
@@ -148,9 +159,10 @@ class RobotObservation:
                 other than ``robot``), or the contract lacks what the builder reads.
         """
         kind = contract.get("observation_kind", "arena")  # format 2 contracts predate robot observations
-        if kind != "robot":
-            raise ValueError(f"the policy observes the {kind!r} observation; RobotObservation builds the 'robot' one "
-                             "(a policy trained with observation='robot', e.g. task nav_deploy)")
+        if kind not in ("robot", "path"):
+            raise ValueError(f"the policy observes the {kind!r} observation; RobotObservation builds the 'robot' and "
+                             "'path' ones (a policy trained with observation='robot' or 'path', e.g. task nav_deploy "
+                             "or follow_path)")
         try:
             fields = contract["observation"]
             scan = contract.get("scan") or {}
@@ -166,8 +178,8 @@ class RobotObservation:
         """The fields' names, in order."""
         return tuple(f.name for f in self.fields)
 
-    def __call__(self, *, odom_pose, odom_twist, imu_orientation, imu_angular_velocity, goal, scan: Scan | None = None,
-                 last_actions=None) -> torch.Tensor:
+    def __call__(self, *, odom_pose, odom_twist, imu_orientation, imu_angular_velocity, goal=None,
+                 scan: Scan | None = None, last_actions=None, path: Mapping | None = None) -> torch.Tensor:
         """The observation, (D,) for one robot or (B, D) for a batch (float32, each value clipped to its bounds).
 
         Args:
@@ -177,10 +189,12 @@ class RobotObservation:
                 (..., 6) the whole twist (linear x, y, z; angular x, y, z).
             imu_orientation: (..., 4) the IMU's orientation quaternion (x, y, z, w) (normalised here).
             imu_angular_velocity: (..., 3) the IMU's angular velocity (x, y, z) [rad/s] in its own frame.
-            goal: (..., 2) the goal's x, y [m] in the odometry frame.
+            goal: (..., 2) the goal's x, y [m] in the odometry frame (a policy that observes a goal).
             scan: The latest laser scan (needed when the policy observes scan sectors); its ranges (..., beams).
             last_actions: (..., K, C) or (..., K * C) the actions the policy chose 1 … K steps before, newest first,
                 in the contract's column order (needed when it observes them; zeros after a reset).
+            path: The plan's fields by name, as :class:`~atrv_warp.core.path.PathTracker` gives them for the
+                robot's pose (a policy that follows a plan): each a number, or (...) for a batch.
 
         Raises:
             ValueError: An input of the wrong shape, a non-finite odometry, IMU, goal or action value, a zero
@@ -191,23 +205,44 @@ class RobotObservation:
         twist = _vector("odom_twist", odom_twist, (2, 6), batch)
         q = _vector("imu_orientation", imu_orientation, (4,), batch)
         omega = _vector("imu_angular_velocity", imu_angular_velocity, (3,), batch)
-        goal = _vector("goal", goal, (2,), batch)
         if pose.shape[-1] == 7:
             yaw = quat_to_yaw(_unit("odom_pose orientation", pose[..., 3:7]))
         else:
             yaw = pose[..., 2]
-        delta = goal - pose[..., :2]
-        bearing = wrap_angle(torch.atan2(delta[..., 1], delta[..., 0]) - yaw)
         rpy = quat_to_rpy(_unit("imu_orientation", q))
-        values = {"goal_distance": delta.norm(dim=-1), "sin_goal_bearing": bearing.sin(),
-                  "cos_goal_bearing": bearing.cos(), "odom_linear": twist[..., 0], "odom_angular": twist[..., -1],
-                  "imu_roll": rpy[..., 0], "imu_pitch": rpy[..., 1], "imu_yaw_rate": omega[..., 2]}
+        values = {"odom_linear": twist[..., 0], "odom_angular": twist[..., -1], "imu_roll": rpy[..., 0],
+                  "imu_pitch": rpy[..., 1], "imu_yaw_rate": omega[..., 2]}
+        if any(f.name in _GOAL_SIGNALS for f in self.fields):
+            if goal is None:
+                raise ValueError("goal: the policy observes its goal; pass goal=(x, y) in the odometry frame")
+            delta = _vector("goal", goal, (2,), batch) - pose[..., :2]
+            bearing = wrap_angle(torch.atan2(delta[..., 1], delta[..., 0]) - yaw)
+            values.update(goal_distance=delta.norm(dim=-1), sin_goal_bearing=bearing.sin(),
+                          cos_goal_bearing=bearing.cos())
+        if self.follows_path:
+            values.update(self._path(path, batch))
         if any(_SCAN.fullmatch(f.name) for f in self.fields):
             values.update(self._scan(scan, batch))
         if self.action_history:
             values.update(self._last_actions(last_actions, batch))
         out = torch.stack([values[f.name] for f in self.fields], -1)
         return torch.minimum(torch.maximum(out, self.low), self.high).to(torch.float32)
+
+    def _path(self, path: Mapping | None, batch: torch.Size) -> dict[str, torch.Tensor]:
+        names = [f.name for f in self.fields if f.name in PATH_SIGNALS or _PATH_POINT.fullmatch(f.name)]
+        if not isinstance(path, Mapping):
+            raise ValueError(  # noqa: TRY004 - every bad input is a ValueError here
+                "path: the policy follows a plan; pass path=PathTracker(...)(pose), its fields by name")
+        missing = [n for n in names if n not in path]
+        if missing:
+            raise ValueError(f"path: the plan's fields lack {', '.join(missing[:4])}{', …' if len(missing) > 4 else ''}")
+        values = {}
+        for n in names:
+            v = torch.as_tensor(path[n], dtype=torch.float64)
+            if v.shape != batch or not bool(torch.isfinite(v).all()):
+                raise ValueError(f"path.{n}: expected a finite value of shape {tuple(batch)}, got {v.tolist()}")
+            values[n] = v
+        return values
 
     def _scan(self, scan: Scan | None, batch: torch.Size) -> dict[str, torch.Tensor]:
         if scan is None:

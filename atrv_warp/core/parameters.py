@@ -17,8 +17,8 @@ import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
-__all__ = ["KINDS", "Parameter", "ParameterError", "check_parameters", "parameter_help", "params_file_names",
-           "params_files", "unknown_parameters"]
+__all__ = ["KINDS", "Parameter", "ParameterError", "check_parameters", "given_parameters", "parameter_help",
+           "params_file_names", "params_files", "unknown_parameters"]
 
 KINDS = ("topic", "frame", "file", "text", "name", "robot", "choice", "switch", "number", "integer")
 
@@ -134,15 +134,21 @@ def check_parameters(parameters: Sequence[Parameter], values: dict) -> dict:
     return {p.name: p.check(values.get(p.name, p.default)) for p in parameters}
 
 
+def given_parameters(args: list[str] | None, params_files: dict[str, list[str]] | None = None) -> set[str]:
+    """The names given as ``-p name:=value`` or set for the node by a ``--params-file`` (``params_files``: each
+    file's parameter names for this node): what was set on purpose, not left at its default."""
+    args = list(args or [])
+    names = {args[i + 1].split(":=")[0] for i, a in enumerate(args[:-1]) if a in ("-p", "--param")}
+    return names.union(*(params_files or {}).values())
+
+
 def unknown_parameters(known: Iterable[str], args: list[str] | None,
                        params_files: dict[str, list[str]] | None = None) -> list[str]:
     """Names given as ``-p name:=value`` that are not ``known`` (nor ROS's own ``use_sim_time``), and those a
     ``--params-file`` sets for the node (``params_files``: each file's parameter names for this node), each with where
     it came from."""
-    args = list(args or [])
     known = set(known) | {"use_sim_time"}
-    names = {args[i + 1].split(":=")[0] for i, a in enumerate(args[:-1]) if a in ("-p", "--param")}
-    found = sorted(names - known)
+    found = sorted(given_parameters(args) - known)
     for file, file_names in (params_files or {}).items():
         found += [f"{name} (in {file})" for name in sorted(set(file_names) - known)]
     return found

@@ -1,7 +1,8 @@
 """The exported policy the deploy node runs: :func:`load_deployable` opens a ``.pt2`` (``python -m atrv_warp.export``)
 and refuses, in one line, a file or a contract the node cannot serve: a missing or garbage file, no contract, another
 contract format, a ``torque`` policy (it commands wheel torques, not ``/cmd_vel``) or an ``arena`` observation (it
-observes what only the simulator knows).
+observes what only the simulator knows). A ``robot`` observation's policy drives to a goal; a ``path`` one
+(``follow_path``) follows Nav2's plan, read as its contract's ``path`` entry says (:class:`Deployable.path_settings`).
 
 Only torch and :mod:`atrv_warp.core` are imported here (``tests/test_layers.py`` holds it).
 """
@@ -17,8 +18,9 @@ import torch
 from atrv_warp.core.contract import EXPORT_FORMAT, read_exported
 from atrv_warp.core.files import ExportedFileError
 from atrv_warp.core.observation import RobotObservation
+from atrv_warp.core.path import PathTracker
 
-__all__ = ["EXPORT_FORMAT", "RATE_RANGE_HZ", "Deployable", "PolicyRefused", "load_deployable"]
+__all__ = ["EXPORT_FORMAT", "RATE_RANGE_HZ", "Deployable", "PathSettings", "PolicyRefused", "load_deployable"]
 
 
 class PolicyRefused(ValueError):
@@ -26,8 +28,47 @@ class PolicyRefused(ValueError):
 
 
 @dataclass(frozen=True)
+class PathSettings:
+    """How a plan-following policy reads its plan and when Nav2's checkers end it (its contract's ``path`` entry)."""
+
+    points: int
+    spacing: float
+    """[m]"""
+    search: float
+    """[m]"""
+    xy_goal_tolerance: float
+    """The goal checker's (``SimpleGoalChecker``, stateful) position tolerance [m]."""
+    yaw_goal_tolerance: float
+    """Its heading tolerance [rad]."""
+    required_movement_radius: float
+    """The progress checker's (``SimpleProgressChecker``) radius [m]."""
+    movement_time_allowance: float
+    """[s]"""
+
+    @classmethod
+    def from_contract(cls, contract: dict) -> PathSettings:
+        """Raises ``ValueError`` where the ``path`` entry is missing, malformed or not finite and positive."""
+        tracker = PathTracker.from_contract(contract)  # names a missing or malformed entry
+        path = contract["path"]
+        try:
+            goal, progress = path["goal_checker"], path["progress_checker"]
+            values = (float(goal["xy_goal_tolerance"]), float(goal["yaw_goal_tolerance"]),
+                      float(progress["required_movement_radius"]), float(progress["movement_time_allowance"]))
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(f"the contract's path entry lacks its goal or progress checker ({err!r})") from None
+        if not all(math.isfinite(v) and v > 0 for v in values):
+            raise ValueError(f"the contract's goal and progress checker settings must be finite and > 0, got {values}")
+        return cls(tracker.points, tracker.spacing, tracker.search, *values)
+
+    def tracker(self) -> PathTracker:
+        """A fresh :class:`~atrv_warp.core.path.PathTracker` reading the plan as the policy trained."""
+        return PathTracker(self.points, self.spacing, self.search)
+
+
+@dataclass(frozen=True)
 class Deployable:
-    """An exported policy the node can run: a ``twist`` action from the ``robot`` observation."""
+    """An exported policy the node can run: a ``twist`` action from the ``robot`` observation (to a goal) or the
+    ``path`` one (along a plan)."""
 
     path: str
     """The ``.pt2`` file."""
@@ -41,6 +82,8 @@ class Deployable:
     """What an action of 1.0 commands: linear.x [m/s], angular.z [rad/s] (the trained limits)."""
     rate_hz: float
     """The control rate it was trained at [Hz] (1 / the simulator's ``step_dt``)."""
+    path_settings: PathSettings | None = None
+    """How it reads its plan and when Nav2's checkers end it (a ``path`` policy); ``None``: it drives to a goal."""
 
     @property
     def period(self) -> float:
@@ -78,7 +121,8 @@ class Deployable:
         """One line: what the policy observes and commands, at what rate."""
         s = self.observation.sectors
         scan = f", {s.count} scan sectors over [{s.edges[0]:.3f}, {s.edges[-1]:.3f}] rad" if s else ""
-        return (f"{self.path}: task {self.contract.get('task', '?')}, robot observation "
+        kind = "path" if self.path_settings else "robot"
+        return (f"{self.path}: task {self.contract.get('task', '?')}, {kind} observation "
                 f"({len(self.observation.fields)},){scan}, twist action x ({self.scale[0]:g} m/s, {self.scale[1]:g} "
                 f"rad/s) at {self.rate_hz:.3g} Hz{self.base_limits()}")
 
@@ -106,7 +150,7 @@ def load_deployable(path: str | Path) -> Deployable:
     Raises:
         PolicyRefused: One line naming the file and the problem: missing, not a ``torch.export`` archive, refused
             by the check, no or another contract format, a ``torque`` action, an ``arena`` observation (its fields
-            named), a contract the observation builder cannot read, a rate outside :data:`RATE_RANGE_HZ`, or a
+            named), a contract the observation builder cannot read (or a ``path`` one without its checkers), a rate outside :data:`RATE_RANGE_HZ`, or a
             program that does not take the contract's observation to a (1, 2) action.
     """
     path = str(path)
@@ -122,13 +166,14 @@ def load_deployable(path: str | Path) -> Deployable:
                             f"[{', '.join(map(str, action.get('units', [])))}]); the node commands /cmd_vel and serves "
                             "'twist' policies only (task nav_deploy)")
     kind = contract.get("observation_kind", "arena")
-    if kind != "robot":
+    if kind not in ("robot", "path"):
         names = [f.get("name") if isinstance(f, dict) else f for f in contract.get("observation", [])]
         raise PolicyRefused(f"{path}: the policy observes the {kind!r} observation ({', '.join(map(str, names[:8]))}"
                             f"{', …' if len(names) > 8 else ''}), which a robot does not publish; the node serves "
-                            "'robot' observations (task nav_deploy)")
+                            "'robot' and 'path' observations (tasks nav_deploy and follow_path)")
     try:
         observation = RobotObservation.from_contract(contract)
+        path_settings = PathSettings.from_contract(contract) if kind == "path" else None
         scale = tuple(float(v) for v in action["scale"])
         rate = float(contract["rate_hz"])
     except (ValueError, KeyError, TypeError, AttributeError) as err:
@@ -154,4 +199,4 @@ def load_deployable(path: str | Path) -> Deployable:
         got = tuple(out.shape) if isinstance(out, torch.Tensor) else type(out).__name__
         raise PolicyRefused(f"{path}: the program maps a (1, {width}) observation to {got}, not a finite (1, 2) "
                             "action")
-    return Deployable(path, module, contract, observation, scale, rate)
+    return Deployable(path, module, contract, observation, scale, rate, path_settings)

@@ -3,8 +3,9 @@
 :class:`Controller` holds the latest ``/odom``, ``/imu``, ``/scan`` and goal (read by :mod:`atrv_warp.deploy.messages`),
 and :meth:`Controller.tick` decides, once per control period, what the rover does with the exported policy
 (:mod:`atrv_warp.deploy.contract`): drive by the policy, hold still (a stale, non-finite or unusable sensor; it
-resumes when they are valid again), or end the goal (reached, time limit). :mod:`atrv_warp.deploy.node` is the rclpy
-shell.
+resumes when they are valid again), or end the goal (reached, time limit). A policy that follows a plan takes
+``FollowPath`` paths instead of goals (:meth:`Controller.on_path`, :mod:`atrv_warp.deploy.follow`).
+:mod:`atrv_warp.deploy.node` is the rclpy shell.
 
 Only torch and :mod:`atrv_warp.core` are imported here (``tests/test_layers.py`` holds it).
 """
@@ -19,12 +20,14 @@ from dataclasses import dataclass
 
 import torch
 
+from atrv_warp.core.geometry import quat_to_yaw
 from atrv_warp.core.tf import TransformBuffer, frame_id
 
 # The names this module held before its split (issue 69) import from here as they did, until 0.3.0; their homes are
 # atrv_warp.deploy.contract and atrv_warp.deploy.messages (EXPORT_FORMAT, RATE_RANGE_HZ, PolicyRefused, load_deployable and
 # scan_geometry are imported for that alone).
 from atrv_warp.deploy.contract import EXPORT_FORMAT, RATE_RANGE_HZ, Deployable, PolicyRefused, load_deployable  # noqa: F401
+from atrv_warp.deploy.follow import FollowedPath, PathRefused, read_path
 from atrv_warp.deploy.messages import (
     read_imu,
     read_odometry,
@@ -43,7 +46,9 @@ MOUNT_LIMIT_M = 1.0
 (every shipped robot is under 1 m long: a scanner moved farther is off the robot) and the scan refused."""
 STATES = ("active", "holding", "reached", "aborted")
 """The goal status's ``state``: driving by the policy; held still for a ``reason`` (resumes by itself); the goal
-reached (within ``goal_tolerance``); given up for a ``reason`` (time limit, shutdown, a new goal)."""
+reached (within ``goal_tolerance``); given up for a ``reason`` (time limit, shutdown, a new goal). A path's abort
+``reason`` starts with Nav2's ``FollowPath`` result code name and a colon (``FAILED_TO_MAKE_PROGRESS: ...``) where
+Nav2 has one."""
 
 @dataclass(frozen=True)
 class Settings:
@@ -127,6 +132,8 @@ class Controller:
         """How the last scan's mounting was found (:meth:`scan_mount`)."""
         self.goal_given: tuple[str, float, float] | None = None
         """The active goal as it was sent: its frame and position [m]."""
+        self.route: FollowedPath | None = None
+        """The active ``FollowPath`` path (a policy that follows a plan), or None."""
         self.sensors = {"odom": _Sensor("/odom"), "imu": _Sensor("/imu")}
         if policy.observation.sectors is not None:
             self.sensors["scan"] = _Sensor("/scan")
@@ -185,9 +192,14 @@ class Controller:
         return (f"/odom jumped {moved:.2f} m in {dt:.2f} s (more than the trained {self.policy.scale[0]:g} m/s allows "
                 f"+ odom_jump_margin {self.settings.odom_jump_margin:g} m): an odometry reset moves the goal's frame")
 
+    @property
+    def active(self) -> bool:
+        """Whether a goal or a path is being driven (or held)."""
+        return self.goal_given is not None or self.route is not None
+
     def _cancel(self, reason: str) -> str:
         """End the active goal for ``reason`` at the next period (zero command, aborted status); the line to log."""
-        if self.goal_given is None:
+        if not self.active:
             return reason
         self.pending = self._end("aborted", reason, log=False)
         return f"{reason}; the goal is aborted and the rover stops"
@@ -285,6 +297,32 @@ class Controller:
         there = f" = ({_coordinate(self.goal[0])}, {_coordinate(self.goal[1])}) in {odom}" if frame != odom else ""
         return f"{at}{there}: driving"
 
+    def on_path(self, msg, now: float, *, preempt: bool = False) -> tuple[str | None, str]:
+        """A ``FollowPath`` goal's ``nav_msgs/Path``: (None, the line to log) where it is taken, else (Nav2's result
+        code name, why): then the active path ends too (the rover stops at the next period; Nav2's controller does
+        not drive on an old path after refusing a new one). ``preempt``: the path replaces the active goal's (the
+        behaviour tree's replan), which drives on without stopping: its progress checker and the last actions are
+        kept, its goal checker starts again."""
+        if self.policy.path_settings is None:
+            raise ValueError("this policy drives to a goal, not along a path (a follow_path policy follows one)")
+        try:
+            frame, xy, goal_yaw = read_path(msg, tf=self.tf, odom_frame=self.settings.odom_frame)
+        except PathRefused as err:
+            reason = f"{err.code}: {err}"
+            if self.active:
+                self.pending = self._end("aborted", reason, log=False)
+            return err.code, reason
+        if preempt and self.route is not None:
+            self.route.replace(frame, xy, goal_yaw)
+        else:
+            self.route = FollowedPath(self.policy.path_settings, frame, xy, goal_yaw, now)
+            self.goal_time, self.steps, self.clipped_steps = now, 0, 0
+            self.history.zero_()
+        self.goal_given, self.hold_reason, self.pending = None, None, None
+        end = self.route.end
+        return None, (f"path ({len(xy)} poses in {frame}, to ({_coordinate(end[0])}, {_coordinate(end[1])}))"
+                      f"{': replanned' if preempt else ''}: following")
+
     def goal_problem(self, msg) -> str | None:
         """Why the ``geometry_msgs/PoseStamped`` goal ``msg`` cannot be taken (no frame, a frame no transforms join
         to, a non-finite position), or None; nothing changes (a ``NavigateToPose`` goal refused this way leaves the
@@ -322,10 +360,10 @@ class Controller:
         its next good message, a goal that may have been half taken is ended, and the rover holds still now."""
         if source in self.sensors:
             self._store(source, None, now, reason)
-        elif self.goal_given is not None and source == "goal":
+        elif self.active and source == "goal":
             self.pending = self._end("aborted", reason, log=False)
         self.hold_reason = f"fault: {source}"
-        return Tick((0.0, 0.0), self.status("holding", reason) if self.goal_given is not None else None)
+        return Tick((0.0, 0.0), self.status("holding", reason) if self.active else None)
 
     # ---------------------------------------------------------------- the control period
     def status(self, state: str, reason: str = "") -> dict:
@@ -333,8 +371,11 @@ class Controller:
         odometry [m], ``steps`` driven by the policy, ``clipped_steps`` (steps a speed clamp clipped),
         ``compute_ms`` (the last step's observation and policy [ms])."""
         odom = self.sensors["odom"].value
-        goal = self.goal if self.goal and all(map(math.isfinite, self.goal)) else None  # standard JSON: no NaN, no inf
-        distance = math.hypot(goal[0] - odom[0][0], goal[1] - odom[0][1]) if odom and goal else None
+        if self.route is not None:  # a path: its end in its own frame, the distance along the plan
+            goal, distance = self.route.end, self.route.remaining
+        else:
+            goal = self.goal if self.goal and all(map(math.isfinite, self.goal)) else None  # standard JSON: no NaN
+            distance = math.hypot(goal[0] - odom[0][0], goal[1] - odom[0][1]) if odom and goal else None
         return {"state": state, "reason": reason, "goal": list(goal) if goal else None,
                 "distance": None if distance is None or not math.isfinite(distance) else round(distance, 4),
                 "steps": self.steps, "clipped_steps": self.clipped_steps,
@@ -349,6 +390,8 @@ class Controller:
         if self.pending is not None:
             tick, self.pending = self.pending, None
             return tick
+        if self.route is not None:
+            return self._tick_path(now)
         if self.goal_given is None:
             return Tick(None, None)
         limit = self.settings.time_limit
@@ -360,6 +403,57 @@ class Controller:
         if not all(map(math.isfinite, self.goal)):
             return self._end("aborted", f"the goal is not finite in {self.settings.odom_frame!r} through /tf's "
                                         f"transforms from {self.goal_given[0]!r}")
+        hold = self._sensors_hold(now)
+        if hold is not None:
+            return hold
+        status = self.status("active")
+        if status["distance"] > self.max_goal_distance:
+            return self._end("aborted", f"the goal is {status['distance']:.1f} m away, farther than "
+                                        f"max_goal_distance {self.max_goal_distance:g} m")
+        if self.goal_tolerance and status["distance"] < self.goal_tolerance:
+            return self._end("reached", f"within {self.goal_tolerance:g} m")
+        return self._drive()
+
+    def _tick_path(self, now: float) -> Tick:
+        """A period on a path: held while a sensor is unusable; aborted where no transform joins the odometry to the
+        path's frame (``TF_ERROR``) or the progress checker fails (``FAILED_TO_MAKE_PROGRESS``); reached where the goal
+        checker says so; else the policy drives on the plan as it reads from the robot's pose."""
+        hold = self._sensors_hold(now)
+        if hold is not None:
+            return hold
+        route, odom = self.route, self.settings.odom_frame
+        pose = self._pose_in(route.frame)
+        if pose is None:
+            return self._end("aborted", f"TF_ERROR: no transform from {odom!r} to the path's frame {route.frame!r} "
+                                        "on /tf")
+        route.follow(pose)
+        if route.goal_reached(pose):
+            s = route.settings
+            return self._end("reached", f"within {s.xy_goal_tolerance:g} m and {s.yaw_goal_tolerance:g} rad of the "
+                                        "path's end")
+        if route.stalled(pose, now):
+            s = route.settings
+            return self._end("aborted", f"FAILED_TO_MAKE_PROGRESS: moved less than {s.required_movement_radius:g} m "
+                                        f"in {s.movement_time_allowance:g} s")
+        return self._drive()
+
+    def _pose_in(self, frame: str) -> tuple[float, float, float] | None:
+        """The odometry's pose (x, y, yaw) carried into ``frame`` through the latest transforms (None: no transform,
+        or not finite)."""
+        position = self.sensors["odom"].value[0]
+        x, y, yaw = position[0], position[1], float(quat_to_yaw(torch.tensor(position[3:7], dtype=torch.float64)))
+        if frame == self.settings.odom_frame:
+            return x, y, yaw
+        odom = self.settings.odom_frame
+        here = self.frames.transform_point((x, y, 0.0), frame, odom)
+        ahead = self.frames.transform_point((x + math.cos(yaw), y + math.sin(yaw), 0.0), frame, odom)
+        if here is None or ahead is None:
+            return None
+        pose = (here[0], here[1], math.atan2(ahead[1] - here[1], ahead[0] - here[0]))
+        return pose if all(map(math.isfinite, pose)) else None
+
+    def _sensors_hold(self, now: float) -> Tick | None:
+        """A hold while a sensor the policy needs is missing, stale or unusable, else None."""
         reasons, keys, quiet = [], [], True  # quiet: every reason was logged when its message came
         for s in self.sensors.values():
             if s.received is None:
@@ -375,12 +469,10 @@ class Controller:
                 keys.append(reasons[-1])
         if reasons:
             return self._hold("; ".join(reasons), "; ".join(keys), quiet)
-        status = self.status("active")
-        if status["distance"] > self.max_goal_distance:
-            return self._end("aborted", f"the goal is {status['distance']:.1f} m away, farther than "
-                                        f"max_goal_distance {self.max_goal_distance:g} m")
-        if self.goal_tolerance and status["distance"] < self.goal_tolerance:
-            return self._end("reached", f"within {self.goal_tolerance:g} m")
+        return None
+
+    def _drive(self) -> Tick:
+        """A period the policy drives: its action, scaled, clamped and remembered (a hold where it fails)."""
         start = time.perf_counter()
         try:
             action = self._act()
@@ -403,7 +495,7 @@ class Controller:
 
     def stop(self, reason: str) -> Tick:
         """End the goal now (e.g. ``"shutdown"``): zero command and an aborted status, or nothing without a goal."""
-        if self.goal_given is None:
+        if not self.active:
             return Tick((0.0, 0.0), None)
         return self._end("aborted", reason)
 
@@ -414,7 +506,8 @@ class Controller:
         Raises:
             ValueError: No goal, a sensor with no usable message yet, or an input the builder refuses (named).
         """
-        if self.goal is None:
+        path = self.route.fields if self.route is not None else None
+        if self.goal is None and path is None:
             raise ValueError("no goal")
         missing = [s.topic for s in self.sensors.values() if s.value is None]
         if missing:
@@ -422,7 +515,7 @@ class Controller:
         (pose, twist), (q, omega) = self.sensors["odom"].value, self.sensors["imu"].value
         scan = self.sensors["scan"].value if "scan" in self.sensors else None
         return self.policy.observation(odom_pose=pose, odom_twist=twist, imu_orientation=q, imu_angular_velocity=omega,
-                                       goal=list(self.goal), scan=scan,
+                                       goal=list(self.goal) if path is None else None, scan=scan, path=path,
                                        last_actions=self.history if self.history.numel() else None)
 
     def trace(self, now: float, tick: Tick) -> dict:
@@ -461,7 +554,7 @@ class Controller:
 
     def _end(self, state: str, reason: str, *, log: bool = True) -> Tick:
         status = self.status(state, reason)
-        self.goal, self.goal_given, self.hold_reason = None, None, None
+        self.goal, self.goal_given, self.route, self.hold_reason = None, None, None, None
         line = f"goal {state}: {reason} ({status['steps']} steps, {status['clipped_steps']} clipped)"
         return Tick((0.0, 0.0), status, (line,) if log else ())
 

@@ -7,7 +7,9 @@ Topic names are relative, so ``--ros-args -r __ns:=/rover_1`` runs it for one ro
 ``goal_pose`` (RViz's "2D Goal Pose"; volatile, as RViz publishes: a goal is not replayed to a restarted node) and
 through Nav2's
 ``NavigateToPose`` action on ``navigate_to_pose`` (RViz's "Nav2 Goal", a behaviour tree, a waypoint follower), in
-the odometry frame or any frame ``/tf`` joins to it.
+the odometry frame or any frame ``/tf`` joins to it. A policy that follows a plan (``follow_path``) serves Nav2's
+``FollowPath`` on ``follow_path`` instead, as Nav2's controller server does (the behaviour tree sends it the planner's
+path about once a second), and publishes on ``cmd_vel_nav``, the velocity smoother's input.
 
 No input ends the node: every callback runs inside a guard (:meth:`DeployNode.guarded`), so that a failure is one
 log line and a zero command, never an exception out of the executor, as Nav2's controller server publishes zero,
@@ -34,7 +36,7 @@ from sensor_msgs.msg import Imu, LaserScan
 from std_msgs.msg import String
 
 from atrv_warp.core.files import OutputPathError, fresh_path
-from atrv_warp.core.parameters import params_file_names
+from atrv_warp.core.parameters import given_parameters, params_file_names
 from atrv_warp.deploy.contract import Deployable
 from atrv_warp.deploy.controller import TIME_LIMIT, Controller, Settings, Tick
 from atrv_warp.deploy.parameters import (
@@ -44,13 +46,16 @@ from atrv_warp.deploy.parameters import (
     unknown_parameters,
 )
 
-__all__ = ["COMMAND_PATH_SECONDS", "RESULT_CODES", "DeployNode", "NodeConfigError"]
+__all__ = ["COMMAND_PATH_SECONDS", "FOLLOW_PATH_TOPIC", "RESULT_CODES", "DeployNode", "NodeConfigError"]
 
 RELIABLE = ReliabilityPolicy.RELIABLE
 
 
 COMMAND_PATH_SECONDS = 1.0
 """The ``command_path`` topic shows where this period's command would take the rover in this long [s]."""
+FOLLOW_PATH_TOPIC = "cmd_vel_nav"
+"""Where a plan-following policy's node publishes unless ``cmd_vel_topic`` is given: the velocity smoother's input,
+where Nav2's own launch remaps its controller server's ``cmd_vel``."""
 RESULT_CODES = {TIME_LIMIT: 9003}
 """Nav2's ``NavigateToPose`` result ``error_code`` for an abort whose reason starts with a key (``TIMEOUT``); any other
 abort is ``UNKNOWN`` (9000). Humble's result carries no code."""
@@ -85,7 +90,8 @@ class DeployNode(Node):
         dynamic = ParameterDescriptor(dynamic_typing=True)  # any type in; check_parameters names a wrong one
         given = {p.name: self.declare_parameter(p.name, p.default, dynamic).value for p in PARAMETERS}
         try:
-            unknown = unknown_parameters(args, self._params_file_names(args))
+            files = self._params_file_names(args)
+            unknown = unknown_parameters(args, files)
             if unknown:
                 raise ParameterError(f"unknown parameter(s) {', '.join(unknown)}; known: "
                                      f"{', '.join(p.name for p in PARAMETERS)}")
@@ -107,6 +113,9 @@ class DeployNode(Node):
         tf_message, tf_from = _tf_message()
         self.controller = Controller(policy, settings, tf=tf_message is not None)
         self.stamped = p["enable_stamped_cmd_vel"]
+        self.follows_path = policy.path_settings is not None
+        if self.follows_path and "cmd_vel_topic" not in given_parameters(args, files):
+            p["cmd_vel_topic"] = FOLLOW_PATH_TOPIC
         self.cmd_pub = self.create_publisher(TwistStamped if self.stamped else Twist, p["cmd_vel_topic"], 10)
         self.status_pub = self.create_publisher(String, p["status_topic"], 10)
         self.command_path_pub = self.create_publisher(Path, "command_path", 10)
@@ -117,11 +126,17 @@ class DeployNode(Node):
         self.create_subscription(Imu, p["imu_topic"], guard("imu", self.controller.on_imu), sensors)
         if "scan" in self.controller.sensors:
             self.create_subscription(LaserScan, p["scan_topic"], guard("scan", self.controller.on_scan), sensors)
-        goal = guard("goal", self.on_goal_topic)
-        self.create_subscription(PoseStamped, p["goal_topic"], goal, QoSProfile(depth=10, reliability=RELIABLE))
         self.action = None
-        """The ``NavigateToPose`` goal being driven: (goal handle, future its execution awaits), or None."""
-        self._start_action_server()
+        """The ``NavigateToPose`` or ``FollowPath`` goal being driven: (goal handle, future its execution awaits), or
+        None."""
+        self._preempt = False
+        """Whether the FollowPath goal about to execute replaces an active one (its path is handed over)."""
+        if self.follows_path:  # Nav2's controller: paths come by FollowPath only
+            self._start_follow_path_server()
+        else:
+            goal = guard("goal", self.on_goal_topic)
+            self.create_subscription(PoseStamped, p["goal_topic"], goal, QoSProfile(depth=10, reliability=RELIABLE))
+            self._start_action_server()
         if tf_message is not None:  # goals in any frame: the tree from /tf and /tf_static, as tf2_ros's listener reads it
             self.create_subscription(tf_message, "/tf", guard("tf", self.controller.on_tf), QoSProfile(depth=100))
             static = functools.partial(self.controller.on_tf, static=True)  # kept: never stale
@@ -147,10 +162,16 @@ class DeployNode(Node):
         tolerance = self.controller.goal_tolerance
         reached = (f"reached within {tolerance:g} m" + (" (trained)" if settings.goal_tolerance < 0 else "")
                    if tolerance else "never judged reached (goal_tolerance:=0)")
+        if self.follows_path:
+            s = policy.path_settings
+            goals = (f"paths by FollowPath, ended by Nav2's goal checker ({s.xy_goal_tolerance:g} m, "
+                     f"{s.yaw_goal_tolerance:g} rad, stateful) and progress checker ({s.required_movement_radius:g} m "
+                     f"in {s.movement_time_allowance:g} s)")
+        else:
+            goals = (f"goals in {settings.odom_frame!r} on {self.resolve_topic_name(p['goal_topic'])}"
+                     f"{' (or any frame /tf joins to it)' if tf_message is not None else ''}, {reached}")
         self.log.info(f"{policy.describe()}; cmd_vel as {'TwistStamped' if self.stamped else 'Twist'} on "
-                      f"{self.cmd_pub.topic_name}, goals in {settings.odom_frame!r} on "
-                      f"{self.resolve_topic_name(p['goal_topic'])}"
-                      f"{' (or any frame /tf joins to it)' if tf_message is not None else ''}, {reached}{clamp}")
+                      f"{self.cmd_pub.topic_name}, {goals}{clamp}")
 
     # ---------------------------------------------------------------- parameters
     def _params_file_names(self, args: list[str] | None) -> dict[str, list[str]]:
@@ -272,6 +293,74 @@ class DeployNode(Node):
         self.log.info(f"NavigateToPose goal {state}" + (f": {reason}" if reason else ""))
         return result
 
+    # ---------------------------------------------------------------- FollowPath
+    def _start_follow_path_server(self) -> None:
+        """Nav2's ``FollowPath`` on ``follow_path`` (relative: in the node's namespace), as its controller server
+        serves it; without ``nav2_msgs`` (neither installed nor buildable) the node cannot take a path: one error line,
+        and it holds the rover still."""
+        from atrv_warp.deploy.nav2 import load_follow_path
+
+        action, where = load_follow_path()
+        self.follow_path = action
+        if action is None:
+            self.log.error(f"no FollowPath action: {where}; this policy follows Nav2's plans and takes no goal "
+                           "otherwise: the rover holds still")
+            return
+        from rclpy.action import ActionServer
+
+        self.action_server = ActionServer(self, action, "follow_path", self._execute_path,
+                                          goal_callback=self._accept_path,
+                                          handle_accepted_callback=self._on_path_accepted,
+                                          cancel_callback=lambda _handle: self._cancel_response())
+        self.log.info(f"FollowPath on {self.get_namespace().rstrip('/')}/follow_path ({where})")
+
+    @staticmethod
+    def _accept_path(_request):
+        """Every goal is accepted, as Nav2's controller server accepts them (a bad path is aborted in execution)."""
+        from rclpy.action import GoalResponse
+
+        return GoalResponse.ACCEPT
+
+    def _on_path_accepted(self, handle) -> None:
+        """A new goal while one is active takes over its path without stopping; the replaced goal ends aborted with
+        an empty result (Nav2's preemption)."""
+        self._preempt = self.action is not None and self.controller.route is not None
+        self._resolve("replaced", "replaced by a new FollowPath goal")
+        handle.execute()
+
+    async def _execute_path(self, handle):
+        """Follow the path until it ends; the result carries Nav2's code where the distribution's definition has
+        one."""
+        from rclpy.task import Future
+
+        future, now = Future(), self.now()
+        self.action = (handle, future)
+        preempt, self._preempt = self._preempt, False
+        try:
+            code, line = self.controller.on_path(handle.request.path, now, preempt=preempt)
+        except Exception as err:  # noqa: BLE001 - a path that cannot be read ends its goal, never the node
+            self._failed("goal", err, now)
+            code, line = "UNKNOWN", f"UNKNOWN: {type(err).__name__}: {err}"
+        self.log.info(f"FollowPath {line}")
+        if code is not None:
+            self._resolve("aborted", line)
+        state, reason = await future
+        result = self.follow_path.Result()
+        if hasattr(result, "error_code"):  # Jazzy and later; Humble's result is empty
+            from atrv_warp.deploy.nav2 import FOLLOW_PATH_CODES
+
+            failed = state == "aborted"
+            result.error_code = FOLLOW_PATH_CODES.get(reason.split(":", 1)[0], 100) if failed else 0
+            result.error_msg = reason if failed else ""
+        if state == "reached":
+            handle.succeed()
+        elif state == "cancelled" and handle.is_cancel_requested:
+            handle.canceled()
+        else:
+            handle.abort()
+        self.log.info(f"FollowPath goal {state}" + (f": {reason}" if reason else ""))
+        return result
+
     def _resolve(self, state: str, reason: str) -> None:
         """End the ``NavigateToPose`` goal being driven, if any, with ``state`` and ``reason``."""
         if self.action is None:
@@ -283,6 +372,13 @@ class DeployNode(Node):
 
     def _feedback(self, status: dict, now: float) -> None:
         handle, _ = self.action
+        if self.follows_path:  # FollowPath's feedback: the distance along the path to its end, and the speed
+            feedback = self.follow_path.Feedback()
+            odom = self.controller.sensors["odom"].value
+            feedback.distance_to_goal = float(status["distance"] or 0.0)
+            feedback.speed = float(math.hypot(*odom[1][:2])) if odom is not None else 0.0
+            handle.publish_feedback(feedback)
+            return
         feedback = self.navigate_to_pose.Feedback()
         odom = self.controller.sensors["odom"].value
         if odom is not None:

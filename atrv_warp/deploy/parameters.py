@@ -22,8 +22,11 @@ PARAMETERS = (
     Parameter("odom_topic", "odom", "nav_msgs/Odometry in (pose in odom_frame, twist in the base frame)", "topic"),
     Parameter("imu_topic", "imu", "sensor_msgs/Imu in (orientation and angular velocity)", "topic"),
     Parameter("goal_topic", "goal_pose", "geometry_msgs/PoseStamped in: the goal, in odom_frame or any frame /tf joins "
-              "to it, e.g. map (RViz's 2D Goal Pose)", "topic"),
-    Parameter("cmd_vel_topic", "cmd_vel", "geometry_msgs/Twist (or TwistStamped) out, at the policy's rate", "topic"),
+              "to it, e.g. map (RViz's 2D Goal Pose); not read for a policy that follows a plan (Nav2's FollowPath on "
+              "follow_path gives it its paths)", "topic"),
+    Parameter("cmd_vel_topic", "cmd_vel", "geometry_msgs/Twist (or TwistStamped) out, at the policy's rate; a policy "
+              "that follows a plan publishes on cmd_vel_nav (Nav2's velocity smoother's input) unless this is given",
+              "topic"),
     Parameter("status_topic", "goal_status", "std_msgs/String out: the goal status as JSON (state active | holding | "
               "reached | aborted, reason, goal, distance, steps, clipped_steps, compute_ms)", "topic"),
     Parameter("odom_frame", "odom", "the odometry frame: /odom's header.frame_id, where the policy sees its goal (a "
