@@ -28,27 +28,29 @@ NS = "/rover_1"
 class Robot:
     """A stand-in robot under :data:`NS`: publishes odometry, IMU and a 181-beam scan; records what the node says."""
 
-    def __init__(self):
+    def __init__(self, cmd_topic: str = "cmd_vel"):
         self.node = rclpy.create_node("fake_rover")
         self.cmds, self.status = [], []
         self.odom = self.node.create_publisher(Odometry, f"{NS}/odom", 10)
         self.imu = self.node.create_publisher(Imu, f"{NS}/imu", 10)
         self.scan = self.node.create_publisher(LaserScan, f"{NS}/scan", 10)
         self.goal = self.node.create_publisher(PoseStamped, f"{NS}/goal_pose", 10)
-        self.node.create_subscription(Twist, f"{NS}/cmd_vel", lambda m: self.cmds.append(
+        self.node.create_subscription(Twist, f"{NS}/{cmd_topic}", lambda m: self.cmds.append(
             (time.monotonic(), m.linear.x, m.angular.z)), 100)
         self.node.create_subscription(String, f"{NS}/goal_status", lambda m: self.status.append(json.loads(m.data)), 100)
         self.imu_on = True
         self.odom_x = 0.0
         """The odometry's x [m] (a fault sets it far away, or to NaN)."""
+        self.odom_y = self.odom_yaw = 0.0
         self.scan_fault: dict = {}
         """LaserScan fields to publish instead of the good scan's (``ranges``, ``range_min``…)."""
 
     def publish(self):
         odom = Odometry()
         odom.header.frame_id = "odom"
-        odom.pose.pose.position.x = self.odom_x
-        odom.pose.pose.orientation.w = 1.0
+        odom.pose.pose.position.x, odom.pose.pose.position.y = self.odom_x, self.odom_y
+        odom.pose.pose.orientation.z = math.sin(self.odom_yaw / 2)
+        odom.pose.pose.orientation.w = math.cos(self.odom_yaw / 2)
         self.odom.publish(odom)
         if self.imu_on:
             imu = Imu()
@@ -419,6 +421,97 @@ def test_navigate_to_pose_in_map_drives_feeds_back_cancels_and_is_replaced(ros_e
         robot.node.destroy_node()
     assert proc.returncode == 0, out[-3000:]
     assert "NavigateToPose goal rejected: it names no frame" in out and "the active goal goes on" in out, out[-3000:]
+
+
+@pytest.mark.slow  # a live ROS 2 node and an action client
+def test_follow_path_in_map_is_served_as_nav2s_controller_serves_it(ros_env, tmp_path):
+    """A plan-following policy's node serves Nav2's ``FollowPath`` on ``follow_path`` (not ``navigate_to_pose``) and
+    publishes on ``cmd_vel_nav``: a path in ``map`` around a corner, with ``map`` -> ``odom`` offset and turned on
+    /tf_static, is accepted and driven, with feedback of the distance along it; a replan takes over without stopping
+    and the replaced goal ends aborted with an empty result; an empty path is aborted with INVALID_PATH and the rover
+    stops; a path whose end the rover is at, turned to its heading, succeeds; the node stays up throughout."""
+    from action_msgs.msg import GoalStatus
+    from rclpy.action import ActionClient
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+
+    from atrv_warp.core.ros_interfaces import TF2_MSGS, load_interface
+    from atrv_warp.deploy.nav2 import FOLLOW_PATH_CODES, load_follow_path
+
+    FollowPath, where = load_follow_path()
+    assert FollowPath is not None, where
+    TFMessage, _ = load_interface(TF2_MSGS, "msg", "TFMessage")
+    policy = write_policy(tmp_path / "path.pt2", task_contract("follow_path"))
+    robot = Robot(cmd_topic="cmd_vel_nav")
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    robot.node.create_publisher(TFMessage, "/tf_static", latched).publish(_tf("map", "odom", 2.0, 1.0, math.pi / 2))
+    proc = subprocess.Popen([sys.executable, "-m", "atrv_warp.deploy", str(policy), "--ros-args", "-r",
+                             f"__ns:={NS}"], env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    client = ActionClient(robot.node, FollowPath, f"{NS}/follow_path")
+    feedback = []
+
+    def send(points, yaw=math.pi):
+        request = FollowPath.Goal()
+        request.path.header.frame_id = "map"
+        for k, (x, y) in enumerate(points):
+            pose = PoseStamped()
+            pose.header.frame_id = "map"
+            pose.pose.position.x, pose.pose.position.y = x, y
+            last = yaw if k == len(points) - 1 else 0.0
+            pose.pose.orientation.z, pose.pose.orientation.w = math.sin(last / 2), math.cos(last / 2)
+            request.path.poses.append(pose)
+        request.controller_id = "FollowPath"
+        future = client.send_goal_async(request, feedback_callback=lambda m: feedback.append(m.feedback))
+        assert robot.run(10, future.done), "no answer to the goal"
+        return future.result()
+
+    def result(handle):
+        answer = handle.get_result_async()
+        assert robot.run(5, answer.done), "no result"
+        return answer.result()
+
+    corner = [(2.0, 1.0), (2.0, 4.0), (0.0, 4.0)]  # from the rover (odom's origin is (2, 1) in map) up, then left
+    try:
+        assert robot.run(120, lambda: client.server_is_ready()), "no FollowPath server"
+        assert not robot.node.get_publishers_info_by_topic(f"{NS}/cmd_vel")  # the velocity smoother's input only
+        first = send(corner)
+        assert first.accepted
+        assert robot.run(10, robot.driving), robot.status[-1:]
+        assert robot.run(5, lambda: len(feedback) >= 3)
+        assert abs(feedback[-1].distance_to_goal - 5.0) < 0.01, feedback[-1]
+        replanned = time.monotonic()
+        second = send([(2.0, 1.1), *corner[1:]])  # the behaviour tree's replan a second later
+        old = result(first)
+        assert old.status == GoalStatus.STATUS_ABORTED
+        if hasattr(old.result, "error_code"):
+            assert (old.result.error_code, old.result.error_msg) == (0, "")  # Nav2's empty result
+        robot.run(0.5)
+        assert all(abs(v) + abs(w) > 0 for t, v, w in robot.cmds if t > replanned), "the replan stopped the rover"
+        empty = send([])  # accepted, as Nav2 accepts every goal, then aborted
+        assert empty.accepted
+        aborted, refused = result(empty), time.monotonic()
+        assert aborted.status == GoalStatus.STATUS_ABORTED
+        if hasattr(aborted.result, "error_code"):
+            assert aborted.result.error_code == FOLLOW_PATH_CODES["INVALID_PATH"] == 103
+            assert aborted.result.error_msg == "INVALID_PATH: the path has no poses", aborted.result.error_msg
+        assert result(second).status == GoalStatus.STATUS_ABORTED  # replaced by the empty path: it does not drive on
+        robot.run(0.5)
+        assert all(v == 0.0 and w == 0.0 for t, v, w in robot.cmds if t > refused + 0.3), robot.cmds[-3:]
+        robot.odom_x, robot.odom_y, robot.odom_yaw = 3.0, 2.0, math.pi / 2  # odom (3, 2) is map (0, 4), facing -x
+        robot.run(0.3)  # the odometry's jump there is said with no goal to abort
+        reached = send(corner)
+        assert result(reached).status == GoalStatus.STATUS_SUCCEEDED
+        assert proc.poll() is None
+    finally:
+        client.destroy()
+        proc.send_signal(2)
+        robot.run(10, lambda: proc.poll() is not None)
+        if proc.poll() is None:
+            proc.kill()
+        out = proc.communicate(timeout=30)[0]
+        robot.node.destroy_node()
+    assert proc.returncode == 0, out[-3000:]
+    assert f"FollowPath on {NS}/follow_path" in out and f"on {NS}/cmd_vel_nav" in out, out[-3000:]
+    assert "navigate_to_pose" not in out, out[-3000:]
 
 
 @pytest.mark.slow  # live ROS 2 contexts
