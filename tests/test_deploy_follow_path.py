@@ -128,3 +128,34 @@ def test_a_goal_seeking_policy_takes_no_path_and_the_observation_names_a_missing
     with pytest.raises(ValueError, match="the policy follows a plan; pass path="):
         path_policy.observation(odom_pose=[0.0, 0.0, 0.0], odom_twist=[0.0, 0.0], imu_orientation=[0, 0, 0, 1.0],
                                 imu_angular_velocity=[0.0, 0.0, 0.0], scan=None, last_actions=torch.zeros(3, 2))
+
+
+def test_one_pose_a_10_km_path_a_replan_flood_and_stale_odometry_each_end_as_nav2s_would(path_policy):
+    """A path of one pose is followed to it; one 10 km long (two poses) is followed, its fields clipped; 100 replans
+    in a second keep one path in memory and the rover driving; odometry that goes stale holds the rover, and a goal
+    held past the progress checker's allowance ends FAILED_TO_MAKE_PROGRESS instead of never."""
+    c = Controller(path_policy, Settings(time_limit=0.0, stale_timeout=0.5))
+    sensors(c, 0.0)
+    assert c.on_path(path_msg([(1.0, 0.0)], frame="odom", yaw=0.0), 0.0)[0] is None
+    assert c.tick(0.25).status["state"] == "active" and c.route.remaining == 0.0
+    sensors(c, 0.5, x=0.9)
+    assert c.tick(0.5).status["state"] == "reached"
+    assert c.on_path(path_msg([(0.0, 0.0), (10_000.0, 0.0)], frame="odom"), 0.5)[0] is None
+    tick = c.tick(0.75)
+    assert tick.status["state"] == "active" and tick.status["distance"] == pytest.approx(10_000.0 - 0.9)
+    remaining = c.last_observation[path_policy.observation.names.index("path_remaining")]
+    assert float(remaining) == {f.name: f.high for f in path_policy.observation.fields}["path_remaining"]
+    for k in range(100):  # a replan every 10 ms
+        assert c.on_path(path_msg([(0.0, 0.01 * k), (5.0, 0.0)], frame="odom"), 0.75 + 0.01 * k, preempt=True)[0] is None
+    sensors(c, 1.75, x=0.9)
+    assert c.tick(1.75).status["state"] == "active" and len(c.route.tracker.path) == 2
+    t = 1.75
+    while t < 20.0:  # the odometry stops coming; the IMU and scan go on
+        t += 0.25
+        c.on_imu(imu_msg(), t)
+        c.on_scan(fov_scan(181, math.pi), t)
+        tick = c.tick(t)
+        if tick.status["state"] not in ("active", "holding"):  # active until the odometry is 0.5 s old
+            break
+    assert tick.status["state"] == "aborted" and tick.command == (0.0, 0.0), tick.status
+    assert tick.status["reason"].startswith("FAILED_TO_MAKE_PROGRESS: held still for more than 10 s (/odom stale"), tick

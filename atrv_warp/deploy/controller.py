@@ -418,10 +418,14 @@ class Controller:
         """A period on a path: held while a sensor is unusable; aborted where no transform joins the odometry to the
         path's frame (``TF_ERROR``) or the progress checker fails (``FAILED_TO_MAKE_PROGRESS``); reached where the goal
         checker says so; else the policy drives on the plan as it reads from the robot's pose."""
+        route, odom = self.route, self.settings.odom_frame
         hold = self._sensors_hold(now)
         if hold is not None:
+            if route.held_too_long(now):
+                s = route.settings
+                return self._end("aborted", f"FAILED_TO_MAKE_PROGRESS: held still for more than "
+                                            f"{s.movement_time_allowance:g} s ({hold.status['reason']})")
             return hold
-        route, odom = self.route, self.settings.odom_frame
         pose = self._pose_in(route.frame)
         if pose is None:
             return self._end("aborted", f"TF_ERROR: no transform from {odom!r} to the path's frame {route.frame!r} "

@@ -126,6 +126,13 @@ class FollowedPath:
             return False
         return now - at[2] > s.movement_time_allowance
 
+    def held_too_long(self, now: float) -> bool:
+        """While the rover is held (a sensor unusable): True once it has not left the progress checker's circle for
+        ``movement_time_allowance`` (since the goal started, where the checker never ran), so a goal held for good
+        ends as Nav2's would, not never."""
+        since = self.progress_at[2] if self.progress_at is not None else self.started
+        return now - since > self.settings.movement_time_allowance
+
     @property
     def remaining(self) -> float | None:
         """The plan's length from the robot's nearest point to its end [m] (None before the first period)."""
