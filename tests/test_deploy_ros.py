@@ -514,6 +514,134 @@ def test_follow_path_in_map_is_served_as_nav2s_controller_serves_it(ros_env, tmp
     assert "navigate_to_pose" not in out, out[-3000:]
 
 
+def _plan_around(env, start, goal):
+    """The plan a Nav2 stack would hand its controller once its obstacle layer has seen every unmapped obstacle: the
+    env's map with its obstacles drawn in as occupied cells, planned by our planner (Nav2's inflation, NavFn's
+    weights). A test client's planner, not Nav2's."""
+    import dataclasses
+
+    import numpy as np
+    import torch
+
+    from atrv_warp.sim.contact import OBSTACLE_KINDS
+    from atrv_warp.sim.maps import GridWorlds
+    from atrv_warp.sim.planner import Planner
+    from atrv_warp.world.nav2_map import OCCUPIED
+
+    site = env.sim.maps.maps[0]
+    rows, cols = site.shape
+    y, x = np.meshgrid(site.origin[1] + (np.arange(rows) + 0.5) * site.resolution,
+                       site.origin[0] + (np.arange(cols) + 0.5) * site.resolution, indexing="ij")
+    cells = site.cells.copy()
+    o = env.sim.obstacles
+    for kind, (ox, oy, yaw), (a, b) in zip(o.kind[0].tolist(), o.pose[0].tolist(), o.size[0].tolist(), strict=True):
+        lx, ly = (x - ox) * math.cos(yaw) + (y - oy) * math.sin(yaw), -(x - ox) * math.sin(yaw) + (y - oy) * math.cos(yaw)
+        if kind == OBSTACLE_KINDS["cylinder"]:
+            cells[np.hypot(lx, ly) <= a] = OCCUPIED
+        elif kind == OBSTACLE_KINDS["box"]:
+            cells[(abs(lx) <= a) & (abs(ly) <= b)] = OCCUPIED
+    seen = dataclasses.replace(site, cells=cells)
+    planner = Planner(GridWorlds([seen], [0], "cpu"), env.sim.footprint_radii)
+    planner.plan([0], torch.tensor([start], dtype=torch.float32), torch.tensor([goal], dtype=torch.float32))
+    return planner.points(0)
+
+
+@pytest.mark.slow  # the simulator node, the deploy node and a client: about a minute
+def test_a_trained_follow_path_policy_drives_nav2s_plan_to_the_goal_in_the_simulated_office(ros_env, tmp_path):
+    """The simulator as a Nav2 test site: the simulator node in the example office map (``/map``, ``map -> odom``,
+    ``/odom``, ``/scan``, ``/imu``, on the clock), ``atrv-deploy`` with the shipped Jackal ``follow_path`` policy, and a
+    client playing Nav2's part: it plans from the robot's pose in ``map`` to the test-set episode's goal and sends
+    ``FollowPath`` with a fresh plan every second of simulated time, as the behaviour tree does, until the node
+    answers; the goal is reached in the map frame (the true pose) and the answer is SUCCEEDED."""
+    import numpy as np
+    from action_msgs.msg import GoalStatus
+    from rclpy.action import ActionClient
+    from rosgraph_msgs.msg import Clock
+
+    from atrv_warp.deploy.nav2 import load_follow_path
+    from atrv_warp.rl.export import export_policy
+    from atrv_warp.task.env import RoverEnv
+    from atrv_warp.world import load_map
+
+    office = ROOT / "atrv_warp" / "assets" / "maps" / "office.yaml"
+    FollowPath, where = load_follow_path()
+    assert FollowPath is not None, where
+    policy = export_policy("follow_path_jackal", tmp_path / "jackal_path.pt2")
+    env = RoverEnv(1, robot="jackal", task="follow_path", seed=0, maps=[load_map(office)])  # the node's first episode
+    env.reset()
+    start = env.sim.root_pose[0, :2].tolist()
+    goal, goal_yaw = env.target[0].tolist(), float(env.target_yaw[0])
+    sim = subprocess.Popen([sys.executable, "-m", "atrv_warp.ros", "--ros-args", "-p", "robot:=jackal", "-p",
+                            "task:=follow_path", "-p", f"map:={office}", "-p", "publish_rate:=20.0", "-p",
+                            "duration:=150.0"], env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    node = subprocess.Popen([sys.executable, "-m", "atrv_warp.deploy", str(policy), "--ros-args", "-p",
+                             "use_sim_time:=true", "-p", "robot:=jackal", "-p", "cmd_vel_topic:=cmd_vel"],
+                            env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    client_node = rclpy.create_node("nav2_stand_in")
+    truth, clock = [], [0.0]
+    client_node.create_subscription(Odometry, "/ground_truth/odom", truth.append, 10)
+    client_node.create_subscription(Clock, "/clock", lambda m: clock.__setitem__(0, m.clock.sec + 1e-9 * m.clock.nanosec),
+                                    10)
+    client = ActionClient(client_node, FollowPath, "/follow_path")
+
+    def spin(seconds, until):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            rclpy.spin_once(client_node, timeout_sec=0.02)
+            if until():
+                return True
+        return False
+
+    def send():
+        p = truth[-1].pose.pose.position
+        request = FollowPath.Goal()
+        request.path.header.frame_id = "map"
+        points = _plan_around(env, [p.x, p.y], goal)
+        for k, (x, y) in enumerate(points):
+            pose = PoseStamped()
+            pose.header.frame_id = "map"
+            pose.pose.position.x, pose.pose.position.y = float(x), float(y)
+            yaw = goal_yaw if k == len(points) - 1 else 0.0
+            pose.pose.orientation.z, pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+            request.path.poses.append(pose)
+        sent = client.send_goal_async(request)
+        assert spin(10, sent.done) and sent.result().accepted
+        return sent.result()
+
+    answer, replans = None, 0
+    try:
+        assert spin(180, lambda: client.server_is_ready() and bool(truth)), "no FollowPath server or no robot"
+        first = truth[-1].pose.pose.position
+        assert math.hypot(first.x - start[0], first.y - start[1]) < 0.05  # the episode the client was given
+        handle = send()
+        while answer is None and clock[0] < 120.0:
+            last = clock[0]
+            spin(30, lambda last=last: clock[0] >= last + 1.0)
+            result = handle.get_result_async()
+            if spin(0.05, result.done):
+                answer = result.result()
+                break
+            handle, replans = send(), replans + 1  # the behaviour tree's replan, about once a second
+    finally:
+        client.destroy()
+        outs = []
+        for proc in (node, sim):
+            proc.send_signal(2)
+            try:
+                outs.append(proc.communicate(timeout=30)[0])
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                outs.append(proc.communicate()[0])
+        client_node.destroy_node()
+    p = truth[-1].pose.pose
+    yaw = 2 * math.atan2(p.orientation.z, p.orientation.w)
+    where = (f"at ({p.position.x:.2f}, {p.position.y:.2f}, {yaw:.2f}) after {clock[0]:.0f} s and {replans} replans, "
+             f"goal ({goal[0]:.2f}, {goal[1]:.2f}, {goal_yaw:.2f})")
+    assert answer is not None and answer.status == GoalStatus.STATUS_SUCCEEDED, (where, outs[0][-3000:])
+    assert np.hypot(p.position.x - goal[0], p.position.y - goal[1]) < 0.3 and replans > 5, where
+    assert abs(math.remainder(yaw - goal_yaw, 2 * math.pi)) < 0.3, where
+
+
 @pytest.mark.slow  # live ROS 2 contexts
 def test_each_shipped_robot_has_deploy_parameters_the_node_runs_with(tmp_path):
     """Every shipped robot: its file's ``[deploy]`` table gives parameters the node takes (every key known, every
