@@ -35,6 +35,7 @@ from atrv_warp.deploy.messages import (
     scan_geometry,  # noqa: F401
 )
 from atrv_warp.deploy.parameters import PARAMETER_BY_NAME
+from atrv_warp.deploy.safety import CollisionMonitor, parse_zone
 
 __all__ = ["MOUNT_LIMIT_M", "STATES", "TIME_LIMIT", "Controller", "Settings", "Tick"]
 
@@ -74,10 +75,20 @@ class Settings:
     odom_jump_margin: float = 0.5
     """Odometry that moves farther between two messages than the trained speed allows in the time between them,
     plus this margin, has jumped (reset, or a broken estimate): the goal is aborted [m]."""
+    collision_monitor: bool = True
+    """Slow and stop on the scan whatever the policy commands (:mod:`atrv_warp.deploy.safety`)."""
+    stop_zone: str = ""
+    """The stop zone, Nav2's ``points`` text (``""``: none)."""
+    slowdown_zone: str = ""
+    """The slow-down zone, likewise."""
+    slowdown_ratio: float = 0.5
+    min_points: int = 4
 
     def __post_init__(self):
         for f in dataclasses.fields(self):  # each field is the node parameter of its name, checked as the node does
             PARAMETER_BY_NAME[f.name].check(getattr(self, f.name))
+        for name in ("stop_zone", "slowdown_zone"):
+            parse_zone(name, getattr(self, name))
 
 
 @dataclass
@@ -160,6 +171,18 @@ class Controller:
         """An end decided between periods (a refused goal, an odometry jump), published by the next :meth:`tick`."""
         self.odom_fix: tuple[float, float, float] | None = None
         """The last valid odometry's (x [m], y [m], time [s]): what a jump is measured from."""
+        self.monitor = CollisionMonitor()
+        """The collision monitor (:mod:`atrv_warp.deploy.safety`; no zones where ``collision_monitor`` is off)."""
+        st = self.settings
+        if st.collision_monitor:
+            mount = (policy.contract.get("scan") or {}).get("mount")
+            try:
+                at = (float(mount["x"]), float(mount["y"]), float(mount["yaw"]))
+            except (KeyError, TypeError, ValueError):
+                at = (0.0, 0.0, 0.0)  # no mount recorded: the scanner at the chassis origin
+            self.monitor = CollisionMonitor(parse_zone("stop_zone", st.stop_zone),
+                                            parse_zone("slowdown_zone", st.slowdown_zone), st.slowdown_ratio,
+                                            st.min_points, at if all(map(math.isfinite, at)) else (0.0, 0.0, 0.0))
         bound = {f.name: f.high for f in policy.observation.fields}.get("goal_distance", math.inf)
         self.max_goal_distance = self.settings.max_goal_distance or bound
         """Farther goals are aborted [m] (``max_goal_distance``, or the policy's ``goal_distance`` bound)."""
@@ -492,10 +515,13 @@ class Controller:
         clipped = [max(-m, min(m, c)) for c, m in zip(command, self.limits)]
         self.steps += 1
         self.clipped_steps += clipped != command
-        self._remember(clipped)
+        scan = self.sensors["scan"].value if "scan" in self.sensors else None
+        safe, said = self.monitor.apply((clipped[0], clipped[1]), scan)
+        self._remember(safe)
         log = ("resumed: driving by the policy",) if self.hold_reason else ()
+        log += (said,) if said else ()
         self.hold_reason = None
-        return Tick((clipped[0], clipped[1]), self.status("active"), log)
+        return Tick(safe, self.status("active"), log)
 
     def stop(self, reason: str) -> Tick:
         """End the goal now (e.g. ``"shutdown"``): zero command and an aborted status, or nothing without a goal."""

@@ -112,6 +112,12 @@ class DeployNode(Node):
         self.policy = policy
         tf_message, tf_from = _tf_message()
         self.controller = Controller(policy, settings, tf=tf_message is not None)
+        m = self.controller.monitor
+        self.log.info("collision monitor: " + (
+            f"stop zone of {len(m.stop_zone)} points, slow-down zone of {len(m.slowdown_zone)} points (x "
+            f"{m.slowdown_ratio:g}), acting on {m.min_points} scan returns" if m.active else
+            "off (collision_monitor:=false)" if not settings.collision_monitor else
+            "no zones (stop_zone, slowdown_zone): the policy's commands pass as they are"))
         self.stamped = p["enable_stamped_cmd_vel"]
         self.follows_path = policy.path_settings is not None
         if self.follows_path and "cmd_vel_topic" not in given_parameters(args, files):

@@ -49,6 +49,17 @@ PARAMETERS = (
               "number", "s", positive=True),
     Parameter("time_limit", 60.0, "abort a goal not reached in this long, in ROS time [s]; 0 = no limit", "number",
               "s"),
+    Parameter("collision_monitor", True, "slow and stop on the scan whatever the policy commands (stop_zone, "
+              "slowdown_zone, as Nav2's collision monitor acts); false for a stack that runs Nav2's collision monitor",
+              "switch"),
+    Parameter("stop_zone", "", "the collision monitor's stop zone in the chassis frame, as Nav2 writes a polygon's "
+              "points: \"[[x, y], [x, y], [x, y], ...]\" [m]; min_points scan returns inside it command zero; '' = "
+              "none", "text"),
+    Parameter("slowdown_zone", "", "its slow-down zone, likewise: min_points returns inside it scale the command by "
+              "slowdown_ratio; '' = none", "text"),
+    Parameter("slowdown_ratio", 0.5, "the slow-down zone's factor on the command (Nav2's default)", "number", "-",
+              positive=True, high=1.0),
+    Parameter("min_points", 4, "the least scan returns inside a zone that act (Nav2's default)", "integer", low=1),
     Parameter("robot", "", "this robot: its name, as its robot file names it (atrvjr, jackal, husky, or yours), or "
               "its robot file's path (.toml): a policy trained on another robot is refused at start, naming both; '' "
               "= no check (the node logs the policy's robot either way)", "robot"),
