@@ -368,7 +368,7 @@ class DeployNode(Node):
         return result
 
     def _resolve(self, state: str, reason: str) -> None:
-        """End the ``NavigateToPose`` goal being driven, if any, with ``state`` and ``reason``."""
+        """End the ``NavigateToPose`` or ``FollowPath`` goal being driven, if any, with ``state`` and ``reason``."""
         if self.action is None:
             return
         _handle, future = self.action
