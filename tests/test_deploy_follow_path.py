@@ -24,8 +24,8 @@ def path_policy(tmp_path_factory):
 
 
 def pose_msg(x, y, yaw=0.0, frame=""):
-    return NS(header=NS(frame_id=frame), pose=NS(position=v3(x, y),
-                                                 orientation=NS(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))))
+    turn = NS(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
+    return NS(header=NS(frame_id=frame), pose=NS(position=v3(x, y), orientation=turn))
 
 
 def path_msg(points, frame="map", yaw=0.0):
@@ -146,7 +146,8 @@ def test_one_pose_a_10_km_path_a_replan_flood_and_stale_odometry_each_end_as_nav
     remaining = c.last_observation[path_policy.observation.names.index("path_remaining")]
     assert float(remaining) == {f.name: f.high for f in path_policy.observation.fields}["path_remaining"]
     for k in range(100):  # a replan every 10 ms
-        assert c.on_path(path_msg([(0.0, 0.01 * k), (5.0, 0.0)], frame="odom"), 0.75 + 0.01 * k, preempt=True)[0] is None
+        replan = path_msg([(0.0, 0.01 * k), (5.0, 0.0)], frame="odom")
+        assert c.on_path(replan, 0.75 + 0.01 * k, preempt=True)[0] is None
     sensors(c, 1.75, x=0.9)
     assert c.tick(1.75).status["state"] == "active" and len(c.route.tracker.path) == 2
     t = 1.75

@@ -514,10 +514,10 @@ def test_follow_path_in_map_is_served_as_nav2s_controller_serves_it(ros_env, tmp
     assert "navigate_to_pose" not in out, out[-3000:]
 
 
-def _plan_around(env, start, goal):
-    """The plan a Nav2 stack would hand its controller once its obstacle layer has seen every unmapped obstacle: the
-    env's map with its obstacles drawn in as occupied cells, planned by our planner (Nav2's inflation, NavFn's
-    weights). A test client's planner, not Nav2's."""
+def _seen_planner(env):
+    """A planner of the plan a Nav2 stack would hand its controller once its obstacle layer has seen every unmapped
+    obstacle: the env's map with its obstacles drawn in as occupied cells, planned by our planner (Nav2's inflation,
+    NavFn's weights); ``plan(start, goal)`` gives the path's points. A test client's planner, not Nav2's."""
     import dataclasses
 
     import numpy as np
@@ -535,15 +535,19 @@ def _plan_around(env, start, goal):
     cells = site.cells.copy()
     o = env.sim.obstacles
     for kind, (ox, oy, yaw), (a, b) in zip(o.kind[0].tolist(), o.pose[0].tolist(), o.size[0].tolist(), strict=True):
-        lx, ly = (x - ox) * math.cos(yaw) + (y - oy) * math.sin(yaw), -(x - ox) * math.sin(yaw) + (y - oy) * math.cos(yaw)
+        c, s = math.cos(yaw), math.sin(yaw)
+        lx, ly = (x - ox) * c + (y - oy) * s, -(x - ox) * s + (y - oy) * c
         if kind == OBSTACLE_KINDS["cylinder"]:
             cells[np.hypot(lx, ly) <= a] = OCCUPIED
         elif kind == OBSTACLE_KINDS["box"]:
             cells[(abs(lx) <= a) & (abs(ly) <= b)] = OCCUPIED
-    seen = dataclasses.replace(site, cells=cells)
-    planner = Planner(GridWorlds([seen], [0], "cpu"), env.sim.footprint_radii)
-    planner.plan([0], torch.tensor([start], dtype=torch.float32), torch.tensor([goal], dtype=torch.float32))
-    return planner.points(0)
+    planner = Planner(GridWorlds([dataclasses.replace(site, cells=cells)], [0], "cpu"), env.sim.footprint_radii)
+
+    def plan(start, goal):
+        planner.plan([0], torch.tensor([start], dtype=torch.float32), torch.tensor([goal], dtype=torch.float32))
+        return planner.points(0)
+
+    return plan
 
 
 @pytest.mark.slow  # the simulator node, the deploy node and a client: about a minute
@@ -571,17 +575,19 @@ def test_a_trained_follow_path_policy_drives_nav2s_plan_to_the_goal_in_the_simul
     env.reset()
     start = env.sim.root_pose[0, :2].tolist()
     goal, goal_yaw = env.target[0].tolist(), float(env.target_yaw[0])
-    sim = subprocess.Popen([sys.executable, "-m", "atrv_warp.ros", "--ros-args", "-p", "robot:=jackal", "-p",
-                            "task:=follow_path", "-p", f"map:={office}", "-p", "publish_rate:=20.0", "-p",
-                            "duration:=150.0"], env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    plan = _seen_planner(env)
+    sim_args = ("robot:=jackal", "task:=follow_path", f"map:={office}", "publish_rate:=20.0", "real_time_factor:=2.0",
+                "duration:=150.0")  # twice real time: the deploy node keeps the simulated clock
+    sim = subprocess.Popen([sys.executable, "-m", "atrv_warp.ros", "--ros-args",
+                            *(a for p in sim_args for a in ("-p", p))], env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     node = subprocess.Popen([sys.executable, "-m", "atrv_warp.deploy", str(policy), "--ros-args", "-p",
                              "use_sim_time:=true", "-p", "robot:=jackal", "-p", "cmd_vel_topic:=cmd_vel"],
                             env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     client_node = rclpy.create_node("nav2_stand_in")
     truth, clock = [], [0.0]
     client_node.create_subscription(Odometry, "/ground_truth/odom", truth.append, 10)
-    client_node.create_subscription(Clock, "/clock", lambda m: clock.__setitem__(0, m.clock.sec + 1e-9 * m.clock.nanosec),
-                                    10)
+    client_node.create_subscription(
+        Clock, "/clock", lambda m: clock.__setitem__(0, m.clock.sec + 1e-9 * m.clock.nanosec), 10)
     client = ActionClient(client_node, FollowPath, "/follow_path")
 
     def spin(seconds, until):
@@ -596,7 +602,7 @@ def test_a_trained_follow_path_policy_drives_nav2s_plan_to_the_goal_in_the_simul
         p = truth[-1].pose.pose.position
         request = FollowPath.Goal()
         request.path.header.frame_id = "map"
-        points = _plan_around(env, [p.x, p.y], goal)
+        points = plan([p.x, p.y], goal)
         for k, (x, y) in enumerate(points):
             pose = PoseStamped()
             pose.header.frame_id = "map"

@@ -150,8 +150,9 @@ def load_deployable(path: str | Path) -> Deployable:
     Raises:
         PolicyRefused: One line naming the file and the problem: missing, not a ``torch.export`` archive, refused
             by the check, no or another contract format, a ``torque`` action, an ``arena`` observation (its fields
-            named), a contract the observation builder cannot read (or a ``path`` one without its checkers), a rate outside :data:`RATE_RANGE_HZ`, or a
-            program that does not take the contract's observation to a (1, 2) action.
+            named), a contract the observation builder cannot read (or a ``path`` one without its checkers), a rate
+            outside :data:`RATE_RANGE_HZ`, or a program that does not take the contract's observation to a (1, 2)
+            action.
     """
     path = str(path)
     if not Path(path).is_file():
