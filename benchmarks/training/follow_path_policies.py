@@ -20,7 +20,9 @@ The training's figures come from its run folder (``--run ROBOT=DIR``; default ``
 ``python -m atrv_warp.train --config follow_path env.robot=<robot> run.name=follow_path_<robot>`` writes
 it): its validation curve (256 episodes in the training places, under ``wide``, every 100,000 frames), the wall time
 until it first reached 90 % and the training's minutes; the run's ``best_policy.pt`` must be the shipped file (its
-sha256). Written to ``benchmarks/results/follow_path_policies.json``.
+sha256). Each nominal run also counts the collisions the robot met backing up (its mean commanded speed over the
+last four steps below -0.1 of its limit: the laser looks forward). Written to
+``benchmarks/results/follow_path_policies.json``.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ from benchmarks._common import (
     write_results,
 )
 
-VERSION = 1
+VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -79,6 +81,32 @@ def training_figures(run_dir: Path, shipped: Path) -> dict:
             "eval_curve": [{"frames": f, "success_rate": r, "wall_s": known.get(f)} for f, r in sorted(success.items())]}
 
 
+class BackingUp:
+    """Per episode (one world each), whether its robot was backing up when it ended: the mean commanded linear
+    speed over its last four steps below -0.1 of its limit (``attach`` for :func:`evaluate_policy`)."""
+
+    STEPS = 4
+
+    def __init__(self):
+        self.at_end: list[bool] = []
+
+    def attach(self, env):
+        import torch
+
+        recent: list[torch.Tensor] = []
+        ended: dict[int, bool] = {}
+
+        def on_step(_env, td):
+            recent.append(td["action"][:, 0].detach().float().cpu().clamp(-1.0, 1.0))
+            del recent[:-self.STEPS]
+            mean = torch.stack(recent).mean(0)
+            for w in torch.nonzero(td["next", "done"].reshape(-1).cpu()).flatten().tolist():
+                ended.setdefault(w, bool(mean[w] < -0.1))
+            self.at_end = [ended.get(w, False) for w in range(len(mean))]
+
+        return on_step
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=1000)
@@ -98,14 +126,19 @@ def main() -> int:
     from atrv_warp.cli.evaluate import evaluate_policy
     from atrv_warp.policy import SHIPPED_POLICIES, shipped_policy_path
     from atrv_warp.task.evaluation import EVAL_SEED, format_result
+    from atrv_warp.task.spec import END_REASONS
 
     def run(label: str, **kwargs):
         t0 = time.perf_counter()
-        evaluation = evaluate_policy(seed=EVAL_SEED, **kwargs)
+        backing = BackingUp()
+        evaluation = evaluate_policy(seed=EVAL_SEED, attach=backing.attach, **kwargs)
         result = evaluation.result
         print(format_result(label, result), f"({time.perf_counter() - t0:.0f} s)", flush=True)
         figures = result.as_dict() | {k: v for k, v in evaluation.extra.items()
                                       if k in ("success_median_path_ratio", "success_median_least_clearance_m")}
+        reasons = [END_REASONS[int(r)] for r in evaluation.record.end_reason]
+        figures["collision_backing_up_rate"] = sum(
+            r in ("obstacle", "wall") and b for r, b in zip(reasons, backing.at_end, strict=True)) / len(reasons)
         return figures, [bool(s) for s in evaluation.record.success]
 
     rows, policies = [], []
@@ -228,7 +261,9 @@ def follow_path_policies() -> str:
         d, t = r["policy_minus_baseline"], r["training"]
         reached = "not reached" if t["wall_s_to_threshold"] is None else f"{t['wall_s_to_threshold'] / 60:.1f} min"
         collisions = r["nominal"]["obstacle_rate"] + r["nominal"]["wall_rate"]
-        rows.append([f"`{r['policy']}`", f"**{_pct(r['nominal']['success_rate'])}**", _pct(collisions),
+        backing = r["nominal"].get("collision_backing_up_rate")
+        rows.append([f"`{r['policy']}`", f"**{_pct(r['nominal']['success_rate'])}**", _pct(collisions)
+                     + (f" ({_pct(backing)} backing up)" if backing is not None else ""),
                      f"**{_pct(r['wide']['success_rate'])}**", f"**{_pct(r['example_map']['success_rate'])}**",
                      _pct(r["baseline"]["success_rate"]),
                      f"{100 * d['difference']:+.1f} ({100 * d['ci95'][0]:+.1f} to {100 * d['ci95'][1]:+.1f})",
