@@ -21,10 +21,14 @@ Topics (relative: --ros-args -r __ns:=/rover_1 runs it for one rover of several)
        cannot take stops the rover), /tf and /tf_static
   out: cmd_vel (geometry_msgs/Twist, or TwistStamped), goal_status (std_msgs/String, JSON),
        command_path (nav_msgs/Path: the command's next second in base_frame, for RViz)
-  action: navigate_to_pose (nav2_msgs/action/NavigateToPose: RViz's "Nav2 Goal", Nav2's clients)
+  action: navigate_to_pose (nav2_msgs/action/NavigateToPose: RViz's "Nav2 Goal", Nav2's clients); a
+       follow_path policy serves follow_path (nav2_msgs/action/FollowPath: Nav2's behaviour tree) instead,
+       takes no goal_pose, and publishes on cmd_vel_nav (the velocity smoother's input)
 
 One launch file for every robot, its parameters from the robot file's [deploy] table (robot:=NAME|PATH):
   python -m atrv_warp.deploy --launch-files jackal
+and one that runs Nav2 around a follow_path policy (map:=, localization:=static|amcl|none):
+  python -m atrv_warp.deploy --launch-files --nav2 jackal
 
 Examples:
   python -m atrv_warp.export nav_deploy nav_deploy.pt2        # on the workstation
@@ -51,6 +55,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="check the robot named instead of POLICY.pt2 (a shipped robot's name or a robot file "
                              "whose [deploy] table gives its topics and frames), print the launch file (pass it the "
                              "same robot:=), and exit")
+    parser.add_argument("--nav2", action="store_true",
+                        help="with --launch-files: print the launch file that runs Nav2 around the node instead")
     return parser
 
 
@@ -63,12 +69,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv[:ros_at])
     if args.launch_files:
         from atrv_warp.deploy.launching import LAUNCH_FILE, robot_parameters
+        from atrv_warp.deploy.nav2_stack import NAV2_LAUNCH_FILE
 
         try:
             robot_parameters(args.policy)
         except ValueError as err:
             parser.error(" ".join(str(err).split()))
-        print(LAUNCH_FILE)
+        print(NAV2_LAUNCH_FILE if args.nav2 else LAUNCH_FILE)
         return 0
     from atrv_warp.deploy.contract import PolicyRefused, load_deployable
 

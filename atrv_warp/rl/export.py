@@ -84,6 +84,26 @@ def scanner_mount(robot, frame: str | None = None) -> dict | None:
             "yaw": math.atan2(float(m[1, 0]), float(m[0, 0]))}
 
 
+def robot_footprint(robot) -> list[list[float]] | None:
+    """The robot's outline about its chassis origin, as Nav2 writes a footprint (the corners [x, y] [m] of the
+    bounding rectangle of the simulator's footprint: its chassis box and wheels), what a Nav2 stack's costmaps need;
+    ``None`` where the robot's URDF cannot be read here (as :func:`scanner_mount`)."""
+    from atrv_warp.core.robot import RobotFileError, load_robot
+    from atrv_warp.sim.config import RoverConfig
+    from atrv_warp.sim.urdf import URDFError, footprint_points, load_rover
+
+    try:
+        here = load_robot(robot.name)
+        if here.urdf_sha256 != robot.urdf_sha256:
+            return None
+        rover = RoverConfig(robot=here.path)
+        points = footprint_points(load_rover(rover), rover)
+    except (OSError, RobotFileError, URDFError, ValueError):
+        return None
+    (x0, y0), (x1, y1) = points.min(axis=0), points.max(axis=0)
+    return [[round(float(x), 4), round(float(y), 4)] for x, y in ((x1, y1), (x1, y0), (x0, y0), (x0, y1))]
+
+
 def contract(source: Path, payload: dict, sim: SimConfig | None = None) -> dict:
     """What the exported program expects and gives, as plain values (the file's ``atrv_warp.json``, format 3).
 
@@ -91,7 +111,8 @@ def contract(source: Path, payload: dict, sim: SimConfig | None = None) -> dict:
     with low, high, unit and frame; the ``action``'s kind (``torque`` | ``twist``), its scale and units per column
     and the task's limits they come from (``action_scale`` [N·m], or ``max_linear`` [m/s] and ``max_angular``
     [rad/s]), and what a robot does with it; the scan's sectors; the action history. Added here: the format, the
-    source file, the policy's metadata, the ``robot`` it was trained on (name, title, limits, IMU and laser frames),
+    source file, the policy's metadata, the ``robot`` it was trained on (name, title, limits, IMU and laser frames,
+    its ``footprint_m``: :func:`robot_footprint`),
     the control period (``step_dt`` [s], ``rate_hz``), the radius within which its task counts a goal reached
     (``reach_radius_m``: the deploy node's default ``goal_tolerance``) and the scanner's geometry (``beams``,
     ``fov_rad``, ``range_min_m``, ``range_max_m``, ``frame``, and its ``mount`` on the chassis: :func:`scanner_mount`),
@@ -127,7 +148,8 @@ def contract(source: Path, payload: dict, sim: SimConfig | None = None) -> dict:
                   "laser_frame": robot.laser_frame, "recorded": record.recorded,
                   "limits": {"linear_velocity": lim.linear_velocity, "angular_velocity": lim.angular_velocity,
                              "linear_acceleration": lim.linear_acceleration,
-                             "angular_acceleration": lim.angular_acceleration}}
+                             "angular_acceleration": lim.angular_acceleration},
+                  "footprint_m": robot_footprint(robot)}
     contract = {"format": EXPORT_FORMAT, "source": str(source), "policy_meta": meta, "task": record.task.name,
                 "robot": robot_part, **spec, "step_dt": step_dt, "rate_hz": 1.0 / step_dt,
                 "reach_radius_m": task.reach_radius}
