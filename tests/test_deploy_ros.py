@@ -88,6 +88,16 @@ class Robot:
         return until is None
 
 
+def _interrupt(proc, robot: Robot) -> str:
+    """Ctrl-C to a node under test while ``robot`` goes on publishing (a node's shutdown stops the rover it drives);
+    killed after 10 s; its output."""
+    proc.send_signal(2)
+    robot.run(10, lambda: proc.poll() is not None)
+    if proc.poll() is None:
+        proc.kill()
+    return proc.communicate(timeout=30)[0]
+
+
 @pytest.mark.slow  # a live ROS 2 node
 def test_a_stale_sensor_and_shutdown_stop_the_rover_in_a_namespace(ros_env, tmp_path):
     policy = write_policy(tmp_path / "tiny.pt2", task_contract())
@@ -413,11 +423,7 @@ def test_navigate_to_pose_in_map_drives_feeds_back_cancels_and_is_replaced(ros_e
         assert robot.run(5, reached.done) and reached.result().status == GoalStatus.STATUS_SUCCEEDED
     finally:
         client.destroy()
-        proc.send_signal(2)
-        robot.run(10, lambda: proc.poll() is not None)
-        if proc.poll() is None:
-            proc.kill()
-        out = proc.communicate(timeout=30)[0]
+        out = _interrupt(proc, robot)
         robot.node.destroy_node()
     assert proc.returncode == 0, out[-3000:]
     assert "NavigateToPose goal rejected: it names no frame" in out and "the active goal goes on" in out, out[-3000:]
@@ -503,11 +509,7 @@ def test_follow_path_in_map_is_served_as_nav2s_controller_serves_it(ros_env, tmp
         assert proc.poll() is None
     finally:
         client.destroy()
-        proc.send_signal(2)
-        robot.run(10, lambda: proc.poll() is not None)
-        if proc.poll() is None:
-            proc.kill()
-        out = proc.communicate(timeout=30)[0]
+        out = _interrupt(proc, robot)
         robot.node.destroy_node()
     assert proc.returncode == 0, out[-3000:]
     assert f"FollowPath on {NS}/follow_path" in out and f"on {NS}/cmd_vel_nav" in out, out[-3000:]

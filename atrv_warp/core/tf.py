@@ -163,3 +163,14 @@ class TransformBuffer:
             else:  # after is the child of before: the parent's point in the child
                 point = self.edges[after][1].inverse().apply(point)
         return point
+
+    def transform_pose2d(self, pose: tuple[float, float, float], target: str, source: str
+                         ) -> tuple[float, float, float] | None:
+        """A planar pose (x [m], y [m], yaw [rad]) given in frame ``source``, expressed in frame ``target`` (the
+        heading carried as the point 1 m ahead of it); ``None`` where the tree does not join them (yet)."""
+        x, y, yaw = pose
+        here = self.transform_point((x, y, 0.0), target, source)
+        ahead = self.transform_point((x + math.cos(yaw), y + math.sin(yaw), 0.0), target, source)
+        if here is None or ahead is None:
+            return None
+        return here[0], here[1], math.atan2(ahead[1] - here[1], ahead[0] - here[0])

@@ -270,11 +270,10 @@ class Controller:
             return None, f"read as trained (the policy's scan.mount is unreadable: {trained!r:.80})"
         if not all(map(math.isfinite, (tx, ty, tyaw))):
             return None, "read as trained (the policy's scan.mount is not finite)"
-        origin = self.frames.transform_point((0.0, 0.0, 0.0), parent, frame) if frame and parent else None
-        ahead = self.frames.transform_point((1.0, 0.0, 0.0), parent, frame) if origin is not None else None
-        if ahead is None:
+        found = self.frames.transform_pose2d((0.0, 0.0, 0.0), parent, frame) if frame and parent else None
+        if found is None:
             return None, f"read as mounted where the policy's was (no /tf from {parent!r} to {frame!r})"
-        yaw = math.atan2(ahead[1] - origin[1], ahead[0] - origin[0]) - tyaw
+        origin, yaw = found[:2], found[2] - tyaw
         c, s = math.cos(tyaw), math.sin(tyaw)
         dx, dy = origin[0] - tx, origin[1] - ty
         mount = (c * dx + s * dy, -s * dx + c * dy, math.remainder(yaw, 2 * math.pi))
@@ -471,13 +470,8 @@ class Controller:
         x, y, yaw = position[0], position[1], float(quat_to_yaw(torch.tensor(position[3:7], dtype=torch.float64)))
         if frame == self.settings.odom_frame:
             return x, y, yaw
-        odom = self.settings.odom_frame
-        here = self.frames.transform_point((x, y, 0.0), frame, odom)
-        ahead = self.frames.transform_point((x + math.cos(yaw), y + math.sin(yaw), 0.0), frame, odom)
-        if here is None or ahead is None:
-            return None
-        pose = (here[0], here[1], math.atan2(ahead[1] - here[1], ahead[0] - here[0]))
-        return pose if all(map(math.isfinite, pose)) else None
+        pose = self.frames.transform_pose2d((x, y, yaw), frame, self.settings.odom_frame)
+        return pose if pose is not None and all(map(math.isfinite, pose)) else None
 
     def _sensors_hold(self, now: float) -> Tick | None:
         """A hold while a sensor the policy needs is missing, stale or unusable, else None."""

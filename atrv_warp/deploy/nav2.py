@@ -66,17 +66,17 @@ def interfaces(distro: str | None = None) -> Interfaces:
 
 def load_navigate_to_pose(distro: str | None = None, *, build: bool = True) -> tuple[type | None, str]:
     """(the ``NavigateToPose`` action class, where it came from), or (``None``, why not)."""
-    try:
-        found = interfaces(distro)
-    except ValueError as err:
-        return None, str(err)
-    return load_interface(found, "action", "NavigateToPose", build=build)
+    return _load("NavigateToPose", distro, build)
 
 
 def load_follow_path(distro: str | None = None, *, build: bool = True) -> tuple[type | None, str]:
     """(the ``FollowPath`` action class, where it came from), or (``None``, why not)."""
+    return _load("FollowPath", distro, build)
+
+
+def _load(name: str, distro: str | None, build: bool) -> tuple[type | None, str]:
     try:
         found = interfaces(distro)
     except ValueError as err:
         return None, str(err)
-    return load_interface(found, "action", "FollowPath", build=build)
+    return load_interface(found, "action", name, build=build)

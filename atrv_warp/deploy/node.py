@@ -237,13 +237,16 @@ class DeployNode(Node):
         if action is None:
             self.log.warning(f"no NavigateToPose action: {where}; goals come on the goal topic only")
             return
+        self._serve(action, "navigate_to_pose", self._execute, self._on_action_goal, self._on_action_accepted, where)
+
+    def _serve(self, action, name: str, execute, goal_callback, accepted_callback, where: str) -> None:
+        """An action server of ``action`` on ``name`` (relative: in the node's namespace); every cancel accepted."""
         from rclpy.action import ActionServer
 
-        self.action_server = ActionServer(self, action, "navigate_to_pose", self._execute,
-                                          goal_callback=self._on_action_goal,
-                                          handle_accepted_callback=self._on_action_accepted,
+        self.action_server = ActionServer(self, action, name, execute, goal_callback=goal_callback,
+                                          handle_accepted_callback=accepted_callback,
                                           cancel_callback=lambda _handle: self._cancel_response())
-        self.log.info(f"NavigateToPose on {self.get_namespace().rstrip('/')}/navigate_to_pose ({where})")
+        self.log.info(f"{action.__name__} on {self.get_namespace().rstrip('/')}/{name} ({where})")
 
     @staticmethod
     def _cancel_response():
@@ -290,14 +293,20 @@ class DeployNode(Node):
             result.error_msg = "" if state == "reached" else reason
             result.error_code = 0 if state in ("reached", "cancelled") else next(
                 (code for key, code in RESULT_CODES.items() if reason.startswith(key)), 9000)
+        self._settle(handle, state, reason)
+        return result
+
+    def _settle(self, handle, state: str, reason: str) -> None:
+        """End an action goal as its ``state`` says: succeeded where reached, cancelled where its client asked,
+        else aborted; one line."""
         if state == "reached":
             handle.succeed()
         elif state == "cancelled" and handle.is_cancel_requested:
             handle.canceled()
         else:
             handle.abort()
-        self.log.info(f"NavigateToPose goal {state}" + (f": {reason}" if reason else ""))
-        return result
+        name = type(handle.request).__name__.removesuffix("_Goal")
+        self.log.info(f"{name} goal {state}" + (f": {reason}" if reason else ""))
 
     # ---------------------------------------------------------------- FollowPath
     def _start_follow_path_server(self) -> None:
@@ -312,13 +321,7 @@ class DeployNode(Node):
             self.log.error(f"no FollowPath action: {where}; this policy follows Nav2's plans and takes no goal "
                            "otherwise: the rover holds still")
             return
-        from rclpy.action import ActionServer
-
-        self.action_server = ActionServer(self, action, "follow_path", self._execute_path,
-                                          goal_callback=self._accept_path,
-                                          handle_accepted_callback=self._on_path_accepted,
-                                          cancel_callback=lambda _handle: self._cancel_response())
-        self.log.info(f"FollowPath on {self.get_namespace().rstrip('/')}/follow_path ({where})")
+        self._serve(action, "follow_path", self._execute_path, self._accept_path, self._on_path_accepted, where)
 
     @staticmethod
     def _accept_path(_request):
@@ -358,13 +361,7 @@ class DeployNode(Node):
             failed = state == "aborted"
             result.error_code = FOLLOW_PATH_CODES.get(reason.split(":", 1)[0], 100) if failed else 0
             result.error_msg = reason if failed else ""
-        if state == "reached":
-            handle.succeed()
-        elif state == "cancelled" and handle.is_cancel_requested:
-            handle.canceled()
-        else:
-            handle.abort()
-        self.log.info(f"FollowPath goal {state}" + (f": {reason}" if reason else ""))
+        self._settle(handle, state, reason)
         return result
 
     def _resolve(self, state: str, reason: str) -> None:
