@@ -110,15 +110,33 @@ def test_a_bad_path_is_aborted_with_nav2s_code_and_the_old_path_does_not_drive_o
     tick = c.tick(0.4)
     assert tick.command == (0.0, 0.0) and tick.status["state"] == "aborted" and tick.status["reason"] == reason
     assert c.tick(0.6).command is None  # no goal: nothing drives
+    sensors(c, 0.7)
+    assert c.on_path(path_msg([(0.0, 0.0), (4.0, 0.0)], frame="odom"), 0.7)[0] is None  # a good path drives again
+    assert c.tick(0.8).status["state"] == "active"
 
 
-def test_a_path_whose_frame_has_no_transform_is_aborted_as_nav2s_tf_error(path_policy):
+def test_a_path_waits_for_its_frames_transform_within_nav2s_tolerance_then_ends_with_tf_error(path_policy):
+    """The rover holds while ``/tf`` does not join ``odom`` to the path's frame; a transform within 0.3 s (Nav2's
+    costmap ``transform_tolerance``) is followed, none aborts with ``TF_ERROR``."""
     c = Controller(path_policy, Settings(time_limit=0.0), tf=True)
     sensors(c, 0.0)
     assert c.on_path(path_msg([(0.0, 0.0), (4.0, 0.0)], frame="map"), 0.0)[0] is None
     tick = c.tick(0.2)
+    assert tick.status["state"] == "holding" and tick.command == (0.0, 0.0)
+    assert "waiting for the transform" in tick.log[0]
+    c.on_tf(tf_msg(("map", "odom", 0.0, 0.0, 0.0)), 0.3)  # late (as /tf_static for a node just started), in time
+    sensors(c, 0.4)
+    assert c.tick(0.4).status["state"] == "active"
+    assert c.on_path(path_msg([(0.0, 0.0), (4.0, 0.0)], frame="elsewhere"), 0.5)[0] is None
+    sensors(c, 0.6)
+    assert c.tick(0.6).status["state"] == "holding"
+    sensors(c, 0.8)
+    assert c.tick(0.8).status["state"] == "holding"  # 0.2 s without it
+    sensors(c, 1.0)
+    tick = c.tick(1.0)
     assert tick.status["state"] == "aborted" and tick.command == (0.0, 0.0)
-    assert tick.status["reason"] == "TF_ERROR: no transform from 'odom' to the path's frame 'map' on /tf"
+    assert tick.status["reason"] == ("TF_ERROR: no transform from 'odom' to the path's frame 'elsewhere' on /tf "
+                                     "within 0.3 s")
 
 
 def test_a_goal_seeking_policy_takes_no_path_and_the_observation_names_a_missing_plan(path_policy, tmp_path):

@@ -581,7 +581,8 @@ def test_a_trained_follow_path_policy_drives_nav2s_plan_to_the_goal_in_the_simul
     sim_args = ("robot:=jackal", "task:=follow_path", f"map:={office}", "publish_rate:=20.0", "real_time_factor:=2.0",
                 "duration:=150.0")  # twice real time: the deploy node keeps the simulated clock
     sim = subprocess.Popen([sys.executable, "-m", "atrv_warp.ros", "--ros-args",
-                            *(a for p in sim_args for a in ("-p", p))], env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                            *(a for p in sim_args for a in ("-p", p))], env=ros_env, stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True)
     node = subprocess.Popen([sys.executable, "-m", "atrv_warp.deploy", str(policy), "--ros-args", "-p",
                              "use_sim_time:=true", "-p", "robot:=jackal", "-p", "cmd_vel_topic:=cmd_vel"],
                             env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

@@ -27,7 +27,7 @@ from atrv_warp.core.tf import TransformBuffer, frame_id
 # atrv_warp.deploy.contract and atrv_warp.deploy.messages (EXPORT_FORMAT, RATE_RANGE_HZ, PolicyRefused, load_deployable and
 # scan_geometry are imported for that alone).
 from atrv_warp.deploy.contract import EXPORT_FORMAT, RATE_RANGE_HZ, Deployable, PolicyRefused, load_deployable  # noqa: F401
-from atrv_warp.deploy.follow import FollowedPath, PathRefused, read_path
+from atrv_warp.deploy.follow import TRANSFORM_TOLERANCE, FollowedPath, PathRefused, read_path
 from atrv_warp.deploy.messages import (
     read_imu,
     read_odometry,
@@ -437,8 +437,9 @@ class Controller:
         return self._drive()
 
     def _tick_path(self, now: float) -> Tick:
-        """A period on a path: held while a sensor is unusable; aborted where no transform joins the odometry to the
-        path's frame (``TF_ERROR``) or the progress checker fails (``FAILED_TO_MAKE_PROGRESS``); reached where the goal
+        """A period on a path: held while a sensor is unusable or ``/tf`` does not join the odometry to the path's
+        frame yet; aborted where it has not for :data:`~atrv_warp.deploy.follow.TRANSFORM_TOLERANCE` (``TF_ERROR``) or
+        the progress checker fails (``FAILED_TO_MAKE_PROGRESS``); reached where the goal
         checker says so; else the policy drives on the plan as it reads from the robot's pose."""
         route, odom = self.route, self.settings.odom_frame
         hold = self._sensors_hold(now)
@@ -449,9 +450,12 @@ class Controller:
                                             f"{s.movement_time_allowance:g} s ({hold.status['reason']})")
             return hold
         pose = self._pose_in(route.frame)
-        if pose is None:
+        if route.transform_lost(pose is not None, now):
             return self._end("aborted", f"TF_ERROR: no transform from {odom!r} to the path's frame {route.frame!r} "
-                                        "on /tf")
+                                        f"on /tf within {TRANSFORM_TOLERANCE:g} s")
+        if pose is None:
+            return self._hold(f"waiting for the transform from {odom!r} to the path's frame {route.frame!r} on /tf",
+                              "no transform")
         route.follow(pose)
         if route.goal_reached(pose):
             s = route.settings

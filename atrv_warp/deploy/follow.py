@@ -22,12 +22,19 @@ import torch
 from atrv_warp.core.geometry import quat_to_yaw
 from atrv_warp.core.tf import frame_id
 
-__all__ = ["MAX_PATH_POSES", "FollowedPath", "PathRefused", "read_path"]
+__all__ = ["MAX_PATH_POSES", "TRANSFORM_TOLERANCE", "FollowedPath", "PathRefused", "read_path"]
 
 MAX_PATH_POSES = 20_000
 """The most poses a path may have: a longer one is aborted (``INVALID_PATH``), not held in memory. Nav2's planners
 give a pose per costmap cell: 20,000 is a 1 km path at 5 cm, or 100 m of a path that doubles back on itself in a
 100 m x 100 m map, more than any plan a controller is handed."""
+
+
+TRANSFORM_TOLERANCE = 0.3
+"""How long [s] a path waits, the rover held, for ``/tf`` to join the odometry to its frame before it is aborted with
+``TF_ERROR``: Nav2's costmap ``transform_tolerance`` default (ros-navigation/navigation2@7436bbe7
+``nav2_costmap_2d/src/costmap_2d_ros.cpp``, Kilted). A transform that comes late (a path sent as the node starts,
+before ``/tf_static`` reaches it) is waited for; one that never comes ends the goal."""
 
 
 class PathRefused(ValueError):
@@ -88,6 +95,8 @@ class FollowedPath:
         self.progress_at: tuple[float, float, float] | None = None
         """The progress checker's (x [m], y [m], time [s]): where and when the robot last left its circle."""
         self.started = now
+        self.no_transform_since: float | None = None
+        """When ``/tf`` last stopped joining the odometry to :attr:`frame` [s] (None: it joins them)."""
         self.replace(frame, xy, goal_yaw)
 
     def replace(self, frame: str, xy: torch.Tensor, goal_yaw: float) -> None:
@@ -125,6 +134,16 @@ class FollowedPath:
             self.progress_at = (pose[0], pose[1], now)
             return False
         return now - at[2] > s.movement_time_allowance
+
+    def transform_lost(self, found: bool, now: float) -> bool:
+        """Whether the path's frame has been out of ``/tf``'s reach for more than :data:`TRANSFORM_TOLERANCE`, given
+        whether it was ``found`` this period."""
+        if found:
+            self.no_transform_since = None
+            return False
+        if self.no_transform_since is None:
+            self.no_transform_since = now
+        return now - self.no_transform_since > TRANSFORM_TOLERANCE
 
     def held_too_long(self, now: float) -> bool:
         """While the rover is held (a sensor unusable): True once it has not left the progress checker's circle for

@@ -5,7 +5,8 @@ A ROS installation's ``nav2_msgs`` is used where there is one (a robot running N
 (rclpy from the package index), the action's type support is built from the definition of the distribution the
 node runs on (``$ROS_DISTRO``, else :data:`DEFAULT_DISTRO`) by :mod:`atrv_warp.core.ros_interfaces`, both actions
 in one ``nav2_msgs``. The definitions differ: Humble's results carry no error code; Jazzy's and Kilted's give an
-``error_code`` and an ``error_msg``, and their ``FollowPath`` goal a ``progress_checker_id``. From Iron on, the middleware carries each type's hash (RIHS01), computed from the fields of the definition built, so a client
+``error_code`` and an ``error_msg``, and their ``FollowPath`` goal a ``progress_checker_id``. From Iron on, the
+middleware carries each type's hash (RIHS01), computed from the fields of the definition built, so a client
 of another distribution's definition does not match.
 """
 
@@ -35,8 +36,8 @@ FOLLOW_PATH: dict[str, str] = {
     'jazzy': '#goal definition\nnav_msgs/Path path\nstring controller_id\nstring goal_checker_id\nstring progress_checker_id\n---\n#result definition\n\n# Error codes\n# Note: The expected priority order of the errors should match the message order\nuint16 NONE=0\nuint16 UNKNOWN=100\nuint16 INVALID_CONTROLLER=101\nuint16 TF_ERROR=102\nuint16 INVALID_PATH=103\nuint16 PATIENCE_EXCEEDED=104\nuint16 FAILED_TO_MAKE_PROGRESS=105\nuint16 NO_VALID_CONTROL=106\nuint16 CONTROLLER_TIMED_OUT=107\n\nstd_msgs/Empty result\nuint16 error_code\nstring error_msg\n---\n#feedback definition\nfloat32 distance_to_goal\nfloat32 speed\n',
     'kilted': '#goal definition\nnav_msgs/Path path\nstring controller_id\nstring goal_checker_id\nstring progress_checker_id\n---\n#result definition\n\n# Error codes\n# Note: The expected priority order of the errors should match the message order\nuint16 NONE=0\nuint16 UNKNOWN=100\nuint16 INVALID_CONTROLLER=101\nuint16 TF_ERROR=102\nuint16 INVALID_PATH=103\nuint16 PATIENCE_EXCEEDED=104\nuint16 FAILED_TO_MAKE_PROGRESS=105\nuint16 NO_VALID_CONTROL=106\nuint16 CONTROLLER_TIMED_OUT=107\n\nstd_msgs/Empty result\nuint16 error_code\nstring error_msg\n---\n#feedback definition\nfloat32 distance_to_goal\nfloat32 speed\n',
 }
-"""``nav2_msgs/action/FollowPath.action`` as each distribution's branch of Nav2 defines it (:data:`FOLLOW_PATH_SOURCES`):
-what the controller server serves on ``follow_path`` and the behaviour tree's ``FollowPath`` node sends."""
+"""``nav2_msgs/action/FollowPath.action`` as each distribution's branch of Nav2 defines it
+(:data:`FOLLOW_PATH_SOURCES`): what the controller server serves on ``follow_path`` and the behaviour tree's ``FollowPath`` node sends."""
 FOLLOW_PATH_SOURCES = {
     'humble': "ros-navigation/navigation2@70da81453d720659071e89d61fdb79bfc22f7a90:nav2_msgs/action/FollowPath.action",
     'jazzy': "ros-navigation/navigation2@3140a6a65c2ecbcf975dac94e3f3c64c0d9efc84:nav2_msgs/action/FollowPath.action",

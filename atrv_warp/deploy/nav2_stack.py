@@ -1,19 +1,20 @@
 """A Nav2 stack around ``atrv-deploy`` as its controller: ``launch/nav2.launch.py`` and the parameters it writes.
 
 ``ros2 launch $(python -m atrv_warp.deploy --launch-files --nav2 jackal) robot:=jackal policy:=$PWD/path.pt2
-map:=$PWD/office.yaml`` starts ``atrv-deploy`` first (a ``follow_path`` policy: it serves ``FollowPath`` and publishes on
-``cmd_vel_nav``), then Nav2's ``map_server``, ``amcl`` (``localization:=amcl``; ``static``: a fixed ``map -> odom``;
+map:=$PWD/office.yaml`` starts ``atrv-deploy`` first (a ``follow_path`` policy: it serves ``FollowPath`` and publishes
+on ``cmd_vel_nav``), then Nav2's ``map_server``, ``amcl`` (``localization:=amcl``; ``static``: a fixed ``map -> odom``;
 ``none``: yours or a simulator's), ``planner_server`` with its global costmap, a local costmap of its own
-(``nav2_costmap_2d``, named ``local_costmap`` in ``local_costmap`` as the controller server would host it: the
-behaviour tree clears it by ``local_costmap/clear_entirely_local_costmap`` and the behaviour server reads its
-``costmap_raw`` and footprint), ``behavior_server``, ``bt_navigator`` (its default tree: plan, follow, recover) and
-``velocity_smoother`` (``cmd_vel_nav`` in, the robot's command topic out), all brought up by ``lifecycle_manager``,
-whose ``node_names`` list Nav2's nodes, not ours (``atrv-deploy`` is no lifecycle node). No Nav2 controller server
-runs: the policy is the controller.
+(``nav2_costmap_2d``, named ``local_costmap`` in ``local_costmap`` as the controller server would host it: the behaviour
+tree clears it by ``local_costmap/clear_entirely_local_costmap`` and the behaviour server reads its ``costmap_raw`` and
+footprint), ``behavior_server``, ``bt_navigator`` (its default tree: plan, follow, recover) and ``velocity_smoother``
+(``cmd_vel_nav`` in, the robot's command topic out), all brought up by ``lifecycle_manager``, whose ``node_names`` list
+Nav2's nodes, not ours (``atrv-deploy`` is no lifecycle node). No Nav2 controller server runs: the policy is the
+controller.
 
 :func:`nav2_parameters` writes the parameters: Nav2's own names as Kilted's ``nav2_bringup`` sets them
 (:data:`SOURCE`), with the robot's frames and topics (its robot file's ``[deploy]`` table), its footprint (the one the
-policy trained with, from the exported file; ``footprint:=`` for an older file), and the velocity smoother's limits at the
+policy trained with, from the exported file; ``footprint:=`` for an older file), and the velocity smoother's limits at
+the
 speeds and accelerations the policy trained with (read from the exported file's contract: a smoother below them
 changes how it drives). ``tests/test_nav2_stack.py`` checks every name against Nav2's. This module imports no ROS;
 the launch description's ``launch`` and ``launch_ros`` come with a ROS install. Not run against Nav2 here (no ROS

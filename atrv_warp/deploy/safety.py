@@ -45,7 +45,8 @@ def parse_zone(name: str, text: str) -> tuple[tuple[float, float], ...]:
         points = json.loads(text)
         zone = tuple((float(x), float(y)) for x, y in points)
     except (ValueError, TypeError) as err:
-        raise ParameterError(f"parameter {name} must be a polygon as Nav2 writes its points, \"[[x, y], [x, y], [x, y]]\" "
+        raise ParameterError(f"parameter {name} must be a polygon as Nav2 writes its points, "
+                             f"\"[[x, y], [x, y], [x, y]]\" "
                          f"[m], got {text!r} ({type(err).__name__})") from None
     if len(zone) < 3 or not all(math.isfinite(v) for p in zone for v in p):
         raise ParameterError(f"parameter {name} must have at least three finite points [m], got {text!r}")
