@@ -22,13 +22,15 @@ Topics (per rover; under ``/rover_<k>`` when ``num_rovers`` > 1):
     ``odometry/filtered`` (nav_msgs/Odometry, out): the encoders' distance along the gyro's heading (what
     ``robot_localization`` gives; the robot observation's odometry), same frames as ``odom``.
     ``reset_episode`` (std_msgs/Int32, in): replay evaluation episode k of ``episode_seed`` (its world,
-    start and goal; one rover, task nav_deploy), stepping the task's environment with the last
+    start and goal; one rover, a twist task: nav_deploy, follow_path), stepping the task's environment with the last
     ``cmd_vel`` until it ends; ``episode`` (std_msgs/String, out, JSON): ``{"event": "start", "episode",
-    "seed", "start", "goal"}`` (world = odometry frame at the start), then ``{"event": "end",
+    "seed", "start", "goal", "goal_yaw"}`` (world = odometry frame at the start), then ``{"event": "end",
     "episode", "end_reason", "steps", "unanswered"}`` (``lockstep``: the steps taken on
     ``lockstep_timeout``, without a new ``cmd_vel``) (benchmarks/transfer/deploy_closed_loop.py). A reset advances ``/clock`` by
     one step; in ``lockstep`` the episode's last state goes out without ``/clock`` and the simulator holds until
     the next ``reset_episode`` (send a controller its next goal meanwhile: it acts first on the reset state).
+    ``plan`` (nav_msgs/Path, out; a path task in a map): the replayed episode's plan in ``map``, at its start and each
+    replan, as Nav2's planner server publishes one (for a ``FollowPath`` client).
     ``ground_truth/odom`` (nav_msgs/Odometry, out): the simulator's pose (frame ``world``) and
     body-frame twist.
     ``joint_states`` (sensor_msgs/JointState, out): wheel joint positions [rad] and velocities.

@@ -332,9 +332,14 @@ class DeployNode(Node):
 
     def _on_path_accepted(self, handle) -> None:
         """A new goal while one is active takes over its path without stopping; the replaced goal ends aborted with
-        an empty result (Nav2's preemption)."""
-        self._preempt = self.action is not None and self.controller.route is not None
-        self._resolve("replaced", "replaced by a new FollowPath goal")
+        an empty result (Nav2's preemption). One whose cancel was asked for and not yet carried out ends cancelled,
+        and the new goal starts afresh (its checkers and last actions new), as after the stop it asked for."""
+        cancelled = self.action is not None and self.action[0].is_cancel_requested
+        self._preempt = self.action is not None and not cancelled and self.controller.route is not None
+        if cancelled:
+            self._resolve("cancelled", "cancelled by the client")
+        else:
+            self._resolve("replaced", "replaced by a new FollowPath goal")
         handle.execute()
 
     async def _execute_path(self, handle):

@@ -404,6 +404,9 @@ class RoverEnv(EnvBase):
         self.planner = None
         """The worlds' global planner (:class:`~atrv_warp.sim.planner.Planner`), or ``None``."""
         self.path = self.path_length = self.path_remaining = self.clearance = None
+        self.replanned = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+        """(N,) the worlds whose plan was searched again in the last step (every ``replan_period``; a reset plans
+        too): what a controller is handed anew, e.g. the ROS simulator node's ``plan`` topic."""
         if cfg is None or not self.sim.maps.maps:
             return
         self.planner = Planner(self.sim.maps, self.sim.footprint_radii, cfg, obstacles=self.sim.obstacles.kernel)
@@ -453,6 +456,7 @@ class RoverEnv(EnvBase):
         """The worlds due (every ``replan_period`` of their episode) plan again from their robots' poses (a path
         task's from where they were a step before: the plan a controller is handed was planned a moment ago)."""
         due = (self.step_count.reshape(-1) % self._replan_steps == 0) & self._mapped
+        self.replanned = due
         if bool(due.any()):
             self.planner.replan(torch.nonzero(due).flatten(),
                                 self._plan_from if self._paths else self.sim.root_pose[:, :2])

@@ -1,6 +1,7 @@
 """The deploy node in closed loop over ROS 2, paired with ``evaluate`` on the same episodes.
 
-Run: ``python -m benchmarks.transfer.deploy_closed_loop [POLICY] [--episodes 200] [--seed 2024] [--out FILE] [--trace FILE]``
+Run: ``python -m benchmarks.transfer.deploy_closed_loop [POLICY] [--episodes 200] [--seed 2024] [--map YAML]
+[--out FILE] [--trace FILE]``
 
 POLICY is a policy file (``best_policy.pt``) or a shipped policy's name (default: ``nav_deploy``). Two ways over
 the same seeded episodes of its task (the evaluation set of ``--seed``: each episode's world, start and goal):
@@ -21,6 +22,19 @@ the same seeded episodes of its task (the evaluation set of ``--seed``: each epi
    (the last state goes out without ``/clock``), so the next goal reaches the node before it acts again. The node
    never ends a goal itself (``goal_tolerance`` 0), as ``evaluate``'s policy drives until the environment ends the
    episode on the true position.
+
+A ``follow_path`` policy (its observation is Nav2's plan) runs its episodes in a map (``--map``, default the example
+office floor: ``evaluate --map`` on the same episodes), and this script plays Nav2's part as its behaviour tree does
+(:class:`PathDriver`): the episode's first plan goes to the node as a ``FollowPath`` goal in ``map`` before the reset;
+the simulator, as Nav2's planner server, publishes each replan on ``plan`` (every second, with the obstacle layer's
+marks, as the environment replans), and each goes to the node as a new goal, which takes over the path without
+stopping. The simulator publishes ``/tf`` (``map -> odom`` puts the fused odometry's ``base_link`` at the true pose,
+``tf_odometry``), through which the node carries each plan into its odometry frame; the node's goal and progress
+checkers are Nav2's defaults, as the task's are. A new plan reaches the node while it acts, so a step may act on the
+plan of a second before (on a robot too); an episode the node ended itself (its goal checker, on its pose) while
+the simulator's goes on holds the rover still (this script answers each state with a zero ``cmd_vel``,
+``held_after_goal``). The node's answer to the last goal is usually ``running``: in lockstep the episode's last
+state goes out without ``/clock``, so the node does not judge it.
 
 Prints both success rates, their paired difference (ROS 2 - evaluate) with its 95 % confidence interval (normal
 approximation of the per-episode differences), how many episodes ended identically (the same end after the same
@@ -50,16 +64,20 @@ VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
-SIM_PARAMETERS = ("task:=nav_deploy", "real_time_factor:=0.0", "lockstep:=true", "lockstep_timeout:=10.0",
+EXAMPLE_MAP = "atrv_warp/assets/maps/office.yaml"
+"""Where a path policy's episodes run (``--map``; from the repository's root): the example office floor, a map no
+policy trained in."""
+SIM_PARAMETERS = ("real_time_factor:=0.0", "lockstep:=true", "lockstep_timeout:=10.0",
                   "scan_beams:=64", "scan_noise:=0.0", "scan_dropout:=0.0",
-                  "imu_accel_noise:=0.0", "imu_gyro_noise:=0.0", "wheel_speed_noise:=0.0", "tf:=false")
+                  "imu_accel_noise:=0.0", "imu_gyro_noise:=0.0", "wheel_speed_noise:=0.0")
 """The simulator node's parameters: the evaluation's sensors (no noise, the task's 64-beam scan), in lockstep with the
 controller (at the policy's rate: :func:`world_parameters`): a step without the node's answer (``unanswered``, after
 10 s) would act on the held command and put the answers a step late for the rest of the episode."""
-DEPLOY_PARAMETERS = ("use_sim_time:=true", "odom_topic:=odometry/filtered", "goal_tolerance:=0.0",
-                     "odom_jump_margin:=1000.0")
+DEPLOY_PARAMETERS = ("use_sim_time:=true", "odom_topic:=odometry/filtered", "cmd_vel_topic:=cmd_vel",
+                     "goal_tolerance:=0.0", "odom_jump_margin:=1000.0")
 """The deploy node's: the simulator's clock, the fused odometry (encoders + gyro, what the robot observation is
-trained on), a time limit past the episode's (the simulator ends each episode first), no odometry-jump check (each
+trained on), its commands straight to the simulated base (a path policy's go to Nav2's velocity smoother,
+``cmd_vel_nav``, by default), a time limit past the episode's (the simulator ends each episode first), no odometry-jump check (each
 episode's reset restarts the odometry under the goal sent for it, on purpose; on a robot such a jump aborts the
 goal), and no goal tolerance:
 ``evaluate`` ends an episode when the *true* position is within 1 m and its policy drives on until then, while a
@@ -98,26 +116,37 @@ def resolve_policy(name: str) -> Path:
     return path
 
 
-def evaluate_episodes(path: Path, episodes: int, seed: int) -> tuple[list[dict], list[tuple[float, float]], float]:
-    """Each episode's ``end_reason`` and ``steps`` under ``evaluate``, its goal (x, y) [m] in the world (= the
-    odometry frame at its start), and the success rate with :class:`StopWithin` :data:`STOP_TOLERANCE`."""
+def evaluate_episodes(path: Path, episodes: int, seed: int, site: str | None = None
+                      ) -> tuple[list[dict], list[dict], float | None]:
+    """Each episode's ``end_reason`` and ``steps`` under ``evaluate``; what a controller is handed for it (its
+    ``goal`` (x, y) [m] in the world (= the odometry frame at its start) and, in the map ``site`` (a path task), its
+    ``goal_yaw`` and first ``plan``); the success rate with :class:`StopWithin` :data:`STOP_TOLERANCE` (None for a
+    path task, whose node judges the goal as the environment does)."""
     from atrv_warp.policy import load_policy, policy_record
     from atrv_warp.task.env import ATRVjrEnv
     from atrv_warp.task.evaluation import run_episodes
     from atrv_warp.task.spec import END_REASONS, observation_fields
+    from atrv_warp.world.places import read_map_files
 
     record = policy_record(path)
     task = record.task.name
-    env = ATRVjrEnv(episodes, task=record.task, robot=robot_of(record))  # the task as it trained, on its robot
+    maps = read_map_files([site] if site else [])
+    # the task as it trained, on its robot
+    env = ATRVjrEnv(episodes, task=record.task, robot=robot_of(record), maps=maps)
     env.set_seed(seed)
     env.reset()  # the episodes run_episodes draws again (it seeds and resets the same way)
-    goals = [tuple(g) for g in env.target.tolist()]
+    given = [{"goal": tuple(g)} for g in env.target.tolist()]
+    if site:
+        for k, g in enumerate(given):
+            g["goal_yaw"], g["plan"] = float(env.target_yaw[k]), env.planner.points(k).tolist()
     policy = load_policy(path, task=task)
     record = run_episodes(policy, env, seed=seed)
     ends = [{"end_reason": END_REASONS[int(r)], "steps": int(n)} for r, n in zip(record.end_reason, record.steps)]
+    if site:
+        return ends, given, None
     index = [f.name for f in observation_fields(env.task_cfg)].index("goal_distance")
     stopping = run_episodes(StopWithin(policy, index, STOP_TOLERANCE), env, seed=seed)
-    return ends, goals, float(stopping.success.float().mean())
+    return ends, given, float(stopping.success.float().mean())
 
 
 class Driver:
@@ -149,13 +178,14 @@ class Driver:
         return self.wait(lambda: self.reset.get_subscription_count() > 0 and self.goal.get_subscription_count() > 0,
                          timeout)
 
-    def run(self, episode: int, goal: tuple[float, float], timeout: float) -> dict:
+    def run(self, episode: int, given: dict, timeout: float) -> dict:
         """One episode through ROS 2, its ``goal`` first (the node has it before the simulator's reset state, and the
         simulator holds between episodes): ``end_reason``, ``steps``, the deploy node's last ``state`` and ``reason``,
         ``stop_step`` (the first step at which its odometry was within :data:`STOP_TOLERANCE` of the goal, or None),
         and its ``compute_ms`` per step."""
         from rclpy.duration import Duration
 
+        goal = given["goal"]
         self.events.clear()
         self.status.clear()
         msg = self.PoseStamped()
@@ -187,6 +217,132 @@ class Driver:
                                and s.get("compute_ms") is not None]}
 
 
+class PathDriver(Driver):
+    """For a path task: Nav2's part as its behaviour tree plays it, with the simulator as its planner server. Each
+    episode's first plan goes to the deploy node as a ``FollowPath`` goal before the simulator's reset (as a goal
+    does for :class:`Driver`); each plan the simulator publishes on ``plan`` after that (every replan, with the
+    obstacle layer's marks, as ``evaluate``'s environment replans) goes as a new goal, which takes over the path
+    without stopping. A goal the episode's end leaves running is cancelled, so the next episode's starts afresh."""
+
+    def __init__(self):
+        super().__init__()
+        from nav_msgs.msg import Path as PathMsg
+        from rclpy.action import ActionClient
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+        from atrv_warp.deploy.nav2 import load_follow_path
+
+        self.FollowPath, where = load_follow_path()
+        if self.FollowPath is None:
+            raise RuntimeError(f"no FollowPath action here: {where}")
+        self.PathMsg = PathMsg
+        self.client = ActionClient(self.node, self.FollowPath, "/follow_path")
+        from geometry_msgs.msg import Twist
+        from rosgraph_msgs.msg import Clock
+
+        self.plans = []
+        qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        self.node.create_subscription(PathMsg, "/plan", self.plans.append, qos)
+        self.ticks = 0  # /clock messages seen: each is a state the rover's controller answers
+        self.node.create_subscription(Clock, "/clock", lambda _m: setattr(self, "ticks", self.ticks + 1), 10)
+        self.zero, self.cmd = Twist(), self.node.create_publisher(Twist, "/cmd_vel", 10)
+        self.handles, self.results = [], {}  # this episode's goals' send futures, in order; their result futures
+
+    def ready(self, timeout: float) -> bool:
+        return self.wait(lambda: self.reset.get_subscription_count() > 0 and self.client.server_is_ready(), timeout)
+
+    @staticmethod
+    def path_message(given: dict):
+        """The episode's first plan (``evaluate``'s) as the simulator publishes it."""
+        from atrv_warp.integrations.ros.rover_io import plan_message
+
+        return plan_message(given["plan"], given["goal_yaw"], "map")
+
+    def send(self, path_msg):
+        goal = self.FollowPath.Goal()
+        goal.path = path_msg
+        self.handles.append(self.client.send_goal_async(goal))
+        return self.handles[-1]
+
+    def goal_over(self) -> bool:
+        """The latest goal has ended (the node answered it): nothing drives the rover any more."""
+        k = len(self.handles) - 1
+        if not self.handles[k].done():
+            return False
+        if not self.handles[k].result().accepted:
+            return True
+        if k not in self.results:
+            self.results[k] = self.handles[k].result().get_result_async()
+        return self.results[k].done()
+
+    def finish_goal(self) -> None:
+        """Cancel the last goal where it still runs (the episode ended on the simulator's side: a collision, the
+        step limit); the node carries the cancel out when the next goal comes."""
+        if self.handles and self.handles[-1].done() and self.handles[-1].result().accepted:
+            handle = self.handles[-1].result()
+            result = handle.get_result_async()
+            if not self.wait(result.done, 0.1):
+                cancel = handle.cancel_goal_async()
+                self.wait(cancel.done, 10.0)
+
+    def run(self, episode: int, given: dict, timeout: float) -> dict:
+        """One episode through ROS 2: its first plan as a ``FollowPath`` goal, then the reset, then every replan as
+        a new goal, until the simulator ends it: ``end_reason``, ``steps``, the node's answer to the last goal
+        (``node_state``: succeeded / aborted / canceled / running, ``node_reason``: its error code), ``replans``
+        and the node's ``compute_ms`` per step."""
+        from action_msgs.msg import GoalStatus
+
+        self.finish_goal()
+        self.events.clear()
+        self.status.clear()
+        self.handles, self.results = [], {}
+        sent = self.send(self.path_message(given))
+        if not self.wait(sent.done, 30.0) or not sent.result().accepted:
+            raise RuntimeError(f"the deploy node did not accept episode {episode}'s FollowPath goal in 30 s")
+        self.plans.clear()
+        self.reset.publish(self.Int32(data=episode))
+        started = lambda: any(e["event"] == "start" and e["episode"] == episode for e in self.events) and self.plans
+        if not self.wait(started, 30.0):
+            raise RuntimeError(f"the simulator did not start episode {episode} (with its plan) in 30 s")
+        start, first = next(e for e in self.events if e["event"] == "start"), self.plans.pop(0)
+        points = [(p.pose.position.x, p.pose.position.y) for p in first.poses]
+        if (max(abs(a - b) for a, b in zip(start["goal"], given["goal"])) > 1e-4 or len(points) != len(given["plan"])
+                or max(abs(a - b) for p, q in zip(points, given["plan"]) for a, b in zip(p, q)) > 1e-4):
+            raise RuntimeError(f"the simulator's episode {episode} has goal {start['goal']} and a plan of "
+                               f"{len(points)} points, evaluate's {list(given['goal'])} and {len(given['plan'])}: not "
+                               "the same episode (episode_seed, task, map or simulator config differ)")
+        ended = lambda: any(e["event"] == "end" and e["episode"] == episode for e in self.events)
+        replans, held, answered, deadline = 0, 0, self.ticks, time.monotonic() + timeout
+        while not ended():
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"episode {episode} did not end in {timeout:g} s")
+            self.rclpy.spin_once(self.node, timeout_sec=0.005)
+            while self.plans:  # the behaviour tree hands each new plan on
+                self.send(self.plans.pop(0))
+                replans += 1
+            if self.ticks > answered and self.goal_over():
+                # the node ended its goal (reached on its pose, or aborted) while the simulator's episode goes on: the
+                # rover holds still, as under Nav2 once FollowPath ends; the zero answers the state in lockstep
+                self.cmd.publish(self.zero)
+                answered, held = self.ticks, held + 1
+        end = next(e for e in self.events if e["event"] == "end")
+        self.wait(lambda: all(h.done() for h in self.handles), 5.0)
+        self.wait(lambda: False, 0.05)  # the node's status of the last step
+        state, code = "running", None
+        last = self.handles[-1].result() if self.handles[-1].done() else None
+        if last is not None and last.accepted:
+            result = last.get_result_async()
+            if self.wait(result.done, 0.2):
+                state = {GoalStatus.STATUS_SUCCEEDED: "succeeded", GoalStatus.STATUS_ABORTED: "aborted",
+                         GoalStatus.STATUS_CANCELED: "canceled"}.get(result.result().status, "unknown")
+                code = getattr(result.result().result, "error_code", None)
+        return {"episode": episode, "end_reason": end["end_reason"], "steps": end["steps"],
+                "unanswered": end.get("unanswered"), "node_state": state, "node_reason": code, "replans": replans,
+                "held_after_goal": held,
+                "compute_ms": [s["compute_ms"] for s in self.status if s.get("state") == "active"
+                               and s.get("compute_ms") is not None]}
+
+
 def start(args: list[str], env: dict, log: Path) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, *args], env=env, stdout=log.open("w"), stderr=subprocess.STDOUT)
 
@@ -209,24 +365,38 @@ def robot_of(record) -> str:
     return robot_spec(record.robot) or record.robot.path
 
 
-def world_parameters(path: Path) -> tuple[tuple[str, ...], tuple[str, ...]]:
+def world_parameters(path: Path, site: str | None = None) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """(the simulator node's, the deploy node's) parameters that follow the policy at ``path``: the world runs the
-    task it records on its robot (``policy:=``), publishing at its control rate; the node's time limit is twice its
-    episode."""
+    task it records on its robot (``policy:=``), publishing at its control rate, in the map ``site`` (a path task:
+    with ``/tf``, through which the node carries the plan from ``map`` to its odometry; else none); the node's
+    time limit is twice its episode."""
     from atrv_warp.policy import policy_record
     from atrv_warp.sim.config import SimConfig
 
     record = policy_record(path)
     period = record.task.config.control_period or SimConfig().step_dt
     episode = record.task.config.max_steps * period
-    return ((f"policy:={path}", f"robot:={robot_of(record)}", f"publish_rate:={float(1 / period)!r}"),
+    # the node reads the fused odometry (DEPLOY_PARAMETERS), so /tf's odom -> base_link follows it: map -> base_link
+    # through the node's pose is then the true pose, which the environment's plan observation reads
+    where = (f"map:={Path(site).resolve()}", "tf:=true", "tf_odometry:=odometry/filtered") if site else ("tf:=false",)
+    return ((f"policy:={path}", f"task:={record.task.name}", f"robot:={robot_of(record)}",
+             f"publish_rate:={float(1 / period)!r}", *where),
             (f"time_limit:={float(2 * episode)!r}",))  # float literals: ROS reads "20" as an integer
 
 
-def ros_episodes(pt2: Path, goals: list[tuple[float, float]], seed: int, workdir: Path, timeout: float,
-                 trace: str | None = None, world: tuple[tuple[str, ...], tuple[str, ...]] = ((), ())) -> list[dict]:
-    """Each episode (of ``goals``) through ROS 2 (the simulator and the deploy node in their own processes, on
-    loopback); ``trace``: the node's trace file; ``world``: :func:`world_parameters`."""
+def is_path_task(path: Path) -> bool:
+    """The policy at ``path`` follows a plan (``observation="path"``): its episodes run in a map, over FollowPath."""
+    from atrv_warp.policy import policy_record
+
+    return policy_record(path).task.config.observation == "path"
+
+
+def ros_episodes(pt2: Path, given: list[dict], seed: int, workdir: Path, timeout: float,
+                 trace: str | None = None, world: tuple[tuple[str, ...], tuple[str, ...]] = ((), ()),
+                 paths: bool = False) -> list[dict]:
+    """Each episode (of ``given``: :func:`evaluate_episodes`) through ROS 2 (the simulator and the deploy node in
+    their own processes, on loopback); ``trace``: the node's trace file; ``world``: :func:`world_parameters`;
+    ``paths``: a path task's (:class:`PathDriver`)."""
     import rclpy
 
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
@@ -238,16 +408,16 @@ def ros_episodes(pt2: Path, goals: list[tuple[float, float]], seed: int, workdir
     deploy = (*DEPLOY_PARAMETERS, *world[1], *((f"trace:={Path(trace).resolve()}",) if trace else ()))
     node = start(["-m", "atrv_warp.deploy", str(pt2), "--ros-args", *params(deploy)], env, workdir / "deploy.log")
     rclpy.init()
-    driver = Driver()
+    driver = PathDriver() if paths else Driver()
     rows = []
     try:
         if not driver.ready(180.0):
             raise RuntimeError(f"the nodes did not come up in 180 s; see {workdir}/sim.log and deploy.log")
         # a first run of episode 0, not counted, leaves the simulator holding as between episodes (before any, it
         # steps on lockstep_timeout, and a goal could reach the node a step before the reset)
-        driver.run(0, goals[0], timeout)
-        for k, goal in enumerate(goals):
-            rows.append(driver.run(k, goal, timeout))
+        driver.run(0, given[0], timeout)
+        for k, episode in enumerate(given):
+            rows.append(driver.run(k, episode, timeout))
             print(f"  episode {k}: {rows[-1]['end_reason']} in {rows[-1]['steps']} steps (node: "
                   f"{rows[-1]['node_state']})", flush=True)
     finally:
@@ -281,6 +451,7 @@ def main() -> int:
     parser.add_argument("--timeout", type=float, default=300.0, help="wall seconds one ROS episode may take")
     parser.add_argument("--out", default=str(RESULTS / "deploy_closed_loop.json"))
     parser.add_argument("--trace", default=None, help="write the deploy node's trace here (JSON lines per step)")
+    parser.add_argument("--map", default=EXAMPLE_MAP, help=f"a path policy's map ({EXAMPLE_MAP})")
     args = parser.parse_args()
     from atrv_warp.rl.export import export_policy
     from atrv_warp.task.evaluation import EVAL_SEED
@@ -290,25 +461,35 @@ def main() -> int:
     workdir = Path(tempfile.mkdtemp(prefix="deploy_closed_loop_"))
     pt2 = export_policy(path, workdir / "policy.pt2", force=True)
     t0 = time.perf_counter()
-    print(f"evaluate: {args.episodes} episodes of seed {seed} ...", flush=True)
-    evaluated, goals, stopping = evaluate_episodes(path, args.episodes, seed)
+    paths = is_path_task(path)
+    site = args.map if paths else None
+    print(f"evaluate: {args.episodes} episodes of seed {seed}{' in ' + site if site else ''} ...", flush=True)
+    evaluated, given, stopping = evaluate_episodes(path, args.episodes, seed, site)
     t1 = time.perf_counter()
     print(f"over ROS 2 (logs in {workdir}) ...", flush=True)
-    rows = ros_episodes(pt2, goals, seed, workdir, args.timeout, args.trace, world_parameters(path))
+    rows = ros_episodes(pt2, given, seed, workdir, args.timeout, args.trace, world_parameters(path, site), paths)
     t2 = time.perf_counter()
     for row, ev in zip(rows, evaluated, strict=True):
         row["evaluate_end_reason"], row["evaluate_steps"] = ev["end_reason"], ev["steps"]
     stats = paired([r["end_reason"] == "success" for r in rows], [r["evaluate_end_reason"] == "success" for r in rows])
     stats["identical"] = sum(r["end_reason"] == r["evaluate_end_reason"] and r["steps"] == r["evaluate_steps"]
                              for r in rows)
-    stats["node_stop"] = {"goal_tolerance": STOP_TOLERANCE, "evaluate_success": stopping}
+    if stopping is not None:
+        stats["node_stop"] = {"goal_tolerance": STOP_TOLERANCE, "evaluate_success": stopping}
+    else:  # a path task: how the node answered the last FollowPath goal of each episode, and how often it was replanned
+        stats["node_answers"] = {}
+        for r in rows:
+            key = f"{r['node_state']}" + (f" {r['node_reason']}" if r["node_reason"] else "")
+            stats["node_answers"][key] = stats["node_answers"].get(key, 0) + 1
+        stats["replans"] = sum(r["replans"] for r in rows)
     stats["unanswered"] = sum(r["unanswered"] or 0 for r in rows)
     compute = [ms for r in rows for ms in r.pop("compute_ms")]
     ends = {"ros": {}, "evaluate": {}}
     for r in rows:
         ends["ros"][r["end_reason"]] = ends["ros"].get(r["end_reason"], 0) + 1
         ends["evaluate"][r["evaluate_end_reason"]] = ends["evaluate"].get(r["evaluate_end_reason"], 0) + 1
-    result = {"benchmark": "deploy_closed_loop", "policy": str(path), "seed": seed, **stats, "end_reasons": ends,
+    result = {"benchmark": "deploy_closed_loop", "policy": str(path), "seed": seed, "map": site, **stats,
+              "end_reasons": ends,
               "compute_ms": {"steps": len(compute), "p50": percentile(compute, 50), "p99": percentile(compute, 99)},
               "wall_s": {"evaluate": round(t1 - t0, 1), "ros": round(t2 - t1, 1)}, "episodes_detail": rows}
     print(f"success over ROS 2 {100 * stats['ros_success']:.1f} %, evaluate {100 * stats['evaluate_success']:.1f} % "
@@ -318,8 +499,12 @@ def main() -> int:
     print(f"{stats['identical']} of {stats['episodes']} episodes ended identically (the same end after as many steps); "
           f"{stats['unanswered']} steps went without the node's answer")
     print(f"ends over ROS 2 {ends['ros']}; evaluate {ends['evaluate']}")
-    print(f"evaluate stopping within {STOP_TOLERANCE:g} m of the goal on its odometry (as a node judging the goal "
-          f"does): {100 * stopping:.1f} %")
+    if stopping is not None:
+        print(f"evaluate stopping within {STOP_TOLERANCE:g} m of the goal on its odometry (as a node judging the "
+              f"goal does): {100 * stopping:.1f} %")
+    else:
+        print(f"the node's answers to each episode's last FollowPath goal {stats['node_answers']}; "
+              f"{stats['replans']} replans handed on")
     print(f"node compute per step: p50 {result['compute_ms']['p50']:.3f} ms, p99 {result['compute_ms']['p99']:.3f} ms "
           f"over {len(compute)} steps")
     out = write_results(args.out, result, version=VERSION, task=True, driver=True, policies=(path,))

@@ -421,7 +421,8 @@ class RoverSimNode(Node):
         """Put ``rover`` in evaluation episode ``rover.pending_episode`` of ``episode_seed`` (the world, start and
         goal ``python -m atrv_warp.evaluate`` gives that episode: :meth:`RoverEnv.reset_to_episodes`), its odometry
         frame at the new start, still; publish ``episode`` ``{"event": "start", "episode", "seed", "start": [x, y,
-        yaw], "goal": [x, y]}`` (world frame = the odometry frame at the start) and the state."""
+        yaw], "goal": [x, y], "goal_yaw"}`` (world frame = the odometry frame at the start), the episode's plan on
+        ``plan`` (a path task in a map; again at each replan) and the state."""
         k, seed = rover.pending_episode, int(self.params["episode_seed"])
         rover.pending_episode = None
         self.reset_ns += round(self.sim.sim_cfg.step_dt * 1e9)
@@ -435,7 +436,9 @@ class RoverSimNode(Node):
         rover.goal = tuple(self.env.target[rover.index].tolist())
         rover.episode, rover.mode, rover.pending, rover.unanswered = k, VELOCITY, VELOCITY, 0
         rover.publish_episode({"event": "start", "episode": k, "seed": seed, "start": list(rover.start),
-                               "goal": list(rover.goal)})
+                               "goal": list(rover.goal), "goal_yaw": float(self.env.target_yaw[rover.index])})
+        if rover.plan_pub is not None:
+            rover.publish_plan(self.stamp_ns())
         self.publish_markers()
 
     def step_episode(self) -> bool:
@@ -458,6 +461,8 @@ class RoverSimNode(Node):
                 rover.episode = None
                 self.sim.set_twist([0.0, 0.0], worlds=[rover.index])
                 ended = True
+            elif rover.episode is not None and rover.plan_pub is not None and bool(self.env.replanned[rover.index]):
+                rover.publish_plan(self.stamp_ns())
         return ended
 
     def publish_state(self) -> None:

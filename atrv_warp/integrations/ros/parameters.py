@@ -59,6 +59,10 @@ PARAMETERS = (
               "(what a 3D view draws the rover from); not /imu or /scan", "file"),
     Parameter("tf", True, "publish live /tf and /tf_static (tf2_msgs: a ROS install's, or built from its definition "
               "with gcc/g++ on first use, cached; without, one line says why)", "switch"),
+    Parameter("tf_odometry", "odom", "the odometry /tf's odom -> base_link follows: odom (the wheels', as "
+              "diff_drive_controller publishes it) | odometry/filtered (the fused one's, as robot_localization "
+              "publishes it where it runs); world or map -> odom puts base_link at the true pose either way", "choice",
+              choices=("odom", "odometry/filtered")),
     Parameter("sim_config", "", "simulator-config TOML ([rover], [contact]; e.g. atrv-calibrate's output) applied to "
               "every rover", "text"),
     Parameter("wait_for_subscribers", 0, "wait for this many /pose subscribers before starting", "integer"),

@@ -7,6 +7,7 @@ them.
 from __future__ import annotations
 
 import collections
+import itertools
 import json
 import math
 
@@ -14,7 +15,7 @@ import numpy as np
 import torch
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, Twist
-from nav_msgs.msg import Odometry
+from nav_msgs.msg import Odometry, Path
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import Imu, JointState, LaserScan
@@ -27,7 +28,7 @@ from atrv_warp.integrations.ros.frames import planar_matrix, pose_matrix, transf
 from atrv_warp.integrations.ros.parameters import COMMANDS, GOAL, VELOCITY
 from atrv_warp.sim.modes import DRIVE_MODE_TORQUES, DriveMode
 
-__all__ = ["RoverIO", "ros_time"]
+__all__ = ["RoverIO", "plan_message", "ros_time"]
 
 # Diagonal covariances of the wheel odometry (x, y, z, roll, pitch, yaw); z and the tilts are not
 # observed by wheel odometry, so they are marked as unknown with a large variance.
@@ -38,6 +39,23 @@ _ODOM_TWIST_VAR = (0.01, 0.01, 1e6, 1e6, 1e6, 0.05)
 def ros_time(ns: int) -> Time:
     """A time [ns] as a ``builtin_interfaces/Time`` (a message's stamp)."""
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def plan_message(points: list[list[float]], goal_yaw: float, frame: str, stamp: Time | None = None) -> Path:
+    """A plan (x, y) [m], start to goal, as a ``nav_msgs/Path`` in ``frame``: each pose facing the next, the last the
+    goal's heading ``goal_yaw`` [rad] (what Nav2's planners hand its controller)."""
+    msg = Path()
+    msg.header.frame_id = frame
+    if stamp is not None:
+        msg.header.stamp = stamp
+    yaws = [math.atan2(b[1] - a[1], b[0] - a[0]) for a, b in itertools.pairwise(points)] + [goal_yaw]
+    for (x, y), yaw in zip(points, yaws, strict=True):
+        pose = PoseStamped()
+        pose.header = msg.header
+        pose.pose.position.x, pose.pose.position.y = float(x), float(y)
+        pose.pose.orientation.z, pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+        msg.poses.append(pose)
+    return msg
 
 
 class RoverIO:
@@ -77,6 +95,7 @@ class RoverIO:
         self.joint_pub = node.create_publisher(JointState, f"{prefix}/joint_states", 10)
         self.imu_pub = node.create_publisher(Imu, f"{prefix}/imu", 10)
         self.scan_pub = node.create_publisher(LaserScan, f"{prefix}/scan", 10) if node.scanner is not None else None
+        self.plan_pub = node.create_publisher(Path, f"{prefix}/plan", qos) if node.env.planner is not None else None
         node.create_subscription(String, f"{prefix}/command", self.on_command, qos)
         node.create_subscription(PoseStamped, f"{prefix}/goal", self.on_goal, qos)
         node.create_subscription(Twist, f"{prefix}/cmd_vel", self.on_cmd_vel, qos)
@@ -129,13 +148,21 @@ class RoverIO:
         task = self.node.env.task_cfg
         if task.action != "twist" or len(self.node.rovers) > 1 or msg.data < 0:
             self.node.log.warning(f"ignored reset_episode {msg.data}: episodes replay with one rover, a twist task "
-                                  f"(nav_deploy) and an episode index >= 0 (here {len(self.node.rovers)} rover(s), "
+                                  f"(nav_deploy, follow_path) and an episode index >= 0 (here {len(self.node.rovers)} rover(s), "
                                   f"task action {task.action!r})")
             return
         self.pending_episode = msg.data
 
     def publish_episode(self, event: dict) -> None:
         self.episode_pub.publish(String(data=json.dumps(event)))
+
+    def publish_plan(self, ns: int) -> None:
+        """The replayed episode's plan as the environment has it now (its start, every replan), as Nav2's planner
+        server publishes one on ``plan`` (:func:`plan_message`, in the world's frame, ``map``): what a ``FollowPath``
+        client hands the controller."""
+        env, k = self.node.env, self.index
+        self.plan_pub.publish(plan_message(env.planner.points(k).tolist(), float(env.target_yaw[k]),
+                                           self.node.world_frame, ros_time(ns)))
 
     # ------------------------------------------------------------------ driving
     def drive(self, goal_action) -> None:
@@ -250,13 +277,14 @@ class RoverIO:
                       for f in desc.frames]
 
     def publish_frames(self, ns: int, pose: list[float]) -> None:
-        """This rover's /tf, live (where tf2_msgs loads) and to the bag: world -> odom -> base_link (odometry,
-        corrected to the true pose) and the turning wheels (:mod:`.frames`). A non-finite pose is never
+        """This rover's /tf, live (where tf2_msgs loads) and to the bag: world -> odom -> base_link (the odometry
+        ``tf_odometry`` names, corrected to the true pose) and the turning wheels (:mod:`.frames`). A non-finite pose is never
         published: the rover's /tf is left out for the step, with one line logged."""
         node = self.node
         if node.bag is None and node.tf_pub is None:
             return
-        (x, y, yaw, _, _), wheels = self.odometry(), node.wheel_positions(self.index)
+        fused = node.params["tf_odometry"] == "odometry/filtered"
+        (x, y, yaw, _, _), wheels = self.odometry(fused=fused), node.wheel_positions(self.index)
         if not all(math.isfinite(v) for v in (*pose, x, y, yaw, *wheels)):
             if not self.tf_skipped:
                 node.log.warning(f"{self.prefix or 'rover'}: non-finite pose, its /tf is not published until it "
