@@ -295,6 +295,28 @@ def test_closed_loop_episodes_over_ros_end_as_evaluate_judges_them(tmp_path):
     assert result["ci95"][0] <= result["difference"] <= result["ci95"][1]
 
 
+@pytest.mark.slow  # the simulator node, the deploy node and the script's client: about 50 s
+def test_follow_path_episodes_over_ros_start_on_evaluates_plan_and_take_every_replan(tmp_path):
+    """Two episodes of the shipped Jackal ``follow_path`` policy in the example office, through ROS 2 as the closed-loop
+    script runs them: each episode's first plan over ROS is ``evaluate``'s (the script stops otherwise), every replan
+    the simulator publishes (one a second: every fifth 0.2 s step but the last) goes to the node as a FollowPath
+    goal, every step waits for the node's answer, and both episodes reach the goal, as under ``evaluate``."""
+    out = tmp_path / "closed_loop.json"
+    env = dict(os.environ)
+    env.setdefault("ROS_DOMAIN_ID", str(random.randint(101, 200)))
+    proc = subprocess.run([sys.executable, "-m", "benchmarks.transfer.deploy_closed_loop", "follow_path_jackal",
+                           "--episodes", "2", "--out", str(out)], capture_output=True, text=True, timeout=900,
+                          env=env, check=False, cwd=ROOT)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    result = json.loads(out.read_text())
+    rows = result["episodes_detail"]
+    assert result["map"] == "atrv_warp/assets/maps/office.yaml"
+    assert [r["unanswered"] for r in rows] == [0, 0], rows
+    assert all(r["replans"] >= (r["steps"] - 1) // 5 - 1 for r in rows), rows  # the last may cross the end
+    assert [(r["end_reason"], r["evaluate_end_reason"]) for r in rows] == [("success", "success")] * 2, rows
+    assert 0 < result["compute_ms"]["p50"] <= result["compute_ms"]["p99"] < 1000
+
+
 @pytest.mark.slow  # two live ROS 2 nodes and the simulator
 def test_over_ros_each_step_is_the_nodes_answer_to_the_state_evaluate_would_observe(tmp_path):
     """Two consecutive episodes of the shipped ``nav_deploy`` policy over ROS 2, replayed in a one-world environment
@@ -435,13 +457,15 @@ def test_follow_path_in_map_is_served_as_nav2s_controller_serves_it(ros_env, tmp
     publishes on ``cmd_vel_nav``: a path in ``map`` around a corner, with ``map`` -> ``odom`` offset and turned on
     /tf_static, is accepted and driven, with feedback of the distance along it; a replan takes over without stopping
     and the replaced goal ends aborted with an empty result; an empty path is aborted with INVALID_PATH and the rover
-    stops; a path whose end the rover is at, turned to its heading, succeeds; the node stays up throughout."""
+    stops; a path whose end the rover is at, turned to its heading, succeeds; a storm of 30 goals each cancelled
+    twice ends each cancelled or replaced, the rover still, and the next goal drives; the node stays up throughout."""
     from action_msgs.msg import GoalStatus
     from rclpy.action import ActionClient
     from rclpy.qos import DurabilityPolicy, QoSProfile
 
     from atrv_warp.core.ros_interfaces import TF2_MSGS, load_interface
     from atrv_warp.deploy.nav2 import FOLLOW_PATH_CODES, load_follow_path
+    from atrv_warp.deploy.node import ACTION_REQUEST_DEPTH
 
     FollowPath, where = load_follow_path()
     assert FollowPath is not None, where
@@ -455,7 +479,7 @@ def test_follow_path_in_map_is_served_as_nav2s_controller_serves_it(ros_env, tmp
     client = ActionClient(robot.node, FollowPath, f"{NS}/follow_path")
     feedback = []
 
-    def send(points, yaw=math.pi):
+    def request(points, yaw=math.pi):
         request = FollowPath.Goal()
         request.path.header.frame_id = "map"
         for k, (x, y) in enumerate(points):
@@ -466,7 +490,10 @@ def test_follow_path_in_map_is_served_as_nav2s_controller_serves_it(ros_env, tmp
             pose.pose.orientation.z, pose.pose.orientation.w = math.sin(last / 2), math.cos(last / 2)
             request.path.poses.append(pose)
         request.controller_id = "FollowPath"
-        future = client.send_goal_async(request, feedback_callback=lambda m: feedback.append(m.feedback))
+        return request
+
+    def send(points, yaw=math.pi):
+        future = client.send_goal_async(request(points, yaw), feedback_callback=lambda m: feedback.append(m.feedback))
         assert robot.run(10, future.done), "no answer to the goal"
         return future.result()
 
@@ -506,6 +533,30 @@ def test_follow_path_in_map_is_served_as_nav2s_controller_serves_it(ros_env, tmp
         robot.run(0.3)  # the odometry's jump there is said with no goal to abort
         reached = send(corner)
         assert result(reached).status == GoalStatus.STATUS_SUCCEEDED
+        # a cancel storm: 30 goals down the corridor at once, each cancelled twice as soon as it is accepted, and
+        # each one's result asked for (a client whose queues hold the burst: the node's hold ACTION_REQUEST_DEPTH)
+        from rclpy.qos import QoSProfile as Qos
+
+        deep = Qos(depth=ACTION_REQUEST_DEPTH)
+        stormer = ActionClient(robot.node, FollowPath, f"{NS}/follow_path", goal_service_qos_profile=deep,
+                               result_service_qos_profile=deep, cancel_service_qos_profile=deep)
+        ahead = [(0.0, 4.0), (-3.0, 4.0)]
+        assert robot.run(10, stormer.server_is_ready)
+        sent = [stormer.send_goal_async(request(ahead)) for _ in range(30)]
+        assert robot.run(10, lambda: all(f.done() for f in sent)), f"{sum(f.done() for f in sent)} of 30 answered"
+        assert all(f.result().accepted for f in sent)
+        cancels = [f.result().cancel_goal_async() for f in sent for _ in range(2)]
+        answers = [f.result().get_result_async() for f in sent]
+        assert robot.run(10, lambda: all(a.done() for a in (*cancels, *answers))), (
+            f"{sum(c.done() for c in cancels)} of 60 cancels, {sum(a.done() for a in answers)} of 30 results answered")
+        stormed = time.monotonic()
+        ends = [a.result().status for a in answers]
+        assert set(ends) <= {GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED}, ends  # cancelled or replaced
+        assert ends[-1] == GoalStatus.STATUS_CANCELED
+        robot.run(0.5)
+        assert all(v == 0.0 and w == 0.0 for t, v, w in robot.cmds if t > stormed + 0.3), robot.cmds[-3:]
+        assert send(ahead).accepted  # and the next goal drives
+        assert robot.run(5, robot.driving), robot.status[-1:]
         assert proc.poll() is None
     finally:
         client.destroy()

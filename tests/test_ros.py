@@ -616,7 +616,8 @@ def test_latched_markers_show_the_nav_world_and_the_goal(ros_env):
 def test_a_map_is_served_on_map_and_the_rover_starts_in_its_free_space(ros_env, tmp_path):
     """``map:=FILE``: a late subscriber gets /map as map_server serves it (transient local, frame map, the cells as
     the file holds them); /tf's tree starts at map (map -> odom -> base_link: the true pose, in the map); the rover
-    starts clear of the walls; a bad map stops the node in one line."""
+    starts clear of the walls; a bad map stops the node in one line; ``publish_map`` and ``map_to_odom`` off leave
+    both to a Nav2 stack's map_server and amcl."""
     import numpy as np
     from nav_msgs.msg import OccupancyGrid, Odometry
     from test_map_worlds import two_rooms
@@ -658,6 +659,20 @@ def test_a_map_is_served_on_map_and_the_rover_starts_in_its_free_space(ros_env, 
     bad = start_node(ros_env, "-p", f"map:={tmp_path / 'gone.yaml'}")
     out, _ = bad.communicate(timeout=120)
     assert bad.returncode != 0 and f"parameter map: map not found: {tmp_path / 'gone.yaml'}" in out
+    # under a stack that runs map_server and amcl: neither /map nor map -> odom, odom -> base_link still
+    proc = start_node(ros_env, "-p", f"map:={path}", "task:=nav_deploy", "wait_for_subscribers:=1", "duration:=3.0",
+                      "publish_map:=false", "map_to_odom:=false")
+    client, grids, tf = Client("atrv_map_client_2"), [], []
+    client.node.create_subscription(TFMessage, "/tf", tf.append, 100)
+    client.node.create_subscription(OccupancyGrid, "/map", grids.append, latched)
+    try:
+        live = client.wait_for(lambda: len(tf) > 10, timeout=120)
+    finally:
+        client.close()
+        out = stop(proc, signal.SIGTERM)
+    frames = {(t.header.frame_id, t.child_frame_id) for m in tf for t in m.transforms}
+    assert live and ("odom", "base_link") in frames and not any(c == "odom" for _, c in frames), (frames, out[-2000:])
+    assert not grids and "on /map" not in out
 
 
 def test_foxglove_layout_shows_what_the_node_publishes():

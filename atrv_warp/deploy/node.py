@@ -46,7 +46,7 @@ from atrv_warp.deploy.parameters import (
     unknown_parameters,
 )
 
-__all__ = ["COMMAND_PATH_SECONDS", "FOLLOW_PATH_TOPIC", "RESULT_CODES", "DeployNode", "NodeConfigError"]
+__all__ = ["ACTION_REQUEST_DEPTH", "COMMAND_PATH_SECONDS", "FOLLOW_PATH_TOPIC", "RESULT_CODES", "DeployNode", "NodeConfigError"]
 
 RELIABLE = ReliabilityPolicy.RELIABLE
 
@@ -56,6 +56,9 @@ COMMAND_PATH_SECONDS = 1.0
 FOLLOW_PATH_TOPIC = "cmd_vel_nav"
 """Where a plan-following policy's node publishes unless ``cmd_vel_topic`` is given: the velocity smoother's input,
 where Nav2's own launch remaps its controller server's ``cmd_vel``."""
+ACTION_REQUEST_DEPTH = 100
+"""How many goal, cancel and result requests each action server queues: a client's burst (a cancel storm, a result
+asked for each of many goals at once) beyond the services' default 10 would be lost in the transport, never answered."""
 RESULT_CODES = {TIME_LIMIT: 9003}
 """Nav2's ``NavigateToPose`` result ``error_code`` for an abort whose reason starts with a key (``TIMEOUT``); any other
 abort is ``UNKNOWN`` (9000). Humble's result carries no code."""
@@ -240,12 +243,16 @@ class DeployNode(Node):
         self._serve(action, "navigate_to_pose", self._execute, self._on_action_goal, self._on_action_accepted, where)
 
     def _serve(self, action, name: str, execute, goal_callback, accepted_callback, where: str) -> None:
-        """An action server of ``action`` on ``name`` (relative: in the node's namespace); every cancel accepted."""
+        """An action server of ``action`` on ``name`` (relative: in the node's namespace); every cancel accepted; its
+        goal, cancel and result requests queued :data:`ACTION_REQUEST_DEPTH` deep."""
         from rclpy.action import ActionServer
 
+        queue = QoSProfile(depth=ACTION_REQUEST_DEPTH, reliability=RELIABLE)
         self.action_server = ActionServer(self, action, name, execute, goal_callback=goal_callback,
                                           handle_accepted_callback=accepted_callback,
-                                          cancel_callback=lambda _handle: self._cancel_response())
+                                          cancel_callback=lambda _handle: self._cancel_response(),
+                                          goal_service_qos_profile=queue, result_service_qos_profile=queue,
+                                          cancel_service_qos_profile=queue)
         self.log.info(f"{action.__name__} on {self.get_namespace().rstrip('/')}/{name} ({where})")
 
     @staticmethod

@@ -1,7 +1,7 @@
 """The deploy node in closed loop over ROS 2, paired with ``evaluate`` on the same episodes.
 
 Run: ``python -m benchmarks.transfer.deploy_closed_loop [POLICY] [--episodes 200] [--seed 2024] [--map YAML]
-[--out FILE] [--trace FILE]``
+[--node-param NAME:=VALUE ...] [--out FILE] [--trace FILE]``
 
 POLICY is a policy file (``best_policy.pt``) or a shipped policy's name (default: ``nav_deploy``). Two ways over
 the same seeded episodes of its task (the evaluation set of ``--seed``: each episode's world, start and goal):
@@ -58,7 +58,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks._common import paired_difference, write_results
+from benchmarks._common import load_results, markdown_table, paired_difference, write_results
 
 VERSION = 2
 """This script's method, bumped by hand when what it measures or how changes (``_common.write_results``)."""
@@ -452,6 +452,9 @@ def main() -> int:
     parser.add_argument("--out", default=str(RESULTS / "deploy_closed_loop.json"))
     parser.add_argument("--trace", default=None, help="write the deploy node's trace here (JSON lines per step)")
     parser.add_argument("--map", default=EXAMPLE_MAP, help=f"a path policy's map ({EXAMPLE_MAP})")
+    parser.add_argument("--node-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="a further parameter of the deploy node (e.g. its collision monitor's stop_zone); "
+                             "repeatable")
     args = parser.parse_args()
     from atrv_warp.rl.export import export_policy
     from atrv_warp.task.evaluation import EVAL_SEED
@@ -467,7 +470,9 @@ def main() -> int:
     evaluated, given, stopping = evaluate_episodes(path, args.episodes, seed, site)
     t1 = time.perf_counter()
     print(f"over ROS 2 (logs in {workdir}) ...", flush=True)
-    rows = ros_episodes(pt2, given, seed, workdir, args.timeout, args.trace, world_parameters(path, site), paths)
+    sim_params, node_params = world_parameters(path, site)
+    rows = ros_episodes(pt2, given, seed, workdir, args.timeout, args.trace,
+                        (sim_params, (*node_params, *args.node_param)), paths)
     t2 = time.perf_counter()
     for row, ev in zip(rows, evaluated, strict=True):
         row["evaluate_end_reason"], row["evaluate_steps"] = ev["end_reason"], ev["steps"]
@@ -488,7 +493,8 @@ def main() -> int:
     for r in rows:
         ends["ros"][r["end_reason"]] = ends["ros"].get(r["end_reason"], 0) + 1
         ends["evaluate"][r["evaluate_end_reason"]] = ends["evaluate"].get(r["evaluate_end_reason"], 0) + 1
-    result = {"benchmark": "deploy_closed_loop", "policy": str(path), "seed": seed, "map": site, **stats,
+    result = {"benchmark": "deploy_closed_loop", "policy": str(path), "seed": seed, "map": site,
+              "node_parameters": args.node_param, **stats,
               "end_reasons": ends,
               "compute_ms": {"steps": len(compute), "p50": percentile(compute, 50), "p99": percentile(compute, 99)},
               "wall_s": {"evaluate": round(t1 - t0, 1), "ros": round(t2 - t1, 1)}, "episodes_detail": rows}
@@ -510,6 +516,42 @@ def main() -> int:
     out = write_results(args.out, result, version=VERSION, task=True, driver=True, policies=(path,))
     print(f"wrote {out}")
     return 0
+
+
+ROBOTS = {"atrvjr": "ATRV-Jr", "husky": "Husky A200", "jackal": "Jackal J100"}
+"""The shipped robots, as the tables name them."""
+
+
+def _table(prefix: str) -> str:
+    """The closed loop of each shipped robot's ``<prefix><robot>`` results: success over ROS 2 and under ``evaluate``
+    on the same episodes, the paired difference and its 95 % interval, the episodes that ended identically, and the
+    node's compute time per step at the 99th percentile."""
+    rows = []
+    for robot, name in ROBOTS.items():
+        r = load_results(f"{prefix}{robot}.json")
+        rows.append([name, f"{100 * r['ros_success']:.1f} %", f"{100 * r['evaluate_success']:.1f} %",
+                     f"{100 * r['difference']:+.1f} ({100 * r['ci95'][0]:+.1f} to {100 * r['ci95'][1]:+.1f})",
+                     f"{r['identical']} of {r['episodes']}", f"{r['compute_ms']['p99']:.1f} ms"])
+    return markdown_table(["robot", "over ROS 2", "`evaluate`", "difference [points, 95 %]", "identical",
+                           "node p99"], ["---"] + ["---:"] * 5, rows)
+
+
+def deploy_closed_loop() -> str:
+    """``deploy_closed_loop_<robot>.json``: each shipped ``nav_deploy_<robot>`` policy's goals through
+    ``atrv-deploy`` (``NavigateToPose``'s policy) and under ``evaluate``."""
+    return _table("deploy_closed_loop_")
+
+
+def deploy_closed_loop_follow_path() -> str:
+    """``deploy_closed_loop_follow_path_<robot>.json``: each shipped ``follow_path_<robot>`` policy's episodes in the
+    office map through ``atrv-deploy``'s ``FollowPath`` and under ``evaluate``."""
+    return _table("deploy_closed_loop_follow_path_")
+
+
+TABLES = {
+    "deploy_closed_loop": deploy_closed_loop,
+    "deploy_closed_loop_follow_path": deploy_closed_loop_follow_path,
+}
 
 
 if __name__ == "__main__":

@@ -172,7 +172,8 @@ class RoverSimNode(Node):
             rover.start = tuple(float(v) for v in start)
         if p["map"]:
             self.world_frame = MAP_FRAME
-            self.publish_map(latched)
+            if p["publish_map"]:
+                self.publish_map(latched)
         self.publish_markers()
         self.tf_pub = self.tf_message = None
         if p["tf"]:

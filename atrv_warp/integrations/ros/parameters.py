@@ -97,6 +97,9 @@ PARAMETERS = (
     Parameter("map", "", "a Nav2 map_server map (YAML) to drive in, or a procedural place (building:1@7, yard:1): "
               "its walls for /scan and collision, served on /map (frame map, transient local) with map -> odom on "
               "/tf; the rovers start at their first episodes' starts in its free space", "text"),
+    Parameter("publish_map", True, "with map: serve it on /map; off for a stack whose map_server serves it", "switch"),
+    Parameter("map_to_odom", True, "publish world (map) -> odom on /tf, the true pose's correction of the odometry; "
+              "off for a stack whose localisation (amcl) publishes it", "switch"),
     Parameter("imu_accel_noise", SENSOR_NOISE.accel, "IMU accelerometer noise, standard deviation [m/s²]", "number",
               "m/s²"),
     Parameter("imu_gyro_noise", SENSOR_NOISE.gyro, "IMU gyroscope noise, standard deviation [rad/s]", "number",

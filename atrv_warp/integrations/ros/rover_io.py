@@ -277,8 +277,8 @@ class RoverIO:
                       for f in desc.frames]
 
     def publish_frames(self, ns: int, pose: list[float]) -> None:
-        """This rover's /tf, live (where tf2_msgs loads) and to the bag: world -> odom -> base_link (the odometry
-        ``tf_odometry`` names, corrected to the true pose) and the turning wheels (:mod:`.frames`). A non-finite pose is never
+        """This rover's /tf, live (where tf2_msgs loads) and to the bag: world -> odom (unless ``map_to_odom`` is
+        off) -> base_link (the odometry ``tf_odometry`` names, corrected to the true pose) and the turning wheels (:mod:`.frames`). A non-finite pose is never
         published: the rover's /tf is left out for the step, with one line logged."""
         node = self.node
         if node.bag is None and node.tf_pub is None:
@@ -293,8 +293,9 @@ class RoverIO:
             return
         self.tf_skipped = False
         world_base, odom_base = pose_matrix(pose[:3], pose[3:7]), planar_matrix(x, y, yaw)
-        transforms = [transform_dict(node.world_frame, self.tf_odom, ns, world_base @ np.linalg.inv(odom_base)),
-                      transform_dict(self.tf_odom, self.tf_base, ns, odom_base)]
+        transforms = [transform_dict(node.world_frame, self.tf_odom, ns, world_base @ np.linalg.inv(odom_base))]
+        transforms = transforms if node.params["map_to_odom"] else []  # else the stack's localisation's
+        transforms.append(transform_dict(self.tf_odom, self.tf_base, ns, odom_base))
         transforms += [transform_dict(self.tf_chassis, self.tf_prefix + w.link, ns,
                                       np.asarray(w.origin, dtype=float) @ turn_matrix(w.axis, q))
                        for w, q in zip(node.sim.description.wheels, wheels)]
