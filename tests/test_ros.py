@@ -675,6 +675,22 @@ def test_a_map_is_served_on_map_and_the_rover_starts_in_its_free_space(ros_env, 
     assert not grids and "on /map" not in out
 
 
+def test_a_plan_is_published_as_nav2s_planner_hands_it_on_and_no_plan_as_no_poses():
+    """``plan_message``: each pose facing the next, the last the goal's heading, in the given frame; a plan of one point
+    is the goal; no plan (none was found) is a path without poses, not an error in the simulator's step."""
+    from atrv_warp.integrations.ros.rover_io import plan_message
+
+    def yaws(msg):
+        return [2 * math.atan2(p.pose.orientation.z, p.pose.orientation.w) for p in msg.poses]
+
+    msg = plan_message([[0.0, 0.0], [1.0, 0.0], [1.0, 2.0]], 3.0, "map")
+    assert msg.header.frame_id == "map" and [p.header.frame_id for p in msg.poses] == ["map"] * 3
+    assert [(p.pose.position.x, p.pose.position.y) for p in msg.poses] == [(0.0, 0.0), (1.0, 0.0), (1.0, 2.0)]
+    assert yaws(msg) == pytest.approx([0.0, math.pi / 2, 3.0])
+    assert yaws(plan_message([[4.0, 5.0]], -1.0, "map")) == pytest.approx([-1.0])
+    assert plan_message([], 1.0, "map").poses == []
+
+
 def test_foxglove_layout_shows_what_the_node_publishes():
     """docs/foxglove_layout.json: a 3D panel with the URDF from /robot_description, the markers, the scan and
     the odometry, following base_link; every topic it names is one the node publishes."""

@@ -43,13 +43,14 @@ def ros_time(ns: int) -> Time:
 
 def plan_message(points: list[list[float]], goal_yaw: float, frame: str, stamp: Time | None = None) -> Path:
     """A plan (x, y) [m], start to goal, as a ``nav_msgs/Path`` in ``frame``: each pose facing the next, the last the
-    goal's heading ``goal_yaw`` [rad] (what Nav2's planners hand its controller)."""
+    goal's heading ``goal_yaw`` [rad] (what Nav2's planners hand its controller); no points, no poses (no plan was
+    found)."""
     msg = Path()
     msg.header.frame_id = frame
     if stamp is not None:
         msg.header.stamp = stamp
     yaws = [math.atan2(b[1] - a[1], b[0] - a[0]) for a, b in itertools.pairwise(points)] + [goal_yaw]
-    for (x, y), yaw in zip(points, yaws, strict=True):
+    for (x, y), yaw in zip(points, yaws[len(yaws) - len(points):], strict=True):
         pose = PoseStamped()
         pose.header = msg.header
         pose.pose.position.x, pose.pose.position.y = float(x), float(y)
