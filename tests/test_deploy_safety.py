@@ -73,6 +73,25 @@ def test_returns_are_placed_from_the_trained_scanners_mount_and_a_moved_scanner_
     assert m.apply((0.5, 0.0), moved)[0] == (0.5, 0.0)  # its returns lie 0.9 m ahead: clear
 
 
+def test_forward_only_zones_let_the_rover_turn_and_back_away_and_stop_it_driving_on():
+    """``zone_motion`` forward (a Nav2 velocity polygon's forward zones): a wall inside the stop zone stops a command
+    that drives forward, and passes one that turns in place or backs away, saying so once."""
+    m = CollisionMonitor(parse_zone("stop_zone", STOP), parse_zone("slowdown_zone", SLOW), forward_only=True)
+    wall = Scan([0.3] * 11, -0.05, 0.01, 0.05, 10.0)
+    said = []
+    for command, want in [((0.5, 0.2), (0.0, 0.0)), ((0.0, 1.0), (0.0, 1.0)), ((-0.2, 0.0), (-0.2, 0.0)),
+                          ((0.0, -1.0), (0.0, -1.0)), ((0.3, 0.0), (0.0, 0.0))]:
+        out, line = m.apply(command, wall)
+        assert out == want, (command, out)
+        said += [line] if line else []
+    assert said == ["collision monitor: 11 scan points in the stop zone: stopping",
+                    "collision monitor: the command turns or backs away from the zone: it passes",
+                    "collision monitor: 11 scan points in the stop zone: stopping"], said
+    assert CollisionMonitor(parse_zone("stop_zone", STOP)).apply((0.0, 1.0), wall)[0] == (0.0, 0.0)  # Nav2's polygon
+    with pytest.raises(ParameterError, match=r"^parameter zone_motion must be one of"):
+        Settings(zone_motion="backward")
+
+
 @pytest.mark.parametrize("text", ["[[0, 0], [1, 0]]", "[0, 0, 1, 0, 1, 1]", "[[0, 0], [1, nan], [1, 1]]", "square"])
 def test_a_bad_zone_is_one_line_naming_its_parameter(text):
     with pytest.raises(ParameterError, match=r"^parameter stop_zone must "):

@@ -83,6 +83,8 @@ class Settings:
     """The slow-down zone, likewise."""
     slowdown_ratio: float = 0.5
     min_points: int = 4
+    zone_motion: str = "any"
+    """The commands the zones act on (``any`` | ``forward``)."""
 
     def __post_init__(self):
         for f in dataclasses.fields(self):  # each field is the node parameter of its name, checked as the node does
@@ -182,7 +184,8 @@ class Controller:
                 at = (0.0, 0.0, 0.0)  # no mount recorded: the scanner at the chassis origin
             self.monitor = CollisionMonitor(parse_zone("stop_zone", st.stop_zone),
                                             parse_zone("slowdown_zone", st.slowdown_zone), st.slowdown_ratio,
-                                            st.min_points, at if all(map(math.isfinite, at)) else (0.0, 0.0, 0.0))
+                                            st.min_points, at if all(map(math.isfinite, at)) else (0.0, 0.0, 0.0),
+                                            forward_only=st.zone_motion == "forward")
         bound = {f.name: f.high for f in policy.observation.fields}.get("goal_distance", math.inf)
         self.max_goal_distance = self.settings.max_goal_distance or bound
         """Farther goals are aborted [m] (``max_goal_distance``, or the policy's ``goal_distance`` bound)."""

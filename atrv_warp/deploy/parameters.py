@@ -12,9 +12,13 @@ from __future__ import annotations
 from atrv_warp.core import parameters as core_parameters
 from atrv_warp.core.parameters import Parameter, ParameterError, params_files
 
-__all__ = ["PARAMETERS", "PARAMETER_BY_NAME", "Parameter", "ParameterError", "check_parameters", "parameter_help",
+__all__ = ["PARAMETERS", "PARAMETER_BY_NAME", "ZONE_MOTIONS", "Parameter", "ParameterError", "check_parameters", "parameter_help",
            "params_files", "unknown_parameters"]
 
+
+ZONE_MOTIONS = ("any", "forward")
+"""What ``zone_motion`` takes: the collision monitor's zones act on every command, or on those that drive forward
+(:class:`atrv_warp.deploy.safety.CollisionMonitor`)."""
 
 PARAMETERS = (
     Parameter("scan_topic", "scan", "sensor_msgs/LaserScan in (any beam count and field of view covering the policy's "
@@ -60,6 +64,9 @@ PARAMETERS = (
     Parameter("slowdown_ratio", 0.5, "the slow-down zone's factor on the command (Nav2's default)", "number", "-",
               positive=True, high=1.0),
     Parameter("min_points", 4, "the least scan returns inside a zone that act (Nav2's default)", "integer", low=1),
+    Parameter("zone_motion", "any", "the commands the zones act on: any (Nav2's polygons) | forward (only those that "
+              "drive forward, as a Nav2 velocity polygon with the zones for forward motion: turning in place and "
+              "backing away pass, so a wall ahead cannot hold the rover for good)", "choice", choices=ZONE_MOTIONS),
     Parameter("robot", "", "this robot: its name, as its robot file names it (atrvjr, jackal, husky, or yours), or "
               "its robot file's path (.toml): a policy trained on another robot is refused at start, naming both; '' "
               "= no check (the node logs the policy's robot either way)", "robot"),

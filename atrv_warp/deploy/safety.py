@@ -29,8 +29,8 @@ from atrv_warp.core.scan import remount
 
 __all__ = ["ACTIONS", "CollisionMonitor", "parse_zone"]
 
-ACTIONS = ("none", "slowdown", "stop")
-"""What the monitor does to a command, mildest first."""
+ACTIONS = ("none", "away", "slowdown", "stop")
+"""What the monitor does to a command, mildest first (``away``: a command the zones do not act on, forward only)."""
 
 
 def parse_zone(name: str, text: str) -> tuple[tuple[float, float], ...]:
@@ -75,6 +75,11 @@ class CollisionMonitor:
     """Nav2's default (Jazzy on): the least returns inside a zone that act."""
     mount: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """The policy's scanner on the chassis (x [m], y [m], yaw [rad])."""
+    forward_only: bool = False
+    """The zones act only on commands that drive forward (``zone_motion`` forward): turning in place and backing away
+    pass, as under a Nav2 ``VelocityPolygon`` whose forward sub-polygons are these zones (Jazzy on; Nav2's answer to
+    a stop zone that holds a robot for good, ros-navigation/navigation2#3313). Nav2's ``Polygon`` acts on every
+    command."""
     action: str = "none"
     """What the last period did (:data:`ACTIONS`): a line is said when it changes."""
 
@@ -102,11 +107,14 @@ class CollisionMonitor:
         counts = {name: int(_inside(x, y, zone).sum()) if zone else 0
                   for name, zone in (("stop", self.stop_zone), ("slowdown", self.slowdown_zone))}
         action = next((a for a in ("stop", "slowdown") if counts[a] >= self.min_points), "none")
+        if self.forward_only and action != "none" and command[0] <= 0.0:
+            action = "away"
         said, self.action = self.action, action
         line = None
         if action != said:
             line = ("collision monitor: clear, the policy's command passes" if action == "none" else
-                    f"collision monitor: {counts[action]} scan points in the {action} zone: "
+                    "collision monitor: the command turns or backs away from the zone: it passes" if action == "away"
+                    else f"collision monitor: {counts[action]} scan points in the {action} zone: "
                     + ("stopping" if action == "stop" else f"slowing to {self.slowdown_ratio:g} x the command"))
         if action == "stop":
             return (0.0, 0.0), line
