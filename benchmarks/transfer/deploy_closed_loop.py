@@ -548,9 +548,33 @@ def deploy_closed_loop_follow_path() -> str:
     return _table("deploy_closed_loop_follow_path_")
 
 
+def _ends(episodes: list[dict], *reasons: str) -> int:
+    return sum(r["end_reason"] in reasons for r in episodes)
+
+
+def deploy_closed_loop_zones() -> str:
+    """``deploy_closed_loop_follow_path_zones_<robot>.json`` against ``deploy_closed_loop_follow_path_<robot>.json``:
+    the same episodes over ROS 2 with the node's collision monitor (the zones its ``node_parameters`` name) and
+    without: success, collisions and stalls (``no_progress``) each way, and the paired difference in success."""
+    rows = []
+    for robot, name in ROBOTS.items():
+        off = load_results(f"deploy_closed_loop_follow_path_{robot}.json")["episodes_detail"]
+        on = load_results(f"deploy_closed_loop_follow_path_zones_{robot}.json")["episodes_detail"]
+        if [r["episode"] for r in on] != [r["episode"] for r in off]:
+            raise ValueError(f"the {robot} runs with and without zones are not over the same episodes")
+        d = paired_difference([r["end_reason"] == "success" for r in on], [r["end_reason"] == "success" for r in off])
+        rows.append([name, f"{_ends(off, 'success')} → {_ends(on, 'success')}",
+                     f"{_ends(off, 'obstacle', 'wall')} → {_ends(on, 'obstacle', 'wall')}",
+                     f"{_ends(off, 'no_progress')} → {_ends(on, 'no_progress')}",
+                     f"{100 * d['difference']:+.1f} ({100 * d['ci95'][0]:+.1f} to {100 * d['ci95'][1]:+.1f})"])
+    return markdown_table(["robot", "reached", "collided", "stalled", "success with - without [points, 95 %]"],
+                          ["---"] + ["---:"] * 4, rows)
+
+
 TABLES = {
     "deploy_closed_loop": deploy_closed_loop,
     "deploy_closed_loop_follow_path": deploy_closed_loop_follow_path,
+    "deploy_closed_loop_zones": deploy_closed_loop_zones,
 }
 
 
