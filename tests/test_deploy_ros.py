@@ -535,9 +535,7 @@ def test_follow_path_in_map_is_served_as_nav2s_controller_serves_it(ros_env, tmp
         assert result(reached).status == GoalStatus.STATUS_SUCCEEDED
         # a cancel storm: 30 goals down the corridor at once, each cancelled twice as soon as it is accepted, and
         # each one's result asked for (a client whose queues hold the burst: the node's hold ACTION_REQUEST_DEPTH)
-        from rclpy.qos import QoSProfile as Qos
-
-        deep = Qos(depth=ACTION_REQUEST_DEPTH)
+        deep = QoSProfile(depth=ACTION_REQUEST_DEPTH)
         stormer = ActionClient(robot.node, FollowPath, f"{NS}/follow_path", goal_service_qos_profile=deep,
                                result_service_qos_profile=deep, cancel_service_qos_profile=deep)
         ahead = [(0.0, 4.0), (-3.0, 4.0)]

@@ -14,8 +14,7 @@ controller.
 :func:`nav2_parameters` writes the parameters: Nav2's own names as Kilted's ``nav2_bringup`` sets them
 (:data:`SOURCE`), with the robot's frames and topics (its robot file's ``[deploy]`` table), its footprint (the one the
 policy trained with, from the exported file; ``footprint:=`` for an older file), and the velocity smoother's limits at
-the
-speeds and accelerations the policy trained with (read from the exported file's contract: a smoother below them
+the speeds and accelerations the policy trained with (read from the exported file's contract: a smoother below them
 changes how it drives). ``tests/test_nav2_stack.py`` checks every name against Nav2's. This module imports no ROS;
 the launch description's ``launch`` and ``launch_ros`` come with a ROS install. Not run against Nav2 here (no ROS
 install on the machines that test it): the docs say so.

@@ -46,7 +46,8 @@ from atrv_warp.deploy.parameters import (
     unknown_parameters,
 )
 
-__all__ = ["ACTION_REQUEST_DEPTH", "COMMAND_PATH_SECONDS", "FOLLOW_PATH_TOPIC", "RESULT_CODES", "DeployNode", "NodeConfigError"]
+__all__ = ["ACTION_REQUEST_DEPTH", "COMMAND_PATH_SECONDS", "FOLLOW_PATH_TOPIC", "RESULT_CODES", "DeployNode",
+           "NodeConfigError"]
 
 RELIABLE = ReliabilityPolicy.RELIABLE
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 from atrv_warp.core import parameters as core_parameters
 from atrv_warp.core.parameters import Parameter, ParameterError, params_files
 
-__all__ = ["PARAMETERS", "PARAMETER_BY_NAME", "ZONE_MOTIONS", "Parameter", "ParameterError", "check_parameters", "parameter_help",
-           "params_files", "unknown_parameters"]
+__all__ = ["PARAMETERS", "PARAMETER_BY_NAME", "ZONE_MOTIONS", "Parameter", "ParameterError", "check_parameters",
+           "parameter_help", "params_files", "unknown_parameters"]
 
 
 ZONE_MOTIONS = ("any", "forward")

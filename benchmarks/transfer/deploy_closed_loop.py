@@ -77,9 +77,9 @@ DEPLOY_PARAMETERS = ("use_sim_time:=true", "odom_topic:=odometry/filtered", "cmd
                      "goal_tolerance:=0.0", "odom_jump_margin:=1000.0")
 """The deploy node's: the simulator's clock, the fused odometry (encoders + gyro, what the robot observation is
 trained on), its commands straight to the simulated base (a path policy's go to Nav2's velocity smoother,
-``cmd_vel_nav``, by default), a time limit past the episode's (the simulator ends each episode first), no odometry-jump check (each
-episode's reset restarts the odometry under the goal sent for it, on purpose; on a robot such a jump aborts the
-goal), and no goal tolerance:
+``cmd_vel_nav``, by default), a time limit past the episode's (the simulator ends each episode first), no
+odometry-jump check (each episode's reset restarts the odometry under the goal sent for it, on purpose; on a robot
+such a jump aborts the goal), and no goal tolerance:
 ``evaluate`` ends an episode when the *true* position is within 1 m and its policy drives on until then, while a
 node judges the goal on its odometry, which wheel slip makes overshoot, and stops (at 0.25 m it stopped short in 35
 of 200 episodes, 15 of them reached by ``evaluate``: ``STOP_TOLERANCE``)."""

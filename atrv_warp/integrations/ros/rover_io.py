@@ -149,7 +149,8 @@ class RoverIO:
         task = self.node.env.task_cfg
         if task.action != "twist" or len(self.node.rovers) > 1 or msg.data < 0:
             self.node.log.warning(f"ignored reset_episode {msg.data}: episodes replay with one rover, a twist task "
-                                  f"(nav_deploy, follow_path) and an episode index >= 0 (here {len(self.node.rovers)} rover(s), "
+                                  f"(nav_deploy, follow_path) and an episode index >= 0 "
+                                  f"(here {len(self.node.rovers)} rover(s), "
                                   f"task action {task.action!r})")
             return
         self.pending_episode = msg.data
