@@ -675,6 +675,23 @@ def test_a_map_is_served_on_map_and_the_rover_starts_in_its_free_space(ros_env, 
     assert not grids and "on /map" not in out
 
 
+def test_the_clock_counts_whole_steps_however_long_the_run():
+    """The node's ROS time is its steps times the step's nanoseconds. It was ``round(sim_time * 1e9)``, the float sum
+    of the steps: after 14,796 steps of 0.2 s (2,959 s) 1 ns short, so the deploy node's timer, due at the step,
+    skipped it, and in lockstep the step went unanswered (one in each 200-episode closed loop over ROS 2)."""
+    from atrv_warp.integrations.ros.rover_io import step_time_ns
+
+    short = {}
+    for step_dt in (0.2, 0.09, 0.05, 0.01):
+        step_ns, sim_time = round(step_dt * 1e9), 0.0
+        for k in range(1, 20_001):
+            sim_time += step_dt  # as RoverSim.step sums it
+            assert step_time_ns(sim_time, step_dt) == k * step_ns, (step_dt, k)
+            if round(sim_time * 1e9) < k * step_ns:
+                short.setdefault(step_dt, k)
+    assert short[0.2] == 14_796, short  # where the closed loops' unanswered step was
+
+
 def test_a_plan_is_published_as_nav2s_planner_hands_it_on_and_no_plan_as_no_poses():
     """``plan_message``: each pose facing the next, the last the goal's heading, in the given frame; a plan of one point
     is the goal; no plan (none was found) is a path without poses, not an error in the simulator's step."""

@@ -41,7 +41,7 @@ from atrv_warp.integrations.ros.parameters import (
     publish_every,
     unknown_parameters,
 )
-from atrv_warp.integrations.ros.rover_io import RoverIO, ros_time
+from atrv_warp.integrations.ros.rover_io import RoverIO, ros_time, step_time_ns
 from atrv_warp.task.spec import END_REASONS, action_to_torque, action_to_twist
 
 __all__ = ["NodeConfigError", "RoverSimNode", "unknown_parameters"]
@@ -341,7 +341,7 @@ class RoverSimNode(Node):
         """ROS time [ns], the stamp of everything the node publishes and its ``/clock``: the simulation time, plus one
         step per ``reset_episode`` (a reset takes a control period, so a controller timed on the clock acts on the
         reset state)."""
-        return round(self.sim.sim_time * 1e9) + self.reset_ns
+        return step_time_ns(self.sim.sim_time, self.sim.sim_cfg.step_dt) + self.reset_ns
 
     def record(self, topic: str, type_name: str, message: dict, stamp_ns: int | None = None) -> None:
         if self.bag is not None:

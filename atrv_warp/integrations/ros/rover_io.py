@@ -28,7 +28,7 @@ from atrv_warp.integrations.ros.frames import planar_matrix, pose_matrix, transf
 from atrv_warp.integrations.ros.parameters import COMMANDS, GOAL, VELOCITY
 from atrv_warp.sim.modes import DRIVE_MODE_TORQUES, DriveMode
 
-__all__ = ["RoverIO", "plan_message", "ros_time"]
+__all__ = ["RoverIO", "plan_message", "ros_time", "step_time_ns"]
 
 # Diagonal covariances of the wheel odometry (x, y, z, roll, pitch, yaw); z and the tilts are not
 # observed by wheel odometry, so they are marked as unknown with a large variance.
@@ -39,6 +39,14 @@ _ODOM_TWIST_VAR = (0.01, 0.01, 1e6, 1e6, 1e6, 0.05)
 def ros_time(ns: int) -> Time:
     """A time [ns] as a ``builtin_interfaces/Time`` (a message's stamp)."""
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def step_time_ns(sim_time: float, step_dt: float) -> int:
+    """The simulation time [s], a whole number of steps of ``step_dt`` [s], in nanoseconds: that number of steps
+    times the step's nanoseconds, exact. ``round(sim_time * 1e9)`` is not: ``sim_time`` sums ``step_dt`` in
+    float64, and after 14,796 steps of 0.2 s it rounds to 1 ns short of the step, so a controller's timer due at the
+    step (rclpy's, on ``/clock``) missed it: in lockstep the step waited out ``lockstep_timeout`` unanswered."""
+    return round(sim_time / step_dt) * round(step_dt * 1e9)
 
 
 def plan_message(points: list[list[float]], goal_yaw: float, frame: str, stamp: Time | None = None) -> Path:
