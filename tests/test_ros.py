@@ -678,7 +678,7 @@ def test_a_map_is_served_on_map_and_the_rover_starts_in_its_free_space(ros_env, 
 def test_the_clock_counts_whole_steps_however_long_the_run():
     """The node's ROS time is its steps times the step's nanoseconds. It was ``round(sim_time * 1e9)``, the float sum
     of the steps: after 14,796 steps of 0.2 s (2,959 s) 1 ns short, so the deploy node's timer, due at the step,
-    skipped it, and in lockstep the step went unanswered (one in each 200-episode closed loop over ROS 2)."""
+    skipped it, and in lockstep the step went unanswered (one in nine of ten 200-episode closed loops over ROS 2)."""
     from atrv_warp.integrations.ros.rover_io import step_time_ns
 
     short = {}
